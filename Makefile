@@ -1,0 +1,55 @@
+# htdata + HandTouch. Every target installs what it needs first (make setup).
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+HTDATA := $(VENV)/bin/htdata
+DATA   ?= data
+SEED   ?= 0
+OOD    ?= palm_push
+JOBS   ?= 2
+
+.PHONY: setup demo sample ingest split validate preview train-smoke test bench clean
+
+setup: $(VENV)/.installed
+
+# torch==2.13.0 is pinned in pyproject.toml: the CPU wheel on the machine's disk.
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e ".[test,ray]"
+	touch $@
+
+sample: setup
+	$(HTDATA) sample $(DATA)/raw --seed $(SEED) --scale small
+
+ingest: sample
+	$(HTDATA) ingest --workers $(JOBS) \
+	  --pipeline pipelines/opentouch.toml=$(DATA)/raw/opentouch \
+	  --pipeline pipelines/touchanything.toml=$(DATA)/raw/touchanything \
+	  --pipeline pipelines/native.toml=$(DATA)/raw/native \
+	  $(DATA)/dataset
+
+split: ingest
+	$(HTDATA) split $(DATA)/dataset --ood-task $(OOD) --seed $(SEED) --name main --force
+
+validate: split
+	$(HTDATA) validate $(DATA)/dataset --split main --deep
+
+preview: validate
+	$(HTDATA) preview $(DATA)/dataset $(DATA)/preview.png
+
+# Trains the three HandTouch stages + baselines on the sample data, scores HT-Bench.
+train-smoke: setup
+	$(PY) -m handtouch.smoke --out runs/smoke --raw $(DATA)/raw --dataset $(DATA)/dataset
+
+demo: preview train-smoke
+	@echo "demo done: $(DATA)/dataset, $(DATA)/preview.png, runs/smoke/results.md"
+
+test: setup
+	$(PY) -m pytest -q -n $(JOBS) --dist loadfile
+
+bench: setup
+	$(HTDATA) bench --out bench
+
+clean:
+	rm -rf $(DATA) runs bench/results.json

@@ -1,0 +1,61 @@
+"""`htdata` command line: one subcommand per module, imported lazily.
+
+Each command module exposes `configure_parser(parser)` and `run(args) -> int`.
+Keeping the table here (and the options in each module) avoids one giant
+argparse block while `htdata --help` still lists everything.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# name -> (module, one-line help). Order is the order of the data path.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "sample": ("htdata.sample.cli", "generate a small raw corpus in all three source formats"),
+    "ingest": ("htdata.ingest", "read raw recordings and write a validated, sharded dataset"),
+    "split": ("htdata.split", "task-level OOD hold-out + 9:1 episode split (or --list-tasks)"),
+    "validate": ("htdata.validate", "prove a dataset is sound (structure, content, time, splits)"),
+    "preview": ("htdata.preview", "render a contact sheet: RGB beside left/right tactile maps"),
+    "layouts": ("htdata.layouts", "list, check and render hand layouts (register a glove)"),
+    "bench": ("htdata.bench", "run the benchmarks and write bench/results.json + report"),
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="htdata",
+        description="Build full-hand tactile + egocentric RGB datasets: "
+        "sample -> ingest -> split -> validate -> preview. "
+        "Run `htdata COMMAND --help` for each command.",
+    )
+    from htdata import __version__
+
+    parser.add_argument("--version", action="version", version=f"htdata {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (module, help_text) in COMMANDS.items():
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        p.set_defaults(_module=module)
+        # Options are added lazily only for the chosen command (fast --help).
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    if not argv or argv[0] not in COMMANDS:
+        args = parser.parse_args(argv)  # prints help / errors for unknown commands
+        parser.print_help()
+        return 0 if not argv else 2
+    name = argv[0]
+    module = importlib.import_module(COMMANDS[name][0])
+    sub = argparse.ArgumentParser(prog=f"htdata {name}", description=COMMANDS[name][1] + ".",
+                                  formatter_class=argparse.RawDescriptionHelpFormatter)
+    module.configure_parser(sub)
+    args = sub.parse_args(argv[1:])
+    return int(module.run(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
