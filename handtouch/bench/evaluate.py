@@ -1,0 +1,326 @@
+"""HT-Bench: score any `TactileModel` on the four tracks.
+
+Tracks (per split part, e.g. test and ood):
+- retrieval: 1-vs-20 Hit@1 / Recall@5 of `embed` against the SSIM ranking
+  (see retrieval.py for the candidate rule);
+- reconstruction: stage-1 autoencoding, `model.reconstruct(tactile, coverage)`
+  if the model has it (not part of TactileModel), else `inpaint` with an
+  empty mask; F- metrics (the check the smoke run asserts on);
+- inpaint: one anatomical part (thumb..palm) per frame is hidden, drawn by a
+  seeded RNG among the parts the glove covers in that frame. Hidden pixels
+  are zeroed before the model sees the map (a model cannot leak them). F-
+  metrics over covered pixels, H- metrics over covered hidden pixels;
+- rgb2tactile: `rgb_to_tactile`, F- metrics;
+- prediction: `predict_next` on windows of 3 frames, F- metrics on frame T.
+
+Items: at most `max_items` frames (and windows) per part, drawn without
+replacement by a seeded RNG, sorted, so every model sees the same items.
+
+Data: a dataset root (str/Path: parts are loaded with htdata.torchdata), or
+in-memory `EvalPart`s (a Mapping part -> EvalPart, or one EvalPart scored as
+part "all"). An `EvalPart` holds Dataset-like objects (len + getitem -> dict
+of tensors, DESIGN.md "Reader / torch").
+
+Reference predictors (`ZerosModel`, `CopyLastModel`) implement the same
+interface so learning can be judged against them.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from handtouch.api import TactileModel
+from handtouch.bench.metrics import MapMetrics
+from handtouch.bench.retrieval import RetrievalConfig, retrieval_metrics
+
+NUM_PARTS = 6          # part ids 1..6 (thumb, index, middle, ring, little, palm)
+TRACKS = ("retrieval", "reconstruction", "inpaint", "rgb2tactile", "prediction")
+
+
+@dataclass
+class EvalConfig:
+    max_items: int = 200
+    seed: int = 0
+    batch_size: int = 16
+    num_candidates: int = 20
+    exclude_radius: int = 5
+
+    def validate(self) -> "EvalConfig":
+        if self.max_items < 1 or self.batch_size < 1:
+            raise ValueError(f"max_items and batch_size must be >= 1, got {self.max_items}, {self.batch_size}")
+        RetrievalConfig(num_candidates=self.num_candidates, exclude_radius=self.exclude_radius).validate()
+        return self
+
+
+@dataclass
+class EvalPart:
+    """Dataset-like sources of one split part; `windows` may be None (prediction is then skipped)."""
+
+    frames: Any
+    windows: Any = None
+
+
+def load_part(dataset_root: str | Path, split_name: str | None, part: str) -> EvalPart:
+    """Open a committed dataset's part through htdata.torchdata (split None = whole dataset)."""
+    from htdata.torchdata import TactileFrameDataset, TactileWindowDataset
+
+    root = str(dataset_root)
+    return EvalPart(frames=TactileFrameDataset(root, split=split_name, part=part),
+                    windows=TactileWindowDataset(root, window=3, split=split_name, part=part))
+
+
+def subsample(n: int, max_items: int, seed: int) -> np.ndarray:
+    """Sorted indices of at most max_items of n items, seeded."""
+    if n <= max_items:
+        return np.arange(n)
+    return np.sort(np.random.default_rng(seed).choice(n, max_items, replace=False))
+
+
+def _collate(items: list[dict]) -> dict[str, torch.Tensor]:
+    out = {}
+    for key in items[0]:
+        vals = [it[key] for it in items]
+        if isinstance(vals[0], torch.Tensor):
+            out[key] = torch.stack(vals)
+        elif isinstance(vals[0], np.ndarray):
+            out[key] = torch.from_numpy(np.stack(vals))
+        elif isinstance(vals[0], (int, float, bool, np.integer, np.floating)):
+            out[key] = torch.as_tensor(vals)
+    return out
+
+
+def iterate_batches(dataset, indices: np.ndarray, batch_size: int):
+    for start in range(0, len(indices), batch_size):
+        yield _collate([dataset[int(i)] for i in indices[start:start + batch_size]])
+
+
+def _hand(batch: dict) -> torch.Tensor:
+    """(B,) long; window items may carry a per-frame hand (B,W): the last frame's is used."""
+    h = batch["hand"]
+    return (h[:, -1] if h.ndim == 2 else h.reshape(-1)).long()
+
+
+def _checked(pred: torch.Tensor, like: torch.Tensor, what: str) -> torch.Tensor:
+    pred = torch.as_tensor(pred).float()
+    if pred.shape != like.shape:
+        raise ValueError(f"{what} returned shape {tuple(pred.shape)}, expected {tuple(like.shape)}")
+    if not torch.isfinite(pred).all():
+        raise ValueError(f"{what} returned NaN/Inf")
+    return pred
+
+
+def part_masks(regions: torch.Tensor, coverage: torch.Tensor, generator: np.random.Generator) -> torch.Tensor:
+    """One covered anatomical part per frame -> mask (B,1,H,W) float, 1 = hidden.
+
+    The part is drawn uniformly among the parts with at least one covered
+    pixel in that frame; a frame with no covered part gets an empty mask
+    (its H- metrics are then skipped, not faked).
+    """
+    covered = coverage[:, 0] > 0.5
+    present = torch.stack([((regions == p) & covered).flatten(1).any(1) for p in range(1, NUM_PARTS + 1)], 1)
+    draw = torch.from_numpy(generator.random(present.shape))
+    choice = torch.where(present, draw, torch.full_like(draw, -1.0)).argmax(1) + 1   # part id 1..6
+    choice = torch.where(present.any(1), choice, torch.zeros_like(choice))
+    return (regions == choice[:, None, None].to(regions.dtype)).logical_and(choice[:, None, None] > 0)[:, None].float()
+
+
+def reconstruct(model: TactileModel, tactile, coverage, rgb, hand) -> torch.Tensor:
+    """Stage-1 autoencoding: `model.reconstruct(tactile, coverage)` when the model has it
+    (HandTouch does), else `inpaint` with nothing hidden."""
+    if callable(getattr(model, "reconstruct", None)):
+        return model.reconstruct(tactile, coverage)
+    return model.inpaint(tactile, coverage, torch.zeros_like(tactile), rgb, hand)
+
+
+def _frame_tracks(model: TactileModel, part: EvalPart, idx: np.ndarray, cfg: EvalConfig) -> dict:
+    recon, inp_full, inp_hole, r2t = MapMetrics(), MapMetrics(), MapMetrics(), MapMetrics()
+    maps, embs, episodes, frames = [], [], [], []
+    rng = np.random.default_rng(cfg.seed + 1)
+    times = {"embed": 0.0, "inpaint": 0.0, "rgb2tactile": 0.0}
+    for b in iterate_batches(part.frames, idx, cfg.batch_size):
+        tactile, coverage, rgb, hand = b["tactile"].float(), b["coverage"].float(), b["rgb"], _hand(b)
+        t0 = time.perf_counter()
+        e = torch.as_tensor(model.embed(tactile, coverage, hand)).float()
+        t1 = time.perf_counter()
+        if e.ndim != 2 or e.shape[0] != tactile.shape[0]:
+            raise ValueError(f"{model.name}.embed returned shape {tuple(e.shape)}, expected (B,E)")
+        maps.append(tactile[:, 0])
+        embs.append(e)
+        episodes.append(b["episode"].reshape(-1))
+        frames.append(b["frame"].reshape(-1))
+
+        rec = _checked(reconstruct(model, tactile, coverage, rgb, hand), tactile, f"{model.name}.reconstruct")
+        recon.update(rec, tactile, coverage)
+
+        mask = part_masks(b["regions"], coverage, rng)
+        t2 = time.perf_counter()
+        filled = _checked(model.inpaint(tactile * (1 - mask), coverage, mask, rgb, hand), tactile,
+                          f"{model.name}.inpaint")
+        t3 = time.perf_counter()
+        inp_full.update(filled, tactile, coverage)
+        inp_hole.update(filled, tactile, coverage * mask)
+
+        t4 = time.perf_counter()
+        guess = _checked(model.rgb_to_tactile(rgb, coverage, hand), tactile, f"{model.name}.rgb_to_tactile")
+        t5 = time.perf_counter()
+        r2t.update(guess, tactile, coverage)
+        times["embed"] += t1 - t0
+        times["inpaint"] += t3 - t2
+        times["rgb2tactile"] += t5 - t4
+
+    retr = retrieval_metrics(torch.cat(maps), torch.cat(embs), torch.cat(episodes).numpy(),
+                             torch.cat(frames).numpy(),
+                             RetrievalConfig(num_candidates=cfg.num_candidates, exclude_radius=cfg.exclude_radius,
+                                             seed=cfg.seed))
+    return {
+        "retrieval": retr,
+        "reconstruction": {"full": recon.result()},
+        "inpaint": {"full": inp_full.result(), "hole": inp_hole.result()},
+        "rgb2tactile": {"full": r2t.result()},
+        "seconds": times,
+    }
+
+
+def window_inputs(b: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Window batch -> (rgb_window (B,W,3,H,W), tactile_window (B,W-1,1,H,W), coverage_T, hand, target_T)."""
+    tactile = b["tactile"].float()
+    coverage = b["coverage"].float()
+    cov_t = coverage[:, -1] if coverage.ndim == 5 else coverage
+    return b["rgb"], tactile[:, :-1], cov_t, _hand(b), tactile[:, -1]
+
+
+def _prediction_track(model: TactileModel, part: EvalPart, idx: np.ndarray, cfg: EvalConfig) -> dict:
+    pred_full = MapMetrics()
+    seconds = 0.0
+    for b in iterate_batches(part.windows, idx, cfg.batch_size):
+        rgb_w, tac_w, cov_t, hand, target = window_inputs(b)
+        t0 = time.perf_counter()
+        pred = _checked(model.predict_next(rgb_w, tac_w, cov_t, hand), target, f"{model.name}.predict_next")
+        seconds += time.perf_counter() - t0
+        pred_full.update(pred, target, cov_t)
+    return {"full": pred_full.result(), "seconds": seconds}
+
+
+def evaluate_part(model: TactileModel, part: EvalPart, cfg: EvalConfig) -> dict:
+    """All tracks on one part."""
+    cfg.validate()
+    n = len(part.frames)
+    if n == 0:
+        raise ValueError("evaluation part has no frames")
+    idx = subsample(n, cfg.max_items, cfg.seed)
+    out = _frame_tracks(model, part, idx, cfg)
+    out["items"] = int(len(idx))
+    if part.windows is not None and len(part.windows) > 0:
+        widx = subsample(len(part.windows), cfg.max_items, cfg.seed)
+        pred = _prediction_track(model, part, widx, cfg)
+        out["prediction"] = {"full": pred["full"]}
+        out["seconds"]["prediction"] = pred["seconds"]
+        out["windows"] = int(len(widx))
+    else:
+        out["prediction"] = {"full": MapMetrics().result()}
+        out["windows"] = 0
+    return out
+
+
+def resolve_parts(dataset_root, split_name: str | None, parts: Sequence[str]) -> dict[str, EvalPart]:
+    if isinstance(dataset_root, EvalPart):
+        return {"all": dataset_root}
+    if isinstance(dataset_root, Mapping):
+        missing = [p for p in parts if p not in dataset_root]
+        if missing:
+            raise KeyError(f"evaluation data has no part(s) {missing}; available: {sorted(dataset_root)}")
+        return {p: dataset_root[p] if isinstance(dataset_root[p], EvalPart) else EvalPart(dataset_root[p])
+                for p in parts}
+    return {p: load_part(dataset_root, split_name, p) for p in parts}
+
+
+def evaluate(model: TactileModel, dataset_root, split_name: str | None = None,
+             parts: Sequence[str] = ("test", "ood"), max_items: int = 200, seed: int = 0,
+             *, batch_size: int = 16, exclude_radius: int = 5) -> dict[str, dict]:
+    """Score `model` on every track of every part -> {part: {track: metrics}}."""
+    cfg = EvalConfig(max_items=max_items, seed=seed, batch_size=batch_size,
+                     exclude_radius=exclude_radius).validate()
+    sources = resolve_parts(dataset_root, split_name, parts)
+    if isinstance(model, torch.nn.Module):
+        model.eval()
+    with torch.inference_mode():
+        return {name: evaluate_part(model, src, cfg) for name, src in sources.items()}
+
+
+def collect_examples(model: TactileModel, part: EvalPart, count: int = 4, seed: int = 0) -> dict[str, np.ndarray]:
+    """A few windows' frame T with every track's output, for report.render_predictions.
+
+    Returns float32 arrays (N,224,224) for gt, inpaint, rgb2tactile, prediction,
+    mask, coverage and uint8 rgb (N,224,224,3).
+    """
+    if part.windows is None or len(part.windows) == 0:
+        raise ValueError("collect_examples needs window items (part.windows is empty)")
+    idx = subsample(len(part.windows), count, seed)
+    b = _collate([part.windows[int(i)] for i in idx])
+    rgb_w, tac_w, cov_t, hand, target = window_inputs(b)
+    rgb_t = rgb_w[:, -1]
+    regions = b["regions"][:, -1] if b["regions"].ndim == 4 else b["regions"]
+    mask = part_masks(regions, cov_t, np.random.default_rng(seed + 1))
+    if isinstance(model, torch.nn.Module):
+        model.eval()
+    with torch.inference_mode():
+        inp = model.inpaint(target * (1 - mask), cov_t, mask, rgb_t, hand)
+        r2t = model.rgb_to_tactile(rgb_t, cov_t, hand)
+        nxt = model.predict_next(rgb_w, tac_w, cov_t, hand)
+    rgb_np = rgb_t.float()
+    if rgb_t.dtype != torch.uint8:
+        rgb_np = rgb_np * 255.0
+    return {
+        "rgb": rgb_np.clamp(0, 255).round().to(torch.uint8).permute(0, 2, 3, 1).numpy(),
+        "gt": target[:, 0].numpy(),
+        "inpaint": inp.float()[:, 0].numpy(),
+        "rgb2tactile": r2t.float()[:, 0].numpy(),
+        "prediction": nxt.float()[:, 0].numpy(),
+        "mask": mask[:, 0].numpy(),
+        "coverage": cov_t[:, 0].numpy(),
+    }
+
+
+# ---- reference predictors --------------------------------------------------
+
+class ZerosModel:
+    """Predicts no contact everywhere; embeds every map to the same vector
+    (retrieval then follows the tie rule: a chance-level reference)."""
+
+    name = "zeros-ref"
+
+    def embed(self, tactile, coverage, hand):
+        return torch.ones(tactile.shape[0], 1)
+
+    def inpaint(self, tactile, coverage, mask, rgb, hand):
+        return torch.zeros_like(tactile, dtype=torch.float32)
+
+    def rgb_to_tactile(self, rgb, coverage, hand):
+        return torch.zeros_like(coverage, dtype=torch.float32)
+
+    def predict_next(self, rgb_window, tactile_window, coverage, hand):
+        return torch.zeros_like(coverage, dtype=torch.float32)
+
+
+class CopyLastModel(ZerosModel):
+    """Copies what it is given: the visible map for inpainting (holes stay 0),
+    the last tactile frame for prediction; embeds the 8x8-pooled raw map
+    (a pixel-space retrieval reference). RGB-to-tactile stays all zeros."""
+
+    name = "copy-last-ref"
+
+    def embed(self, tactile, coverage, hand):
+        return torch.nn.functional.avg_pool2d(tactile.float(), 8).flatten(1)
+
+    def inpaint(self, tactile, coverage, mask, rgb, hand):
+        return tactile.float() * (1 - mask)
+
+    def predict_next(self, rgb_window, tactile_window, coverage, hand):
+        return tactile_window[:, -1].float()

@@ -1,0 +1,132 @@
+"""Map metrics of HT-Bench: RMSE and contact IoU over a pixel region.
+
+The region is the glove's covered pixels (F- metrics, full map) or the
+covered pixels inside the hidden part (H- metrics, holes). Pixels outside
+the region are never read, so a model is not rewarded for the empty canvas.
+
+    rmse  = sqrt( sum_region (P_hat - P)^2 / |region| )        raw predictions
+    cIoU  = sum_region min(P, P_hat) / sum_region max(P, P_hat)  P_hat clamped to [0,1]
+
+Defined edge cases:
+- both maps zero over a non-empty region -> cIoU = 1 (a correct "no
+  contact" prediction); a zero denominator never yields NaN;
+- a frame whose region is empty (no covered pixel in it) is skipped and
+  counted in `skipped`; it contributes to no mean;
+- NaN/Inf in a prediction or target -> ValueError (a broken model must
+  not score).
+
+Two aggregations are reported: the mean of per-frame values (`rmse`,
+`ciou`) and the pooled value over all counted pixels of all frames
+(`rmse_pooled` = sqrt(total squared error / total pixels), `ciou_pooled`
+= total min / total max), which weights frames by their contact.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+
+def _frames(x, name: str) -> torch.Tensor:
+    """(B,1,H,W) / (B,H,W) -> (B,H*W) float64."""
+    t = torch.as_tensor(x)
+    if t.ndim == 4:
+        if t.shape[1] != 1:
+            raise ValueError(f"{name}: expected 1 channel, got shape {tuple(t.shape)}")
+        t = t[:, 0]
+    if t.ndim != 3:
+        raise ValueError(f"{name}: expected (B,1,H,W) or (B,H,W), got shape {tuple(t.shape)}")
+    return t.reshape(t.shape[0], -1).to(torch.float64)
+
+
+@dataclass
+class FrameScores:
+    """Per-frame sums over the region; the accumulator adds these up."""
+
+    sq_err: torch.Tensor     # (B,) sum of squared error
+    count: torch.Tensor      # (B,) number of region pixels
+    inter: torch.Tensor      # (B,) sum of min(P, P_hat)
+    union: torch.Tensor      # (B,) sum of max(P, P_hat)
+
+    @property
+    def valid(self) -> torch.Tensor:
+        return self.count > 0
+
+    @property
+    def rmse(self) -> torch.Tensor:
+        """(B,) per-frame RMSE; NaN marks frames with an empty region (never averaged)."""
+        return torch.where(self.valid, (self.sq_err / self.count.clamp(min=1)).sqrt(),
+                           torch.full_like(self.sq_err, float("nan")))
+
+    @property
+    def ciou(self) -> torch.Tensor:
+        """(B,) per-frame cIoU; 1 where both maps are zero over the region, NaN if the region is empty."""
+        iou = torch.where(self.union > 0, self.inter / self.union.clamp(min=1e-300),
+                          torch.ones_like(self.union))
+        return torch.where(self.valid, iou, torch.full_like(iou, float("nan")))
+
+
+def frame_scores(pred, target, region, *, name: str = "prediction") -> FrameScores:
+    """Score a batch: pred/target (B,1,H,W) values, region (B,1,H,W) weights in {0,1}."""
+    p, t, r = _frames(pred, name), _frames(target, "target"), _frames(region, "region")
+    if not (p.shape == t.shape == r.shape):
+        raise ValueError(f"{name}: shapes differ: pred {tuple(p.shape)}, target {tuple(t.shape)}, "
+                         f"region {tuple(r.shape)}")
+    for label, x in ((name, p), ("target", t)):
+        bad = (~torch.isfinite(x)).any(dim=1).nonzero().flatten().tolist()
+        if bad:
+            raise ValueError(f"{label}: non-finite values in batch frames {bad[:10]}")
+    r = (r > 0.5).to(torch.float64)
+    pc = p.clamp(0.0, 1.0)
+    return FrameScores(
+        sq_err=(r * (p - t) ** 2).sum(1),
+        count=r.sum(1),
+        inter=(r * torch.minimum(pc, t)).sum(1),
+        union=(r * torch.maximum(pc, t)).sum(1),
+    )
+
+
+@dataclass
+class MapMetrics:
+    """Accumulates FrameScores over batches; `result()` gives the reported numbers."""
+
+    rmse_sum: float = 0.0
+    ciou_sum: float = 0.0
+    frames: int = 0
+    skipped: int = 0
+    sq_err: float = 0.0
+    count: float = 0.0
+    inter: float = 0.0
+    union: float = 0.0
+
+    def add(self, scores: FrameScores) -> None:
+        v = scores.valid
+        self.frames += int(v.sum())
+        self.skipped += int((~v).sum())
+        self.rmse_sum += float(scores.rmse[v].sum())
+        self.ciou_sum += float(scores.ciou[v].sum())
+        self.sq_err += float(scores.sq_err[v].sum())
+        self.count += float(scores.count[v].sum())
+        self.inter += float(scores.inter[v].sum())
+        self.union += float(scores.union[v].sum())
+
+    def update(self, pred, target, region) -> None:
+        self.add(frame_scores(pred, target, region))
+
+    def result(self) -> dict[str, float | int | None]:
+        """rmse/ciou (per-frame mean), rmse_pooled/ciou_pooled, frames, skipped.
+
+        With no scored frame at all the values are None (JSON null), never NaN.
+        """
+        if self.frames == 0:
+            return {"rmse": None, "ciou": None, "rmse_pooled": None, "ciou_pooled": None,
+                    "frames": 0, "skipped": self.skipped}
+        return {
+            "rmse": self.rmse_sum / self.frames,
+            "ciou": self.ciou_sum / self.frames,
+            "rmse_pooled": (self.sq_err / self.count) ** 0.5,
+            "ciou_pooled": self.inter / self.union if self.union > 0 else 1.0,
+            "frames": self.frames,
+            "skipped": self.skipped,
+        }

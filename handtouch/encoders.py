@@ -1,0 +1,117 @@
+"""Tactile encoders with one interface: (B, C, 224, 224) -> tokens (B, N, D).
+
+ViTEncoder is HandTouch's; CNNEncoder and ResNet18Encoder are the baselines
+(tokens = final feature map flattened and projected to D). Each exposes
+`.grid` (tokens per side) so the decoder knows how far to upsample.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn as nn
+
+from .config import CANVAS, CNN_GRID, RESNET_GRID, ModelConfig
+
+
+def transformer_stack(dim: int, heads: int, mlp_ratio: float, depth: int) -> nn.TransformerEncoder:
+    """Pre-LN ViT blocks (TOOLING_FACTS: plain torch, no nested tensors)."""
+    layer = nn.TransformerEncoderLayer(dim, heads, int(dim * mlp_ratio), dropout=0.0,
+                                       activation="gelu", batch_first=True, norm_first=True)
+    return nn.TransformerEncoder(layer, depth, enable_nested_tensor=False)
+
+
+class ViTEncoder(nn.Module):
+    def __init__(self, in_chans: int, patch: int, dim: int, depth: int, heads: int, mlp_ratio: float):
+        super().__init__()
+        self.grid = CANVAS // patch
+        self.patch_embed = nn.Conv2d(in_chans, dim, kernel_size=patch, stride=patch)
+        self.pos = nn.Parameter(torch.randn(1, self.grid * self.grid, dim) * 0.02)
+        self.blocks = transformer_stack(dim, heads, mlp_ratio, depth)
+        self.norm = nn.LayerNorm(dim)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        tokens = self.patch_embed(x).flatten(2).transpose(1, 2) + self.pos
+        return self.norm(self.blocks(tokens))
+
+
+class _FeatureMapTokens(nn.Module):
+    """Flatten a (B,C,g,g) feature map into tokens and project C -> D, plus positions."""
+
+    def __init__(self, channels: int, dim: int, grid: int):
+        super().__init__()
+        self.proj = nn.Linear(channels, dim)
+        self.pos = nn.Parameter(torch.randn(1, grid * grid, dim) * 0.02)
+        self.norm = nn.LayerNorm(dim)
+
+    def forward(self, fmap: torch.Tensor) -> torch.Tensor:
+        return self.norm(self.proj(fmap.flatten(2).transpose(1, 2)) + self.pos)
+
+
+class CNNEncoder(nn.Module):
+    """Plain conv stack: four stride-2 stages (224 -> 14), then tokens."""
+
+    def __init__(self, in_chans: int, dim: int, widths: tuple[int, ...] = (32, 64, 128, 256)):
+        super().__init__()
+        layers, c = [], in_chans
+        for w in widths:
+            layers += [nn.Conv2d(c, w, 3, stride=2, padding=1), nn.GroupNorm(8, w), nn.GELU(),
+                       nn.Conv2d(w, w, 3, padding=1), nn.GroupNorm(8, w), nn.GELU()]
+            c = w
+        self.features = nn.Sequential(*layers)
+        self.grid = CNN_GRID
+        self.tokens = _FeatureMapTokens(c, dim, self.grid)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.tokens(self.features(x))
+
+
+class BasicBlock(nn.Module):
+    """ResNet basic block: two 3x3 convs + identity (or 1x1 strided) shortcut."""
+
+    def __init__(self, c_in: int, c_out: int, stride: int):
+        super().__init__()
+        self.conv1 = nn.Conv2d(c_in, c_out, 3, stride=stride, padding=1, bias=False)
+        self.bn1 = nn.BatchNorm2d(c_out)
+        self.conv2 = nn.Conv2d(c_out, c_out, 3, padding=1, bias=False)
+        self.bn2 = nn.BatchNorm2d(c_out)
+        self.relu = nn.ReLU(inplace=True)
+        self.shortcut = nn.Identity()
+        if stride != 1 or c_in != c_out:
+            self.shortcut = nn.Sequential(nn.Conv2d(c_in, c_out, 1, stride=stride, bias=False),
+                                          nn.BatchNorm2d(c_out))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        out = self.relu(self.bn1(self.conv1(x)))
+        out = self.bn2(self.conv2(out))
+        return self.relu(out + self.shortcut(x))
+
+
+class ResNet18Encoder(nn.Module):
+    """ResNet-18 layout (stem + 4 stages x 2 basic blocks, widths 64..512), stride 32 -> 7x7 tokens."""
+
+    def __init__(self, in_chans: int, dim: int, widths: tuple[int, ...] = (64, 128, 256, 512)):
+        super().__init__()
+        self.stem = nn.Sequential(
+            nn.Conv2d(in_chans, widths[0], 7, stride=2, padding=3, bias=False),
+            nn.BatchNorm2d(widths[0]), nn.ReLU(inplace=True), nn.MaxPool2d(3, stride=2, padding=1))
+        stages, c = [], widths[0]
+        for i, w in enumerate(widths):
+            stride = 1 if i == 0 else 2
+            stages += [BasicBlock(c, w, stride), BasicBlock(w, w, 1)]
+            c = w
+        self.stages = nn.Sequential(*stages)
+        self.grid = RESNET_GRID
+        self.tokens = _FeatureMapTokens(c, dim, self.grid)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.tokens(self.stages(self.stem(x)))
+
+
+def build_tactile_encoder(cfg: ModelConfig, in_chans: int) -> nn.Module:
+    if cfg.encoder == "vit":
+        return ViTEncoder(in_chans, cfg.patch, cfg.dim, cfg.depth, cfg.heads, cfg.mlp_ratio)
+    if cfg.encoder == "cnn":
+        return CNNEncoder(in_chans, cfg.dim)
+    if cfg.encoder == "resnet18":
+        return ResNet18Encoder(in_chans, cfg.dim)
+    raise ValueError(f"unknown tactile encoder {cfg.encoder!r}")

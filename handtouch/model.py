@@ -1,0 +1,254 @@
+"""HandTouch: tactile encoder -> (fusion | temporal prediction) -> factorised VQ -> decoder.
+
+Top-level modules (the names stages freeze / unfreeze, config.MODULE_NAMES):
+  encoder     tactile encoder (ViT, or the CNN / ResNet-18 baselines); input is two
+              channels: the map with masked pixels zeroed, and the mask itself
+  vq          FactorisedVQ, the shared discrete token space
+  decoder     attention blocks + conv upsampling -> (B,1,224,224) in [0,1]
+  rgb_proj    frozen-RGB tokens (B,M,C) -> (B,M,D) + positions
+  hand_token  learnable left / right token prepended to the tactile tokens
+  fusion      stage 2: tactile tokens self-attend and cross-attend to visual tokens
+  temporal    stage 3: per-token attention over t_{T-2}, t_{T-1} + time embeddings
+  predictor   stage 3: cross-attention from aggregated tokens to v_{T-2..T}
+rgb_encoder is always frozen and is not one of them.
+
+Stages: 1 reconstruct, 2 masked reconstruction with RGB, 3 predict t_T.
+Every loss ignores uncovered pixels (coverage 0); predictions are zero there.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterable
+
+import torch
+import torch.nn as nn
+
+from .config import MODULE_NAMES, LossConfig, ModelConfig
+from .decoder import TactileDecoder
+from .encoders import build_tactile_encoder, transformer_stack
+from .rgb_encoder import RGBEncoder
+from .vq import FactorisedVQ
+
+MODEL_NAMES = {"vit": "handtouch-vit", "cnn": "baseline-cnn", "resnet18": "baseline-resnet18"}
+WINDOW = 3
+
+
+def masked_mse(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+    """Mean squared error over pixels with weight 1 (0/1 weights); 0 when no pixel counts.
+
+    `torch.where` keeps non-finite values at excluded pixels out of the sum and its gradient.
+    """
+    keep = weight > 0
+    sq = torch.where(keep, (pred.float() - target.float()) ** 2, torch.zeros((), device=pred.device))
+    return sq.sum() / keep.sum().clamp_min(1).float()
+
+
+class RGBProjector(nn.Module):
+    def __init__(self, in_dim: int, num_tokens: int, dim: int):
+        super().__init__()
+        self.proj = nn.Linear(in_dim, dim)
+        self.pos = nn.Parameter(torch.randn(1, num_tokens, dim) * 0.02)
+        self.norm = nn.LayerNorm(dim)
+
+    def forward(self, feats: torch.Tensor) -> torch.Tensor:
+        return self.norm(self.proj(feats.float()) + self.pos)
+
+
+class CrossAttentionStack(nn.Module):
+    """Pre-LN self-attention + cross-attention + MLP layers (nn.TransformerDecoderLayer)."""
+
+    def __init__(self, dim: int, heads: int, mlp_ratio: float, depth: int):
+        super().__init__()
+        layer = nn.TransformerDecoderLayer(dim, heads, int(dim * mlp_ratio), dropout=0.0,
+                                           activation="gelu", batch_first=True, norm_first=True)
+        self.layers = nn.TransformerDecoder(layer, depth)
+        self.norm = nn.LayerNorm(dim)
+
+    def forward(self, x: torch.Tensor, memory: torch.Tensor) -> torch.Tensor:
+        return self.norm(self.layers(x, memory))
+
+
+class TemporalAggregator(nn.Module):
+    """Per-token attention over time: (B,T,N,D) -> (B,N,D), read out at the last step."""
+
+    def __init__(self, dim: int, heads: int, mlp_ratio: float, depth: int, window: int):
+        super().__init__()
+        self.time = nn.Parameter(torch.randn(window, dim) * 0.02)
+        self.blocks = transformer_stack(dim, heads, mlp_ratio, depth)
+
+    def forward(self, tokens: torch.Tensor) -> torch.Tensor:
+        b, t, n, d = tokens.shape
+        x = (tokens + self.time[:t, None, :]).permute(0, 2, 1, 3).reshape(b * n, t, d)
+        return self.blocks(x)[:, -1].reshape(b, n, d)
+
+    def stamp(self, tokens: torch.Tensor) -> torch.Tensor:
+        """Add time embeddings to (B,T,M,D) and flatten to (B,T*M,D)."""
+        b, t, m, d = tokens.shape
+        return (tokens + self.time[:t, None, :]).reshape(b, t * m, d)
+
+
+def _hand_ids(hand: torch.Tensor) -> torch.Tensor:
+    """(B,) or windowed (B,T) hand labels -> (B,) long (the last frame's)."""
+    hand = torch.as_tensor(hand)
+    if hand.dim() == 2:
+        hand = hand[:, -1]
+    return hand.long()
+
+
+class HandTouch(nn.Module):
+    def __init__(self, cfg: ModelConfig, rgb_encoder: RGBEncoder):
+        super().__init__()
+        cfg.validate()
+        self.cfg = cfg
+        self.name = MODEL_NAMES[cfg.encoder]
+        d = cfg.dim
+        self.encoder = build_tactile_encoder(cfg, in_chans=2)
+        self.vq = FactorisedVQ(d, cfg.code_dim, cfg.codebook_size, cfg.vq_beta, cfg.vq_dead_threshold,
+                               cfg.vq_usage_decay, cfg.vq_restart_noise)
+        self.decoder = TactileDecoder(d, self.encoder.grid, cfg.decoder_depth, cfg.heads, cfg.mlp_ratio,
+                                      cfg.decoder_channels)
+        self.rgb_encoder = rgb_encoder
+        self.rgb_proj = RGBProjector(rgb_encoder.out_dim, rgb_encoder.num_tokens, d)
+        self.hand_token = nn.Embedding(2, d)
+        self.fusion = CrossAttentionStack(d, cfg.heads, cfg.mlp_ratio, cfg.fusion_depth)
+        self.temporal = TemporalAggregator(d, cfg.heads, cfg.mlp_ratio, cfg.temporal_depth, WINDOW)
+        self.predictor = CrossAttentionStack(d, cfg.heads, cfg.mlp_ratio, cfg.predictor_depth)
+        self._frozen: set[str] = set()
+
+    # ---- freezing by module name -------------------------------------------------
+    def _named(self, names: Iterable[str]) -> list[str]:
+        names = list(names)
+        unknown = sorted(set(names) - set(MODULE_NAMES))
+        if unknown:
+            raise ValueError(f"unknown module names {unknown}; known: {list(MODULE_NAMES)} "
+                             "(rgb_encoder is always frozen)")
+        return names
+
+    def freeze(self, names: Iterable[str]) -> None:
+        for n in self._named(names):
+            module = getattr(self, n)
+            module.requires_grad_(False)
+            module.eval()          # frozen BatchNorm stats and VQ usage / restarts stay put
+            self._frozen.add(n)
+
+    def unfreeze(self, names: Iterable[str]) -> None:
+        for n in self._named(names):
+            module = getattr(self, n)
+            module.requires_grad_(True)
+            module.train(self.training)
+            self._frozen.discard(n)
+
+    def set_trainable(self, names: Iterable[str]) -> None:
+        """Train exactly `names`; freeze every other module."""
+        names = self._named(names)
+        self.freeze([n for n in MODULE_NAMES if n not in names])
+        self.unfreeze(names)
+
+    @property
+    def frozen(self) -> frozenset[str]:
+        return frozenset(self._frozen)
+
+    def train(self, mode: bool = True):
+        super().train(mode)
+        for n in self._frozen:
+            getattr(self, n).eval()
+        return self
+
+    # ---- building blocks ----------------------------------------------------------
+    def _grad_context(self, name: str):
+        return torch.no_grad() if name in self._frozen else contextlib.nullcontext()
+
+    def encode(self, tactile: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+        """(B,1,224,224) map (+ mask, 1 = hidden) -> tokens (B,N,D); hidden pixels are zeroed."""
+        if mask is None:
+            mask = torch.zeros_like(tactile)
+        x = torch.cat([tactile.float() * (1 - mask), mask.float()], dim=1)
+        with self._grad_context("encoder"):
+            return self.encoder(x)
+
+    def visual_tokens(self, rgb: torch.Tensor) -> torch.Tensor:
+        """(B,3,224,224) uint8 or [0,1] -> (B,M,D)."""
+        return self.rgb_proj(self.rgb_encoder(rgb))
+
+    def _with_hand(self, tokens: torch.Tensor, hand: torch.Tensor) -> torch.Tensor:
+        return torch.cat([self.hand_token(_hand_ids(hand).to(tokens.device))[:, None], tokens], dim=1)
+
+    def quantise_decode(self, tokens: torch.Tensor, coverage: torch.Tensor):
+        """tokens -> VQ -> map * coverage; returns (map, indices, vq losses, vq stats)."""
+        z, indices, losses, stats = self.vq(tokens)
+        return self.decoder(z) * coverage, indices, losses, stats
+
+    def _inpaint(self, tactile, coverage, mask, rgb, hand):
+        tokens = self.encode(tactile, mask)
+        fused = self.fusion(self._with_hand(tokens, hand), self.visual_tokens(rgb))[:, 1:]
+        return self.quantise_decode(fused, coverage)
+
+    def _predict_next(self, rgb_window, tactile_window, coverage, hand):
+        b, t = tactile_window.shape[:2]
+        past = self.encode(tactile_window.reshape(b * t, *tactile_window.shape[2:]))
+        past = self.temporal(past.reshape(b, t, *past.shape[1:]))
+        tv = rgb_window.shape[1]
+        vis = self.visual_tokens(rgb_window.reshape(b * tv, *rgb_window.shape[2:]))
+        vis = self.temporal.stamp(vis.reshape(b, tv, *vis.shape[1:]))
+        pred = self.predictor(self._with_hand(past, hand), vis)[:, 1:]
+        return self.quantise_decode(pred, coverage)
+
+    # ---- TactileModel API ---------------------------------------------------------
+    def embed(self, tactile, coverage, hand) -> torch.Tensor:
+        """(B,D): mean of the quantised tokens of the (unmasked) map."""
+        z, _, _, _ = self.vq(self.encode(tactile * coverage))
+        return z.mean(dim=1)
+
+    def reconstruct(self, tactile, coverage) -> torch.Tensor:
+        return self.quantise_decode(self.encode(tactile * coverage), coverage)[0]
+
+    def inpaint(self, tactile, coverage, mask, rgb, hand) -> torch.Tensor:
+        return self._inpaint(tactile * coverage, coverage, mask, rgb, hand)[0]
+
+    def rgb_to_tactile(self, rgb, coverage, hand) -> torch.Tensor:
+        blank = torch.zeros_like(coverage, dtype=torch.float32)
+        return self._inpaint(blank, coverage, torch.ones_like(blank), rgb, hand)[0]
+
+    def predict_next(self, rgb_window, tactile_window, coverage, hand) -> torch.Tensor:
+        return self._predict_next(rgb_window, tactile_window, coverage, hand)[0]
+
+    # ---- training losses ----------------------------------------------------------
+    def forward(self, batch: dict, stage: int, mask: torch.Tensor | None = None,
+                weights: LossConfig | None = None) -> dict[str, torch.Tensor]:
+        """Losses of one stage on a batch (frame batch for stages 1-2, window batch for 3).
+
+        Stage 2 needs `mask` (B,1,224,224), 1 = hidden. Returns {"loss", its terms, VQ stats}.
+        """
+        w = weights or LossConfig()
+        if stage == 1:
+            cov = batch["coverage"]
+            target = batch["tactile"] * cov
+            pred, _, vq_l, stats = self.quantise_decode(self.encode(target), cov)
+            terms = {"recon": masked_mse(pred, target, cov)}
+            main = terms["recon"]
+        elif stage == 2:
+            if mask is None:
+                raise ValueError("stage 2 needs a mask")
+            cov = batch["coverage"]
+            target = batch["tactile"] * cov
+            pred, _, vq_l, stats = self._inpaint(target, cov, mask, batch["rgb"], batch["hand"])
+            terms = {"visible": masked_mse(pred, target, cov * (1 - mask)),
+                     "masked": masked_mse(pred, target, cov * mask)}
+            main = w.lambda_vis * terms["visible"] + w.lambda_mask * terms["masked"]
+        elif stage == 3:
+            tac, cov = batch["tactile"], batch["coverage"]
+            if tac.dim() != 5 or tac.shape[1] != WINDOW:
+                raise ValueError(f"stage 3 needs window batches (B,{WINDOW},1,H,W), got {tuple(tac.shape)}")
+            cov_t = cov[:, -1] if cov.dim() == 5 else cov      # window coverage may be given once
+            target = tac[:, -1] * cov_t
+            past = tac[:, :-1] * (cov[:, :-1] if cov.dim() == 5 else cov[:, None])
+            pred, _, vq_l, stats = self._predict_next(batch["rgb"], past, cov_t, batch["hand"])
+            terms = {"next": masked_mse(pred, target, cov_t)}
+            main = terms["next"]
+        else:
+            raise ValueError(f"stage must be 1, 2 or 3, got {stage}")
+        vq_total = vq_l["codebook"] + vq_l["commit"]
+        out = {"loss": main + w.vq_weight * vq_total, "vq": vq_total, **terms}
+        out.update({k: v.to(main.device) for k, v in stats.items()})
+        return out

@@ -1,0 +1,138 @@
+"""Frozen RGB encoder, chosen by a spec string; never downloads, never falls back.
+
+Specs:
+  "random:SEED"      a seeded random small conv encoder, explicitly for smoke runs
+  "PATH.pt2"         a torch.export archive: torch.export.load(PATH).module()
+  "PATH.pt"          {"arch": NAME, "state_dict": ...} for an architecture in ARCHS
+
+The encoder receives float32 (B,3,224,224) in [0,1] (any normalisation the
+weights expect must live inside the exported module / architecture) and
+returns tokens (B,M,C), a feature map (B,C,h,w) or a vector (B,C);
+`RGBEncoder` turns all three into tokens (B,M,C).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+import torch.nn as nn
+
+from .config import CANVAS
+
+log = logging.getLogger("handtouch.rgb_encoder")
+
+
+class SmallConvRGB(nn.Module):
+    """Five conv stages (224 -> 7); ImageNet-style normalisation inside."""
+
+    def __init__(self, width: int = 64):
+        super().__init__()
+        self.register_buffer("mean", torch.tensor([0.485, 0.456, 0.406]).view(1, 3, 1, 1))
+        self.register_buffer("std", torch.tensor([0.229, 0.224, 0.225]).view(1, 3, 1, 1))
+        layers, c = [], 3
+        for w in (16, 32, width, width, width):
+            layers += [nn.Conv2d(c, w, 3, stride=2, padding=1), nn.GELU()]
+            c = w
+        self.features = nn.Sequential(*layers)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.features((x - self.mean) / self.std)
+
+
+ARCHS = {"small_conv": SmallConvRGB}
+
+
+def sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with path.open("rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class RGBEncoderInfo:
+    spec: str
+    kind: str          # random | export | state_dict
+    sha256: str        # of the file; "" for random encoders
+
+
+def to_unit_float(rgb: torch.Tensor) -> torch.Tensor:
+    """uint8 0..255 or float [0,1] -> float32 [0,1]."""
+    if rgb.dtype == torch.uint8:
+        return rgb.float() / 255.0
+    return rgb.float()
+
+
+class RGBEncoder(nn.Module):
+    """Wraps a frozen backbone: always eval, no grad, output as tokens (B,M,C)."""
+
+    def __init__(self, backbone: nn.Module, info: RGBEncoderInfo):
+        super().__init__()
+        self.backbone = backbone
+        self.info = info
+        for p in self.backbone.parameters():
+            p.requires_grad_(False)
+        self.backbone.eval()
+        with torch.no_grad():
+            probe = self(torch.zeros(1, 3, CANVAS, CANVAS, dtype=torch.uint8))
+        self.num_tokens, self.out_dim = probe.shape[1], probe.shape[2]
+
+    def train(self, mode: bool = True):
+        super().train(False)   # frozen: never leaves eval mode
+        return self
+
+    def forward(self, rgb: torch.Tensor) -> torch.Tensor:
+        with torch.no_grad():
+            out = self.backbone(to_unit_float(rgb))
+        if isinstance(out, (tuple, list)):
+            out = out[0]
+        if out.dim() == 4:
+            return out.flatten(2).transpose(1, 2)
+        if out.dim() == 2:
+            return out[:, None, :]
+        if out.dim() == 3:
+            return out
+        raise ValueError(f"RGB encoder {self.info.spec!r} returned shape {tuple(out.shape)}; "
+                         "expected (B,M,C), (B,C,h,w) or (B,C)")
+
+
+def _random_backbone(seed: int) -> nn.Module:
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        return SmallConvRGB()
+
+
+def load_rgb_encoder(spec: str) -> RGBEncoder:
+    """Build the frozen RGB encoder named by `spec` (see module docstring)."""
+    if spec.startswith("random:"):
+        try:
+            seed = int(spec.split(":", 1)[1])
+        except ValueError:
+            raise ValueError(f"rgb encoder spec {spec!r}: expected random:SEED with an integer seed") from None
+        log.warning("RGB encoder: RANDOM small conv (seed %d) - smoke runs only, not a pretrained model", seed)
+        return RGBEncoder(_random_backbone(seed), RGBEncoderInfo(spec, "random", ""))
+    path = Path(spec)
+    if not path.is_file():
+        raise FileNotFoundError(f"RGB encoder file not found: {path}")
+    digest = sha256_file(path)
+    if path.suffix == ".pt2":
+        backbone = torch.export.load(str(path)).module()
+        info = RGBEncoderInfo(spec, "export", digest)
+    elif path.suffix == ".pt":
+        blob = torch.load(path, map_location="cpu", weights_only=True)
+        if not isinstance(blob, dict) or "arch" not in blob or "state_dict" not in blob:
+            raise ValueError(f"{path}: expected a dict with 'arch' and 'state_dict'")
+        if blob["arch"] not in ARCHS:
+            raise ValueError(f"{path}: unknown arch {blob['arch']!r}; known: {sorted(ARCHS)}")
+        backbone = ARCHS[blob["arch"]]()
+        backbone.load_state_dict(blob["state_dict"])
+        info = RGBEncoderInfo(spec, "state_dict", digest)
+    else:
+        raise ValueError(f"{path}: RGB encoder files must be .pt2 (torch.export) or .pt (state dict)")
+    log.info("RGB encoder: %s (%s) sha256=%s", path, info.kind, digest)
+    return RGBEncoder(backbone, info)

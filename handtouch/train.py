@@ -1,0 +1,341 @@
+"""HandTouch trainer: stage 1 (reconstruct) -> 2 (masked + RGB) -> 3 (predict t_T).
+
+    python -m handtouch.train --config configs/smoke.toml [--set key=value ...]
+    torchrun --nproc_per_node 2 -m handtouch.train --config ...      (DDP)
+
+Each stage writes OUT/stageN.pt (model, optimizer, step, RNG states); a re-run
+continues an unfinished stage from its checkpoint and skips finished ones.
+Losses and throughput go to stdout and OUT/log.jsonl; OUT/metrics.json holds the
+final losses per stage, codebook perplexity / usage, recon RMSE on a held-out
+batch and steps/s. Python API: `train(cfg) -> metrics`, `load_model(path)`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import logging
+import math
+import os
+import random
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.utils.data import DataLoader, Dataset
+
+from .config import LossConfig, TrainConfig, load_train_config, model_config_from_dict
+from .distributed import (DistEnv, StepBatchSampler, barrier, init_distributed, mean_across_ranks,
+                          shutdown, unwrap, wrap)
+from .masking import sample_masks
+from .model import HandTouch, masked_mse
+from .rgb_encoder import load_rgb_encoder
+
+log = logging.getLogger("handtouch.train")
+CHECKPOINT_FORMAT = 1
+
+
+@dataclass
+class TrainData:
+    frames: Dataset            # stage 1-2 items (TactileFrameDataset keys)
+    windows: Dataset | None    # stage 3 items (TactileWindowDataset keys); None if stage 3 is not run
+    eval_frames: Dataset       # source of the held-out batch
+    eval_source: str           # what eval_frames is, for metrics.json
+
+
+def load_data(cfg: TrainConfig) -> TrainData:
+    """The committed dataset at cfg.data_root through htdata.torchdata."""
+    from htdata.torchdata import TactileFrameDataset, TactileWindowDataset
+
+    split = cfg.split or None
+    train_part = cfg.train_part if split else None
+    frames = TactileFrameDataset(cfg.data_root, split=split, part=train_part)
+    windows = (TactileWindowDataset(cfg.data_root, window=3, split=split, part=train_part)
+               if 3 in cfg.stages else None)
+    if split:
+        eval_frames = TactileFrameDataset(cfg.data_root, split=split, part=cfg.eval_part)
+        source = f"part {cfg.eval_part!r} of split {split!r}"
+    else:
+        eval_frames, source = frames, "training data (no split configured: not held out)"
+    return TrainData(frames, windows, eval_frames, source)
+
+
+# ---- checkpoints ---------------------------------------------------------------------
+def _rng_state() -> dict:
+    name, keys, pos, has_gauss, cached = np.random.get_state()
+    return {"torch": torch.get_rng_state(), "numpy": [name, torch.from_numpy(keys.copy()), pos, has_gauss, cached],
+            "python": random.getstate()}
+
+
+def _set_rng_state(state: dict) -> None:
+    torch.set_rng_state(state["torch"])
+    name, keys, pos, has_gauss, cached = state["numpy"]
+    np.random.set_state((name, keys.numpy(), pos, has_gauss, cached))
+    random.setstate(state["python"])
+
+
+def _to_tuple(obj):
+    return tuple(_to_tuple(x) for x in obj) if isinstance(obj, list) else obj
+
+
+def save_checkpoint(path: Path, payload: dict) -> None:
+    """Atomic: write a temp file, then rename over the old checkpoint."""
+    tmp = path.with_suffix(".tmp")
+    torch.save(payload, tmp)
+    os.replace(tmp, path)
+
+
+def read_checkpoint(path: Path) -> dict:
+    blob = torch.load(path, map_location="cpu", weights_only=True)
+    if blob.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(f"{path}: not a HandTouch checkpoint (format {blob.get('format')!r})")
+    blob["rng"]["python"] = _to_tuple(blob["rng"]["python"])
+    return blob
+
+
+def build_model(cfg: TrainConfig) -> HandTouch:
+    return HandTouch(cfg.model, load_rgb_encoder(cfg.rgb_encoder))
+
+
+def load_model(checkpoint_path: str | Path, device: str = "cpu") -> HandTouch:
+    """A trained HandTouch in eval mode, from any OUT/stageN.pt."""
+    path = Path(checkpoint_path)
+    if not path.is_file():
+        raise FileNotFoundError(f"checkpoint not found: {path}")
+    blob = read_checkpoint(path)
+    rgb = load_rgb_encoder(blob["rgb_encoder"]["spec"])
+    if rgb.info.sha256 != blob["rgb_encoder"]["sha256"]:
+        raise ValueError(f"{path}: RGB encoder {rgb.info.spec} has sha256 {rgb.info.sha256}, "
+                         f"the checkpoint was trained with {blob['rgb_encoder']['sha256']}")
+    model = HandTouch(model_config_from_dict(blob["model_config"]), rgb)
+    model.load_state_dict(blob["model"])
+    return model.to(device).eval()
+
+
+# ---- one stage -----------------------------------------------------------------------
+def lr_at(step: int, total: int, base: float, warmup: int) -> float:
+    """Linear warmup then cosine decay to 10% of base."""
+    if warmup and step < warmup:
+        return base * (step + 1) / warmup
+    span = max(total - warmup, 1)
+    return base * (0.1 + 0.45 * (1 + math.cos(math.pi * min(step - warmup, span) / span)))
+
+
+def _to_device(batch: dict, device: torch.device) -> dict:
+    return {k: v.to(device, non_blocking=True) if torch.is_tensor(v) else v for k, v in batch.items()}
+
+
+def _mask_generator(seed: int, stage: int, step: int, rank: int) -> torch.Generator:
+    """Per-step generator: masks depend only on (seed, stage, step, rank), so resumes repeat them."""
+    return torch.Generator().manual_seed(((seed * 7 + stage) * 1_000_003 + step) * 131 + rank)
+
+
+class JsonlLog:
+    def __init__(self, path: Path | None):
+        self.path = path
+
+    def write(self, record: dict) -> None:
+        print(json.dumps(record), flush=True)
+        if self.path is not None:
+            with self.path.open("a") as f:
+                f.write(json.dumps(record) + "\n")
+
+
+def _autocast(cfg: TrainConfig, device: torch.device):
+    return torch.autocast(device_type=device.type, dtype=torch.bfloat16, enabled=cfg.bf16)
+
+
+def run_stage(n: int, model: HandTouch, cfg: TrainConfig, data: TrainData, env: DistEnv,
+              out: Path, logger: JsonlLog) -> dict:
+    """Train stage n (resuming / skipping from OUT/stageN.pt); returns the stage summary."""
+    scfg = cfg.stage(n)
+    ckpt_path = out / f"stage{n}.pt"
+    state = read_checkpoint(ckpt_path) if ckpt_path.is_file() else None
+    if state is not None and state["done"]:
+        model.load_state_dict(state["model"])
+        _set_rng_state(state["rng"])   # later stages start from the same RNG as an uninterrupted run
+        logger.write({"event": "stage_skipped", "stage": n, "reason": f"{ckpt_path} is finished"})
+        return state["summary"]
+
+    model.set_trainable(scfg.trainable)
+    model.train()
+    params = [p for p in model.parameters() if p.requires_grad]
+    opt = torch.optim.AdamW(params, lr=scfg.lr, weight_decay=scfg.weight_decay)
+    start = 0
+    if state is not None:
+        model.load_state_dict(state["model"])
+        opt.load_state_dict(state["optimizer"])
+        start = state["step"]
+        logger.write({"event": "stage_resumed", "stage": n, "step": start})
+    dataset = data.windows if n == 3 else data.frames
+    if dataset is None:
+        raise ValueError("stage 3 needs window data (TrainData.windows is None)")
+    sampler = StepBatchSampler(len(dataset), cfg.batch_size, cfg.seed + n, start, scfg.steps,
+                               env.rank, env.world_size)
+    loader = DataLoader(dataset, batch_sampler=sampler, num_workers=cfg.workers,
+                        generator=torch.Generator().manual_seed(cfg.seed),  # keep global RNG untouched
+                        persistent_workers=False, pin_memory=env.device.type == "cuda")
+    if state is not None:
+        _set_rng_state(state["rng"])
+    ddp = wrap(model, env)
+    weights: LossConfig = cfg.loss
+
+    def checkpoint(step: int, done: bool, summary: dict | None) -> None:
+        if env.is_main:
+            save_checkpoint(ckpt_path, {
+                "format": CHECKPOINT_FORMAT, "stage": n, "step": step, "done": done,
+                "model": unwrap(ddp).state_dict(), "optimizer": opt.state_dict(), "rng": _rng_state(),
+                "model_config": dataclasses.asdict(cfg.model),
+                "rgb_encoder": {"spec": model.rgb_encoder.info.spec, "sha256": model.rgb_encoder.info.sha256},
+                "summary": summary or {}})
+        barrier(env)
+
+    window: dict[str, float] = {}
+    window_steps, t_window, t_start = 0, time.perf_counter(), time.perf_counter()
+    last: dict[str, float] = {}
+    step = start
+    for step, batch in zip(range(start, scfg.steps), loader):
+        batch = _to_device(batch, env.device)
+        for group in opt.param_groups:
+            group["lr"] = lr_at(step, scfg.steps, scfg.lr, scfg.warmup_steps)
+        mask = None
+        if n == 2:
+            g = step / max(scfg.steps - 1, 1)
+            mask, _ = sample_masks(batch["regions"].cpu(), g, cfg.masking.p_min, cfg.masking.p_max,
+                                   cfg.masking.max_parts, _mask_generator(cfg.seed, n, step, env.rank))
+            mask = mask.to(env.device)
+        with _autocast(cfg, env.device):
+            losses = ddp(batch, n, mask=mask, weights=weights)
+        loss = losses["loss"]
+        if not torch.isfinite(loss):
+            raise FloatingPointError(f"stage {n} step {step}: non-finite loss {float(loss)}")
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(params, scfg.grad_clip)
+        opt.step()
+        for k, v in losses.items():
+            window[k] = window.get(k, 0.0) + float(v.detach())
+        window_steps += 1
+        done_steps = step + 1
+        if done_steps % cfg.log_every == 0 or done_steps == scfg.steps:
+            elapsed = time.perf_counter() - t_window
+            last = mean_across_ranks({k: v / window_steps for k, v in window.items()}, env)
+            sps = window_steps / max(elapsed, 1e-9)
+            if env.is_main:
+                logger.write({"stage": n, "step": done_steps, "lr": opt.param_groups[0]["lr"], **last,
+                              "steps_per_s": sps, "samples_per_s": sps * cfg.batch_size * env.world_size})
+            window, window_steps, t_window = {}, 0, time.perf_counter()
+        if done_steps % cfg.checkpoint_every == 0 and done_steps < scfg.steps:
+            checkpoint(done_steps, False, None)
+    seconds = time.perf_counter() - t_start
+    ran = scfg.steps - start
+    summary = {"steps": scfg.steps, "resumed_from": start, "final": last, "seconds": seconds,
+               "steps_per_s": ran / max(seconds, 1e-9),
+               "samples_per_s": ran * cfg.batch_size * env.world_size / max(seconds, 1e-9)}
+    if ran and step + 1 != scfg.steps:
+        raise RuntimeError(f"stage {n}: data loader stopped at step {step + 1} of {scfg.steps}")
+    checkpoint(scfg.steps, True, summary)
+    return summary
+
+
+# ---- evaluation on the held-out batch -------------------------------------------------
+def heldout_batch(dataset: Dataset, size: int) -> dict:
+    """`size` evenly spaced items (deterministic) collated into a batch."""
+    n = len(dataset)
+    if n == 0:
+        raise ValueError("held-out dataset is empty")
+    idx = np.unique(np.linspace(0, n - 1, num=min(size, n)).round().astype(int))
+    return torch.utils.data.default_collate([dataset[int(i)] for i in idx])
+
+
+@torch.no_grad()
+def evaluate_heldout(model: HandTouch, batch: dict, device: torch.device) -> dict:
+    model.eval()
+    batch = _to_device(batch, device)
+    cov = batch["coverage"]
+    target = batch["tactile"] * cov
+    pred, _, _, stats = model.quantise_decode(model.encode(target), cov)
+    out = {"recon_rmse": math.sqrt(float(masked_mse(pred, target, cov))),
+           "codebook": {"perplexity": float(stats["perplexity"]), "batch_usage": float(stats["usage"]),
+                        "active_fraction": float((model.vq.usage >= model.vq.dead_threshold).float().mean()),
+                        "size": model.vq.codebook_size},
+           "heldout_items": int(target.shape[0])}
+    rgb_pred = model.rgb_to_tactile(batch["rgb"], cov, batch["hand"])
+    out["rgb_to_tactile_rmse"] = math.sqrt(float(masked_mse(rgb_pred, target, cov)))
+    return out
+
+
+# ---- driver --------------------------------------------------------------------------
+def _seed_everything(seed: int) -> None:
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
+
+
+def train(cfg: TrainConfig, data: TrainData | None = None) -> dict:
+    """Run the configured stages; returns (and on rank 0 writes) OUT/metrics.json's content."""
+    cfg.validate()
+    env = init_distributed(cfg.device)
+    try:
+        cfg.check_codebook_load(env.world_size)
+        out = Path(cfg.out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        logger = JsonlLog(out / "log.jsonl" if env.is_main else None)
+        _seed_everything(cfg.seed)   # same on every rank: identical initial weights
+        data = data or load_data(cfg)
+        model = build_model(cfg).to(env.device)
+        first = cfg.stages[0]
+        if first > 1:
+            prev = out / f"stage{first - 1}.pt"
+            if not prev.is_file():
+                raise FileNotFoundError(f"stages start at {first} but {prev} does not exist")
+            model.load_state_dict(read_checkpoint(prev)["model"])
+        logger.write({"event": "start", "model": model.name, "world_size": env.world_size,
+                      "device": str(env.device), "bf16": cfg.bf16, "rgb_encoder": model.rgb_encoder.info.spec,
+                      "rgb_encoder_sha256": model.rgb_encoder.info.sha256,
+                      "train_items": len(data.frames), "window_items": len(data.windows or [])})
+        summaries = {}
+        for n in cfg.stages:
+            summaries[str(n)] = run_stage(n, model, cfg, data, env, out, logger)
+        metrics = {"model": model.name, "encoder": cfg.model.encoder, "world_size": env.world_size,
+                   "device": str(env.device), "rgb_encoder": dataclasses.asdict(model.rgb_encoder.info),
+                   "stages": summaries, "heldout_source": data.eval_source}
+        ran = [s for s in summaries.values() if s.get("seconds", 0) > 0]
+        total_steps = sum(s["steps"] - s.get("resumed_from", 0) for s in ran)
+        metrics["steps_per_s"] = total_steps / max(sum(s["seconds"] for s in ran), 1e-9) if ran else 0.0
+        if env.is_main:
+            metrics.update(evaluate_heldout(model, heldout_batch(data.eval_frames, cfg.eval_batch_size),
+                                            env.device))
+            tmp = out / "metrics.json.tmp"
+            tmp.write_text(json.dumps(metrics, indent=2))
+            os.replace(tmp, out / "metrics.json")
+            logger.write({"event": "done", "metrics": str(out / "metrics.json"),
+                          "recon_rmse": metrics["recon_rmse"]})
+        barrier(env)
+        return metrics
+    finally:
+        shutdown(env)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m handtouch.train", description=__doc__.splitlines()[0])
+    parser.add_argument("--config", required=True, help="TOML file (configs/smoke.toml, configs/full.toml)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a config key, e.g. --set model.dim=64 --set stage1.steps=10")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    try:
+        cfg = load_train_config(args.config, args.set)
+    except (ValueError, FileNotFoundError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    train(cfg)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

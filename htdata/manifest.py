@@ -1,0 +1,393 @@
+"""Dataset manifest, episode records and sample index: build, commit, load.
+
+`commit_dataset` turns the results of the work units (their shards, sample
+records and episode records) into the three files of DESIGN.md "Dataset on
+disk": episodes.jsonl, index.npy and dataset.json. dataset.json is written
+LAST through tmp + fsync + rename, so a dataset either has a complete
+manifest or none: readers treat a missing dataset.json as "not committed".
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import gc
+import hashlib
+import io
+import json
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from htdata import storage
+from htdata.resources import validate_json
+from htdata.shardio import SampleRecord, ShardRecord, parse_key
+
+FORMAT = "htdata"
+FORMAT_VERSION = 1
+HANDS = ("left", "right")
+
+# DESIGN.md index.npy dtype, little endian, one row per sample.
+INDEX_DTYPE = np.dtype([
+    ("shard", "<u4"),
+    ("offset", "<u8"),
+    ("episode", "<u4"),
+    ("frame", "<u4"),
+    ("size_json", "<u4"),
+    ("size_rgb", "<u4"),
+    ("size_tactile_left", "<u4"),
+    ("size_tactile_right", "<u4"),
+    ("size_bend_left", "<u4"),
+    ("size_bend_right", "<u4"),
+])
+# member suffix -> index size column, in DESIGN member order
+SIZE_FIELDS = {
+    "json": "size_json",
+    "rgb.jpg": "size_rgb",
+    "tactile_left.exr": "size_tactile_left",
+    "tactile_right.exr": "size_tactile_right",
+    "bend_left.npy": "size_bend_left",
+    "bend_right.npy": "size_bend_right",
+}
+
+MANIFEST_FILE = "dataset.json"
+EPISODES_FILE = "episodes.jsonl"
+INDEX_FILE = "index.npy"
+SHARDS_DIR = "shards"
+LAYOUTS_DIR = "layouts"
+CANONICAL_FILE = "canonical_hand.json"
+REGIONS_FILE = "regions.png"   # per-place region ids (0 = outside the hand)
+PARTS_FILE = "parts.png"       # part ids: thumb=1 .. palm=6 (stage-2 masking)
+
+
+@dataclass
+class UnitResult:
+    """What one ingest work unit produced.
+
+    `samples[i].shard` indexes `shards`; `episodes` are episode records
+    (schemas/episode.schema.json) without `first_sample`/`shards`, which the
+    commit fills in. Each episode's samples are contiguous, frames 0..n-1.
+    """
+    unit: int
+    shards: list[ShardRecord]
+    samples: list[SampleRecord]
+    episodes: list[dict]
+
+
+@dataclass
+class LayoutArtifact:
+    """A glove layout to copy into DATASET/layouts: its JSON document and coverage."""
+    layout_id: str
+    document: dict
+    coverage: np.ndarray  # (224,224) uint8 0/1
+
+
+@dataclass
+class CanonicalArtifact:
+    """The canonical hand template: JSON document, region ids and part ids maps."""
+    document: dict
+    region_map: np.ndarray  # (224,224) uint8 region ids
+    part_map: np.ndarray    # (224,224) uint8 part ids
+
+
+@dataclass
+class BuiltIndex:
+    rows: np.ndarray              # INDEX_DTYPE
+    episodes: list[dict]
+    shards: list[dict]            # manifest shard entries
+
+
+def sha256_file(path: str | os.PathLike, chunk: int = 1 << 20) -> str:
+    h = hashlib.sha256()
+    with storage.open_binary(path) as f:
+        while True:
+            block = f.read(chunk)
+            if not block:
+                return h.hexdigest()
+            h.update(block)
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    """tmp + fsync + rename: readers never see a half-written file."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+    fd = os.open(path.parent, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def encode_png_u8(image: np.ndarray, where: str) -> bytes:
+    import cv2
+
+    arr = np.asarray(image)
+    if arr.shape != (224, 224) or arr.dtype != np.uint8:
+        raise ValueError(f"{where}: expected a (224,224) uint8 map, got {arr.shape} {arr.dtype}")
+    ok, buf = cv2.imencode(".png", arr)
+    if not ok:
+        raise ValueError(f"{where}: PNG encoding failed")
+    return buf.tobytes()
+
+
+def decode_png_u8(data: bytes, where: str) -> np.ndarray:
+    import cv2
+
+    arr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if arr is None or arr.dtype != np.uint8 or arr.ndim != 2:
+        raise ValueError(f"{where}: not a single-channel 8-bit PNG")
+    return arr
+
+
+def build_index(units: list[UnitResult]) -> BuiltIndex:
+    """Concatenate units (sorted by unit number) into global rows/episodes/shards."""
+    units = sorted(units, key=lambda u: u.unit)
+    seen_units = [u.unit for u in units]
+    if len(set(seen_units)) != len(seen_units):
+        raise ValueError(f"duplicate work unit numbers in commit: {seen_units}")
+    n = sum(len(u.samples) for u in units)
+    rows = np.zeros(n, dtype=INDEX_DTYPE)
+    episodes: list[dict] = []
+    episode_pos: dict[str, int] = {}
+    shards: list[dict] = []
+    i = 0
+    for unit in units:
+        where = f"unit {unit.unit}"
+        records = {}
+        for rec in unit.episodes:
+            eid = rec["episode_id"]
+            if eid in episode_pos or eid in records:
+                raise ValueError(f"{where}: episode {eid!r} appears twice in the dataset")
+            records[eid] = rec
+        shard_base = len(shards)
+        for s in unit.shards:
+            shards.append({"name": s.name, "sha256": s.sha256, "bytes": int(s.bytes),
+                           "samples": int(s.samples), "first_sample": 0})
+        current = None
+        for sample in unit.samples:
+            eid, frame = parse_key(sample.key)
+            if eid not in records:
+                raise ValueError(f"{where}: sample {sample.key} has no episode record")
+            if eid != current:
+                if eid in episode_pos:
+                    raise ValueError(f"{where}: frames of episode {eid!r} are not contiguous (at {sample.key})")
+                rec = dict(records[eid])
+                rec["first_sample"] = i
+                rec["shards"] = []
+                episode_pos[eid] = len(episodes)
+                episodes.append(rec)
+                current, expected = eid, 0
+            if frame != expected:
+                raise ValueError(f"{where}: episode {eid!r}: expected frame {expected}, got {sample.key}")
+            expected += 1
+            if not 0 <= sample.shard < len(unit.shards):
+                raise ValueError(f"{where}: sample {sample.key} names shard {sample.shard} of {len(unit.shards)}")
+            row = rows[i]
+            row["shard"] = shard_base + sample.shard
+            row["offset"] = sample.offset
+            row["episode"] = episode_pos[eid]
+            row["frame"] = frame
+            for suffix, size in sample.sizes.items():
+                row[SIZE_FIELDS[suffix]] = size
+            name = shards[shard_base + sample.shard]["name"]
+            if name not in episodes[-1]["shards"]:
+                episodes[-1]["shards"].append(name)
+            i += 1
+        missing = set(records) - set(episode_pos)
+        if missing:
+            raise ValueError(f"{where}: episode record(s) without samples: {sorted(missing)}")
+    # per-shard first_sample and sample counts must agree with the rows
+    counts = np.bincount(rows["shard"], minlength=len(shards)) if n else np.zeros(len(shards), int)
+    first = 0
+    for pos, entry in enumerate(shards):
+        if counts[pos] != entry["samples"]:
+            raise ValueError(f"shard {entry['name']}: records {entry['samples']} samples, index has {counts[pos]}")
+        entry["first_sample"] = first
+        first += entry["samples"]
+    ep_counts = np.bincount(rows["episode"], minlength=len(episodes)) if n else np.zeros(0, int)
+    for pos, ep in enumerate(episodes):
+        count = int(ep_counts[pos])
+        if "num_frames" in ep and ep["num_frames"] != count:
+            raise ValueError(f"episode {ep['episode_id']!r}: record says num_frames={ep['num_frames']}, "
+                             f"shards hold {count} samples")
+        ep["num_frames"] = count
+    return BuiltIndex(rows=rows, episodes=episodes, shards=shards)
+
+
+def _frames_per_hand(rows: np.ndarray) -> dict[str, int]:
+    return {hand: int(np.count_nonzero(rows[f"size_tactile_{hand}"])) for hand in HANDS}
+
+
+def commit_dataset(root: str | os.PathLike, units: list[UnitResult], layouts: list[LayoutArtifact],
+                   canonical: CanonicalArtifact, codec: dict, sources: list[dict],
+                   created: str | None = None, htdata_version: str | None = None) -> dict:
+    """Write layouts/, episodes.jsonl, index.npy and finally dataset.json. Returns the manifest.
+
+    Shards must already sit in ROOT/shards (ShardWriter put them there); their
+    sizes are checked against the records. sha256 of shards come from the
+    writer (computed while writing), of the other files from disk.
+    """
+    root = Path(root)
+    built = build_index(units)
+    for entry in built.shards:
+        path = root / SHARDS_DIR / entry["name"]
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: shard listed by a work unit is missing")
+        if path.stat().st_size != entry["bytes"]:
+            raise ValueError(f"{path}: size {path.stat().st_size} != recorded {entry['bytes']}")
+    for ep in built.episodes:
+        validate_json(ep, "episode", where=f"{EPISODES_FILE}: episode {ep.get('episode_id')!r}")
+        for hand, layout_id in ep["layouts"].items():
+            if layout_id not in {lay.layout_id for lay in layouts}:
+                raise ValueError(f"episode {ep['episode_id']!r}: layout {layout_id!r} ({hand}) not provided to commit")
+
+    layout_dir = root / LAYOUTS_DIR
+    layout_dir.mkdir(parents=True, exist_ok=True)
+    canon_bytes = (json.dumps(canonical.document, indent=2, sort_keys=True) + "\n").encode()
+    _write_atomic(layout_dir / CANONICAL_FILE, canon_bytes)
+    _write_atomic(layout_dir / REGIONS_FILE, encode_png_u8(canonical.region_map, "canonical region map"))
+    _write_atomic(layout_dir / PARTS_FILE, encode_png_u8(canonical.part_map, "canonical part map"))
+    layout_entries = {}
+    for lay in sorted(layouts, key=lambda x: x.layout_id):
+        doc = (json.dumps(lay.document, indent=2, sort_keys=True) + "\n").encode()
+        cov = np.asarray(lay.coverage)
+        if cov.size and cov.max() > 1:
+            raise ValueError(f"layout {lay.layout_id!r}: coverage must be 0/1")
+        _write_atomic(layout_dir / f"{lay.layout_id}.json", doc)
+        _write_atomic(layout_dir / f"coverage_{lay.layout_id}.png",
+                      encode_png_u8(cov.astype(np.uint8), f"coverage of {lay.layout_id}"))
+        layout_entries[lay.layout_id] = {
+            "file": f"{LAYOUTS_DIR}/{lay.layout_id}.json",
+            "coverage": f"{LAYOUTS_DIR}/coverage_{lay.layout_id}.png",
+            "sha256": hashlib.sha256(doc).hexdigest(),
+        }
+
+    episodes_bytes = "".join(json.dumps(ep, sort_keys=True) + "\n" for ep in built.episodes).encode()
+    _write_atomic(root / EPISODES_FILE, episodes_bytes)
+    buf = io.BytesIO()
+    np.save(buf, built.rows, allow_pickle=False)
+    index_bytes = buf.getvalue()
+    _write_atomic(root / INDEX_FILE, index_bytes)
+
+    from htdata import __version__
+
+    manifest = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "created": created or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "htdata_version": htdata_version or __version__,
+        "sources": list(sources),
+        "layouts": layout_entries,
+        "canonical": {"file": f"{LAYOUTS_DIR}/{CANONICAL_FILE}", "regions": f"{LAYOUTS_DIR}/{REGIONS_FILE}",
+                      "parts": f"{LAYOUTS_DIR}/{PARTS_FILE}", "sha256": hashlib.sha256(canon_bytes).hexdigest()},
+        "codec": codec,
+        "tasks": sorted({ep["task"] for ep in built.episodes}),
+        "scenes": sorted({ep["scene"] for ep in built.episodes}),
+        "counts": {"episodes": len(built.episodes), "samples": int(len(built.rows)),
+                   "shards": len(built.shards), "frames_per_hand": _frames_per_hand(built.rows)},
+        "shards": built.shards,
+        "episodes_file": EPISODES_FILE,
+        "episodes_sha256": hashlib.sha256(episodes_bytes).hexdigest(),
+        "index_file": INDEX_FILE,
+        "index_sha256": hashlib.sha256(index_bytes).hexdigest(),
+    }
+    validate_json(manifest, "manifest", where=f"{root / MANIFEST_FILE}")
+    _write_atomic(root / MANIFEST_FILE, (json.dumps(manifest, indent=2) + "\n").encode())
+    return manifest
+
+
+# -- loading ---------------------------------------------------------------
+
+def load_manifest(root: str | os.PathLike, validate: bool = True) -> dict:
+    path = storage.join(root, MANIFEST_FILE)
+    if not storage.exists(path):
+        raise FileNotFoundError(f"{path}: no manifest: not a committed htdata dataset")
+    manifest = json.loads(storage.read_text(path))
+    if manifest.get("format") != FORMAT or manifest.get("format_version") != FORMAT_VERSION:
+        raise ValueError(f"{path}: format {manifest.get('format')!r} v{manifest.get('format_version')!r}, "
+                         f"expected {FORMAT!r} v{FORMAT_VERSION}")
+    if validate:
+        validate_json(manifest, "manifest", where=str(path))
+    return manifest
+
+
+def load_episodes(root: str | os.PathLike) -> list[dict]:
+    path = storage.join(root, EPISODES_FILE)
+    episodes = []
+    for lineno, line in enumerate(storage.read_text(path).splitlines(), 1):
+        if line.strip():
+            try:
+                episodes.append(json.loads(line))
+            except json.JSONDecodeError as e:
+                raise ValueError(f"{path}:{lineno}: invalid JSON: {e}") from None
+    return episodes
+
+
+def load_index(root: str | os.PathLike, mmap: bool = True) -> np.ndarray:
+    """index.npy as INDEX_DTYPE; memory-mapped for local datasets when `mmap`."""
+    path = storage.join(root, INDEX_FILE)
+    local = storage.local_path(path)
+    if local is not None:
+        rows = np.load(local, mmap_mode="r" if mmap else None, allow_pickle=False)
+    else:
+        rows = np.load(io.BytesIO(storage.read_bytes(path)), allow_pickle=False)
+    if rows.dtype != INDEX_DTYPE:
+        raise ValueError(f"{path}: index dtype {rows.dtype} != {INDEX_DTYPE}")
+    return rows
+
+
+# -- benchmark helpers -----------------------------------------------------
+
+def synthetic_index(n_rows: int, path: str | os.PathLike, samples_per_shard: int = 1000,
+                    frames_per_episode: int = 500) -> Path:
+    """Write a plausible index.npy of `n_rows` rows (for load-time benchmarks)."""
+    path = Path(path)
+    rows = np.zeros(n_rows, dtype=INDEX_DTYPE)
+    i = np.arange(n_rows, dtype=np.uint64)
+    sample_bytes = 512 * 8 + 2048 + 26 * 1024 + 18 * 1024
+    rows["shard"] = i // samples_per_shard
+    rows["offset"] = (i % samples_per_shard) * sample_bytes
+    rows["episode"] = i // frames_per_episode
+    rows["frame"] = i % frames_per_episode
+    rows["size_json"] = 300
+    rows["size_rgb"] = 26_000
+    rows["size_tactile_right"] = 17_600
+    np.save(path, rows, allow_pickle=False)
+    return path
+
+
+def index_load_benchmark(n_rows: int, tmpdir: str | os.PathLike) -> dict:
+    """Write a synthetic index, then time mmap and full loads; report RSS growth."""
+    import psutil
+
+    path = synthetic_index(n_rows, Path(tmpdir) / "bench_index.npy")
+    proc = psutil.Process()
+    gc.collect()
+    rss0 = proc.memory_info().rss
+    t0 = time.perf_counter()
+    rows = np.load(path, mmap_mode="r")
+    first_touch = int(rows["episode"][n_rows // 2])  # touch one page so the map is real
+    t1 = time.perf_counter()
+    rss_mmap = proc.memory_info().rss
+    del rows
+    gc.collect()
+    t2 = time.perf_counter()
+    full = np.load(path)
+    t3 = time.perf_counter()
+    rss_full = proc.memory_info().rss
+    del full
+    return {
+        "rows": n_rows,
+        "file_bytes": path.stat().st_size,
+        "mmap_load_ms": (t1 - t0) * 1e3,
+        "mmap_rss_delta_mb": (rss_mmap - rss0) / 2**20,
+        "full_load_ms": (t3 - t2) * 1e3,
+        "full_rss_delta_mb": (rss_full - rss0) / 2**20,
+        "probe_episode": first_touch,
+    }

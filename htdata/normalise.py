@@ -1,0 +1,137 @@
+"""Glove units -> contact in [0,1], per pipeline and layout.
+
+    inverted:  v = (max_value - p) / max_value     (OpenTouch: 3072 = no load, 0 = saturated)
+    direct:    v = p / max_value                   (TouchAnything: already [0,1])
+    baseline:  v -= b  per taxel, then clip at 0   (b from the first frames, see below)
+    scale:     v *= scale
+    clip:      true  -> clip to [0,1];
+               false -> strict: a finite live value outside [0,1] raises ValueError.
+
+Divisions only ever use `max_value`, which validate() requires > 0, so
+saturated or zero-range sensors come out as 0 or 1, never NaN.
+Non-finite live taxels are NOT repaired: they become NaN and the frame is
+flagged False in `finite_mask` (the ingest drops and counts such frames).
+
+Streaming: the baseline is fitted once on the first chunk (`fit_baseline`),
+then `apply` is called chunk by chunk with the same result as on the whole.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+CONVENTIONS = ("inverted", "direct")
+BASELINES = ("none", "first_frame", "rest_window")
+
+
+@dataclass
+class NormaliseConfig:
+    convention: str = "direct"
+    max_value: float = 1.0
+    baseline: str = "none"
+    rest_frames: int = 10     # frames averaged (median) for baseline="rest_window"
+    clip: bool = True
+    scale: float = 1.0
+
+    def validate(self, where: str = "normalise") -> "NormaliseConfig":
+        if self.convention not in CONVENTIONS:
+            raise ValueError(f"{where}: convention must be one of {CONVENTIONS}, got {self.convention!r}")
+        if not (isinstance(self.max_value, (int, float)) and np.isfinite(self.max_value)
+                and self.max_value > 0):
+            raise ValueError(f"{where}: max_value must be a finite number > 0, got {self.max_value!r}")
+        if self.baseline not in BASELINES:
+            raise ValueError(f"{where}: baseline must be one of {BASELINES}, got {self.baseline!r}")
+        if not isinstance(self.rest_frames, int) or self.rest_frames < 1:
+            raise ValueError(f"{where}: rest_frames must be an integer >= 1, got {self.rest_frames!r}")
+        if not (isinstance(self.scale, (int, float)) and np.isfinite(self.scale) and self.scale > 0):
+            raise ValueError(f"{where}: scale must be a finite number > 0, got {self.scale!r}")
+        if not isinstance(self.clip, bool):
+            raise ValueError(f"{where}: clip must be true or false, got {self.clip!r}")
+        return self
+
+    @classmethod
+    def from_layout_value(cls, value: dict) -> "NormaliseConfig":
+        """Default config from a layout's `value` block ({"convention", "max"})."""
+        return cls(convention=value["convention"], max_value=float(value["max"])).validate()
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+class Normaliser:
+    """Apply a NormaliseConfig to raw grids (T,H,W) of one glove layout."""
+
+    def __init__(self, cfg: NormaliseConfig, layout):
+        self.cfg = cfg.validate()
+        self.live_mask = np.asarray(layout.live_mask, dtype=bool)
+        self.grid = tuple(self.live_mask.shape)
+        self.layout_id = getattr(layout, "layout_id", "?")
+        self.baseline: np.ndarray | None = None
+        if cfg.baseline == "none":
+            self.baseline = np.zeros(self.grid, dtype=np.float32)
+
+    def _check(self, raw) -> np.ndarray:
+        arr = np.asarray(raw, dtype=np.float32)
+        if arr.ndim != 3 or arr.shape[1:] != self.grid:
+            raise ValueError(f"layout {self.layout_id}: expected raw grids (T,{self.grid[0]},"
+                             f"{self.grid[1]}), got shape {arr.shape}")
+        return arr
+
+    def to_unit(self, raw: np.ndarray) -> np.ndarray:
+        """Convention + max only (before baseline/scale/clip)."""
+        with np.errstate(invalid="ignore", over="ignore"):
+            if self.cfg.convention == "inverted":
+                return (np.float32(self.cfg.max_value) - raw) / np.float32(self.cfg.max_value)
+            return raw / np.float32(self.cfg.max_value)
+
+    def fit_baseline(self, first_chunk) -> np.ndarray:
+        """Fix the per-taxel baseline from the episode's first frames (idempotent per episode)."""
+        if self.cfg.baseline == "none":
+            return self.baseline
+        unit = self.to_unit(self._check(first_chunk))
+        if unit.shape[0] == 0:
+            raise ValueError(f"layout {self.layout_id}: cannot fit a baseline on zero frames")
+        window = unit[:1] if self.cfg.baseline == "first_frame" else unit[: self.cfg.rest_frames]
+        # Median over finite samples only; a taxel never finite in the window gets baseline 0.
+        finite = np.isfinite(window)
+        filled = np.where(finite, window, np.nan)
+        n_finite = finite.sum(axis=0)
+        base = np.zeros(self.grid, dtype=np.float32)
+        has = n_finite > 0
+        if has.any():
+            base[has] = np.nanmedian(filled[:, has], axis=0)
+        self.baseline = np.clip(base, 0.0, 1.0).astype(np.float32)
+        return self.baseline
+
+    def apply(self, raw) -> tuple[np.ndarray, np.ndarray]:
+        """raw (T,H,W) -> (values (T,H,W) float32, finite_mask (T,) bool).
+
+        Finite live taxels of values are in [0,1]; non-finite live taxels are
+        set to NaN and their frame is False in finite_mask.
+        """
+        arr = self._check(raw)
+        if self.baseline is None:
+            raise RuntimeError(f"layout {self.layout_id}: fit_baseline() must be called before apply() "
+                               f"with baseline={self.cfg.baseline!r}")
+        finite_mask = np.isfinite(arr[:, self.live_mask]).all(axis=1)
+        with np.errstate(invalid="ignore", over="ignore"):
+            v = self.to_unit(arr)
+            if self.cfg.baseline != "none":
+                v = np.maximum(v - self.baseline, 0.0)
+            if self.cfg.scale != 1.0:
+                v = v * np.float32(self.cfg.scale)
+            if self.cfg.clip:
+                v = np.clip(v, 0.0, 1.0)
+            else:
+                live = v[:, self.live_mask]
+                bad = np.isfinite(live) & ((live < 0.0) | (live > 1.0))
+                if bad.any():
+                    t = int(np.argwhere(bad.any(axis=1))[0, 0])
+                    raise ValueError(f"layout {self.layout_id}: frame {t} of this chunk has values outside "
+                                     f"[0,1] after normalisation and clip=false "
+                                     f"(min {np.nanmin(live[t]):.4g}, max {np.nanmax(live[t]):.4g})")
+            # Clipping would turn +Inf into 1: mark every non-finite input NaN instead.
+            v = np.where(np.isfinite(arr), v, np.float32(np.nan))
+        return v.astype(np.float32, copy=False), finite_mask

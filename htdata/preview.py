@@ -1,0 +1,171 @@
+"""`htdata preview`: a contact sheet of one episode, drawn with cv2 only.
+
+Rows run over time (N frames evenly spaced over the episode, first and last
+included); columns are RGB | left tactile | right tactile. Tactile maps are
+colour-mapped (inferno, 0 = black, 1 = pale yellow), the canonical region
+outlines are drawn on top, pixels the glove does not cover are shaded with a
+grey hatch, and a hand the episode does not have is a grey panel labelled
+"no left hand" / "no right hand". Non-finite tactile pixels (a damaged
+dataset) show as magenta rather than being hidden.
+
+Sheet size is fixed by the row count: see `sheet_size`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+CANVAS = 224
+PAD = 8
+TITLE_H = 30
+HEADER_H = 22
+COLUMNS = ("rgb", "left", "right")
+COLUMN_TITLES = ("RGB", "left tactile", "right tactile")
+BACKGROUND = (32, 32, 32)        # BGR
+ABSENT_GREY = (128, 128, 128)
+OUTLINE = (255, 255, 255)
+NONFINITE = (255, 0, 255)
+TEXT = (235, 235, 235)
+FONT = cv2.FONT_HERSHEY_SIMPLEX
+
+
+def sheet_size(rows: int) -> tuple[int, int]:
+    """(height, width) in pixels of a sheet with `rows` frames."""
+    width = PAD + len(COLUMNS) * (CANVAS + PAD)
+    height = TITLE_H + HEADER_H + rows * (CANVAS + PAD) + PAD
+    return height, width
+
+
+def frame_positions(num_frames: int, rows: int) -> np.ndarray:
+    """`rows` evenly spaced frame numbers of an episode (all frames when it is shorter)."""
+    if num_frames < 1:
+        raise ValueError(f"an episode needs at least one frame, got {num_frames}")
+    if rows < 1:
+        raise ValueError(f"--frames must be >= 1, got {rows}")
+    return np.unique(np.round(np.linspace(0, num_frames - 1, min(rows, num_frames))).astype(np.int64))
+
+
+def region_outline(labels: np.ndarray) -> np.ndarray:
+    """Bool mask of pixels whose right or lower neighbour has another label."""
+    edge = np.zeros(labels.shape, bool)
+    edge[:, :-1] |= labels[:, :-1] != labels[:, 1:]
+    edge[:-1, :] |= labels[:-1, :] != labels[1:, :]
+    return edge
+
+
+def hatch_mask(shape: tuple[int, int], spacing: int = 8) -> np.ndarray:
+    yy, xx = np.indices(shape)
+    return (xx + yy) % spacing == 0
+
+
+def render_tactile(tmap: np.ndarray, coverage: np.ndarray, outline: np.ndarray) -> np.ndarray:
+    """(224,224) map in [0,1] -> (224,224,3) BGR panel with outlines and shaded uncovered area."""
+    finite = np.isfinite(tmap)
+    values = np.clip(np.where(finite, tmap, 0.0), 0.0, 1.0)
+    panel = cv2.applyColorMap(np.round(values * 255).astype(np.uint8), cv2.COLORMAP_INFERNO)
+    uncovered = coverage == 0
+    # shade, not hide: anything drawn outside coverage stays visible (dimmed)
+    panel[uncovered] = (panel[uncovered] * 0.35 + 70).astype(np.uint8)
+    panel[uncovered & hatch_mask(tmap.shape)] = (110, 110, 110)
+    panel[outline] = OUTLINE
+    panel[~finite] = NONFINITE
+    return panel
+
+
+def absent_panel(hand: str) -> np.ndarray:
+    panel = np.empty((CANVAS, CANVAS, 3), np.uint8)
+    panel[:] = ABSENT_GREY
+    text = f"no {hand} hand"
+    (tw, th), _ = cv2.getTextSize(text, FONT, 0.6, 1)
+    cv2.putText(panel, text, ((CANVAS - tw) // 2, (CANVAS + th) // 2), FONT, 0.6, (255, 255, 255), 1,
+                cv2.LINE_AA)
+    return panel
+
+
+def _label(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.45) -> None:
+    # light text on a dark box stays readable on any panel
+    (tw, th), base = cv2.getTextSize(text, FONT, scale, 1)
+    x, y = org
+    cv2.rectangle(img, (x - 2, y - th - 3), (x + tw + 2, y + base), (0, 0, 0), cv2.FILLED)
+    cv2.putText(img, text, org, FONT, scale, TEXT, 1, cv2.LINE_AA)
+
+
+def render_contact_sheet(dataset, episode: str | None = None, frames: int = 6) -> np.ndarray:
+    """Contact sheet of one episode (default: the first) as a BGR uint8 image."""
+    from htdata.reader import DatasetReader
+
+    with DatasetReader(dataset) as reader:
+        if not reader.episodes:
+            raise ValueError(f"{dataset}: dataset has no episodes")
+        if episode is None:
+            episode = reader.episodes[0]["episode_id"]
+        try:
+            pos = reader.episode_position(episode)
+        except KeyError:
+            known = ", ".join(ep["episode_id"] for ep in reader.episodes[:10])
+            raise ValueError(f"{dataset}: no episode {episode!r} (first episodes: {known})") from None
+        ep = reader.episodes[pos]
+        first, n = reader.episode_range(pos)
+        chosen = frame_positions(n, frames)
+        outline = region_outline(reader.place_map)
+        coverage = {hand: reader.coverage(layout_id) for hand, layout_id in ep["layouts"].items()}
+
+        height, width = sheet_size(len(chosen))
+        sheet = np.empty((height, width, 3), np.uint8)
+        sheet[:] = BACKGROUND
+        _label(sheet, f"{ep['episode_id']}  task={ep['task']}  scene={ep['scene']}  "
+                      f"{n} frames @ {ep['fps']:g} fps", (PAD, 20), 0.5)
+        for c, title in enumerate(COLUMN_TITLES):
+            _label(sheet, title, (PAD + c * (CANVAS + PAD), TITLE_H + 15))
+        t0 = None
+        for r, frame in enumerate(chosen):
+            sample = reader.decoded(first + int(frame))
+            y = TITLE_H + HEADER_H + r * (CANVAS + PAD)
+            panels = [cv2.cvtColor(sample["rgb"], cv2.COLOR_RGB2BGR)]
+            for hand in ("left", "right"):
+                if hand in sample["tactile"]:
+                    panels.append(render_tactile(sample["tactile"][hand], coverage[hand], outline))
+                else:
+                    panels.append(absent_panel(hand))
+            for c, panel in enumerate(panels):
+                x = PAD + c * (CANVAS + PAD)
+                sheet[y:y + CANVAS, x:x + CANVAS] = panel
+            t = sample["meta"]["t_rgb_ns"]
+            t0 = t if t0 is None else t0
+            _label(sheet, f"frame {int(frame)}  t={(t - t0) / 1e9:.3f}s", (PAD + 4, y + 16))
+    return sheet
+
+
+def write_preview(dataset, out, episode: str | None = None, frames: int = 6) -> Path:
+    out = Path(out)
+    if out.suffix.lower() != ".png":
+        raise ValueError(f"{out}: the preview is written as PNG; give a .png path")
+    sheet = render_contact_sheet(dataset, episode=episode, frames=frames)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(out), sheet):
+        raise OSError(f"{out}: cv2 could not write the PNG")
+    return out
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = __doc__
+    parser.add_argument("dataset", type=Path, help="committed dataset directory")
+    parser.add_argument("out", type=Path, metavar="OUT.png", help="contact sheet to write")
+    parser.add_argument("--episode", default=None, metavar="ID", help="episode id (default: the first)")
+    parser.add_argument("--frames", type=int, default=6, metavar="N",
+                        help="rows: N frames evenly spaced over the episode (default 6)")
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        out = write_preview(args.dataset, args.out, episode=args.episode, frames=args.frames)
+    except (ValueError, FileNotFoundError, OSError) as exc:
+        print(f"htdata preview: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {out}")
+    return 0

@@ -1,0 +1,288 @@
+"""DatasetReader: random access, windows and streaming over a committed dataset.
+
+Random access never scans: index.npy gives each sample's shard, header
+offset and member sizes, so one seek + one read returns exactly that
+sample's bytes (headers are checked against the expected member names).
+Works on local paths and fsspec URLs (file://, memory://, s3://...).
+
+Shard file handles are opened lazily and remembered with the pid that opened
+them; after a fork (DataLoader workers) the child opens its own. Pickling a
+reader drops handles and the index map; they reopen on first use.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import tarfile
+from collections import OrderedDict
+from typing import Iterator
+
+import numpy as np
+
+from htdata import storage
+from htdata.codec import decode_rgb, decode_tactile
+from htdata.manifest import (LAYOUTS_DIR, SHARDS_DIR, SIZE_FIELDS, load_episodes, load_index,
+                             load_manifest, decode_png_u8)
+from htdata.shardio import BLOCK, member_offsets, sample_key
+
+HANDS = ("left", "right")
+MAX_OPEN_SHARDS = 32
+
+
+class DatasetReader:
+    def __init__(self, root: str | os.PathLike, validate_manifest: bool = True):
+        self.root = os.fspath(root)
+        self.manifest = load_manifest(self.root, validate=validate_manifest)
+        self.episodes: list[dict] = load_episodes(self.root)
+        if len(self.episodes) != self.manifest["counts"]["episodes"]:
+            raise ValueError(f"{self.root}: episodes.jsonl has {len(self.episodes)} records, "
+                             f"manifest counts {self.manifest['counts']['episodes']}")
+        self._episode_pos = {ep["episode_id"]: i for i, ep in enumerate(self.episodes)}
+        self._shard_names = [s["name"] for s in self.manifest["shards"]]
+        self._index: np.ndarray | None = None
+        self._handles: OrderedDict[int, object] = OrderedDict()
+        self._pid = os.getpid()
+        self._maps: dict[str, np.ndarray] = {}
+
+    # -- pickling / fork safety -------------------------------------------
+    def __getstate__(self):
+        state = self.__dict__.copy()
+        state["_index"] = None
+        state["_handles"] = OrderedDict()
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._pid = os.getpid()
+
+    def _check_pid(self) -> None:
+        if os.getpid() != self._pid:
+            # Inherited handles share file offsets with the parent: never use them.
+            self._handles = OrderedDict()
+            self._pid = os.getpid()
+
+    def close(self) -> None:
+        if os.getpid() == self._pid:
+            for handle in self._handles.values():
+                handle.close()
+        self._handles.clear()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # -- index -------------------------------------------------------------
+    @property
+    def index(self) -> np.ndarray:
+        if self._index is None:
+            rows = load_index(self.root, mmap=True)
+            if len(rows) != self.manifest["counts"]["samples"]:
+                raise ValueError(f"{self.root}: index has {len(rows)} rows, manifest counts "
+                                 f"{self.manifest['counts']['samples']}")
+            self._index = rows
+        return self._index
+
+    def __len__(self) -> int:
+        return int(self.manifest["counts"]["samples"])
+
+    def _row(self, i: int):
+        n = len(self)
+        if not -n <= i < n:
+            raise IndexError(f"{self.root}: sample {i} out of range (dataset has {n})")
+        return self.index[int(i) % n]
+
+    def key(self, i: int) -> str:
+        row = self._row(i)
+        return sample_key(self.episodes[int(row["episode"])]["episode_id"], int(row["frame"]))
+
+    def episode_position(self, episode: str | int) -> int:
+        if isinstance(episode, (int, np.integer)):
+            if not 0 <= episode < len(self.episodes):
+                raise IndexError(f"{self.root}: episode position {episode} out of range ({len(self.episodes)})")
+            return int(episode)
+        if episode not in self._episode_pos:
+            raise KeyError(f"{self.root}: no episode {episode!r}")
+        return self._episode_pos[episode]
+
+    def episode_range(self, episode: str | int) -> tuple[int, int]:
+        """(first global sample, number of frames) of an episode id or position."""
+        ep = self.episodes[self.episode_position(episode)]
+        return int(ep["first_sample"]), int(ep["num_frames"])
+
+    def locate(self, episode: str | int, frame: int) -> int:
+        """Global sample index of (episode, frame)."""
+        first, n = self.episode_range(episode)
+        if not 0 <= frame < n:
+            raise IndexError(f"{self.root}: episode {self.episodes[self.episode_position(episode)]['episode_id']!r} "
+                             f"has frames 0..{n - 1}, asked for {frame}")
+        return first + int(frame)
+
+    # -- bytes -------------------------------------------------------------
+    def _shard_path(self, shard: int) -> str:
+        return storage.join(self.root, SHARDS_DIR, self._shard_names[shard])
+
+    def _handle(self, shard: int):
+        self._check_pid()
+        handle = self._handles.get(shard)
+        if handle is None:
+            handle = storage.open_binary(self._shard_path(shard))
+            self._handles[shard] = handle
+            if len(self._handles) > MAX_OPEN_SHARDS:
+                _, oldest = self._handles.popitem(last=False)
+                oldest.close()
+        else:
+            self._handles.move_to_end(shard)
+        return handle
+
+    def _members_from_span(self, row, span: bytes, key: str, shard: int) -> dict[str, bytes]:
+        suffixes = [s for s, f in SIZE_FIELDS.items() if row[f] > 0]
+        sizes = [int(row[SIZE_FIELDS[s]]) for s in suffixes]
+        base = int(row["offset"])
+        out = {}
+        for suffix, size, data_off in zip(suffixes, sizes, member_offsets(base, sizes)):
+            rel = data_off - base
+            header = tarfile.TarInfo.frombuf(span[rel - BLOCK:rel], "utf-8", "surrogateescape")
+            expected = f"{key}.{suffix}"
+            if header.name != expected or header.size != size:
+                raise ValueError(f"{self._shard_path(shard)}: at offset {data_off - BLOCK} expected member "
+                                 f"{expected} ({size} B), found {header.name} ({header.size} B): index and shard disagree")
+            out[suffix] = span[rel:rel + size]
+        return out
+
+    @staticmethod
+    def _span_size(row) -> int:
+        sizes = [int(row[f]) for f in SIZE_FIELDS.values() if row[f] > 0]
+        last = member_offsets(0, sizes)[-1]
+        return last + sizes[-1]
+
+    def sample(self, i: int) -> dict[str, bytes]:
+        """Raw member bytes of sample `i`, keyed by suffix ("json", "rgb.jpg", ...)."""
+        row = self._row(i)
+        shard = int(row["shard"])
+        key = sample_key(self.episodes[int(row["episode"])]["episode_id"], int(row["frame"]))
+        size = self._span_size(row)
+        f = self._handle(shard)
+        f.seek(int(row["offset"]))
+        span = f.read(size)
+        if len(span) != size:
+            raise ValueError(f"{self._shard_path(shard)}: truncated at sample {key} "
+                             f"(wanted {size} B at {int(row['offset'])}, got {len(span)})")
+        return self._members_from_span(row, span, key, shard)
+
+    def decode(self, members: dict[str, bytes], where: str = "sample") -> dict:
+        """Decode raw members: rgb uint8 (224,224,3), tactile/bend per hand, meta json."""
+        out = {"meta": json.loads(members["json"]), "tactile": {}, "bend": {}}
+        if "rgb.jpg" in members:
+            out["rgb"] = decode_rgb(members["rgb.jpg"], where=f"{where}.rgb.jpg")
+        for hand in HANDS:
+            if f"tactile_{hand}.exr" in members:
+                out["tactile"][hand] = decode_tactile(members[f"tactile_{hand}.exr"],
+                                                      where=f"{where}.tactile_{hand}.exr")
+            if f"bend_{hand}.npy" in members:
+                out["bend"][hand] = np.load(io.BytesIO(members[f"bend_{hand}.npy"]),
+                                            allow_pickle=False).astype(np.float32)
+        return out
+
+    def decoded(self, i: int) -> dict:
+        return self.decode(self.sample(i), where=f"{self.root}: {self.key(i)}")
+
+    def window(self, episode: str | int, frame: int, k: int) -> list[dict]:
+        """Decoded frames T-k..T (k+1 frames) of one episode; never crosses its start."""
+        if k < 0:
+            raise ValueError(f"window size k must be >= 0, got {k}")
+        end = self.locate(episode, frame)
+        if frame - k < 0:
+            eid = self.episodes[self.episode_position(episode)]["episode_id"]
+            raise IndexError(f"{self.root}: window of frames {frame - k}..{frame} would cross the start "
+                             f"of episode {eid!r} (frame 0); need frame >= {k}")
+        return [self.decoded(i) for i in range(end - k, end + 1)]
+
+    def iter_samples(self, shards: list[int] | None = None, decode: bool = False) -> Iterator[tuple[int, dict]]:
+        """Stream (global index, members) shard by shard, each shard read front to back."""
+        rows = self.index
+        for shard in (range(len(self._shard_names)) if shards is None else shards):
+            entry = self.manifest["shards"][shard]
+            first, count = int(entry["first_sample"]), int(entry["samples"])
+            with storage.open_binary(self._shard_path(shard)) as f:
+                for i in range(first, first + count):
+                    row = rows[i]
+                    if int(row["shard"]) != shard:
+                        raise ValueError(f"{self.root}: index row {i} names shard {int(row['shard'])}, "
+                                         f"manifest puts it in {shard}")
+                    key = sample_key(self.episodes[int(row["episode"])]["episode_id"], int(row["frame"]))
+                    size = self._span_size(row)
+                    f.seek(int(row["offset"]))
+                    span = f.read(size)
+                    if len(span) != size:
+                        raise ValueError(f"{self._shard_path(shard)}: truncated at sample {key}")
+                    members = self._members_from_span(row, span, key, shard)
+                    yield i, (self.decode(members, where=key) if decode else members)
+
+    # -- layouts / maps ----------------------------------------------------
+    def _png(self, relpath: str) -> np.ndarray:
+        if relpath not in self._maps:
+            path = storage.join(self.root, relpath)
+            self._maps[relpath] = decode_png_u8(storage.read_bytes(path), path)
+        return self._maps[relpath]
+
+    def coverage(self, layout_id: str) -> np.ndarray:
+        """(224,224) uint8 0/1: where this glove layout has sensors."""
+        layouts = self.manifest["layouts"]
+        if layout_id not in layouts:
+            raise KeyError(f"{self.root}: layout {layout_id!r} not in dataset (has {sorted(layouts)})")
+        return self._png(layouts[layout_id]["coverage"])
+
+    def layout(self, layout_id: str) -> dict:
+        if layout_id not in self.manifest["layouts"]:
+            raise KeyError(f"{self.root}: layout {layout_id!r} not in dataset")
+        return json.loads(storage.read_text(storage.join(self.root, self.manifest["layouts"][layout_id]["file"])))
+
+    @property
+    def region_map(self) -> np.ndarray:
+        """(224,224) uint8 PART ids (thumb=1..palm=6, 0 outside): the stage-2 masking map."""
+        canonical = self.manifest["canonical"]
+        return self._png(canonical.get("parts", f"{LAYOUTS_DIR}/parts.png"))
+
+    @property
+    def place_map(self) -> np.ndarray:
+        """(224,224) uint8 per-place region ids of the canonical template."""
+        return self._png(self.manifest["canonical"]["regions"])
+
+    # -- splits ------------------------------------------------------------
+    def split(self, name: str) -> dict:
+        """DATASET/splits/NAME.json: {"parts": {part: {"episodes": [...]}, ...}, ...}."""
+        path = storage.join(self.root, "splits", f"{name}.json")
+        if not storage.exists(path):
+            raise FileNotFoundError(f"{path}: no split named {name!r} (run `htdata split`)")
+        doc = json.loads(storage.read_text(path))
+        if not isinstance(doc.get("parts"), dict):
+            raise ValueError(f"{path}: split has no 'parts' object")
+        return doc
+
+    def episode_positions(self, split: str | None = None, part: str | None = None) -> list[int]:
+        """Episode positions selected by a split part (all episodes when split is None)."""
+        if split is None:
+            if part is not None:
+                raise ValueError("part given without a split")
+            return list(range(len(self.episodes)))
+        parts = self.split(split)["parts"]
+        if part is None:
+            raise ValueError(f"split {split!r}: choose a part from {sorted(parts)}")
+        if part not in parts:
+            raise KeyError(f"split {split!r} has no part {part!r} (parts: {sorted(parts)})")
+        ids = parts[part]["episodes"]
+        missing = [e for e in ids if e not in self._episode_pos]
+        if missing:
+            raise KeyError(f"split {split!r}/{part}: unknown episode(s) {missing[:5]}")
+        return sorted(self._episode_pos[e] for e in ids)
+
+    def sample_indices(self, split: str | None = None, part: str | None = None) -> np.ndarray:
+        """Global sample indices of the selected episodes, in global order."""
+        ranges = [self.episode_range(p) for p in self.episode_positions(split, part)]
+        if not ranges:
+            return np.zeros(0, dtype=np.int64)
+        return np.concatenate([np.arange(a, a + n, dtype=np.int64) for a, n in ranges])

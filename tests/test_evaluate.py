@@ -1,0 +1,209 @@
+import json
+import math
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from handtouch.bench.evaluate import (CopyLastModel, EvalPart, ZerosModel, collect_examples, evaluate,
+                                      part_masks, subsample)
+from handtouch.bench.report import markdown_table, render_predictions, write_results
+
+S = 32          # small canvas: the bench code is size-agnostic, the tests stay fast
+
+
+class ListDataset:
+    def __init__(self, items):
+        self.items = items
+
+    def __len__(self):
+        return len(self.items)
+
+    def __getitem__(self, i):
+        return self.items[i]
+
+
+def _regions():
+    """Six vertical stripes = part ids 1..6, inside a covered square; row 0 outside the hand."""
+    reg = np.repeat(np.repeat(np.arange(1, 7, dtype=np.uint8), S // 6 + 1)[:S][None], S, 0)
+    reg[0] = 0
+    return torch.from_numpy(reg)
+
+
+def _coverage():
+    cov = torch.zeros(1, S, S)
+    cov[:, 1:, : S - 4] = 1.0      # part 6 (last stripe) only partly covered; row 0 uncovered
+    return cov
+
+
+def _frame_item(ep, f, static):
+    yy, xx = np.mgrid[:S, :S]
+    cx = 8 + (0 if static else f) + 4 * ep
+    m = np.exp(-((yy - 16) ** 2 + (xx - cx) ** 2) / 20.0).astype(np.float32)
+    if f % 5 == 4:
+        m[:] = 0.0                 # some frames have no contact at all
+    return {"tactile": torch.from_numpy(m)[None], "coverage": _coverage(), "regions": _regions(),
+            "rgb": torch.full((3, S, S), 10 * f, dtype=torch.uint8), "hand": ep % 2,
+            "task": 0, "scene": 0, "episode": ep, "frame": f}
+
+
+def _part(episodes=4, frames=12, static=False, per_frame_ids=False):
+    items = {(e, f): _frame_item(e, f, static) for e in range(episodes) for f in range(frames)}
+    flat = [items[k] for k in sorted(items)]
+    windows = []
+    for e in range(episodes):
+        for f in range(2, frames):
+            group = [items[(e, g)] for g in (f - 2, f - 1, f)]
+            # like htdata.torchdata.TactileWindowDataset: per-frame tensors stacked,
+            # coverage / regions / hand / ids given once
+            w = dict(group[-1])
+            for k in ("tactile", "rgb", "frame"):
+                w[k] = torch.stack([torch.as_tensor(x[k]) for x in group])
+            if per_frame_ids:   # the evaluator also accepts per-frame stacked coverage / hand
+                w["coverage"] = torch.stack([x["coverage"] for x in group])
+                w["hand"] = torch.tensor([x["hand"] for x in group])
+            windows.append(w)
+    return EvalPart(frames=ListDataset(flat), windows=ListDataset(windows))
+
+
+class RecordingModel(CopyLastModel):
+    """Copy model that records what it was shown, to check leakage of hidden pixels."""
+
+    name = "recording"
+
+    def __init__(self):
+        self.hidden_max = 0.0
+
+    def inpaint(self, tactile, coverage, mask, rgb, hand):
+        self.hidden_max = max(self.hidden_max, float((tactile * mask).abs().max()))
+        return super().inpaint(tactile, coverage, mask, rgb, hand)
+
+
+class NaNModel(ZerosModel):
+    name = "nan"
+
+    def rgb_to_tactile(self, rgb, coverage, hand):
+        return torch.full_like(coverage, float("nan"))
+
+
+def test_zeros_reference_matches_hand_computation():
+    part = _part()
+    res = evaluate(ZerosModel(), {"test": part}, parts=("test",), max_items=1000, exclude_radius=2)["test"]
+    gts = torch.stack([it["tactile"] for it in part.frames.items])
+    cov = _coverage()
+    per_frame = ((gts ** 2) * cov).flatten(1).sum(1) / cov.sum()
+    assert res["items"] == len(gts)
+    assert res["rgb2tactile"]["full"]["rmse"] == pytest.approx(float(per_frame.sqrt().mean()), rel=1e-6)
+    # zeros vs contact -> cIoU 0; zeros vs empty frames (every 5th) -> 1
+    empty = float((gts.flatten(1).amax(1) == 0).double().mean())
+    assert res["rgb2tactile"]["full"]["ciou"] == pytest.approx(empty)
+    assert res["reconstruction"]["full"]["rmse"] == pytest.approx(res["rgb2tactile"]["full"]["rmse"])
+    # constant embeddings: the model ranking is the tie rule (lowest index first), which
+    # agrees with the SSIM-nearest candidate only by chance
+    assert res["retrieval"]["queries"] == len(gts) and res["retrieval"]["hit_at_1"] < 0.3
+
+
+def test_copy_reference_reconstructs_and_copies_static_frames():
+    res = evaluate(CopyLastModel(), {"test": _part(static=True)}, parts=("test",), max_items=1000)["test"]
+    assert res["reconstruction"]["full"]["rmse"] == 0.0 and res["reconstruction"]["full"]["ciou"] == 1.0
+    # only frames 4, 9 (empty) and their successors differ from the previous frame
+    assert res["prediction"]["full"]["rmse"] > 0.0
+    h = res["inpaint"]["hole"]
+    assert h["frames"] == res["items"] and h["skipped"] == 0
+    assert res["inpaint"]["full"]["rmse"] < h["rmse"]          # holes hold all the error
+    assert res["windows"] == 4 * 10
+
+
+@pytest.mark.parametrize("per_frame_ids", [False, True])
+def test_copy_last_exact_on_constant_episodes(per_frame_ids):
+    part = _part(static=True, per_frame_ids=per_frame_ids)
+    for w in part.windows.items:                                 # make every window constant in time
+        w["tactile"][:] = w["tactile"][-1]
+    res = evaluate(CopyLastModel(), {"ood": part}, parts=("ood",), max_items=1000)["ood"]
+    assert res["prediction"]["full"]["rmse"] == 0.0 and res["prediction"]["full"]["ciou"] == 1.0
+
+
+def test_hidden_pixels_never_reach_the_model():
+    model = RecordingModel()
+    evaluate(model, {"test": _part()}, parts=("test",), max_items=30)
+    assert model.hidden_max == 0.0
+
+
+def test_seeded_subsample_is_deterministic_and_bounded():
+    a = evaluate(CopyLastModel(), {"test": _part()}, parts=("test",), max_items=20, seed=7)
+    b = evaluate(CopyLastModel(), {"test": _part()}, parts=("test",), max_items=20, seed=7)
+    for r in (a, b):
+        for track in r["test"].values():
+            if isinstance(track, dict):
+                track.pop("seconds", None)
+        r["test"].pop("seconds")
+    assert a == b
+    assert a["test"]["items"] == 20 and a["test"]["windows"] == 20
+    assert subsample(5, 10, 0).tolist() == [0, 1, 2, 3, 4]
+    assert len(set(subsample(100, 10, 1).tolist())) == 10
+
+
+def test_part_masks_pick_covered_parts_only():
+    regions = _regions()[None].repeat(200, 1, 1)
+    cov = torch.zeros(200, 1, S, S)
+    cov[:100, :, 1:, :6] = 1.0                                  # only part 1 covered in the first half
+    masks = part_masks(regions, cov, np.random.default_rng(0))
+    assert torch.equal(masks[:100, 0], (regions[:100] == 1).float())
+    assert masks[100:].sum() == 0                               # nothing covered -> empty mask
+    cov_all = torch.ones(200, 1, S, S)
+    chosen = {int(regions[0][m[0] > 0].unique().item()) for m in part_masks(regions, cov_all, np.random.default_rng(1))}
+    assert chosen == {1, 2, 3, 4, 5, 6}
+
+
+def test_bad_model_output_and_missing_part_raise():
+    with pytest.raises(ValueError, match="nan.rgb_to_tactile returned NaN"):
+        evaluate(NaNModel(), {"test": _part()}, parts=("test",), max_items=8)
+    with pytest.raises(KeyError, match="ood"):
+        evaluate(ZerosModel(), {"test": _part()}, parts=("test", "ood"))
+
+
+def test_single_frame_episodes_skip_prediction_and_retrieval_gracefully():
+    part = _part(episodes=3, frames=1)
+    part.windows = ListDataset([])
+    res = evaluate(CopyLastModel(), part, max_items=10)["all"]
+    assert res["retrieval"]["queries"] == 0 and res["retrieval"]["hit_at_1"] is None
+    assert res["prediction"]["full"]["rmse"] is None and res["windows"] == 0
+    assert res["reconstruction"]["full"]["rmse"] == 0.0
+
+
+def test_report_table_json_and_png(tmp_path):
+    part = _part()
+    results = {m.name: evaluate(m, {"test": part, "ood": part}, max_items=24)
+               for m in (ZerosModel(), CopyLastModel())}
+    doc = write_results(tmp_path, results, {"seed": 0})
+    assert json.loads((tmp_path / "results.json").read_text())["results"].keys() == results.keys()
+    table = (tmp_path / "results.md").read_text()
+    lines = [l for l in table.splitlines() if l.startswith("|")]
+    assert lines[0].startswith("| Model | Retrieval Hit@1 | Retrieval R@5 | Inpaint F-RMSE | F-cIoU | H-RMSE")
+    assert len(lines) == 2 + 4                                  # header, rule, 2 models x 2 parts
+    assert "| copy-last-ref (ood) |" in table and doc["meta"] == {"seed": 0}
+    rmse = results["zeros-ref"]["test"]["inpaint"]["full"]["rmse"]
+    assert f"{rmse:.3f}" in markdown_table({"zeros-ref": {"test": results["zeros-ref"]["test"]}})
+
+    ex = collect_examples(CopyLastModel(), part, count=3)
+    assert ex["gt"].shape == (3, S, S) and ex["rgb"].shape == (3, S, S, 3) and ex["rgb"].dtype == np.uint8
+    img = render_predictions(ex, tmp_path / "predictions.png", title="copy-last-ref")
+    back = cv2.imread(str(tmp_path / "predictions.png"))
+    assert back.shape == img.shape and back.shape[1] == 6 * S and back.shape[0] > 3 * S
+    assert math.isfinite(float(img.mean()))
+
+
+class ReconstructingModel(ZerosModel):
+    """Has the optional stage-1 `reconstruct`; its inpaint would score badly."""
+
+    name = "recon"
+
+    def reconstruct(self, tactile, coverage):
+        return tactile * coverage
+
+
+def test_reconstruction_track_prefers_model_reconstruct():
+    res = evaluate(ReconstructingModel(), _part(), max_items=16)["all"]
+    assert res["reconstruction"]["full"]["rmse"] == 0.0
+    assert res["inpaint"]["full"]["rmse"] > 0.0

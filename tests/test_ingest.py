@@ -1,0 +1,379 @@
+"""End-to-end ingest on tiny raw fixtures in all three source formats.
+
+Fixtures are written with htdata.sample.formats (the source layouts), then
+ingested through the real CLI (in-process, or in a subprocess for crash tests).
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from htdata.ingest import pack_units, parse_sources, run
+from htdata.cli import build_parser  # noqa: F401  (the CLI module must import)
+from htdata.resources import PIPELINES_DIR
+from htdata.sample.formats import (NativeHand, NativeRecording, OpenTouchClip, TouchAnythingEpisode,
+                                   write_native_recording, write_opentouch_annotations,
+                                   write_opentouch_scene, write_touchanything_episode)
+
+PERIOD = 33_333_333
+COLOURS = [(200, 40, 90), (30, 160, 220), (250, 250, 10), (90, 90, 90)]
+
+
+def small_pipeline(tmp_path: Path, name: str, samples_per_shard: int = 8) -> Path:
+    """A shipped pipeline with a tiny shard size (more units, more shards)."""
+    text = (PIPELINES_DIR / f"{name}.toml").read_text()
+    text = text.replace("samples_per_shard = 256", f"samples_per_shard = {samples_per_shard}")
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text)
+    return path
+
+
+def ot_clip(demo_id: str, t: int, colour, pressure: np.ndarray | None = None) -> OpenTouchClip:
+    if pressure is None:
+        rng = np.random.default_rng(len(demo_id) * 7 + t)
+        pressure = rng.uniform(1000, 3072, size=(t, 16, 16)).astype(np.float32)
+    frames = [np.full((48, 64, 3), colour, np.uint8) for _ in range(t)]
+    return OpenTouchClip(demo_id, np.arange(t, dtype=np.int64) * PERIOD + 10**12, pressure, frames)
+
+
+def make_opentouch(root: Path, bad: bool = False) -> Path:
+    clips = [ot_clip("demo_01", 12, COLOURS[0]), ot_clip("demo_02", 7, COLOURS[1]),
+             ot_clip("demo_003", 20, COLOURS[2])]
+    write_opentouch_scene(root / "home_kitchen_p1.hdf5", clips)
+    rows = [{"id": f"home_kitchen_p1::{c.demo_id}", "action": a} for c, a in zip(clips, ["pour", "cut", "wipe"])]
+    if bad:
+        nan = np.full((6, 16, 16), np.nan, np.float32)
+        bad_clips = [ot_clip("demo_01", 6, COLOURS[3], pressure=nan),   # all-NaN
+                     ot_clip("demo_02", 0, COLOURS[3]),                  # zero frames
+                     ot_clip("demo_03", 6, COLOURS[3])]                  # undecodable JPEG at frame 4
+        write_opentouch_scene(root / "office_desk_p2.hdf5", bad_clips)
+        with h5py.File(root / "office_desk_p2.hdf5", "r+") as f:
+            f["data/demo_03/rgb_images_jpeg"][4] = np.frombuffer(b"not a jpeg at all", np.uint8)
+        rows += [{"id": f"office_desk_p2::demo_0{i}", "action": "type"} for i in (1, 2, 3)]
+    write_opentouch_annotations(root / "annotations.csv", rows)
+    return root
+
+
+def make_touchanything(root: Path, truncated: bool = False) -> Path:
+    from htdata.layouts import load_layout
+
+    for n, (scene, task, traj) in enumerate([("Home", "plug_usb", "20260320_135743_682"),
+                                             ("Office", "open_drawer", "20260321_101010_001")]):
+        t = 5 + n
+        grids = {}
+        for hand in ("left", "right"):
+            lay = load_layout(f"touchanything_{hand}_21x21")
+            g = np.full((t, 21, 21), np.nan, np.float32)
+            g[:, lay.live_mask] = np.linspace(0, 1, t, dtype=np.float32)[:, None]
+            g[:, lay.bend_cells[:, 0], lay.bend_cells[:, 1]] = 0.25
+            grids[hand] = g
+        ep = TouchAnythingEpisode(left_grid=grids["left"], right_grid=grids["right"],
+                                  chest_frames=[np.full((480, 640, 3), COLOURS[n], np.uint8)] * t,
+                                  ts_epoch_s=1.7e9 + np.arange(t) / 30.0)
+        folder = root / scene / task / traj
+        write_touchanything_episode(folder, ep, wrist_videos=False)
+        if truncated and n == 1:
+            npz = folder / "pressure_grids.npz"
+            data = npz.read_bytes()
+            npz.write_bytes(data[: len(data) // 2])
+    return root
+
+
+def make_native(root: Path, wrong_grid: bool = False) -> Path:
+    t_video = np.arange(9, dtype=np.int64) * PERIOD
+    t_glove = np.arange(0, 9 * PERIOD, 10_000_000, dtype=np.int64)   # 100 Hz glove, 30 Hz video
+    values = np.full((t_glove.size, 16, 16), 1536.0, np.float32)
+    rec = NativeRecording(task="grasp_cup", scene="lab", video_storage="jpeg",
+                          video_frames=[np.full((40, 40, 3), COLOURS[0], np.uint8)] * 9,
+                          video_timestamps_ns=t_video,
+                          hands={"right": NativeHand("opentouch_right_16x16", values, t_glove)})
+    write_native_recording(root / "rec_good", rec)
+    if wrong_grid:
+        rec.hands = {"right": NativeHand("opentouch_right_16x16", np.zeros((t_glove.size, 8, 8), np.float32),
+                                         t_glove)}
+        rec.video_frames = [np.full((40, 40, 3), COLOURS[1], np.uint8)] * 9
+        write_native_recording(root / "rec_wrong_grid", rec)
+    return root
+
+
+def ingest_cli(*args) -> int:
+    from htdata.cli import main
+
+    return main(["ingest", "--workers", "1", "--quiet", *map(str, args)])
+
+
+def read_all(out: Path) -> dict[str, dict[str, bytes]]:
+    from htdata.reader import DatasetReader
+
+    reader = DatasetReader(out)
+    samples = {}
+    for i in range(len(reader)):
+        s = reader.sample(i)
+        samples[json.loads(s["json"])["key"]] = s
+    return samples
+
+
+def temp_leftovers(out: Path) -> list[str]:
+    return sorted(str(p.relative_to(out)) for p in out.rglob("*")
+                  if p.name.endswith(".tmp") or p.name.startswith("spool-"))
+
+
+# --------------------------------------------------------------------------- planning / CLI forms
+
+def test_pack_units_is_greedy_in_order():
+    assert pack_units([3, 3, 3, 10, 1], 6) == [[0, 1], [2, 3], [4]]
+    assert pack_units([100], 8) == [[0]]          # a long episode is its own unit
+    assert pack_units([], 8) == []
+    assert pack_units([0, 0], 8) == [[0, 1]]
+
+
+def test_parse_sources_forms(tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir(), b.mkdir()
+    s, out = parse_sources(["opentouch"], [str(a), str(tmp_path / "out")])
+    assert [x.pipeline.name for x in s] == ["opentouch"] and out == (tmp_path / "out").resolve()
+    s, _ = parse_sources([f"opentouch={a}", f"native={b}"], [str(tmp_path / "out")])
+    assert [(x.pipeline.name, x.root) for x in s] == [("opentouch", a.resolve()), ("native", b.resolve())]
+    s, _ = parse_sources(["opentouch", "native"], [str(a), str(b), "out"])
+    assert [x.root for x in s] == [a.resolve(), b.resolve()]
+    with pytest.raises(ValueError, match="need 2 SRC"):
+        parse_sources(["opentouch", "native"], [str(a), "out"])
+    with pytest.raises(ValueError, match="every --pipeline"):
+        parse_sources([f"opentouch={a}", "native"], [str(b), "out"])
+    with pytest.raises(ValueError, match="does not exist"):
+        parse_sources(["opentouch"], [str(tmp_path / "missing"), "out"])
+    with pytest.raises(ValueError, match="distinct"):
+        parse_sources([f"opentouch={a}", f"opentouch={b}"], ["out"])
+
+
+# --------------------------------------------------------------------------- formats
+
+def test_opentouch_ingest_reads_back(tmp_path):
+    import webdataset as wds
+
+    from htdata.layouts import load_layout
+    from htdata.rasterise import Rasteriser
+    from htdata.reader import DatasetReader
+
+    raw = make_opentouch(tmp_path / "raw")
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", small_pipeline(tmp_path, "opentouch"), raw, out) == 0
+    reader = DatasetReader(out)
+    assert len(reader) == 39 and reader.manifest["counts"]["episodes"] == 3
+    by_id = {e["episode_id"]: e for e in reader.episodes}
+    assert [e["episode_id"] for e in reader.episodes] == sorted(by_id)
+    ep = by_id["ot-home_kitchen_p1-demo_01"]
+    assert ep["task"] == "pour" and ep["num_frames"] == 12 and abs(ep["fps"] - 30.0) < 0.01
+    assert ep["sync"]["kept"] == 12 and ep["dropped_frames"] == {}
+    # the 20-frame episode is one unit spanning 3 shards of 8
+    assert len(by_id["ot-home_kitchen_p1-demo_003"]["shards"]) == 3
+
+    first, n = reader.episode_range(reader.episodes.index(ep))
+    d = reader.decoded(first + 5)
+    assert d["meta"]["frame_index"] == 5 and d["meta"]["hands"] == {"left": False, "right": True}
+    assert np.abs(d["rgb"].astype(int) - COLOURS[0]).max() <= 3   # BGR-stored JPEG came back as RGB
+    # tactile round trip: sample the stored map at the taxels == (3072 - p) / 3072
+    with h5py.File(raw / "home_kitchen_p1.hdf5") as f:
+        p = f["data/demo_01/right_pressure"][5]
+    lay = load_layout("opentouch_right_16x16")
+    taxels = Rasteriser(lay).sample(d["tactile"]["right"][None])[0]
+    expected = np.clip((3072 - p) / 3072, 0, 1)
+    np.testing.assert_allclose(taxels[lay.live_mask], expected[lay.live_mask], atol=1e-3)
+
+    # webdataset reads the same samples
+    urls = [str(out / "shards" / s["name"]) for s in reader.manifest["shards"]]
+    keys = [s["__key__"] for s in wds.WebDataset(urls, shardshuffle=False)]
+    assert len(keys) == 39 and keys == sorted(keys, key=lambda k: (k.rsplit("__", 1)[0] in by_id, 0)) and \
+        set(keys) == set(read_all(out))
+    report = json.loads((out / "reports" / "ingest.json").read_text())
+    assert report["failures"] == [] and set(report["sync"]) == set(by_id)
+    assert temp_leftovers(out) == []
+
+
+def test_touchanything_ingest_both_hands_and_bend(tmp_path):
+    from htdata.reader import DatasetReader
+
+    raw = make_touchanything(tmp_path / "raw")
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", small_pipeline(tmp_path, "touchanything"), raw, out) == 0
+    reader = DatasetReader(out)
+    assert len(reader) == 11 and reader.manifest["counts"]["frames_per_hand"] == {"left": 11, "right": 11}
+    d = reader.decoded(reader.episode_range(0)[0] + 4)
+    assert set(d["tactile"]) == {"left", "right"}
+    assert np.abs(d["rgb"].astype(int) - COLOURS[0]).max() <= 6
+    s = reader.sample(0)
+    assert {"bend_left.npy", "bend_right.npy"} <= set(s)
+    from io import BytesIO
+    bend = np.load(BytesIO(s["bend_left.npy"]))
+    assert bend.shape == (66,) and np.allclose(bend, 0.25)
+
+
+def test_native_100hz_glove_30hz_video(tmp_path):
+    from htdata.reader import DatasetReader
+
+    raw = make_native(tmp_path / "raw")
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", small_pipeline(tmp_path, "native"), raw, out) == 0
+    reader = DatasetReader(out)
+    assert len(reader) == 9
+    meta = reader.decoded(3)["meta"]
+    assert abs(meta["sync_offset_ns"]["right"]) <= 5_000_000
+    assert np.allclose(reader.decoded(3)["tactile"]["right"].max(), 0.5, atol=1e-3)
+
+
+# --------------------------------------------------------------------------- failures
+
+def test_bad_episodes_are_reported_and_the_rest_ingested(tmp_path, capsys):
+    from htdata.reader import DatasetReader
+
+    ot = make_opentouch(tmp_path / "ot", bad=True)
+    nat = make_native(tmp_path / "nat", wrong_grid=True)
+    ta = make_touchanything(tmp_path / "ta", truncated=True)
+    out = tmp_path / "ds"
+    args = ["--pipeline", f"{small_pipeline(tmp_path, 'opentouch')}={ot}",
+            "--pipeline", f"{small_pipeline(tmp_path, 'native')}={nat}",
+            "--pipeline", f"{small_pipeline(tmp_path, 'touchanything')}={ta}", out]
+    assert ingest_cli(*args) == 1
+    err = capsys.readouterr().err
+    report = json.loads((out / "reports" / "ingest.json").read_text())
+    failed = {f["episode_id"]: f for f in report["failures"]}
+    assert set(failed) == {"ot-office_desk_p2-demo_01", "ot-office_desk_p2-demo_02", "ot-office_desk_p2-demo_03",
+                           "nat-rec_wrong_grid", "ta-Office-open_drawer-20260321_101010_001"} or \
+        len(failed) == 5, failed
+    jpeg = failed["ot-office_desk_p2-demo_03"]
+    assert jpeg["frame"] == 4 and "JPEG" in jpeg["error"] and jpeg["file"].endswith("office_desk_p2.hdf5")
+    assert "non-finite" in failed["ot-office_desk_p2-demo_01"]["error"]
+    assert "8, 8" in failed["nat-rec_wrong_grid"]["error"] or "(8," in failed["nat-rec_wrong_grid"]["error"]
+    assert "office_desk_p2.hdf5 [ot-office_desk_p2-demo_03] frame 4" in err
+    reader = DatasetReader(out)
+    ids = {e["episode_id"] for e in reader.episodes}
+    assert ids == {"ot-home_kitchen_p1-demo_01", "ot-home_kitchen_p1-demo_02", "ot-home_kitchen_p1-demo_003",
+                   "nat-rec_good", "ta-Home-plug_usb-20260320_135743_682"} or len(ids) == 5, ids
+    assert len(reader) == 39 + 9 + 5
+    # no frame of a failed episode leaked into the shards
+    assert not [k for k in read_all(out) if "office_desk" in k or "wrong_grid" in k]
+    # same command with --allow-failures resumes (nothing to redo) and exits 0
+    assert ingest_cli("--allow-failures", *args) == 0
+    assert temp_leftovers(out) == []
+
+
+def test_nonfinite_frames_are_dropped_and_counted(tmp_path):
+    from htdata.reader import DatasetReader
+
+    p = np.random.default_rng(0).uniform(1000, 3072, size=(10, 16, 16)).astype(np.float32)
+    p[[2, 7], 5, 9] = np.nan       # (5,9) is a live taxel (index finger, middle phalanx)
+    p[4, 0, 2] = np.inf             # (0,2) is an unused cell: ignored
+    raw = tmp_path / "raw"
+    write_opentouch_scene(raw / "s.hdf5", [ot_clip("demo_01", 10, COLOURS[0], pressure=p)])
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", small_pipeline(tmp_path, "opentouch"), raw, out) == 0
+    reader = DatasetReader(out)
+    ep = reader.episodes[0]
+    assert ep["num_frames"] == 8 and ep["dropped_frames"] == {"nonfinite_tactile:right": 2}
+    assert [json.loads(reader.sample(i)["json"])["source_frame"] for i in range(8)] == [0, 1, 3, 4, 5, 6, 8, 9]
+    report = json.loads((out / "reports" / "ingest.json").read_text())
+    assert report["dropped_frames"] == [{"episode_id": ep["episode_id"], "rgb_index": i,
+                                         "reason": "nonfinite_tactile:right"} for i in (2, 7)]
+
+
+def test_refuses_foreign_or_different_output_dirs(tmp_path, capsys):
+    raw = make_native(tmp_path / "raw")
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine")
+    assert ingest_cli("--pipeline", "native", raw, foreign) == 2
+    assert "not empty" in capsys.readouterr().err and (foreign / "notes.txt").read_text() == "mine"
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", small_pipeline(tmp_path, "native"), raw, out) == 0
+    other = small_pipeline(tmp_path, "native", samples_per_shard=3)
+    assert ingest_cli("--pipeline", other, raw, out) == 2
+    assert "different pipeline" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- crash + resume
+
+def cli_subprocess(args, env_extra=None, **kw):
+    env = {**os.environ, **(env_extra or {})}
+    cmd = [sys.executable, "-m", "htdata.cli", "ingest", "--workers", "1", "--quiet", *map(str, args)]
+    return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kw)
+
+
+def dataset_bytes(out: Path) -> dict[str, bytes]:
+    files = {p.name: p.read_bytes() for p in (out / "shards").glob("*.tar")}
+    files["index.npy"] = (out / "index.npy").read_bytes()
+    files["episodes.jsonl"] = (out / "episodes.jsonl").read_bytes()
+    return files
+
+
+@pytest.fixture
+def clean_run(tmp_path):
+    raw = make_opentouch(tmp_path / "raw")
+    pipe = small_pipeline(tmp_path, "opentouch")
+    ref = tmp_path / "clean"
+    assert ingest_cli("--pipeline", pipe, raw, ref) == 0
+    return raw, pipe, ref
+
+
+def test_resume_after_worker_crash_equals_clean_run(tmp_path, clean_run):
+    raw, pipe, ref = clean_run
+    out = tmp_path / "crashed"
+    proc = cli_subprocess(["--pipeline", pipe, raw, out], {"HTDATA_TEST_FAULT_UNIT": "1"})
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode != 0, err
+    assert (out / ".work" / "unit-000000.json").exists()
+    assert not (out / ".work" / "unit-000001.json").exists() and not (out / "dataset.json").exists()
+    assert list((out / "shards").glob(".shard-000001-*.tmp"))       # a half-written shard was left
+    proc = cli_subprocess(["--pipeline", pipe, raw, out])
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0, err
+    assert dataset_bytes(out) == dataset_bytes(ref)
+    assert read_all(out).keys() == read_all(ref).keys()
+    assert temp_leftovers(out) == []
+    assert json.loads((out / "reports" / "ingest.json").read_text())["units_resumed"] == 1
+
+
+def test_resume_after_kill_9_equals_clean_run(tmp_path, clean_run):
+    raw, pipe, ref = clean_run
+    out = tmp_path / "killed"
+    proc = cli_subprocess(["--pipeline", pipe, raw, out], {"HTDATA_TEST_FAULT_UNIT": "1",
+                                                           "HTDATA_TEST_FAULT": "hang"},
+                          start_new_session=True)
+    deadline = time.time() + 90
+    try:
+        while not list((out / "shards").glob(".shard-000001-*.tmp")):
+            assert proc.poll() is None and time.time() < deadline, "ingest ended before it could be killed"
+            time.sleep(0.05)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)   # kill -9 the CLI and its worker processes
+        proc.wait(timeout=30)
+    assert proc.returncode == -signal.SIGKILL
+    assert not (out / "dataset.json").exists()
+    # a stale record from a different run must not be trusted: corrupt a finished shard too
+    shard0 = next((out / "shards").glob("shard-000000-000.tar"))
+    data = bytearray(shard0.read_bytes())
+    data[700] ^= 0xFF
+    shard0.write_bytes(bytes(data))
+    proc = cli_subprocess(["--pipeline", pipe, raw, out])
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0, err
+    assert dataset_bytes(out) == dataset_bytes(ref)
+    assert temp_leftovers(out) == []
+
+
+def test_changed_source_redoes_only_its_unit(tmp_path, clean_run):
+    raw, pipe, ref = clean_run
+    out = tmp_path / "again"
+    assert ingest_cli("--pipeline", pipe, raw, out) == 0
+    extra = tmp_path / "raw" / "z_scene.hdf5"
+    write_opentouch_scene(extra, [ot_clip("demo_01", 9, COLOURS[3])])
+    assert ingest_cli("--pipeline", pipe, raw, out) == 0
+    report = json.loads((out / "reports" / "ingest.json").read_text())
+    assert report["units"] == 4 and report["units_run"] == 1 and report["samples"] == 48

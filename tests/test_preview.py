@@ -1,0 +1,102 @@
+"""htdata preview: a PNG contact sheet of the expected size and layout."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from htdata import preview as pv
+from htdata.cli import main as cli_main
+from tests.factories import write_synthetic_dataset
+
+EPISODES = [
+    {"episode_id": "ep_r", "task": "pour", "scene": "kitchen", "hands": ("right",), "num_frames": 7},
+    {"episode_id": "ep_lr", "task": "wipe", "scene": "office", "hands": ("left", "right"), "num_frames": 3},
+    {"episode_id": "ep_one", "task": "wipe", "scene": "office", "hands": ("left",), "num_frames": 1},
+]
+
+
+@pytest.fixture(scope="module")
+def ds(tmp_path_factory):
+    cov = np.zeros((224, 224), np.uint8)
+    cov[20:200, 30:190] = 1
+    return write_synthetic_dataset(tmp_path_factory.mktemp("pv") / "ds", EPISODES,
+                                   coverages={"test_full": cov})
+
+
+def _panel(sheet: np.ndarray, row: int, col: int) -> np.ndarray:
+    y = pv.TITLE_H + pv.HEADER_H + row * (pv.CANVAS + pv.PAD)
+    x = pv.PAD + col * (pv.CANVAS + pv.PAD)
+    return sheet[y:y + pv.CANVAS, x:x + pv.CANVAS]
+
+
+def test_frame_positions_are_evenly_spaced_and_bounded():
+    assert pv.frame_positions(7, 4).tolist() == [0, 2, 4, 6]
+    assert pv.frame_positions(3, 6).tolist() == [0, 1, 2]   # shorter episode: all frames
+    assert pv.frame_positions(1, 6).tolist() == [0]
+    with pytest.raises(ValueError, match="--frames"):
+        pv.frame_positions(5, 0)
+    with pytest.raises(ValueError, match="at least one frame"):
+        pv.frame_positions(0, 3)
+
+
+def test_region_outline_marks_label_changes_only():
+    labels = np.zeros((6, 6), np.uint8)
+    labels[:, 3:] = 1
+    edge = pv.region_outline(labels)
+    assert edge[:, 2].all() and edge.sum() == 6
+    assert not pv.region_outline(np.full((5, 5), 4, np.uint8)).any()
+
+
+def test_cli_writes_png_of_expected_size(ds, tmp_path):
+    out = tmp_path / "sheet.png"
+    assert cli_main(["preview", str(ds), "--episode", "ep_r", "--frames", "4", str(out)]) == 0
+    img = cv2.imread(str(out), cv2.IMREAD_COLOR)
+    assert img.shape[:2] == pv.sheet_size(4) == (pv.TITLE_H + pv.HEADER_H + 4 * 232 + 8, 8 + 3 * 232)
+
+
+def test_absent_hand_is_a_grey_panel_and_tactile_is_drawn(ds):
+    sheet = pv.render_contact_sheet(ds, episode="ep_r", frames=3)
+    left = _panel(sheet, 0, 1)
+    grey = np.all(left == pv.ABSENT_GREY, axis=2).mean()
+    assert grey > 0.9          # the rest is the "no left hand" text
+    assert (left != pv.ABSENT_GREY).any()
+    right = _panel(sheet, 0, 2)
+    assert (right == pv.OUTLINE).all(axis=2).any()        # region outlines
+    assert np.all(right[5, 5] == (110, 110, 110)) or np.all(right[5, 5] < 160)  # uncovered: shaded
+    # the RGB panel is the decoded frame (BGR on the sheet)
+    from htdata.reader import DatasetReader
+    with DatasetReader(ds) as r:
+        rgb = r.decoded(r.locate("ep_r", 0))["rgb"]
+    assert np.array_equal(_panel(sheet, 0, 0)[40:], cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)[40:])
+
+
+def test_two_hands_and_single_frame_episode(ds):
+    sheet = pv.render_contact_sheet(ds, episode="ep_lr", frames=10)
+    assert sheet.shape[:2] == pv.sheet_size(3)
+    assert not np.all(_panel(sheet, 1, 1) == pv.ABSENT_GREY, axis=2).mean() > 0.5
+    one = pv.render_contact_sheet(ds, episode="ep_one", frames=5)
+    assert one.shape[:2] == pv.sheet_size(1)
+    assert np.all(_panel(one, 0, 2) == pv.ABSENT_GREY, axis=2).mean() > 0.9
+
+
+def test_render_tactile_shows_nonfinite_and_shades_uncovered():
+    tmap = np.zeros((224, 224), np.float32)
+    tmap[100, 100] = np.nan
+    tmap[50, 50] = 1.0
+    cov = np.zeros((224, 224), np.uint8)
+    cov[40:, 40:] = 1
+    panel = pv.render_tactile(tmap, cov, np.zeros((224, 224), bool))
+    assert tuple(panel[100, 100]) == pv.NONFINITE
+    assert panel[50, 50].sum() > 500                      # inferno(1.0) is pale yellow
+    assert tuple(panel[0, 0]) == (110, 110, 110)          # hatch line in the uncovered area
+    # inferno(0) is near-black: dimmed to 35% and lifted by 70 it becomes a dark grey
+    assert np.all(np.abs(panel[0, 1].astype(int) - 70) <= 2)
+
+
+def test_errors_unknown_episode_and_bad_suffix(ds, tmp_path, capsys):
+    assert cli_main(["preview", str(ds), "--episode", "nope", str(tmp_path / "a.png")]) == 2
+    assert "no episode 'nope'" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="give a .png path"):
+        pv.write_preview(ds, tmp_path / "a.jpg")

@@ -1,0 +1,267 @@
+"""`htdata sample OUT`: the corpus plan and the files written in the three formats."""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections import Counter, defaultdict
+from pathlib import Path
+
+import cv2
+import h5py
+import numpy as np
+import pytest
+
+from htdata.cli import main as htdata_main
+from htdata.sample.corpus import CorpusConfig, plan_corpus, write_corpus
+from htdata.sample.world import TASKS
+
+OT_KEYS = {"camera_poses", "labels", "rgb_images_jpeg", "right_hand_landmarks", "right_palm_pos",
+           "right_wrist_pos", "right_pressure", "timestamps"}
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("corpus") / "raw"
+    assert htdata_main(["sample", str(out), "--scale", "tiny", "--quiet"]) == 0
+    return out
+
+
+def _video_frames(path: Path) -> list[np.ndarray]:
+    cap = cv2.VideoCapture(str(path))
+    frames = []
+    while True:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        frames.append(frame)
+    cap.release()
+    return frames
+
+
+# ---- plan -------------------------------------------------------------------------
+
+def test_small_plan_supports_task_splits():
+    plan = plan_corpus(CorpusConfig(out=Path("unused"), scale="small"))
+    tasks = {ep.spec.task for ep in plan}
+    scenes = {ep.spec.scene for ep in plan}
+    assert len(tasks) >= 6 and set(tasks) == set(TASKS) and len(scenes) >= 3
+    per = Counter((ep.fmt, ep.spec.task) for ep in plan)
+    for task in tasks:  # a 9:1 split per task and an OOD task need >= 3 episodes in some format
+        assert max(per[(fmt, task)] for fmt in ("opentouch", "touchanything", "native")) >= 3, task
+    assert 40 <= len(plan) <= 60
+    assert 2500 <= sum(ep.spec.n_frames for ep in plan) <= 5000
+    ot = [ep for ep in plan if ep.fmt == "opentouch"]
+    assert all(47 <= ep.spec.n_frames <= 90 for ep in ot)
+    assert len({ep.spec.scene for ep in ot}) == 3
+    # names unique per container
+    assert len({(ep.fmt, ep.spec.scene if ep.fmt == "opentouch" else "", ep.name) for ep in plan}) == len(plan)
+    native = [ep for ep in plan if ep.fmt == "native"]
+    assert any(ep.spec.hands == ("left", "right") for ep in native)
+    assert any(ep.spec.hands == ("right",) for ep in native)
+
+
+def test_plan_is_deterministic_and_seeded():
+    a = plan_corpus(CorpusConfig(out=Path("x"), seed=0, scale="small"))
+    b = plan_corpus(CorpusConfig(out=Path("y"), seed=0, scale="small"))
+    c = plan_corpus(CorpusConfig(out=Path("x"), seed=1, scale="small"))
+    assert [(e.name, e.spec) for e in a] == [(e.name, e.spec) for e in b]
+    assert [e.spec.seed for e in a] != [e.spec.seed for e in c]
+
+
+def test_config_validation():
+    with pytest.raises(ValueError, match="scale"):
+        CorpusConfig(out=Path("x"), scale="huge").validate()
+    with pytest.raises(ValueError, match="formats"):
+        CorpusConfig(out=Path("x"), formats=("opentouch", "kinect")).validate()
+    with pytest.raises(ValueError, match="formats"):
+        CorpusConfig(out=Path("x"), formats=()).validate()
+    with pytest.raises(ValueError, match="seed"):
+        CorpusConfig(out=Path("x"), seed=-1).validate()
+
+
+# ---- OpenTouch ----------------------------------------------------------------------
+
+def test_opentouch_files_keys_units_and_annotations(tiny):
+    files = sorted((tiny / "opentouch").glob("*.hdf5"))
+    assert len(files) == 2
+    with open(tiny / "opentouch" / "annotations.csv", newline="") as f:
+        rows = {r["id"]: r for r in csv.DictReader(f)}
+    paddings = set()
+    for path in files:
+        with h5py.File(path, "r") as h5:
+            assert {"calibration", "data", "transform_slam_to_rgb"} <= set(h5)
+            assert h5["calibration/rgb/image_size"][()].tolist() == [512, 512]
+            for demo, g in h5["data"].items():
+                paddings.add(len(demo.split("_")[1]))
+                assert set(g) == OT_KEYS
+                p = g["right_pressure"][()]
+                ts = g["timestamps"][()]
+                t = len(ts)
+                assert p.shape == (t, 16, 16) and p.dtype == np.float32 and 47 <= t <= 90
+                assert p.min() >= 0 and p.max() <= 3072
+                assert np.median(p) > 3000  # mostly unloaded: inverted units
+                assert p.min() < 2000       # but somewhere pressed hard
+                assert ts.dtype == np.int64 and np.all(np.diff(ts) > 0)
+                assert 30e6 < np.median(np.diff(ts)) < 36e6  # 30 fps in ns
+                assert g["rgb_images_jpeg"].shape == (t,)
+                assert g["labels"].dtype.names == ("low_light", "hand_out_of_frame")
+                row = rows[f"{path.stem}::{demo}"]
+                assert row["action"] in TASKS
+    assert paddings == {2, 3}  # demo_07 in one file, demo_007 in the other
+    assert len(rows) == 4
+
+
+def test_opentouch_pinch_contact_on_thumb_and_index_tips(tiny):
+    with open(tiny / "opentouch" / "annotations.csv", newline="") as f:
+        pinch = [r["id"] for r in csv.DictReader(f) if r["action"] == "pinch_pick"]
+    scene, demo = pinch[0].split("::")
+    with h5py.File(tiny / "opentouch" / f"{scene}.hdf5", "r") as h5:
+        p = h5[f"data/{demo}/right_pressure"][()]
+    contact = np.clip((3072 - p) / 3072, 0, 1)
+    peak = contact[int(np.argmax(contact.sum(axis=(1, 2))))]
+    assert peak[0:3, 9:11].max() > 0.3 and peak[12:16, 13:16].max() > 0.3  # index / thumb distal
+    assert peak[9:16, 0:11].max() < 0.05                                   # palm untouched (noise)
+    assert contact[0].max() < 0.05                                         # approach: nothing
+
+
+def test_opentouch_jpegs_are_stored_bgr_swapped(tiny):
+    with open(tiny / "opentouch" / "annotations.csv", newline="") as f:
+        pinch = [r["id"] for r in csv.DictReader(f) if r["action"] == "pinch_pick"]
+    scene, demo = pinch[0].split("::")
+    with h5py.File(tiny / "opentouch" / f"{scene}.hdf5", "r") as h5:
+        buf = np.asarray(h5[f"data/{demo}/rgb_images_jpeg"][0])
+    arr = cv2.imdecode(buf, cv2.IMREAD_COLOR)  # cv2 hands back the stored channel order
+    assert arr.shape == (512, 512, 3)
+    # The red sphere: stored swapped, so channel 0 holds red (a correct JPEG would give B first).
+    red_first = (arr[..., 0] > 170) & (arr[..., 1] < 80) & (arr[..., 2] < 90)
+    red_last = (arr[..., 2] > 170) & (arr[..., 1] < 80) & (arr[..., 0] < 90)
+    assert red_first.sum() > 50 and red_last.sum() == 0
+
+
+def test_same_seed_same_opentouch_bytes(tmp_path):
+    def load(out):
+        got = {}
+        for path in sorted((out / "opentouch").glob("*.hdf5")):
+            with h5py.File(path, "r") as h5:
+                for demo, g in h5["data"].items():
+                    got[(path.name, demo, "p")] = g["right_pressure"][()]
+                    got[(path.name, demo, "jpg")] = [bytes(np.asarray(b)) for b in g["rgb_images_jpeg"]]
+        return got
+
+    outs = []
+    for name, seed in (("a", 3), ("b", 3), ("c", 4)):
+        cfg = CorpusConfig(out=tmp_path / name, seed=seed, scale="tiny", formats=("opentouch",), progress=False)
+        write_corpus(cfg)
+        outs.append(load(tmp_path / name))
+    a, b, c = outs
+    assert a.keys() == b.keys()
+    for key in a:
+        if key[2] == "p":
+            np.testing.assert_array_equal(a[key], b[key])
+        else:
+            assert a[key] == b[key]
+    p_keys = [k for k in a if k[2] == "p"]
+    assert any(k not in c or not np.array_equal(a[k], c[k]) for k in p_keys)
+
+
+# ---- TouchAnything ------------------------------------------------------------------
+
+def test_touchanything_episodes(tiny):
+    root = tiny / "touchanything"
+    split = json.loads((root / "split.json").read_text())
+    assert set(split) == {"train", "val", "test_seen", "test_unseen"}
+    episodes = sorted(p.parent for p in root.glob("*/*/*/pressure_grids.npz"))
+    assert len(episodes) == 2
+    listed = {"/".join(Path(p).parts[-3:]) for paths in split.values() for p in paths}
+    assert listed == {"/".join(e.parts[-3:]) for e in episodes}
+    extra_frames = []
+    for ep in episodes:
+        names = {p.name for p in ep.iterdir()}
+        assert {"chest.mp4", "left.mp4", "right.mp4", "pressure_grids.npz", "jq_pressure.json",
+                "wilor_hands.json", "hamer_hands.json", "rokoko_hands.json", "vive_poses.json"} <= names
+        with np.load(ep / "pressure_grids.npz") as z:
+            left, right = z["left_pressure_grid"], z["right_pressure_grid"]
+        t = left.shape[0]
+        for g in (left, right):
+            assert g.shape == (t, 21, 21)
+            assert (np.isnan(g).sum(axis=(1, 2)) == 224).all()
+            assert np.nanmin(g) >= 0 and np.nanmax(g) <= 1
+        rows = [json.loads(line) for line in (ep / "jq_pressure.json").read_text().splitlines()]
+        assert len(rows) == t and [r["frame_index"] for r in rows] == list(range(t))
+        ts = np.array([r["ts"] for r in rows])
+        assert ts[0] > 1.6e9 and np.all(np.diff(ts) >= 0)
+        assert len(rows[0]["sensor_left"]) == 256
+        frames = _video_frames(ep / "chest.mp4")
+        assert frames[0].shape == (480, 640, 3)
+        extra_frames.append(len(frames) - t)
+    assert all(0 <= e <= 2 for e in extra_frames)
+    assert any(e > 0 for e in extra_frames)  # the release quirk is present
+
+
+def test_touchanything_right_grid_stored_mirrored(tiny):
+    ep = next((tiny / "touchanything").glob("*/pinch_pick/*"))
+    with np.load(ep / "pressure_grids.npz") as z:
+        right = z["right_pressure_grid"]
+    peak = right[int(np.nanargmax(np.nansum(right[:, :6], axis=(1, 2))))]
+    # right index tip sits at stored columns 5-7 (left layout: 13-15)
+    assert np.nanmax(peak[2:6, 5:8]) > 0.3 and np.nanmax(peak[2:6, 13:16]) < 0.05
+
+
+# ---- native -------------------------------------------------------------------------
+
+def test_native_recordings_clocks(tiny):
+    recs = sorted((tiny / "native").iterdir())
+    assert len(recs) == 2
+    seen_hands = set()
+    for rec in recs:
+        doc = json.loads((rec / "recording.json").read_text())
+        assert doc["format"] == "htdata-native" and doc["task"] in TASKS
+        video_ts = np.load(rec / doc["video"]["timestamps"])
+        assert 30e6 < np.median(np.diff(video_ts)) < 36e6
+        frames = _video_frames(rec / doc["video"]["file"])
+        assert len(frames) == len(video_ts) and frames[0].shape == (480, 480, 3)
+        seen_hands.add(tuple(sorted(doc["hands"])))
+        for hand, h in doc["hands"].items():
+            with np.load(rec / h["file"]) as z:
+                values, ts = z["values"], z["timestamps_ns"]
+            assert np.median(np.diff(ts)) == pytest.approx(10e6, rel=0.01)  # 100 Hz
+            assert h["clock_offset_ns"] != 0
+            on_video = ts + h["clock_offset_ns"]
+            # same episode span on both clocks once the offset is applied
+            assert abs(int(on_video[0]) - int(video_ts[0])) < 20e6
+            grid = (16, 16) if h["layout"] == "opentouch_right_16x16" else (21, 21)
+            assert values.shape == (len(ts), *grid)
+            assert len(ts) > 3 * len(video_ts) - 5
+    assert seen_hands == {("right",), ("left", "right")}
+
+
+# ---- command ------------------------------------------------------------------------
+
+def test_cli_refuses_to_overwrite_and_reports(tiny, capsys):
+    assert htdata_main(["sample", str(tiny), "--scale", "tiny", "--quiet", "--formats", "native"]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+
+
+def test_cli_writes_selected_formats_and_summary(tmp_path, capsys):
+    out = tmp_path / "only_native"
+    assert htdata_main(["sample", str(out), "--scale", "tiny", "--formats", "native"]) == 0
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out)
+    assert summary["native"]["episodes"] == 2 and "opentouch" not in summary
+    assert "htdata sample" in captured.err  # tqdm progress goes to stderr
+    assert sorted(p.name for p in out.iterdir()) == ["native"]
+    assert htdata_main(["sample", str(out), "--scale", "tiny", "--formats", "native",
+                        "--overwrite", "--quiet"]) == 0
+
+
+def test_cli_rejects_unknown_format(tmp_path):
+    with pytest.raises(SystemExit):
+        htdata_main(["sample", str(tmp_path), "--formats", "opentouch,kinect"])
+
+
+def test_cli_dry_run_lists_plan(tmp_path, capsys):
+    assert htdata_main(["sample", str(tmp_path / "none"), "--dry-run", "--scale", "small"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == len(plan_corpus(CorpusConfig(out=tmp_path, scale="small")))
+    assert not (tmp_path / "none").exists()

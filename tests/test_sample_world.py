@@ -1,0 +1,266 @@
+"""The synthetic world: task-dependent contact, time course, RGB driven by the same state."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from htdata.layouts import load_canonical, load_layout
+from htdata.sample import world as W
+from htdata.sample.world import (
+    PHASE_APPROACH, PHASE_CONTACT, PHASE_RELEASE, PLACE_NAMES, TASKS, EpisodeSpec, World,
+    contact_grid, contact_grids, place_intensity,
+)
+
+OT = "opentouch_right_16x16"
+
+
+@pytest.fixture(scope="module")
+def ot_layout():
+    return load_layout(OT)
+
+
+@pytest.fixture(scope="module")
+def ta_layouts():
+    return {h: load_layout(f"touchanything_{h}_21x21") for h in ("left", "right")}
+
+
+def _block_max(layout, grid: np.ndarray) -> dict[str, float]:
+    """Peak value per layout place over one (H,W) grid."""
+    out = {}
+    for b in layout.blocks:
+        cells = grid[b.rows[0]:b.rows[1] + 1, b.cols[0]:b.cols[1] + 1]
+        out[b.place] = max(out.get(b.place, 0.0), float(np.nanmax(cells)))
+    return out
+
+
+def _peak_frame(state) -> int:
+    return int(np.argmax(state.force))
+
+
+def test_place_names_match_canonical_template():
+    assert set(PLACE_NAMES) == set(load_canonical().places)
+
+
+def test_tasks_cover_distinct_contact_profiles():
+    assert len(TASKS) >= 6
+    profiles = {frozenset(t.contact) for t in TASKS.values()}
+    assert len(profiles) == len(TASKS)  # no two tasks touch the same places
+    for task in TASKS.values():
+        assert set(task.contact) <= set(PLACE_NAMES) and task.contact
+        assert all(0 < v <= 1 for v in task.contact.values())
+
+
+def test_pinch_lights_thumb_and_index_distal_only(ot_layout):
+    world = World(EpisodeSpec("pinch_pick", "home_kitchen_p1", seed=5, n_frames=60))
+    state = world.state("right")
+    grid = contact_grids(ot_layout, state)[_peak_frame(state)]
+    peaks = _block_max(ot_layout, grid)
+    assert peaks["thumb.distal"] > 0.3 and peaks["index.distal"] > 0.3
+    others = {p: v for p, v in peaks.items() if p not in ("thumb.distal", "index.distal")}
+    assert max(others.values()) == 0.0, others
+
+
+def test_power_grasp_lights_palm_and_every_finger(ot_layout):
+    world = World(EpisodeSpec("power_grasp", "office_desk_p2", seed=1, n_frames=50))
+    state = world.state("right")
+    grid = contact_grids(ot_layout, state)[_peak_frame(state)]
+    peaks = _block_max(ot_layout, grid)
+    for group in ("thumb", "index", "middle", "ring", "little", "palm"):
+        assert max(v for p, v in peaks.items() if p.startswith(group + ".")) > 0.2, group
+
+
+@pytest.mark.parametrize("task,expected", [
+    ("press_button", {"index.distal"}),
+    ("palm_push", {"palm.upper_ulnar", "palm.upper_radial", "palm.lower_ulnar", "palm.lower_radial"}),
+    ("hook_carry", {"index.middle", "index.proximal", "middle.middle", "middle.proximal",
+                    "ring.middle", "ring.proximal", "little.middle"}),
+])
+def test_other_tasks_light_exactly_their_places(ot_layout, task, expected):
+    world = World(EpisodeSpec(task, "grocery_target_p1", seed=2, n_frames=45))
+    state = world.state("right")
+    peaks = _block_max(ot_layout, contact_grids(ot_layout, state)[_peak_frame(state)])
+    assert {p for p, v in peaks.items() if v > 0} == expected
+
+
+def test_time_course_approach_contact_release(ot_layout):
+    world = World(EpisodeSpec("tripod_grasp", "office_desk_p2", seed=9, n_frames=90))
+    state = world.state("right")
+    phase = state.phase
+    assert phase[0] == PHASE_APPROACH and phase[-1] == PHASE_RELEASE
+    assert np.all(np.diff(phase) >= 0)  # approach -> contact -> release, never back
+    totals = contact_grids(ot_layout, state).sum(axis=(1, 2))
+    assert np.all(totals[phase == PHASE_APPROACH] == 0)
+    assert np.all(totals[phase == PHASE_RELEASE] == 0)
+    assert totals[phase == PHASE_CONTACT].max() > 0.5
+    assert np.all(state.force[phase != PHASE_CONTACT] == 0)
+    # fingers close with the grip: closure at peak force beats the first frame
+    peak = _peak_frame(state)
+    assert state.closure[peak].mean() > state.closure[0].mean() + 0.2
+
+
+def test_grids_in_unit_range_and_float32(ot_layout, ta_layouts):
+    for task in TASKS:
+        world = World(EpisodeSpec(task, "Home", seed=3, n_frames=40, hands=("left", "right")))
+        for hand, layout in [("right", ot_layout), ("left", ta_layouts["left"]), ("right", ta_layouts["right"])]:
+            g = world.contact_grids(layout, hand)
+            assert g.dtype == np.float32 and g.shape == (40, *layout.grid)
+            assert np.isfinite(g).all() and g.min() >= 0 and g.max() <= 1
+
+
+def test_touchanything_grid_nan_cells_and_bend(ta_layouts):
+    world = World(EpisodeSpec("power_grasp", "Office", seed=4, n_frames=60, hands=("left", "right")))
+    for hand, layout in ta_layouts.items():
+        state = world.state(hand)
+        g = contact_grids(layout, state, fill=np.nan)
+        assert (np.isnan(g).sum(axis=(1, 2)) == 224).all()
+        bend = np.asarray(layout.bend_cells)
+        flex = g[:, bend[:, 0], bend[:, 1]]
+        assert np.isfinite(flex).all() and flex.min() >= 0 and flex.max() <= 1
+        # bend follows the grip closure: bent at peak force, straight at the start
+        assert flex[_peak_frame(state)].mean() > 0.2 > flex[0].mean()
+
+
+def test_right_touchanything_grid_is_stored_mirrored(ta_layouts):
+    """The right layout describes the mirrored storage: a right pinch lights stored
+    columns 5-7 (index tip) and 1-3 (thumb tip), not the left-grid columns."""
+    world = World(EpisodeSpec("pinch_pick", "Home", seed=8, n_frames=50, hands=("left", "right")))
+    state = world.state("right")
+    g = contact_grids(ta_layouts["right"], state)[_peak_frame(state)]
+    assert g[2:6, 5:8].max() > 0.3 and g[6:10, 1:4].max() > 0.3
+    # where the LEFT layout has index and thumb tips: ring tip / no sensor on the right grid
+    assert g[2:6, 13:16].max() == 0 and g[6, 17:20].max() == 0
+
+
+def test_single_frame_state_matches_episode(ot_layout):
+    world = World(EpisodeSpec("lateral_key_turn", "lab_bench", seed=11, n_frames=70))
+    state = world.state("right")
+    grids = contact_grids(ot_layout, state)
+    for i in (0, 30, 69):
+        np.testing.assert_array_equal(contact_grid(ot_layout, state.frame(i)), grids[i])
+    with pytest.raises(ValueError, match="single-frame"):
+        contact_grid(ot_layout, state)
+
+
+def test_single_frame_episode_is_mid_contact(ot_layout):
+    world = World(EpisodeSpec("pinch_pick", "Home", seed=0, n_frames=1))
+    state = world.state("right")
+    assert len(state) == 1 and state.phase[0] == PHASE_CONTACT and state.force[0] > 0
+    assert contact_grids(ot_layout, state).max() > 0
+    frame = world.render(0.0, (64, 48))
+    assert frame.shape == (48, 64, 3) and frame.dtype == np.uint8
+
+
+def test_state_is_a_function_of_time_so_rates_agree():
+    """100 Hz tactile and 30 Hz video sample the same world: equal at shared times."""
+    spec = EpisodeSpec("palm_push", "lab_bench", seed=12, n_frames=60, fps=30.0)
+    world = World(spec)
+    fast = world.state("right", spec.frame_times(100.0))
+    slow = world.state("right", spec.frame_times(30.0))
+    assert len(fast) == 200 and len(slow) == 60
+    np.testing.assert_allclose(fast.force[::10], slow.force[::3], atol=1e-6)
+    # after the episode: released, nothing touches
+    late = world.state("right", np.array([spec.duration_s + 0.5]))
+    assert late.force[0] == 0 and late.phase[0] == PHASE_RELEASE
+
+
+def test_support_hand_profile_and_missing_hand():
+    world = World(EpisodeSpec("pinch_pick", "Home", seed=1, n_frames=30, hands=("left", "right")))
+    assert world.state("right").role == "dominant" and world.state("left").role == "support"
+    assert world.state("left").profile == {}  # pinch is one-handed: left hand feels nothing
+    one = World(EpisodeSpec("pinch_pick", "Home", seed=1, n_frames=30))
+    with pytest.raises(ValueError, match="no left hand"):
+        one.state("left")
+    left_only = World(EpisodeSpec("press_button", "Home", seed=1, n_frames=30, hands=("left",)))
+    assert left_only.state("left").role == "dominant"
+
+
+def test_determinism_by_seed(ot_layout):
+    spec = dict(task="hook_carry", scene="grocery_target_p1", n_frames=30, hands=("right",))
+    a, b, c = World(EpisodeSpec(seed=7, **spec)), World(EpisodeSpec(seed=7, **spec)), World(EpisodeSpec(seed=8, **spec))
+    np.testing.assert_array_equal(a.contact_grids(ot_layout, "right"), b.contact_grids(ot_layout, "right"))
+    fa = list(a.render_frames(None, (160, 120)))
+    fb = list(b.render_frames(None, (160, 120)))
+    assert all(np.array_equal(x, y) for x, y in zip(fa, fb))
+    assert not np.array_equal(a.contact_grids(ot_layout, "right"), c.contact_grids(ot_layout, "right"))
+
+
+def test_rgb_follows_hand_closure():
+    """Open vs closed hand at the same place: a large image difference at the hand."""
+    view = W._camera("ego", (320, 240), {})
+    bg = np.full((240, 320, 3), 128, np.uint8)
+    open_img, closed_img = bg.copy(), bg.copy()
+    W._draw_hand(open_img, "right", (0.5, 0.6), np.zeros(5), view)
+    W._draw_hand(closed_img, "right", (0.5, 0.6), np.ones(5), view)
+    changed = np.abs(open_img.astype(int) - closed_img.astype(int)).sum(axis=2) > 30
+    assert changed.sum() > 800  # fingers moved: a few thousand pixels at 320x240
+
+
+def test_rgb_frames_follow_the_episode():
+    world = World(EpisodeSpec("power_grasp", "Home", seed=3, n_frames=60))
+    state = world.state("right")
+    frames = list(world.render_frames(None, (320, 240)))
+    approach = frames[0].astype(np.float32)
+    peak = frames[_peak_frame(state)].astype(np.float32)
+    assert np.abs(approach - peak).mean() > 2.0  # hand moved in and closed
+    # the object's colour is in the frame before the hand covers it
+    rgb = np.array(world.object_rgb, np.float32)
+    near = np.abs(approach - rgb).max(axis=2) < 25
+    assert near.sum() > 100
+
+
+def test_object_colour_depends_on_task():
+    colours = {t: World(EpisodeSpec(t, "Home", 0, 10)).object_rgb for t in TASKS}
+    arr = np.array(list(colours.values()), float)
+    d = np.abs(arr[:, None] - arr[None]).sum(axis=2) + np.eye(len(arr)) * 1e9
+    assert d.min() > 40
+
+
+def test_scene_changes_the_background():
+    a = World(EpisodeSpec("palm_push", "home_kitchen_p1", 0, 5)).render(0.0, (160, 120))
+    b = World(EpisodeSpec("palm_push", "office_desk_p2", 0, 5)).render(0.0, (160, 120))
+    assert np.abs(a[:30].astype(int) - b[:30].astype(int)).mean() > 10  # wall region
+
+
+def test_render_is_cheap():
+    world = World(EpisodeSpec("tripod_grasp", "Retail", seed=1, n_frames=60, hands=("left", "right")))
+    list(world.render_frames(None, (640, 480)))  # warm the background cache
+    t0 = time.perf_counter()
+    frames = list(world.render_frames(None, (640, 480)))
+    per_frame = (time.perf_counter() - t0) / len(frames)
+    assert frames[0].shape == (480, 640, 3)
+    assert per_frame < 0.015  # ~2 ms measured; generous for a shared 2-core box
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    (dict(task="juggle"), "unknown task"),
+    (dict(scene="moon_base"), "matches no style"),
+    (dict(n_frames=0), "n_frames"),
+    (dict(fps=0.0), "fps"),
+    (dict(fps=float("nan")), "fps"),
+    (dict(hands=("left", "left")), "hands"),
+    (dict(hands=("middle",)), "hands"),
+    (dict(hands=()), "hands"),
+])
+def test_spec_validation(kwargs, match):
+    base = dict(task="pinch_pick", scene="Home", seed=0, n_frames=10)
+    base.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        EpisodeSpec(**base).validate()
+
+
+def test_place_intensity_groups_and_unknown():
+    profile = TASKS["lateral_key_turn"].contact
+    assert place_intensity(profile, "index") == pytest.approx(0.8)
+    assert place_intensity(profile, "palm") == 0.0
+    with pytest.raises(ValueError, match="not a canonical place"):
+        place_intensity(profile, "wrist")
+
+
+def test_unknown_camera():
+    world = World(EpisodeSpec("pinch_pick", "Home", 0, 5))
+    with pytest.raises(ValueError, match="unknown camera"):
+        world.render(0.0, (64, 48), camera="wrist_left")
+    assert world.render(0.0, (64, 48), camera="wrist_right").shape == (48, 64, 3)

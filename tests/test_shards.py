@@ -1,0 +1,200 @@
+import hashlib
+import json
+import tarfile
+
+import numpy as np
+import pytest
+
+from htdata.manifest import (INDEX_DTYPE, UnitResult, build_index, index_load_benchmark, load_episodes,
+                             load_index, load_manifest)
+from htdata.resources import validate_json
+from htdata.shardio import (ShardWriter, member_offsets, parse_key, read_member, sample_key,
+                            sample_span)
+from tests.factories import write_synthetic_dataset
+
+EPISODES = [
+    {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": ("right",), "num_frames": 5},
+    {"episode_id": "ep_b", "task": "wipe", "scene": "office", "hands": ("left", "right"), "num_frames": 3},
+    {"episode_id": "ep_c", "task": "pour", "scene": "office", "hands": ("left",), "num_frames": 1},
+]
+
+
+def members(key, n=3, size=700):
+    out = {"json": json.dumps({"key": key}).encode()}
+    if n > 1:
+        out["rgb.jpg"] = bytes([n]) * size
+    if n > 2:
+        out["tactile_right.exr"] = b"E" * 512  # exactly one block: no padding
+    return out
+
+
+def write_unit(directory, unit=0, n=5, per_shard=2):
+    with ShardWriter(directory, unit=unit, samples_per_shard=per_shard) as w:
+        for f in range(n):
+            w.add_sample(sample_key("ep", f), members(sample_key("ep", f)))
+    return w
+
+
+def test_member_offsets_follow_ustar_rule():
+    assert member_offsets(0, [1, 512, 513]) == [512, 1536, 2560]
+    assert member_offsets(1024, []) == []
+    assert sample_span(0, [1, 512, 513]) == 2560 + 513
+
+
+def test_writer_rolls_shards_and_records_offsets(tmp_path):
+    w = write_unit(tmp_path)
+    names = [s.name for s in w.shards]
+    assert names == ["shard-000000-000.tar", "shard-000000-001.tar", "shard-000000-002.tar"]
+    assert [s.samples for s in w.shards] == [2, 2, 1]
+    assert [s.shard for s in w.samples] == [0, 0, 1, 1, 2]
+    for s in w.shards:
+        data = (tmp_path / s.name).read_bytes()
+        assert hashlib.sha256(data).hexdigest() == s.sha256 and len(data) == s.bytes
+    for rec in w.samples:
+        with open(tmp_path / w.shards[rec.shard].name, "rb") as f:
+            sizes = list(rec.sizes.values())
+            for (suffix, size), off in zip(rec.sizes.items(), member_offsets(rec.offset, sizes)):
+                assert read_member(f, off, size) == members(rec.key)[suffix]
+    assert not list(tmp_path.glob(".*tmp"))
+
+
+def test_standard_tarfile_reads_members_in_design_order(tmp_path):
+    w = write_unit(tmp_path, n=1)
+    with tarfile.open(tmp_path / w.shards[0].name) as tf:
+        infos = tf.getmembers()
+    assert [i.name for i in infos] == ["ep__000000.json", "ep__000000.rgb.jpg", "ep__000000.tactile_right.exr"]
+    for i in infos:
+        assert (i.mtime, i.uid, i.gid, i.mode, i.uname, i.gname) == (0, 0, 0, 0o644, "", "")
+
+
+def test_shards_are_byte_identical_for_equal_input(tmp_path):
+    a, b = write_unit(tmp_path / "a"), write_unit(tmp_path / "b")
+    assert [s.sha256 for s in a.shards] == [s.sha256 for s in b.shards]
+
+
+def test_refuses_to_overwrite_finished_shard(tmp_path):
+    write_unit(tmp_path)
+    before = (tmp_path / "shard-000000-000.tar").read_bytes()
+    with pytest.raises(FileExistsError, match="shard-000000-000.tar"):
+        write_unit(tmp_path)
+    assert (tmp_path / "shard-000000-000.tar").read_bytes() == before
+
+
+def test_exception_mid_shard_leaves_no_partial_final_shard(tmp_path):
+    with pytest.raises(RuntimeError):
+        with ShardWriter(tmp_path, unit=3, samples_per_shard=2) as w:
+            for f in range(3):
+                w.add_sample(sample_key("ep", f), members(sample_key("ep", f)))
+            raise RuntimeError("source died mid-shard")
+    finals = sorted(p.name for p in tmp_path.iterdir())
+    assert finals == ["shard-000003-000.tar"]  # the finished one only; temp of part 001 removed
+    with tarfile.open(tmp_path / finals[0]) as tf:
+        assert len(tf.getmembers()) == 6
+
+
+def test_stale_temp_from_crashed_run_is_replaced(tmp_path):
+    (tmp_path / ".shard-000000-000.tar.tmp").write_bytes(b"garbage")
+    w = write_unit(tmp_path, n=1)
+    assert (tmp_path / "shard-000000-000.tar").stat().st_size == w.shards[0].bytes
+    assert not (tmp_path / ".shard-000000-000.tar.tmp").exists()
+
+
+def test_member_name_limit_and_bad_input(tmp_path):
+    with ShardWriter(tmp_path, unit=0, samples_per_shard=2) as w:
+        with pytest.raises(ValueError, match="100"):
+            long_key = sample_key("e" * 90, 0)
+            w.add_sample(long_key, {"json": b"{}", "tactile_right.exr": b"x"})
+        with pytest.raises(ValueError, match="unknown member"):
+            w.add_sample(sample_key("ep", 0), {"json": b"{}", "depth.png": b"x"})
+        with pytest.raises(ValueError, match="json"):
+            w.add_sample(sample_key("ep", 0), {"rgb.jpg": b"x"})
+        with pytest.raises(ValueError, match="non-empty"):
+            w.add_sample(sample_key("ep", 0), {"json": b""})
+        with pytest.raises(ValueError, match="invalid sample key"):
+            w.add_sample("ep.0", {"json": b"{}"})
+    with pytest.raises(ValueError, match="invalid sample key"):
+        sample_key("bad.id", 1)
+    assert parse_key("ep_x-1__000012") == ("ep_x-1", 12)
+
+
+def test_max_shard_bytes_never_splits_a_sample(tmp_path):
+    with ShardWriter(tmp_path, unit=0, samples_per_shard=100, max_shard_bytes=4096) as w:
+        for f in range(4):
+            w.add_sample(sample_key("ep", f), members(sample_key("ep", f)))
+    assert sum(s.samples for s in w.shards) == 4 and len(w.shards) >= 2
+    for s in w.shards:
+        with tarfile.open(tmp_path / s.name) as tf:
+            assert len(tf.getmembers()) == 3 * s.samples
+
+
+def test_webdataset_reads_our_shards(tmp_path):
+    import webdataset as wds
+
+    root = write_synthetic_dataset(tmp_path / "ds", EPISODES, samples_per_shard=3)
+    manifest = load_manifest(root)
+    urls = [str(root / "shards" / s["name"]) for s in manifest["shards"]]
+    ds = wds.WebDataset(urls, shardshuffle=False, empty_check=False)
+    got = [(s["__key__"], sorted(k for k in s if not k.startswith("__"))) for s in ds]
+    keys = [f"{e['episode_id']}__{f:06d}" for e in EPISODES for f in range(e["num_frames"])]
+    assert [k for k, _ in got] == keys
+    assert got[0][1] == ["json", "rgb.jpg", "tactile_right.exr"]
+    assert got[5][1] == ["json", "rgb.jpg", "tactile_left.exr", "tactile_right.exr"]
+
+
+def test_commit_writes_consistent_index_and_manifest(tmp_path):
+    root = write_synthetic_dataset(tmp_path / "ds", EPISODES, samples_per_shard=3)
+    manifest = load_manifest(root)
+    index = load_index(root)
+    episodes = load_episodes(root)
+    assert index.dtype == INDEX_DTYPE and isinstance(index, np.memmap)
+    assert manifest["counts"] == {"episodes": 3, "samples": 9, "shards": 4,
+                                  "frames_per_hand": {"left": 4, "right": 8}}
+    assert manifest["tasks"] == ["pour", "wipe"] and manifest["scenes"] == ["kitchen", "office"]
+    assert hashlib.sha256((root / "index.npy").read_bytes()).hexdigest() == manifest["index_sha256"]
+    assert hashlib.sha256((root / "episodes.jsonl").read_bytes()).hexdigest() == manifest["episodes_sha256"]
+    for s in manifest["shards"]:
+        assert hashlib.sha256((root / "shards" / s["name"]).read_bytes()).hexdigest() == s["sha256"]
+    assert [s["first_sample"] for s in manifest["shards"]] == [0, 3, 6, 8]
+    assert [e["first_sample"] for e in episodes] == [0, 5, 8]
+    assert episodes[0]["shards"] == ["shard-000000-000.tar", "shard-000000-001.tar"]
+    for ep in episodes:
+        validate_json(ep, "episode")
+    # every index row points at the header of its sample's json member
+    for row in index:
+        shard = manifest["shards"][row["shard"]]["name"]
+        with open(root / "shards" / shard, "rb") as f:
+            header = tarfile.TarInfo.frombuf(read_member(f, int(row["offset"]), 512), "utf-8", "strict")
+        key = f"{episodes[row['episode']]['episode_id']}__{int(row['frame']):06d}"
+        assert header.name == key + ".json" and header.size == row["size_json"]
+    assert (root / "layouts" / "coverage_test_full.png").is_file()
+    assert (root / "layouts" / "regions.png").is_file()
+
+
+def test_build_index_rejects_inconsistent_units(tmp_path):
+    w = write_unit(tmp_path, n=3, per_shard=2)
+    ep = {"episode_id": "ep", "task": "t", "scene": "s", "hands": ["right"], "layouts": {"right": "x"}}
+    built = build_index([UnitResult(0, w.shards, w.samples, [ep])])
+    assert list(built.rows["frame"]) == [0, 1, 2] and built.episodes[0]["num_frames"] == 3
+    with pytest.raises(ValueError, match="num_frames"):
+        build_index([UnitResult(0, w.shards, w.samples, [{**ep, "num_frames": 4}])])
+    with pytest.raises(ValueError, match="no episode record"):
+        build_index([UnitResult(0, w.shards, w.samples, [])])
+    with pytest.raises(ValueError, match="expected frame 0"):
+        build_index([UnitResult(0, w.shards, w.samples[1:], [ep])])
+    with pytest.raises(ValueError, match="duplicate work unit"):
+        build_index([UnitResult(0, w.shards, w.samples, [ep]), UnitResult(0, [], [], [])])
+    with pytest.raises(ValueError, match="appears twice"):
+        build_index([UnitResult(0, w.shards, w.samples, [ep]), UnitResult(1, [], [], [ep])])
+
+
+def test_missing_manifest_means_not_committed(tmp_path):
+    with pytest.raises(FileNotFoundError, match="not a committed"):
+        load_manifest(tmp_path)
+
+
+def test_index_load_benchmark_small(tmp_path):
+    res = index_load_benchmark(10_000, tmp_path)
+    assert res["rows"] == 10_000 and res["file_bytes"] > 10_000 * INDEX_DTYPE.itemsize
+    assert res["probe_episode"] == 5000 // 500
+    for k in ("mmap_load_ms", "full_load_ms", "mmap_rss_delta_mb", "full_rss_delta_mb"):
+        assert np.isfinite(res[k])

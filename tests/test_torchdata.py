@@ -1,0 +1,154 @@
+import json
+
+import numpy as np
+import pytest
+import torch
+from torch.utils.data import DataLoader
+
+from htdata.torchdata import (TactileFrameDataset, TactileStream, TactileWindowDataset,
+                              shards_for_consumer, shuffled_indices)
+from tests.factories import default_canonical, synthetic_rgb, synthetic_tactile, write_synthetic_dataset
+
+EPISODES = [
+    {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": ("right",), "num_frames": 5,
+     "layouts": {"right": "glove_r"}},
+    {"episode_id": "ep_b", "task": "wipe", "scene": "office", "hands": ("left", "right"), "num_frames": 4,
+     "layouts": {"left": "glove_l", "right": "glove_r"}},
+    {"episode_id": "ep_c", "task": "pour", "scene": "office", "hands": ("left",), "num_frames": 1,
+     "layouts": {"left": "glove_l"}},
+]
+SEED = 3
+
+
+def coverages():
+    right = np.zeros((224, 224), np.uint8)
+    right[20:200, 30:190] = 1
+    left = np.ones((224, 224), np.uint8)
+    left[:10] = 0
+    return {"glove_r": right, "glove_l": left}
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    root = tmp_path_factory.mktemp("tds") / "ds"
+    write_synthetic_dataset(root, EPISODES, seed=SEED, coverages=coverages(), samples_per_shard=2)
+    (root / "splits").mkdir()
+    (root / "splits" / "main.json").write_text(json.dumps(
+        {"parts": {"train": {"episodes": ["ep_a", "ep_c"]}, "val": {"episodes": ["ep_b"]}}}))
+    return root
+
+
+def test_frame_dataset_items_and_tensors(dataset):
+    ds = TactileFrameDataset(dataset)
+    assert len(ds) == 5 + 8 + 1
+    item = ds[5]  # ep_b frame 0, left hand (left before right)
+    assert item["tactile"].shape == (1, 224, 224) and item["tactile"].dtype == torch.float32
+    assert item["coverage"].shape == (1, 224, 224) and item["coverage"].dtype == torch.float32
+    assert item["regions"].shape == (224, 224) and item["regions"].dtype == torch.uint8
+    assert item["rgb"].shape == (3, 224, 224) and item["rgb"].dtype == torch.uint8
+    assert (int(item["hand"]), int(item["episode"]), int(item["frame"])) == (0, 1, 0)
+    assert int(item["task"]) == 1 and int(item["scene"]) == 1  # wipe, office in sorted lists
+    assert torch.equal(item["coverage"][0], torch.from_numpy(coverages()["glove_l"].astype(np.float32)))
+    assert torch.equal(item["regions"], torch.from_numpy(default_canonical().part_map))
+    truth = synthetic_tactile(SEED, "ep_b", 0, "left", coverages()["glove_l"])
+    assert np.abs(item["tactile"][0].numpy() - truth).max() <= 2.5e-4
+    # JPEG is lossy: close to the source frame, in RGB order
+    rgb = item["rgb"].permute(1, 2, 0).numpy().astype(int)
+    assert np.abs(rgb - synthetic_rgb(SEED, "ep_b", 0).astype(int)).mean() < 4
+    assert int(ds[6]["hand"]) == 1
+
+
+def test_frame_dataset_hands_split_and_rgb_float(dataset):
+    assert len(TactileFrameDataset(dataset, hands=("left",))) == 4 + 1
+    train = TactileFrameDataset(dataset, split="main", part="train")
+    assert len(train) == 6 and {int(train[i]["episode"]) for i in range(len(train))} == {0, 2}
+    val = TactileFrameDataset(dataset, split="main", part="val", rgb_float=True)
+    rgb = val[0]["rgb"]
+    assert rgb.dtype == torch.float32 and 0.0 <= float(rgb.min()) and float(rgb.max()) <= 1.0
+    with pytest.raises(ValueError, match="hands"):
+        TactileFrameDataset(dataset, hands=("middle",))
+    with pytest.raises(ValueError, match="choose a part"):
+        TactileFrameDataset(dataset, split="main")
+
+
+def test_window_dataset_never_crosses_episodes(dataset):
+    ds = TactileWindowDataset(dataset, window=3)
+    # ep_a: T=2..4 (right); ep_b: T=2,3 x (left, right); ep_c has 1 frame: no full window
+    assert len(ds) == 3 + 4
+    for i in range(len(ds)):
+        item = ds[i]
+        assert item["tactile"].shape == (3, 1, 224, 224) and item["rgb"].shape == (3, 3, 224, 224)
+        frames = item["frame"].tolist()
+        assert frames == list(range(frames[-1] - 2, frames[-1] + 1)) and frames[0] >= 0
+    item = ds[3]  # ep_b T=2, left
+    assert (int(item["episode"]), int(item["hand"]), item["frame"].tolist()) == (1, 0, [0, 1, 2])
+    for k, f in enumerate(item["frame"].tolist()):
+        truth = synthetic_tactile(SEED, "ep_b", f, "left", coverages()["glove_l"])
+        assert np.abs(item["tactile"][k, 0].numpy() - truth).max() <= 2.5e-4
+    assert len(TactileWindowDataset(dataset, window=1)) == len(TactileFrameDataset(dataset))
+    assert len(TactileWindowDataset(dataset, window=6)) == 0
+    with pytest.raises(ValueError, match="window"):
+        TactileWindowDataset(dataset, window=0)
+
+
+def _collect(loader):
+    out = []
+    for batch in loader:
+        for j in range(len(batch["index"])):
+            out.append((int(batch["index"][j]), int(batch["hand"][j]),
+                        float(batch["tactile"][j].sum()), int(batch["rgb"][j].sum())))
+    return out
+
+
+def test_dataloader_two_workers_matches_zero(dataset):
+    ds = TactileFrameDataset(dataset)
+    serial = _collect(DataLoader(ds, batch_size=4, num_workers=0))
+    parallel = _collect(DataLoader(ds, batch_size=4, num_workers=2))
+    assert serial == parallel and len(serial) == len(ds)
+
+
+def test_stream_covers_every_item_once_with_workers(dataset):
+    stream = TactileStream(dataset)
+    serial = _collect(DataLoader(stream, batch_size=3, num_workers=0))
+    parallel = _collect(DataLoader(stream, batch_size=3, num_workers=2))
+    frames = _collect(DataLoader(TactileFrameDataset(dataset), batch_size=5))
+    assert serial == frames  # in order with one consumer
+    assert sorted(parallel) == sorted(frames) and len(stream) == len(frames)
+    val = TactileStream(dataset, split="main", part="val", hands=("right",))
+    assert [int(x["index"]) for x in val] == [5, 6, 7, 8]
+
+
+def test_shard_assignment_is_a_deterministic_partition():
+    for seed in (None, 11):
+        parts = [shards_for_consumer(10, c, 4, seed, epoch=2) for c in range(4)]
+        assert sorted(sum(parts, [])) == list(range(10))
+        assert parts == [shards_for_consumer(10, c, 4, seed, epoch=2) for c in range(4)]
+    assert shards_for_consumer(2, 3, 4, None, 0) == []
+    assert shards_for_consumer(10, 0, 1, 11, 0) != shards_for_consumer(10, 0, 1, 11, 1)
+
+
+def test_shuffled_indices():
+    a = shuffled_indices(100, seed=5, epoch=0)
+    assert sorted(a.tolist()) == list(range(100))
+    assert np.array_equal(a, shuffled_indices(100, 5, 0))
+    assert not np.array_equal(a, shuffled_indices(100, 5, 1))
+    assert len(shuffled_indices(0, 5, 0)) == 0
+    with pytest.raises(ValueError):
+        shuffled_indices(-1, 0, 0)
+
+
+def test_stream_splits_shards_across_ddp_ranks(dataset, monkeypatch):
+    import htdata.torchdata as td
+
+    stream = TactileStream(dataset)
+    n_shards = len(stream.reader.manifest["shards"])
+    seen = []
+    for rank in (0, 1):
+        monkeypatch.setattr(td, "_dist_rank_world", lambda rank=rank: (rank, 2))
+        seen.append(stream.my_shards())
+    assert seen == [list(range(0, n_shards, 2)), list(range(1, n_shards, 2))]
+    items = []
+    for rank in (0, 1):
+        monkeypatch.setattr(td, "_dist_rank_world", lambda rank=rank: (rank, 2))
+        items += [(int(x["index"]), int(x["hand"])) for x in stream]
+    assert sorted(items) == sorted((int(x["index"]), int(x["hand"])) for x in TactileFrameDataset(dataset))

@@ -1,0 +1,395 @@
+"""htdata validate: a good dataset passes; each injected fault is caught and pinpointed."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from htdata.cli import main as cli_main
+from htdata.codec import encode_exr
+from htdata.manifest import INDEX_FILE, MANIFEST_FILE, SHARDS_DIR, SIZE_FIELDS, load_index
+from htdata.shardio import BLOCK, member_header, padded
+from htdata.split import make_split
+from htdata.validate import validate_benchmark, validate_dataset
+from tests.factories import FRAME_NS, write_synthetic_dataset
+
+EPISODES = [
+    {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": ("right",), "num_frames": 5},
+    {"episode_id": "ep_b", "task": "wipe", "scene": "office", "hands": ("left", "right"), "num_frames": 4},
+    {"episode_id": "ep_c", "task": "wipe", "scene": "kitchen", "hands": ("right",), "num_frames": 3},
+    {"episode_id": "ep_d", "task": "grasp", "scene": "office", "hands": ("right",), "num_frames": 3},
+    {"episode_id": "ep_e", "task": "grasp", "scene": "office", "hands": ("right",), "num_frames": 1},
+]
+
+
+@pytest.fixture(scope="module")
+def pristine(tmp_path_factory) -> Path:
+    return write_synthetic_dataset(tmp_path_factory.mktemp("pristine") / "ds", EPISODES, seed=1)
+
+
+@pytest.fixture
+def ds(pristine, tmp_path) -> Path:
+    """A private copy each test may damage."""
+    return Path(shutil.copytree(pristine, tmp_path / "ds"))
+
+
+# -- fault injection helpers ---------------------------------------------------------------------
+
+def _manifest(root: Path) -> dict:
+    return json.loads((root / MANIFEST_FILE).read_text())
+
+
+def _row_of(root: Path, episode_id: str, frame: int) -> int:
+    eps = [json.loads(l)["episode_id"] for l in (root / "episodes.jsonl").read_text().splitlines()]
+    index = load_index(root, mmap=False)
+    pos = eps.index(episode_id)
+    return int(np.flatnonzero((index["episode"] == pos) & (index["frame"] == frame))[0])
+
+
+def _read_members(root: Path, row: int) -> dict[str, bytes]:
+    index = load_index(root, mmap=False)
+    r = index[row]
+    shard = _manifest(root)["shards"][int(r["shard"])]["name"]
+    out = {}
+    with open(root / SHARDS_DIR / shard, "rb") as f:
+        header = int(r["offset"])
+        for suffix, col in SIZE_FIELDS.items():
+            size = int(r[col])
+            if size:
+                f.seek(header + BLOCK)
+                out[suffix] = f.read(size)
+                header += BLOCK + padded(size)
+    return out
+
+
+def rewrite_members(root: Path, row: int, replacement: dict[str, bytes]) -> None:
+    """Replace member bytes of one sample, bypassing every writer check, then fix the
+    shard's offsets/sizes in index.npy and the sha256/bytes in dataset.json so that only
+    the content (or time / split) checks can notice."""
+    manifest = _manifest(root)
+    index = load_index(root, mmap=False).copy()
+    shard_pos = int(index[row]["shard"])
+    entry = manifest["shards"][shard_pos]
+    eps = [json.loads(l)["episode_id"] for l in (root / "episodes.jsonl").read_text().splitlines()]
+    out = bytearray()
+    for r in np.flatnonzero(index["shard"] == shard_pos):
+        members = _read_members(root, int(r))
+        if r == row:
+            members.update(replacement)
+        key = f"{eps[int(index[r]['episode'])]}__{int(index[r]['frame']):06d}"
+        index[r]["offset"] = len(out)
+        for suffix, col in SIZE_FIELDS.items():
+            data = members.get(suffix, b"")
+            index[r][col] = len(data)
+            if data:
+                out += member_header(f"{key}.{suffix}", len(data)) + data + b"\0" * (padded(len(data)) - len(data))
+    out += b"\0" * (2 * BLOCK)
+    (root / SHARDS_DIR / entry["name"]).write_bytes(bytes(out))
+    entry["sha256"] = hashlib.sha256(out).hexdigest()
+    entry["bytes"] = len(out)
+    buf = io.BytesIO()
+    np.save(buf, index, allow_pickle=False)
+    (root / INDEX_FILE).write_bytes(buf.getvalue())
+    manifest["index_sha256"] = hashlib.sha256(buf.getvalue()).hexdigest()
+    (root / MANIFEST_FILE).write_text(json.dumps(manifest, indent=2))
+
+
+def _failures(report: dict, check: str, what: str) -> list[dict]:
+    return [f for f in report["checks"][check]["failures"] if f["what"] == what]
+
+
+def _failing_checks(report: dict) -> set[str]:
+    return {name for name, c in report["checks"].items() if c["failure_count"]}
+
+
+# -- a sound dataset ------------------------------------------------------------------------------
+
+def test_good_dataset_passes_every_check(ds, capsys):
+    make_split(ds, ["pour"], test_ratio=0.3, seed=0, name="main")
+    report = validate_dataset(ds, split="main", deep=True, workers=1)
+    assert report["ok"], json.dumps({k: c["failures"][:3] for k, c in report["checks"].items()}, indent=1)
+    s = report["checks"]["structure"]["checked"]
+    assert s["samples"] == 16 and s["shards"] == len(_manifest(ds)["shards"])
+    assert report["checks"]["content"]["checked"]["samples_decoded"] == 16
+    assert report["checks"]["content"]["checked"]["tactile_maps_decoded"] == 20
+    assert report["checks"]["splits"]["status"] == "pass"
+    assert report["stats"]["frames_per_task"] == {"grasp": 4, "pour": 5, "wipe": 7}
+    assert report["stats"]["frames_per_hand"] == {"left": 4, "right": 16}
+    assert sum(report["stats"]["contact_area_histogram"]["counts"]) == 20
+    assert sum(report["stats"]["pressure_histogram"]["counts"]) > 0
+
+    assert cli_main(["validate", str(ds), "--split", "main"]) == 0
+    out = capsys.readouterr().out
+    assert "OK: dataset is sound" in out
+    saved = json.loads((ds / "reports" / "validate.json").read_text())
+    assert saved["ok"] is True and set(saved["checks"]) == {"structure", "content", "time", "sensors", "splits"}
+
+
+def test_sampled_mode_decodes_a_seeded_subset_with_every_first_frame(ds):
+    a = validate_dataset(ds, sample_frac=0.01, seed=3)
+    b = validate_dataset(ds, sample_frac=0.01, seed=3)
+    decoded = a["checks"]["content"]["checked"]["samples_decoded"]
+    assert decoded == b["checks"]["content"]["checked"]["samples_decoded"]
+    assert len(EPISODES) <= decoded < 16
+
+
+def test_parallel_workers_agree_with_serial(ds):
+    row = _row_of(ds, "ep_b", 2)
+    nan_map = np.zeros((224, 224), np.float32)
+    nan_map[5, 7] = np.nan
+    rewrite_members(ds, row, {"tactile_left.exr": encode_exr(nan_map)})
+    serial = validate_dataset(ds, deep=True, workers=1)
+    parallel = validate_dataset(ds, deep=True, workers=2)
+    assert parallel["params"]["workers"] == 2
+    for name in serial["checks"]:
+        assert serial["checks"][name]["failures"] == parallel["checks"][name]["failures"], name
+        assert serial["checks"][name]["checked"] == parallel["checks"][name]["checked"], name
+
+
+# -- structure faults -----------------------------------------------------------------------------
+
+def test_flipped_byte_fails_shard_sha256(ds):
+    shard = _manifest(ds)["shards"][1]
+    path = ds / SHARDS_DIR / shard["name"]
+    data = bytearray(path.read_bytes())
+    data[BLOCK + 700] ^= 0xFF  # inside the first sample's data: headers stay valid
+    path.write_bytes(bytes(data))
+    report = validate_dataset(ds)
+    assert not report["ok"]
+    [fail] = _failures(report, "structure", "shard_sha256")
+    assert fail["shard"] == shard["name"]
+    assert fail["expected"] == shard["sha256"]
+    assert fail["found"] == hashlib.sha256(bytes(data)).hexdigest()
+    assert cli_main(["validate", str(ds), "--json", str(ds / "r.json")]) == 1
+    assert json.loads((ds / "r.json").read_text())["ok"] is False
+
+
+def test_truncated_shard_names_size_and_lost_samples(ds):
+    shard = _manifest(ds)["shards"][0]
+    path = ds / SHARDS_DIR / shard["name"]
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    report = validate_dataset(ds)
+    [size] = _failures(report, "structure", "shard_size")
+    assert size["shard"] == shard["name"] and size["expected"] == len(data) and size["found"] == len(data) // 2
+    assert _failures(report, "structure", "shard_sha256")
+    lost = _failures(report, "structure", "member_truncated")
+    assert lost and all(f["shard"] == shard["name"] for f in lost)
+    assert lost[-1]["key"] == "ep_a__000003"  # last sample of shard 0 (4 samples per shard)
+
+
+def test_deleted_shard(ds):
+    shard = _manifest(ds)["shards"][2]
+    (ds / SHARDS_DIR / shard["name"]).unlink()
+    report = validate_dataset(ds)
+    [fail] = _failures(report, "structure", "shard_missing")
+    assert fail["shard"] == shard["name"]
+    assert f"({shard['samples']} samples lost)" in fail["message"]
+
+
+def test_extra_shard_is_a_failure(ds):
+    shutil.copy(ds / SHARDS_DIR / _manifest(ds)["shards"][0]["name"], ds / SHARDS_DIR / "shard-999999-000.tar")
+    report = validate_dataset(ds)
+    [fail] = _failures(report, "structure", "shard_extra")
+    assert fail["shard"] == "shard-999999-000.tar"
+
+
+def test_index_offset_pointing_at_the_wrong_member(ds):
+    index = load_index(ds, mmap=False).copy()
+    index[1]["offset"], index[2]["offset"] = index[2]["offset"], index[1]["offset"]
+    buf = io.BytesIO()
+    np.save(buf, index, allow_pickle=False)
+    (ds / INDEX_FILE).write_bytes(buf.getvalue())
+    manifest = _manifest(ds)
+    manifest["index_sha256"] = hashlib.sha256(buf.getvalue()).hexdigest()
+    (ds / MANIFEST_FILE).write_text(json.dumps(manifest))
+    report = validate_dataset(ds)
+    fails = _failures(report, "structure", "member_offset")
+    assert {f["key"] for f in fails} == {"ep_a__000001", "ep_a__000002"}
+    assert fails[0]["expected"].startswith("ep_a__000001.json") and fails[0]["found"].startswith("ep_a__000002.json")
+    assert not _failures(report, "structure", "index_sha256")
+
+
+def test_tampered_episodes_file_fails_checksum(ds):
+    path = ds / "episodes.jsonl"
+    path.write_text(path.read_text().replace('"kitchen"', '"garage"', 1))
+    report = validate_dataset(ds)
+    [fail] = _failures(report, "structure", "episodes_sha256")
+    assert fail["file"] == "episodes.jsonl"
+
+
+def test_missing_manifest_is_reported_not_raised(tmp_path):
+    report = validate_dataset(tmp_path)
+    assert not report["ok"]
+    assert _failures(report, "structure", "manifest_missing")
+    assert report["checks"]["content"]["status"] == "skipped"
+
+
+# -- content faults -------------------------------------------------------------------------------
+
+def test_nan_tactile_frame_is_caught_only_by_content(ds):
+    row = _row_of(ds, "ep_b", 2)
+    nan_map = np.zeros((224, 224), np.float32)
+    nan_map[5, 7] = np.nan
+    rewrite_members(ds, row, {"tactile_left.exr": encode_exr(nan_map)})
+    report = validate_dataset(ds, deep=True)
+    assert _failing_checks(report) == {"content"}
+    [fail] = _failures(report, "content", "tactile_nonfinite")
+    assert (fail["key"], fail["episode"], fail["frame"], fail["hand"]) == ("ep_b__000002", "ep_b", 2, "left")
+    assert "row 5, col 7" in fail["message"] and fail["found"] == "1 NaN, 0 Inf"
+
+
+def test_out_of_range_and_float32_tactile(ds):
+    big = np.full((224, 224), 0.5, np.float32)
+    big[0, 0] = 1.5
+    rewrite_members(ds, _row_of(ds, "ep_a", 1), {"tactile_right.exr": encode_exr(big)})
+    rewrite_members(ds, _row_of(ds, "ep_c", 0),
+                    {"tactile_right.exr": encode_exr(np.zeros((224, 224)), pixel_type=np.float32)})
+    report = validate_dataset(ds, deep=True)
+    [rng] = _failures(report, "content", "tactile_range")
+    assert rng["key"] == "ep_a__000001" and rng["found"] == "[0.5, 1.5]"
+    [shape] = _failures(report, "content", "tactile_shape")
+    assert shape["key"] == "ep_c__000000" and "float32" in shape["found"]
+
+
+def test_tactile_outside_coverage(tmp_path):
+    cov = np.zeros((224, 224), np.uint8)
+    cov[50:150, 50:150] = 1
+    root = write_synthetic_dataset(tmp_path / "ds", EPISODES[:2], coverages={"test_full": cov})
+    assert validate_dataset(root, deep=True)["ok"]
+    leak = np.zeros((224, 224), np.float32)
+    leak[10, 20] = 0.3
+    rewrite_members(root, _row_of(root, "ep_a", 4), {"tactile_right.exr": encode_exr(leak)})
+    report = validate_dataset(root, deep=True)
+    [fail] = _failures(report, "content", "tactile_outside_coverage")
+    assert fail["key"] == "ep_a__000004" and "row 10, col 20" in fail["message"]
+
+
+def test_undecodable_rgb(ds):
+    rewrite_members(ds, _row_of(ds, "ep_d", 1), {"rgb.jpg": b"not a jpeg at all"})
+    report = validate_dataset(ds, deep=True)
+    [fail] = _failures(report, "content", "rgb_decode")
+    assert fail["key"] == "ep_d__000001"
+
+
+# -- time faults ----------------------------------------------------------------------------------
+
+def _rewrite_json(root: Path, episode: str, frame: int, **changes) -> None:
+    row = _row_of(root, episode, frame)
+    meta = json.loads(_read_members(root, row)["json"])
+    meta.update(changes)
+    rewrite_members(root, row, {"json": json.dumps(meta).encode()})
+
+
+def test_non_monotonic_timestamps(ds):
+    t1 = 1_000_000_000 + 1 * FRAME_NS
+    _rewrite_json(ds, "ep_a", 3, t_rgb_ns=t1, t_tactile_ns={"right": t1 + 1000})
+    report = validate_dataset(ds)
+    assert _failing_checks(report) == {"time"}
+    rgb = _failures(report, "time", "rgb_not_increasing")
+    assert [(f["episode"], f["frame"], f["key"]) for f in rgb] == [("ep_a", 3, "ep_a__000003")]
+    tac = _failures(report, "time", "tactile_not_increasing")
+    assert [(f["frame"], f["hand"]) for f in tac] == [(3, "right")]
+
+
+def test_sync_skew_over_tolerance(ds):
+    t = 1_000_000_000 + 2 * FRAME_NS
+    _rewrite_json(ds, "ep_c", 2, t_tactile_ns={"right": t - 25_000_000})  # 25 ms > 20 ms default
+    report = validate_dataset(ds)
+    [fail] = _failures(report, "time", "sync_skew")
+    assert (fail["episode"], fail["frame"], fail["hand"], fail["found"]) == ("ep_c", 2, "right", 25_000_000)
+
+
+def test_repeated_tactile_timestamp_is_a_warning_not_a_failure(ds):
+    # a glove frame half-way between RGB frames 0 and 1 paired with both (skew 16.7 ms < 20 ms)
+    t_mid = 1_000_000_000 + FRAME_NS // 2
+    _rewrite_json(ds, "ep_a", 0, t_tactile_ns={"right": t_mid})
+    _rewrite_json(ds, "ep_a", 1, t_tactile_ns={"right": t_mid})
+    report = validate_dataset(ds)
+    assert report["checks"]["time"]["failure_count"] == 0
+    assert report["checks"]["time"]["warning_counts"]["tactile_repeated"] == 1
+
+
+# -- sensors --------------------------------------------------------------------------------------
+
+def test_all_zero_and_dead_regions_are_warnings(tmp_path):
+    root = write_synthetic_dataset(tmp_path / "ds", EPISODES[:1])
+    for frame in range(5):
+        rewrite_members(root, _row_of(root, "ep_a", frame),
+                        {"tactile_right.exr": encode_exr(np.zeros((224, 224), np.float32))})
+    report = validate_dataset(root, deep=True)
+    assert report["ok"]
+    sensors = report["checks"]["sensors"]
+    assert sensors["warning_counts"] == {"all_zero": 1}
+    assert sensors["warnings"][0]["episode"] == "ep_a"
+
+
+# -- split faults ---------------------------------------------------------------------------------
+
+def _edit_split(root: Path, name: str, edit) -> None:
+    path = root / "splits" / f"{name}.json"
+    doc = json.loads(path.read_text())
+    edit(doc)
+    path.write_text(json.dumps(doc))
+
+
+def test_episode_in_two_parts(ds):
+    doc = make_split(ds, ["pour"], test_ratio=0.3, name="s")
+    moved = doc["parts"]["train"]["episodes"][0]
+    _edit_split(ds, "s", lambda d: d["parts"]["test"]["episodes"].append(moved))
+    report = validate_dataset(ds, split="s")
+    [fail] = _failures(report, "splits", "episode_in_two_parts")
+    assert fail["episode"] == moved and fail["found"] == ["train", "test"]
+    assert _failures(report, "splits", "split_frames")  # stated test frames no longer add up
+
+
+def test_ood_task_in_train(ds):
+    make_split(ds, ["pour"], name="s")
+    _edit_split(ds, "s", lambda d: (d["parts"]["ood"]["episodes"].remove("ep_a"),
+                                    d["parts"]["train"]["episodes"].append("ep_a")))
+    report = validate_dataset(ds, split="s")
+    leaks = _failures(report, "splits", "ood_task_leak")
+    assert {(f["episode"], f.get("part")) for f in leaks} == {("ep_a", "train"), ("ep_a", None)}
+
+
+def test_duplicated_frame_across_parts(ds):
+    doc = make_split(ds, ["pour"], test_ratio=0.3, name="s")
+    assert validate_dataset(ds, split="s")["ok"]
+    ood_row = _row_of(ds, "ep_a", 2)             # ood part
+    train_ep = next(e for e in doc["parts"]["train"]["episodes"] if e != "ep_b")
+    train_row = _row_of(ds, train_ep, 0)
+    source = _read_members(ds, ood_row)
+    rewrite_members(ds, train_row, {"rgb.jpg": source["rgb.jpg"], "tactile_right.exr": source["tactile_right.exr"]})
+    report = validate_dataset(ds, split="s")
+    assert _failing_checks(report) == {"splits"}
+    [fail] = _failures(report, "splits", "duplicate_frame_across_parts")
+    assert sorted(fail["keys"]) == sorted(["ep_a__000002", f"{train_ep}__000000"])
+    assert fail["parts"] == ["ood", "train"]
+
+
+def test_split_of_another_commit_and_unknown_split(ds):
+    make_split(ds, ["pour"], name="s")
+    _edit_split(ds, "s", lambda d: d.update(manifest_sha256="0" * 64))
+    report = validate_dataset(ds, split="s")
+    assert _failures(report, "splits", "split_manifest")
+    report = validate_dataset(ds, split="nope")
+    [fail] = _failures(report, "splits", "split_missing")
+    assert "known splits: s" in fail["message"]
+
+
+def test_bad_arguments():
+    with pytest.raises(ValueError, match="--sample-frac"):
+        validate_dataset("x", sample_frac=0.0)
+    with pytest.raises(ValueError, match="--workers"):
+        validate_dataset("x", workers=0)
+
+
+def test_validate_benchmark_reports_frames_per_second(pristine):
+    result = validate_benchmark(pristine, workers=1)
+    assert result["ok"] and result["frames"] == 16 and result["frames_per_s"] > 0
