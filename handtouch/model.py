@@ -40,8 +40,14 @@ def masked_mse(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -
     `torch.where` keeps non-finite values at excluded pixels out of the sum and its gradient.
     """
     keep = weight > 0
-    sq = torch.where(keep, (pred.float() - target.float()) ** 2, torch.zeros((), device=pred.device))
-    return sq.sum() / keep.sum().clamp_min(1).float()
+    zero = torch.zeros((), device=pred.device)
+    diff = torch.where(keep, pred.float() - torch.where(keep, target.float(), zero), zero)
+    return diff.pow(2).sum() / keep.sum().clamp_min(1).float()
+
+
+def covered(tactile: torch.Tensor, coverage: torch.Tensor) -> torch.Tensor:
+    """The map with every uncovered pixel set to 0 (whatever it held, NaN included)."""
+    return torch.where(coverage > 0, tactile.float(), torch.zeros((), device=tactile.device))
 
 
 class RGBProjector(nn.Module):
@@ -197,21 +203,22 @@ class HandTouch(nn.Module):
     # ---- TactileModel API ---------------------------------------------------------
     def embed(self, tactile, coverage, hand) -> torch.Tensor:
         """(B,D): mean of the quantised tokens of the (unmasked) map."""
-        z, _, _, _ = self.vq(self.encode(tactile * coverage))
+        z, _, _, _ = self.vq(self.encode(covered(tactile, coverage)))
         return z.mean(dim=1)
 
     def reconstruct(self, tactile, coverage) -> torch.Tensor:
-        return self.quantise_decode(self.encode(tactile * coverage), coverage)[0]
+        return self.quantise_decode(self.encode(covered(tactile, coverage)), coverage)[0]
 
     def inpaint(self, tactile, coverage, mask, rgb, hand) -> torch.Tensor:
-        return self._inpaint(tactile * coverage, coverage, mask, rgb, hand)[0]
+        return self._inpaint(covered(tactile, coverage), coverage, mask, rgb, hand)[0]
 
     def rgb_to_tactile(self, rgb, coverage, hand) -> torch.Tensor:
         blank = torch.zeros_like(coverage, dtype=torch.float32)
         return self._inpaint(blank, coverage, torch.ones_like(blank), rgb, hand)[0]
 
     def predict_next(self, rgb_window, tactile_window, coverage, hand) -> torch.Tensor:
-        return self._predict_next(rgb_window, tactile_window, coverage, hand)[0]
+        past = covered(tactile_window, coverage[:, None])
+        return self._predict_next(rgb_window, past, coverage, hand)[0]
 
     # ---- training losses ----------------------------------------------------------
     def forward(self, batch: dict, stage: int, mask: torch.Tensor | None = None,
@@ -223,7 +230,7 @@ class HandTouch(nn.Module):
         w = weights or LossConfig()
         if stage == 1:
             cov = batch["coverage"]
-            target = batch["tactile"] * cov
+            target = covered(batch["tactile"], cov)
             pred, _, vq_l, stats = self.quantise_decode(self.encode(target), cov)
             terms = {"recon": masked_mse(pred, target, cov)}
             main = terms["recon"]
@@ -231,7 +238,7 @@ class HandTouch(nn.Module):
             if mask is None:
                 raise ValueError("stage 2 needs a mask")
             cov = batch["coverage"]
-            target = batch["tactile"] * cov
+            target = covered(batch["tactile"], cov)
             pred, _, vq_l, stats = self._inpaint(target, cov, mask, batch["rgb"], batch["hand"])
             terms = {"visible": masked_mse(pred, target, cov * (1 - mask)),
                      "masked": masked_mse(pred, target, cov * mask)}
@@ -241,8 +248,8 @@ class HandTouch(nn.Module):
             if tac.dim() != 5 or tac.shape[1] != WINDOW:
                 raise ValueError(f"stage 3 needs window batches (B,{WINDOW},1,H,W), got {tuple(tac.shape)}")
             cov_t = cov[:, -1] if cov.dim() == 5 else cov      # window coverage may be given once
-            target = tac[:, -1] * cov_t
-            past = tac[:, :-1] * (cov[:, :-1] if cov.dim() == 5 else cov[:, None])
+            target = covered(tac[:, -1], cov_t)
+            past = covered(tac[:, :-1], cov[:, :-1] if cov.dim() == 5 else cov[:, None])
             pred, _, vq_l, stats = self._predict_next(batch["rgb"], past, cov_t, batch["hand"])
             terms = {"next": masked_mse(pred, target, cov_t)}
             main = terms["next"]

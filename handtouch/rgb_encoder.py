@@ -2,7 +2,8 @@
 
 Specs:
   "random:SEED"      a seeded random small conv encoder, explicitly for smoke runs
-  "PATH.pt2"         a torch.export archive: torch.export.load(PATH).module()
+  "PATH.pt2"         a torch.export archive: torch.export.load(PATH).module(); export it
+                     with a dynamic batch dimension (dynamic_shapes={0: Dim("batch")})
   "PATH.pt"          {"arch": NAME, "state_dict": ...} for an architecture in ARCHS
 
 The encoder receives float32 (B,3,224,224) in [0,1] (any normalisation the
@@ -77,13 +78,17 @@ class RGBEncoder(nn.Module):
         self.info = info
         for p in self.backbone.parameters():
             p.requires_grad_(False)
-        self.backbone.eval()
+        self.train(False)
         with torch.no_grad():
             probe = self(torch.zeros(1, 3, CANVAS, CANVAS, dtype=torch.uint8))
         self.num_tokens, self.out_dim = probe.shape[1], probe.shape[2]
 
     def train(self, mode: bool = True):
-        super().train(False)   # frozen: never leaves eval mode
+        """Frozen: never leaves eval mode. An exported module keeps the mode it was traced in
+        (its train()/eval() raise), so it is left alone."""
+        self.training = False
+        if self.info.kind != "export":
+            self.backbone.eval()
         return self
 
     def forward(self, rgb: torch.Tensor) -> torch.Tensor:

@@ -32,7 +32,7 @@ from .config import LossConfig, TrainConfig, load_train_config, model_config_fro
 from .distributed import (DistEnv, StepBatchSampler, barrier, init_distributed, mean_across_ranks,
                           shutdown, unwrap, wrap)
 from .masking import sample_masks
-from .model import HandTouch, masked_mse
+from .model import HandTouch, covered, masked_mse
 from .rgb_encoder import load_rgb_encoder
 
 log = logging.getLogger("handtouch.train")
@@ -257,7 +257,7 @@ def evaluate_heldout(model: HandTouch, batch: dict, device: torch.device) -> dic
     model.eval()
     batch = _to_device(batch, device)
     cov = batch["coverage"]
-    target = batch["tactile"] * cov
+    target = covered(batch["tactile"], cov)
     pred, _, _, stats = model.quantise_decode(model.encode(target), cov)
     out = {"recon_rmse": math.sqrt(float(masked_mse(pred, target, cov))),
            "codebook": {"perplexity": float(stats["perplexity"]), "batch_usage": float(stats["usage"]),

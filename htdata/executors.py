@@ -26,6 +26,24 @@ class UnitFailed(RuntimeError):
     """A unit kept failing after its retries."""
 
 
+class InlineExecutor:
+    """Runs units one after another in this process (`--workers 0`: debugging, tests)."""
+
+    def __init__(self, max_retries: int = 1):
+        self.max_retries = max(0, int(max_retries))
+
+    def map_units(self, fn: Callable[[Any], Any], tasks: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
+        for task in tasks:
+            for attempt in range(self.max_retries + 1):
+                try:
+                    result = fn(task)
+                    break
+                except Exception as exc:
+                    if attempt == self.max_retries:
+                        raise UnitFailed(f"{task!r} failed after {attempt + 1} attempt(s): {exc}") from exc
+            yield task, result
+
+
 class ProcessExecutor:
     """concurrent.futures process pool; keeps at most `2 * workers` tasks in flight."""
 
@@ -83,31 +101,35 @@ class RayExecutor:
         self.workers = workers
         self.max_retries = max(0, int(max_retries))
 
-    def _init(self) -> None:
+    def _init(self) -> bool:
+        """Connect/start Ray; True when this call started it (so we shut it down)."""
         if self.ray.is_initialized():
-            return
+            return False
         kwargs: dict = {"include_dashboard": False, "log_to_driver": False}
         if self.address:
             kwargs["address"] = self.address
         elif self.workers:
             kwargs["num_cpus"] = int(self.workers)
         self.ray.init(**kwargs)
+        return True
 
     def map_units(self, fn: Callable[[Any], Any], tasks: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
-        self._init()
-        remote = self.ray.remote(max_retries=self.max_retries, retry_exceptions=True)(fn)
-        refs = {}
-        for task in tasks:
-            refs[remote.remote(task)] = task
-        while refs:
-            ready, _ = self.ray.wait(list(refs), num_returns=1)
-            for ref in ready:
-                task = refs.pop(ref)
-                try:
-                    result = self.ray.get(ref)
-                except Exception as e:
-                    raise UnitFailed(f"{task!r} failed on Ray after {self.max_retries} retries: {e}") from e
-                yield task, result
+        started = self._init()
+        try:
+            remote = self.ray.remote(max_retries=self.max_retries, retry_exceptions=True)(fn)
+            refs = {remote.remote(task): task for task in tasks}
+            while refs:
+                ready, _ = self.ray.wait(list(refs), num_returns=1)
+                for ref in ready:
+                    task = refs.pop(ref)
+                    try:
+                        result = self.ray.get(ref)
+                    except Exception as e:
+                        raise UnitFailed(f"{task!r} failed on Ray after {self.max_retries} retries: {e}") from e
+                    yield task, result
+        finally:
+            if started:
+                self.ray.shutdown()
 
 
 def make_executor(kind: str, workers: int | None = None, address: str | None = None,
@@ -115,6 +137,8 @@ def make_executor(kind: str, workers: int | None = None, address: str | None = N
     if kind == "process":
         if address:
             raise ValueError("--address is only meaningful with --executor ray")
+        if workers == 0:
+            return InlineExecutor(max_retries=max_retries)
         return ProcessExecutor(workers, max_retries=max_retries)
     if kind == "ray":
         return RayExecutor(address=address, workers=workers, max_retries=max_retries)

@@ -52,6 +52,7 @@ import numpy as np
 
 from htdata.codec import DEFAULT_CODEC_INFO, encode_rgb, encode_tactile
 from htdata.errors import EpisodeError
+from htdata.executors import UnitFailed, make_executor
 from htdata.normalise import Normaliser
 from htdata.pipeline import PipelineConfig, load_pipeline
 from htdata.rgb import to_square_224
@@ -512,8 +513,7 @@ def prepare_output(out: Path, identity: dict) -> None:
 def remove_strays(out: Path, tasks: list[UnitTask]) -> None:
     """Temp files, spools, and shards/records of unit numbers outside the plan."""
     planned = {t.unit for t in tasks}
-    for p in list((out / SHARDS_DIR).glob(".*.tmp")) + list((out / WORK_DIR).glob(".*.tmp")) \
-            + list((out / WORK_DIR).glob("spool-*.bin")) + list(out.glob(".*.tmp")):
+    for p in list(out.rglob(".*.tmp")) + list((out / WORK_DIR).glob("spool-*.bin")):
         p.unlink()
     for p in (out / SHARDS_DIR).glob("shard-*.tar"):
         if int(p.name.split("-")[1]) not in planned:
@@ -590,7 +590,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="pipeline TOML (or a name in pipelines/); repeat for a multi-source dataset")
     parser.add_argument("paths", nargs="+", metavar="SRC... OUT",
                         help="one SRC per --pipeline (unless given as PIPELINE=SRC), then OUT")
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes (default: CPUs)")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes (default: CPUs); 0 = run units in this process (debugging)")
     parser.add_argument("--executor", choices=("process", "ray"), default="process")
     parser.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
     parser.add_argument("--retries", type=int, default=1, help="retries of a unit that raised (default 1)")
@@ -602,8 +602,6 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
            address: str | None = None, retries: int = 1, progress: bool = True) -> dict:
     """Run (or resume) an ingest; returns the report dict (also written to reports/ingest.json)."""
     from tqdm import tqdm
-
-    from htdata.executors import make_executor
 
     prepare_output(out, directory_identity(sources))
     refs = []
@@ -662,6 +660,9 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, FileNotFoundError) as e:
         print(f"htdata ingest: error: {e}", file=sys.stderr)
         return 2
+    except UnitFailed as e:
+        print(f"htdata ingest: error: {e}", file=sys.stderr)
+        return 3
     n_fail = len(report["failures"])
     for f in report["failures"]:
         frame = f" frame {f['frame']}" if f["frame"] is not None else ""

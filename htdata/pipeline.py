@@ -30,7 +30,6 @@ from pathlib import Path
 from htdata.normalise import NormaliseConfig
 from htdata.resources import PIPELINES_DIR, validate_json
 
-HANDS = ("left", "right")
 
 
 @dataclass

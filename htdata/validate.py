@@ -47,11 +47,12 @@ from collections import Counter, defaultdict
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
-from htdata.manifest import (EPISODES_FILE, INDEX_DTYPE, INDEX_FILE, MANIFEST_FILE, SHARDS_DIR,
+from htdata.manifest import (INDEX_DTYPE, MANIFEST_FILE, SHARDS_DIR,
                              SIZE_FIELDS)
 from htdata.resources import validate_json
 from htdata.shardio import BLOCK, member_offsets
@@ -204,18 +205,42 @@ def _decode_exr_half(data: bytes) -> tuple[np.ndarray, str]:
     return pixels, str(pixels.dtype)
 
 
-def _region_means(tmap: np.ndarray, labels: np.ndarray, n_regions: int) -> np.ndarray:
-    """Mean of `tmap` over each region label (0 = ignored); NaN for an empty region."""
-    flat = labels.ravel()
-    keep = flat > 0
-    sums = np.bincount(flat[keep], weights=tmap.ravel()[keep], minlength=n_regions + 1)
-    counts = np.bincount(flat[keep], minlength=n_regions + 1)
+@dataclass
+class CoverageGeometry:
+    """Per-layout lookups computed once per shard, so each map costs a few vector ops."""
+    mask: np.ndarray        # (224,224) bool covered pixels
+    idx: np.ndarray         # flat indices of covered pixels
+    labels: np.ndarray      # region id of each covered pixel (0 = outside every region)
+    counts: np.ndarray      # covered pixels per region id
+    n_covered: int
+
+
+def coverage_geometry(coverage: np.ndarray, region_map: np.ndarray | None) -> CoverageGeometry:
+    mask = np.asarray(coverage, bool)
+    idx = np.flatnonzero(mask.ravel())
+    regions = np.zeros(mask.shape, np.uint8) if region_map is None else region_map
+    labels = regions.ravel()[idx].astype(np.intp)
+    counts = np.bincount(labels, minlength=int(regions.max()) + 1)
+    return CoverageGeometry(mask, idx, labels, counts, int(idx.size))
+
+
+def region_means(covered_values: np.ndarray, geo: CoverageGeometry) -> np.ndarray:
+    """Mean value per region id over covered pixels; NaN for a region with no covered pixel."""
+    sums = np.bincount(geo.labels, weights=covered_values, minlength=geo.counts.size)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
+        means = np.where(geo.counts > 0, sums / np.maximum(geo.counts, 1), np.nan)
+    means[0] = np.nan  # label 0: covered but outside the template's regions
+    return means
 
 
-def _check_content(job: ShardJob, rec: Recorder, key: str, where: dict, members: dict[str, bytes],
-                   hands_present: list[str], sensor: dict) -> None:
+def value_histogram(values: np.ndarray) -> np.ndarray:
+    """HIST_BINS equal bins over [0,1] (1.0 in the last bin), like np.histogram but ~5x cheaper."""
+    bins = np.minimum((values * HIST_BINS).astype(np.intp), HIST_BINS - 1)
+    return np.bincount(bins, minlength=HIST_BINS)
+
+
+def _check_content(geometry: dict[str, CoverageGeometry], rec: Recorder, key: str, where: dict,
+                   members: dict[str, bytes], hands_present: list[str], sensor: dict) -> None:
     """Decode one sample's members and check shapes, dtypes, values and coverage."""
     from htdata.codec import decode_rgb
 
@@ -255,32 +280,31 @@ def _check_content(job: ShardJob, rec: Recorder, key: str, where: dict, members:
         if lo < 0.0 or hi > 1.0:
             rec.fail("tactile_range", f"{key}.{member}: values outside [0,1]", **where, hand=hand,
                      expected="[0, 1]", found=f"[{lo:.6g}, {hi:.6g}]")
-        cov = job.coverage.get(f"{where['episode']}:{hand}")
-        if cov is None:
+        geo = geometry.get(f"{where['episode']}:{hand}")
+        if geo is None:
             rec.fail("coverage_missing", f"{key}: no coverage map for the {hand} hand's layout",
                      **where, hand=hand)
             continue
-        outside = (~cov) & (tmap != 0)
-        if outside.any():
-            bad = np.argwhere(outside)[0]
+        flat = tmap.ravel()
+        covered = flat[geo.idx]
+        n_outside = int(np.count_nonzero(flat)) - int(np.count_nonzero(covered))
+        if n_outside:
+            bad = np.argwhere((~geo.mask) & (tmap != 0))[0]
             rec.fail("tactile_outside_coverage",
-                     f"{key}.{member}: {int(outside.sum())} non-zero pixel(s) outside the layout's "
+                     f"{key}.{member}: {n_outside} non-zero pixel(s) outside the layout's "
                      f"coverage, first at row {bad[0]}, col {bad[1]}", **where, hand=hand,
-                     expected="0 outside coverage", found=f"{int(outside.sum())} pixels")
-        covered = tmap[cov]
-        n_cov = max(int(cov.sum()), 1)
+                     expected="0 outside coverage", found=f"{n_outside} pixels")
         acc = sensor.setdefault(f"{where['episode']}:{hand}", {
             "frames": [], "region_means": [], "max": 0.0, "saturated": 0, "covered": 0})
         acc["frames"].append(where["frame"])
-        if job.region_map is not None:
-            labels = np.where(cov, job.region_map, 0)
-            acc["region_means"].append(_region_means(tmap, labels, int(job.region_map.max())))
+        acc["region_means"].append(region_means(covered, geo))
         acc["max"] = max(acc["max"], hi)
-        acc["saturated"] += int((covered >= SATURATION_LEVEL).sum())
-        acc["covered"] += int(covered.size)
-        sensor.setdefault("_contact_area", []).append(float((covered > CONTACT_THRESHOLD).sum()) / n_cov)
+        acc["saturated"] += int(np.count_nonzero(covered >= SATURATION_LEVEL))
+        acc["covered"] += geo.n_covered
+        sensor.setdefault("_contact_area", []).append(
+            float(np.count_nonzero(covered > CONTACT_THRESHOLD)) / max(geo.n_covered, 1))
         sensor.setdefault("_pressure_hist", np.zeros(HIST_BINS, np.int64))
-        sensor["_pressure_hist"] += np.histogram(covered[covered > 0], bins=HIST_BINS, range=(0.0, 1.0))[0]
+        sensor["_pressure_hist"] += value_histogram(covered[covered > 0])
     for hand in HANDS:
         member = f"bend_{hand}.npy"
         if member in members:
@@ -298,6 +322,11 @@ def check_shard(job: ShardJob) -> dict:
     """Structure (+ content when asked) of one shard. Returns plain data for the parent."""
     structure, content = Recorder(), Recorder()
     n = len(job.rows)
+    by_array: dict[int, CoverageGeometry] = {}
+    for cov in job.coverage.values():
+        if id(cov) not in by_array:
+            by_array[id(cov)] = coverage_geometry(cov, job.region_map)
+    geometry = {k: by_array[id(cov)] for k, cov in job.coverage.items()}
     timestamps = {"row": job.row_ids.copy(), "t_rgb": np.zeros(n, np.int64),
                   "ok": np.zeros(n, bool)}
     for hand in HANDS:
@@ -389,16 +418,27 @@ def check_shard(job: ShardJob) -> dict:
                     h.update(suffix.encode() + b"\0" + members.get(suffix, b""))
                 hashes.append((int(job.row_ids[i]), h.hexdigest()))
             if job.decode[i]:
-                _check_content(job, content, key, where, members, hands_present, sensor)
+                _check_content(geometry, content, key, where, members, hands_present, sensor)
     return {"structure": structure.to_dict(), "content": content.to_dict(), "timestamps": timestamps,
             "hashes": hashes, "sensor": sensor}
+
+
+@lru_cache(maxsize=1)
+def _sample_validator():
+    """One compiled validator per process: building it per sample costs ~1 ms each."""
+    import jsonschema
+
+    from htdata.resources import load_schema
+
+    return jsonschema.Draft202012Validator(load_schema("sample"))
 
 
 def _check_sample_json(rec: Recorder, data: bytes, key: str, eid: str, frame: int, row,
                        where: dict) -> dict | None:
     try:
         meta = json.loads(data)
-        validate_json(meta, "sample", where=f"{key}.json")
+        if not _sample_validator().is_valid(meta):
+            validate_json(meta, "sample", where=f"{key}.json")  # raises with the first error
     except (ValueError, UnicodeDecodeError) as exc:
         rec.fail("sample_json", f"{key}.json: {exc}", **where)
         return None

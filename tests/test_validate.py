@@ -16,7 +16,7 @@ from htdata.codec import encode_exr
 from htdata.manifest import INDEX_FILE, MANIFEST_FILE, SHARDS_DIR, SIZE_FIELDS, load_index
 from htdata.shardio import BLOCK, member_header, padded
 from htdata.split import make_split
-from htdata.validate import validate_benchmark, validate_dataset
+from htdata.validate import group_rows, validate_benchmark, validate_dataset
 from tests.factories import FRAME_NS, write_synthetic_dataset
 
 EPISODES = [
@@ -203,17 +203,46 @@ def test_extra_shard_is_a_failure(ds):
 def test_index_offset_pointing_at_the_wrong_member(ds):
     index = load_index(ds, mmap=False).copy()
     index[1]["offset"], index[2]["offset"] = index[2]["offset"], index[1]["offset"]
-    buf = io.BytesIO()
-    np.save(buf, index, allow_pickle=False)
-    (ds / INDEX_FILE).write_bytes(buf.getvalue())
-    manifest = _manifest(ds)
-    manifest["index_sha256"] = hashlib.sha256(buf.getvalue()).hexdigest()
-    (ds / MANIFEST_FILE).write_text(json.dumps(manifest))
+    _write_index(ds, index)
     report = validate_dataset(ds)
     fails = _failures(report, "structure", "member_offset")
     assert {f["key"] for f in fails} == {"ep_a__000001", "ep_a__000002"}
     assert fails[0]["expected"].startswith("ep_a__000001.json") and fails[0]["found"].startswith("ep_a__000002.json")
     assert not _failures(report, "structure", "index_sha256")
+
+
+def _write_index(root: Path, index: np.ndarray) -> None:
+    buf = io.BytesIO()
+    np.save(buf, index, allow_pickle=False)
+    (root / INDEX_FILE).write_bytes(buf.getvalue())
+    manifest = _manifest(root)
+    manifest["index_sha256"] = hashlib.sha256(buf.getvalue()).hexdigest()
+    (root / MANIFEST_FILE).write_text(json.dumps(manifest))
+
+
+def test_swapped_index_rows_break_frame_order(ds):
+    index = load_index(ds, mmap=False).copy()
+    index[[1, 2]] = index[[2, 1]]           # ep_a frames 0,2,1,3,4
+    _write_index(ds, index)
+    report = validate_dataset(ds)
+    [order] = _failures(report, "structure", "frame_order")
+    assert (order["episode"], order["sample"], order["frame"], order["expected"]) == ("ep_a", 1, 2, 1)
+    assert _failures(report, "structure", "offset_order")[0]["sample"] == 2
+
+
+def test_interleaved_episodes_are_not_contiguous(ds):
+    index = load_index(ds, mmap=False).copy()
+    index[[4, 5]] = index[[5, 4]]           # ep_a frame 4 and ep_b frame 0 swap places
+    _write_index(ds, index)
+    report = validate_dataset(ds)
+    fails = _failures(report, "structure", "episode_not_contiguous")
+    assert {f["episode"] for f in fails} == {"ep_a", "ep_b"}
+    assert not report["ok"]
+
+
+def test_group_rows_handles_empty_groups():
+    groups = group_rows(np.array([2, 0, 2, 0], np.uint32), 4)
+    assert [g.tolist() for g in groups] == [[1, 3], [], [0, 2], []]
 
 
 def test_tampered_episodes_file_fails_checksum(ds):

@@ -14,7 +14,7 @@ come from the same world. Stable hashes (crc32), never Python's salted hash().
 from __future__ import annotations
 
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, Iterator
 

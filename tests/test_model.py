@@ -1,0 +1,223 @@
+import pytest
+import torch
+
+from handtouch.config import MODULE_NAMES, LossConfig, ModelConfig
+from handtouch.model import HandTouch, masked_mse
+from handtouch.rgb_encoder import SmallConvRGB, load_rgb_encoder
+
+STAGE_TRAINABLE = {
+    1: ["encoder", "vq", "decoder"],
+    2: ["encoder", "vq", "decoder", "rgb_proj", "hand_token", "fusion"],
+    3: ["temporal", "predictor", "rgb_proj", "hand_token", "vq", "decoder"],
+}
+
+
+def tiny_cfg(encoder="vit", **kw):
+    base = dict(encoder=encoder, patch=32, dim=32, depth=1, heads=2, mlp_ratio=2.0, code_dim=8,
+                codebook_size=16, decoder_depth=1, decoder_channels=16, fusion_depth=1,
+                temporal_depth=1, predictor_depth=1)
+    base.update(kw)
+    return ModelConfig(**base)
+
+
+def tiny_model(encoder="vit", seed=0, **kw):
+    torch.manual_seed(seed)
+    return HandTouch(tiny_cfg(encoder, **kw), load_rgb_encoder("random:0"))
+
+
+def frame_batch(b=2, seed=0, coverage=None):
+    g = torch.Generator().manual_seed(seed)
+    cov = torch.ones(b, 1, 224, 224) if coverage is None else coverage
+    regions = torch.zeros(b, 224, 224, dtype=torch.uint8)
+    regions[:, :112, :112] = 1
+    regions[:, 112:, :] = 6
+    return {"tactile": torch.rand(b, 1, 224, 224, generator=g) * cov, "coverage": cov, "regions": regions,
+            "rgb": torch.randint(0, 256, (b, 3, 224, 224), generator=g, dtype=torch.uint8),
+            "hand": torch.tensor([0, 1] * (b // 2) + [1] * (b % 2))}
+
+
+def window_batch(b=2, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    return {"tactile": torch.rand(b, 3, 1, 224, 224, generator=g), "coverage": torch.ones(b, 1, 224, 224),
+            "rgb": torch.randint(0, 256, (b, 3, 3, 224, 224), generator=g, dtype=torch.uint8),
+            "hand": torch.ones(b, dtype=torch.long)}
+
+
+@pytest.mark.parametrize("encoder", ["vit", "cnn", "resnet18"])
+def test_api_shapes_for_every_encoder(encoder):
+    model = tiny_model(encoder).eval()
+    b = frame_batch(2)
+    cov = torch.zeros(2, 1, 224, 224)
+    cov[:, :, 50:150, 30:200] = 1
+    mask = torch.zeros(2, 1, 224, 224)
+    mask[:, :, :100] = 1
+    w = window_batch(2)
+    with torch.no_grad():
+        tokens = model.encode(b["tactile"])
+        assert tokens.shape == (2, model.cfg.num_tokens, 32)
+        assert model.embed(b["tactile"], cov, b["hand"]).shape == (2, 32)
+        outs = [model.reconstruct(b["tactile"], cov),
+                model.inpaint(b["tactile"], cov, mask, b["rgb"], b["hand"]),
+                model.rgb_to_tactile(b["rgb"], cov, b["hand"]),
+                model.predict_next(w["rgb"], w["tactile"][:, :2], cov, w["hand"])]
+    for out in outs:
+        assert out.shape == (2, 1, 224, 224)
+        assert float(out.min()) >= 0.0 and float(out.max()) <= 1.0
+        assert float(out[cov == 0].abs().max()) == 0.0       # nothing predicted where there is no sensor
+    assert model.name == {"vit": "handtouch-vit", "cnn": "baseline-cnn", "resnet18": "baseline-resnet18"}[encoder]
+
+
+@pytest.mark.parametrize("stage", [1, 2, 3])
+def test_losses_ignore_uncovered_pixels(stage):
+    model = tiny_model().eval()       # eval: no VQ restarts, so two calls are comparable
+    cov = torch.zeros(2, 1, 224, 224)
+    cov[:, :, 40:180, 40:180] = 1
+    if stage == 3:
+        batch = window_batch(2)
+        batch["coverage"] = cov
+    else:
+        batch = frame_batch(2, coverage=cov)
+    mask = torch.zeros(2, 1, 224, 224)
+    mask[:, :, :112] = 1
+    with torch.no_grad():
+        ref = model(batch, stage, mask=mask)
+        noisy = dict(batch)
+        junk = torch.where(cov.bool(), torch.zeros(()), torch.full((), float("nan")))
+        noisy["tactile"] = batch["tactile"] + (junk[:, None] if stage == 3 else junk)
+        out = model(noisy, stage, mask=mask)
+    for key in ref:
+        assert torch.isfinite(out[key]).all(), key
+        assert torch.allclose(ref[key], out[key]), key
+
+
+def test_masked_mse_zero_over_zero_and_nan_outside():
+    pred = torch.rand(1, 1, 4, 4, requires_grad=True)
+    target = torch.full((1, 1, 4, 4), float("nan"))
+    loss = masked_mse(pred, target, torch.zeros(1, 1, 4, 4))
+    loss.backward()
+    assert float(loss.detach()) == 0.0 and torch.isfinite(pred.grad).all()
+    weight = torch.zeros(1, 1, 4, 4)
+    weight[..., 0, 0] = 1
+    target = torch.zeros(1, 1, 4, 4)
+    assert float(masked_mse(pred, target, weight).detach()) == pytest.approx(float(pred.detach()[0, 0, 0, 0]) ** 2)
+
+
+def test_stage2_weights_visible_and_masked_terms():
+    model = tiny_model().eval()
+    b = frame_batch(2)
+    mask = torch.zeros(2, 1, 224, 224)
+    mask[:, :, :112] = 1
+    w = LossConfig(lambda_vis=0.25, lambda_mask=2.0, vq_weight=0.0)
+    with torch.no_grad():
+        out = model(b, 2, mask=mask, weights=w)
+        full = model(b, 2, mask=torch.ones_like(mask), weights=w)
+    assert float(out["loss"]) == pytest.approx(0.25 * float(out["visible"]) + 2.0 * float(out["masked"]), rel=1e-5)
+    assert float(full["visible"]) == 0.0          # complete masking: nothing visible, 0/0 guarded
+    with pytest.raises(ValueError, match="mask"):
+        model(b, 2)
+
+
+def test_all_zero_inputs_train_without_nan():
+    model = tiny_model().train()
+    b = frame_batch(2)
+    b["tactile"].zero_()
+    b["rgb"].zero_()
+    out = model(b, 2, mask=torch.zeros(2, 1, 224, 224))
+    out["loss"].backward()
+    assert torch.isfinite(out["loss"])
+    for name, p in model.named_parameters():
+        if p.grad is not None:
+            assert torch.isfinite(p.grad).all(), name
+
+
+@pytest.mark.parametrize("stage", [1, 2, 3])
+def test_stage_freezing_freezes_exactly_the_named_parts(stage):
+    model = tiny_model().train()
+    model.set_trainable(STAGE_TRAINABLE[stage])
+    assert model.frozen == set(MODULE_NAMES) - set(STAGE_TRAINABLE[stage])
+    batch = window_batch(2) if stage == 3 else frame_batch(2)
+    out = model(batch, stage, mask=torch.zeros(2, 1, 224, 224))
+    out["loss"].backward()
+    for name in MODULE_NAMES:
+        params = list(getattr(model, name).parameters())
+        trainable = name in STAGE_TRAINABLE[stage]
+        assert all(p.requires_grad == trainable for p in params), name
+        if trainable:   # every trained module is used by this stage's loss
+            assert any(p.grad is not None and float(p.grad.abs().sum()) > 0 for p in params), name
+        else:
+            assert all(p.grad is None for p in params), name
+    assert not any(p.requires_grad for p in model.rgb_encoder.parameters())
+    assert all(not getattr(model, n).training for n in model.frozen)
+    assert not model.rgb_encoder.training
+
+
+def test_freeze_unfreeze_by_name_and_unknown_names():
+    model = tiny_model().train()
+    model.freeze(["encoder"])
+    assert not any(p.requires_grad for p in model.encoder.parameters())
+    model.train()
+    assert not model.encoder.training and model.decoder.training
+    model.unfreeze(["encoder"])
+    assert all(p.requires_grad for p in model.encoder.parameters()) and model.encoder.training
+    with pytest.raises(ValueError, match="unknown module"):
+        model.freeze(["rgb_encoder"])
+    with pytest.raises(ValueError, match="unknown module"):
+        model.set_trainable(["encodr"])
+
+
+def test_stage3_encoder_frozen_gets_no_gradient():
+    model = tiny_model().train()
+    model.set_trainable(STAGE_TRAINABLE[3])
+    out = model(window_batch(2), 3)
+    out["loss"].backward()
+    assert all(p.grad is None for p in model.encoder.parameters())
+    with pytest.raises(ValueError, match="window"):
+        model(frame_batch(2), 3)
+
+
+def test_rgb_encoder_specs(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        load_rgb_encoder(str(tmp_path / "missing.pt2"))
+    with pytest.raises(ValueError):
+        load_rgb_encoder("random:abc")
+    a, b = load_rgb_encoder("random:3"), load_rgb_encoder("random:3")
+    rgb = torch.randint(0, 256, (2, 3, 224, 224), dtype=torch.uint8)
+    assert torch.equal(a(rgb), b(rgb))
+    assert not torch.equal(a(rgb), load_rgb_encoder("random:4")(rgb))
+    assert torch.allclose(a(rgb), a(rgb.float() / 255))     # uint8 and [0,1] floats agree
+
+    torch.manual_seed(0)
+    net = SmallConvRGB()
+    path = tmp_path / "enc.pt"
+    torch.save({"arch": "small_conv", "state_dict": net.state_dict()}, path)
+    enc = load_rgb_encoder(str(path))
+    assert enc.info.kind == "state_dict" and len(enc.info.sha256) == 64
+    assert not any(p.requires_grad for p in enc.parameters())
+    assert torch.allclose(enc(rgb), net(rgb.float() / 255).flatten(2).transpose(1, 2))
+    torch.save({"arch": "nope", "state_dict": {}}, tmp_path / "bad.pt")
+    with pytest.raises(ValueError, match="unknown arch"):
+        load_rgb_encoder(str(tmp_path / "bad.pt"))
+
+
+def test_rgb_encoder_from_torch_export(tmp_path):
+    net = SmallConvRGB().eval()
+    ep = torch.export.export(net, (torch.rand(2, 3, 224, 224),),
+                             dynamic_shapes=({0: torch.export.Dim("batch")},))
+    path = tmp_path / "enc.pt2"
+    torch.export.save(ep, str(path))
+    enc = load_rgb_encoder(str(path))
+    assert enc.info.kind == "export"
+    rgb = torch.randint(0, 256, (3, 3, 224, 224), dtype=torch.uint8)
+    assert torch.allclose(enc(rgb), net(rgb.float() / 255).flatten(2).transpose(1, 2), atol=1e-5)
+    model = HandTouch(tiny_cfg(), enc)
+    model.train()                       # must not call train() on the exported module
+    assert model.rgb_to_tactile(rgb, torch.ones(3, 1, 224, 224), torch.zeros(3, dtype=torch.long)).shape == (3, 1, 224, 224)
+
+
+def test_model_config_validation():
+    with pytest.raises(ValueError):
+        tiny_cfg(encoder="vgg").validate()
+    with pytest.raises(ValueError):
+        tiny_cfg(patch=14).validate()        # 224/14 = 16 tokens a side: not a doubling of 224
+    with pytest.raises(ValueError):
+        tiny_cfg(dim=30, heads=4).validate()

@@ -1,0 +1,180 @@
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from torch.utils.data import Dataset
+
+from handtouch.config import (TrainConfig, apply_overrides, load_train_config, parse_override,
+                              train_config_from_dict)
+from handtouch.distributed import StepBatchSampler
+from handtouch.train import TrainData, load_data, load_model, lr_at, main, read_checkpoint, train
+from tests.factories import write_synthetic_dataset
+
+EPISODES = [
+    {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": ("right",), "num_frames": 6},
+    {"episode_id": "ep_b", "task": "pour", "scene": "office", "hands": ("left", "right"), "num_frames": 5},
+    {"episode_id": "ep_c", "task": "wipe", "scene": "kitchen", "hands": ("right",), "num_frames": 4},
+    {"episode_id": "ep_d", "task": "wipe", "scene": "office", "hands": ("left",), "num_frames": 4},
+    {"episode_id": "ep_e", "task": "grab", "scene": "office", "hands": ("right",), "num_frames": 3},
+]
+
+TINY_MODEL = {"encoder": "vit", "patch": 32, "dim": 32, "depth": 1, "heads": 2, "mlp_ratio": 2.0,
+              "code_dim": 8, "codebook_size": 16, "vq_usage_decay": 0.9, "decoder_depth": 1,
+              "decoder_channels": 16, "fusion_depth": 1, "temporal_depth": 1, "predictor_depth": 1}
+
+
+@pytest.fixture(scope="module")
+def dataset_root(tmp_path_factory):
+    root = write_synthetic_dataset(tmp_path_factory.mktemp("ds") / "ds", EPISODES, seed=3)
+    from htdata.split import make_split
+    make_split(root, ood_tasks=["grab"], test_ratio=0.5, seed=0, name="s")
+    return root
+
+
+def tiny_config(root, out, **over) -> TrainConfig:
+    data = {"data_root": str(root), "out_dir": str(out), "rgb_encoder": "random:0", "device": "cpu",
+            "workers": 0, "batch_size": 4, "eval_batch_size": 4, "log_every": 5, "checkpoint_every": 6,
+            "seed": 1, "model": dict(TINY_MODEL),
+            "stage1": {"steps": 30, "lr": 3e-3, "warmup_steps": 2, "trainable": ["encoder", "vq", "decoder"]},
+            "stage2": {"steps": 4, "lr": 1e-3, "warmup_steps": 1,
+                       "trainable": ["encoder", "vq", "decoder", "rgb_proj", "hand_token", "fusion"]},
+            "stage3": {"steps": 4, "lr": 1e-3, "warmup_steps": 1,
+                       "trainable": ["temporal", "predictor", "rgb_proj", "hand_token", "vq", "decoder"]}}
+    return train_config_from_dict(apply_overrides(data, [f"{k}={v}" for k, v in over.items()]))
+
+
+def read_log(out: Path) -> list[dict]:
+    return [json.loads(line) for line in (out / "log.jsonl").read_text().splitlines()]
+
+
+def test_three_stages_train_log_and_write_metrics(dataset_root, tmp_path):
+    out = tmp_path / "run"
+    cfg = tiny_config(dataset_root, out, workers=1, split='"s"')
+    metrics = train(cfg)
+    log = read_log(out)
+    s1 = [r for r in log if r.get("stage") == 1 and "loss" in r]
+    assert len(s1) == 6                              # every 5 of 30 steps
+    assert s1[-1]["recon"] < 0.5 * s1[0]["recon"]    # reconstruction loss goes down
+    assert all(r["steps_per_s"] > 0 and r["samples_per_s"] == pytest.approx(4 * r["steps_per_s"]) for r in s1)
+    for n in (1, 2, 3):
+        ck = read_checkpoint(out / f"stage{n}.pt")
+        assert ck["done"] and ck["step"] == cfg.stage(n).steps
+    on_disk = json.loads((out / "metrics.json").read_text())
+    assert on_disk == json.loads(json.dumps(metrics))
+    assert set(on_disk["stages"]) == {"1", "2", "3"}
+    assert {"visible", "masked"} <= set(on_disk["stages"]["2"]["final"])
+    assert "next" in on_disk["stages"]["3"]["final"]
+    assert 0 < on_disk["recon_rmse"] < 1 and on_disk["steps_per_s"] > 0
+    assert 1 <= on_disk["codebook"]["perplexity"] <= 16
+    assert on_disk["heldout_source"] == "part 'test' of split 's'"
+    assert on_disk["rgb_encoder"]["spec"] == "random:0"
+
+    model = load_model(out / "stage3.pt")
+    assert not model.training
+    state = read_checkpoint(out / "stage3.pt")["model"]
+    assert all(torch.equal(v, state[k]) for k, v in model.state_dict().items())
+
+    # a re-run skips the finished stages and trains nothing
+    train(cfg)
+    events = [r.get("event") for r in read_log(out)]
+    assert events.count("stage_skipped") == 3
+
+
+class FailAfter(Dataset):
+    """Wraps a dataset and raises after `limit` items: a crash in the middle of a stage."""
+
+    def __init__(self, inner, limit):
+        self.inner, self.limit, self.calls = inner, limit, 0
+
+    def __len__(self):
+        return len(self.inner)
+
+    def __getitem__(self, i):
+        self.calls += 1
+        if self.calls > self.limit:
+            raise RuntimeError("simulated crash")
+        return self.inner[i]
+
+
+def test_resume_from_checkpoint_matches_an_uninterrupted_run(dataset_root, tmp_path):
+    over = {"stages": "[1, 2]", "stage1.steps": 12, "stage2.steps": 12}
+    full_cfg = tiny_config(dataset_root, tmp_path / "a", **over)
+    train(full_cfg)
+
+    cfg = tiny_config(dataset_root, tmp_path / "b", **over)
+    data = load_data(cfg)
+    crashing = TrainData(data.frames, data.windows, data.eval_frames, data.eval_source)
+    crashing.frames = FailAfter(data.frames, limit=4 * (12 + 9))   # dies in stage 2, step 9
+    with pytest.raises(RuntimeError, match="simulated crash"):
+        train(cfg, crashing)
+    assert read_checkpoint(tmp_path / "b" / "stage1.pt")["done"]
+    partial = read_checkpoint(tmp_path / "b" / "stage2.pt")
+    assert not partial["done"] and partial["step"] == 6
+
+    train(cfg)
+    events = [r.get("event") for r in read_log(tmp_path / "b")]
+    assert "stage_resumed" in events
+    a = read_checkpoint(tmp_path / "a" / "stage2.pt")["model"]
+    b = read_checkpoint(tmp_path / "b" / "stage2.pt")["model"]
+    for k in a:
+        assert torch.allclose(a[k], b[k], atol=1e-6), k
+
+
+def test_later_stage_needs_the_previous_checkpoint(dataset_root, tmp_path):
+    cfg = tiny_config(dataset_root, tmp_path / "c", stages="[2]")
+    with pytest.raises(FileNotFoundError, match="stage1.pt"):
+        train(cfg)
+
+
+def test_step_batch_sampler_is_deterministic_disjoint_and_resumable():
+    full = list(StepBatchSampler(10, 2, seed=4, start_step=0, stop_step=7))
+    assert list(StepBatchSampler(10, 2, seed=4, start_step=3, stop_step=7)) == full[3:]
+    for epoch_batches in (full[0:5], full[5:7]):
+        flat = [i for b in epoch_batches for i in b]
+        assert len(flat) == len(set(flat))            # no repeats inside an epoch
+    r0 = list(StepBatchSampler(9, 2, seed=1, start_step=0, stop_step=2, rank=0, world_size=2))
+    r1 = list(StepBatchSampler(9, 2, seed=1, start_step=0, stop_step=2, rank=1, world_size=2))
+    for b0, b1 in zip(r0, r1):
+        assert not set(b0) & set(b1) and len(b0) == len(b1) == 2
+    with pytest.raises(ValueError, match="fewer than one global batch"):
+        StepBatchSampler(3, 2, seed=0, start_step=0, stop_step=1, world_size=2)
+
+
+def test_lr_schedule_warmup_then_cosine():
+    assert lr_at(0, 100, 1.0, 10) == pytest.approx(0.1)
+    assert lr_at(9, 100, 1.0, 10) == pytest.approx(1.0)
+    assert lr_at(10, 100, 1.0, 10) == pytest.approx(1.0)
+    assert lr_at(100, 100, 1.0, 10) == pytest.approx(0.1)
+    assert np.all(np.diff([lr_at(s, 100, 1.0, 10) for s in range(10, 101)]) <= 1e-12)
+
+
+def test_config_files_load_and_reject_bad_input(tmp_path):
+    repo = Path(__file__).resolve().parents[1]
+    smoke = load_train_config(repo / "configs" / "smoke.toml")
+    full = load_train_config(repo / "configs" / "full.toml", ["model.depth=8"])
+    assert smoke.model.encoder == "vit" and full.model.depth == 8 and full.model.codebook_size == 2048
+    assert parse_override("stage1.steps=7") == (["stage1", "steps"], 7)
+    assert parse_override("rgb_encoder=random:3") == (["rgb_encoder"], "random:3")
+    base = (repo / "configs" / "smoke.toml").read_text()
+    cases = {
+        "unknown keys": base + "\nbogus = 1\n",
+        "unknown keys ": base.replace("[model]", "[model]\ndimm = 3"),
+        "lambda_mask": base.replace("lambda_mask = 1.0", "lambda_mask = 0.4"),
+        "uses per code": base.replace("codebook_size = 64", "codebook_size = 4096"),
+        "trainable has unknown": base.replace('trainable = ["encoder", "vq", "decoder"]', 'trainable = ["encoderr"]'),
+        "stages": base.replace("stages = [1, 2, 3]", "stages = [2, 1]"),
+    }
+    for msg, text in cases.items():
+        path = tmp_path / "c.toml"
+        path.write_text(text)
+        with pytest.raises(ValueError, match=msg.strip()):
+            load_train_config(path)
+    missing = base.replace('rgb_encoder = "random:0"', "")
+    (tmp_path / "m.toml").write_text(missing)
+    with pytest.raises(ValueError, match="rgb_encoder"):
+        load_train_config(tmp_path / "m.toml")
+    with pytest.raises(FileNotFoundError):
+        load_train_config(tmp_path / "absent.toml")
+    assert main(["--config", str(tmp_path / "c.toml")]) == 2     # CLI reports config errors, exit 2
