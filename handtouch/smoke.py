@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from handtouch.bench.evaluate import (CopyLastModel, ZerosModel, collect_examples, evaluate, load_part,
-                                      subsample, iterate_batches)
+from handtouch.bench.evaluate import (CopyLastModel, EvalConfig, PreparedPart, ZerosModel, collect_examples, evaluate,
+                                      load_part, prepare)
 from handtouch.bench.report import render_predictions, write_results
 
 ENCODERS = ("vit", "cnn", "resnet18")     # HandTouch first; the other two are the baselines
@@ -84,31 +84,24 @@ def train_encoder(config: Path, encoder: str, dataset: Path, out_dir: Path, extr
                  f"train_part={_toml_str('train')}", f"eval_part={_toml_str('test')}", *extra]
     cfg = load_train_config(config, overrides)
     metrics = train(cfg)
-    return load_model(checkpoint_path(out_dir, metrics)), metrics
+    ckpt = Path(cfg.out_dir) / f"stage{max(cfg.stages)}.pt"    # the trainer's last stage checkpoint
+    if not ckpt.is_file():
+        raise SystemExit(f"smoke: training {encoder} finished without its final checkpoint {ckpt}")
+    return load_model(ckpt), metrics
 
 
-def checkpoint_path(out_dir: Path, metrics: dict) -> Path:
-    """The final checkpoint the trainer reports (metrics["checkpoint"]), else the newest *.pt in out_dir."""
-    if isinstance(metrics, dict) and metrics.get("checkpoint"):
-        return Path(metrics["checkpoint"])
-    found = sorted(Path(out_dir).rglob("*.pt"), key=lambda p: p.stat().st_mtime)
-    if not found:
-        raise SystemExit(f"smoke: training wrote no checkpoint (*.pt) under {out_dir}")
-    return found[-1]
-
-
-def codebook_perplexity(model, part, max_items: int, seed: int, batch_size: int = 16) -> float:
-    """exp(entropy) of code usage over every token of up to max_items maps (eval mode, no restarts)."""
+def codebook_perplexity(model, prep: PreparedPart) -> float:
+    """exp(entropy) of code usage over every token of the prepared maps (eval mode: no restarts)."""
     if not (hasattr(model, "vq") and hasattr(model, "encode")):
         raise TypeError(f"{model.name}: no vq/encode; codebook perplexity needs a HandTouch model")
     counts = torch.zeros(model.vq.codebook_size, dtype=torch.float64)
     model.eval()
     with torch.inference_mode():
-        for b in iterate_batches(part.frames, subsample(len(part.frames), max_items, seed), batch_size):
+        for b in prep.frames:
             _, idx, _, _ = model.vq(model.encode(b["tactile"].float() * b["coverage"].float()))
             counts += torch.bincount(idx.flatten(), minlength=counts.numel()).double()
-    p = counts / counts.sum()
-    return float(torch.exp(-(p[p > 0] * p[p > 0].log()).sum()))
+    p = counts[counts > 0] / counts.sum()
+    return float(torch.exp(-(p * p.log()).sum()))
 
 
 def learning_checks(results: dict, handtouch: str, perplexity: float) -> list[dict]:
@@ -174,7 +167,11 @@ def main(argv=None) -> int:
     make_split(args.dataset, args.ood_task, args.seed)
     timings["data"] = time.perf_counter() - t0
 
+    t = time.perf_counter()
     parts = {p: load_part(args.dataset, SPLIT_NAME, p) for p in ("test", "ood")}
+    # decoded once, same items / masks / SSIM reference for every model
+    prepared = prepare(parts, cfg=EvalConfig(max_items=args.max_items, seed=args.seed))
+    timings["eval_prepare"] = time.perf_counter() - t
     models, train_metrics = {}, {}
     for enc in args.encoders:
         t = time.perf_counter()
@@ -188,10 +185,9 @@ def main(argv=None) -> int:
     results = {}
     for model in [*models.values(), ZerosModel(), CopyLastModel()]:
         t = time.perf_counter()
-        results[model.name] = evaluate(model, parts, parts=("test", "ood"), max_items=args.max_items,
-                                       seed=args.seed)
+        results[model.name] = evaluate(model, prepared)
         timings[f"eval_{model.name}"] = time.perf_counter() - t
-    perplexity = codebook_perplexity(models[handtouch], parts["test"], args.max_items, args.seed)
+    perplexity = codebook_perplexity(models[handtouch], prepared["test"])
     checks = learning_checks(results, handtouch, perplexity)
     timings["total"] = time.perf_counter() - t0
 

@@ -19,6 +19,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "validate": ("htdata.validate", "prove a dataset is sound (structure, content, time, splits)"),
     "preview": ("htdata.preview", "render a contact sheet: RGB beside left/right tactile maps"),
     "layouts": ("htdata.layouts", "list, check and render hand layouts (register a glove)"),
+    "publish": ("htdata.remote", "upload a dataset to an fsspec URL (s3://, gs://, memory://), manifest last"),
     "bench": ("htdata.bench", "run the benchmarks and write bench/results.json + report"),
 }
 

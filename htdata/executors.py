@@ -10,6 +10,13 @@ its own shards before writing).
 Retries are bounded: an exception raised by the function is retried up to
 `max_retries` times, then re-raised. A worker process that dies (killed,
 os._exit) breaks a local pool: the run stops and a re-run resumes.
+
+Progress: a unit function may call `report_progress(event)` (a small dict,
+e.g. one per finished episode). `map_units(fn, tasks, on_progress=cb)`
+delivers those events to `cb` in the driver: inline directly, from a
+process pool through a multiprocessing queue handed to each worker at
+start-up. Ray tasks do not forward events (`report_progress` is a no-op
+there): callers see progress only when a unit's result arrives.
 """
 
 from __future__ import annotations
@@ -26,21 +33,55 @@ class UnitFailed(RuntimeError):
     """A unit kept failing after its retries."""
 
 
+ProgressCallback = Callable[[dict], None]
+
+# Where report_progress sends events in this process (None: nobody listens).
+_progress_sink: ProgressCallback | None = None
+
+
+def report_progress(event: dict) -> None:
+    """Send a small progress event to the driver, if the executor running us listens."""
+    if _progress_sink is not None:
+        _progress_sink(event)
+
+
+def _install_queue_sink(queue) -> None:
+    """Process-pool initializer: events of this worker go to the driver's queue."""
+    global _progress_sink
+    _progress_sink = queue.put
+
+
+def _drain(queue, on_progress: ProgressCallback) -> None:
+    import queue as queue_module
+
+    while True:
+        try:
+            event = queue.get_nowait()
+        except (queue_module.Empty, EOFError, OSError):
+            return
+        on_progress(event)
+
+
 class InlineExecutor:
     """Runs units one after another in this process (`--workers 0`: debugging, tests)."""
 
     def __init__(self, max_retries: int = 1):
         self.max_retries = max(0, int(max_retries))
 
-    def map_units(self, fn: Callable[[Any], Any], tasks: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
+    def map_units(self, fn: Callable[[Any], Any], tasks: Iterable[Any],
+                  on_progress: ProgressCallback | None = None) -> Iterator[tuple[Any, Any]]:
+        global _progress_sink
         for task in tasks:
             for attempt in range(self.max_retries + 1):
+                previous, _progress_sink = _progress_sink, on_progress
                 try:
                     result = fn(task)
                     break
                 except Exception as exc:
                     if attempt == self.max_retries:
                         raise UnitFailed(f"{task!r} failed after {attempt + 1} attempt(s): {exc}") from exc
+                finally:
+                    _progress_sink = previous
             yield task, result
 
 
@@ -53,18 +94,32 @@ class ProcessExecutor:
         # spawn: the parent may hold threads (tqdm monitor, BLAS) that fork would copy mid-lock.
         self.start_method = start_method
 
-    def map_units(self, fn: Callable[[Any], Any], tasks: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
+    def map_units(self, fn: Callable[[Any], Any], tasks: Iterable[Any],
+                  on_progress: ProgressCallback | None = None) -> Iterator[tuple[Any, Any]]:
         pending = list(tasks)
         pending.reverse()  # pop() from the end keeps submission in task order
         attempts: dict[int, int] = {}
         ctx = mp.get_context(self.start_method)
-        with ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx) as pool:
+        queue = ctx.Queue() if on_progress is not None else None
+        pool_kwargs = {"initializer": _install_queue_sink, "initargs": (queue,)} if queue is not None else {}
+        # With a listener, wake up a few times a second to forward events between unit results.
+        timeout = 0.2 if queue is not None else None
+        try:
+            yield from self._run(fn, pending, attempts, ctx, pool_kwargs, queue, on_progress, timeout)
+        finally:
+            if queue is not None:
+                queue.close()
+
+    def _run(self, fn, pending, attempts, ctx, pool_kwargs, queue, on_progress, timeout):
+        with ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, **pool_kwargs) as pool:
             running = {}
             while pending or running:
                 while pending and len(running) < 2 * self.workers:
                     task = pending.pop()
                     running[pool.submit(fn, task)] = task
-                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                done, _ = wait(running, timeout=timeout, return_when=FIRST_COMPLETED)
+                if queue is not None:
+                    _drain(queue, on_progress)  # before results, so a unit's events precede its completion
                 for fut in done:
                     task = running.pop(fut)
                     exc = fut.exception()
@@ -81,6 +136,8 @@ class ProcessExecutor:
                     if n > self.max_retries:
                         raise UnitFailed(f"{task!r} failed after {n} attempt(s): {exc}") from exc
                     running[pool.submit(fn, task)] = task
+        if queue is not None:
+            _drain(queue, on_progress)  # the pool has shut down: its workers flushed their last events
 
 
 class RayExecutor:
@@ -108,12 +165,17 @@ class RayExecutor:
         kwargs: dict = {"include_dashboard": False, "log_to_driver": False}
         if self.address:
             kwargs["address"] = self.address
-        elif self.workers:
-            kwargs["num_cpus"] = int(self.workers)
+        else:
+            # A local single-node Ray: keep it on loopback (no listening on the network).
+            kwargs["_node_ip_address"] = "127.0.0.1"
+            if self.workers:
+                kwargs["num_cpus"] = int(self.workers)
         self.ray.init(**kwargs)
         return True
 
-    def map_units(self, fn: Callable[[Any], Any], tasks: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
+    def map_units(self, fn: Callable[[Any], Any], tasks: Iterable[Any],
+                  on_progress: ProgressCallback | None = None) -> Iterator[tuple[Any, Any]]:
+        """`on_progress` is accepted for a uniform interface; Ray tasks send no events."""
         started = self._init()
         try:
             remote = self.ray.remote(max_retries=self.max_retries, retry_exceptions=True)(fn)

@@ -24,9 +24,12 @@ fingerprint and shards (sha256) all match, removes temp files and rewrites
 every other unit from scratch. dataset.json is removed at start and written
 LAST by `commit_dataset`, so a crashed run is never mistaken for a dataset.
 
-Failures (EpisodeError or any exception inside an episode) are reported with
-file/episode/frame in DATASET/reports/ingest.json (with every dropped frame
-and every sync report); the exit code is 1 unless --allow-failures.
+Failures (EpisodeError or any exception inside an episode, and every source
+file discovery could not read) are reported with file/episode/frame in
+DATASET/reports/ingest.json (with every dropped frame, every sync report and
+a per-stage timing breakdown of the units run); the exit code is 1 unless
+--allow-failures. The progress bar (stderr) advances per finished episode
+(per finished unit with Ray).
 
 Test hooks (fault injection, used by tests/test_ingest.py):
 HTDATA_TEST_FAULT_UNIT=U and HTDATA_TEST_FAULT=crash|hang make unit U
@@ -45,6 +48,7 @@ import os
 import pickle
 import sys
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -52,7 +56,7 @@ import numpy as np
 
 from htdata.codec import DEFAULT_CODEC_INFO, encode_rgb, encode_tactile
 from htdata.errors import EpisodeError
-from htdata.executors import UnitFailed, make_executor
+from htdata.executors import UnitFailed, make_executor, report_progress
 from htdata.normalise import Normaliser
 from htdata.pipeline import PipelineConfig, load_pipeline
 from htdata.rgb import to_square_224
@@ -97,6 +101,48 @@ def get_adapter(name: str):
     from htdata.adapters import get_adapter as registry_lookup
 
     return registry_lookup(name)
+
+
+# --------------------------------------------------------------------------- stage timing
+
+STAGES = ("decode", "resize", "normalise", "rasterise", "encode", "write")
+
+
+class StageClock:
+    """Wall seconds per ingest stage, summed over a unit (perf_counter around whole calls).
+
+    decode = opening the episode's streams + RGB decode + tactile reads;
+    resize = rgb.to_square_224; normalise; rasterise (incl. bend vectors and
+    contact stats); encode = EXR + JPEG (+ bend .npy, sample JSON); write =
+    spool writes + replay into the shard writer + closing shards.
+    """
+
+    def __init__(self):
+        self.seconds = dict.fromkeys(STAGES, 0.0)
+
+    @contextmanager
+    def stage(self, name: str):
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.seconds[name] += time.perf_counter() - t0
+
+    def as_record(self) -> dict:
+        return {f"{k}_s": v for k, v in self.seconds.items()}
+
+
+def timing_summary(records: list[dict], total_s: float) -> dict:
+    """report["timing"] from the records of the units run in this invocation."""
+    worker_s = sum(float(r.get("seconds", 0.0)) for r in records)
+    out = {"frames": sum(len(r["samples"]) for r in records), "total_s": total_s, "worker_s": worker_s}
+    staged = 0.0
+    for name in STAGES:
+        v = sum(float(r.get("timing", {}).get(f"{name}_s", 0.0)) for r in records)
+        out[f"{name}_s"] = v
+        staged += v
+    out["other_s"] = max(worker_s - staged, 0.0)
+    return out
 
 
 # --------------------------------------------------------------------------- planning
@@ -193,23 +239,26 @@ class RgbFetcher:
     224x224 arrays; unwanted frames are skipped without resizing.
     """
 
-    def __init__(self, ref, frames, wanted: np.ndarray, resize):
+    def __init__(self, ref, frames, wanted: np.ndarray, resize, clock: StageClock):
         self.ref = ref
         self.frames = iter(frames)
         self.wanted = set(int(i) for i in wanted)
         self.resize = resize
+        self.clock = clock
         self.pending: dict[int, np.ndarray] = {}
 
     def get(self, index: int) -> np.ndarray:
         index = int(index)
         while index not in self.pending:
             try:
-                i, frame = next(self.frames)
+                with self.clock.stage("decode"):
+                    i, frame = next(self.frames)
             except StopIteration:
                 raise EpisodeError(self.ref, index, "RGB stream ended before this frame") from None
             i = int(i)
             if i in self.wanted:
-                self.pending[i] = self.resize(frame, i)
+                with self.clock.stage("resize"):
+                    self.pending[i] = self.resize(frame, i)
         self.wanted.discard(index)
         return self.pending.pop(index)
 
@@ -259,12 +308,17 @@ def _fps(rgb_ts: np.ndarray) -> float | None:
     return float(1e9 / np.median(d)) if d.size else None
 
 
-def ingest_episode(ref, cfg: PipelineConfig, adapter, spool: Spool, where: dict) -> EpisodeOutcome:
-    """Stream one episode into `spool`; raise on any failure. `where["frame"]` tracks progress."""
+def ingest_episode(ref, cfg: PipelineConfig, adapter, spool: Spool, where: dict,
+                   clock: StageClock | None = None) -> EpisodeOutcome:
+    """Stream one episode into `spool`; raise on any failure. `where["frame"]` tracks progress,
+    `clock` collects the time spent per stage."""
+    clock = clock or StageClock()
     params = cfg.adapter.params
     hands = [h for h in HANDS if h in ref.hands]
     layouts = {h: _CACHES.layout(cfg.layout_for(h, ref.layouts[h])) for h in hands}
-    with adapter.open(ref, params) as streams:
+    with clock.stage("decode"):
+        opened = adapter.open(ref, params)
+    with opened as streams:
         missing = [h for h in hands if h not in streams.tactile_timestamps_ns]
         if missing:
             raise EpisodeError(ref, None, f"no tactile stream for hand(s) {missing}")
@@ -286,7 +340,7 @@ def ingest_episode(ref, cfg: PipelineConfig, adapter, spool: Spool, where: dict)
             return to_square_224(frame, rgb_cfg.size, rgb_cfg.crop, rgb_cfg.interpolation,
                                  where=f"{ref.source_ref} [{ref.episode_id}] frame {i}")
 
-        fetcher = RgbFetcher(ref, streams.iter_rgb(), sync.rgb_index, resize)
+        fetcher = RgbFetcher(ref, streams.iter_rgb(), sync.rgb_index, resize, clock)
         dropped: list[tuple[int, str]] = list(sync.dropped)
         contact_sum = {h: 0.0 for h in hands}
         contact_max = {h: 0.0 for h in hands}
@@ -304,15 +358,17 @@ def ingest_episode(ref, cfg: PipelineConfig, adapter, spool: Spool, where: dict)
             for h in hands:
                 tidx = sync.tactile_index[h][start:stop]
                 uniq, inverse = np.unique(tidx, return_inverse=True)  # adapters want increasing indices
-                raw = np.asarray(streams.read_tactile(h, uniq))
+                with clock.stage("decode"):
+                    raw = np.asarray(streams.read_tactile(h, uniq))
                 if raw.ndim != 3 or raw.shape[1:] != tuple(layouts[h].grid) or raw.shape[0] != uniq.size:
                     raise EpisodeError(ref, int(rgb_idx[0]), f"{h} tactile rows have shape {raw.shape}, expected "
                                        f"({uniq.size}, {layouts[h].grid[0]}, {layouts[h].grid[1]}) for layout "
                                        f"{layouts[h].layout_id}")
                 raw = raw[inverse.reshape(-1)]
-                if start == 0:
-                    normalisers[h].fit_baseline(raw)
-                v, finite = normalisers[h].apply(raw)
+                with clock.stage("normalise"):
+                    if start == 0:
+                        normalisers[h].fit_baseline(raw)
+                    v, finite = normalisers[h].apply(raw)
                 for j in np.flatnonzero(ok & ~finite):
                     dropped.append((int(rgb_idx[j]), f"nonfinite_tactile:{h}"))
                 ok &= finite
@@ -323,34 +379,38 @@ def ingest_episode(ref, cfg: PipelineConfig, adapter, spool: Spool, where: dict)
             if keep.size == 0:
                 continue
             maps, bends = {}, {}
-            for h in hands:
-                v = values[h][keep]
-                maps[h] = rasters[h].render(v)
-                live = v[:, layouts[h].live_mask]
-                contact_sum[h] += float(live.sum(dtype=np.float64))
-                contact_max[h] = max(contact_max[h], float(live.max(initial=0.0)))
-                if keep_bend[h]:
-                    bends[h] = rasters[h].bend_vector(v)
+            with clock.stage("rasterise"):
+                for h in hands:
+                    v = values[h][keep]
+                    maps[h] = rasters[h].render(v)
+                    live = v[:, layouts[h].live_mask]
+                    contact_sum[h] += float(live.sum(dtype=np.float64))
+                    contact_max[h] = max(contact_max[h], float(live.max(initial=0.0)))
+                    if keep_bend[h]:
+                        bends[h] = rasters[h].bend_vector(v)
             for n, j in enumerate(keep):
                 i = int(rgb_idx[j])
                 where["frame"] = i
                 key = sample_key(ref.episode_id, n_out)
                 k = start + int(j)
-                meta = {"key": key, "episode_id": ref.episode_id, "frame_index": n_out,
-                        "source_frame": i, "t_rgb_ns": int(sync.t_rgb_ns[k]),
-                        "t_tactile_ns": {h: int(sync.t_tactile_ns[h][k]) for h in hands},
-                        "sync_offset_ns": {h: int(sync.skew_ns[h][k]) for h in hands},
-                        "hands": hands_flags}
-                members = {"json": json.dumps(meta, sort_keys=True, separators=(",", ":")).encode(),
-                           "rgb.jpg": encode_rgb(fetcher.get(i), rgb_cfg.quality, where=key)}
-                for h in hands:
-                    members[f"tactile_{h}.exr"] = encode_tactile(maps[h][n], cfg.tactile.compression,
-                                                                 where=f"{key} ({h})")
-                for h, b in bends.items():
-                    buf = io.BytesIO()
-                    np.save(buf, b[n], allow_pickle=False)
-                    members[f"bend_{h}.npy"] = buf.getvalue()
-                spool.add(key, members)
+                rgb = fetcher.get(i)  # timed inside as decode + resize
+                with clock.stage("encode"):
+                    meta = {"key": key, "episode_id": ref.episode_id, "frame_index": n_out,
+                            "source_frame": i, "t_rgb_ns": int(sync.t_rgb_ns[k]),
+                            "t_tactile_ns": {h: int(sync.t_tactile_ns[h][k]) for h in hands},
+                            "sync_offset_ns": {h: int(sync.skew_ns[h][k]) for h in hands},
+                            "hands": hands_flags}
+                    members = {"json": json.dumps(meta, sort_keys=True, separators=(",", ":")).encode(),
+                               "rgb.jpg": encode_rgb(rgb, rgb_cfg.quality, where=key)}
+                    for h in hands:
+                        members[f"tactile_{h}.exr"] = encode_tactile(maps[h][n], cfg.tactile.compression,
+                                                                     where=f"{key} ({h})")
+                    for h, b in bends.items():
+                        buf = io.BytesIO()
+                        np.save(buf, b[n], allow_pickle=False)
+                        members[f"bend_{h}.npy"] = buf.getvalue()
+                with clock.stage("write"):
+                    spool.add(key, members)
                 n_out += 1
         if n_out == 0:
             raise EpisodeError(ref, None, f"no frame left: all {K} synchronised frames had non-finite tactile values")
@@ -408,8 +468,14 @@ def failure_entry(ref, exc: BaseException, frame: int | None) -> dict:
         file, frame, msg = exc.file, exc.frame if exc.frame is not None else frame, exc.message
     else:
         file, msg = str(ref.source_ref).split("::", 1)[0], f"{type(exc).__name__}: {exc}"
-    return {"episode_id": ref.episode_id, "source": ref.source, "source_ref": ref.source_ref,
+    return {"stage": "ingest", "episode_id": ref.episode_id, "source": ref.source, "source_ref": ref.source_ref,
             "file": file, "frame": frame, "error": msg}
+
+
+def discovery_failure_entry(source: str, exc: EpisodeError) -> dict:
+    """A file (or one of its episodes) that discovery could not read; episode_id may be None."""
+    return {"stage": "discovery", "episode_id": exc.episode_id, "source": source, "source_ref": exc.file,
+            "file": exc.file, "frame": exc.frame, "error": exc.message}
 
 
 def run_unit(task: UnitTask) -> dict:
@@ -420,23 +486,29 @@ def run_unit(task: UnitTask) -> dict:
     adapter = get_adapter(cfg.adapter.name)
     spool = Spool(out / WORK_DIR / f"spool-{task.unit:06d}.bin")
     episodes, failures, dropped = [], [], []
+    clock = StageClock()
     t0 = time.perf_counter()
     try:
         with ShardWriter(out / SHARDS_DIR, task.unit, cfg.shards.samples_per_shard) as writer:
             for ref in task.episodes:
                 where = {"frame": None}
                 try:
-                    outcome = ingest_episode(ref, cfg, adapter, spool, where)
+                    outcome = ingest_episode(ref, cfg, adapter, spool, where, clock)
                 except Exception as exc:  # any failure stays inside its episode
                     failures.append(failure_entry(ref, exc, where["frame"]))
+                    report_progress({"unit": task.unit, "episode_id": ref.episode_id, "frames": 0})
                     continue
-                for key, members in spool.replay():
-                    writer.add_sample(key, members)
+                with clock.stage("write"):
+                    for key, members in spool.replay():
+                        writer.add_sample(key, members)
                 episodes.append(outcome.record)
                 dropped += [{"episode_id": ref.episode_id, "rgb_index": i, "reason": r}
                             for i, r in outcome.dropped]
+                report_progress({"unit": task.unit, "episode_id": ref.episode_id,
+                                 "frames": outcome.record["num_frames"]})
                 _fault_hook(task.unit)
-            shards = writer.close()
+            with clock.stage("write"):
+                shards = writer.close()
             samples = writer.samples
     finally:
         spool.close()
@@ -446,7 +518,7 @@ def run_unit(task: UnitTask) -> dict:
         "shards": [dataclasses.asdict(s) for s in shards],
         "samples": [dataclasses.asdict(s) for s in samples],
         "episodes": episodes, "failures": failures, "dropped": dropped,
-        "seconds": time.perf_counter() - t0,
+        "seconds": time.perf_counter() - t0, "timing": clock.as_record(),
     }
     write_atomic(unit_record_path(out, task.unit), dumps(record))
     return record
@@ -590,26 +662,91 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="pipeline TOML (or a name in pipelines/); repeat for a multi-source dataset")
     parser.add_argument("paths", nargs="+", metavar="SRC... OUT",
                         help="one SRC per --pipeline (unless given as PIPELINE=SRC), then OUT")
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes (default: CPUs); 0 = run units in this process (debugging)")
-    parser.add_argument("--executor", choices=("process", "ray"), default="process")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                        help="worker processes (default: CPUs); 0 = run units in this process (debugging)")
+    parser.add_argument("--executor", choices=("process", "ray"), default="process",
+                        help="process: local pool, the progress bar advances per finished episode; "
+                             "ray: one Ray task per work unit, the bar advances per finished unit")
     parser.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
     parser.add_argument("--retries", type=int, default=1, help="retries of a unit that raised (default 1)")
     parser.add_argument("--allow-failures", action="store_true", help="exit 0 even if some episodes failed")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--quiet", action="store_true",
+                        help="hide the progress bar (stderr: episodes done, frames/s)")
+
+
+def discover_sources(sources: list[Source]) -> tuple[list[list], list[dict]]:
+    """Every source's episode refs, and one failure entry per file/episode discovery could not read.
+
+    A bad file is a failure like a bad episode; only a source-wide problem
+    (bad adapter params, unreadable annotation/split file) aborts (ValueError).
+    """
+    refs, failures = [], []
+    for s in sources:
+        name = s.pipeline.adapter.name
+        try:
+            found, bad = get_adapter(name).discover_all(s.root, s.pipeline.adapter.params)
+        except Exception as e:
+            raise ValueError(f"{s.root}: discovery with adapter {name!r} failed: {e}") from e
+        refs.append(found)
+        failures += [discovery_failure_entry(name, e) for e in bad]
+    return refs, failures
+
+
+class EpisodeProgress:
+    """tqdm bar on stderr over episodes, with frames/s.
+
+    Advanced by per-episode events from the workers (process pool, inline);
+    when a unit's result arrives the bar is reconciled to the unit's true
+    episode and frame counts, which covers executors that send no events
+    (Ray), events that arrive late, and events repeated by a retried unit.
+    """
+
+    def __init__(self, tasks: list[UnitTask], done_units: set[int], enabled: bool):
+        from tqdm import tqdm
+
+        self.limits = {t.unit: len(t.episodes) for t in tasks}
+        self.bar = tqdm(total=sum(self.limits.values()), unit="ep", file=sys.stderr, disable=not enabled,
+                        desc="ingest")
+        self.done = sum(self.limits[u] for u in done_units)   # episodes counted (a disabled bar keeps n = 0)
+        self.bar.update(self.done)
+        self.finished = set(done_units)
+        self.episodes: dict[int, int] = {}
+        self.unit_frames: dict[int, int] = {}
+        self.frames = 0
+        self.t0 = time.perf_counter()
+
+    def _advance(self, episodes: int, frames: int) -> None:
+        self.frames += frames
+        if episodes:
+            self.done += episodes
+            self.bar.update(episodes)
+        self.bar.set_postfix(frames_per_s=f"{self.frames / max(time.perf_counter() - self.t0, 1e-9):.1f}",
+                             refresh=False)
+
+    def event(self, event: dict) -> None:
+        unit = int(event["unit"])
+        if unit in self.finished or self.episodes.get(unit, 0) >= self.limits.get(unit, 0):
+            return
+        self.episodes[unit] = self.episodes.get(unit, 0) + 1
+        self.unit_frames[unit] = self.unit_frames.get(unit, 0) + int(event.get("frames", 0))
+        self._advance(1, int(event.get("frames", 0)))
+
+    def unit_done(self, task: UnitTask, record: dict) -> None:
+        self.finished.add(task.unit)
+        episodes = self.limits[task.unit] - self.episodes.pop(task.unit, 0)
+        frames = len(record["samples"]) - self.unit_frames.pop(task.unit, 0)
+        self._advance(episodes, frames)
+
+    def close(self) -> None:
+        self.bar.close()
 
 
 def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "process",
            address: str | None = None, retries: int = 1, progress: bool = True) -> dict:
     """Run (or resume) an ingest; returns the report dict (also written to reports/ingest.json)."""
-    from tqdm import tqdm
-
+    t_start = time.perf_counter()
     prepare_output(out, directory_identity(sources))
-    refs = []
-    for s in sources:
-        try:
-            refs.append(get_adapter(s.pipeline.adapter.name).discover(s.root, s.pipeline.adapter.params))
-        except Exception as e:
-            raise ValueError(f"{s.root}: discovery with adapter {s.pipeline.adapter.name!r} failed: {e}") from e
+    refs, discovery_failures = discover_sources(sources)
     tasks = plan_units(sources, refs, out)
     remove_strays(out, tasks)
     records, todo = {}, []
@@ -621,15 +758,13 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         else:
             records[t.unit] = rec
     n_eps = sum(len(t.episodes) for t in tasks)
-    bar = tqdm(total=n_eps, unit="ep", file=sys.stderr, disable=not progress, desc="ingest")
-    bar.update(sum(len(t.episodes) for t in tasks if t.unit in records))
-    t0, frames = time.perf_counter(), 0
+    bar = EpisodeProgress(tasks, set(records), progress)
+    t0 = time.perf_counter()
     try:
-        for task, rec in make_executor(executor, workers, address, retries).map_units(run_unit, todo):
+        runner = make_executor(executor, workers, address, retries)
+        for task, rec in runner.map_units(run_unit, todo, on_progress=bar.event):
             records[task.unit] = rec
-            frames += len(rec["samples"])
-            bar.update(len(task.episodes))
-            bar.set_postfix(frames_per_s=f"{frames / max(time.perf_counter() - t0, 1e-9):.1f}")
+            bar.unit_done(task, rec)
     finally:
         bar.close()
     ordered = [records[t.unit] for t in tasks]
@@ -640,15 +775,19 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         "episodes_ingested": sum(len(r["episodes"]) for r in ordered),
         "samples": sum(len(r["samples"]) for r in ordered),
         "seconds": time.perf_counter() - t0,
-        "failures": [f for r in ordered for f in r["failures"]],
+        "failures": discovery_failures + [f for r in ordered for f in r["failures"]],
         "dropped_frames": [d for r in ordered for d in r["dropped"]],
         "sync": {ep["episode_id"]: ep["sync"] for r in ordered for ep in r["episodes"]},
+        "timing": timing_summary([records[t.unit] for t in todo], time.perf_counter() - t_start),
     }
+    # Written before the commit too, so a run that commits nothing still explains why.
     write_atomic(out / REPORT_FILE, dumps(report))
     if report["episodes_ingested"] == 0:
         raise ValueError(f"no episode could be ingested ({len(report['failures'])} failures); "
                          f"see {out / REPORT_FILE}")
     commit(out, sources, ordered)
+    report["timing"]["total_s"] = time.perf_counter() - t_start
+    write_atomic(out / REPORT_FILE, dumps(report))
     return report
 
 
@@ -665,8 +804,9 @@ def run(args: argparse.Namespace) -> int:
         return 3
     n_fail = len(report["failures"])
     for f in report["failures"]:
+        episode = f" [{f['episode_id']}]" if f["episode_id"] is not None else ""
         frame = f" frame {f['frame']}" if f["frame"] is not None else ""
-        print(f"FAILED {f['file']} [{f['episode_id']}]{frame}: {f['error']}", file=sys.stderr)
+        print(f"FAILED {f['file']}{episode}{frame}: {f['error']}", file=sys.stderr)
     print(f"ingested {report['episodes_ingested']}/{report['episodes_planned']} episodes, "
           f"{report['samples']} samples, {len(report['dropped_frames'])} dropped frames, {n_fail} failures "
           f"({report['units_resumed']} of {report['units']} units resumed) -> {out}", file=sys.stderr)

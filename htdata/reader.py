@@ -79,7 +79,12 @@ class DatasetReader:
     @property
     def index(self) -> np.ndarray:
         if self._index is None:
-            rows = load_index(self.root, mmap=True)
+            if storage.is_url(self.root):
+                # Remote: one download into the local cache (keyed by sha256), then mmap.
+                from htdata.remote import load_cached_index
+                rows = load_cached_index(self.root, self.manifest)
+            else:
+                rows = load_index(self.root, mmap=True)
             if len(rows) != self.manifest["counts"]["samples"]:
                 raise ValueError(f"{self.root}: index has {len(rows)} rows, manifest counts "
                                  f"{self.manifest['counts']['samples']}")

@@ -161,3 +161,40 @@ def test_truncated_tactile_npz(tmp_path, adapter):
     (ref,) = adapter.discover(tmp_path, {})
     with pytest.raises(EpisodeError, match=r"tactile_right.npz \[nat-r\]: not a readable npz"):
         adapter.open(ref, {})
+
+
+def test_discover_all_keeps_good_recordings_beside_bad_and_duplicate_ones(tmp_path, adapter):
+    write_native_recording(tmp_path / "a" / "r1", recording(3))
+    write_native_recording(tmp_path / "b" / "r1", recording(3))          # same folder name: same episode id
+    write_native_recording(tmp_path / "c" / "r2", recording(3))
+    (tmp_path / "c" / "r2" / "recording.json").write_text("{truncated")
+    write_native_recording(tmp_path / "d" / "r3", recording(4))
+    refs, failures = adapter.discover_all(tmp_path, {})
+    assert [r.episode_id for r in refs] == ["nat-r1", "nat-r3"]
+    assert refs[0].source_ref == str(tmp_path / "a" / "r1")             # the first file keeps the id
+    assert [(f.file, f.episode_id) for f in failures] == [
+        (str(tmp_path / "b" / "r1" / "recording.json"), "nat-r1"),
+        (str(tmp_path / "c" / "r2" / "recording.json"), "nat-r2")]
+    assert "also produced by" in failures[0].message and "does not parse" in failures[1].message
+    with pytest.raises(EpisodeError, match="also produced by"):      # the strict form raises the first one
+        adapter.discover(tmp_path, {})
+
+
+def test_discover_all_names_the_file_of_an_unexpected_error(tmp_path, adapter, monkeypatch):
+    from htdata.adapters.native import NativeAdapter
+
+    write_native_recording(tmp_path / "r1", recording(3))
+    write_native_recording(tmp_path / "r2", recording(3))
+    original = NativeAdapter.discover_file
+
+    def flaky(self, path, root, params, context):
+        if path.parent.name == "r1":
+            raise KeyError("hands")
+        return original(self, path, root, params, context)
+
+    monkeypatch.setattr(NativeAdapter, "discover_file", flaky)
+    refs, failures = adapter.discover_all(tmp_path, {})
+    assert [r.episode_id for r in refs] == ["nat-r2"]
+    (f,) = failures
+    assert f.file == str(tmp_path / "r1" / "recording.json") and f.episode_id is None
+    assert str(f).endswith("r1/recording.json: KeyError: 'hands'")

@@ -233,3 +233,16 @@ def test_writer_keeps_every_release_key(tmp_path):
         assert np.isnan(g["right_hand_landmarks"][()]).any()
         assert g["right_palm_pos"].shape == g["right_wrist_pos"].shape == (10, 3)
         assert g["right_pressure"].dtype == np.float32 and g["timestamps"].dtype == np.int64
+
+
+def test_truncated_hdf5_beside_good_files_is_one_failure(tmp_path, adapter):
+    write_opentouch_scene(tmp_path / "a_scene.hdf5", [clip("demo_1", t=3), clip("demo_2", t=2)])
+    write_opentouch_scene(tmp_path / "b_broken.hdf5", [clip("demo_1", t=5)])
+    data = (tmp_path / "b_broken.hdf5").read_bytes()
+    (tmp_path / "b_broken.hdf5").write_bytes(data[: len(data) // 2])
+    write_opentouch_scene(tmp_path / "c_scene.hdf5", [clip("demo_1", t=4)])
+    refs, failures = adapter.discover_all(tmp_path, {})
+    assert [r.episode_id for r in refs] == ["ot-a_scene-demo_1", "ot-a_scene-demo_2", "ot-c_scene-demo_1"]
+    (f,) = failures
+    assert f.file == str(tmp_path / "b_broken.hdf5") and f.episode_id is None and f.frame is None
+    assert "HDF5 does not open" in f.message

@@ -223,3 +223,42 @@ def test_folder_not_three_levels_deep(tmp_path, adapter):
     write(tmp_path, "flat", episode(2))
     with pytest.raises(EpisodeError, match="Scene}/{task}/{trajectory}"):
         adapter.discover(tmp_path, {})
+
+
+def zero_video_packet(video, index):
+    """Overwrite the payload of the index-th video packet (decode order) with zeros; return its pts rank."""
+    import av
+
+    with av.open(str(video)) as c:
+        packets = [(p.pos, p.size, p.pts) for p in c.demux(c.streams.video[0]) if p.size]
+    pos, size, pts = packets[index]
+    data = bytearray(video.read_bytes())
+    data[pos:pos + size] = bytes(size)
+    video.write_bytes(bytes(data))
+    return int(np.searchsorted(np.sort([p[2] for p in packets]), pts))
+
+
+def test_corrupt_packet_mid_video_fails_the_episode_at_that_frame(tmp_path, adapter):
+    """Policy: a mid-video corrupt frame fails the whole episode (EpisodeError naming the frame);
+    frames before it are decoded but the ingest never keeps half an episode."""
+    rng = np.random.default_rng(3)
+    noise = [rng.integers(0, 256, (480, 640, 3), dtype=np.uint8) for _ in range(12)]  # every packet carries data
+    ep = episode(12)
+    ep.chest_frames = noise
+    folder = write(tmp_path, "Home/t/a", ep)
+    frame = zero_video_packet(folder / "chest.mp4", 8)
+    assert frame == 8
+    (ref,) = adapter.discover(tmp_path, {})
+    delivered = []
+    with adapter.open(ref, {}) as st:
+        assert st.rgb_timestamps_ns.size == 12           # the container still lists every packet
+        with pytest.raises(EpisodeError) as err:
+            for i, rgb in st.iter_rgb():
+                delivered.append(i)
+    e = err.value
+    assert (e.episode_id, e.frame) == ("ta-Home-t-a", 8) and e.file.endswith("chest.mp4")
+    assert "corrupt packet at frame 8" in e.message
+    assert delivered == list(range(len(delivered))) and len(delivered) <= 8
+    last = len(delivered) - 1   # the frames that did come out are the recorded ones, in order
+    own = np.abs(rgb.astype(int) - noise[last]).mean()
+    assert own < 0.75 * min(np.abs(rgb.astype(int) - noise[j]).mean() for j in range(12) if j != last)

@@ -207,3 +207,41 @@ def test_reconstruction_track_prefers_model_reconstruct():
     res = evaluate(ReconstructingModel(), _part(), max_items=16)["all"]
     assert res["reconstruction"]["full"]["rmse"] == 0.0
     assert res["inpaint"]["full"]["rmse"] > 0.0
+
+
+def _strip_seconds(res):
+    for part in res.values():
+        part.pop("seconds", None)
+    return res
+
+
+def test_prepared_parts_are_reused_with_identical_scores():
+    from handtouch.bench.evaluate import EvalConfig, prepare
+
+    data = {"test": _part(), "ood": _part(static=True)}
+    prepared = prepare(data, cfg=EvalConfig(max_items=20, seed=3))
+    direct = _strip_seconds(evaluate(CopyLastModel(), data, max_items=20, seed=3))
+    again = _strip_seconds(evaluate(CopyLastModel(), prepared))
+    assert direct == again
+    # non-half-exact maps are kept in float32 (no silent rounding of the ground truth)
+    assert prepared["test"].frames[0]["tactile"].dtype == torch.float32
+    half_exact = _part()
+    for it in half_exact.frames.items:
+        it["tactile"] = it["tactile"].half().float()
+    assert prepare({"test": half_exact}, parts=("test",))["test"].frames[0]["tactile"].dtype == torch.float16
+
+
+def test_smoke_learning_checks_compare_against_references():
+    from handtouch.smoke import learning_checks
+
+    def tracks(rmse, hit):
+        return {"test": {"reconstruction": {"full": {"rmse": rmse}},
+                         "retrieval": {"hit_at_1": hit, "chance_hit_at_1": 0.05}}}
+
+    results = {"ht": tracks(0.02, 0.3), "zeros-ref": tracks(0.1, 0.05)}
+    assert all(c["ok"] for c in learning_checks(results, "ht", perplexity=10.0))
+    results["ht"] = tracks(0.08, 0.05)                   # no better than zeros, chance retrieval
+    failed = [c["check"] for c in learning_checks(results, "ht", perplexity=2.0) if not c["ok"]]
+    assert len(failed) == 3
+    results["ht"] = tracks(None, None)                   # unscored -> failed, never passed
+    assert not any(c["ok"] for c in learning_checks(results, "ht", perplexity=float("nan")))

@@ -261,12 +261,63 @@ def test_bad_episodes_are_reported_and_the_rest_ingested(tmp_path, capsys):
     assert temp_leftovers(out) == []
 
 
-def test_unreadable_file_at_discovery_is_a_clear_error(tmp_path, capsys):
+def truncate_half(path: Path) -> None:
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+
+
+def test_unreadable_files_at_discovery_are_failures_and_the_rest_ingested(tmp_path, capsys):
+    from htdata.reader import DatasetReader
+
+    ot = make_opentouch(tmp_path / "ot")
+    write_opentouch_scene(ot / "broken_scene.hdf5", [ot_clip("demo_01", 6, COLOURS[3])])
+    truncate_half(ot / "broken_scene.hdf5")
     ta = make_touchanything(tmp_path / "ta", truncated=True)
-    assert ingest_cli("--pipeline", "touchanything", ta, tmp_path / "ds") == 2
+    out = tmp_path / "ds"
+    args = ["--pipeline", f"{small_pipeline(tmp_path, 'opentouch')}={ot}",
+            "--pipeline", f"{small_pipeline(tmp_path, 'touchanything')}={ta}", out]
+    assert ingest_cli(*args) == 1
     err = capsys.readouterr().err
-    assert "20260321_101010_001/pressure_grids.npz" in err and "discovery" in err
+    report = json.loads((out / "reports" / "ingest.json").read_text())
+    found = [f for f in report["failures"] if f["stage"] == "discovery"]
+    assert len(found) == len(report["failures"]) == 2, report["failures"]
+    hdf5, npz = found
+    assert hdf5["file"].endswith("broken_scene.hdf5") and "HDF5 does not open" in hdf5["error"]
+    assert hdf5["episode_id"] is None and hdf5["source"] == "opentouch" and hdf5["frame"] is None
+    assert npz["file"].endswith("20260321_101010_001/pressure_grids.npz") and "not a readable npz" in npz["error"]
+    assert npz["episode_id"] == "ta-Office-open_drawer-20260321_101010_001" and npz["source"] == "touchanything"
+    assert "broken_scene.hdf5: HDF5 does not open" in err
+    assert "pressure_grids.npz [ta-Office-open_drawer-20260321_101010_001]: not a readable npz" in err
+    reader = DatasetReader(out)
+    assert {e["episode_id"] for e in reader.episodes} == {
+        "ot-home_kitchen_p1-demo_01", "ot-home_kitchen_p1-demo_02", "ot-home_kitchen_p1-demo_003",
+        "ta-Home-plug_usb-20260320_135743_682"}
+    assert len(reader) == 39 + 5
+    # a re-run resumes every unit, still reports the bad files, and --allow-failures makes it exit 0
+    assert ingest_cli("--allow-failures", *args) == 0
+    again = json.loads((out / "reports" / "ingest.json").read_text())
+    assert again["failures"] == report["failures"] and again["units_run"] == 0
+    assert temp_leftovers(out) == []
+
+
+def test_source_with_only_unreadable_files_is_refused(tmp_path, capsys):
+    raw = tmp_path / "raw"
+    write_opentouch_scene(raw / "s.hdf5", [ot_clip("demo_01", 4, COLOURS[0])])
+    truncate_half(raw / "s.hdf5")
+    write_opentouch_annotations(raw / "annotations.csv", [{"id": "s::demo_01", "action": "pour"}])
+    assert ingest_cli("--pipeline", "opentouch", raw, tmp_path / "ds") == 2
+    assert "no episode could be ingested (1 failures)" in capsys.readouterr().err
+    report = json.loads((tmp_path / "ds" / "reports" / "ingest.json").read_text())
+    assert report["failures"][0]["file"].endswith("s.hdf5")
     assert not (tmp_path / "ds" / "dataset.json").exists()
+
+
+def test_source_wide_discovery_error_aborts(tmp_path, capsys):
+    raw = make_touchanything(tmp_path / "raw")
+    (raw / "split.json").write_text("{not json")
+    assert ingest_cli("--pipeline", "touchanything", raw, tmp_path / "ds") == 2
+    err = capsys.readouterr().err
+    assert "discovery with adapter 'touchanything' failed" in err and "split.json: not valid JSON" in err
 
 
 def test_nonfinite_frames_are_dropped_and_counted(tmp_path):
@@ -385,3 +436,78 @@ def test_changed_source_redoes_only_its_unit(tmp_path, clean_run):
     report = json.loads((out / "reports" / "ingest.json").read_text())
     # units: [demo_003 (20)], [demo_01 (12)], [demo_02 (7) + z_scene demo_01 (9)]: only the last is redone
     assert report["units"] == 3 and report["units_run"] == 1 and report["samples"] == 48
+
+
+# --------------------------------------------------------------------------- progress + timing
+
+TIMING_KEYS = {"frames", "total_s", "worker_s", "decode_s", "resize_s", "normalise_s", "rasterise_s",
+               "encode_s", "write_s", "other_s"}
+
+
+def test_progress_events_arrive_per_episode_from_the_process_pool(tmp_path, monkeypatch):
+    from htdata import ingest as ingest_module
+
+    events, finished = [], []
+    original_event, original_done = ingest_module.EpisodeProgress.event, ingest_module.EpisodeProgress.unit_done
+
+    def record_event(self, event):
+        events.append(event)
+        original_event(self, event)
+
+    def record_done(self, task, record):
+        original_done(self, task, record)
+        finished.append((self.done, self.frames))
+
+    monkeypatch.setattr(ingest_module.EpisodeProgress, "event", record_event)
+    monkeypatch.setattr(ingest_module.EpisodeProgress, "unit_done", record_done)
+    raw = make_opentouch(tmp_path / "raw", bad=True)
+    assert ingest_cli("--allow-failures", "--pipeline", small_pipeline(tmp_path, "opentouch", 16), raw,
+                      tmp_path / "ds", workers=2) == 0
+    by_episode = {e["episode_id"]: e["frames"] for e in events}
+    assert len(events) == 6 and by_episode == {
+        "ot-home_kitchen_p1-demo_01": 12, "ot-home_kitchen_p1-demo_02": 7, "ot-home_kitchen_p1-demo_003": 20,
+        "ot-office_desk_p2-demo_01": 0, "ot-office_desk_p2-demo_02": 0, "ot-office_desk_p2-demo_03": 0}
+    assert finished[-1] == (6, 39)      # reconciled: every episode counted once, every written frame
+
+
+def test_episode_progress_reconciles_missing_late_and_repeated_events():
+    from htdata.ingest import EpisodeProgress, UnitTask
+
+    def task(unit, n):
+        return UnitTask(unit=unit, out="", pipeline={}, pipeline_path="", root="", episodes=[None] * n)
+
+    tasks = [task(0, 2), task(1, 3), task(2, 1)]
+    p = EpisodeProgress(tasks, done_units={2}, enabled=False)
+    assert p.done == 1
+    p.event({"unit": 0, "frames": 5})
+    p.event({"unit": 0, "frames": 4})
+    p.event({"unit": 0, "frames": 5})          # a retried unit repeats an event: capped at 2 episodes
+    assert (p.done, p.frames) == (3, 9)
+    p.unit_done(tasks[0], {"samples": [None] * 8})
+    assert (p.done, p.frames) == (3, 8)        # frames corrected to what the unit wrote
+    p.event({"unit": 0, "frames": 5})          # late event of a finished unit: ignored
+    p.unit_done(tasks[1], {"samples": [None] * 7})   # no events at all (Ray): the unit result counts
+    assert (p.done, p.frames) == (6, 15)
+    p.close()
+
+
+def test_report_has_stage_timing(tmp_path):
+    raw = make_touchanything(tmp_path / "raw")
+    out = tmp_path / "ds"
+    pipe = small_pipeline(tmp_path, "touchanything")
+    assert ingest_cli("--pipeline", pipe, raw, out) == 0
+    timing = json.loads((out / "reports" / "ingest.json").read_text())["timing"]
+    assert set(timing) == TIMING_KEYS
+    assert timing["frames"] == 11
+    for stage in ("decode_s", "resize_s", "normalise_s", "rasterise_s", "encode_s", "write_s"):
+        assert timing[stage] > 0, stage
+    stages = sum(timing[k] for k in TIMING_KEYS - {"frames", "total_s", "worker_s", "other_s"})
+    assert timing["other_s"] >= 0 and abs(stages + timing["other_s"] - timing["worker_s"]) < 1e-6
+    assert timing["total_s"] >= timing["worker_s"]        # inline: the units ran inside the wall time
+    records = [json.loads(p.read_text()) for p in sorted((out / ".work").glob("unit-*.json"))]
+    assert sum(r["timing"]["encode_s"] for r in records) == pytest.approx(timing["encode_s"])
+    # a fully resumed run processed no frame
+    assert ingest_cli("--pipeline", pipe, raw, out) == 0
+    resumed = json.loads((out / "reports" / "ingest.json").read_text())["timing"]
+    assert resumed["frames"] == 0 and resumed["worker_s"] == 0 and resumed["decode_s"] == 0
+    assert resumed["total_s"] > 0

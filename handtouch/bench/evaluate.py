@@ -21,6 +21,10 @@ in-memory `EvalPart`s (a Mapping part -> EvalPart, or one EvalPart scored as
 part "all"). An `EvalPart` holds Dataset-like objects (len + getitem -> dict
 of tensors, DESIGN.md "Reader / torch").
 
+Several models: `prepare(...)` decodes each part once and fixes the
+model-independent parts (items, inpainting masks, the retrieval SSIM
+reference); pass its result to `evaluate` for every model.
+
 Reference predictors (`ZerosModel`, `CopyLastModel`) implement the same
 interface so learning can be judged against them.
 """
@@ -38,7 +42,7 @@ import torch
 
 from handtouch.api import TactileModel
 from handtouch.bench.metrics import MapMetrics
-from handtouch.bench.retrieval import RetrievalConfig, retrieval_metrics
+from handtouch.bench.retrieval import RetrievalConfig, RetrievalReference, retrieval_reference, score_retrieval
 
 NUM_PARTS = 6          # part ids 1..6 (thumb, index, middle, ring, little, palm)
 TRACKS = ("retrieval", "reconstruction", "inpaint", "rgb2tactile", "prediction")
@@ -139,48 +143,85 @@ def reconstruct(model: TactileModel, tactile, coverage, rgb, hand) -> torch.Tens
     return model.inpaint(tactile, coverage, torch.zeros_like(tactile), rgb, hand)
 
 
-def _frame_tracks(model: TactileModel, part: EvalPart, idx: np.ndarray, cfg: EvalConfig) -> dict:
-    recon, inp_full, inp_hole, r2t = MapMetrics(), MapMetrics(), MapMetrics(), MapMetrics()
-    maps, embs, episodes, frames = [], [], [], []
+def _compact(x: torch.Tensor) -> torch.Tensor:
+    """float16 if that is lossless (decoded EXR half maps are), else unchanged: halves cache memory."""
+    if x.dtype == torch.float32:
+        h = x.half()
+        if torch.equal(h.float(), x):
+            return h
+    return x
+
+
+@dataclass
+class PreparedPart:
+    """A part's evaluation items decoded once, in batches, with everything model-independent
+    (inpainting masks, the retrieval SSIM reference) fixed, so every model sees the same."""
+
+    frames: list[dict]          # tactile, coverage (u8), regions, rgb, hand, mask (u8, 1 = hidden)
+    windows: list[dict]         # rgb_window, tactile_window, coverage, hand, target
+    reference: RetrievalReference
+    items: int
+    num_windows: int
+
+
+def prepare_part(part: EvalPart, cfg: EvalConfig) -> PreparedPart:
+    cfg.validate()
+    n = len(part.frames)
+    if n == 0:
+        raise ValueError("evaluation part has no frames")
+    idx = subsample(n, cfg.max_items, cfg.seed)
     rng = np.random.default_rng(cfg.seed + 1)
-    times = {"embed": 0.0, "inpaint": 0.0, "rgb2tactile": 0.0}
+    frames, maps, episodes, frame_ids = [], [], [], []
     for b in iterate_batches(part.frames, idx, cfg.batch_size):
-        tactile, coverage, rgb, hand = b["tactile"].float(), b["coverage"].float(), b["rgb"], _hand(b)
+        tactile, coverage = b["tactile"].float(), b["coverage"].float()
+        frames.append({"tactile": _compact(tactile), "coverage": (coverage > 0.5).to(torch.uint8),
+                       "rgb": b["rgb"], "hand": _hand(b),
+                       "mask": part_masks(b["regions"], coverage, rng).to(torch.uint8)})
+        maps.append(tactile[:, 0])
+        episodes.append(b["episode"].reshape(-1))
+        frame_ids.append(b["frame"].reshape(-1))
+    reference = retrieval_reference(
+        torch.cat(maps), torch.cat(episodes).numpy(), torch.cat(frame_ids).numpy(),
+        RetrievalConfig(num_candidates=cfg.num_candidates, exclude_radius=cfg.exclude_radius, seed=cfg.seed))
+    windows = []
+    widx = np.zeros(0, np.int64)
+    if part.windows is not None and len(part.windows) > 0:
+        widx = subsample(len(part.windows), cfg.max_items, cfg.seed)
+        for b in iterate_batches(part.windows, widx, cfg.batch_size):
+            rgb_w, tac_w, cov_t, hand, target = window_inputs(b)
+            windows.append({"rgb_window": rgb_w, "tactile_window": _compact(tac_w),
+                            "coverage": (cov_t > 0.5).to(torch.uint8), "hand": hand, "target": _compact(target)})
+    return PreparedPart(frames, windows, reference, int(len(idx)), int(len(widx)))
+
+
+def _frame_tracks(model: TactileModel, prep: PreparedPart) -> dict:
+    recon, inp_full, inp_hole, r2t = MapMetrics(), MapMetrics(), MapMetrics(), MapMetrics()
+    embs = []
+    times = {"embed": 0.0, "reconstruct": 0.0, "inpaint": 0.0, "rgb2tactile": 0.0}
+
+    def timed(key, fn, *a):
         t0 = time.perf_counter()
-        e = torch.as_tensor(model.embed(tactile, coverage, hand)).float()
-        t1 = time.perf_counter()
+        out = fn(*a)
+        times[key] += time.perf_counter() - t0
+        return out
+
+    for b in prep.frames:
+        tactile, coverage, rgb, hand = b["tactile"].float(), b["coverage"].float(), b["rgb"], b["hand"]
+        mask = b["mask"].float()
+        e = torch.as_tensor(timed("embed", model.embed, tactile, coverage, hand)).float()
         if e.ndim != 2 or e.shape[0] != tactile.shape[0]:
             raise ValueError(f"{model.name}.embed returned shape {tuple(e.shape)}, expected (B,E)")
-        maps.append(tactile[:, 0])
         embs.append(e)
-        episodes.append(b["episode"].reshape(-1))
-        frames.append(b["frame"].reshape(-1))
-
-        rec = _checked(reconstruct(model, tactile, coverage, rgb, hand), tactile, f"{model.name}.reconstruct")
-        recon.update(rec, tactile, coverage)
-
-        mask = part_masks(b["regions"], coverage, rng)
-        t2 = time.perf_counter()
-        filled = _checked(model.inpaint(tactile * (1 - mask), coverage, mask, rgb, hand), tactile,
-                          f"{model.name}.inpaint")
-        t3 = time.perf_counter()
+        rec = timed("reconstruct", reconstruct, model, tactile, coverage, rgb, hand)
+        recon.update(_checked(rec, tactile, f"{model.name}.reconstruct"), tactile, coverage)
+        filled = timed("inpaint", model.inpaint, tactile * (1 - mask), coverage, mask, rgb, hand)
+        filled = _checked(filled, tactile, f"{model.name}.inpaint")
         inp_full.update(filled, tactile, coverage)
         inp_hole.update(filled, tactile, coverage * mask)
-
-        t4 = time.perf_counter()
-        guess = _checked(model.rgb_to_tactile(rgb, coverage, hand), tactile, f"{model.name}.rgb_to_tactile")
-        t5 = time.perf_counter()
-        r2t.update(guess, tactile, coverage)
-        times["embed"] += t1 - t0
-        times["inpaint"] += t3 - t2
-        times["rgb2tactile"] += t5 - t4
-
-    retr = retrieval_metrics(torch.cat(maps), torch.cat(embs), torch.cat(episodes).numpy(),
-                             torch.cat(frames).numpy(),
-                             RetrievalConfig(num_candidates=cfg.num_candidates, exclude_radius=cfg.exclude_radius,
-                                             seed=cfg.seed))
+        guess = timed("rgb2tactile", model.rgb_to_tactile, rgb, coverage, hand)
+        r2t.update(_checked(guess, tactile, f"{model.name}.rgb_to_tactile"), tactile, coverage)
     return {
-        "retrieval": retr,
+        "retrieval": score_retrieval(prep.reference, torch.cat(embs)),
         "reconstruction": {"full": recon.result()},
         "inpaint": {"full": inp_full.result(), "hole": inp_hole.result()},
         "rgb2tactile": {"full": r2t.result()},
@@ -196,62 +237,63 @@ def window_inputs(b: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, to
     return b["rgb"], tactile[:, :-1], cov_t, _hand(b), tactile[:, -1]
 
 
-def _prediction_track(model: TactileModel, part: EvalPart, idx: np.ndarray, cfg: EvalConfig) -> dict:
+def _prediction_track(model: TactileModel, prep: PreparedPart) -> tuple[dict, float]:
     pred_full = MapMetrics()
     seconds = 0.0
-    for b in iterate_batches(part.windows, idx, cfg.batch_size):
-        rgb_w, tac_w, cov_t, hand, target = window_inputs(b)
+    for b in prep.windows:
+        target, cov_t = b["target"].float(), b["coverage"].float()
         t0 = time.perf_counter()
-        pred = _checked(model.predict_next(rgb_w, tac_w, cov_t, hand), target, f"{model.name}.predict_next")
+        pred = model.predict_next(b["rgb_window"], b["tactile_window"].float(), cov_t, b["hand"])
         seconds += time.perf_counter() - t0
-        pred_full.update(pred, target, cov_t)
-    return {"full": pred_full.result(), "seconds": seconds}
+        pred_full.update(_checked(pred, target, f"{model.name}.predict_next"), target, cov_t)
+    return {"full": pred_full.result()}, seconds
 
 
-def evaluate_part(model: TactileModel, part: EvalPart, cfg: EvalConfig) -> dict:
-    """All tracks on one part."""
-    cfg.validate()
-    n = len(part.frames)
-    if n == 0:
-        raise ValueError("evaluation part has no frames")
-    idx = subsample(n, cfg.max_items, cfg.seed)
-    out = _frame_tracks(model, part, idx, cfg)
-    out["items"] = int(len(idx))
-    if part.windows is not None and len(part.windows) > 0:
-        widx = subsample(len(part.windows), cfg.max_items, cfg.seed)
-        pred = _prediction_track(model, part, widx, cfg)
-        out["prediction"] = {"full": pred["full"]}
-        out["seconds"]["prediction"] = pred["seconds"]
-        out["windows"] = int(len(widx))
-    else:
-        out["prediction"] = {"full": MapMetrics().result()}
-        out["windows"] = 0
+def score_part(model: TactileModel, prep: PreparedPart) -> dict:
+    """All tracks of one model on one prepared part."""
+    out = _frame_tracks(model, prep)
+    out["prediction"], out["seconds"]["prediction"] = _prediction_track(model, prep)
+    out["items"] = prep.items
+    out["windows"] = prep.num_windows
     return out
 
 
-def resolve_parts(dataset_root, split_name: str | None, parts: Sequence[str]) -> dict[str, EvalPart]:
-    if isinstance(dataset_root, EvalPart):
+def resolve_parts(dataset_root, split_name: str | None, parts: Sequence[str]) -> dict[str, EvalPart | PreparedPart]:
+    if isinstance(dataset_root, (EvalPart, PreparedPart)):
         return {"all": dataset_root}
     if isinstance(dataset_root, Mapping):
         missing = [p for p in parts if p not in dataset_root]
         if missing:
             raise KeyError(f"evaluation data has no part(s) {missing}; available: {sorted(dataset_root)}")
-        return {p: dataset_root[p] if isinstance(dataset_root[p], EvalPart) else EvalPart(dataset_root[p])
-                for p in parts}
+        return {p: dataset_root[p] if isinstance(dataset_root[p], (EvalPart, PreparedPart))
+                else EvalPart(dataset_root[p]) for p in parts}
     return {p: load_part(dataset_root, split_name, p) for p in parts}
+
+
+def prepare(dataset_root, split_name: str | None = None, parts: Sequence[str] = ("test", "ood"),
+            cfg: EvalConfig | None = None) -> dict[str, PreparedPart]:
+    """Decode and fix each part's items once (reuse the result for several models)."""
+    cfg = (cfg or EvalConfig()).validate()
+    return {name: src if isinstance(src, PreparedPart) else prepare_part(src, cfg)
+            for name, src in resolve_parts(dataset_root, split_name, parts).items()}
 
 
 def evaluate(model: TactileModel, dataset_root, split_name: str | None = None,
              parts: Sequence[str] = ("test", "ood"), max_items: int = 200, seed: int = 0,
              *, batch_size: int = 16, exclude_radius: int = 5) -> dict[str, dict]:
-    """Score `model` on every track of every part -> {part: {track: metrics}}."""
+    """Score `model` on every track of every part -> {part: {track: metrics}}.
+
+    `dataset_root` may also be in-memory data (see module doc) or the result
+    of `prepare` (then max_items/seed/batch_size/exclude_radius are those of
+    the preparation).
+    """
     cfg = EvalConfig(max_items=max_items, seed=seed, batch_size=batch_size,
                      exclude_radius=exclude_radius).validate()
-    sources = resolve_parts(dataset_root, split_name, parts)
+    prepared = prepare(dataset_root, split_name, parts, cfg)
     if isinstance(model, torch.nn.Module):
         model.eval()
     with torch.inference_mode():
-        return {name: evaluate_part(model, src, cfg) for name, src in sources.items()}
+        return {name: score_part(model, prep) for name, prep in prepared.items()}
 
 
 def collect_examples(model: TactileModel, part: EvalPart, count: int = 4, seed: int = 0) -> dict[str, np.ndarray]:

@@ -96,33 +96,71 @@ def cosine_scores(embeddings: torch.Tensor, queries: torch.Tensor, candidates: t
     return torch.einsum("qe,qce->qc", e[queries], e[candidates])
 
 
-def retrieval_metrics(maps, embeddings, episodes, frames, cfg: RetrievalConfig | None = None) -> dict:
-    """Score 1-vs-C retrieval. maps (N,1,H,W) or (N,H,W) in [0,1]; embeddings (N,E).
+@dataclass
+class RetrievalReference:
+    """The model-independent half of the benchmark: drawn candidates and their SSIM ranking.
 
-    Returns hit_at_1, recall_at_5 (key uses cfg.top_k), chance levels,
-    number of queries and of skipped queries. Values are None if no query
-    could be formed (too few eligible maps).
+    Computed once per evaluation set and shared by every model scored on it.
     """
+
+    queries: torch.Tensor      # (Q,) long dataset indices
+    candidates: torch.Tensor   # (Q,C) long, rows ascending
+    ssim: torch.Tensor         # (Q,C) float64 SSIM(query, candidate)
+    skipped: int
+    cfg: RetrievalConfig
+
+
+def retrieval_reference(maps, episodes, frames, cfg: RetrievalConfig | None = None) -> RetrievalReference:
+    """Draw candidates and score them by SSIM. maps (N,1,H,W) or (N,H,W) in [0,1]."""
     cfg = (cfg or RetrievalConfig()).validate()
-    embeddings = torch.as_tensor(embeddings)
     maps_t = torch.as_tensor(maps)
-    if embeddings.ndim != 2 or embeddings.shape[0] != maps_t.shape[0]:
-        raise ValueError(f"embeddings must be (N,E) with N = {maps_t.shape[0]} maps, got {tuple(embeddings.shape)}")
+    if len(episodes) != maps_t.shape[0] or len(frames) != maps_t.shape[0]:
+        raise ValueError(f"episodes/frames ({len(episodes)}/{len(frames)}) must match {maps_t.shape[0]} maps")
     queries, cands, skipped = draw_candidates(episodes, frames, cfg)
-    k = cfg.top_k
-    out = {"hit_at_1": None, f"recall_at_{k}": None, "queries": int(len(queries)), "skipped": skipped,
-           "num_candidates": cfg.num_candidates, "exclude_radius": cfg.exclude_radius,
-           "chance_hit_at_1": 1.0 / cfg.num_candidates, f"chance_recall_at_{k}": k / cfg.num_candidates}
-    if len(queries) == 0:
-        return out
     q_t, c_t = torch.from_numpy(queries), torch.from_numpy(cands)
-    ref = ssim_query_candidates(map_stats(maps_t), q_t, c_t, data_range=1.0)
+    if len(queries):
+        used = np.unique(np.concatenate([queries, cands.ravel()]))     # stats only for maps in play
+        pos = torch.full((maps_t.shape[0],), -1, dtype=torch.long)
+        pos[torch.from_numpy(used)] = torch.arange(len(used))
+        ref = ssim_query_candidates(map_stats(maps_t[torch.from_numpy(used)]), pos[q_t], pos[c_t], data_range=1.0)
+    else:
+        ref = torch.zeros(c_t.shape, dtype=torch.float64)
+    return RetrievalReference(q_t, c_t, ref, skipped, cfg)
+
+
+def score_retrieval(reference: RetrievalReference, embeddings) -> dict:
+    """Hit@1 / Recall@k of an embedding against the SSIM reference, with chance levels.
+
+    Values are None if no query could be formed (too few eligible maps).
+    """
+    cfg, k = reference.cfg, reference.cfg.top_k
+    embeddings = torch.as_tensor(embeddings)
+    out = {"hit_at_1": None, f"recall_at_{k}": None, "queries": int(len(reference.queries)),
+           "skipped": reference.skipped, "num_candidates": cfg.num_candidates,
+           "exclude_radius": cfg.exclude_radius, "chance_hit_at_1": 1.0 / cfg.num_candidates,
+           f"chance_recall_at_{k}": k / cfg.num_candidates}
+    if embeddings.ndim != 2:
+        raise ValueError(f"embeddings must be (N,E), got {tuple(embeddings.shape)}")
+    if len(reference.queries) == 0:
+        return out
+    if int(reference.candidates.max()) >= embeddings.shape[0]:
+        raise ValueError(f"embeddings has {embeddings.shape[0]} rows, the reference indexes "
+                         f"{int(reference.candidates.max()) + 1}")
+    q_t, c_t, ref = reference.queries, reference.candidates, reference.ssim
     emb = cosine_scores(embeddings, q_t, c_t)
     ref_rank, emb_rank = rank(ref, c_t), rank(emb, c_t)
     hits = (ref_rank[:, 0] == emb_rank[:, 0]).double()
     ref_top = torch.zeros(ref.shape, dtype=torch.bool).scatter_(1, ref_rank[:, :k], True)
     emb_top = torch.zeros(ref.shape, dtype=torch.bool).scatter_(1, emb_rank[:, :k], True)
-    recall = (ref_top & emb_top).sum(1).double() / k
     out["hit_at_1"] = float(hits.mean())
-    out[f"recall_at_{k}"] = float(recall.mean())
+    out[f"recall_at_{k}"] = float(((ref_top & emb_top).sum(1).double() / k).mean())
     return out
+
+
+def retrieval_metrics(maps, embeddings, episodes, frames, cfg: RetrievalConfig | None = None) -> dict:
+    """One-shot scoring: `retrieval_reference` then `score_retrieval`."""
+    embeddings = torch.as_tensor(embeddings)
+    n = torch.as_tensor(maps).shape[0]
+    if embeddings.ndim != 2 or embeddings.shape[0] != n:
+        raise ValueError(f"embeddings must be (N,E) with N = {n} maps, got {tuple(embeddings.shape)}")
+    return score_retrieval(retrieval_reference(maps, episodes, frames, cfg), embeddings)

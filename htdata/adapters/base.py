@@ -82,7 +82,84 @@ class Adapter(Protocol):
 
     def discover(self, root: Path, params: dict) -> list[EpisodeRef]: ...
 
+    def discover_all(self, root: Path, params: dict) -> tuple[list[EpisodeRef], list[EpisodeError]]: ...
+
     def open(self, ref: EpisodeRef, params: dict) -> EpisodeStreams: ...
+
+
+# --------------------------------------------------------------------------
+# discovery: one source file at a time, so one bad file never hides the rest
+
+
+class FileDiscovery:
+    """Discovery split per source file; adapters subclass this and fill three hooks.
+
+    `discovery_context(root, params)` reads what the whole source shares
+    (annotation table, split file, params); an error there aborts the
+    source. `discovery_files(root, params)` lists the files that each hold
+    one or more episodes (HDF5 scenes, npz grids, recording.json), and
+    `discover_file(path, root, params, context)` turns one of them into refs,
+    raising when the file is unreadable. `discover_all` runs the per-file
+    hook under the one try/except that turns a bad file into a failure.
+    """
+
+    name: str
+
+    def discovery_context(self, root: Path, params: dict):
+        return None
+
+    def discovery_files(self, root: Path, params: dict) -> list[Path]:
+        raise NotImplementedError
+
+    def discover_file(self, path: Path, root: Path, params: dict, context) -> list[EpisodeRef]:
+        raise NotImplementedError
+
+    def discover_all(self, root: Path, params: dict) -> tuple[list[EpisodeRef], list[EpisodeError]]:
+        return discover_all(self, root, params)
+
+    def discover(self, root: Path, params: dict) -> list[EpisodeRef]:
+        """Strict form: every ref, or the first file's failure raised."""
+        refs, failures = self.discover_all(root, params)
+        if failures:
+            raise failures[0]
+        return refs
+
+
+def discovery_failure(path: Path, exc: BaseException) -> EpisodeError:
+    """`exc` raised while discovering `path` as an EpisodeError naming the file (and episode when known)."""
+    if isinstance(exc, EpisodeError):
+        if exc.file is not None:
+            return exc
+        return EpisodeError(None, exc.frame, exc.message, file=path, episode_id=exc.episode_id)
+    return EpisodeError(None, None, f"{type(exc).__name__}: {exc}", file=path)
+
+
+def discover_all(adapter: FileDiscovery, root: Path | str, params: dict) -> tuple[list[EpisodeRef], list[EpisodeError]]:
+    """(refs sorted naturally by episode id, one EpisodeError per file or episode that failed).
+
+    A file that raises while being read becomes a failure and every other
+    file is still discovered; an episode id already produced by an earlier
+    file is a failure of the later one (the first keeps the id).
+    """
+    root = Path(root)
+    context = adapter.discovery_context(root, params)
+    refs: list[EpisodeRef] = []
+    failures: list[EpisodeError] = []
+    seen: dict[str, str] = {}
+    for path in adapter.discovery_files(root, params):
+        try:
+            found = adapter.discover_file(path, root, params, context)
+        except Exception as exc:  # any unreadable file is reported, never fatal for the source
+            failures.append(discovery_failure(path, exc))
+            continue
+        for ref in found:
+            if ref.episode_id in seen:
+                failures.append(EpisodeError(None, None, f"episode id {ref.episode_id} also produced by "
+                                             f"{seen[ref.episode_id]}", file=path, episode_id=ref.episode_id))
+                continue
+            seen[ref.episode_id] = ref.source_ref
+            refs.append(ref)
+    return sorted(refs, key=lambda r: natural_key(r.episode_id)), failures
 
 
 # --------------------------------------------------------------------------
@@ -305,8 +382,30 @@ def probe_video_pts_ns(path: Path | str) -> np.ndarray:
     return (p * tb.numerator * 1_000_000_000 + tb.denominator // 2) // tb.denominator
 
 
+def _presentation_index(path: Path | str, pts: int | None, fallback: int) -> int:
+    """Presentation-order index of the packet stamped `pts` (its rank among all packet pts)."""
+    import av
+
+    if pts is None:
+        return fallback
+    try:
+        with av.open(str(path)) as container:
+            stream = container.streams.video[0]
+            all_pts = np.sort(np.asarray([p.pts for p in container.demux(stream) if p.pts is not None and p.size > 0],
+                                        dtype=np.int64))
+    except _av_errors():
+        return fallback
+    return int(np.searchsorted(all_pts, pts)) if all_pts.size else fallback
+
+
 def iter_video_rgb(path: Path | str) -> Iterator[np.ndarray]:
-    """Decode a video frame by frame as HxWx3 uint8 RGB (presentation order)."""
+    """Decode a video frame by frame as HxWx3 uint8 RGB (presentation order).
+
+    Packets are decoded one by one so that a corrupt packet in the middle of
+    the file is named by its own presentation index (`VideoError.frame`):
+    the decoder holds a few frames back for reordering, so the count of
+    frames delivered so far would point a little before it.
+    """
     import av
 
     count = 0
@@ -315,16 +414,26 @@ def iter_video_rgb(path: Path | str) -> Iterator[np.ndarray]:
     except _av_errors() as exc:
         raise VideoError(None, f"video does not open ({exc})") from exc
     try:
-        frames = container.decode(video=0)
+        if not container.streams.video:
+            raise VideoError(None, "video has zero frames (no video stream in the container)")
+        stream = container.streams.video[0]
+        packets = container.demux(stream)
         while True:
             try:
-                frame = next(frames)
+                packet = next(packets)
             except StopIteration:
                 return
             except _av_errors() as exc:
-                raise VideoError(count, f"video frame does not decode ({exc})") from exc
-            yield frame.to_ndarray(format="rgb24")
-            count += 1
+                raise VideoError(count, f"video stream unreadable after {count} frames ({exc})") from exc
+            try:
+                frames = packet.decode()  # the final empty packet flushes the decoder
+            except _av_errors() as exc:
+                bad = _presentation_index(path, packet.pts, count)
+                raise VideoError(bad, f"video frame does not decode: corrupt packet at frame {bad}, "
+                                 f"{count} frames decoded before it ({exc})") from exc
+            for frame in frames:
+                yield frame.to_ndarray(format="rgb24")
+                count += 1
     finally:
         container.close()
 

@@ -17,8 +17,8 @@ from typing import Iterator
 import numpy as np
 
 from htdata.adapters.base import (
-    EpisodeRef, EpisodeStreams, NpzRowError, NpzRows, VideoError, check_tactile_shape, file_frame_mismatch_note,
-    fingerprint_files, natural_key, iter_video_rgb, probe_video_pts_ns, relpath_inside, sanitise_id,
+    EpisodeRef, EpisodeStreams, FileDiscovery, NpzRowError, NpzRows, VideoError, check_tactile_shape, file_frame_mismatch_note,
+    fingerprint_files, iter_video_rgb, probe_video_pts_ns, relpath_inside, sanitise_id,
 )
 from htdata.errors import EpisodeError
 
@@ -61,42 +61,37 @@ def _frame_files(frames_dir: Path) -> list[Path]:
     return sorted(p for p in frames_dir.iterdir() if p.suffix.lower() in JPEG_SUFFIXES)
 
 
-class NativeAdapter:
+class NativeAdapter(FileDiscovery):
     name = SOURCE
 
-    def discover(self, root: Path, params: dict) -> list[EpisodeRef]:
-        root = Path(root)
-        refs, seen = [], {}
-        for rec_path in sorted(root.rglob(RECORDING_JSON)):
-            folder = rec_path.parent
-            episode_id = sanitise_id(f"nat-{folder.name}")
-            if episode_id in seen:
-                raise EpisodeError(None, None, f"episode id {episode_id} also produced by {seen[episode_id]}",
-                                   file=rec_path, episode_id=episode_id)
-            seen[episode_id] = str(rec_path)
-            doc = load_recording(rec_path, episode_id)
-            paths = _recording_paths(folder, doc, rec_path)
-            missing = [p for p in [paths["timestamps"], *paths["hands"].values(),
-                                   paths.get("video_file") or paths["frames_dir"]] if not p.exists()]
-            if missing:
-                raise EpisodeError(None, None, f"missing files {[str(p) for p in missing]}", file=rec_path,
-                                   episode_id=episode_id)
-            try:
-                est_frames = int(np.load(paths["timestamps"], mmap_mode="r").shape[0])
-            except (OSError, ValueError, IndexError) as exc:
-                raise EpisodeError(None, None, f"timestamps .npy unreadable: {exc}", file=paths["timestamps"],
-                                   episode_id=episode_id) from exc
-            files = [rec_path, paths["timestamps"], *paths["hands"].values()]
-            files += [paths["video_file"]] if "video_file" in paths else _frame_files(paths["frames_dir"])
-            hands = tuple(sorted(doc["hands"]))
-            refs.append(EpisodeRef(
-                episode_id=episode_id, source=SOURCE, source_ref=str(folder), task=doc["task"], scene=doc["scene"],
-                hands=hands, layouts={h: doc["hands"][h]["layout"] for h in hands}, est_frames=est_frames,
-                fingerprint=fingerprint_files(root, files),
-                extra={"operator": doc.get("operator", ""), "clock_offset_ns":
-                       {h: int(doc["hands"][h].get("clock_offset_ns", 0)) for h in hands}},
-            ))
-        return sorted(refs, key=lambda r: natural_key(r.episode_id))
+    def discovery_files(self, root: Path, params: dict) -> list[Path]:
+        return sorted(Path(root).rglob(RECORDING_JSON))
+
+    def discover_file(self, rec_path: Path, root: Path, params: dict, context) -> list[EpisodeRef]:
+        folder = rec_path.parent
+        episode_id = sanitise_id(f"nat-{folder.name}")
+        doc = load_recording(rec_path, episode_id)
+        paths = _recording_paths(folder, doc, rec_path)
+        missing = [p for p in [paths["timestamps"], *paths["hands"].values(),
+                               paths.get("video_file") or paths["frames_dir"]] if not p.exists()]
+        if missing:
+            raise EpisodeError(None, None, f"missing files {[str(p) for p in missing]}", file=rec_path,
+                               episode_id=episode_id)
+        try:
+            est_frames = int(np.load(paths["timestamps"], mmap_mode="r").shape[0])
+        except (OSError, ValueError, IndexError) as exc:
+            raise EpisodeError(None, None, f"timestamps .npy unreadable: {exc}", file=paths["timestamps"],
+                               episode_id=episode_id) from exc
+        files = [rec_path, paths["timestamps"], *paths["hands"].values()]
+        files += [paths["video_file"]] if "video_file" in paths else _frame_files(paths["frames_dir"])
+        hands = tuple(sorted(doc["hands"]))
+        return [EpisodeRef(
+            episode_id=episode_id, source=SOURCE, source_ref=str(folder), task=doc["task"], scene=doc["scene"],
+            hands=hands, layouts={h: doc["hands"][h]["layout"] for h in hands}, est_frames=est_frames,
+            fingerprint=fingerprint_files(root, files),
+            extra={"operator": doc.get("operator", ""), "clock_offset_ns":
+                   {h: int(doc["hands"][h].get("clock_offset_ns", 0)) for h in hands}},
+        )]
 
     def open(self, ref: EpisodeRef, params: dict) -> "NativeStreams":
         return NativeStreams(ref, params)

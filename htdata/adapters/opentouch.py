@@ -19,21 +19,25 @@ Task rule: the annotation row "<scene>::<demo_id>" (matched exactly, then
 by clip number ignoring zero padding); without annotations, or without a
 row / value, the task is "unlabelled" and `extra["task_source"]` says why.
 
-Discovery raises EpisodeError for a file that does not open or a clip
-whose left hand has no layout; frame-level problems raise from the
-opened streams.
+Discovery is per scene file (`FileDiscovery`): a file that does not open,
+or holds a clip without right_pressure or whose left hand has no layout,
+is one failure (`discover_all`) while the other files are still found;
+frame-level problems raise from the opened streams.
 """
 
 from __future__ import annotations
 
 import csv
 import re
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 
-from htdata.adapters.base import EpisodeRef, EpisodeStreams, check_tactile_shape, fingerprint_files, natural_key, sanitise_id
+from htdata.adapters.base import (
+    EpisodeRef, EpisodeStreams, FileDiscovery, check_tactile_shape, fingerprint_files, sanitise_id,
+)
 from htdata.errors import EpisodeError
 
 SOURCE = "opentouch"
@@ -106,49 +110,56 @@ def _clip_sort_key(demo_id: str):
     return (n if n is not None else float("inf"), demo_id)
 
 
-class OpenTouchAdapter:
+@dataclass
+class OpenTouchContext:
+    """What every scene file of one source shares."""
+    tasks: dict[str, str] | None
+    by_number: dict
+    layouts: dict[str, str]
+    allowed_hands: tuple[str, ...]
+
+
+class OpenTouchAdapter(FileDiscovery):
     name = SOURCE
 
-    def discover(self, root: Path, params: dict) -> list[EpisodeRef]:
-        import h5py
-
-        root = Path(root)
+    def discovery_context(self, root: Path, params: dict) -> OpenTouchContext:
         task_field = params.get("task_field", "action")
         tasks = None
         if params.get("annotations"):
-            tasks = load_annotations(_resolve(str(params["annotations"]), root), task_field)
-        by_number = _annotation_lookup(tasks or {})
-        layouts = {**DEFAULT_LAYOUTS, **params.get("layouts", {})}
-        allowed_hands = tuple(params.get("hands", ("left", "right")))
-        refs: list[EpisodeRef] = []
-        seen: dict[str, str] = {}
-        for path in sorted(root.rglob("*.hdf5")):
-            scene = path.stem
-            fingerprint = fingerprint_files(root, [path])
-            try:
-                with h5py.File(path, "r") as f:
-                    clips = self._list_clips(f, path)
-            except OSError as exc:
-                raise EpisodeError(None, None, f"HDF5 does not open: {exc}", file=path) from exc
-            for demo_id, n_frames, has_left in clips:
-                episode_id = sanitise_id(f"ot-{scene}-{demo_id}")
-                source_ref = f"{path}::data/{demo_id}"
-                if episode_id in seen:
-                    raise EpisodeError(None, None, f"episode id {episode_id} also produced by {seen[episode_id]}",
-                                       file=path, episode_id=episode_id)
-                seen[episode_id] = source_ref
-                hands = tuple(h for h in ("left", "right") if h in allowed_hands and (h == "right" or has_left))
-                if "left" in hands and not self._layout_exists(layouts["left"]):
-                    raise EpisodeError(None, None, f"clip has left_pressure but layout {layouts['left']!r} does not "
-                                       "exist: pass params layouts.left, or hands=['right'] to skip it",
-                                       file=path, episode_id=episode_id)
-                task, task_source = _task_for(scene, demo_id, tasks, by_number)
-                refs.append(EpisodeRef(
-                    episode_id=episode_id, source=SOURCE, source_ref=source_ref, task=task, scene=scene,
-                    hands=hands, layouts={h: layouts[h] for h in hands}, est_frames=n_frames,
-                    fingerprint=fingerprint, extra={"task_source": task_source, "demo_id": demo_id},
-                ))
-        return sorted(refs, key=lambda r: natural_key(r.episode_id))
+            tasks = load_annotations(_resolve(str(params["annotations"]), Path(root)), task_field)
+        return OpenTouchContext(tasks=tasks, by_number=_annotation_lookup(tasks or {}),
+                                layouts={**DEFAULT_LAYOUTS, **params.get("layouts", {})},
+                                allowed_hands=tuple(params.get("hands", ("left", "right"))))
+
+    def discovery_files(self, root: Path, params: dict) -> list[Path]:
+        return sorted(Path(root).rglob("*.hdf5"))
+
+    def discover_file(self, path: Path, root: Path, params: dict, context: OpenTouchContext) -> list[EpisodeRef]:
+        import h5py
+
+        scene = path.stem
+        fingerprint = fingerprint_files(root, [path])
+        try:
+            with h5py.File(path, "r") as f:
+                clips = self._list_clips(f, path)
+        except OSError as exc:
+            raise EpisodeError(None, None, f"HDF5 does not open: {exc}", file=path) from exc
+        refs = []
+        layouts = context.layouts
+        for demo_id, n_frames, has_left in clips:
+            episode_id = sanitise_id(f"ot-{scene}-{demo_id}")
+            hands = tuple(h for h in ("left", "right") if h in context.allowed_hands and (h == "right" or has_left))
+            if "left" in hands and not self._layout_exists(layouts["left"]):
+                raise EpisodeError(None, None, f"clip has left_pressure but layout {layouts['left']!r} does not "
+                                   "exist: pass params layouts.left, or hands=['right'] to skip it",
+                                   file=path, episode_id=episode_id)
+            task, task_source = _task_for(scene, demo_id, context.tasks, context.by_number)
+            refs.append(EpisodeRef(
+                episode_id=episode_id, source=SOURCE, source_ref=f"{path}::data/{demo_id}", task=task, scene=scene,
+                hands=hands, layouts={h: layouts[h] for h in hands}, est_frames=n_frames,
+                fingerprint=fingerprint, extra={"task_source": task_source, "demo_id": demo_id},
+            ))
+        return refs
 
     @staticmethod
     def _layout_exists(layout_id: str) -> bool:

@@ -23,14 +23,15 @@ cells only).
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 
 from htdata.adapters.base import (
-    EpisodeRef, EpisodeStreams, NpzRowError, NpzRows, VideoError, check_tactile_shape, file_frame_mismatch_note,
-    fingerprint_files, natural_key, iter_video_rgb, probe_video_pts_ns, sanitise_id,
+    EpisodeRef, EpisodeStreams, FileDiscovery, NpzRowError, NpzRows, VideoError, check_tactile_shape, file_frame_mismatch_note,
+    fingerprint_files, iter_video_rgb, probe_video_pts_ns, sanitise_id,
 )
 from htdata.errors import EpisodeError
 
@@ -75,41 +76,51 @@ def _has_live_value(rows: NpzRows) -> bool:
     return False
 
 
-class TouchAnythingAdapter:
+@dataclass
+class TouchAnythingContext:
+    """What every episode folder of one source shares."""
+    splits: dict[tuple[str, ...], str]
+    layouts: dict[str, str]
+    video: str
+
+
+class TouchAnythingAdapter(FileDiscovery):
     name = SOURCE
 
-    def discover(self, root: Path, params: dict) -> list[EpisodeRef]:
-        root = Path(root)
-        splits = load_split(root)
-        layouts = {**DEFAULT_LAYOUTS, **params.get("layouts", {})}
+    def discovery_context(self, root: Path, params: dict) -> TouchAnythingContext:
         video = params.get("video", "chest")
         if video not in VIDEO_NAMES:
             raise ValueError(f"touchanything video must be one of {sorted(VIDEO_NAMES)}, got {video!r}")
-        refs = []
-        for npz in sorted(root.rglob(NPZ_NAME)):
-            folder = npz.parent
-            parts = folder.relative_to(root).parts
-            if len(parts) < 3:
-                raise EpisodeError(None, None, "episode folder must be {Scene}/{task}/{trajectory} under the root",
-                                   file=npz)
-            scene, task, traj = parts[-3:]
-            episode_id = sanitise_id(f"ta-{scene}-{task}-{traj}")
-            hands, n_frames, excluded = self._probe_hands(npz, episode_id)
-            if not hands:
-                raise EpisodeError(None, None, f"no usable tactile grid ({excluded or 'no grid arrays'})",
-                                   file=npz, episode_id=episode_id)
-            files = [npz] + [folder / n for n in (VIDEO_NAMES[video], JQ_NAME) if (folder / n).is_file()]
-            extra: dict = {"video": video}
-            if (scene, task, traj) in splits:
-                extra["source_split"] = splits[(scene, task, traj)]
-            if excluded:
-                extra["hands_excluded"] = excluded
-            refs.append(EpisodeRef(
-                episode_id=episode_id, source=SOURCE, source_ref=str(folder), task=task, scene=scene,
-                hands=hands, layouts={h: layouts[h] for h in hands}, est_frames=n_frames,
-                fingerprint=fingerprint_files(root, files), extra=extra,
-            ))
-        return sorted(refs, key=lambda r: natural_key(r.episode_id))
+        return TouchAnythingContext(splits=load_split(Path(root)),
+                                    layouts={**DEFAULT_LAYOUTS, **params.get("layouts", {})}, video=video)
+
+    def discovery_files(self, root: Path, params: dict) -> list[Path]:
+        return sorted(Path(root).rglob(NPZ_NAME))
+
+    def discover_file(self, npz: Path, root: Path, params: dict, context: TouchAnythingContext) -> list[EpisodeRef]:
+        folder = npz.parent
+        parts = folder.relative_to(root).parts
+        if len(parts) < 3:
+            raise EpisodeError(None, None, "episode folder must be {Scene}/{task}/{trajectory} under the root",
+                               file=npz)
+        scene, task, traj = parts[-3:]
+        episode_id = sanitise_id(f"ta-{scene}-{task}-{traj}")
+        hands, n_frames, excluded = self._probe_hands(npz, episode_id)
+        if not hands:
+            raise EpisodeError(None, None, f"no usable tactile grid ({excluded or 'no grid arrays'})",
+                               file=npz, episode_id=episode_id)
+        video = context.video
+        files = [npz] + [folder / n for n in (VIDEO_NAMES[video], JQ_NAME) if (folder / n).is_file()]
+        extra: dict = {"video": video}
+        if (scene, task, traj) in context.splits:
+            extra["source_split"] = context.splits[(scene, task, traj)]
+        if excluded:
+            extra["hands_excluded"] = excluded
+        return [EpisodeRef(
+            episode_id=episode_id, source=SOURCE, source_ref=str(folder), task=task, scene=scene,
+            hands=hands, layouts={h: context.layouts[h] for h in hands}, est_frames=n_frames,
+            fingerprint=fingerprint_files(root, files), extra=extra,
+        )]
 
     @staticmethod
     def _probe_hands(npz: Path, episode_id: str) -> tuple[tuple[str, ...], int, dict[str, str]]:

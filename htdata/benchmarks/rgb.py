@@ -1,7 +1,7 @@
 """RGB trade-offs: JPEG quality vs bytes vs PSNR, resize method vs time vs error.
 
-Frames come from the synthetic world at camera resolution, so the numbers
-describe the kind of frames `htdata ingest` sees in the demo.
+Frames are decoded source frames of the sample corpus at camera resolution
+(bench.py reads them through the adapters), i.e. what `htdata ingest` sees.
 """
 
 from __future__ import annotations
@@ -10,6 +10,10 @@ import cv2
 import numpy as np
 
 from htdata.benchmarks.timing import best_ms
+from htdata.codec import DEFAULT_CODEC_INFO
+
+DEFAULT_QUALITY = int(DEFAULT_CODEC_INFO["rgb"]["quality"])
+DEFAULT_RESIZE = "cv2_area"   # what htdata.rgb.to_square_224 does with interpolation="area"
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
@@ -76,3 +80,25 @@ def resize_rows(frames: list[np.ndarray], size: int = 224) -> list[dict]:
                      "max_abs_error": float(max(e.max() for e in errs)) / 255.0,
                      "source_size": f"{frames[0].shape[1]}x{frames[0].shape[0]}"})
     return rows
+
+
+def rgb_section(frames: list[np.ndarray], size: int = 224) -> dict:
+    """Both RGB tables plus the defaults and the numbers behind them."""
+    if not frames:
+        raise ValueError("rgb benchmark needs at least one source frame")
+    squares224 = [cv2.resize(np.ascontiguousarray(_square(f)), (size, size), interpolation=cv2.INTER_AREA)
+                  for f in frames]
+    quality = jpeg_quality_rows(squares224)
+    resize = resize_rows(frames, size)
+    q = {r["quality"]: r for r in quality}
+    r = {row["method"]: row for row in resize}
+    reason = []
+    if DEFAULT_QUALITY in q and 90 in q and DEFAULT_QUALITY != 90:
+        reason.append(f"JPEG q{DEFAULT_QUALITY}: {q[DEFAULT_QUALITY]['psnr_db']:.1f} dB at "
+                      f"{q[DEFAULT_QUALITY]['bytes_per_frame'] / 1024:.1f} KiB vs q90 {q[90]['psnr_db']:.1f} dB at "
+                      f"{q[90]['bytes_per_frame'] / 1024:.1f} KiB")
+    area, best = r[DEFAULT_RESIZE], min(resize, key=lambda row: row["mean_abs_error"])
+    reason.append(f"resize {DEFAULT_RESIZE}: mean error {area['mean_abs_error']:.4f} in {area['ms_per_frame']:.2f} ms "
+                  f"(lowest error: {best['method']} {best['mean_abs_error']:.4f} in {best['ms_per_frame']:.2f} ms)")
+    return {"frames": len(frames), "source_size": resize[0]["source_size"], "jpeg": quality, "resize": resize,
+            "default_quality": DEFAULT_QUALITY, "default_resize": DEFAULT_RESIZE, "reason": "; ".join(reason)}

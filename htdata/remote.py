@@ -1,0 +1,201 @@
+"""Remote datasets: publish a committed dataset to an fsspec URL; cache a remote index locally.
+
+    htdata publish DATASET URL        # s3://bucket/ds, gs://bucket/ds, memory://ds, file:///x
+
+Publishing uploads layouts/, splits/, shards/, episodes.jsonl and index.npy,
+reads every uploaded file back to check its sha256 against the local file
+(and against the manifest where the manifest records one), and writes
+dataset.json LAST. A previous dataset.json at the URL is deleted first, so
+while an upload runs, or after it failed part way, the URL is never a valid
+dataset (readers refuse a directory without a manifest).
+
+Readers on a URL (`DatasetReader("s3://...")`) keep shard reads ranged
+(seek + read on the fsspec file) but fetch index.npy once into a local cache
+(HTDATA_CACHE, default ~/.cache/htdata), keyed by the manifest's
+index_sha256, and memory-map it from there; a second open downloads nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import os
+import posixpath
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from htdata import storage
+from htdata.manifest import (EPISODES_FILE, INDEX_DTYPE, INDEX_FILE, LAYOUTS_DIR, MANIFEST_FILE, SHARDS_DIR,
+                             load_manifest, sha256_file)
+
+CACHE_ENV = "HTDATA_CACHE"
+SPLITS_DIR = "splits"
+CHUNK = 1 << 20
+
+
+@dataclass
+class PublishResult:
+    url: str
+    files: int          # files uploaded, dataset.json included
+    bytes: int
+    seconds: float
+
+
+def cache_dir() -> Path:
+    """Local cache root: $HTDATA_CACHE, else ~/.cache/htdata."""
+    env = os.environ.get(CACHE_ENV)
+    return Path(env) if env else Path.home() / ".cache" / "htdata"
+
+
+def _fs(url: str):
+    import fsspec
+
+    return fsspec.core.url_to_fs(url)
+
+
+def _sha256_stream(f) -> str:
+    h = hashlib.sha256()
+    for block in iter(lambda: f.read(CHUNK), b""):
+        h.update(block)
+    return h.hexdigest()
+
+
+# -- publish ----------------------------------------------------------------
+
+def publish_plan(local_root: str | os.PathLike) -> tuple[dict, list[tuple[str, str | None]]]:
+    """(manifest, [(relative path, sha256 the manifest expects or None)]) in upload order.
+
+    Everything but dataset.json: layouts and splits first, then shards in
+    manifest order, then episodes.jsonl and index.npy (which name the shards).
+    Resume state (.work/) and reports are not part of a published dataset.
+    """
+    root = Path(local_root)
+    manifest = load_manifest(root)
+    plan: list[tuple[str, str | None]] = []
+    for sub in (LAYOUTS_DIR, SPLITS_DIR):
+        folder = root / sub
+        if folder.is_dir():
+            plan += [(f"{sub}/{p.name}", None) for p in sorted(folder.iterdir()) if p.is_file()]
+    plan += [(f"{SHARDS_DIR}/{s['name']}", s["sha256"]) for s in manifest["shards"]]
+    plan.append((manifest.get("episodes_file", EPISODES_FILE), manifest.get("episodes_sha256")))
+    plan.append((manifest.get("index_file", INDEX_FILE), manifest.get("index_sha256")))
+    for rel, _ in plan:
+        if not (root / rel).is_file():
+            raise FileNotFoundError(f"{root / rel}: listed by the dataset but missing; cannot publish")
+    return manifest, plan
+
+
+def upload_file(fs, local: Path, remote: str) -> str:
+    """Copy one local file to `remote` (streamed); return the sha256 of the bytes written."""
+    parent = posixpath.dirname(remote)
+    if parent:
+        fs.makedirs(parent, exist_ok=True)
+    h = hashlib.sha256()
+    with open(local, "rb") as src, fs.open(remote, "wb") as dst:
+        for block in iter(lambda: src.read(CHUNK), b""):
+            h.update(block)
+            dst.write(block)
+    return h.hexdigest()
+
+
+def remote_sha256(fs, remote: str) -> str:
+    with fs.open(remote, "rb") as f:
+        return _sha256_stream(f)
+
+
+def publish_dataset(local_root: str | os.PathLike, url: str, progress: bool = False) -> PublishResult:
+    """Upload a committed local dataset to an fsspec URL, verified, manifest last."""
+    root = Path(local_root)
+    if storage.is_url(os.fspath(local_root)):
+        raise ValueError(f"{local_root}: publish reads a LOCAL dataset directory")
+    manifest_path = root / MANIFEST_FILE
+    if not manifest_path.is_file():
+        raise FileNotFoundError(f"{manifest_path}: no manifest: not a committed htdata dataset")
+    _, plan = publish_plan(root)
+    fs, base = _fs(url)
+    base = base.rstrip("/")
+    t0 = time.perf_counter()
+    remote_manifest = f"{base}/{MANIFEST_FILE}"
+    if fs.exists(remote_manifest):
+        fs.rm(remote_manifest)   # the URL stops being a dataset until the new upload is complete
+    total = 0
+    for n, (rel, expected) in enumerate(plan, 1):
+        local = root / rel
+        if expected is not None and sha256_file(local) != expected:
+            raise ValueError(f"{local}: sha256 differs from the manifest: the local dataset is damaged "
+                             f"(run `htdata validate`); nothing more uploaded")
+        written = upload_file(fs, local, f"{base}/{rel}")
+        back = remote_sha256(fs, f"{base}/{rel}")
+        if back != written:
+            raise IOError(f"{url}/{rel}: uploaded sha256 {written[:12]} but read back {back[:12]}")
+        total += local.stat().st_size
+        if progress:
+            print(f"[{n}/{len(plan) + 1}] {rel}", file=sys.stderr)
+    # The manifest goes last: only now does the URL hold a valid dataset.
+    written = upload_file(fs, manifest_path, remote_manifest)
+    if remote_sha256(fs, remote_manifest) != written:
+        raise IOError(f"{url}/{MANIFEST_FILE}: read-back sha256 differs from what was uploaded")
+    total += manifest_path.stat().st_size
+    return PublishResult(url=url, files=len(plan) + 1, bytes=total, seconds=time.perf_counter() - t0)
+
+
+# -- index cache for remote readers ----------------------------------------
+
+def cached_index_path(root_url: str, manifest: dict) -> Path:
+    """Local copy of a remote dataset's index.npy, downloaded once (keyed by its sha256)."""
+    sha = manifest.get("index_sha256")
+    if not isinstance(sha, str) or len(sha) != 64:
+        raise ValueError(f"{root_url}: manifest has no index_sha256; cannot cache the index")
+    target = cache_dir() / "index" / f"{sha}.npy"
+    if target.is_file():
+        return target
+    target.parent.mkdir(parents=True, exist_ok=True)
+    src = storage.join(root_url, manifest.get("index_file", INDEX_FILE))
+    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=".index-", suffix=".tmp")
+    try:
+        h = hashlib.sha256()
+        with os.fdopen(fd, "wb") as out, storage.open_binary(src) as f:
+            for block in iter(lambda: f.read(CHUNK), b""):
+                h.update(block)
+                out.write(block)
+        if h.hexdigest() != sha:
+            raise ValueError(f"{src}: downloaded index sha256 {h.hexdigest()[:12]} != manifest {sha[:12]}")
+        os.replace(tmp, target)   # concurrent readers each write their own tmp; replace is atomic
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return target
+
+
+def load_cached_index(root_url: str, manifest: dict) -> np.ndarray:
+    """The remote dataset's index, memory-mapped from the local cache."""
+    path = cached_index_path(root_url, manifest)
+    rows = np.load(path, mmap_mode="r", allow_pickle=False)
+    if rows.dtype != INDEX_DTYPE:
+        raise ValueError(f"{path} (cache of {root_url}): index dtype {rows.dtype} != {INDEX_DTYPE}")
+    return rows
+
+
+# -- CLI --------------------------------------------------------------------
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = __doc__.split("\n\n")[1]
+    parser.add_argument("dataset", type=Path, help="committed local dataset directory")
+    parser.add_argument("url", help="fsspec URL to upload to (s3://, gs://, memory://, file://)")
+    parser.add_argument("--quiet", action="store_true", help="no per-file progress")
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        result = publish_dataset(args.dataset, args.url, progress=not args.quiet)
+    except (FileNotFoundError, ValueError, OSError) as exc:
+        print(f"htdata publish: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"published {result.files} files, {result.bytes / 2**20:.1f} MiB to {result.url} "
+          f"in {result.seconds:.1f} s (verified sha256; dataset.json written last)", file=sys.stderr)
+    return 0

@@ -1,0 +1,150 @@
+import json
+import uuid
+
+import fsspec
+import numpy as np
+import pytest
+
+from htdata import remote
+from htdata.cli import main as cli_main
+from htdata.reader import DatasetReader
+from tests.factories import write_synthetic_dataset
+
+EPISODES = [
+    {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": ("right",), "num_frames": 5},
+    {"episode_id": "ep_b", "task": "wipe", "scene": "office", "hands": ("left", "right"), "num_frames": 4},
+    {"episode_id": "ep_c", "task": "pour", "scene": "office", "hands": ("left",), "num_frames": 1},
+]
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    root = write_synthetic_dataset(tmp_path_factory.mktemp("ds") / "ds", EPISODES, seed=3,
+                                   samples_per_shard=3, bend_dims=2)
+    (root / "splits").mkdir()
+    (root / "splits" / "main.json").write_text(json.dumps(
+        {"parts": {"train": {"episodes": ["ep_a", "ep_c"]}, "test": {"episodes": ["ep_b"]}}}))
+    return root
+
+
+@pytest.fixture(autouse=True)
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv(remote.CACHE_ENV, str(tmp_path / "cache"))
+    return tmp_path / "cache"
+
+
+def fresh_url() -> str:
+    return f"memory://htdata-test-{uuid.uuid4().hex}/ds"
+
+
+def test_publish_round_trip_is_byte_equal(dataset):
+    url = fresh_url()
+    result = remote.publish_dataset(dataset, url)
+    manifest = json.loads((dataset / "dataset.json").read_text())
+    assert result.files == len(manifest["shards"]) + 2 + 1 + len(list((dataset / "layouts").iterdir())) + 1
+    local, far = DatasetReader(dataset), DatasetReader(url)
+    assert len(far) == len(local) == 10
+    assert far.manifest == local.manifest and far.episodes == local.episodes
+    for i in range(len(local)):
+        assert far.sample(i) == local.sample(i)
+    for (i, a), (j, b) in zip(local.iter_samples(), far.iter_samples(), strict=True):
+        assert i == j and a == b
+    w_local, w_far = local.window("ep_a", 4, 2), far.window("ep_a", 4, 2)
+    for a, b in zip(w_local, w_far, strict=True):
+        assert np.array_equal(a["rgb"], b["rgb"]) and a["meta"] == b["meta"]
+        for hand in a["tactile"]:
+            assert np.array_equal(a["tactile"][hand], b["tactile"][hand])
+    assert far.split("main") == local.split("main")
+    for layout_id in local.manifest["layouts"]:
+        assert np.array_equal(far.coverage(layout_id), local.coverage(layout_id))
+    fs = fsspec.filesystem("memory")
+    assert not fs.exists(url.replace("memory://", "/") + "/.work")
+
+
+def test_interrupted_upload_leaves_no_manifest(dataset, monkeypatch):
+    url = fresh_url()
+    remote.publish_dataset(dataset, url)   # a previous, complete upload is at the URL
+    real = remote.upload_file
+    calls = {"n": 0}
+
+    def failing_upload(fs, local, target):
+        calls["n"] += 1
+        if calls["n"] == 4:
+            raise ConnectionError("network dropped")
+        return real(fs, local, target)
+
+    monkeypatch.setattr(remote, "upload_file", failing_upload)
+    with pytest.raises(ConnectionError):
+        remote.publish_dataset(dataset, url)
+    fs, path = fsspec.core.url_to_fs(url)
+    assert fs.exists(f"{path}/layouts")             # some files went up ...
+    assert not fs.exists(f"{path}/dataset.json")    # ... but the URL is not a dataset
+    with pytest.raises(FileNotFoundError, match="no manifest"):
+        DatasetReader(url)
+
+
+def test_corrupt_local_shard_is_not_published(dataset, tmp_path):
+    import shutil
+
+    copy = tmp_path / "copy"
+    shutil.copytree(dataset, copy)
+    shard = sorted((copy / "shards").iterdir())[1]
+    data = bytearray(shard.read_bytes())
+    data[600] ^= 0xFF
+    shard.write_bytes(bytes(data))
+    url = fresh_url()
+    with pytest.raises(ValueError, match="sha256 differs"):
+        remote.publish_dataset(copy, url)
+    fs, path = fsspec.core.url_to_fs(url)
+    assert not fs.exists(f"{path}/dataset.json")
+
+
+def test_cached_index_is_reused_without_download(dataset, cache, monkeypatch):
+    url = fresh_url()
+    remote.publish_dataset(dataset, url)
+    first = DatasetReader(url)
+    rows = first.index
+    assert isinstance(rows, np.memmap)
+    cached = list((cache / "index").glob("*.npy"))
+    assert len(cached) == 1 and cached[0].stem == first.manifest["index_sha256"]
+    mtime = cached[0].stat().st_mtime_ns
+    # Remove the remote index: a second open can only work from the cache.
+    fs, path = fsspec.core.url_to_fs(url)
+    fs.rm(f"{path}/index.npy")
+    downloads = {"n": 0}
+    real_open = remote.storage.open_binary
+
+    def counting_open(location):
+        if str(location).endswith("index.npy"):
+            downloads["n"] += 1
+        return real_open(location)
+
+    monkeypatch.setattr(remote.storage, "open_binary", counting_open)
+    second = DatasetReader(url)
+    assert np.array_equal(np.asarray(second.index), np.asarray(rows))
+    assert second.sample(7) == DatasetReader(dataset).sample(7)
+    assert downloads["n"] == 0 and cached[0].stat().st_mtime_ns == mtime
+
+
+def test_cached_index_rejects_wrong_sha(dataset, cache):
+    url = fresh_url()
+    remote.publish_dataset(dataset, url)
+    manifest = json.loads((dataset / "dataset.json").read_text())
+    manifest["index_sha256"] = "0" * 64
+    with pytest.raises(ValueError, match="sha256"):
+        remote.cached_index_path(url, manifest)
+    assert not list((cache / "index").glob("*"))     # no partial file left behind
+
+
+def test_publish_refuses_uncommitted_directory(tmp_path):
+    (tmp_path / "shards").mkdir()
+    with pytest.raises(FileNotFoundError, match="no manifest"):
+        remote.publish_dataset(tmp_path, fresh_url())
+
+
+def test_publish_command(dataset, capsys):
+    url = fresh_url()
+    assert cli_main(["publish", str(dataset), url, "--quiet"]) == 0
+    assert len(DatasetReader(url)) == 10
+    assert cli_main(["publish", str(dataset / "missing"), fresh_url(), "--quiet"]) == 2
+    assert "no manifest" in capsys.readouterr().err
