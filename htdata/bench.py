@@ -43,6 +43,7 @@ class BenchConfig:
     index_rows: tuple[int, ...] = (1_000_000, 10_000_000)
     validate_workers: tuple[int, ...] = (1, 2)
     train_steps: int = 40
+    train_warmup: bool = True
     sections: tuple[str, ...] = field(default_factory=lambda: (
         "codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate", "training"))
 
@@ -50,7 +51,7 @@ class BenchConfig:
     def quick_config(cls, out: Path, seed: int = 0) -> "BenchConfig":
         return cls(out=out, quick=True, seed=seed, scale="tiny", codec_maps_per_glove=8, rgb_frames=2,
                    raster_frames=8, rss_lengths=(20, 40), loader_random=20, loader_windows=5,
-                   index_rows=(10_000,), train_steps=2)
+                   index_rows=(10_000,), train_steps=2, train_warmup=False)
 
     def validate(self) -> "BenchConfig":
         self.out = Path(self.out)
@@ -197,7 +198,8 @@ class Sections:
     def training(self) -> dict:
         from htdata.benchmarks.training import training_rows
 
-        return training_rows(self.dataset, self.cfg.work, self.cfg.train_steps)
+        return training_rows(self.dataset, self.cfg.work, self.cfg.train_steps,
+                             warmup=self.cfg.train_warmup)
 
 
 def run_bench(cfg: BenchConfig, command: str = "htdata bench", progress: bool = True) -> dict:

@@ -25,14 +25,22 @@ def _rate(n: int, seconds: float) -> float:
 def decode_bound(reader: DatasetReader, indices: np.ndarray) -> dict:
     """Samples/s of json + JPEG + EXR decode with every member already in memory."""
     members = [reader.sample(int(i)) for i in indices]
-    t0 = time.perf_counter()
-    for m in members:
-        json.loads(m["json"])
-        decode_rgb(m["rgb.jpg"])
-        for suffix, data in m.items():
-            if suffix.startswith("tactile_"):
-                decode_tactile(data)
-    return {"samples": len(members), "samples_per_s": _rate(len(members), time.perf_counter() - t0)}
+
+    def decode_all() -> None:
+        for m in members:
+            json.loads(m["json"])
+            decode_rgb(m["rgb.jpg"])
+            for suffix, data in m.items():
+                if suffix.startswith("tactile_"):
+                    decode_tactile(data)
+
+    decode_all()   # warm-up: codec libraries initialise lazily on first use
+    best = float("inf")
+    for _ in range(2):   # best of 2: the bound is the least noisy pass
+        t0 = time.perf_counter()
+        decode_all()
+        best = min(best, time.perf_counter() - t0)
+    return {"samples": len(members), "samples_per_s": _rate(len(members), best)}
 
 
 def loader_rows(root: Path, n_random: int, n_windows: int, seed: int = 0) -> dict:

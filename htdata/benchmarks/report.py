@@ -122,6 +122,17 @@ def _dominant(g: dict, adapter: str) -> str:
     return ", ".join(f"{k} {100 * v / total:.0f}%" for k, v in top)
 
 
+def _contention(g: dict, adapter: str) -> str:
+    """How much slower each worker got with more workers: >1 means they shared cores with others."""
+    runs = {r["workers"]: r for r in g["runs"] if r["pipelines"] == adapter and r.get("worker_s")}
+    if len(runs) < 2:
+        return "no in-worker timing to compare."
+    lo, hi = runs[min(runs)], runs[max(runs)]
+    factor = (hi["worker_s"] / hi["frames"]) / (lo["worker_s"] / lo["frames"])
+    return (f"in-worker time per frame was {factor:.2f}x at {hi['workers']} workers vs {lo['workers']} "
+            f"(1.0 = each worker had a core of its own; see the load average under Machine).")
+
+
 def _targets_ingest(g: dict) -> list[str]:
     lines = []
     for s in g["summary"]:
@@ -132,7 +143,7 @@ def _targets_ingest(g: dict) -> list[str]:
             ok = s["scaling"] >= TARGET_SCALING
             why = "" if ok else (f" {s['units']} work unit(s) over {s['workers_max']} workers bound it at "
                                  f"{s['units'] / -(-s['units'] // s['workers_max']):.2f}x if units were equal; "
-                                 f"the machine's load average also counts (see Machine).")
+                                 f"{_contention(g, s['adapter'])}")
             lines.append(f"- {s['adapter']}: 1 -> {s['workers_max']} workers scaling {s['scaling']:.2f}x "
                          f"(target >= {TARGET_SCALING}x): {'met' if ok else 'MISSED'}.{why}")
     return lines + [""]
@@ -171,7 +182,9 @@ def _training(t: dict) -> list[str]:
                               ("steps_per_s", "steps/s"), ("samples_per_s", "samples/s"),
                               ("final_loss", "final loss"), ("recon_rmse", "recon RMSE")])
     return lines + [f"bf16 / fp32 speed: {t['bf16_speedup']:.2f}x; recon RMSE ratio {t['recon_rmse_ratio_bf16_fp32']:.3f} "
-                    f"(held-out batch: {t['rows'][0]['eval_source']}).", ""]
+                    f"(held-out batch: {t['rows'][0]['eval_source']}). "
+                    + ("An untimed 2-step warm-up run came first." if t.get("warmup_run") else
+                       "No warm-up run: fp32 (run first) carries one-off start-up costs."), ""]
 
 
 RENDERERS = {"machine": _machine, "codecs": _codecs, "rgb": _rgb, "raster": _raster, "ingest": _ingest,
