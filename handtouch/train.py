@@ -150,7 +150,7 @@ def _autocast(cfg: TrainConfig, device: torch.device):
 
 
 def run_stage(n: int, model: HandTouch, cfg: TrainConfig, data: TrainData, env: DistEnv,
-              out: Path, logger: JsonlLog) -> dict:
+              out: Path, logger: JsonlLog, heldout: dict | None = None) -> dict:
     """Train stage n (resuming / skipping from OUT/stageN.pt); returns the stage summary."""
     scfg = cfg.stage(n)
     ckpt_path = out / f"stage{n}.pt"
@@ -174,8 +174,12 @@ def run_stage(n: int, model: HandTouch, cfg: TrainConfig, data: TrainData, env: 
     dataset = data.windows if n == 3 else data.frames
     if dataset is None:
         raise ValueError("stage 3 needs window data (TrainData.windows is None)")
-    sampler = StepBatchSampler(len(dataset), cfg.batch_size, cfg.seed + n, start, scfg.steps,
-                               env.rank, env.world_size)
+    try:
+        sampler = StepBatchSampler(len(dataset), cfg.batch_size, cfg.seed + n, start, scfg.steps,
+                                   env.rank, env.world_size)
+    except ValueError as e:
+        kind = "window (T >= 2)" if n == 3 else "frame"
+        raise ValueError(f"stage {n} ({kind} items from {cfg.data_root}): {e}") from None
     loader = DataLoader(dataset, batch_sampler=sampler, num_workers=cfg.workers,
                         generator=torch.Generator().manual_seed(cfg.seed),  # keep global RNG untouched
                         persistent_workers=False, pin_memory=env.device.type == "cuda")
@@ -238,16 +242,19 @@ def run_stage(n: int, model: HandTouch, cfg: TrainConfig, data: TrainData, env: 
                "samples_per_s": ran * cfg.batch_size * env.world_size / max(seconds, 1e-9)}
     if ran and step + 1 != scfg.steps:
         raise RuntimeError(f"stage {n}: data loader stopped at step {step + 1} of {scfg.steps}")
+    if heldout is not None:   # how each stage leaves reconstruction (stage 3 fine-tunes vq + decoder)
+        summary["heldout"] = evaluate_heldout(model, heldout, env.device)
+        model.train()
     checkpoint(scfg.steps, True, summary)
     return summary
 
 
 # ---- evaluation on the held-out batch -------------------------------------------------
-def heldout_batch(dataset: Dataset, size: int) -> dict:
+def heldout_batch(dataset: Dataset, size: int, source: str = "held-out data") -> dict:
     """`size` evenly spaced items (deterministic) collated into a batch."""
     n = len(dataset)
     if n == 0:
-        raise ValueError("held-out dataset is empty")
+        raise ValueError(f"{source} has no items: cannot build the held-out batch")
     idx = np.unique(np.linspace(0, n - 1, num=min(size, n)).round().astype(int))
     return torch.utils.data.default_collate([dataset[int(i)] for i in idx])
 
@@ -298,9 +305,11 @@ def train(cfg: TrainConfig, data: TrainData | None = None) -> dict:
                       "device": str(env.device), "bf16": cfg.bf16, "rgb_encoder": model.rgb_encoder.info.spec,
                       "rgb_encoder_sha256": model.rgb_encoder.info.sha256,
                       "train_items": len(data.frames), "window_items": len(data.windows or [])})
+        heldout = (heldout_batch(data.eval_frames, cfg.eval_batch_size, data.eval_source)
+                   if env.is_main else None)
         summaries = {}
         for n in cfg.stages:
-            summaries[str(n)] = run_stage(n, model, cfg, data, env, out, logger)
+            summaries[str(n)] = run_stage(n, model, cfg, data, env, out, logger, heldout)
         metrics = {"model": model.name, "encoder": cfg.model.encoder, "world_size": env.world_size,
                    "device": str(env.device), "rgb_encoder": dataclasses.asdict(model.rgb_encoder.info),
                    "stages": summaries, "heldout_source": data.eval_source}
@@ -308,8 +317,7 @@ def train(cfg: TrainConfig, data: TrainData | None = None) -> dict:
         total_steps = sum(s["steps"] - s.get("resumed_from", 0) for s in ran)
         metrics["steps_per_s"] = total_steps / max(sum(s["seconds"] for s in ran), 1e-9) if ran else 0.0
         if env.is_main:
-            metrics.update(evaluate_heldout(model, heldout_batch(data.eval_frames, cfg.eval_batch_size),
-                                            env.device))
+            metrics.update(evaluate_heldout(model, heldout, env.device))
             tmp = out / "metrics.json.tmp"
             tmp.write_text(json.dumps(metrics, indent=2))
             os.replace(tmp, out / "metrics.json")

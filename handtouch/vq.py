@@ -51,8 +51,8 @@ class FactorisedVQ(nn.Module):
         indices = self.nearest(z.detach())
         z_q = F.embedding(indices, self.codebook)
         counts = torch.bincount(indices, minlength=self.codebook_size).float()
-        if _distributed():   # identical usage (hence identical restarts) on every rank
-            dist.all_reduce(counts)
+        if self.training and _distributed():   # identical usage (hence restarts) on every rank;
+            dist.all_reduce(counts)              # eval may run on one rank only: no collective there
         if self.training:
             with torch.no_grad():
                 self.usage.mul_(self.usage_decay).add_(counts, alpha=1 - self.usage_decay)

@@ -221,3 +221,14 @@ def test_model_config_validation():
         tiny_cfg(patch=14).validate()        # 224/14 = 16 tokens a side: not a doubling of 224
     with pytest.raises(ValueError):
         tiny_cfg(dim=30, heads=4).validate()
+
+
+def test_bf16_autocast_training_step_is_finite():
+    model = tiny_model().train()
+    b = frame_batch(2)
+    with torch.autocast(device_type="cpu", dtype=torch.bfloat16):
+        out = model(b, 2, mask=torch.zeros(2, 1, 224, 224))
+    assert out["loss"].dtype == torch.float32
+    out["loss"].backward()
+    assert torch.isfinite(out["loss"])
+    assert all(torch.isfinite(p.grad).all() for p in model.parameters() if p.grad is not None)

@@ -178,3 +178,23 @@ def test_config_files_load_and_reject_bad_input(tmp_path):
     with pytest.raises(FileNotFoundError):
         load_train_config(tmp_path / "absent.toml")
     assert main(["--config", str(tmp_path / "c.toml")]) == 2     # CLI reports config errors, exit 2
+
+
+def test_cli_runs_with_overrides(dataset_root, tmp_path, capsys):
+    repo = Path(__file__).resolve().parents[1]
+    out = tmp_path / "cli"
+    rc = main(["--config", str(repo / "configs" / "smoke.toml"), "--set", f'data_root="{dataset_root}"',
+               "--set", f'out_dir="{out}"', "--set", "stages=[1]", "--set", "stage1.steps=2",
+               "--set", "workers=0", "--set", "batch_size=4", "--set", "model.codebook_size=16",
+               "--set", "device=cpu"])
+    assert rc == 0
+    assert json.loads((out / "metrics.json").read_text())["stages"]["1"]["steps"] == 2
+    assert '"event": "done"' in capsys.readouterr().out
+
+
+def test_single_frame_episodes_give_a_clear_stage3_error(tmp_path):
+    root = write_synthetic_dataset(tmp_path / "ds1", [
+        {"episode_id": f"e{i}", "task": "t", "scene": "s", "hands": ("right",), "num_frames": 1} for i in range(4)])
+    cfg = tiny_config(root, tmp_path / "o", **{"stage1.steps": 1, "stage2.steps": 1})
+    with pytest.raises(ValueError, match=r"stage 3 \(window"):
+        train(cfg)

@@ -64,6 +64,7 @@ def write_text_atomic(path: str | Path, text: str) -> None:
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
     with os.fdopen(fd, "w") as f:
         f.write(text)
+    os.chmod(tmp, 0o644)          # mkstemp creates 0600; results are meant to be shared
     os.replace(tmp, path)
 
 
