@@ -40,6 +40,8 @@ class ModelConfig:
     fusion_depth: int = 2         # stage 2 cross-attention layers
     temporal_depth: int = 1       # stage 3 per-token attention over time
     predictor_depth: int = 2      # stage 3 cross-attention layers
+    cnn_widths: list[int] = field(default_factory=lambda: [32, 64, 128])   # baseline CNN: stem, 2 stages
+    resnet_widths: list[int] = field(default_factory=lambda: [64, 128, 256, 512])  # baseline ResNet-18 stages
 
     @property
     def grid(self) -> int:
@@ -69,6 +71,11 @@ class ModelConfig:
                 raise ValueError(f"model.{name} must be >= 1, got {getattr(self, name)}")
         if self.dim % self.heads:
             raise ValueError(f"model.dim={self.dim} must be divisible by model.heads={self.heads}")
+        if len(self.cnn_widths) != 3 or any(int(w) <= 0 or int(w) % 8 for w in self.cnn_widths):
+            raise ValueError(f"model.cnn_widths must be 3 positive multiples of 8 (GroupNorm(8)), "
+                             f"got {self.cnn_widths}")
+        if len(self.resnet_widths) != 4 or any(int(w) <= 0 for w in self.resnet_widths):
+            raise ValueError(f"model.resnet_widths must be 4 positive widths, got {self.resnet_widths}")
         if self.mlp_ratio <= 0:
             raise ValueError("model.mlp_ratio must be > 0")
         if self.vq_beta < 0 or self.vq_dead_threshold < 0 or self.vq_restart_noise < 0:
@@ -117,10 +124,15 @@ class LossConfig:
     lambda_vis: float = 0.5       # stage 2, visible covered pixels
     lambda_mask: float = 1.0      # stage 2, masked covered pixels (must exceed lambda_vis)
     vq_weight: float = 1.0        # weight of the VQ codebook + commitment terms
+    # Reconstruction replay in stages 2 and 3: the whole map (stage 2) / t_T (stage 3)
+    # through encoder -> VQ -> decoder, as in stage 1. Both stages fine-tune the shared
+    # VQ and decoder; without this term stage 3's next-frame loss alone collapsed the
+    # codebook (perplexity 1.0) and pulled reconstruction back to the all-zeros level.
+    lambda_replay: float = 1.0
 
     def validate(self) -> None:
-        if self.lambda_vis < 0 or self.vq_weight < 0:
-            raise ValueError("loss.lambda_vis and loss.vq_weight must be >= 0")
+        if self.lambda_vis < 0 or self.vq_weight < 0 or self.lambda_replay < 0:
+            raise ValueError("loss.lambda_vis, loss.vq_weight and loss.lambda_replay must be >= 0")
         if not self.lambda_mask > self.lambda_vis:
             raise ValueError(f"loss.lambda_mask ({self.lambda_mask}) must exceed lambda_vis ({self.lambda_vis})")
 

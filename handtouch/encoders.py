@@ -1,7 +1,8 @@
 """Tactile encoders with one interface: (B, C, 224, 224) -> tokens (B, N, D).
 
 ViTEncoder is HandTouch's; CNNEncoder and ResNet18Encoder are the baselines
-(tokens = final feature map flattened and projected to D). Each exposes
+(tokens = final feature map flattened and projected to D; widths from
+ModelConfig.cnn_widths / resnet_widths). Each exposes
 `.grid` (tokens per side) so the decoder knows how far to upsample.
 """
 
@@ -48,14 +49,27 @@ class _FeatureMapTokens(nn.Module):
 
 
 class CNNEncoder(nn.Module):
-    """Plain conv stack: four stride-2 stages (224 -> 14), then tokens."""
+    """Plain conv stack, stride 16 (224 -> 14): a stride-4 patchify stem, then stride-2 stages.
 
-    def __init__(self, in_chans: int, dim: int, widths: tuple[int, ...] = (32, 64, 128, 256)):
+    The stem works on 4x4 patches like the ViT's patch embedding: 3x3 convs at full or
+    half resolution cost ~6x the whole ViT step on 2 CPU cores (562 s for a smoke run).
+    widths = (stem, stage 1, stage 2); each is followed by a 3x3 conv at the same size.
+    """
+
+    def __init__(self, in_chans: int, dim: int, widths: tuple[int, ...] = (32, 64, 128)):
         super().__init__()
-        layers, c = [], in_chans
-        for w in widths:
-            layers += [nn.Conv2d(c, w, 3, stride=2, padding=1), nn.GroupNorm(8, w), nn.GELU(),
-                       nn.Conv2d(w, w, 3, padding=1), nn.GroupNorm(8, w), nn.GELU()]
+        if len(widths) != 3:
+            raise ValueError(f"CNNEncoder needs 3 widths (stem + 2 stride-2 stages), got {list(widths)}")
+
+        def conv(c_in: int, c_out: int, k: int, stride: int) -> list[nn.Module]:
+            # 3x3 convs are padded (same size / exact halving); the 4x4 stride-4 stem tiles exactly
+            return [nn.Conv2d(c_in, c_out, k, stride=stride, padding=1 if k == 3 else 0),
+                    nn.GroupNorm(8, c_out), nn.GELU()]
+
+        layers = conv(in_chans, widths[0], 4, 4) + conv(widths[0], widths[0], 3, 1)
+        c = widths[0]
+        for w in widths[1:]:
+            layers += conv(c, w, 3, 2) + conv(w, w, 3, 1)
             c = w
         self.features = nn.Sequential(*layers)
         self.grid = CNN_GRID
@@ -87,10 +101,16 @@ class BasicBlock(nn.Module):
 
 
 class ResNet18Encoder(nn.Module):
-    """ResNet-18 layout (stem + 4 stages x 2 basic blocks, widths 64..512), stride 32 -> 7x7 tokens."""
+    """ResNet-18 layout (stride-4 stem + 4 stages x 2 basic blocks), stride 32 -> 7x7 tokens.
+
+    widths (64, 128, 256, 512) are torchvision's (1.8 GMAC per map); the smoke config
+    narrows them (configs/smoke.toml) so the baseline costs about what the ViT costs.
+    """
 
     def __init__(self, in_chans: int, dim: int, widths: tuple[int, ...] = (64, 128, 256, 512)):
         super().__init__()
+        if len(widths) != 4:
+            raise ValueError(f"ResNet18Encoder needs 4 stage widths, got {list(widths)}")
         self.stem = nn.Sequential(
             nn.Conv2d(in_chans, widths[0], 7, stride=2, padding=3, bias=False),
             nn.BatchNorm2d(widths[0]), nn.ReLU(inplace=True), nn.MaxPool2d(3, stride=2, padding=1))
@@ -111,7 +131,7 @@ def build_tactile_encoder(cfg: ModelConfig, in_chans: int) -> nn.Module:
     if cfg.encoder == "vit":
         return ViTEncoder(in_chans, cfg.patch, cfg.dim, cfg.depth, cfg.heads, cfg.mlp_ratio)
     if cfg.encoder == "cnn":
-        return CNNEncoder(in_chans, cfg.dim)
+        return CNNEncoder(in_chans, cfg.dim, tuple(cfg.cnn_widths))
     if cfg.encoder == "resnet18":
-        return ResNet18Encoder(in_chans, cfg.dim)
+        return ResNet18Encoder(in_chans, cfg.dim, tuple(cfg.resnet_widths))
     raise ValueError(f"unknown tactile encoder {cfg.encoder!r}")

@@ -12,7 +12,9 @@ Top-level modules (the names stages freeze / unfreeze, config.MODULE_NAMES):
   predictor   stage 3: cross-attention from aggregated tokens to v_{T-2..T}
 rgb_encoder is always frozen and is not one of them.
 
-Stages: 1 reconstruct, 2 masked reconstruction with RGB, 3 predict t_T.
+Stages: 1 reconstruct, 2 masked reconstruction with RGB, 3 predict t_T; stages 2
+and 3 also replay stage 1's reconstruction (LossConfig.lambda_replay) because
+they fine-tune the VQ and decoder that reconstruction shares.
 Every loss ignores uncovered pixels (coverage 0); predictions are zero there.
 """
 
@@ -190,14 +192,22 @@ class HandTouch(nn.Module):
         fused = self.fusion(self._with_hand(tokens, hand), self.visual_tokens(rgb))[:, 1:]
         return self.quantise_decode(fused, coverage)
 
-    def _predict_next(self, rgb_window, tactile_window, coverage, hand):
-        b, t = tactile_window.shape[:2]
-        past = self.encode(tactile_window.reshape(b * t, *tactile_window.shape[2:]))
-        past = self.temporal(past.reshape(b, t, *past.shape[1:]))
-        tv = rgb_window.shape[1]
+    def _predicted_tokens(self, rgb_window, past_tokens, hand):
+        """Encoded past frames (B,T-1,N,D) + RGB v_{T-2..T} -> predicted t_T tokens (B,N,D), before VQ."""
+        past = self.temporal(past_tokens)
+        b, tv = rgb_window.shape[:2]
         vis = self.visual_tokens(rgb_window.reshape(b * tv, *rgb_window.shape[2:]))
         vis = self.temporal.stamp(vis.reshape(b, tv, *vis.shape[1:]))
-        pred = self.predictor(self._with_hand(past, hand), vis)[:, 1:]
+        return self.predictor(self._with_hand(past, hand), vis)[:, 1:]
+
+    def _encode_frames(self, frames: torch.Tensor) -> torch.Tensor:
+        """(B,T,1,H,W) -> tokens (B,T,N,D) in one encoder call."""
+        b, t = frames.shape[:2]
+        tokens = self.encode(frames.reshape(b * t, *frames.shape[2:]))
+        return tokens.reshape(b, t, *tokens.shape[1:])
+
+    def _predict_next(self, rgb_window, tactile_window, coverage, hand):
+        pred = self._predicted_tokens(rgb_window, self._encode_frames(tactile_window), hand)
         return self.quantise_decode(pred, coverage)
 
     # ---- TactileModel API ---------------------------------------------------------
@@ -239,20 +249,31 @@ class HandTouch(nn.Module):
                 raise ValueError("stage 2 needs a mask")
             cov = batch["coverage"]
             target = covered(batch["tactile"], cov)
-            pred, _, vq_l, stats = self._inpaint(target, cov, mask, batch["rgb"], batch["hand"])
+            b = target.shape[0]
+            # one encoder call: the masked maps (for fusion) and the whole maps (replay)
+            tokens = self.encode(torch.cat([target, target]), torch.cat([mask, torch.zeros_like(mask)]))
+            fused = self.fusion(self._with_hand(tokens[:b], batch["hand"]), self.visual_tokens(batch["rgb"]))[:, 1:]
+            maps, _, vq_l, stats = self.quantise_decode(torch.cat([fused, tokens[b:]]), torch.cat([cov, cov]))
+            pred = maps[:b]
             terms = {"visible": masked_mse(pred, target, cov * (1 - mask)),
-                     "masked": masked_mse(pred, target, cov * mask)}
-            main = w.lambda_vis * terms["visible"] + w.lambda_mask * terms["masked"]
+                     "masked": masked_mse(pred, target, cov * mask),
+                     "replay": masked_mse(maps[b:], target, cov)}
+            main = w.lambda_vis * terms["visible"] + w.lambda_mask * terms["masked"] + w.lambda_replay * terms["replay"]
         elif stage == 3:
             tac, cov = batch["tactile"], batch["coverage"]
             if tac.dim() != 5 or tac.shape[1] != WINDOW:
                 raise ValueError(f"stage 3 needs window batches (B,{WINDOW},1,H,W), got {tuple(tac.shape)}")
-            cov_t = cov[:, -1] if cov.dim() == 5 else cov      # window coverage may be given once
-            target = covered(tac[:, -1], cov_t)
-            past = covered(tac[:, :-1], cov[:, :-1] if cov.dim() == 5 else cov[:, None])
-            pred, _, vq_l, stats = self._predict_next(batch["rgb"], past, cov_t, batch["hand"])
-            terms = {"next": masked_mse(pred, target, cov_t)}
-            main = terms["next"]
+            cov_w = cov if cov.dim() == 5 else cov[:, None].expand(-1, WINDOW, -1, -1, -1)  # coverage may be given once
+            cov_t = cov_w[:, -1]
+            frames = covered(tac, cov_w)
+            target = frames[:, -1]
+            tokens = self._encode_frames(frames)            # past frames + t_T (replay) in one call
+            pred_tokens = self._predicted_tokens(batch["rgb"], tokens[:, :-1], batch["hand"])
+            b = target.shape[0]
+            maps, _, vq_l, stats = self.quantise_decode(torch.cat([pred_tokens, tokens[:, -1]]),
+                                                        torch.cat([cov_t, cov_t]))
+            terms = {"next": masked_mse(maps[:b], target, cov_t), "replay": masked_mse(maps[b:], target, cov_t)}
+            main = terms["next"] + w.lambda_replay * terms["replay"]
         else:
             raise ValueError(f"stage must be 1, 2 or 3, got {stage}")
         vq_total = vq_l["codebook"] + vq_l["commit"]

@@ -56,6 +56,7 @@ import numpy as np
 
 from htdata.codec import DEFAULT_CODEC_INFO, encode_rgb, encode_tactile
 from htdata.errors import EpisodeError
+from htdata.fsutil import sha256_file, write_bytes_atomic
 from htdata.executors import UnitFailed, make_executor, report_progress
 from htdata.normalise import Normaliser
 from htdata.pipeline import PipelineConfig, load_pipeline
@@ -73,27 +74,12 @@ MANIFEST_FILE = "dataset.json"
 
 # --------------------------------------------------------------------------- small helpers
 
-def write_atomic(path: Path, data: bytes) -> None:
-    """tmp + fsync + rename (a crash leaves the old file or a temp, never half a file)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
 
 
 def dumps(obj) -> bytes:
     return (json.dumps(obj, indent=1, sort_keys=True) + "\n").encode()
 
 
-def sha256_path(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def get_adapter(name: str):
@@ -520,7 +506,7 @@ def run_unit(task: UnitTask) -> dict:
         "episodes": episodes, "failures": failures, "dropped": dropped,
         "seconds": time.perf_counter() - t0, "timing": clock.as_record(),
     }
-    write_atomic(unit_record_path(out, task.unit), dumps(record))
+    write_bytes_atomic(unit_record_path(out, task.unit), dumps(record))
     return record
 
 
@@ -538,7 +524,7 @@ def load_valid_record(task: UnitTask) -> dict | None:
         return None
     for s in record.get("shards", []):
         p = out / SHARDS_DIR / s["name"]
-        if not p.is_file() or p.stat().st_size != s["bytes"] or sha256_path(p) != s["sha256"]:
+        if not p.is_file() or p.stat().st_size != s["bytes"] or sha256_file(p) != s["sha256"]:
             return None
     return record
 
@@ -577,7 +563,7 @@ def prepare_output(out: Path, identity: dict) -> None:
                              f"refusing to mix datasets (use a new directory)")
     (out / WORK_DIR).mkdir(parents=True, exist_ok=True)
     (out / SHARDS_DIR).mkdir(parents=True, exist_ok=True)
-    write_atomic(out / WORK_DIR / STATE_FILE, dumps(identity))
+    write_bytes_atomic(out / WORK_DIR / STATE_FILE, dumps(identity))
     # Not committed while we work: a crash must not leave a manifest naming rewritten shards.
     (out / MANIFEST_FILE).unlink(missing_ok=True)
 
@@ -781,13 +767,13 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         "timing": timing_summary([records[t.unit] for t in todo], time.perf_counter() - t_start),
     }
     # Written before the commit too, so a run that commits nothing still explains why.
-    write_atomic(out / REPORT_FILE, dumps(report))
+    write_bytes_atomic(out / REPORT_FILE, dumps(report))
     if report["episodes_ingested"] == 0:
         raise ValueError(f"no episode could be ingested ({len(report['failures'])} failures); "
                          f"see {out / REPORT_FILE}")
     commit(out, sources, ordered)
     report["timing"]["total_s"] = time.perf_counter() - t_start
-    write_atomic(out / REPORT_FILE, dumps(report))
+    write_bytes_atomic(out / REPORT_FILE, dumps(report))
     return report
 
 

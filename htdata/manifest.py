@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata import storage
+from htdata.fsutil import write_bytes_atomic
 from htdata.resources import validate_json
 from htdata.shardio import SampleRecord, ShardRecord, parse_key
 
@@ -99,29 +100,6 @@ class BuiltIndex:
     shards: list[dict]            # manifest shard entries
 
 
-def sha256_file(path: str | os.PathLike, chunk: int = 1 << 20) -> str:
-    h = hashlib.sha256()
-    with storage.open_binary(path) as f:
-        while True:
-            block = f.read(chunk)
-            if not block:
-                return h.hexdigest()
-            h.update(block)
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    """tmp + fsync + rename: readers never see a half-written file."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-    fd = os.open(path.parent, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 def encode_png_u8(image: np.ndarray, where: str) -> bytes:
@@ -250,17 +228,17 @@ def commit_dataset(root: str | os.PathLike, units: list[UnitResult], layouts: li
     layout_dir = root / LAYOUTS_DIR
     layout_dir.mkdir(parents=True, exist_ok=True)
     canon_bytes = (json.dumps(canonical.document, indent=2, sort_keys=True) + "\n").encode()
-    _write_atomic(layout_dir / CANONICAL_FILE, canon_bytes)
-    _write_atomic(layout_dir / REGIONS_FILE, encode_png_u8(canonical.region_map, "canonical region map"))
-    _write_atomic(layout_dir / PARTS_FILE, encode_png_u8(canonical.part_map, "canonical part map"))
+    write_bytes_atomic(layout_dir / CANONICAL_FILE, canon_bytes)
+    write_bytes_atomic(layout_dir / REGIONS_FILE, encode_png_u8(canonical.region_map, "canonical region map"))
+    write_bytes_atomic(layout_dir / PARTS_FILE, encode_png_u8(canonical.part_map, "canonical part map"))
     layout_entries = {}
     for lay in sorted(layouts, key=lambda x: x.layout_id):
         doc = (json.dumps(lay.document, indent=2, sort_keys=True) + "\n").encode()
         cov = np.asarray(lay.coverage)
         if cov.size and cov.max() > 1:
             raise ValueError(f"layout {lay.layout_id!r}: coverage must be 0/1")
-        _write_atomic(layout_dir / f"{lay.layout_id}.json", doc)
-        _write_atomic(layout_dir / f"coverage_{lay.layout_id}.png",
+        write_bytes_atomic(layout_dir / f"{lay.layout_id}.json", doc)
+        write_bytes_atomic(layout_dir / f"coverage_{lay.layout_id}.png",
                       encode_png_u8(cov.astype(np.uint8), f"coverage of {lay.layout_id}"))
         layout_entries[lay.layout_id] = {
             "file": f"{LAYOUTS_DIR}/{lay.layout_id}.json",
@@ -269,11 +247,11 @@ def commit_dataset(root: str | os.PathLike, units: list[UnitResult], layouts: li
         }
 
     episodes_bytes = "".join(json.dumps(ep, sort_keys=True) + "\n" for ep in built.episodes).encode()
-    _write_atomic(root / EPISODES_FILE, episodes_bytes)
+    write_bytes_atomic(root / EPISODES_FILE, episodes_bytes)
     buf = io.BytesIO()
     np.save(buf, built.rows, allow_pickle=False)
     index_bytes = buf.getvalue()
-    _write_atomic(root / INDEX_FILE, index_bytes)
+    write_bytes_atomic(root / INDEX_FILE, index_bytes)
 
     from htdata import __version__
 
@@ -298,7 +276,7 @@ def commit_dataset(root: str | os.PathLike, units: list[UnitResult], layouts: li
         "index_sha256": hashlib.sha256(index_bytes).hexdigest(),
     }
     validate_json(manifest, "manifest", where=f"{root / MANIFEST_FILE}")
-    _write_atomic(root / MANIFEST_FILE, (json.dumps(manifest, indent=2) + "\n").encode())
+    write_bytes_atomic(root / MANIFEST_FILE, (json.dumps(manifest, indent=2) + "\n").encode())
     return manifest
 
 

@@ -30,8 +30,9 @@ from pathlib import Path
 import numpy as np
 
 from htdata import storage
+from htdata.fsutil import sha256_file, sha256_stream
 from htdata.manifest import (EPISODES_FILE, INDEX_DTYPE, INDEX_FILE, LAYOUTS_DIR, MANIFEST_FILE, SHARDS_DIR,
-                             load_manifest, sha256_file)
+                             load_manifest)
 
 CACHE_ENV = "HTDATA_CACHE"
 SPLITS_DIR = "splits"
@@ -58,11 +59,6 @@ def _fs(url: str):
     return fsspec.core.url_to_fs(url)
 
 
-def _sha256_stream(f) -> str:
-    h = hashlib.sha256()
-    for block in iter(lambda: f.read(CHUNK), b""):
-        h.update(block)
-    return h.hexdigest()
 
 
 # -- publish ----------------------------------------------------------------
@@ -105,7 +101,7 @@ def upload_file(fs, local: Path, remote: str) -> str:
 
 def remote_sha256(fs, remote: str) -> str:
     with fs.open(remote, "rb") as f:
-        return _sha256_stream(f)
+        return sha256_stream(f)
 
 
 def publish_dataset(local_root: str | os.PathLike, url: str, progress: bool = False) -> PublishResult:

@@ -35,15 +35,14 @@ import argparse
 import difflib
 import hashlib
 import json
-import os
 import re
 import sys
-import tempfile
 from collections import defaultdict
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
+from htdata.fsutil import write_json_atomic
 from htdata.resources import validate_json
 
 PARTS = ("train", "test", "ood")
@@ -234,20 +233,6 @@ def read_dataset_episodes(dataset: Path) -> tuple[bytes, list[dict]]:
     return manifest_bytes, episodes
 
 
-def write_json_atomic(path: Path, obj: dict) -> None:
-    """tmp file in the same directory + fsync + rename: readers never see half a file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            json.dump(obj, fh, indent=2, sort_keys=False)
-            fh.write("\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def make_split(dataset, ood_tasks, test_ratio: float = 0.1, seed: int = 0,

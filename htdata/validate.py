@@ -52,6 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.fsutil import sha256_file, write_json_atomic
 from htdata.manifest import (INDEX_DTYPE, MANIFEST_FILE, SHARDS_DIR,
                              SIZE_FIELDS)
 from htdata.resources import validate_json
@@ -179,12 +180,6 @@ class ShardJob:
 # ----------------------------------------------------------------------------- shard worker
 
 
-def _sha256_file(path: str) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _header_name_size(header: bytes) -> tuple[str, int]:
@@ -346,7 +341,7 @@ def check_shard(job: ShardJob) -> dict:
         structure.fail("shard_size", f"shard {job.name} has {size} bytes, manifest says {job.bytes}"
                        + (" (truncated)" if size < job.bytes else ""), **base,
                        expected=job.bytes, found=size)
-    digest = _sha256_file(job.path)
+    digest = sha256_file(job.path)
     if digest != job.sha256:
         structure.fail("shard_sha256", f"shard {job.name}: sha256 differs from the manifest "
                        f"(content changed or corrupted)", **base, expected=job.sha256, found=digest)
@@ -1029,7 +1024,6 @@ def format_report(report: dict) -> str:
 
 
 def write_report(report: dict, path: Path) -> None:
-    from htdata.split import write_json_atomic
 
     write_json_atomic(path, report)
 

@@ -107,14 +107,43 @@ def test_stage2_weights_visible_and_masked_terms():
     b = frame_batch(2)
     mask = torch.zeros(2, 1, 224, 224)
     mask[:, :, :112] = 1
-    w = LossConfig(lambda_vis=0.25, lambda_mask=2.0, vq_weight=0.0)
+    w = LossConfig(lambda_vis=0.25, lambda_mask=2.0, vq_weight=0.0, lambda_replay=0.5)
     with torch.no_grad():
         out = model(b, 2, mask=mask, weights=w)
         full = model(b, 2, mask=torch.ones_like(mask), weights=w)
-    assert float(out["loss"]) == pytest.approx(0.25 * float(out["visible"]) + 2.0 * float(out["masked"]), rel=1e-5)
+    assert float(out["loss"]) == pytest.approx(
+        0.25 * float(out["visible"]) + 2.0 * float(out["masked"]) + 0.5 * float(out["replay"]), rel=1e-5)
     assert float(full["visible"]) == 0.0          # complete masking: nothing visible, 0/0 guarded
     with pytest.raises(ValueError, match="mask"):
         model(b, 2)
+
+
+@pytest.mark.parametrize("stage", [2, 3])
+def test_replay_term_is_stage1_reconstruction(stage):
+    """Stages 2 and 3 replay reconstruction (whole map / t_T through encoder -> VQ -> decoder)."""
+    model = tiny_model().eval()
+    cov = torch.zeros(2, 1, 224, 224)
+    cov[:, :, 30:200, 20:190] = 1
+    if stage == 3:
+        batch = window_batch(2)
+        batch["coverage"] = cov
+        target = batch["tactile"][:, -1]
+    else:
+        batch = frame_batch(2, coverage=cov)
+        target = batch["tactile"]
+    mask = torch.zeros(2, 1, 224, 224)
+    mask[:, :, :100] = 1
+    with torch.no_grad():
+        out = model(batch, stage, mask=mask, weights=LossConfig(vq_weight=0.0, lambda_replay=0.0))
+        weighted = model(batch, stage, mask=mask, weights=LossConfig(vq_weight=0.0, lambda_replay=3.0))
+        recon = masked_mse(model.reconstruct(target, cov), target * cov, cov)
+    assert float(out["replay"]) == pytest.approx(float(recon), rel=1e-5)
+    assert float(weighted["loss"] - out["loss"]) == pytest.approx(3.0 * float(recon), rel=1e-4)
+    if stage == 3:
+        assert float(out["loss"]) == pytest.approx(float(out["next"]), rel=1e-6)
+        with torch.no_grad():
+            pred = model.predict_next(batch["rgb"], batch["tactile"][:, :2], cov, batch["hand"])
+        assert float(out["next"]) == pytest.approx(float(masked_mse(pred, target * cov, cov)), rel=1e-5)
 
 
 def test_all_zero_inputs_train_without_nan():
@@ -221,6 +250,26 @@ def test_model_config_validation():
         tiny_cfg(patch=14).validate()        # 224/14 = 16 tokens a side: not a doubling of 224
     with pytest.raises(ValueError):
         tiny_cfg(dim=30, heads=4).validate()
+    with pytest.raises(ValueError, match="cnn_widths"):
+        tiny_cfg(encoder="cnn", cnn_widths=[32, 64]).validate()
+    with pytest.raises(ValueError, match="cnn_widths"):
+        tiny_cfg(encoder="cnn", cnn_widths=[12, 64, 128]).validate()    # GroupNorm(8) needs multiples of 8
+    with pytest.raises(ValueError, match="resnet_widths"):
+        tiny_cfg(encoder="resnet18", resnet_widths=[16, 32, 0, 128]).validate()
+    with pytest.raises(ValueError, match="lambda_replay"):
+        LossConfig(lambda_replay=-1.0).validate()
+
+
+@pytest.mark.parametrize("encoder,widths", [("cnn", {"cnn_widths": [8, 16, 24]}),
+                                            ("resnet18", {"resnet_widths": [8, 16, 24, 32]})])
+def test_baseline_widths_come_from_the_config(encoder, widths):
+    model = tiny_model(encoder, **widths).eval()
+    convs = [m for m in model.encoder.modules() if isinstance(m, torch.nn.Conv2d)]
+    assert max(c.out_channels for c in convs) == list(widths.values())[0][-1]
+    if encoder == "cnn":          # stride-4 stem: no conv runs at full 224x224 resolution
+        assert convs[0].stride == (4, 4)
+    with torch.no_grad():
+        assert model.encode(torch.rand(2, 1, 224, 224)).shape == (2, model.cfg.num_tokens, 32)
 
 
 def test_bf16_autocast_training_step_is_finite():

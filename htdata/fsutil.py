@@ -1,0 +1,57 @@
+"""Crash-safe file writes and checksums used by every writer in htdata.
+
+A write goes to a temp file in the same directory, is fsynced and renamed
+over the target (then the directory is fsynced), so readers and a re-run
+after a crash see the old file or the new one, never half of one.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import IO
+
+CHUNK = 1 << 20
+
+
+def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    dir_fd = os.open(path.parent, os.O_RDONLY)
+    try:
+        os.fsync(dir_fd)
+    finally:
+        os.close(dir_fd)
+
+
+def write_json_atomic(path: str | os.PathLike, obj, *, indent: int | None = 2, sort_keys: bool = False) -> None:
+    text = json.dumps(obj, indent=indent, sort_keys=sort_keys) + "\n"
+    write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def sha256_stream(f: IO[bytes], chunk: int = CHUNK) -> str:
+    h = hashlib.sha256()
+    for block in iter(lambda: f.read(chunk), b""):
+        h.update(block)
+    return h.hexdigest()
+
+
+def sha256_file(path: str | os.PathLike, chunk: int = CHUNK) -> str:
+    """sha256 of a local file or an fsspec URL."""
+    from htdata import storage
+
+    with storage.open_binary(path) as f:
+        return sha256_stream(f, chunk)
