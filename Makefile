@@ -19,9 +19,12 @@ $(VENV)/.installed: pyproject.toml
 	$(PY) -m pip install -q -e ".[test,ray]"
 	touch $@
 
+# Raw sample corpus: written once (htdata sample refuses to overwrite), reused after.
 sample: setup
-	$(HTDATA) sample $(DATA)/raw --seed $(SEED) --scale small
+	@if [ -f $(DATA)/raw/.complete ]; then echo "sample data present: $(DATA)/raw"; else \
+	  rm -rf $(DATA)/raw && $(HTDATA) sample $(DATA)/raw --seed $(SEED) --scale small && touch $(DATA)/raw/.complete; fi
 
+# Re-running resumes: finished work units are skipped by checksum.
 ingest: sample
 	$(HTDATA) ingest --workers $(JOBS) \
 	  --pipeline pipelines/opentouch.toml=$(DATA)/raw/opentouch \
@@ -52,4 +55,4 @@ bench: setup
 	$(HTDATA) bench --out bench
 
 clean:
-	rm -rf $(DATA) runs bench/results.json
+	rm -rf $(DATA) runs bench/.work

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from handtouch.bench.evaluate import (CopyLastModel, EvalPart, ZerosModel, collect_examples, evaluate,
-                                      part_masks, subsample)
+from handtouch.bench.evaluate import (CopyLastModel, EvalConfig, EvalPart, ZerosModel, collect_examples, evaluate,
+                                      part_masks, prepare, subsample)
 from handtouch.bench.report import markdown_table, render_predictions, write_results
 
 S = 32          # small canvas: the bench code is size-agnostic, the tests stay fast
@@ -188,6 +188,14 @@ def test_report_table_json_and_png(tmp_path):
 
     ex = collect_examples(CopyLastModel(), part, count=3)
     assert ex["gt"].shape == (3, S, S) and ex["rgb"].shape == (3, S, S, 3) and ex["rgb"].dtype == np.uint8
+    # the figure shows the frames with the most contact, never an empty (f % 5 == 4) frame
+    contact = (ex["gt"] * ex["coverage"]).sum((1, 2))
+    assert (contact > 0).all() and list(contact) == sorted(contact, reverse=True)
+    prepared = prepare({"test": part}, parts=("test",), cfg=EvalConfig(max_items=500))["test"]
+    all_contact = torch.cat([(b["target"].float() * b["coverage"]).flatten(1).sum(1) for b in prepared.windows])
+    assert contact[0] == pytest.approx(float(all_contact.max()))
+    again = collect_examples(CopyLastModel(), prepared, count=3)
+    assert all(np.array_equal(again[k], ex[k]) for k in ("gt", "prediction", "rgb"))   # deterministic
     img = render_predictions(ex, tmp_path / "predictions.png", title="copy-last-ref")
     back = cv2.imread(str(tmp_path / "predictions.png"))
     assert back.shape == img.shape and back.shape[1] == 6 * S and back.shape[0] > 3 * S

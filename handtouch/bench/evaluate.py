@@ -158,7 +158,7 @@ class PreparedPart:
     (inpainting masks, the retrieval SSIM reference) fixed, so every model sees the same."""
 
     frames: list[dict]          # tactile, coverage (u8), regions, rgb, hand, mask (u8, 1 = hidden)
-    windows: list[dict]         # rgb_window, tactile_window, coverage, hand, target
+    windows: list[dict]         # rgb_window, tactile_window, coverage, hand, target, mask (u8, frame T)
     reference: RetrievalReference
     items: int
     num_windows: int
@@ -187,10 +187,14 @@ def prepare_part(part: EvalPart, cfg: EvalConfig) -> PreparedPart:
     widx = np.zeros(0, np.int64)
     if part.windows is not None and len(part.windows) > 0:
         widx = subsample(len(part.windows), cfg.max_items, cfg.seed)
+        wrng = np.random.default_rng(cfg.seed + 2)
         for b in iterate_batches(part.windows, widx, cfg.batch_size):
             rgb_w, tac_w, cov_t, hand, target = window_inputs(b)
+            regions = b["regions"][:, -1] if b["regions"].ndim == 4 else b["regions"]
             windows.append({"rgb_window": rgb_w, "tactile_window": _compact(tac_w),
-                            "coverage": (cov_t > 0.5).to(torch.uint8), "hand": hand, "target": _compact(target)})
+                            "coverage": (cov_t > 0.5).to(torch.uint8), "hand": hand, "target": _compact(target),
+                            # frame T's inpainting mask, for the predictions figure
+                            "mask": part_masks(regions, cov_t, wrng).to(torch.uint8)})
     return PreparedPart(frames, windows, reference, int(len(idx)), int(len(widx)))
 
 
@@ -296,20 +300,38 @@ def evaluate(model: TactileModel, dataset_root, split_name: str | None = None,
         return {name: score_part(model, prep) for name, prep in prepared.items()}
 
 
-def collect_examples(model: TactileModel, part: EvalPart, count: int = 4, seed: int = 0) -> dict[str, np.ndarray]:
-    """A few windows' frame T with every track's output, for report.render_predictions.
+def contact_order(windows: list[dict]) -> np.ndarray:
+    """Prepared window positions ordered by ground-truth contact at T (sum over covered
+    pixels), largest first; ties keep the lower position (stable, deterministic)."""
+    totals = [(b["target"].float() * b["coverage"].float()).flatten(1).sum(1) for b in windows]
+    if not totals:
+        return np.zeros(0, np.int64)
+    return np.argsort(-torch.cat(totals).double().numpy(), kind="stable")
 
+
+def collect_examples(model: TactileModel, part: EvalPart | PreparedPart, count: int = 4,
+                     cfg: EvalConfig | None = None) -> dict[str, np.ndarray]:
+    """The `count` evaluation windows with the most contact at frame T, with every track's
+    output, for report.render_predictions (frames without contact show nothing).
+
+    `part` is a PreparedPart (its items) or an EvalPart (prepared first with `cfg`).
     Returns float32 arrays (N,224,224) for gt, inpaint, rgb2tactile, prediction,
     mask, coverage and uint8 rgb (N,224,224,3).
     """
-    if part.windows is None or len(part.windows) == 0:
-        raise ValueError("collect_examples needs window items (part.windows is empty)")
-    idx = subsample(len(part.windows), count, seed)
-    b = _collate([part.windows[int(i)] for i in idx])
-    rgb_w, tac_w, cov_t, hand, target = window_inputs(b)
+    prep = part if isinstance(part, PreparedPart) else prepare_part(part, (cfg or EvalConfig()).validate())
+    if not prep.windows:
+        raise ValueError("collect_examples needs window items (the part has no windows)")
+    sizes = [len(b["target"]) for b in prep.windows]
+    starts = np.cumsum([0, *sizes])
+    picks = contact_order(prep.windows)[:count]
+    batch_of = np.searchsorted(starts, picks, side="right") - 1
+
+    def gather(key: str) -> torch.Tensor:
+        return torch.stack([prep.windows[k][key][i - starts[k]] for k, i in zip(batch_of, picks)])
+
+    rgb_w, tac_w, hand = gather("rgb_window"), gather("tactile_window").float(), gather("hand")
+    cov_t, target, mask = gather("coverage").float(), gather("target").float(), gather("mask").float()
     rgb_t = rgb_w[:, -1]
-    regions = b["regions"][:, -1] if b["regions"].ndim == 4 else b["regions"]
-    mask = part_masks(regions, cov_t, np.random.default_rng(seed + 1))
     if isinstance(model, torch.nn.Module):
         model.eval()
     with torch.inference_mode():
