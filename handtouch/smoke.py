@@ -7,11 +7,15 @@
    and budget (configs/smoke.toml, only model.encoder overridden);
 3. HT-Bench on the test and ood parts (at most --max-items items per part) for
    the three models and the reference predictors (zeros-ref, copy-last-ref);
-4. write OUT/results.json, OUT/results.md, OUT/predictions.png;
+4. write OUT/results.json (with the wall time of every phase under
+   meta.seconds), OUT/results.md, OUT/predictions.png (the test windows with
+   the most contact);
 5. assert that HandTouch learned (exit 1 with the failed checks otherwise):
-   - stage-1 reconstruction F-RMSE (test) <= RECON_RATIO x the all-zeros predictor's,
-   - retrieval Hit@1 (test) > chance 1/20,
-   - codebook perplexity on test maps >= PERPLEXITY_FLOOR codes.
+   - stage-1 reconstruction F-RMSE of the stage-1 checkpoint on the held-out
+     test items <= RECON_RATIO x the all-zeros predictor's on the same items,
+   - retrieval Hit@1 (test, final model) > chance 1/20,
+   - codebook perplexity of the final model over every token of the test
+     maps >= PERPLEXITY_FLOOR codes.
 """
 
 from __future__ import annotations
@@ -28,13 +32,15 @@ import numpy as np
 import torch
 
 from handtouch.bench.evaluate import (CopyLastModel, EvalConfig, PreparedPart, ZerosModel, collect_examples, evaluate,
-                                      load_part, prepare)
+                                      load_part, prepare, reconstruct)
+from handtouch.bench.metrics import MapMetrics
 from handtouch.bench.report import render_predictions, write_results
 
 ENCODERS = ("vit", "cnn", "resnet18")     # HandTouch first; the other two are the baselines
 RAW_FORMATS = ("opentouch", "touchanything", "native")
 SPLIT_NAME = "smoke"
 RECON_RATIO = 0.7
+# 64 codes in the smoke config; a collapsed codebook scores ~1. Healthy runs use 15-30.
 PERPLEXITY_FLOOR = 4.0
 
 
@@ -67,6 +73,9 @@ def ensure_dataset(raw: Path, dataset: Path, workers: int) -> None:
 
 
 def make_split(dataset: Path, ood_task: str, seed: int) -> None:
+    tasks = json.loads((dataset / "dataset.json").read_text()).get("tasks", [])
+    if ood_task not in tasks:
+        raise SystemExit(f"smoke: ood task {ood_task!r} is not in {dataset} (tasks: {tasks})")
     _htdata("split", str(dataset), "--ood-task", ood_task, "--seed", str(seed), "--name", SPLIT_NAME, "--force")
 
 
@@ -75,7 +84,10 @@ def _toml_str(value: str) -> str:
 
 
 def train_encoder(config: Path, encoder: str, dataset: Path, out_dir: Path, extra: list[str]):
-    """Train one model with the smoke config (only the encoder differs) -> (model, train metrics)."""
+    """Train one model with the smoke config (only the encoder differs).
+
+    -> (final model, stage-1 model, train metrics); both models in eval mode.
+    """
     from handtouch.config import load_train_config
     from handtouch.train import load_model, train
 
@@ -83,11 +95,28 @@ def train_encoder(config: Path, encoder: str, dataset: Path, out_dir: Path, extr
                  f"out_dir={_toml_str(out_dir)}", f"split={_toml_str(SPLIT_NAME)}",
                  f"train_part={_toml_str('train')}", f"eval_part={_toml_str('test')}", *extra]
     cfg = load_train_config(config, overrides)
+    if 1 not in cfg.stages:
+        raise SystemExit("smoke: the config must run stage 1 (the reconstruction check uses its checkpoint)")
     metrics = train(cfg)
-    ckpt = Path(cfg.out_dir) / f"stage{max(cfg.stages)}.pt"    # the trainer's last stage checkpoint
-    if not ckpt.is_file():
-        raise SystemExit(f"smoke: training {encoder} finished without its final checkpoint {ckpt}")
-    return load_model(ckpt), metrics
+    out = Path(cfg.out_dir)
+    ckpts = {s: out / f"stage{s}.pt" for s in (1, max(cfg.stages))}    # the trainer's stage checkpoints
+    for path in ckpts.values():
+        if not path.is_file():
+            raise SystemExit(f"smoke: training {encoder} finished without its checkpoint {path}")
+    return load_model(ckpts[max(cfg.stages)]), load_model(ckpts[1]), metrics
+
+
+def reconstruction_rmse(model, prep: PreparedPart) -> float | None:
+    """Per-frame mean F-RMSE of stage-1 autoencoding over the prepared items (the
+    reconstruction track's number); None if no frame has a covered pixel."""
+    metrics = MapMetrics()
+    if isinstance(model, torch.nn.Module):
+        model.eval()
+    with torch.inference_mode():
+        for b in prep.frames:
+            tactile, coverage = b["tactile"].float(), b["coverage"].float()
+            metrics.update(reconstruct(model, tactile, coverage, b["rgb"], b["hand"]), tactile, coverage)
+    return metrics.result()["rmse"]
 
 
 def codebook_perplexity(model, prep: PreparedPart) -> float:
@@ -100,23 +129,33 @@ def codebook_perplexity(model, prep: PreparedPart) -> float:
         for b in prep.frames:
             _, idx, _, _ = model.vq(model.encode(b["tactile"].float() * b["coverage"].float()))
             counts += torch.bincount(idx.flatten(), minlength=counts.numel()).double()
+    if counts.sum() == 0:
+        return float("nan")
     p = counts[counts > 0] / counts.sum()
     return float(torch.exp(-(p * p.log()).sum()))
 
 
-def learning_checks(results: dict, handtouch: str, perplexity: float) -> list[dict]:
-    """The smoke run's pass/fail criteria, each with the numbers it compared."""
-    ht, zeros = results[handtouch]["test"], results[ZerosModel.name]["test"]
-    recon, recon_zero = ht["reconstruction"]["full"]["rmse"], zeros["reconstruction"]["full"]["rmse"]
-    hit, chance = ht["retrieval"]["hit_at_1"], ht["retrieval"]["chance_hit_at_1"]
+def learning_checks(stage1_rmse: float | None, zeros_rmse: float | None, retrieval: dict,
+                    perplexity: float) -> list[dict]:
+    """The smoke run's pass/fail criteria, each with the numbers it compared.
+
+    stage1_rmse / zeros_rmse: reconstruction F-RMSE of the stage-1 model and of the
+    all-zeros predictor on the same held-out items; retrieval: the final model's
+    retrieval track (test); perplexity: the final model's codebook perplexity.
+    A missing (None / NaN) number fails its check.
+    """
+    def known(x) -> bool:
+        return x is not None and math.isfinite(x)
+
+    hit, chance = retrieval.get("hit_at_1"), retrieval.get("chance_hit_at_1")
     return [
-        {"check": f"stage-1 reconstruction F-RMSE <= {RECON_RATIO} x all-zeros",
-         "value": recon, "limit": None if recon_zero is None else RECON_RATIO * recon_zero,
-         "ok": recon is not None and recon_zero is not None and recon <= RECON_RATIO * recon_zero},
+        {"check": f"stage-1 reconstruction F-RMSE <= {RECON_RATIO} x all-zeros (same held-out items)",
+         "value": stage1_rmse, "limit": RECON_RATIO * zeros_rmse if known(zeros_rmse) else None,
+         "ok": known(stage1_rmse) and known(zeros_rmse) and stage1_rmse <= RECON_RATIO * zeros_rmse},
         {"check": "retrieval Hit@1 above chance", "value": hit, "limit": chance,
-         "ok": hit is not None and hit > chance},
+         "ok": known(hit) and known(chance) and hit > chance},
         {"check": f"codebook perplexity >= {PERPLEXITY_FLOOR}", "value": perplexity,
-         "limit": PERPLEXITY_FLOOR, "ok": math.isfinite(perplexity) and perplexity >= PERPLEXITY_FLOOR},
+         "limit": PERPLEXITY_FLOOR, "ok": known(perplexity) and perplexity >= PERPLEXITY_FLOOR},
     ]
 
 
@@ -157,51 +196,67 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
+class PhaseTimer:
+    """Wall seconds per named phase, in run order."""
+
+    def __init__(self):
+        self.seconds: dict[str, float] = {}
+        self.t0 = time.perf_counter()
+
+    def run(self, name: str, fn, *args, **kwargs):
+        t = time.perf_counter()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t
+
+    def total(self) -> dict[str, float]:
+        return {**self.seconds, "total": time.perf_counter() - self.t0}
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
     torch.manual_seed(args.seed)
-    timings: dict[str, float] = {}
-    t0 = time.perf_counter()
-    ensure_raw(args.raw, args.seed)
-    ensure_dataset(args.raw, args.dataset, args.workers)
-    make_split(args.dataset, args.ood_task, args.seed)
-    timings["data"] = time.perf_counter() - t0
+    timer = PhaseTimer()
+    timer.run("data_sample", ensure_raw, args.raw, args.seed)
+    timer.run("data_ingest", ensure_dataset, args.raw, args.dataset, args.workers)
+    timer.run("data_split", make_split, args.dataset, args.ood_task, args.seed)
 
-    t = time.perf_counter()
     parts = {p: load_part(args.dataset, SPLIT_NAME, p) for p in ("test", "ood")}
     # decoded once, same items / masks / SSIM reference for every model
-    prepared = prepare(parts, cfg=EvalConfig(max_items=args.max_items, seed=args.seed))
-    timings["eval_prepare"] = time.perf_counter() - t
-    models, train_metrics = {}, {}
+    prepared = timer.run("eval_prepare", prepare, parts, cfg=EvalConfig(max_items=args.max_items, seed=args.seed))
+    models, stage1_models, train_metrics = {}, {}, {}
     for enc in args.encoders:
-        t = time.perf_counter()
         print(f"smoke: training encoder={enc}", flush=True)
-        model, metrics = train_encoder(args.config, enc, args.dataset, args.out / "train" / enc, args.set)
-        timings[f"train_{enc}"] = time.perf_counter() - t
-        models[model.name] = model
-        train_metrics[model.name] = metrics
+        model, stage1, metrics = timer.run(f"train_{enc}", train_encoder, args.config, enc, args.dataset,
+                                           args.out / "train" / enc, args.set)
+        models[model.name], stage1_models[model.name], train_metrics[model.name] = model, stage1, metrics
     handtouch = next(iter(models))
 
     results = {}
     for model in [*models.values(), ZerosModel(), CopyLastModel()]:
-        t = time.perf_counter()
-        results[model.name] = evaluate(model, prepared)
-        timings[f"eval_{model.name}"] = time.perf_counter() - t
-    perplexity = codebook_perplexity(models[handtouch], prepared["test"])
-    checks = learning_checks(results, handtouch, perplexity)
-    timings["total"] = time.perf_counter() - t0
+        results[model.name] = timer.run(f"eval_{model.name}", evaluate, model, prepared)
+    stage1_rmse = timer.run("checks", reconstruction_rmse, stage1_models[handtouch], prepared["test"])
+    zeros_rmse = results[ZerosModel.name]["test"]["reconstruction"]["full"]["rmse"]   # same items
+    perplexity = timer.run("checks", codebook_perplexity, models[handtouch], prepared["test"])
+    checks = learning_checks(stage1_rmse, zeros_rmse, results[handtouch]["test"]["retrieval"], perplexity)
+    examples = timer.run("report", collect_examples, models[handtouch], prepared["test"], count=4)
+    timer.run("report", render_predictions, examples, args.out / "predictions.png",
+              title=f"{handtouch} on test: the 4 windows with the most contact")
+    seconds = timer.total()
 
     meta = {"dataset": args.dataset, "split": SPLIT_NAME, "ood_task": args.ood_task, "config": args.config,
             "encoders": args.encoders, "max_items": args.max_items, "seed": args.seed,
-            "handtouch": handtouch, "codebook_perplexity": perplexity, "checks": checks,
-            "train_metrics": train_metrics, "seconds": timings}
+            "handtouch": handtouch, "stage1_reconstruction_rmse": stage1_rmse,
+            "zeros_reconstruction_rmse": zeros_rmse, "codebook_perplexity": perplexity, "checks": checks,
+            "train_metrics": train_metrics, "seconds": seconds}
     write_results(args.out, results, _jsonable(meta))
-    examples = collect_examples(models[handtouch], parts["test"], count=4, seed=args.seed)
-    render_predictions(examples, args.out / "predictions.png", title=f"{handtouch} on test")
     print((args.out / "results.md").read_text())
+    for name, sec in seconds.items():
+        print(f"smoke: {name:<28} {sec:8.1f} s")
     for c in checks:
         print(f"smoke: [{'ok' if c['ok'] else 'FAILED'}] {c['check']}: value {c['value']}, limit {c['limit']}")
-    print(f"smoke: {timings['total']:.0f} s total; results in {args.out}", flush=True)
+    print(f"smoke: {seconds['total']:.0f} s total; results in {args.out}", flush=True)
     failed = [c["check"] for c in checks if not c["ok"]]
     if failed:
         print(f"smoke: HandTouch did not learn: failed {failed}", file=sys.stderr)

@@ -95,15 +95,30 @@ def _label(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.45
     cv2.putText(img, text, org, FONT, scale, TEXT, 1, cv2.LINE_AA)
 
 
+def _default_episode(episodes: list[dict]) -> str:
+    def mean_contact(ep: dict) -> float:
+        values = (ep.get("stats") or {}).get("mean_contact") or {}
+        return min(values.values()) if values else 0.0   # min: every hand shows contact
+
+    most = max(len(ep["hands"]) for ep in episodes)
+    candidates = [ep for ep in episodes if len(ep["hands"]) == most]
+    return max(candidates, key=mean_contact)["episode_id"]   # max() keeps the first on ties
+
+
 def render_contact_sheet(dataset, episode: str | None = None, frames: int = 6) -> np.ndarray:
-    """Contact sheet of one episode (default: the first) as a BGR uint8 image."""
+    """Contact sheet of one episode as a BGR uint8 image.
+
+    Default episode: among those with the most hands (so a two-handed
+    dataset shows both gloves and mirroring can be checked by eye), the one
+    with the highest mean contact in its ingest stats (first on ties).
+    """
     from htdata.reader import DatasetReader
 
     with DatasetReader(dataset) as reader:
         if not reader.episodes:
             raise ValueError(f"{dataset}: dataset has no episodes")
         if episode is None:
-            episode = reader.episodes[0]["episode_id"]
+            episode = _default_episode(reader.episodes)
         try:
             pos = reader.episode_position(episode)
         except KeyError:
@@ -156,7 +171,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.epilog = __doc__
     parser.add_argument("dataset", type=Path, help="committed dataset directory")
     parser.add_argument("out", type=Path, metavar="OUT.png", help="contact sheet to write")
-    parser.add_argument("--episode", default=None, metavar="ID", help="episode id (default: the first)")
+    parser.add_argument("--episode", default=None, metavar="ID", help="episode id (default: the two-handed episode with the most contact)")
     parser.add_argument("--frames", type=int, default=6, metavar="N",
                         help="rows: N frames evenly spaced over the episode (default 6)")
 
