@@ -2,8 +2,15 @@
 
 Random access never scans: index.npy gives each sample's shard, header
 offset and member sizes, so one seek + one read returns exactly that
-sample's bytes (headers are checked against the expected member names).
+sample's bytes. Each member's header is checked cheaply (name and size
+fields compared as bytes, DESIGN "Tar is USTAR") so an index that disagrees
+with its shard is an error naming the sample; full header parsing and
+checksums are `htdata validate`'s job, not the hot path's.
 Works on local paths and fsspec URLs (file://, memory://, s3://...).
+
+Hot-path costs kept small on purpose (see htdata/benchmarks/loader.py):
+index rows are read as one tuple (`np.void.item()`), not field by field;
+bend vectors skip np.load's header parsing once a header has been seen.
 
 Shard file handles are opened lazily and remembered with the pid that opened
 them; after a fork (DataLoader workers) the child opens its own. Pickling a
@@ -15,20 +22,129 @@ from __future__ import annotations
 import io
 import json
 import os
+import struct
 import tarfile
 from collections import OrderedDict
-from typing import Iterator
+from collections.abc import Iterator
+from typing import NamedTuple
 
 import numpy as np
 
 from htdata import storage
 from htdata.codec import decode_rgb, decode_tactile
-from htdata.manifest import (LAYOUTS_DIR, SHARDS_DIR, SIZE_FIELDS, load_episodes, load_index,
-                             load_manifest, decode_png_u8)
-from htdata.shardio import BLOCK, member_offsets, sample_key
+from htdata.manifest import (
+    INDEX_DTYPE,
+    LAYOUTS_DIR,
+    SHARDS_DIR,
+    SIZE_FIELDS,
+    decode_png_u8,
+    load_episodes,
+    load_index,
+    load_manifest,
+)
+from htdata.shardio import BLOCK, padded, sample_key
 
 HANDS = ("left", "right")
 MAX_OPEN_SHARDS = 32
+MEMBER_SUFFIXES = tuple(SIZE_FIELDS)            # DESIGN member order
+_SIZE_POS = tuple(INDEX_DTYPE.names.index(f) for f in SIZE_FIELDS.values())
+_USTAR_NAME = 100                               # name field: bytes 0..99, NUL padded
+_USTAR_SIZE = slice(124, 136)                   # size field: 11 octal digits + NUL
+
+
+class SampleRow(NamedTuple):
+    """One index.npy row as plain ints; `sizes` follows MEMBER_SUFFIXES (0 = absent)."""
+    shard: int
+    offset: int
+    episode: int
+    frame: int
+    sizes: tuple[int, ...]
+
+
+def member_layout(sizes: tuple[int, ...], wanted=None) -> tuple[list[tuple[str, int, int]], int]:
+    """([(suffix, header offset from the first header, size)], bytes to read).
+
+    Only members present (size > 0) and in `wanted` (all when None) are
+    listed; the read stops at the end of the last listed member.
+    """
+    layout, pos, end = [], 0, 0
+    for suffix, size in zip(MEMBER_SUFFIXES, sizes):
+        if size:
+            if wanted is None or suffix in wanted:
+                layout.append((suffix, pos, size))
+                end = pos + BLOCK + size
+            pos += BLOCK + padded(size)
+    return layout, end
+
+
+def header_matches(header: bytes, name: bytes, size: int) -> bool:
+    """Cheap USTAR check: name field == name (NUL padded) and size field == size.
+
+    Compares raw bytes in the encoding ShardWriter writes; any other valid
+    encoding of the same values falls back to tarfile's parser.
+    """
+    n = len(name)
+    if (header[:n] == name and (n == _USTAR_NAME or header[n] == 0)
+            and header[_USTAR_SIZE] == b"%011o\0" % size):
+        return True
+    try:
+        info = tarfile.TarInfo.frombuf(header, "utf-8", "surrogateescape")
+    except tarfile.HeaderError:
+        return False
+    return info.name.encode("utf-8", "surrogateescape") == name and info.size == size
+
+
+def _describe_header(header: bytes) -> str:
+    try:
+        info = tarfile.TarInfo.frombuf(header, "utf-8", "surrogateescape")
+    except tarfile.HeaderError as exc:
+        return f"an unreadable header ({exc})"
+    return f"{info.name} ({info.size} B)"
+
+
+# npy header bytes -> (dtype, shape, fortran_order, data offset). Bend vectors of one dataset
+# share a handful of headers, so np.load's header parsing (ast.literal_eval) runs once per shape.
+_NPY_HEADERS: dict[bytes, tuple[np.dtype, tuple, bool, int]] = {}
+_NPY_HEADER_CACHE_MAX = 256
+
+
+def decode_npy(data: bytes, where: str = "npy") -> np.ndarray:
+    """.npy bytes -> array (a writable copy), exactly what np.load would return."""
+    if data[:6] != b"\x93NUMPY" or len(data) < 10:
+        raise ValueError(f"{where}: not an .npy member ({len(data)} bytes)")
+    if data[6] == 1:
+        start = 10 + struct.unpack_from("<H", data, 8)[0]
+    elif len(data) >= 12:
+        start = 12 + struct.unpack_from("<I", data, 8)[0]
+    else:
+        raise ValueError(f"{where}: truncated .npy header")
+    header = data[:start]
+    meta = _NPY_HEADERS.get(header)
+    if meta is None:
+        try:
+            arr = np.load(io.BytesIO(data), allow_pickle=False)
+        except Exception as exc:
+            raise ValueError(f"{where}: unreadable .npy member: {exc}") from exc
+        fortran = arr.ndim > 1 and arr.flags.f_contiguous and not arr.flags.c_contiguous
+        if len(_NPY_HEADERS) < _NPY_HEADER_CACHE_MAX:
+            _NPY_HEADERS[header] = (arr.dtype, arr.shape, fortran, start)
+        return arr
+    dtype, shape, fortran, start = meta
+    count = int(np.prod(shape, dtype=np.int64))
+    if len(data) - start != count * dtype.itemsize:
+        raise ValueError(f"{where}: .npy member holds {len(data) - start} data bytes, "
+                         f"header says {count * dtype.itemsize}")
+    return np.frombuffer(data, dtype, count, start).reshape(shape, order="F" if fortran else "C").copy()
+
+
+def decode_tactile_member(data: bytes, where: str) -> np.ndarray:
+    """decode_tactile, with OpenEXR's own errors (which name no file) re-raised naming `where`."""
+    try:
+        return decode_tactile(data, where=where)
+    except ValueError:
+        raise
+    except Exception as exc:
+        raise ValueError(f"{where}: undecodable EXR ({len(data)} bytes): {exc}") from exc
 
 
 class DatasetReader:
@@ -40,7 +156,9 @@ class DatasetReader:
             raise ValueError(f"{self.root}: episodes.jsonl has {len(self.episodes)} records, "
                              f"manifest counts {self.manifest['counts']['episodes']}")
         self._episode_pos = {ep["episode_id"]: i for i, ep in enumerate(self.episodes)}
+        self._episode_ids = [ep["episode_id"] for ep in self.episodes]
         self._shard_names = [s["name"] for s in self.manifest["shards"]]
+        self._n = int(self.manifest["counts"]["samples"])
         self._index: np.ndarray | None = None
         self._handles: OrderedDict[int, object] = OrderedDict()
         self._pid = os.getpid()
@@ -85,24 +203,27 @@ class DatasetReader:
                 rows = load_cached_index(self.root, self.manifest)
             else:
                 rows = load_index(self.root, mmap=True)
-            if len(rows) != self.manifest["counts"]["samples"]:
-                raise ValueError(f"{self.root}: index has {len(rows)} rows, manifest counts "
-                                 f"{self.manifest['counts']['samples']}")
+            if len(rows) != self._n:
+                raise ValueError(f"{self.root}: index has {len(rows)} rows, manifest counts {self._n}")
             self._index = rows
         return self._index
 
     def __len__(self) -> int:
-        return int(self.manifest["counts"]["samples"])
+        return self._n
 
-    def _row(self, i: int):
-        n = len(self)
+    def row(self, i: int) -> SampleRow:
+        """Index row of sample `i` (negative counts from the end) as plain ints."""
+        n = self._n
         if not -n <= i < n:
             raise IndexError(f"{self.root}: sample {i} out of range (dataset has {n})")
-        return self.index[int(i) % n]
+        values = self.index[int(i) % n].item()   # one tuple: ~10x cheaper than field-by-field
+        return SampleRow(values[0], values[1], values[2], values[3], tuple(values[p] for p in _SIZE_POS))
+
+    def _key(self, row: SampleRow) -> str:
+        return sample_key(self._episode_ids[row.episode], row.frame)
 
     def key(self, i: int) -> str:
-        row = self._row(i)
-        return sample_key(self.episodes[int(row["episode"])]["episode_id"], int(row["frame"]))
+        return self._key(self.row(i))
 
     def episode_position(self, episode: str | int) -> int:
         if isinstance(episode, (int, np.integer)):
@@ -143,57 +264,63 @@ class DatasetReader:
             self._handles.move_to_end(shard)
         return handle
 
-    def _members_from_span(self, row, span: bytes, key: str, shard: int) -> dict[str, bytes]:
-        suffixes = [s for s, f in SIZE_FIELDS.items() if row[f] > 0]
-        sizes = [int(row[SIZE_FIELDS[s]]) for s in suffixes]
-        base = int(row["offset"])
-        out = {}
-        for suffix, size, data_off in zip(suffixes, sizes, member_offsets(base, sizes)):
-            rel = data_off - base
-            header = tarfile.TarInfo.frombuf(span[rel - BLOCK:rel], "utf-8", "surrogateescape")
-            expected = f"{key}.{suffix}"
-            if header.name != expected or header.size != size:
-                raise ValueError(f"{self._shard_path(shard)}: at offset {data_off - BLOCK} expected member "
-                                 f"{expected} ({size} B), found {header.name} ({header.size} B): index and shard disagree")
-            out[suffix] = span[rel:rel + size]
-        return out
-
-    @staticmethod
-    def _span_size(row) -> int:
-        sizes = [int(row[f]) for f in SIZE_FIELDS.values() if row[f] > 0]
-        last = member_offsets(0, sizes)[-1]
-        return last + sizes[-1]
-
-    def sample(self, i: int) -> dict[str, bytes]:
-        """Raw member bytes of sample `i`, keyed by suffix ("json", "rgb.jpg", ...)."""
-        row = self._row(i)
-        shard = int(row["shard"])
-        key = sample_key(self.episodes[int(row["episode"])]["episode_id"], int(row["frame"]))
-        size = self._span_size(row)
-        f = self._handle(shard)
-        f.seek(int(row["offset"]))
+    def _read_members(self, f, row: SampleRow, key: str, wanted=None) -> dict[str, bytes]:
+        """One seek + one read of the sample's span, then the members sliced out of it."""
+        layout, size = member_layout(row.sizes, wanted)
+        if not layout:
+            return {}
+        f.seek(row.offset)
         span = f.read(size)
         if len(span) != size:
-            raise ValueError(f"{self._shard_path(shard)}: truncated at sample {key} "
-                             f"(wanted {size} B at {int(row['offset'])}, got {len(span)})")
-        return self._members_from_span(row, span, key, shard)
+            raise ValueError(f"{self._shard_path(row.shard)}: truncated at sample {key} "
+                             f"(wanted {size} B at {row.offset}, got {len(span)})")
+        out = {}
+        for suffix, rel, member_size in layout:
+            header = span[rel:rel + BLOCK]
+            expected = f"{key}.{suffix}"
+            if not header_matches(header, expected.encode("utf-8"), member_size):
+                raise ValueError(f"{self._shard_path(row.shard)}: at offset {row.offset + rel} expected member "
+                                 f"{expected} ({member_size} B), found {_describe_header(header)}: "
+                                 f"index and shard disagree")
+            out[suffix] = span[rel + BLOCK:rel + BLOCK + member_size]
+        return out
+
+    def sample(self, i: int, suffixes=None) -> dict[str, bytes]:
+        """Raw member bytes of sample `i`, keyed by suffix ("json", "rgb.jpg", ...).
+
+        `suffixes` limits the result to those members (absent ones are skipped);
+        the read then stops after the last one wanted.
+        """
+        return self.read_sample(i, suffixes)[2]
+
+    def read_sample(self, i: int, suffixes=None) -> tuple[SampleRow, str, dict[str, bytes]]:
+        """(index row, key, members) of sample `i`: one index lookup for callers needing all three."""
+        row = self.row(i)
+        key = self._key(row)
+        return row, key, self._read_members(self._handle(row.shard), row, key, suffixes)
 
     def decode(self, members: dict[str, bytes], where: str = "sample") -> dict:
-        """Decode raw members: rgb uint8 (224,224,3), tactile/bend per hand, meta json."""
-        out = {"meta": json.loads(members["json"]), "tactile": {}, "bend": {}}
+        """Decode raw members: rgb uint8 (224,224,3), tactile/bend per hand, meta json.
+
+        "meta" is present only when the json member is (it always is in sample(i)).
+        """
+        out = {"tactile": {}, "bend": {}}
+        if "json" in members:
+            out["meta"] = json.loads(members["json"])
         if "rgb.jpg" in members:
             out["rgb"] = decode_rgb(members["rgb.jpg"], where=f"{where}.rgb.jpg")
         for hand in HANDS:
             if f"tactile_{hand}.exr" in members:
-                out["tactile"][hand] = decode_tactile(members[f"tactile_{hand}.exr"],
-                                                      where=f"{where}.tactile_{hand}.exr")
+                out["tactile"][hand] = decode_tactile_member(members[f"tactile_{hand}.exr"],
+                                                             f"{where}.tactile_{hand}.exr")
             if f"bend_{hand}.npy" in members:
-                out["bend"][hand] = np.load(io.BytesIO(members[f"bend_{hand}.npy"]),
-                                            allow_pickle=False).astype(np.float32)
+                out["bend"][hand] = decode_npy(members[f"bend_{hand}.npy"],
+                                               where=f"{where}.bend_{hand}.npy").astype(np.float32, copy=False)
         return out
 
-    def decoded(self, i: int) -> dict:
-        return self.decode(self.sample(i), where=f"{self.root}: {self.key(i)}")
+    def decoded(self, i: int, suffixes=None) -> dict:
+        _, key, members = self.read_sample(i, suffixes)
+        return self.decode(members, where=f"{self.root}: {key}")
 
     def window(self, episode: str | int, frame: int, k: int) -> list[dict]:
         """Decoded frames T-k..T (k+1 frames) of one episode; never crosses its start."""
@@ -206,26 +333,27 @@ class DatasetReader:
                              f"of episode {eid!r} (frame 0); need frame >= {k}")
         return [self.decoded(i) for i in range(end - k, end + 1)]
 
-    def iter_samples(self, shards: list[int] | None = None, decode: bool = False) -> Iterator[tuple[int, dict]]:
-        """Stream (global index, members) shard by shard, each shard read front to back."""
+    def iter_samples(self, shards: list[int] | None = None, decode: bool = False,
+                     suffixes=None) -> Iterator[tuple[int, dict]]:
+        """Stream (global index, members) shard by shard, each shard read front to back.
+
+        `suffixes` limits which members are returned (and decoded), as in sample().
+        """
         rows = self.index
         for shard in (range(len(self._shard_names)) if shards is None else shards):
             entry = self.manifest["shards"][shard]
             first, count = int(entry["first_sample"]), int(entry["samples"])
             with storage.open_binary(self._shard_path(shard)) as f:
                 for i in range(first, first + count):
-                    row = rows[i]
-                    if int(row["shard"]) != shard:
-                        raise ValueError(f"{self.root}: index row {i} names shard {int(row['shard'])}, "
+                    values = rows[i].item()
+                    row = SampleRow(values[0], values[1], values[2], values[3],
+                                    tuple(values[p] for p in _SIZE_POS))
+                    if row.shard != shard:
+                        raise ValueError(f"{self.root}: index row {i} names shard {row.shard}, "
                                          f"manifest puts it in {shard}")
-                    key = sample_key(self.episodes[int(row["episode"])]["episode_id"], int(row["frame"]))
-                    size = self._span_size(row)
-                    f.seek(int(row["offset"]))
-                    span = f.read(size)
-                    if len(span) != size:
-                        raise ValueError(f"{self._shard_path(shard)}: truncated at sample {key}")
-                    members = self._members_from_span(row, span, key, shard)
-                    yield i, (self.decode(members, where=key) if decode else members)
+                    key = self._key(row)
+                    members = self._read_members(f, row, key, suffixes)
+                    yield i, (self.decode(members, where=f"{self.root}: {key}") if decode else members)
 
     # -- layouts / maps ----------------------------------------------------
     def _png(self, relpath: str) -> np.ndarray:

@@ -21,7 +21,7 @@ def is_url(location: str | os.PathLike) -> bool:
 
 def _local(location: str | os.PathLike) -> str:
     text = os.fspath(location)
-    return text[len("file://"):] if text.startswith("file://") else text
+    return text.removeprefix("file://")
 
 
 def join(root: str | os.PathLike, *parts: str) -> str:

@@ -6,8 +6,12 @@ import numpy as np
 import pytest
 
 from htdata.reader import DatasetReader
-from tests.factories import (default_canonical, synthetic_members, synthetic_tactile,
-                             write_synthetic_dataset)
+from tests.factories import (
+    default_canonical,
+    synthetic_members,
+    synthetic_tactile,
+    write_synthetic_dataset,
+)
 
 EPISODES = [
     {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": ("right",), "num_frames": 5,
@@ -194,3 +198,172 @@ def test_storage_helpers_local_and_memory(dataset):
     assert storage.listdir("memory://st/a") == ["x.bin"]
     assert not storage.exists("memory://st/a/y.bin")
     fs.rm("/st", recursive=True)
+
+
+# -- hot-path helpers (cheap header check, fast .npy, partial reads) -----------------------
+
+def _copy(dataset, tmp_path):
+    import shutil
+
+    copy = tmp_path / "copy"
+    shutil.copytree(dataset, copy)
+    return copy
+
+
+def test_row_matches_index_fields(dataset):
+    from htdata.manifest import SIZE_FIELDS
+
+    r = DatasetReader(dataset)
+    for i in (0, 5, 9, -1):
+        row, raw = r.row(i), r.index[i % len(r)]
+        assert (row.shard, row.offset, row.episode, row.frame) == (
+            int(raw["shard"]), int(raw["offset"]), int(raw["episode"]), int(raw["frame"]))
+        assert row.sizes == tuple(int(raw[f]) for f in SIZE_FIELDS.values())
+        assert all(type(v) is int for v in (row.shard, row.offset, *row.sizes))
+    with pytest.raises(IndexError, match="out of range"):
+        r.row(-11)
+
+
+def test_member_layout_offsets_and_early_stop():
+    from htdata.reader import member_layout
+
+    sizes = (10, 600, 0, 512, 3, 0)   # json, rgb, (no left), right, bend_left, (no bend_right)
+    layout, end = member_layout(sizes)
+    assert layout == [("json", 0, 10), ("rgb.jpg", 1024, 600), ("tactile_right.exr", 2560, 512),
+                      ("bend_left.npy", 3584, 3)]
+    assert end == 3584 + 512 + 3
+    layout, end = member_layout(sizes, ("rgb.jpg", "tactile_left.exr"))
+    assert layout == [("rgb.jpg", 1024, 600)] and end == 1024 + 512 + 600
+    assert member_layout((0,) * 6) == ([], 0)
+
+
+def test_header_check_fast_path_fallback_and_mismatch():
+    import tarfile
+
+    from htdata.reader import header_matches
+    from htdata.shardio import member_header
+
+    name = "ep_a__000001.json"
+    ours = member_header(name, 1234)
+    assert header_matches(ours, name.encode(), 1234)
+    assert not header_matches(ours, name.encode(), 1235)
+    assert not header_matches(ours, b"ep_a__000001.jso", 1234)       # prefix of the stored name
+    assert not header_matches(ours, (name + "n").encode(), 1234)     # stored name is a prefix
+    # another valid encoding of the same size (space-terminated, as some tar writers do):
+    # the byte comparison fails, tarfile's parser decides
+    other = bytearray(ours)
+    other[124:136] = b"%011o " % 1234
+    other[148:156] = b"        "
+    other[148:156] = b"%06o\0 " % tarfile.calc_chksums(bytes(other))[0]
+    assert other[124:136] != ours[124:136] and tarfile.TarInfo.frombuf(bytes(other), "utf-8", "strict").size == 1234
+    assert header_matches(bytes(other), name.encode(), 1234)
+    assert not header_matches(bytes(other), name.encode(), 1233)
+    assert not header_matches(b"\xff" * 512, name.encode(), 1234)    # garbage: no exception
+    # a 100-byte name fills the field with no NUL terminator
+    long_name = "e" * 95 + ".json"
+    assert header_matches(member_header(long_name, 7), long_name.encode(), 7)
+
+
+@pytest.mark.parametrize("arr", [
+    np.arange(4, dtype=np.float32), np.float16([1.5, -2.0]), np.zeros((0,), np.float32),
+    np.array(3.25), np.arange(6, dtype=np.int16).reshape(2, 3),
+    np.asfortranarray(np.arange(6, dtype=np.float64).reshape(2, 3)),
+])
+def test_decode_npy_matches_np_load_on_miss_and_hit(arr):
+    import io
+
+    from htdata.reader import decode_npy
+
+    buf = io.BytesIO()
+    np.save(buf, arr)
+    data = buf.getvalue()
+    for _ in range(2):   # first call parses the header, second uses the cached parse
+        out = decode_npy(data, "x")
+        assert out.dtype == arr.dtype and out.shape == arr.shape and np.array_equal(out, arr)
+        assert out.flags.writeable
+    buf = io.BytesIO()
+    np.lib.format.write_array(buf, arr, version=(2, 0))
+    assert np.array_equal(decode_npy(buf.getvalue(), "x"), arr)
+
+
+def test_decode_npy_errors_name_the_member():
+    import io
+
+    from htdata.reader import decode_npy
+
+    buf = io.BytesIO()
+    np.save(buf, np.arange(5, dtype=np.float32))
+    data = buf.getvalue()
+    decode_npy(data, "warm")   # header now cached: the cached path must also check the length
+    with pytest.raises(ValueError, match="k__000001.bend_left.npy.*data bytes"):
+        decode_npy(data[:-4], "k__000001.bend_left.npy")
+    with pytest.raises(ValueError, match="k__000002.bend_left.npy.*data bytes"):
+        decode_npy(data + b"\0" * 4, "k__000002.bend_left.npy")
+    with pytest.raises(ValueError, match="k__3: not an .npy"):
+        decode_npy(b"{json}", "k__3")
+    other = io.BytesIO()
+    np.save(other, np.arange(7, dtype=np.int64))
+    with pytest.raises(ValueError, match="k__4: unreadable"):
+        decode_npy(other.getvalue()[:-8], "k__4")   # unseen header: np.load reports it
+
+
+def test_bend_decoding_matches_np_load(dataset):
+    import io
+
+    r = DatasetReader(dataset)
+    for i in range(len(r)):
+        members = r.sample(i)
+        d = r.decode(members)
+        for hand in ("left", "right"):
+            if f"bend_{hand}.npy" in members:
+                want = np.load(io.BytesIO(members[f"bend_{hand}.npy"])).astype(np.float32)
+                assert np.array_equal(d["bend"][hand], want)
+
+
+def test_partial_reads_are_byte_exact_subsets(dataset):
+    r = DatasetReader(dataset)
+    wanted = ("rgb.jpg", "tactile_left.exr")
+    for i in range(len(r)):
+        full = r.sample(i)
+        part = r.sample(i, suffixes=wanted)
+        assert part == {k: v for k, v in full.items() if k in wanted}
+        row, key, members = r.read_sample(i, ("json",))
+        assert key == r.key(i) and members == {"json": full["json"]} and row == r.row(i)
+    streamed = dict(r.iter_samples(suffixes=("json",)))
+    assert streamed == {i: {"json": r.sample(i)["json"]} for i in range(len(r))}
+    d = r.decoded(0, suffixes=("rgb.jpg",))
+    assert "meta" not in d and d["rgb"].shape == (224, 224, 3) and d["tactile"] == {}
+
+
+def test_truncated_shard_names_the_sample_but_early_members_still_read(dataset, tmp_path):
+    copy = _copy(dataset, tmp_path)
+    r = DatasetReader(copy)
+    last = len(r) - 1
+    row, key = r.row(last), r.key(last)
+    shard = copy / "shards" / r.manifest["shards"][row.shard]["name"]
+    data = shard.read_bytes()
+    cut = row.offset + 512 + row.sizes[0] + 100   # mid-way through the rgb member
+    shard.write_bytes(data[:cut])
+    r = DatasetReader(copy)
+    assert r.sample(last, suffixes=("json",)) == DatasetReader(dataset).sample(last, suffixes=("json",))
+    with pytest.raises(ValueError, match=f"truncated at sample {key}"):
+        r.sample(last)
+
+
+def test_corrupt_size_field_and_undecodable_member_name_the_sample(dataset, tmp_path):
+    copy = _copy(dataset, tmp_path)
+    r = DatasetReader(copy)
+    i = r.locate("ep_b", 1)
+    row, key = r.row(i), r.key(i)
+    shard = copy / "shards" / r.manifest["shards"][row.shard]["name"]
+    data = bytearray(shard.read_bytes())
+    json_header = row.offset
+    data[json_header + 124:json_header + 136] = b"%011o\0" % (row.sizes[0] + 1)   # size field lies
+    rgb_data = row.offset + 512 + (row.sizes[0] + 511) // 512 * 512 + 512
+    data[rgb_data:rgb_data + row.sizes[1]] = bytes(row.sizes[1])                 # JPEG zeroed
+    shard.write_bytes(bytes(data))
+    r = DatasetReader(copy)
+    with pytest.raises(ValueError, match=f"expected member {key}.json .*index and shard disagree"):
+        r.sample(i)
+    with pytest.raises(ValueError, match=f"{key}.rgb.jpg: not a decodable JPEG"):
+        r.decoded(i, suffixes=("rgb.jpg",))

@@ -5,9 +5,19 @@ import pytest
 import torch
 from torch.utils.data import DataLoader
 
-from htdata.torchdata import (TactileFrameDataset, TactileStream, TactileWindowDataset,
-                              shards_for_consumer, shuffled_indices)
-from tests.factories import default_canonical, synthetic_rgb, synthetic_tactile, write_synthetic_dataset
+from htdata.torchdata import (
+    TactileFrameDataset,
+    TactileStream,
+    TactileWindowDataset,
+    shards_for_consumer,
+    shuffled_indices,
+)
+from tests.factories import (
+    default_canonical,
+    synthetic_rgb,
+    synthetic_tactile,
+    write_synthetic_dataset,
+)
 
 EPISODES = [
     {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": ("right",), "num_frames": 5,
@@ -152,3 +162,114 @@ def test_stream_splits_shards_across_ddp_ranks(dataset, monkeypatch):
         monkeypatch.setattr(td, "_dist_rank_world", lambda rank=rank: (rank, 2))
         items += [(int(x["index"]), int(x["hand"])) for x in stream]
     assert sorted(items) == sorted((int(x["index"]), int(x["hand"])) for x in TactileFrameDataset(dataset))
+
+
+# -- fast item path: same tensors as decoding the sample through the reader -----------------
+
+def _reference_item(reader, index, hand):
+    """What an item must hold, built the slow obvious way from DatasetReader.decoded."""
+    d = reader.decoded(index)
+    return d["tactile"][hand][None], np.ascontiguousarray(d["rgb"].transpose(2, 0, 1))
+
+
+def test_frame_items_equal_reader_decode(dataset):
+    ds = TactileFrameDataset(dataset)
+    floats = TactileFrameDataset(dataset, rgb_float=True)
+    for i in range(len(ds)):
+        item, fitem = ds[i], floats[i]
+        hand = ("left", "right")[int(item["hand"])]
+        tactile, rgb = _reference_item(ds.reader, int(item["index"]), hand)
+        assert np.array_equal(item["tactile"].numpy(), tactile)
+        assert np.array_equal(item["rgb"].numpy(), rgb) and item["rgb"].is_contiguous()
+        assert np.array_equal(fitem["rgb"].numpy(), rgb.astype(np.float32) / np.float32(255.0))
+        assert item["episode"].dtype == torch.long and item["episode"].shape == ()
+
+
+def test_window_items_equal_stacked_frames(dataset):
+    ds = TactileWindowDataset(dataset, window=2, rgb_float=True)
+    frames = TactileFrameDataset(dataset, rgb_float=True)
+    by_key = {(int(f["index"]), int(f["hand"])): f for f in frames}
+    assert len(ds) == 4 + 2 * 3
+    for i in range(len(ds)):
+        item = ds[i]
+        hand = int(item["hand"])
+        parts = [by_key[(int(j), hand)] for j in item["index"]]
+        assert torch.equal(item["tactile"], torch.stack([p["tactile"] for p in parts]))
+        assert torch.equal(item["rgb"], torch.stack([p["rgb"] for p in parts]))
+        assert item["frame"].tolist() == [int(p["frame"]) for p in parts]
+        assert item["index"].dtype == torch.long and item["frame"].dtype == torch.long
+        assert torch.equal(item["coverage"], parts[-1]["coverage"])
+
+
+def test_stream_items_equal_frame_items_and_do_not_alias(dataset):
+    frames = {(int(f["index"]), int(f["hand"])): f for f in TactileFrameDataset(dataset)}
+    stream = list(TactileStream(dataset))
+    assert [(int(s["index"]), int(s["hand"])) for s in stream] == list(frames)
+    for s in stream:
+        f = frames[(int(s["index"]), int(s["hand"]))]
+        for name in ("tactile", "rgb", "coverage", "regions", "task", "scene", "episode", "frame"):
+            assert torch.equal(s[name], f[name]), name
+    # ep_b frame 0 has both hands: the JPEG is decoded once but each item owns its rgb
+    left, right = (s for s in stream if int(s["index"]) == 5)
+    before = right["rgb"].clone()
+    left["rgb"].zero_()
+    left["tactile"].fill_(7.0)
+    assert torch.equal(right["rgb"], before) and float(right["tactile"].max()) <= 1.0
+
+
+def test_put_rgb_matches_transpose():
+    from htdata.torchdata import _ItemBuilder
+
+    rgb = np.random.default_rng(0).integers(0, 256, (224, 224, 3), dtype=np.uint8)
+    builder = _ItemBuilder.__new__(_ItemBuilder)
+    out = np.empty((3, 224, 224), np.uint8)
+    builder.put_rgb(out, rgb)
+    assert np.array_equal(out, rgb.transpose(2, 0, 1))
+    fout = np.empty((3, 224, 224), np.float32)
+    builder.put_rgb(fout, rgb)
+    assert np.array_equal(fout, rgb.transpose(2, 0, 1).astype(np.float32) / np.float32(255.0))
+    assert fout.max() <= 1.0 and fout.min() >= 0.0
+
+
+def test_corrupt_tactile_member_error_names_the_sample(dataset, tmp_path):
+    import shutil
+
+    from htdata.reader import DatasetReader, member_layout
+
+    copy = tmp_path / "copy"
+    shutil.copytree(dataset, copy)
+    reader = DatasetReader(copy)
+    index = reader.locate("ep_a", 2)
+    row, key = reader.row(index), reader.key(index)
+    (_, rel, size), = member_layout(row.sizes, ("tactile_right.exr",))[0]
+    shard = copy / "shards" / reader.manifest["shards"][row.shard]["name"]
+    data = bytearray(shard.read_bytes())
+    data[row.offset + rel + 512:row.offset + rel + 512 + size] = bytes(size)
+    shard.write_bytes(bytes(data))
+    ds = TactileFrameDataset(copy, hands=("right",))
+    with pytest.raises(ValueError, match=f"{key}.tactile_right.exr: undecodable EXR"):
+        ds[2]
+    windows = TactileWindowDataset(copy, window=3, hands=("right",))
+    with pytest.raises(ValueError, match=f"{key}.tactile_right.exr"):
+        windows[0]
+    assert int(ds[1]["frame"]) == 1   # other samples still read
+    with pytest.raises(ValueError, match=f"{key}.tactile_right.exr: undecodable EXR"):
+        DatasetReader(copy).decoded(index)
+
+
+def test_loader_bench_rows_decode_what_each_access_decodes(dataset):
+    from htdata.benchmarks.loader import loader_rows
+
+    out = loader_rows(dataset, n_random=6, n_windows=3, seed=1, passes=1)
+    rows = {r["access"]: r for r in out["rows"]}
+    assert len(rows) == 7 and out["samples_in_dataset"] == 10 and out["bound"]["samples"] == 6
+    assert rows["reader random decoded(i)"]["samples_decoded"] == 6
+    assert rows["reader window k=2 (3 frames)"]["samples_decoded"] == 3 * rows["reader window k=2 (3 frames)"]["items"]
+    assert rows["reader stream iter_samples"]["samples_decoded"] == 10
+    assert rows["TactileWindowDataset item (3 frames)"]["samples_decoded"] == 9
+    stream = rows["TactileStream (one worker)"]
+    assert stream["items"] == len(TactileFrameDataset(dataset)) and stream["samples_decoded"] == 10
+    for r in rows.values():
+        assert r["seconds"] > 0 and r["bound_seconds"] > 0
+        assert r["ratio_to_bound"] == pytest.approx(r["bound_seconds"] / r["seconds"])
+        assert r["samples_per_s"] == pytest.approx(r["samples_decoded"] / r["seconds"])
