@@ -72,12 +72,31 @@ def check_tactile_values(tactile_map: np.ndarray, where: str) -> np.ndarray:
     return arr
 
 
+def to_half(values: np.ndarray) -> np.ndarray:
+    """float -> contiguous float16, bit-identical to numpy's `astype(np.float16)`.
+
+    numpy converts element by element (~0.4 ms per 224x224 map here, a third
+    of the EXR encode); cv2 uses the CPU's F16C instructions (~0.05 ms). Both
+    round to nearest even, keep subnormals, -0.0, NaN, and overflow to +-Inf
+    (checked exhaustively over [0,1] and on random float32 bit patterns;
+    tests/test_codec_half.py keeps the edge cases). cv2 takes 2-D float32
+    only; anything else goes through numpy.
+    """
+    arr = np.asarray(values)
+    if arr.dtype == np.float32 and arr.ndim == 2 and arr.size:
+        return cv2.multiply(np.ascontiguousarray(arr), 1.0, dtype=cv2.CV_16F)
+    return np.ascontiguousarray(arr, dtype=np.float16)
+
+
 def encode_exr(tactile_map: np.ndarray, compression: str = "zip", pixel_type=np.float16) -> bytes:
     """Raw EXR writer (no value rule): one channel "Y" of `pixel_type`."""
     if compression not in _EXR_COMPRESSIONS:
         raise ValueError(f"unknown EXR compression {compression!r}; known: {sorted(_EXR_COMPRESSIONS)}")
     header = {"compression": _EXR_COMPRESSIONS[compression], "type": OpenEXR.scanlineimage}
-    pixels = np.ascontiguousarray(tactile_map, dtype=pixel_type)
+    if np.dtype(pixel_type) == np.float16:
+        pixels = to_half(tactile_map)
+    else:
+        pixels = np.ascontiguousarray(tactile_map, dtype=pixel_type)
     buf = io.BytesIO()
     OpenEXR.File(header, {EXR_CHANNEL: pixels}).write(buf)
     return buf.getvalue()

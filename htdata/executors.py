@@ -11,6 +11,13 @@ Retries are bounded: an exception raised by the function is retried up to
 `max_retries` times, then re-raised. A worker process that dies (killed,
 os._exit) breaks a local pool: the run stops and a re-run resumes.
 
+Threads: a worker runs `limit_threads(n)` before its first unit, with n =
+usable cores // workers (at least 1): with 2 workers on 2 cores each uses
+one thread in OpenCV (resize, JPEG), torch (if loaded) and OpenMP/BLAS,
+instead of every worker starting a pool as wide as the machine. Ray tasks
+(1 CPU each) use one thread. Video decoders are single-threaded anyway
+(adapters/base.py).
+
 Progress: a unit function may call `report_progress(event)` (a small dict,
 e.g. one per finished episode). `map_units(fn, tasks, on_progress=cb)`
 delivers those events to `cb` in the driver: inline directly, from a
@@ -23,6 +30,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import sys
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any, Callable, Iterable, Iterator
 
@@ -45,10 +53,53 @@ def report_progress(event: dict) -> None:
         _progress_sink(event)
 
 
-def _install_queue_sink(queue) -> None:
-    """Process-pool initializer: events of this worker go to the driver's queue."""
+def usable_cores() -> int:
+    """Cores this process may run on (affinity mask when the OS exposes it)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def threads_per_worker(workers: int, cores: int | None = None) -> int:
+    """Native threads each of `workers` processes may use so that together they fill the cores once."""
+    cores = usable_cores() if cores is None else max(1, int(cores))
+    return max(1, cores // max(1, int(workers)))
+
+
+def limit_threads(threads: int) -> None:
+    """Cap the native thread pools of this process at `threads`.
+
+    OpenCV and an already imported torch are set directly; the OpenMP/BLAS
+    variables only reach libraries loaded after this call, and a value the
+    user exported is kept.
+    """
+    n = max(1, int(threads))
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, str(n))
+    try:
+        import cv2
+    except ImportError:  # pragma: no cover - cv2 is a dependency of htdata
+        cv2 = None
+    if cv2 is not None:
+        cv2.setNumThreads(n)
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        torch.set_num_threads(n)
+
+
+def _init_worker(queue, threads: int) -> None:
+    """Process-pool initializer: thread caps, and events of this worker go to the driver's queue."""
     global _progress_sink
-    _progress_sink = queue.put
+    limit_threads(threads)
+    if queue is not None:
+        _progress_sink = queue.put
+
+
+def _run_ray_unit(fn: Callable[[Any], Any], threads: int, task: Any) -> Any:
+    """Body of one Ray task: a Ray worker is reused across tasks, so set the caps every time (cheap)."""
+    limit_threads(threads)
+    return fn(task)
 
 
 def _drain(queue, on_progress: ProgressCallback) -> None:
@@ -88,9 +139,11 @@ class InlineExecutor:
 class ProcessExecutor:
     """concurrent.futures process pool; keeps at most `2 * workers` tasks in flight."""
 
-    def __init__(self, workers: int | None = None, max_retries: int = 1, start_method: str = "spawn"):
-        self.workers = max(1, int(workers or os.cpu_count() or 1))
+    def __init__(self, workers: int | None = None, max_retries: int = 1, start_method: str = "spawn",
+                 threads: int | None = None):
+        self.workers = max(1, int(workers or usable_cores()))
         self.max_retries = max(0, int(max_retries))
+        self.threads = threads_per_worker(self.workers) if threads is None else max(1, int(threads))
         # spawn: the parent may hold threads (tqdm monitor, BLAS) that fork would copy mid-lock.
         self.start_method = start_method
 
@@ -101,7 +154,7 @@ class ProcessExecutor:
         attempts: dict[int, int] = {}
         ctx = mp.get_context(self.start_method)
         queue = ctx.Queue() if on_progress is not None else None
-        pool_kwargs = {"initializer": _install_queue_sink, "initargs": (queue,)} if queue is not None else {}
+        pool_kwargs = {"initializer": _init_worker, "initargs": (queue, self.threads)}
         # With a listener, wake up a few times a second to forward events between unit results.
         timeout = 0.2 if queue is not None else None
         try:
@@ -178,8 +231,8 @@ class RayExecutor:
         """`on_progress` is accepted for a uniform interface; Ray tasks send no events."""
         started = self._init()
         try:
-            remote = self.ray.remote(max_retries=self.max_retries, retry_exceptions=True)(fn)
-            refs = {remote.remote(task): task for task in tasks}
+            remote = self.ray.remote(max_retries=self.max_retries, retry_exceptions=True)(_run_ray_unit)
+            refs = {remote.remote(fn, 1, task): task for task in tasks}  # a Ray task holds 1 CPU
             while refs:
                 ready, _ = self.ray.wait(list(refs), num_returns=1)
                 for ref in ready:

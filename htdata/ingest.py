@@ -7,8 +7,12 @@
 
 Plan: every pipeline's adapter discovers its episodes (sorted by id); in
 pipeline order, episodes are packed into work units of >= samples_per_shard
-estimated frames (a long episode is a unit of its own and spans several
-shards). Unit numbers are therefore fixed by the sorted episode lists.
+/ UNITS_PER_SHARD estimated frames (a long episode is a unit of its own and
+spans several shards). Unit numbers are therefore fixed by the sorted
+episode lists and the pipeline config, never by --workers, so a run resumed
+with another worker count finds the same units. Small units (a quarter
+shard: 64 frames by default) give a pool enough units to balance on small
+corpora; units run largest first.
 
 A unit (`run_unit`, in a worker process or a Ray task) opens each episode,
 cleans and pairs timestamps (sync.py), reads tactile rows in chunks,
@@ -163,13 +167,22 @@ class UnitTask:
         return f"unit {self.unit:06d} ({len(self.episodes)} episodes)"
 
 
-def pack_units(episode_frames: list[int], samples_per_shard: int) -> list[list[int]]:
-    """Group consecutive episodes (by position) into units of >= samples_per_shard est. frames."""
+# Units per shard's worth of frames: the unit target is samples_per_shard / 4.
+UNITS_PER_SHARD = 4
+
+
+def unit_target_frames(samples_per_shard: int) -> int:
+    """Estimated frames a work unit is packed up to (from the pipeline config only)."""
+    return max(1, -(-int(samples_per_shard) // UNITS_PER_SHARD))
+
+
+def pack_units(episode_frames: list[int], target_frames: int) -> list[list[int]]:
+    """Group consecutive episodes (by position) into units of >= target_frames est. frames."""
     units, current, total = [], [], 0
     for i, n in enumerate(episode_frames):
         current.append(i)
         total += max(int(n), 0)
-        if total >= samples_per_shard:
+        if total >= target_frames:
             units.append(current)
             current, total = [], 0
     if current:
@@ -186,7 +199,8 @@ def plan_units(sources: list[Source], refs_per_source: list[list], out: Path) ->
             if r.episode_id in seen:
                 raise ValueError(f"episode id {r.episode_id!r} found twice: {seen[r.episode_id]} and {r.source_ref}")
             seen[r.episode_id] = r.source_ref
-        for group in pack_units([r.est_frames for r in refs], src.pipeline.shards.samples_per_shard):
+        target = unit_target_frames(src.pipeline.shards.samples_per_shard)
+        for group in pack_units([r.est_frames for r in refs], target):
             tasks.append(UnitTask(unit=len(tasks), out=str(out), pipeline=src.pipeline.to_dict(),
                                   pipeline_path=src.pipeline.path, root=str(src.root),
                                   episodes=[refs[i] for i in group]))
@@ -743,6 +757,8 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
             todo.append(t)
         else:
             records[t.unit] = rec
+    # Largest first: a long unit started last would leave the other workers idle at the end.
+    todo.sort(key=lambda t: -t.est_frames)
     n_eps = sum(len(t.episodes) for t in tasks)
     bar = EpisodeProgress(tasks, set(records), progress)
     t0 = time.perf_counter()

@@ -16,7 +16,7 @@ import h5py
 import numpy as np
 import pytest
 
-from htdata.ingest import pack_units, parse_sources
+from htdata.ingest import pack_units, parse_sources, unit_target_frames
 from htdata.resources import PIPELINES_DIR
 from htdata.sample.formats import (NativeHand, NativeRecording, OpenTouchClip, TouchAnythingEpisode,
                                    write_native_recording, write_opentouch_annotations,
@@ -133,6 +133,27 @@ def test_pack_units_is_greedy_in_order():
     assert pack_units([100], 8) == [[0]]          # a long episode is its own unit
     assert pack_units([], 8) == []
     assert pack_units([0, 0], 8) == [[0, 1]]
+
+
+def test_unit_target_comes_from_the_shard_size_only():
+    assert unit_target_frames(256) == 64
+    assert unit_target_frames(8) == 2
+    assert unit_target_frames(3) == 1 and unit_target_frames(1) == 1   # ceil, never 0
+    # 21 episodes of ~65 frames (the bench corpus): enough units for 2 workers (>= 8)
+    frames = [80, 54, 64, 79, 76, 83, 86, 56, 86, 58, 78, 52, 72, 48, 51, 49, 54, 63, 68, 61, 62]
+    assert len(pack_units(frames, unit_target_frames(256))) >= 8
+
+
+def test_resume_with_other_worker_count_keeps_every_unit(tmp_path):
+    raw = make_opentouch(tmp_path / "raw")
+    pipe = small_pipeline(tmp_path, "opentouch")
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", pipe, raw, out, workers=0) == 0
+    first = dataset_bytes(out)
+    assert ingest_cli("--pipeline", pipe, raw, out, workers=2) == 0
+    report = json.loads((out / "reports" / "ingest.json").read_text())
+    assert report["units_run"] == 0 and report["units_resumed"] == report["units"] == 3
+    assert dataset_bytes(out) == first
 
 
 def test_parse_sources_forms(tmp_path):
@@ -434,8 +455,8 @@ def test_changed_source_redoes_only_its_unit(tmp_path, clean_run):
         f.write("z_scene::demo_01,lift,,,,\n")
     assert ingest_cli("--pipeline", pipe, raw, out) == 0
     report = json.loads((out / "reports" / "ingest.json").read_text())
-    # units: [demo_003 (20)], [demo_01 (12)], [demo_02 (7) + z_scene demo_01 (9)]: only the last is redone
-    assert report["units"] == 3 and report["units_run"] == 1 and report["samples"] == 48
+    # 8 samples per shard -> units of >= 2 frames: one episode each; only the new episode's unit runs
+    assert report["units"] == 4 and report["units_run"] == 1 and report["samples"] == 48
 
 
 # --------------------------------------------------------------------------- progress + timing

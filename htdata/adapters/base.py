@@ -9,6 +9,7 @@ loading it, and H.264 timestamp probing / streaming decode.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import re
@@ -195,13 +196,34 @@ def fingerprint_files(root: Path, files: Iterable[Path]) -> str:
     return h.hexdigest()
 
 
-def check_tactile_shape(ref: EpisodeRef, hand: str, shape: tuple[int, ...], file: Path | str) -> None:
-    """Raise EpisodeError unless `shape` is (M, H, W) with (H, W) = the hand's layout grid."""
+@functools.lru_cache(maxsize=64)
+def _cached_layout_grid(path: str, mtime_ns: int, size: int) -> tuple[int, ...]:
     from htdata.layouts import load_layout
 
+    return tuple(load_layout(path).grid)
+
+
+def layout_grid(layout_id: str) -> tuple[int, ...]:
+    """Raw grid (H, W) of a layout id or file, parsed (and schema-checked) once per file version.
+
+    Opening an episode checks its grids against the layout; parsing and
+    validating the layout JSON each time was a visible per-episode cost.
+    """
+    from htdata.layouts import layout_path, load_layout
+
+    path = layout_path(layout_id)
+    try:
+        st = path.stat()
+    except OSError:
+        return tuple(load_layout(layout_id).grid)   # raises FileNotFoundError naming the layout
+    return _cached_layout_grid(str(path), st.st_mtime_ns, st.st_size)
+
+
+def check_tactile_shape(ref: EpisodeRef, hand: str, shape: tuple[int, ...], file: Path | str) -> None:
+    """Raise EpisodeError unless `shape` is (M, H, W) with (H, W) = the hand's layout grid."""
     layout_id = ref.layouts[hand]
     try:
-        grid = tuple(load_layout(layout_id).grid)
+        grid = layout_grid(layout_id)
     except (FileNotFoundError, ValueError, KeyError) as exc:
         raise EpisodeError(ref, None, f"{hand} hand layout {layout_id!r} cannot be loaded: {exc}", file=file) from exc
     if len(shape) != 3 or tuple(shape[1:]) != grid:
@@ -398,6 +420,19 @@ def _presentation_index(path: Path | str, pts: int | None, fallback: int) -> int
     return int(np.searchsorted(all_pts, pts)) if all_pts.size else fallback
 
 
+# Decoder threads per video stream. Ingest parallelism comes from worker
+# processes (one per core); FFmpeg's default (slice threads, count = cores)
+# made decode wall time 2-3x its CPU time on a loaded 2-core machine, and
+# H.264 decoding is bit-exact whatever the thread count.
+VIDEO_DECODE_THREADS = 1
+
+
+def configure_decoder_threads(stream, threads: int = VIDEO_DECODE_THREADS) -> None:
+    """Single-threaded (by default) slice decoding for `stream`; set before the first packet."""
+    stream.thread_type = "SLICE"
+    stream.codec_context.thread_count = int(threads)
+
+
 def iter_video_rgb(path: Path | str) -> Iterator[np.ndarray]:
     """Decode a video frame by frame as HxWx3 uint8 RGB (presentation order).
 
@@ -417,6 +452,7 @@ def iter_video_rgb(path: Path | str) -> Iterator[np.ndarray]:
         if not container.streams.video:
             raise VideoError(None, "video has zero frames (no video stream in the container)")
         stream = container.streams.video[0]
+        configure_decoder_threads(stream)
         packets = container.demux(stream)
         while True:
             try:

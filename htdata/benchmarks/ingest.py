@@ -7,7 +7,11 @@
   spool and shard writing cost on top of the work no ingest can avoid.
 - `peak_rss_rows`: a synthetic long native episode at several lengths, each
   ingested inline (`--workers 0`) in a fresh subprocess reporting its own
-  ru_maxrss, so peak memory vs episode length is exact, not sampled.
+  peak RSS, so peak memory vs episode length is exact, not sampled. The
+  peak is VmHWM of /proc/self/status: ru_maxrss is NOT the child's own
+  peak on Linux, it keeps the high-water mark of the process it was forked
+  from (the bench process, ~400-600 MiB after the ingest section) across
+  fork + exec, which is what the report used to show.
 """
 
 from __future__ import annotations
@@ -111,14 +115,30 @@ def write_long_native(folder: Path, n_frames: int, seed: int = 0) -> None:
 
 _RSS_CHILD = """
 import resource, sys
+from htdata.benchmarks.ingest import own_peak_rss_kb
 from htdata.cli import main
 rc = main(sys.argv[1:])
-print("MAXRSS_KB", resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, rc)
+print("MAXRSS_KB", own_peak_rss_kb(), rc)
 """
 
 
+def own_peak_rss_kb(status: str | None = None) -> int:
+    """Peak RSS (KiB) of this process image: VmHWM, which exec resets; ru_maxrss where /proc is missing."""
+    if status is None:
+        try:
+            status = Path("/proc/self/status").read_text()
+        except OSError:
+            import resource
+
+            return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+    for line in status.splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1])
+    raise ValueError("no VmHWM line in /proc/self/status")
+
+
 def peak_rss_ingest(src: Path, out: Path, pipeline: str = "native") -> dict:
-    """Inline ingest in a fresh interpreter; its own peak RSS (ru_maxrss, KiB on Linux)."""
+    """Inline ingest in a fresh interpreter; its own peak RSS (VmHWM, KiB)."""
     if out.exists():
         shutil.rmtree(out)
     args = ["ingest", "--quiet", "--workers", "0", "--pipeline", f"{pipeline}={src}", str(out)]

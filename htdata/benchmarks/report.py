@@ -104,7 +104,9 @@ def _ingest(g: dict) -> list[str]:
         lines += table(rows, cols)
     else:
         lines += ["Stage breakdown: the ingest report carried no `timing` section in this run.", ""]
-    lines += ["Bare bound per adapter (same frames: source decode + INTER_AREA resize + JPEG + EXR encode):", ""]
+    lines += ["Bare bound per adapter (same kept frames and hands: open streams + source decode + tactile read, "
+              "the pipeline's resize, JPEG + EXR encode at the pipeline's settings; no sync, normalise, "
+              "rasterise or write):", ""]
     lines += table([{"adapter": k, **v} for k, v in g["bound"].items()],
                    [("adapter", "adapter"), ("frames", "frames"), ("decode_s", "decode s"), ("resize_s", "resize s"),
                     ("jpeg_s", "jpeg s"), ("exr_s", "exr s"), ("frames_per_s", "frames/s")])

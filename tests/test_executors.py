@@ -1,0 +1,66 @@
+"""Thread caps of workers: each worker fills its share of the cores once, never more."""
+
+from __future__ import annotations
+
+import cv2
+import pytest
+
+from htdata import executors
+from htdata.executors import InlineExecutor, ProcessExecutor, limit_threads, threads_per_worker
+
+
+def test_threads_per_worker_splits_cores():
+    assert threads_per_worker(1, cores=2) == 2
+    assert threads_per_worker(2, cores=2) == 1
+    assert threads_per_worker(3, cores=2) == 1      # never 0
+    assert threads_per_worker(2, cores=8) == 4
+    assert threads_per_worker(0, cores=4) == 4      # 0 workers (inline) counts as one
+    assert executors.usable_cores() >= 1
+
+
+def test_limit_threads_sets_opencv_and_keeps_user_env(monkeypatch):
+    before = cv2.getNumThreads()
+    monkeypatch.setenv("OMP_NUM_THREADS", "7")
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    try:
+        limit_threads(1)
+        assert cv2.getNumThreads() == 1
+        import os
+        assert os.environ["OMP_NUM_THREADS"] == "7"          # the user's choice stays
+        assert os.environ["OPENBLAS_NUM_THREADS"] == "1"
+        limit_threads(0)                                     # clamped to 1
+        assert cv2.getNumThreads() == 1
+    finally:
+        cv2.setNumThreads(before)
+
+
+def _worker_threads(_task) -> tuple[int, str]:
+    import os
+
+    return cv2.getNumThreads(), os.environ.get("OPENBLAS_NUM_THREADS", "")
+
+
+def test_process_pool_workers_get_their_share(monkeypatch):
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    pool = ProcessExecutor(workers=2, threads=1)
+    results = [r for _, r in pool.map_units(_worker_threads, [0, 1])]
+    assert results == [(1, "1"), (1, "1")]
+    assert ProcessExecutor(workers=2).threads == threads_per_worker(2)
+
+
+def test_inline_executor_leaves_threads_alone():
+    before = cv2.getNumThreads()
+    assert [r for _, r in InlineExecutor().map_units(_worker_threads, [0])][0][0] == before
+
+
+def test_ray_task_body_caps_threads():
+    before = cv2.getNumThreads()
+    try:
+        assert executors._run_ray_unit(_worker_threads, 1, None)[0] == 1
+    finally:
+        cv2.setNumThreads(before)
+
+
+def test_bad_threads_argument():
+    with pytest.raises((TypeError, ValueError)):
+        ProcessExecutor(workers=1, threads="many")
