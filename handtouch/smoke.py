@@ -217,6 +217,13 @@ class PhaseTimer:
 def main(argv=None) -> int:
     args = parse_args(argv)
     torch.manual_seed(args.seed)
+    from handtouch.config import load_train_config
+
+    # Evaluation runs under the training thread budget too: with 2 threads next to any other
+    # busy process, preparing the SSIM reference went 21 s -> 92 s (threads waiting on each other).
+    threads = load_train_config(args.config, args.set).threads
+    if threads:
+        torch.set_num_threads(threads)
     timer = PhaseTimer()
     timer.run("data_sample", ensure_raw, args.raw, args.seed)
     timer.run("data_ingest", ensure_dataset, args.raw, args.dataset, args.workers)

@@ -261,12 +261,19 @@ def heldout_batch(dataset: Dataset, size: int, source: str = "held-out data") ->
 
 @torch.no_grad()
 def evaluate_heldout(model: HandTouch, batch: dict, device: torch.device) -> dict:
+    """Reconstruction / codebook numbers on the held-out batch (pooled RMSE over covered
+    pixels, next to the all-zeros predictor's on the same batch).
+
+    Runs on rank 0 only, so it must issue no collective: the model is put in eval mode,
+    where the VQ neither all-reduces usage nor restarts (and broadcasts) codes.
+    """
     model.eval()
     batch = _to_device(batch, device)
     cov = batch["coverage"]
     target = covered(batch["tactile"], cov)
     pred, _, _, stats = model.quantise_decode(model.encode(target), cov)
     out = {"recon_rmse": math.sqrt(float(masked_mse(pred, target, cov))),
+           "zeros_rmse": math.sqrt(float(masked_mse(torch.zeros_like(target), target, cov))),
            "codebook": {"perplexity": float(stats["perplexity"]), "batch_usage": float(stats["usage"]),
                         "active_fraction": float((model.vq.usage >= model.vq.dead_threshold).float().mean()),
                         "size": model.vq.codebook_size},
@@ -286,6 +293,9 @@ def _seed_everything(seed: int) -> None:
 def train(cfg: TrainConfig, data: TrainData | None = None) -> dict:
     """Run the configured stages; returns (and on rank 0 writes) OUT/metrics.json's content."""
     cfg.validate()
+    threads_before = torch.get_num_threads()
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
     env = init_distributed(cfg.device)
     try:
         cfg.check_codebook_load(env.world_size)
@@ -327,6 +337,7 @@ def train(cfg: TrainConfig, data: TrainData | None = None) -> dict:
         return metrics
     finally:
         shutdown(env)
+        torch.set_num_threads(threads_before)   # cfg.threads is this training run's budget only
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -3,6 +3,7 @@
 import json
 import os
 import socket
+import time
 
 import torch
 import torch.multiprocessing as mp
@@ -12,7 +13,9 @@ from handtouch.config import ModelConfig, train_config_from_dict
 from handtouch.distributed import init_distributed, unwrap, wrap
 from handtouch.model import HandTouch
 from handtouch.rgb_encoder import load_rgb_encoder
-from handtouch.train import TrainData, train
+from handtouch.train import TrainData, evaluate_heldout, heldout_batch, train
+
+JOIN_TIMEOUT_S = 240      # a deadlocked collective must fail the test, never hang the suite
 
 TINY = dict(encoder="vit", patch=32, dim=32, depth=1, heads=2, mlp_ratio=2.0, code_dim=8, codebook_size=16,
             vq_usage_decay=0.5, decoder_depth=1, decoder_channels=16, fusion_depth=1, temporal_depth=1,
@@ -71,6 +74,15 @@ def _worker(rank: int, world: int, port: int, out: str) -> None:
         restarts.append(float(losses["restarts"]))
     torch.save({"state": unwrap(ddp).state_dict(), "restarts": restarts}, os.path.join(out, f"rank{rank}.pt"))
 
+    # Rank 0 alone evaluates a model left in training mode while rank 1 goes straight to a
+    # barrier: any collective inside evaluation (VQ usage all_reduce, restart broadcast)
+    # would deadlock here, as it once did in a full-suite run.
+    model.train()
+    if rank == 0:
+        evaluate_heldout(model, heldout_batch(TinyFrames(4), 4), env.device)
+        assert not model.training
+    torch.distributed.barrier()
+
     cfg = train_config_from_dict({
         "data_root": "in-memory", "out_dir": os.path.join(out, "run"), "rgb_encoder": "random:0",
         "device": "cpu", "workers": 0, "batch_size": 2, "eval_batch_size": 2, "log_every": 2,
@@ -90,8 +102,22 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def _join_or_fail(ctx, timeout_s: float) -> None:
+    """Join spawned ranks; on timeout kill them and fail (a hung rank must not hang pytest)."""
+    deadline = time.monotonic() + timeout_s
+    while not ctx.join(timeout=max(0.1, min(5.0, deadline - time.monotonic()))):
+        if time.monotonic() >= deadline:
+            for p in ctx.processes:
+                if p.is_alive():
+                    p.kill()
+            for p in ctx.processes:
+                p.join(5)
+            raise AssertionError(f"DDP ranks did not finish within {timeout_s} s (deadlock?)")
+
+
 def test_two_process_ddp_ranks_stay_identical(tmp_path):
-    mp.spawn(_worker, args=(2, _free_port(), str(tmp_path)), nprocs=2, join=True)
+    ctx = mp.spawn(_worker, args=(2, _free_port(), str(tmp_path)), nprocs=2, join=False)
+    _join_or_fail(ctx, JOIN_TIMEOUT_S)     # a rank that raised re-raises here (ProcessRaisedException)
     r0 = torch.load(tmp_path / "rank0.pt", weights_only=True)
     r1 = torch.load(tmp_path / "rank1.pt", weights_only=True)
     assert r0["restarts"][0] == 16                      # the first step restarts every code ...

@@ -242,14 +242,40 @@ def test_prepared_parts_are_reused_with_identical_scores():
 def test_smoke_learning_checks_compare_against_references():
     from handtouch.smoke import learning_checks
 
-    def tracks(rmse, hit):
-        return {"test": {"reconstruction": {"full": {"rmse": rmse}},
-                         "retrieval": {"hit_at_1": hit, "chance_hit_at_1": 0.05}}}
+    good = {"hit_at_1": 0.3, "chance_hit_at_1": 0.05}
+    assert all(c["ok"] for c in learning_checks(0.02, 0.1, good, perplexity=10.0))
+    chance = {"hit_at_1": 0.05, "chance_hit_at_1": 0.05}
+    failed = [c["check"] for c in learning_checks(0.08, 0.1, chance, perplexity=2.0) if not c["ok"]]
+    assert len(failed) == 3                              # no better than zeros, chance retrieval, collapsed
+    assert not learning_checks(0.0701, 0.1, good, 10.0)[0]["ok"]     # just above 0.7 x zeros
+    unscored = {"hit_at_1": None, "chance_hit_at_1": 0.05}
+    assert not any(c["ok"] for c in learning_checks(None, 0.1, unscored, perplexity=float("nan")))
+    assert not learning_checks(0.0, None, good, 10.0)[0]["ok"]      # no reference -> failed, never passed
 
-    results = {"ht": tracks(0.02, 0.3), "zeros-ref": tracks(0.1, 0.05)}
-    assert all(c["ok"] for c in learning_checks(results, "ht", perplexity=10.0))
-    results["ht"] = tracks(0.08, 0.05)                   # no better than zeros, chance retrieval
-    failed = [c["check"] for c in learning_checks(results, "ht", perplexity=2.0) if not c["ok"]]
-    assert len(failed) == 3
-    results["ht"] = tracks(None, None)                   # unscored -> failed, never passed
-    assert not any(c["ok"] for c in learning_checks(results, "ht", perplexity=float("nan")))
+
+def test_smoke_checks_fail_for_an_untrained_model():
+    """The assertions are real: an untrained HandTouch does worse than predicting zeros."""
+    from handtouch.config import ModelConfig
+    from handtouch.model import HandTouch
+    from handtouch.rgb_encoder import load_rgb_encoder
+    from handtouch.smoke import RECON_RATIO, codebook_perplexity, learning_checks, reconstruction_rmse
+
+    torch.manual_seed(0)
+    model = HandTouch(ModelConfig(patch=32, dim=32, depth=1, heads=2, mlp_ratio=2.0, code_dim=8, codebook_size=16,
+                                  decoder_depth=1, decoder_channels=16, fusion_depth=1, temporal_depth=1,
+                                  predictor_depth=1), load_rgb_encoder("random:0"))
+    # sparse contact on a 224 canvas, like the sample data: zeros is a strong baseline
+    part = _part(episodes=2, frames=8)
+    for it in [*part.frames.items, *part.windows.items]:
+        t = it["tactile"]
+        it["tactile"] = torch.nn.functional.pad(t, (0, 224 - S, 0, 224 - S))
+        it["coverage"] = torch.nn.functional.pad(it["coverage"], (0, 224 - S, 0, 224 - S), value=1.0)
+        it["regions"] = torch.nn.functional.pad(it["regions"], (0, 224 - S, 0, 224 - S))
+        it["rgb"] = torch.nn.functional.pad(it["rgb"], (0, 224 - S, 0, 224 - S))
+    prep = prepare({"test": part}, parts=("test",), cfg=EvalConfig(max_items=8, exclude_radius=1))["test"]
+    rmse, zeros = reconstruction_rmse(model, prep), reconstruction_rmse(ZerosModel(), prep)
+    perplexity = codebook_perplexity(model, prep)      # untrained: codebook never fitted to the maps
+    checks = learning_checks(rmse, zeros, {"hit_at_1": 0.05, "chance_hit_at_1": 0.05}, perplexity)
+    assert zeros > 0 and rmse > RECON_RATIO * zeros
+    assert not checks[0]["ok"] and not checks[1]["ok"]
+    assert math.isfinite(perplexity) and 1.0 <= perplexity <= 16.0

@@ -183,11 +183,13 @@ def test_config_files_load_and_reject_bad_input(tmp_path):
 def test_cli_runs_with_overrides(dataset_root, tmp_path, capsys):
     repo = Path(__file__).resolve().parents[1]
     out = tmp_path / "cli"
+    threads = torch.get_num_threads()
     rc = main(["--config", str(repo / "configs" / "smoke.toml"), "--set", f'data_root="{dataset_root}"',
                "--set", f'out_dir="{out}"', "--set", "stages=[1]", "--set", "stage1.steps=2",
                "--set", "workers=0", "--set", "batch_size=4", "--set", "model.codebook_size=16",
-               "--set", "device=cpu"])
+               "--set", "device=cpu", "--set", "threads=1"])
     assert rc == 0
+    assert torch.get_num_threads() == threads       # the training thread budget does not leak out
     assert json.loads((out / "metrics.json").read_text())["stages"]["1"]["steps"] == 2
     assert '"event": "done"' in capsys.readouterr().out
 

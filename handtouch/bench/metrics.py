@@ -29,7 +29,7 @@ import torch
 
 
 def _frames(x, name: str) -> torch.Tensor:
-    """(B,1,H,W) / (B,H,W) -> (B,H*W) float64."""
+    """(B,1,H,W) / (B,H,W) -> (B,H*W) float32 (per-pixel work; sums are taken in float64)."""
     t = torch.as_tensor(x)
     if t.ndim == 4:
         if t.shape[1] != 1:
@@ -37,7 +37,7 @@ def _frames(x, name: str) -> torch.Tensor:
         t = t[:, 0]
     if t.ndim != 3:
         raise ValueError(f"{name}: expected (B,1,H,W) or (B,H,W), got shape {tuple(t.shape)}")
-    return t.reshape(t.shape[0], -1).to(torch.float64)
+    return t.reshape(t.shape[0], -1).to(torch.float32)
 
 
 @dataclass
@@ -77,13 +77,19 @@ def frame_scores(pred, target, region, *, name: str = "prediction") -> FrameScor
         bad = (~torch.isfinite(x)).any(dim=1).nonzero().flatten().tolist()
         if bad:
             raise ValueError(f"{label}: non-finite values in batch frames {bad[:10]}")
-    r = (r > 0.5).to(torch.float64)
+    r = r > 0.5
+    zero = torch.zeros((), dtype=p.dtype)
     pc = p.clamp(0.0, 1.0)
+
+    def region_sum(x: torch.Tensor) -> torch.Tensor:
+        # float32 per pixel (half the memory traffic of float64), float64 accumulation
+        return torch.where(r, x, zero).sum(1, dtype=torch.float64)
+
     return FrameScores(
-        sq_err=(r * (p - t) ** 2).sum(1),
-        count=r.sum(1),
-        inter=(r * torch.minimum(pc, t)).sum(1),
-        union=(r * torch.maximum(pc, t)).sum(1),
+        sq_err=region_sum((p - t) ** 2),
+        count=r.sum(1, dtype=torch.float64),
+        inter=region_sum(torch.minimum(pc, t)),
+        union=region_sum(torch.maximum(pc, t)),
     )
 
 
