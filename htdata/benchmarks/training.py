@@ -22,7 +22,7 @@ def stage1_run(dataset: Path, out: Path, steps: int, bf16: bool, batch_size: int
 
     if out.exists():
         shutil.rmtree(out)
-    overrides = [f'data_root="{dataset}"', f'out_dir="{out}"', "stages=[1]", "split=\"\"", "workers=0",
+    overrides = [f'data_root="{dataset}"', f'out_dir="{out}"', "stages=[1]", "split=\"\"", "workers=0", "threads=0",
                  f"bf16={'true' if bf16 else 'false'}", f"stage1.steps={steps}",
                  f"stage1.warmup_steps={max(1, min(10, steps // 3))}", f"log_every={steps}",
                  f"checkpoint_every={steps + 1}"]
