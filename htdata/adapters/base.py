@@ -9,6 +9,7 @@ loading it, and H.264 timestamp probing / streaming decode.
 
 from __future__ import annotations
 
+import abc
 import functools
 import hashlib
 import os
@@ -42,7 +43,7 @@ class EpisodeRef:
     extra: dict = field(default_factory=dict)
 
 
-class EpisodeStreams:
+class EpisodeStreams(abc.ABC):
     """An opened episode. Subclasses fill the timestamps and implement the readers.
 
     `rgb_timestamps_ns` (N,) int64 and `tactile_timestamps_ns` {hand: (M_h,)}
@@ -57,11 +58,13 @@ class EpisodeStreams:
         self.tactile_timestamps_ns: dict[str, np.ndarray] = {}
         self.notes: list[str] = []
 
+    @abc.abstractmethod
     def iter_rgb(self) -> Iterator[tuple[int, np.ndarray]]:
-        raise NotImplementedError
+        ...
 
+    @abc.abstractmethod
     def read_tactile(self, hand: str, indices: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
+        ...
 
     def close(self) -> None:
         """Release open files; safe to call twice."""
@@ -92,7 +95,7 @@ class Adapter(Protocol):
 # discovery: one source file at a time, so one bad file never hides the rest
 
 
-class FileDiscovery:
+class FileDiscovery(abc.ABC):
     """Discovery split per source file; adapters subclass this and fill three hooks.
 
     `discovery_context(root, params)` reads what the whole source shares
@@ -109,11 +112,13 @@ class FileDiscovery:
     def discovery_context(self, root: Path, params: dict):
         return None
 
+    @abc.abstractmethod
     def discovery_files(self, root: Path, params: dict) -> list[Path]:
-        raise NotImplementedError
+        ...
 
+    @abc.abstractmethod
     def discover_file(self, path: Path, root: Path, params: dict, context) -> list[EpisodeRef]:
-        raise NotImplementedError
+        ...
 
     def discover_all(self, root: Path, params: dict) -> tuple[list[EpisodeRef], list[EpisodeError]]:
         return discover_all(self, root, params)
@@ -488,3 +493,22 @@ def relpath_inside(folder: Path, rel: str, where: str) -> Path:
     if os.path.commonpath([path, folder.resolve()]) != str(folder.resolve()):
         raise ValueError(f"{where}: path {rel!r} leaves the recording folder")
     return path
+
+
+def iter_episode_video(ref: EpisodeRef, video: Path, n_frames: int) -> Iterator[tuple[int, np.ndarray]]:
+    """(index, RGB frame) for the first `n_frames` frames of `video` (the aligned length).
+
+    A decode error or a video shorter than promised becomes an EpisodeError
+    naming the file, the episode and the frame.
+    """
+    count = 0
+    try:
+        for frame in iter_video_rgb(video):
+            if count >= n_frames:
+                break
+            yield count, frame
+            count += 1
+    except VideoError as exc:
+        raise EpisodeError(ref, exc.frame, str(exc), file=video) from exc
+    if count < n_frames:
+        raise EpisodeError(ref, count, f"video decoded only {count} of {n_frames} frames", file=video)

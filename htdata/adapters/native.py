@@ -18,7 +18,7 @@ import numpy as np
 
 from htdata.adapters.base import (
     EpisodeRef, EpisodeStreams, FileDiscovery, NpzRowError, NpzRows, VideoError, check_tactile_shape, file_frame_mismatch_note,
-    fingerprint_files, iter_video_rgb, probe_video_pts_ns, relpath_inside, sanitise_id,
+    fingerprint_files, iter_episode_video, probe_video_pts_ns, relpath_inside, sanitise_id,
 )
 from htdata.errors import EpisodeError
 
@@ -170,18 +170,7 @@ class NativeStreams(EpisodeStreams):
         if self._frames is not None:
             yield from self._iter_jpegs()
             return
-        count = 0
-        try:
-            for frame in iter_video_rgb(self._video_file):
-                if count >= self._n_rgb:
-                    break
-                yield count, frame
-                count += 1
-        except VideoError as exc:
-            raise EpisodeError(self.ref, exc.frame, str(exc), file=self._video_file) from exc
-        if count < self._n_rgb:
-            raise EpisodeError(self.ref, count, f"video decoded only {count} of {self._n_rgb} frames",
-                               file=self._video_file)
+        yield from iter_episode_video(self.ref, self._video_file, self._n_rgb)
 
     def _iter_jpegs(self) -> Iterator[tuple[int, np.ndarray]]:
         import cv2

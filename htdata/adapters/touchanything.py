@@ -31,7 +31,7 @@ import numpy as np
 
 from htdata.adapters.base import (
     EpisodeRef, EpisodeStreams, FileDiscovery, NpzRowError, NpzRows, VideoError, check_tactile_shape, file_frame_mismatch_note,
-    fingerprint_files, iter_video_rgb, probe_video_pts_ns, sanitise_id,
+    fingerprint_files, iter_episode_video, probe_video_pts_ns, sanitise_id,
 )
 from htdata.errors import EpisodeError
 
@@ -233,17 +233,7 @@ class TouchAnythingStreams(EpisodeStreams):
         return ts, idx
 
     def iter_rgb(self) -> Iterator[tuple[int, np.ndarray]]:
-        count = 0
-        try:
-            for frame in iter_video_rgb(self.video):
-                if count >= self._n_rgb:
-                    break
-                yield count, frame
-                count += 1
-        except VideoError as exc:
-            raise EpisodeError(self.ref, exc.frame, str(exc), file=self.video) from exc
-        if count < self._n_rgb:
-            raise EpisodeError(self.ref, count, f"video decoded only {count} of {self._n_rgb} frames", file=self.video)
+        yield from iter_episode_video(self.ref, self.video, self._n_rgb)
 
     def read_tactile(self, hand: str, indices: np.ndarray) -> np.ndarray:
         self._check_hand(hand)
