@@ -155,7 +155,21 @@ def _frame_items(reader: DatasetReader, indices: np.ndarray, hands: tuple[str, .
     return np.stack([indices[sample_pos], hand_ids], axis=1).astype(np.int64)
 
 
-class TactileFrameDataset(Dataset):
+class _ItemDataset(Dataset):
+    """Map-style dataset over `self.items` rows, built by an `_ItemBuilder`."""
+
+    _builder: "_ItemBuilder"
+    items: np.ndarray
+
+    @property
+    def reader(self) -> DatasetReader:
+        return self._builder.reader
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+
+class TactileFrameDataset(_ItemDataset):
     """One item per (frame, hand present) of the selected split part."""
 
     def __init__(self, root, split: str | None = None, part: str | None = None,
@@ -165,19 +179,12 @@ class TactileFrameDataset(Dataset):
         reader = self._builder.reader
         self.items = _frame_items(reader, reader.sample_indices(split, part), self.hands)
 
-    @property
-    def reader(self) -> DatasetReader:
-        return self._builder.reader
-
-    def __len__(self) -> int:
-        return len(self.items)
-
     def __getitem__(self, i: int) -> dict:
         index, hand_id = self.items[i].tolist()
         return self._builder.frame_item(index, HAND_NAMES[hand_id])
 
 
-class TactileWindowDataset(Dataset):
+class TactileWindowDataset(_ItemDataset):
     """Items for frames T >= window-1: tactile (window,1,224,224), rgb (window,3,224,224).
 
     frame / index are stacked (window,); coverage, regions, hand, task, scene,
@@ -207,13 +214,6 @@ class TactileWindowDataset(Dataset):
             present = cols[frames, items[:, 1:2]] > 0
             items = items[present.all(axis=1)]
         self.items = items
-
-    @property
-    def reader(self) -> DatasetReader:
-        return self._builder.reader
-
-    def __len__(self) -> int:
-        return len(self.items)
 
     def __getitem__(self, i: int) -> dict:
         end, hand_id = self.items[i].tolist()
