@@ -165,3 +165,14 @@ def write_synthetic_dataset(root, episodes: list[dict], seed: int = 0,
                    codec=DEFAULT_CODEC_INFO, sources=[{"name": "synthetic", "seed": seed}],
                    created="2000-01-01T00:00:00+00:00")
     return root
+
+
+# Three episodes covering one hand, two hands and a single frame; used by the reader and torch tests.
+MIXED_HANDS_EPISODES = [
+    {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": ("right",), "num_frames": 5,
+     "layouts": {"right": "glove_r"}},
+    {"episode_id": "ep_b", "task": "wipe", "scene": "office", "hands": ("left", "right"), "num_frames": 4,
+     "layouts": {"left": "glove_l", "right": "glove_r"}},
+    {"episode_id": "ep_c", "task": "pour", "scene": "office", "hands": ("left",), "num_frames": 1,
+     "layouts": {"left": "glove_l"}},
+]

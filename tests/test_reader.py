@@ -7,20 +7,14 @@ import pytest
 
 from htdata.reader import DatasetReader
 from tests.factories import (
+    MIXED_HANDS_EPISODES,
     default_canonical,
     synthetic_members,
     synthetic_tactile,
     write_synthetic_dataset,
 )
 
-EPISODES = [
-    {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": ("right",), "num_frames": 5,
-     "layouts": {"right": "glove_r"}},
-    {"episode_id": "ep_b", "task": "wipe", "scene": "office", "hands": ("left", "right"), "num_frames": 4,
-     "layouts": {"left": "glove_l", "right": "glove_r"}},
-    {"episode_id": "ep_c", "task": "pour", "scene": "office", "hands": ("left",), "num_frames": 1,
-     "layouts": {"left": "glove_l"}},
-]
+EPISODES = MIXED_HANDS_EPISODES
 SEED = 7
 
 

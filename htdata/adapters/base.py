@@ -69,6 +69,14 @@ class EpisodeStreams(abc.ABC):
     def close(self) -> None:
         """Release open files; safe to call twice."""
 
+    def _setup_or_close(self, setup) -> None:
+        """Run `setup()`; on any failure release what it opened, then re-raise."""
+        try:
+            setup()
+        except Exception:
+            self.close()
+            raise
+
     def __enter__(self):
         return self
 

@@ -103,11 +103,7 @@ class NativeStreams(EpisodeStreams):
         self.folder = Path(ref.source_ref)
         self.rec_path = self.folder / RECORDING_JSON
         self._rows: dict[str, NpzRows] = {}
-        try:
-            self._setup()
-        except Exception:
-            self.close()
-            raise
+        self._setup_or_close(self._setup)
 
     def _setup(self) -> None:
         ref = self.ref

@@ -180,11 +180,7 @@ class TouchAnythingStreams(EpisodeStreams):
         self.npz = self.folder / NPZ_NAME
         self.video = self.folder / VIDEO_NAMES[ref.extra.get("video", params.get("video", "chest"))]
         self._rows: dict[str, NpzRows] = {}
-        try:
-            self._setup()
-        except Exception:
-            self.close()
-            raise
+        self._setup_or_close(self._setup)
 
     def _setup(self) -> None:
         ref = self.ref
