@@ -12,22 +12,22 @@ float16 facts that matter for [0,1] maps (checked in tests/test_codec.py):
 - The largest finite half is 65504; the value rule rejects anything > 1+1e-3
   long before that, so overflow to Inf cannot happen on stored maps.
 
-`TACTILE_CODECS` is a registry of alternatives measured by the benchmark
-(`codec_benchmark`); only the default EXR half ZIP is used for datasets.
+`MEMBER_CODECS` maps each codec kind named in the member table
+(htdata/format.py) to its (encoder, decoder); alternatives measured by the
+benchmark live in htdata/benchmarks/codecs.py.
 """
 
 from __future__ import annotations
 
 import io
-import time
-from typing import Callable
+import json
+import struct
 
 import cv2
 import numpy as np
 import OpenEXR
 
-CANVAS = 224
-MAP_SHAPE = (CANVAS, CANVAS)
+from htdata.format import CANVAS, MAP_SHAPE
 # Resampling round-off tolerated (and clipped) outside [0,1]; see the value rule.
 ROUND_OFF = 1e-3
 EXR_CHANNEL = "Y"
@@ -102,12 +102,23 @@ def encode_exr(tactile_map: np.ndarray, compression: str = "zip", pixel_type=np.
     return buf.getvalue()
 
 
-def decode_exr(data: bytes) -> np.ndarray:
-    """Read channel "Y" of an in-memory EXR as float32."""
-    channels = OpenEXR.File(io.BytesIO(data)).channels()
+def decode_exr_pixels(data: bytes, where: str = "EXR") -> np.ndarray:
+    """Channel "Y" of an in-memory EXR in its stored pixel type (float16 for dataset maps).
+
+    OpenEXR's own exceptions name no file: they are re-raised as ValueError naming `where`.
+    """
+    try:
+        channels = OpenEXR.File(io.BytesIO(data)).channels()
+    except Exception as exc:
+        raise ValueError(f"{where}: undecodable EXR ({len(data)} bytes): {exc}") from exc
     if EXR_CHANNEL not in channels:
-        raise ValueError(f"EXR has no channel {EXR_CHANNEL!r} (channels: {sorted(channels)})")
-    return np.asarray(channels[EXR_CHANNEL].pixels, dtype=np.float32)
+        raise ValueError(f"{where}: EXR has no channel {EXR_CHANNEL!r} (channels: {sorted(channels)})")
+    return np.asarray(channels[EXR_CHANNEL].pixels)
+
+
+def decode_exr(data: bytes, where: str = "EXR") -> np.ndarray:
+    """Read channel "Y" of an in-memory EXR as float32."""
+    return decode_exr_pixels(data, where).astype(np.float32, copy=False)
 
 
 def encode_tactile(tactile_map: np.ndarray, compression: str = "zip", where: str = "tactile map") -> bytes:
@@ -116,8 +127,8 @@ def encode_tactile(tactile_map: np.ndarray, compression: str = "zip", where: str
 
 
 def decode_tactile(data: bytes, where: str = "tactile map") -> np.ndarray:
-    """EXR bytes -> float32 (224,224) map."""
-    arr = decode_exr(data)
+    """EXR bytes -> float32 (224,224) map; any decode failure is a ValueError naming `where`."""
+    arr = decode_exr(data, where)
     if arr.shape != MAP_SHAPE:
         raise ValueError(f"{where}: decoded tactile map has shape {arr.shape}, expected {MAP_SHAPE}")
     return arr
@@ -139,22 +150,6 @@ def decode_png16(data: bytes) -> np.ndarray:
         raise ValueError("not a 16-bit PNG")
     return arr.astype(np.float32) / 65535.0
 
-
-def _exr_codec(compression: str, pixel_type) -> tuple[Callable, Callable]:
-    def encode(tactile_map: np.ndarray) -> bytes:
-        return encode_exr(check_tactile_values(tactile_map, f"exr {compression}"), compression, pixel_type)
-
-    return encode, decode_exr
-
-
-TACTILE_CODECS: dict[str, tuple[Callable[[np.ndarray], bytes], Callable[[bytes], np.ndarray]]] = {
-    "exr_half_zip": _exr_codec("zip", np.float16),
-    "exr_half_piz": _exr_codec("piz", np.float16),
-    "exr_half_htj2k256": _exr_codec("htj2k256", np.float16),
-    "exr_float_zip": _exr_codec("zip", np.float32),
-    "png16": (encode_png16, decode_png16),
-    "exr_half_dwab_lossy": _exr_codec("dwab", np.float16),
-}
 
 # What the dataset uses; recorded in the manifest's "codec" section.
 DEFAULT_CODEC_INFO = {
@@ -184,29 +179,83 @@ def decode_rgb(data: bytes, where: str = "rgb frame") -> np.ndarray:
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
 
 
-def codec_benchmark(maps: np.ndarray, codecs: dict | None = None) -> list[dict]:
-    """Size, speed and error of each tactile codec over `maps` (N,224,224) in [0,1].
+def encode_png_u8(image: np.ndarray, where: str) -> bytes:
+    """(224,224) uint8 label/coverage map -> PNG bytes (lossless)."""
+    arr = np.asarray(image)
+    if arr.shape != MAP_SHAPE or arr.dtype != np.uint8:
+        raise ValueError(f"{where}: expected a (224,224) uint8 map, got {arr.shape} {arr.dtype}")
+    ok, buf = cv2.imencode(".png", arr)
+    if not ok:
+        raise ValueError(f"{where}: PNG encoding failed")
+    return buf.tobytes()
 
-    Returns one dict per codec: bytes_per_frame, encode_ms, decode_ms (per
-    frame, mean), max_error, rmse. Timing only; callers must not assert on it.
-    """
-    maps = np.asarray(maps, dtype=np.float32)
-    if maps.ndim != 3 or maps.shape[1:] != MAP_SHAPE or len(maps) == 0:
-        raise ValueError(f"codec_benchmark needs (N,224,224) maps with N>0, got {maps.shape}")
-    results = []
-    for name, (encode, decode) in (codecs or TACTILE_CODECS).items():
-        t0 = time.perf_counter()
-        blobs = [encode(m) for m in maps]
-        t1 = time.perf_counter()
-        decoded = np.stack([decode(b) for b in blobs])
-        t2 = time.perf_counter()
-        err = decoded.astype(np.float64) - maps
-        results.append({
-            "codec": name,
-            "bytes_per_frame": float(np.mean([len(b) for b in blobs])),
-            "encode_ms": (t1 - t0) * 1e3 / len(maps),
-            "decode_ms": (t2 - t1) * 1e3 / len(maps),
-            "max_error": float(np.abs(err).max()),
-            "rmse": float(np.sqrt(np.mean(err ** 2))),
-        })
-    return results
+
+def decode_png_u8(data: bytes, where: str) -> np.ndarray:
+    arr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if arr is None or arr.dtype != np.uint8 or arr.ndim != 2:
+        raise ValueError(f"{where}: not a single-channel 8-bit PNG")
+    return arr
+
+
+def encode_npy(array: np.ndarray) -> bytes:
+    """np.save bytes (no pickle): dtype and shape travel with the data."""
+    buf = io.BytesIO()
+    np.save(buf, np.asarray(array), allow_pickle=False)
+    return buf.getvalue()
+
+
+# npy header bytes -> (dtype, shape, fortran_order, data offset). Members of one dataset
+# share a handful of headers, so np.load's header parsing (ast.literal_eval) runs once per shape.
+_NPY_HEADERS: dict[bytes, tuple[np.dtype, tuple, bool, int]] = {}
+_NPY_HEADER_CACHE_MAX = 256
+
+
+def decode_npy(data: bytes, where: str = "npy") -> np.ndarray:
+    """.npy bytes -> array (a writable copy), exactly what np.load would return."""
+    if data[:6] != b"\x93NUMPY" or len(data) < 10:
+        raise ValueError(f"{where}: not an .npy member ({len(data)} bytes)")
+    if data[6] == 1:
+        start = 10 + struct.unpack_from("<H", data, 8)[0]
+    elif len(data) >= 12:
+        start = 12 + struct.unpack_from("<I", data, 8)[0]
+    else:
+        raise ValueError(f"{where}: truncated .npy header")
+    header = data[:start]
+    meta = _NPY_HEADERS.get(header)
+    if meta is None:
+        try:
+            arr = np.load(io.BytesIO(data), allow_pickle=False)
+        except Exception as exc:
+            raise ValueError(f"{where}: unreadable .npy member: {exc}") from exc
+        fortran = arr.ndim > 1 and arr.flags.f_contiguous and not arr.flags.c_contiguous
+        if len(_NPY_HEADERS) < _NPY_HEADER_CACHE_MAX:
+            _NPY_HEADERS[header] = (arr.dtype, arr.shape, fortran, start)
+        return arr
+    dtype, shape, fortran, start = meta
+    count = int(np.prod(shape, dtype=np.int64))
+    if len(data) - start != count * dtype.itemsize:
+        raise ValueError(f"{where}: .npy member holds {len(data) - start} data bytes, "
+                         f"header says {count * dtype.itemsize}")
+    return np.frombuffer(data, dtype, count, start).reshape(shape, order="F" if fortran else "C").copy()
+
+
+def encode_json(obj) -> bytes:
+    """Compact, key-sorted JSON: equal dicts give equal bytes (deterministic shards)."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":")).encode()
+
+
+def decode_json(data: bytes, where: str = "json") -> dict:
+    try:
+        return json.loads(data)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{where}: invalid JSON member: {exc}") from exc
+
+
+# Codec kind (htdata/format.py MEMBERS) -> (encode(value, settings, where), decode(data, where));
+# `settings` is a format.CodecSettings.
+MEMBER_CODECS = {
+    "json": (lambda obj, settings, where: encode_json(obj), decode_json),
+    "jpeg": (lambda rgb, settings, where: encode_rgb(rgb, settings.rgb_quality, where), decode_rgb),
+    "exr": (lambda m, settings, where: encode_tactile(m, settings.tactile_compression, where), decode_tactile),
+    "npy": (lambda arr, settings, where: encode_npy(arr), decode_npy),
+}

@@ -5,63 +5,33 @@ records and episode records) into the three files of DESIGN.md "Dataset on
 disk": episodes.jsonl, index.npy and dataset.json. dataset.json is written
 LAST through tmp + fsync + rename, so a dataset either has a complete
 manifest or none: readers treat a missing dataset.json as "not committed".
+
+`load_manifest` / `load_episodes` / `load_index` (and `parse_episodes` /
+`parse_index` for callers that hash the bytes they parse) are THE loaders of
+those files: the reader, split, validate and preview all go through them.
+File names, the index dtype and the member table live in htdata/format.py.
 """
 
 from __future__ import annotations
 
 import datetime as _dt
-import gc
 import hashlib
 import io
 import json
 import os
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from htdata import storage
+from htdata.codec import encode_png_u8
+from htdata.format import (CANONICAL_FILE, EPISODES_FILE, FORMAT, FORMAT_VERSION, HANDS, INDEX_DTYPE, INDEX_FILE,
+                           LAYOUTS_DIR, MANIFEST_FILE, PARTS_FILE, REGIONS_FILE, SHARDS_DIR, SIZE_FIELDS,
+                           tactile_member)
 from htdata.fsutil import write_bytes_atomic
 from htdata.resources import validate_json
 from htdata.shardio import SampleRecord, ShardRecord, parse_key
-
-FORMAT = "htdata"
-FORMAT_VERSION = 1
-HANDS = ("left", "right")
-
-# DESIGN.md index.npy dtype, little endian, one row per sample.
-INDEX_DTYPE = np.dtype([
-    ("shard", "<u4"),
-    ("offset", "<u8"),
-    ("episode", "<u4"),
-    ("frame", "<u4"),
-    ("size_json", "<u4"),
-    ("size_rgb", "<u4"),
-    ("size_tactile_left", "<u4"),
-    ("size_tactile_right", "<u4"),
-    ("size_bend_left", "<u4"),
-    ("size_bend_right", "<u4"),
-])
-# member suffix -> index size column, in DESIGN member order
-SIZE_FIELDS = {
-    "json": "size_json",
-    "rgb.jpg": "size_rgb",
-    "tactile_left.exr": "size_tactile_left",
-    "tactile_right.exr": "size_tactile_right",
-    "bend_left.npy": "size_bend_left",
-    "bend_right.npy": "size_bend_right",
-}
-
-MANIFEST_FILE = "dataset.json"
-EPISODES_FILE = "episodes.jsonl"
-INDEX_FILE = "index.npy"
-SHARDS_DIR = "shards"
-LAYOUTS_DIR = "layouts"
-CANONICAL_FILE = "canonical_hand.json"
-REGIONS_FILE = "regions.png"   # per-place region ids (0 = outside the hand)
-PARTS_FILE = "parts.png"       # part ids: thumb=1 .. palm=6 (stage-2 masking)
-
 
 @dataclass
 class UnitResult:
@@ -100,27 +70,6 @@ class BuiltIndex:
     shards: list[dict]            # manifest shard entries
 
 
-
-
-def encode_png_u8(image: np.ndarray, where: str) -> bytes:
-    import cv2
-
-    arr = np.asarray(image)
-    if arr.shape != (224, 224) or arr.dtype != np.uint8:
-        raise ValueError(f"{where}: expected a (224,224) uint8 map, got {arr.shape} {arr.dtype}")
-    ok, buf = cv2.imencode(".png", arr)
-    if not ok:
-        raise ValueError(f"{where}: PNG encoding failed")
-    return buf.tobytes()
-
-
-def decode_png_u8(data: bytes, where: str) -> np.ndarray:
-    import cv2
-
-    arr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-    if arr is None or arr.dtype != np.uint8 or arr.ndim != 2:
-        raise ValueError(f"{where}: not a single-channel 8-bit PNG")
-    return arr
 
 
 def build_index(units: list[UnitResult]) -> BuiltIndex:
@@ -199,7 +148,7 @@ def build_index(units: list[UnitResult]) -> BuiltIndex:
 
 
 def _frames_per_hand(rows: np.ndarray) -> dict[str, int]:
-    return {hand: int(np.count_nonzero(rows[f"size_tactile_{hand}"])) for hand in HANDS}
+    return {hand: int(np.count_nonzero(rows[SIZE_FIELDS[tactile_member(hand)]])) for hand in HANDS}
 
 
 def commit_dataset(root: str | os.PathLike, units: list[UnitResult], layouts: list[LayoutArtifact],
@@ -295,77 +244,42 @@ def load_manifest(root: str | os.PathLike, validate: bool = True) -> dict:
     return manifest
 
 
-def load_episodes(root: str | os.PathLike) -> list[dict]:
-    path = storage.join(root, EPISODES_FILE)
+def parse_episodes(text: str, where: str) -> list[dict]:
+    """episodes.jsonl text -> records; a bad line is an error naming `where` and the line."""
     episodes = []
-    for lineno, line in enumerate(storage.read_text(path).splitlines(), 1):
+    for lineno, line in enumerate(text.splitlines(), 1):
         if line.strip():
             try:
                 episodes.append(json.loads(line))
             except json.JSONDecodeError as e:
-                raise ValueError(f"{path}:{lineno}: invalid JSON: {e}") from None
+                raise ValueError(f"{where}:{lineno}: invalid JSON: {e}") from None
     return episodes
+
+
+def load_episodes(root: str | os.PathLike) -> list[dict]:
+    path = storage.join(root, EPISODES_FILE)
+    return parse_episodes(storage.read_text(path), path)
+
+
+def _check_index_dtype(rows: np.ndarray, where: str) -> np.ndarray:
+    if rows.dtype != INDEX_DTYPE:
+        raise ValueError(f"{where}: index dtype {rows.dtype} != {INDEX_DTYPE}")
+    return rows
+
+
+def parse_index(data: bytes, where: str) -> np.ndarray:
+    """index.npy bytes -> rows (for callers that hash the bytes they parse)."""
+    try:
+        rows = np.load(io.BytesIO(data), allow_pickle=False)
+    except Exception as e:
+        raise ValueError(f"{where}: unreadable index: {e}") from None
+    return _check_index_dtype(rows, where)
 
 
 def load_index(root: str | os.PathLike, mmap: bool = True) -> np.ndarray:
     """index.npy as INDEX_DTYPE; memory-mapped for local datasets when `mmap`."""
     path = storage.join(root, INDEX_FILE)
     local = storage.local_path(path)
-    if local is not None:
-        rows = np.load(local, mmap_mode="r" if mmap else None, allow_pickle=False)
-    else:
-        rows = np.load(io.BytesIO(storage.read_bytes(path)), allow_pickle=False)
-    if rows.dtype != INDEX_DTYPE:
-        raise ValueError(f"{path}: index dtype {rows.dtype} != {INDEX_DTYPE}")
-    return rows
-
-
-# -- benchmark helpers -----------------------------------------------------
-
-def synthetic_index(n_rows: int, path: str | os.PathLike, samples_per_shard: int = 1000,
-                    frames_per_episode: int = 500) -> Path:
-    """Write a plausible index.npy of `n_rows` rows (for load-time benchmarks)."""
-    path = Path(path)
-    rows = np.zeros(n_rows, dtype=INDEX_DTYPE)
-    i = np.arange(n_rows, dtype=np.uint64)
-    sample_bytes = 512 * 8 + 2048 + 26 * 1024 + 18 * 1024
-    rows["shard"] = i // samples_per_shard
-    rows["offset"] = (i % samples_per_shard) * sample_bytes
-    rows["episode"] = i // frames_per_episode
-    rows["frame"] = i % frames_per_episode
-    rows["size_json"] = 300
-    rows["size_rgb"] = 26_000
-    rows["size_tactile_right"] = 17_600
-    np.save(path, rows, allow_pickle=False)
-    return path
-
-
-def index_load_benchmark(n_rows: int, tmpdir: str | os.PathLike) -> dict:
-    """Write a synthetic index, then time mmap and full loads; report RSS growth."""
-    import psutil
-
-    path = synthetic_index(n_rows, Path(tmpdir) / "bench_index.npy")
-    proc = psutil.Process()
-    gc.collect()
-    rss0 = proc.memory_info().rss
-    t0 = time.perf_counter()
-    rows = np.load(path, mmap_mode="r")
-    first_touch = int(rows["episode"][n_rows // 2])  # touch one page so the map is real
-    t1 = time.perf_counter()
-    rss_mmap = proc.memory_info().rss
-    del rows
-    gc.collect()
-    t2 = time.perf_counter()
-    full = np.load(path)
-    t3 = time.perf_counter()
-    rss_full = proc.memory_info().rss
-    del full
-    return {
-        "rows": n_rows,
-        "file_bytes": path.stat().st_size,
-        "mmap_load_ms": (t1 - t0) * 1e3,
-        "mmap_rss_delta_mb": (rss_mmap - rss0) / 2**20,
-        "full_load_ms": (t3 - t2) * 1e3,
-        "full_rss_delta_mb": (rss_full - rss0) / 2**20,
-        "probe_episode": first_touch,
-    }
+    if local is None:
+        return parse_index(storage.read_bytes(path), path)
+    return _check_index_dtype(np.load(local, mmap_mode="r" if mmap else None, allow_pickle=False), path)

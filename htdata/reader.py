@@ -10,7 +10,8 @@ Works on local paths and fsspec URLs (file://, memory://, s3://...).
 
 Hot-path costs kept small on purpose (see htdata/benchmarks/loader.py):
 index rows are read as one tuple (`np.void.item()`), not field by field;
-bend vectors skip np.load's header parsing once a header has been seen.
+.npy members skip np.load's header parsing once a header has been seen
+(codec.decode_npy). Member names, sizes and codecs come from htdata/format.py.
 
 Shard file handles are opened lazily and remembered with the pid that opened
 them; after a fork (DataLoader workers) the child opens its own. Pickling a
@@ -19,11 +20,8 @@ reader drops handles and the index map; they reopen on first use.
 
 from __future__ import annotations
 
-import io
 import json
 import os
-import struct
-import tarfile
 from collections import OrderedDict
 from collections.abc import Iterator
 from typing import NamedTuple
@@ -31,29 +29,17 @@ from typing import NamedTuple
 import numpy as np
 
 from htdata import storage
-from htdata.codec import decode_rgb, decode_tactile
-from htdata.manifest import (
-    INDEX_DTYPE,
-    LAYOUTS_DIR,
-    SHARDS_DIR,
-    SIZE_FIELDS,
-    decode_png_u8,
-    load_episodes,
-    load_index,
-    load_manifest,
-)
-from htdata.shardio import BLOCK, padded, sample_key
+from htdata.codec import decode_png_u8
+from htdata.format import INDEX_DTYPE, LAYOUTS_DIR, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS, SPLITS_DIR, decode_sample
+from htdata.manifest import load_episodes, load_index, load_manifest
+from htdata.shardio import BLOCK, describe_header, header_matches, padded, sample_key
 
-HANDS = ("left", "right")
 MAX_OPEN_SHARDS = 32
-MEMBER_SUFFIXES = tuple(SIZE_FIELDS)            # DESIGN member order
-_SIZE_POS = tuple(INDEX_DTYPE.names.index(f) for f in SIZE_FIELDS.values())
-_USTAR_NAME = 100                               # name field: bytes 0..99, NUL padded
-_USTAR_SIZE = slice(124, 136)                   # size field: 11 octal digits + NUL
+_SIZE_POS = tuple(INDEX_DTYPE.names.index(SIZE_FIELDS[s]) for s in MEMBER_ORDER)
 
 
 class SampleRow(NamedTuple):
-    """One index.npy row as plain ints; `sizes` follows MEMBER_SUFFIXES (0 = absent)."""
+    """One index.npy row as plain ints; `sizes` follows format.MEMBER_ORDER (0 = absent)."""
     shard: int
     offset: int
     episode: int
@@ -68,83 +54,13 @@ def member_layout(sizes: tuple[int, ...], wanted=None) -> tuple[list[tuple[str, 
     listed; the read stops at the end of the last listed member.
     """
     layout, pos, end = [], 0, 0
-    for suffix, size in zip(MEMBER_SUFFIXES, sizes):
+    for suffix, size in zip(MEMBER_ORDER, sizes):
         if size:
             if wanted is None or suffix in wanted:
                 layout.append((suffix, pos, size))
                 end = pos + BLOCK + size
             pos += BLOCK + padded(size)
     return layout, end
-
-
-def header_matches(header: bytes, name: bytes, size: int) -> bool:
-    """Cheap USTAR check: name field == name (NUL padded) and size field == size.
-
-    Compares raw bytes in the encoding ShardWriter writes; any other valid
-    encoding of the same values falls back to tarfile's parser.
-    """
-    n = len(name)
-    if (header[:n] == name and (n == _USTAR_NAME or header[n] == 0)
-            and header[_USTAR_SIZE] == b"%011o\0" % size):
-        return True
-    try:
-        info = tarfile.TarInfo.frombuf(header, "utf-8", "surrogateescape")
-    except tarfile.HeaderError:
-        return False
-    return info.name.encode("utf-8", "surrogateescape") == name and info.size == size
-
-
-def _describe_header(header: bytes) -> str:
-    try:
-        info = tarfile.TarInfo.frombuf(header, "utf-8", "surrogateescape")
-    except tarfile.HeaderError as exc:
-        return f"an unreadable header ({exc})"
-    return f"{info.name} ({info.size} B)"
-
-
-# npy header bytes -> (dtype, shape, fortran_order, data offset). Bend vectors of one dataset
-# share a handful of headers, so np.load's header parsing (ast.literal_eval) runs once per shape.
-_NPY_HEADERS: dict[bytes, tuple[np.dtype, tuple, bool, int]] = {}
-_NPY_HEADER_CACHE_MAX = 256
-
-
-def decode_npy(data: bytes, where: str = "npy") -> np.ndarray:
-    """.npy bytes -> array (a writable copy), exactly what np.load would return."""
-    if data[:6] != b"\x93NUMPY" or len(data) < 10:
-        raise ValueError(f"{where}: not an .npy member ({len(data)} bytes)")
-    if data[6] == 1:
-        start = 10 + struct.unpack_from("<H", data, 8)[0]
-    elif len(data) >= 12:
-        start = 12 + struct.unpack_from("<I", data, 8)[0]
-    else:
-        raise ValueError(f"{where}: truncated .npy header")
-    header = data[:start]
-    meta = _NPY_HEADERS.get(header)
-    if meta is None:
-        try:
-            arr = np.load(io.BytesIO(data), allow_pickle=False)
-        except Exception as exc:
-            raise ValueError(f"{where}: unreadable .npy member: {exc}") from exc
-        fortran = arr.ndim > 1 and arr.flags.f_contiguous and not arr.flags.c_contiguous
-        if len(_NPY_HEADERS) < _NPY_HEADER_CACHE_MAX:
-            _NPY_HEADERS[header] = (arr.dtype, arr.shape, fortran, start)
-        return arr
-    dtype, shape, fortran, start = meta
-    count = int(np.prod(shape, dtype=np.int64))
-    if len(data) - start != count * dtype.itemsize:
-        raise ValueError(f"{where}: .npy member holds {len(data) - start} data bytes, "
-                         f"header says {count * dtype.itemsize}")
-    return np.frombuffer(data, dtype, count, start).reshape(shape, order="F" if fortran else "C").copy()
-
-
-def decode_tactile_member(data: bytes, where: str) -> np.ndarray:
-    """decode_tactile, with OpenEXR's own errors (which name no file) re-raised naming `where`."""
-    try:
-        return decode_tactile(data, where=where)
-    except ValueError:
-        raise
-    except Exception as exc:
-        raise ValueError(f"{where}: undecodable EXR ({len(data)} bytes): {exc}") from exc
 
 
 class DatasetReader:
@@ -280,7 +196,7 @@ class DatasetReader:
             expected = f"{key}.{suffix}"
             if not header_matches(header, expected.encode("utf-8"), member_size):
                 raise ValueError(f"{self._shard_path(row.shard)}: at offset {row.offset + rel} expected member "
-                                 f"{expected} ({member_size} B), found {_describe_header(header)}: "
+                                 f"{expected} ({member_size} B), found {describe_header(header)}: "
                                  f"index and shard disagree")
             out[suffix] = span[rel + BLOCK:rel + BLOCK + member_size]
         return out
@@ -300,23 +216,11 @@ class DatasetReader:
         return row, key, self._read_members(self._handle(row.shard), row, key, suffixes)
 
     def decode(self, members: dict[str, bytes], where: str = "sample") -> dict:
-        """Decode raw members: rgb uint8 (224,224,3), tactile/bend per hand, meta json.
+        """Decode raw members (format.decode_sample): rgb uint8 (224,224,3), tactile/bend per hand, meta.
 
         "meta" is present only when the json member is (it always is in sample(i)).
         """
-        out = {"tactile": {}, "bend": {}}
-        if "json" in members:
-            out["meta"] = json.loads(members["json"])
-        if "rgb.jpg" in members:
-            out["rgb"] = decode_rgb(members["rgb.jpg"], where=f"{where}.rgb.jpg")
-        for hand in HANDS:
-            if f"tactile_{hand}.exr" in members:
-                out["tactile"][hand] = decode_tactile_member(members[f"tactile_{hand}.exr"],
-                                                             f"{where}.tactile_{hand}.exr")
-            if f"bend_{hand}.npy" in members:
-                out["bend"][hand] = decode_npy(members[f"bend_{hand}.npy"],
-                                               where=f"{where}.bend_{hand}.npy").astype(np.float32, copy=False)
-        return out
+        return decode_sample(members, where)
 
     def decoded(self, i: int, suffixes=None) -> dict:
         _, key, members = self.read_sample(i, suffixes)
@@ -388,7 +292,7 @@ class DatasetReader:
     # -- splits ------------------------------------------------------------
     def split(self, name: str) -> dict:
         """DATASET/splits/NAME.json: {"parts": {part: {"episodes": [...]}, ...}, ...}."""
-        path = storage.join(self.root, "splits", f"{name}.json")
+        path = storage.join(self.root, SPLITS_DIR, f"{name}.json")
         if not storage.exists(path):
             raise FileNotFoundError(f"{path}: no split named {name!r} (run `htdata split`)")
         doc = json.loads(storage.read_text(path))

@@ -5,8 +5,10 @@ unit). It is written under `.shard-UUUUUU-KKK.tar.tmp`, fsynced, then linked
 to its final name, which must not exist: a finished shard is never
 overwritten and a crash leaves at most a temp file.
 
-Headers are written by hand (tarfile.TarInfo.tobuf, USTAR) so we know every
-offset while writing and hash the bytes as they go out: with mtime 0,
+This module is the one place that writes AND parses tar headers
+(`member_header`; `header_matches` for the reader's hot path, `parse_header`
+for validation). Headers are written by hand (tarfile.TarInfo.tobuf, USTAR)
+so we know every offset while writing and hash the bytes as they go out: with mtime 0,
 uid/gid 0, mode 0o644 and empty owner names, equal input gives byte-identical
 shards. USTAR fixes the layout: a 512-byte header, the data, zero padding to
 512; the archive ends with two zero blocks. Standard readers (tar, tarfile,
@@ -21,13 +23,14 @@ import re
 import tarfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Iterable
+from typing import Iterable
+
+from htdata.format import MEMBER_ORDER
 
 BLOCK = 512
 MAX_NAME = 100  # USTAR name field; longer names would need the prefix field
 MAX_PARTS_PER_UNIT = 1000
-# DESIGN.md member order; a sample holds only those that exist.
-MEMBER_ORDER = ("json", "rgb.jpg", "tactile_left.exr", "tactile_right.exr", "bend_left.npy", "bend_right.npy")
+_USTAR_SIZE = slice(124, 136)   # size field: 11 octal digits + NUL
 KEY_RE = re.compile(r"^[A-Za-z0-9_-]+__[0-9]{6,}$")
 
 
@@ -73,24 +76,6 @@ def member_offsets(first_header_offset: int, sizes: Iterable[int]) -> list[int]:
     return offsets
 
 
-def sample_span(first_header_offset: int, sizes: Iterable[int]) -> int:
-    """Bytes from the first header to the end of the last member's data (unpadded)."""
-    sizes = [int(s) for s in sizes]
-    if not sizes:
-        return 0
-    return member_offsets(first_header_offset, sizes)[-1] + sizes[-1] - int(first_header_offset)
-
-
-def read_member(fileobj: IO[bytes], offset: int, size: int) -> bytes:
-    """Read `size` bytes at `offset`; a short read is an error (truncated shard)."""
-    fileobj.seek(offset)
-    data = fileobj.read(size)
-    if len(data) != size:
-        name = getattr(fileobj, "name", "<shard>")
-        raise ValueError(f"{name}: truncated: wanted {size} bytes at offset {offset}, got {len(data)}")
-    return data
-
-
 def member_header(name: str, size: int) -> bytes:
     """A deterministic USTAR header block for a regular file."""
     if len(name.encode("utf-8")) > MAX_NAME:
@@ -103,6 +88,38 @@ def member_header(name: str, size: int) -> bytes:
     info.uname = info.gname = ""
     info.type = tarfile.REGTYPE
     return info.tobuf(tarfile.USTAR_FORMAT, "utf-8", "strict")
+
+
+def parse_header(header: bytes) -> tuple[str, int]:
+    """(name, size) of a tar header block; ValueError (tarfile.HeaderError) on a bad checksum."""
+    info = tarfile.TarInfo.frombuf(header, "utf-8", "strict")
+    return info.name, info.size
+
+
+def header_matches(header: bytes, name: bytes, size: int) -> bool:
+    """Cheap check for the read path: name field == name (NUL padded) and size field == size.
+
+    Compares raw bytes in the encoding `member_header` writes; any other valid
+    encoding of the same values falls back to tarfile's parser.
+    """
+    n = len(name)
+    if (header[:n] == name and (n == MAX_NAME or header[n] == 0)
+            and header[_USTAR_SIZE] == b"%011o\0" % size):
+        return True
+    try:
+        info = tarfile.TarInfo.frombuf(header, "utf-8", "surrogateescape")
+    except tarfile.HeaderError:
+        return False
+    return info.name.encode("utf-8", "surrogateescape") == name and info.size == size
+
+
+def describe_header(header: bytes) -> str:
+    """'name (size B)' of a header block, or why it is unreadable (for error messages)."""
+    try:
+        info = tarfile.TarInfo.frombuf(header, "utf-8", "surrogateescape")
+    except tarfile.HeaderError as exc:
+        return f"an unreadable header ({exc})"
+    return f"{info.name} ({info.size} B)"
 
 
 @dataclass

@@ -25,11 +25,17 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
-from htdata.codec import decode_rgb
-from htdata.reader import DatasetReader, SampleRow, decode_tactile_member
+from htdata import keys
+from htdata.codec import decode_rgb, decode_tactile
+from htdata.format import CANVAS, HANDS, RGB_MEMBER, SIZE_FIELDS, tactile_member
+from htdata.keys import HAND_IDS
+from htdata.reader import DatasetReader, SampleRow
 
-HAND_IDS = {"left": 0, "right": 1}
-HAND_NAMES = ("left", "right")
+HAND_NAMES = HANDS   # hand id -> name (HAND_IDS inverted: left=0, right=1)
+
+
+def _tactile_present(rows: np.ndarray, hand: str) -> np.ndarray:
+    return rows[SIZE_FIELDS[tactile_member(hand)]] > 0
 
 
 def shuffled_indices(n: int, seed: int, epoch: int) -> np.ndarray:
@@ -82,7 +88,7 @@ class _ItemBuilder:
 
     def empty_rgb(self, n: int) -> np.ndarray:
         """(n,3,224,224) rgb buffer (u8, or f32 with rgb_float) to decode into."""
-        return np.empty((n, 3, 224, 224), np.float32 if self.rgb_float else np.uint8)
+        return np.empty((n, 3, CANVAS, CANVAS), np.float32 if self.rgb_float else np.uint8)
 
     def put_rgb(self, out: np.ndarray, rgb_hwc: np.ndarray) -> None:
         """HWC uint8 -> CHW in `out` (scaled to [0,1] when out is float).
@@ -100,13 +106,13 @@ class _ItemBuilder:
 
     def decode_into(self, members: dict[str, bytes], hands, where: str, rgb_out) -> list[np.ndarray]:
         """Decode the JPEG once into each hand's rgb buffer; return each hand's (224,224) map."""
-        rgb = decode_rgb(members["rgb.jpg"], where=f"{where}.rgb.jpg")
+        rgb = decode_rgb(members[RGB_MEMBER], where=f"{where}.{RGB_MEMBER}")
         maps = []
         for k, (hand, r_out) in enumerate(zip(hands, rgb_out)):
-            suffix = f"tactile_{hand}.exr"
+            suffix = tactile_member(hand)
             if suffix not in members:
                 raise KeyError(f"{where} has no {hand} tactile map")
-            maps.append(decode_tactile_member(members[suffix], f"{where}.{suffix}"))
+            maps.append(decode_tactile(members[suffix], f"{where}.{suffix}"))
             if k == 0:
                 self.put_rgb(r_out, rgb)
             else:
@@ -116,30 +122,30 @@ class _ItemBuilder:
     def read_frame(self, index: int, hand: str, rgb_out: np.ndarray) -> tuple[SampleRow, np.ndarray]:
         """Read + decode sample `index` for `hand`: rgb into `rgb_out` (3,224,224); returns (row, map)."""
         reader = self.reader
-        row, key, members = reader.read_sample(index, suffixes=("rgb.jpg", f"tactile_{hand}.exr"))
-        if "rgb.jpg" not in members:
+        row, key, members = reader.read_sample(index, suffixes=(RGB_MEMBER, tactile_member(hand)))
+        if RGB_MEMBER not in members:
             raise KeyError(f"{reader.root}: {key} has no rgb frame")
         return row, self.decode_into(members, (hand,), f"{reader.root}: {key}", [rgb_out])[0]
 
     def ids(self, row: SampleRow, index: int, hand: str) -> dict:
         ep = self.reader.episodes[row.episode]
         return {
-            "coverage": self.coverage(ep["layouts"][hand]),
-            "regions": self.regions(),
-            "hand": _long(HAND_IDS[hand]),
-            "task": _long(self._task_ids[ep["task"]]),
-            "scene": _long(self._scene_ids[ep["scene"]]),
-            "episode": _long(row.episode),
-            "frame": _long(row.frame),
-            "index": _long(index),
+            keys.COVERAGE: self.coverage(ep["layouts"][hand]),
+            keys.REGIONS: self.regions(),
+            keys.HAND: _long(HAND_IDS[hand]),
+            keys.TASK: _long(self._task_ids[ep["task"]]),
+            keys.SCENE: _long(self._scene_ids[ep["scene"]]),
+            keys.EPISODE: _long(row.episode),
+            keys.FRAME: _long(row.frame),
+            keys.INDEX: _long(index),
         }
 
     def frame_item(self, index: int, hand: str) -> dict:
         rgb = self.empty_rgb(1)[0]
         row, tactile = self.read_frame(index, hand, rgb)
         item = self.ids(row, index, hand)
-        item["tactile"] = torch.from_numpy(tactile[None])   # decoded map is a fresh array: no copy
-        item["rgb"] = torch.from_numpy(rgb)
+        item[keys.TACTILE] = torch.from_numpy(tactile[None])   # decoded map is a fresh array: no copy
+        item[keys.RGB] = torch.from_numpy(rgb)
         return item
 
 
@@ -147,8 +153,8 @@ def _frame_items(reader: DatasetReader, indices: np.ndarray, hands: tuple[str, .
     """(N,2) int64 [sample index, hand id] for each selected sample with that hand, sample-major."""
     rows = reader.index[indices] if len(indices) else np.zeros(0, reader.index.dtype)
     cols = []
-    for hand in ("left", "right"):
-        present = rows[f"size_tactile_{hand}"] > 0 if hand in hands else np.zeros(len(rows), bool)
+    for hand in HANDS:
+        present = _tactile_present(rows, hand) if hand in hands else np.zeros(len(rows), bool)
         cols.append(present)
     present = np.stack(cols, axis=1)  # (N, 2)
     sample_pos, hand_ids = np.nonzero(present)  # row-major: left before right per sample
@@ -173,7 +179,7 @@ class TactileFrameDataset(_ItemDataset):
     """One item per (frame, hand present) of the selected split part."""
 
     def __init__(self, root, split: str | None = None, part: str | None = None,
-                 hands=("left", "right"), rgb_float: bool = False):
+                 hands=HANDS, rgb_float: bool = False):
         self.hands = _check_hands(hands)
         self._builder = _ItemBuilder(root, rgb_float)
         reader = self._builder.reader
@@ -192,7 +198,7 @@ class TactileWindowDataset(_ItemDataset):
     """
 
     def __init__(self, root, window: int = 3, split: str | None = None, part: str | None = None,
-                 hands=("left", "right"), rgb_float: bool = False):
+                 hands=HANDS, rgb_float: bool = False):
         if window < 1:
             raise ValueError(f"window must be >= 1, got {window}")
         self.window = window
@@ -210,8 +216,8 @@ class TactileWindowDataset(_ItemDataset):
         if len(items):
             offsets = np.arange(-(window - 1), 1)
             frames = items[:, :1] + offsets[None, :]
-            cols = np.stack([reader.index["size_tactile_left"], reader.index["size_tactile_right"]], 1)
-            present = cols[frames, items[:, 1:2]] > 0
+            cols = np.stack([_tactile_present(reader.index, h) for h in HANDS], 1)
+            present = cols[frames, items[:, 1:2]]
             items = items[present.all(axis=1)]
         self.items = items
 
@@ -219,15 +225,15 @@ class TactileWindowDataset(_ItemDataset):
         end, hand_id = self.items[i].tolist()
         hand = HAND_NAMES[hand_id]
         builder, w = self._builder, self.window
-        tactile = np.empty((w, 1, 224, 224), np.float32)
+        tactile = np.empty((w, 1, CANVAS, CANVAS), np.float32)
         rgb = builder.empty_rgb(w)   # frames decode straight into the stacked buffers
         for k, j in enumerate(range(end - w + 1, end + 1)):
             row, tactile[k, 0] = builder.read_frame(j, hand, rgb[k])
         out = builder.ids(row, end, hand)
-        out["tactile"] = torch.from_numpy(tactile)
-        out["rgb"] = torch.from_numpy(rgb)
-        out["frame"] = torch.from_numpy(np.arange(row.frame - w + 1, row.frame + 1, dtype=np.int64))
-        out["index"] = torch.from_numpy(np.arange(end - w + 1, end + 1, dtype=np.int64))
+        out[keys.TACTILE] = torch.from_numpy(tactile)
+        out[keys.RGB] = torch.from_numpy(rgb)
+        out[keys.FRAME] = torch.from_numpy(np.arange(row.frame - w + 1, row.frame + 1, dtype=np.int64))
+        out[keys.INDEX] = torch.from_numpy(np.arange(end - w + 1, end + 1, dtype=np.int64))
         return out
 
 
@@ -252,7 +258,7 @@ class TactileStream(IterableDataset):
     """
 
     def __init__(self, root, split: str | None = None, part: str | None = None,
-                 hands=("left", "right"), rgb_float: bool = False,
+                 hands=HANDS, rgb_float: bool = False,
                  shuffle_seed: int | None = None):
         self.hands = _check_hands(hands)
         self._builder = _ItemBuilder(root, rgb_float)
@@ -295,11 +301,11 @@ class TactileStream(IterableDataset):
     def iter_shards(self, shards: list[int]) -> Iterator[dict]:
         """Items of the selected samples of `shards`, in order (what __iter__ yields for its shards)."""
         builder, reader = self._builder, self.reader
-        wanted = ("rgb.jpg",) + tuple(f"tactile_{h}.exr" for h in self.hands)
+        wanted = (RGB_MEMBER,) + tuple(tactile_member(h) for h in self.hands)
         for index, members in reader.iter_samples(shards, suffixes=wanted):
             if not self._selected[index]:
                 continue
-            hands = [h for h in HAND_NAMES if h in self.hands and f"tactile_{h}.exr" in members]
+            hands = [h for h in HAND_NAMES if h in self.hands and tactile_member(h) in members]
             if not hands:
                 continue
             row = reader.row(index)
@@ -307,6 +313,6 @@ class TactileStream(IterableDataset):
             maps = builder.decode_into(members, hands, f"{reader.root}: {reader.key(index)}", rgb)
             for k, hand in enumerate(hands):
                 item = builder.ids(row, index, hand)
-                item["tactile"] = torch.from_numpy(maps[k][None])
-                item["rgb"] = torch.from_numpy(rgb[k])
+                item[keys.TACTILE] = torch.from_numpy(maps[k][None])
+                item[keys.RGB] = torch.from_numpy(rgb[k])
                 yield item

@@ -205,7 +205,7 @@ def _copy(dataset, tmp_path):
 
 
 def test_row_matches_index_fields(dataset):
-    from htdata.manifest import SIZE_FIELDS
+    from htdata.format import SIZE_FIELDS
 
     r = DatasetReader(dataset)
     for i in (0, 5, 9, -1):
@@ -234,8 +234,7 @@ def test_member_layout_offsets_and_early_stop():
 def test_header_check_fast_path_fallback_and_mismatch():
     import tarfile
 
-    from htdata.reader import header_matches
-    from htdata.shardio import member_header
+    from htdata.shardio import header_matches, member_header
 
     name = "ep_a__000001.json"
     ours = member_header(name, 1234)
@@ -266,7 +265,7 @@ def test_header_check_fast_path_fallback_and_mismatch():
 def test_decode_npy_matches_np_load_on_miss_and_hit(arr):
     import io
 
-    from htdata.reader import decode_npy
+    from htdata.codec import decode_npy
 
     buf = io.BytesIO()
     np.save(buf, arr)
@@ -283,7 +282,7 @@ def test_decode_npy_matches_np_load_on_miss_and_hit(arr):
 def test_decode_npy_errors_name_the_member():
     import io
 
-    from htdata.reader import decode_npy
+    from htdata.codec import decode_npy
 
     buf = io.BytesIO()
     np.save(buf, np.arange(5, dtype=np.float32))

@@ -32,12 +32,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from htdata.codec import decode_rgb, decode_tactile
-from htdata.manifest import index_load_benchmark
-from htdata.reader import DatasetReader, decode_npy
+from htdata.benchmarks.index import index_load_benchmark
+from htdata.codec import decode_npy, decode_rgb, decode_tactile
+from htdata.format import HANDS
+from htdata.reader import DatasetReader
 
 IMAGES = ("rgb.jpg", "tactile_left.exr", "tactile_right.exr")
-HANDS = ("left", "right")
 
 
 def _rate(n: int, seconds: float) -> float:

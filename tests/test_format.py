@@ -1,0 +1,69 @@
+"""The on-disk format table (htdata/format.py): one row per member, exact round trips."""
+
+import numpy as np
+import pytest
+
+from htdata.format import (HANDS, INDEX_DTYPE, MEMBER_ORDER, MEMBERS, SIZE_FIELDS, CodecSettings, bend_member,
+                           decode_sample, encode_sample, tactile_member)
+
+
+def test_member_order_and_index_columns_are_the_published_format():
+    # Changing either breaks every dataset already written: append members, never reorder.
+    assert MEMBER_ORDER == ("json", "rgb.jpg", "tactile_left.exr", "tactile_right.exr",
+                            "bend_left.npy", "bend_right.npy")
+    assert INDEX_DTYPE.names == ("shard", "offset", "episode", "frame", "size_json", "size_rgb",
+                                 "size_tactile_left", "size_tactile_right", "size_bend_left", "size_bend_right")
+    assert INDEX_DTYPE.itemsize == 44
+    assert [SIZE_FIELDS[s] for s in MEMBER_ORDER] == list(INDEX_DTYPE.names[4:])
+    assert {m.hand for m in MEMBERS if m.hand} == set(HANDS)
+
+
+def test_hand_member_names():
+    assert tactile_member("left") == "tactile_left.exr" and bend_member("right") == "bend_right.npy"
+    with pytest.raises(ValueError, match="hand 'middle'"):
+        tactile_member("middle")
+
+
+def sample(hands=HANDS, bend=True):
+    rng = np.random.default_rng(1)
+    tactile = {h: np.zeros((224, 224), np.float32) for h in hands}
+    for m in tactile.values():
+        m[50:60, 70:90] = 0.5   # exact in float16
+    out = {"meta": {"key": "ep__000000", "frame_index": 0},
+           "rgb": rng.integers(0, 255, (224, 224, 3), dtype=np.uint8),
+           "tactile": tactile}
+    if bend:
+        out["bend"] = {h: rng.random(7).astype(np.float32) for h in hands}
+    return out
+
+
+def test_encode_decode_round_trip_is_exact_for_lossless_members():
+    s = sample()
+    members = encode_sample(s, CodecSettings(), "ep__000000")
+    assert tuple(members) == MEMBER_ORDER
+    back = decode_sample(members, "ep__000000")
+    assert back["meta"] == s["meta"]
+    for h in HANDS:
+        assert np.array_equal(back["tactile"][h], s["tactile"][h])
+        assert np.array_equal(back["bend"][h], s["bend"][h]) and back["bend"][h].dtype == np.float32
+    assert back["rgb"].shape == (224, 224, 3)   # JPEG: lossy by design
+    # deterministic bytes: same sample, same members
+    assert encode_sample(s, CodecSettings(), "x") == members
+
+
+def test_absent_members_are_absent_and_settings_are_used():
+    s = sample(hands=("right",), bend=False)
+    members = encode_sample(s, CodecSettings(tactile_compression="none", rgb_quality=50), "k")
+    assert tuple(members) == ("json", "rgb.jpg", "tactile_right.exr")
+    assert len(members["tactile_right.exr"]) > 224 * 224 * 2      # uncompressed half
+    back = decode_sample(members, "k")
+    assert back["tactile"].keys() == {"right"} and back["bend"] == {}
+
+
+def test_decode_errors_name_the_member():
+    with pytest.raises(ValueError, match=r"ep__000003\.tactile_left\.exr"):
+        decode_sample({"tactile_left.exr": b"not an exr"}, "ep__000003")
+    with pytest.raises(ValueError, match="unknown member 'depth.png'"):
+        decode_sample({"depth.png": b"x"}, "ep__000003")
+    with pytest.raises(ValueError, match=r"ep__000004\.json"):
+        decode_sample({"json": b"{not json"}, "ep__000004")
