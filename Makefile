@@ -8,12 +8,12 @@ SEED   ?= 0
 OOD    ?= palm_push
 JOBS   ?= 2
 
-.PHONY: setup demo sample ingest split validate preview train-smoke test bench clean
+.PHONY: setup demo sample ingest split validate preview train-smoke test install-check bench clean
 
 setup: $(VENV)/.installed
 
 # torch==2.13.0 is pinned in pyproject.toml: the CPU wheel on the machine's disk.
-$(VENV)/.installed: pyproject.toml
+$(VENV)/.installed: pyproject.toml setup.py
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e ".[test,ray]"
@@ -50,6 +50,11 @@ demo: preview train-smoke
 
 test: setup
 	$(PY) -m pytest -q -n $(JOBS) --dist loadfile
+
+# A real install: build sdist + wheel, install the wheel into a fresh venv under a
+# temp dir, run layouts -> sample -> ingest -> split -> validate outside the checkout.
+install-check:
+	PYTHON=$(PYTHON) tools/install_check.sh
 
 bench: setup
 	$(HTDATA) bench --out bench

@@ -12,8 +12,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-CANVAS = 224
+from htdata.format import CANVAS
+
 ENCODERS = ("vit", "cnn", "resnet18")
+# Frames per stage-3 window (t_{T-2..T}): the temporal model's length, the trainer's and
+# HT-Bench's window datasets.
+WINDOW = 3
 # Top-level modules of HandTouch that a stage may train (see model.py).
 MODULE_NAMES = ("encoder", "vq", "decoder", "rgb_proj", "hand_token", "fusion", "temporal", "predictor")
 # Token grid side of the baselines' encoders (stride 16 CNN, stride 32 ResNet-18).
@@ -196,7 +200,7 @@ class TrainConfig:
     def check_codebook_load(self, world_size: int) -> None:
         """Refuse batches too small for the codebook: if the expected uses per code per
         step are below 2 x the dead threshold, healthy codes look dead and get restarted
-        every step (TOOLING_FACTS 'Vector quantisation')."""
+        every step (the usage EMA of a code used ~once per step hovers around the threshold)."""
         m = self.model
         per_code = self.batch_size * world_size * m.num_tokens / m.codebook_size
         if per_code < 2 * m.vq_dead_threshold:

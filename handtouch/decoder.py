@@ -13,7 +13,8 @@ import math
 import torch
 import torch.nn as nn
 
-from .config import CANVAS
+from htdata.format import CANVAS
+
 from .encoders import transformer_stack
 
 SHUFFLE_DOUBLINGS = 2   # the last 4x of upsampling is a PixelShuffle

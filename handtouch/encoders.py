@@ -11,11 +11,14 @@ from __future__ import annotations
 import torch
 import torch.nn as nn
 
-from .config import CANVAS, CNN_GRID, RESNET_GRID, ModelConfig
+from htdata.format import CANVAS
+
+from .config import CNN_GRID, RESNET_GRID, ModelConfig
 
 
 def transformer_stack(dim: int, heads: int, mlp_ratio: float, depth: int) -> nn.TransformerEncoder:
-    """Pre-LN ViT blocks (TOOLING_FACTS: plain torch, no nested tensors)."""
+    """Pre-LN ViT blocks in plain torch. Nested tensors are off: torch cannot use them with
+    norm_first layers and would only warn that it ignores the setting."""
     layer = nn.TransformerEncoderLayer(dim, heads, int(dim * mlp_ratio), dropout=0.0,
                                        activation="gelu", batch_first=True, norm_first=True)
     return nn.TransformerEncoder(layer, depth, enable_nested_tensor=False)

@@ -12,10 +12,9 @@ Top-level modules (the names stages freeze / unfreeze, config.MODULE_NAMES):
   predictor   stage 3: cross-attention from aggregated tokens to v_{T-2..T}
 rgb_encoder is always frozen and is not one of them.
 
-Stages: 1 reconstruct, 2 masked reconstruction with RGB, 3 predict t_T; stages 2
-and 3 also replay stage 1's reconstruction (LossConfig.lambda_replay) because
-they fine-tune the VQ and decoder that reconstruction shares.
-Every loss ignores uncovered pixels (coverage 0); predictions are zero there.
+The model holds no training logic: each stage's loss is built from the blocks
+below in `handtouch.stages` (1 reconstruct, 2 masked reconstruction with RGB,
+3 predict t_T). Predictions are zero where coverage is 0.
 """
 
 from __future__ import annotations
@@ -26,14 +25,13 @@ from collections.abc import Iterable
 import torch
 import torch.nn as nn
 
-from .config import MODULE_NAMES, LossConfig, ModelConfig
+from .config import MODULE_NAMES, WINDOW, ModelConfig
 from .decoder import TactileDecoder
 from .encoders import build_tactile_encoder, transformer_stack
 from .rgb_encoder import RGBEncoder
 from .vq import FactorisedVQ
 
 MODEL_NAMES = {"vit": "handtouch-vit", "cnn": "baseline-cnn", "resnet18": "baseline-resnet18"}
-WINDOW = 3
 
 
 def masked_mse(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
@@ -182,17 +180,19 @@ class HandTouch(nn.Module):
     def _with_hand(self, tokens: torch.Tensor, hand: torch.Tensor) -> torch.Tensor:
         return torch.cat([self.hand_token(_hand_ids(hand).to(tokens.device))[:, None], tokens], dim=1)
 
+    def fuse(self, tokens: torch.Tensor, rgb: torch.Tensor, hand: torch.Tensor) -> torch.Tensor:
+        """Tactile tokens (B,N,D) + hand token cross-attend to the RGB frame's tokens -> (B,N,D)."""
+        return self.fusion(self._with_hand(tokens, hand), self.visual_tokens(rgb))[:, 1:]
+
     def quantise_decode(self, tokens: torch.Tensor, coverage: torch.Tensor):
         """tokens -> VQ -> map * coverage; returns (map, indices, vq losses, vq stats)."""
         z, indices, losses, stats = self.vq(tokens)
         return self.decoder(z) * coverage, indices, losses, stats
 
     def _inpaint(self, tactile, coverage, mask, rgb, hand):
-        tokens = self.encode(tactile, mask)
-        fused = self.fusion(self._with_hand(tokens, hand), self.visual_tokens(rgb))[:, 1:]
-        return self.quantise_decode(fused, coverage)
+        return self.quantise_decode(self.fuse(self.encode(tactile, mask), rgb, hand), coverage)
 
-    def _predicted_tokens(self, rgb_window, past_tokens, hand):
+    def predicted_tokens(self, rgb_window, past_tokens, hand):
         """Encoded past frames (B,T-1,N,D) + RGB v_{T-2..T} -> predicted t_T tokens (B,N,D), before VQ."""
         past = self.temporal(past_tokens)
         b, tv = rgb_window.shape[:2]
@@ -200,14 +200,14 @@ class HandTouch(nn.Module):
         vis = self.temporal.stamp(vis.reshape(b, tv, *vis.shape[1:]))
         return self.predictor(self._with_hand(past, hand), vis)[:, 1:]
 
-    def _encode_frames(self, frames: torch.Tensor) -> torch.Tensor:
+    def encode_frames(self, frames: torch.Tensor) -> torch.Tensor:
         """(B,T,1,H,W) -> tokens (B,T,N,D) in one encoder call."""
         b, t = frames.shape[:2]
         tokens = self.encode(frames.reshape(b * t, *frames.shape[2:]))
         return tokens.reshape(b, t, *tokens.shape[1:])
 
     def _predict_next(self, rgb_window, tactile_window, coverage, hand):
-        pred = self._predicted_tokens(rgb_window, self._encode_frames(tactile_window), hand)
+        pred = self.predicted_tokens(rgb_window, self.encode_frames(tactile_window), hand)
         return self.quantise_decode(pred, coverage)
 
     # ---- TactileModel API ---------------------------------------------------------
@@ -229,54 +229,3 @@ class HandTouch(nn.Module):
     def predict_next(self, rgb_window, tactile_window, coverage, hand) -> torch.Tensor:
         past = covered(tactile_window, coverage[:, None])
         return self._predict_next(rgb_window, past, coverage, hand)[0]
-
-    # ---- training losses ----------------------------------------------------------
-    def forward(self, batch: dict, stage: int, mask: torch.Tensor | None = None,
-                weights: LossConfig | None = None) -> dict[str, torch.Tensor]:
-        """Losses of one stage on a batch (frame batch for stages 1-2, window batch for 3).
-
-        Stage 2 needs `mask` (B,1,224,224), 1 = hidden. Returns {"loss", its terms, VQ stats}.
-        """
-        w = weights or LossConfig()
-        if stage == 1:
-            cov = batch["coverage"]
-            target = covered(batch["tactile"], cov)
-            pred, _, vq_l, stats = self.quantise_decode(self.encode(target), cov)
-            terms = {"recon": masked_mse(pred, target, cov)}
-            main = terms["recon"]
-        elif stage == 2:
-            if mask is None:
-                raise ValueError("stage 2 needs a mask")
-            cov = batch["coverage"]
-            target = covered(batch["tactile"], cov)
-            b = target.shape[0]
-            # one encoder call: the masked maps (for fusion) and the whole maps (replay)
-            tokens = self.encode(torch.cat([target, target]), torch.cat([mask, torch.zeros_like(mask)]))
-            fused = self.fusion(self._with_hand(tokens[:b], batch["hand"]), self.visual_tokens(batch["rgb"]))[:, 1:]
-            maps, _, vq_l, stats = self.quantise_decode(torch.cat([fused, tokens[b:]]), torch.cat([cov, cov]))
-            pred = maps[:b]
-            terms = {"visible": masked_mse(pred, target, cov * (1 - mask)),
-                     "masked": masked_mse(pred, target, cov * mask),
-                     "replay": masked_mse(maps[b:], target, cov)}
-            main = w.lambda_vis * terms["visible"] + w.lambda_mask * terms["masked"] + w.lambda_replay * terms["replay"]
-        elif stage == 3:
-            tac, cov = batch["tactile"], batch["coverage"]
-            if tac.dim() != 5 or tac.shape[1] != WINDOW:
-                raise ValueError(f"stage 3 needs window batches (B,{WINDOW},1,H,W), got {tuple(tac.shape)}")
-            cov_w = cov if cov.dim() == 5 else cov[:, None].expand(-1, WINDOW, -1, -1, -1)  # coverage may be given once
-            cov_t = cov_w[:, -1]
-            frames = covered(tac, cov_w)
-            target = frames[:, -1]
-            tokens = self._encode_frames(frames)            # past frames + t_T (replay) in one call
-            pred_tokens = self._predicted_tokens(batch["rgb"], tokens[:, :-1], batch["hand"])
-            b = target.shape[0]
-            maps, _, vq_l, stats = self.quantise_decode(torch.cat([pred_tokens, tokens[:, -1]]),
-                                                        torch.cat([cov_t, cov_t]))
-            terms = {"next": masked_mse(maps[:b], target, cov_t), "replay": masked_mse(maps[b:], target, cov_t)}
-            main = terms["next"] + w.lambda_replay * terms["replay"]
-        else:
-            raise ValueError(f"stage must be 1, 2 or 3, got {stage}")
-        vq_total = vq_l["codebook"] + vq_l["commit"]
-        out = {"loss": main + w.vq_weight * vq_total, "vq": vq_total, **terms}
-        out.update({k: v.to(main.device) for k, v in stats.items()})
-        return out

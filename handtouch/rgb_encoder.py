@@ -22,7 +22,7 @@ from pathlib import Path
 import torch
 import torch.nn as nn
 
-from .config import CANVAS
+from htdata.format import CANVAS
 
 log = logging.getLogger("handtouch.rgb_encoder")
 

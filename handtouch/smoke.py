@@ -35,9 +35,13 @@ from handtouch.bench.evaluate import (CopyLastModel, EvalConfig, PreparedPart, Z
                                       load_part, prepare, reconstruct)
 from handtouch.bench.metrics import MapMetrics
 from handtouch.bench.report import render_predictions, write_results
+from handtouch.resources import config_file
+from htdata import keys
+from htdata.adapters import ADAPTERS
+from htdata.format import MANIFEST_FILE
 
 ENCODERS = ("vit", "cnn", "resnet18")     # HandTouch first; the other two are the baselines
-RAW_FORMATS = ("opentouch", "touchanything", "native")
+RAW_FORMATS = tuple(ADAPTERS)            # one sample corpus folder and pipeline per source adapter
 SPLIT_NAME = "smoke"
 RECON_RATIO = 0.7
 # 64 codes in the smoke config; a collapsed codebook scores ~1. Healthy runs use 15-30.
@@ -61,7 +65,7 @@ def ensure_raw(raw: Path, seed: int) -> None:
 
 
 def ensure_dataset(raw: Path, dataset: Path, workers: int) -> None:
-    if (dataset / "dataset.json").is_file():
+    if (dataset / MANIFEST_FILE).is_file():
         print(f"smoke: dataset present at {dataset}", flush=True)
         return
     from htdata.resources import PIPELINES_DIR
@@ -73,7 +77,9 @@ def ensure_dataset(raw: Path, dataset: Path, workers: int) -> None:
 
 
 def make_split(dataset: Path, ood_task: str, seed: int) -> None:
-    tasks = json.loads((dataset / "dataset.json").read_text()).get("tasks", [])
+    from htdata.manifest import load_manifest
+
+    tasks = load_manifest(dataset).get("tasks", [])
     if ood_task not in tasks:
         raise SystemExit(f"smoke: ood task {ood_task!r} is not in {dataset} (tasks: {tasks})")
     _htdata("split", str(dataset), "--ood-task", ood_task, "--seed", str(seed), "--name", SPLIT_NAME, "--force")
@@ -114,8 +120,8 @@ def reconstruction_rmse(model, prep: PreparedPart) -> float | None:
         model.eval()
     with torch.inference_mode():
         for b in prep.frames:
-            tactile, coverage = b["tactile"].float(), b["coverage"].float()
-            metrics.update(reconstruct(model, tactile, coverage, b["rgb"], b["hand"]), tactile, coverage)
+            tactile, coverage = b[keys.TACTILE].float(), b[keys.COVERAGE].float()
+            metrics.update(reconstruct(model, tactile, coverage, b[keys.RGB], b[keys.HAND]), tactile, coverage)
     return metrics.result()["rmse"]
 
 
@@ -127,7 +133,7 @@ def codebook_perplexity(model, prep: PreparedPart) -> float:
     model.eval()
     with torch.inference_mode():
         for b in prep.frames:
-            _, idx, _, _ = model.vq(model.encode(b["tactile"].float() * b["coverage"].float()))
+            _, idx, _, _ = model.vq(model.encode(b[keys.TACTILE].float() * b[keys.COVERAGE].float()))
             counts += torch.bincount(idx.flatten(), minlength=counts.numel()).double()
     if counts.sum() == 0:
         return float("nan")
@@ -179,7 +185,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--out", type=Path, default=Path("runs/smoke"), help="run folder (results, checkpoints)")
     p.add_argument("--raw", type=Path, default=None, help="raw corpus folder (default OUT/raw)")
     p.add_argument("--dataset", type=Path, default=None, help="dataset folder (default OUT/dataset)")
-    p.add_argument("--config", type=Path, default=Path(__file__).resolve().parents[1] / "configs" / "smoke.toml")
+    p.add_argument("--config", type=Path, default=None,
+                   help="trainer config (default: the shipped smoke config, handtouch.resources)")
     p.add_argument("--ood-task", default="palm_push", help="task held out as the ood part")
     p.add_argument("--encoders", default=",".join(ENCODERS), help="comma list; the first is HandTouch")
     p.add_argument("--max-items", type=int, default=200, help="evaluation items per part")
@@ -190,6 +197,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     args = p.parse_args(argv)
     args.raw = args.raw or args.out / "raw"
     args.dataset = args.dataset or args.out / "dataset"
+    args.config = args.config or config_file("smoke")
     args.encoders = [e.strip() for e in args.encoders.split(",") if e.strip()]
     if not args.encoders or args.encoders[0] != "vit":
         p.error("--encoders must start with vit (HandTouch); the learning checks apply to it")
@@ -244,7 +252,7 @@ def main(argv=None) -> int:
     for model in [*models.values(), ZerosModel(), CopyLastModel()]:
         results[model.name] = timer.run(f"eval_{model.name}", evaluate, model, prepared)
     stage1_rmse = timer.run("checks", reconstruction_rmse, stage1_models[handtouch], prepared["test"])
-    zeros_rmse = results[ZerosModel.name]["test"]["reconstruction"]["full"]["rmse"]   # same items
+    zeros_rmse = results[ZerosModel.name]["test"]["reconstruction"]["f_covered"]["rmse"]   # same items
     perplexity = timer.run("checks", codebook_perplexity, models[handtouch], prepared["test"])
     checks = learning_checks(stage1_rmse, zeros_rmse, results[handtouch]["test"]["retrieval"], perplexity)
     examples = timer.run("report", collect_examples, models[handtouch], prepared["test"], count=4)

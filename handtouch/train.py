@@ -1,11 +1,15 @@
 """HandTouch trainer: stage 1 (reconstruct) -> 2 (masked + RGB) -> 3 (predict t_T).
 
+The loop is generic: what each stage reads, prepares, computes and trains is its
+`handtouch.stages.Stage` object.
+
     python -m handtouch.train --config configs/smoke.toml [--set key=value ...]
     torchrun --nproc_per_node 2 -m handtouch.train --config ...      (DDP)
 
 Each stage writes OUT/stageN.pt (model, optimizer, step, RNG states); a re-run
 continues an unfinished stage from its checkpoint and skips finished ones.
-Losses and throughput go to stdout and OUT/log.jsonl; OUT/metrics.json holds the
+Losses and throughput go to OUT/log.jsonl and to stdout (the CLI; `train()` logs them
+through `logging` unless given `on_record`); OUT/metrics.json holds the
 final losses per stage, codebook perplexity / usage, recon RMSE on a held-out
 batch and steps/s. Python API: `train(cfg) -> metrics`, `load_model(path)`.
 """
@@ -14,26 +18,31 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import io
 import json
 import logging
 import math
-import os
 import random
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
+import torch.nn as nn
 from torch.utils.data import DataLoader, Dataset
 
-from .config import LossConfig, TrainConfig, load_train_config, model_config_from_dict
-from .distributed import (DistEnv, StepBatchSampler, barrier, init_distributed, mean_across_ranks,
-                          shutdown, unwrap, wrap)
-from .masking import sample_masks
+from htdata import keys
+from htdata.fsutil import write_bytes_atomic, write_json_atomic
+
+from .config import WINDOW, TrainConfig, load_train_config, model_config_from_dict
+from .distributed import DistEnv, StepBatchSampler, barrier, init_distributed, mean_across_ranks, shutdown, wrap
 from .model import HandTouch, covered, masked_mse
+from .resources import config_file
 from .rgb_encoder import load_rgb_encoder
+from .stages import FRAMES, WINDOWS, Stage, StageLoss, StepInfo, build_stages
 
 log = logging.getLogger("handtouch.train")
 CHECKPOINT_FORMAT = 1
@@ -41,10 +50,16 @@ CHECKPOINT_FORMAT = 1
 
 @dataclass
 class TrainData:
-    frames: Dataset            # stage 1-2 items (TactileFrameDataset keys)
-    windows: Dataset | None    # stage 3 items (TactileWindowDataset keys); None if stage 3 is not run
+    frames: Dataset            # stages.FRAMES items (TactileFrameDataset keys)
+    windows: Dataset | None    # stages.WINDOWS items (TactileWindowDataset keys); None if no stage reads them
     eval_frames: Dataset       # source of the held-out batch
     eval_source: str           # what eval_frames is, for metrics.json
+
+    def items(self, kind: str) -> Dataset | None:
+        """The dataset a stage reads (Stage.data: stages.FRAMES or stages.WINDOWS)."""
+        if kind not in (FRAMES, WINDOWS):
+            raise ValueError(f"unknown stage data kind {kind!r}; known: {FRAMES!r}, {WINDOWS!r}")
+        return self.frames if kind == FRAMES else self.windows
 
 
 def load_data(cfg: TrainConfig) -> TrainData:
@@ -54,8 +69,8 @@ def load_data(cfg: TrainConfig) -> TrainData:
     split = cfg.split or None
     train_part = cfg.train_part if split else None
     frames = TactileFrameDataset(cfg.data_root, split=split, part=train_part)
-    windows = (TactileWindowDataset(cfg.data_root, window=3, split=split, part=train_part)
-               if 3 in cfg.stages else None)
+    windows = (TactileWindowDataset(cfg.data_root, window=WINDOW, split=split, part=train_part)
+               if any(s.data == WINDOWS for s in build_stages(cfg)) else None)
     if split:
         eval_frames = TactileFrameDataset(cfg.data_root, split=split, part=cfg.eval_part)
         source = f"part {cfg.eval_part!r} of split {split!r}"
@@ -83,10 +98,10 @@ def _to_tuple(obj):
 
 
 def save_checkpoint(path: Path, payload: dict) -> None:
-    """Atomic: write a temp file, then rename over the old checkpoint."""
-    tmp = path.with_suffix(".tmp")
-    torch.save(payload, tmp)
-    os.replace(tmp, path)
+    """Atomic: a crash leaves the old checkpoint or the new one, never half of one."""
+    buf = io.BytesIO()
+    torch.save(payload, buf)
+    write_bytes_atomic(path, buf.getbuffer())
 
 
 def read_checkpoint(path: Path) -> dict:
@@ -129,30 +144,100 @@ def _to_device(batch: dict, device: torch.device) -> dict:
     return {k: v.to(device, non_blocking=True) if torch.is_tensor(v) else v for k, v in batch.items()}
 
 
-def _mask_generator(seed: int, stage: int, step: int, rank: int) -> torch.Generator:
-    """Per-step generator: masks depend only on (seed, stage, step, rank), so resumes repeat them."""
-    return torch.Generator().manual_seed(((seed * 7 + stage) * 1_000_003 + step) * 131 + rank)
-
-
 class JsonlLog:
-    def __init__(self, path: Path | None):
+    """Training records: appended to OUT/log.jsonl (when `path` is set), then handed to
+    `emit` if given (the CLI prints them), else logged at INFO on "handtouch.train"."""
+
+    def __init__(self, path: Path | None, emit: Callable[[dict], None] | None = None):
         self.path = path
+        self.emit = emit
 
     def write(self, record: dict) -> None:
-        print(json.dumps(record), flush=True)
+        line = json.dumps(record)
         if self.path is not None:
             with self.path.open("a") as f:
-                f.write(json.dumps(record) + "\n")
+                f.write(line + "\n")
+        if self.emit is not None:
+            self.emit(record)
+        else:
+            log.info("%s", line)
 
 
 def _autocast(cfg: TrainConfig, device: torch.device):
     return torch.autocast(device_type=device.type, dtype=torch.bfloat16, enabled=cfg.bf16)
 
 
-def run_stage(n: int, model: HandTouch, cfg: TrainConfig, data: TrainData, env: DistEnv,
+def _stage_loader(stage: Stage, cfg: TrainConfig, data: TrainData, env: DistEnv, start: int) -> DataLoader:
+    """Batches of the stage's dataset kind for steps [start, steps) of this rank."""
+    n = stage.number
+    dataset = data.items(stage.data)
+    if dataset is None:
+        raise ValueError(f"stage {n} needs {stage.data} data (TrainData.{stage.data} is None)")
+    try:
+        sampler = StepBatchSampler(len(dataset), cfg.batch_size, cfg.seed + n, start, stage.cfg.steps,
+                                   env.rank, env.world_size)
+    except ValueError as e:
+        raise ValueError(f"stage {n} ({stage.items} items from {cfg.data_root}): {e}") from None
+    return DataLoader(dataset, batch_sampler=sampler, num_workers=cfg.workers,
+                      generator=torch.Generator().manual_seed(cfg.seed),  # keep global RNG untouched
+                      persistent_workers=False, pin_memory=env.device.type == "cuda")
+
+
+@dataclass
+class _StageRun:
+    """The pieces one stage's step loop works with."""
+    stage: Stage
+    step_loss: nn.Module          # StageLoss(stage, model), DDP-wrapped under torchrun
+    opt: torch.optim.Optimizer
+    params: list[torch.nn.Parameter]
+    cfg: TrainConfig
+    env: DistEnv
+    logger: JsonlLog
+
+
+def _train_steps(run: _StageRun, loader: DataLoader, start: int,
+                 checkpoint: Callable[[int], None]) -> tuple[dict[str, float], int]:
+    """Steps [start, steps): the generic loop. -> (last logged mean losses, last step index)."""
+    stage, cfg, env, opt = run.stage, run.cfg, run.env, run.opt
+    n, total = stage.number, stage.cfg.steps
+    window: dict[str, float] = {}
+    window_steps, t_window = 0, time.perf_counter()
+    last: dict[str, float] = {}
+    step = start
+    for step, batch in zip(range(start, total), loader):
+        batch = _to_device(batch, env.device)
+        for group in opt.param_groups:
+            group["lr"] = lr_at(step, total, stage.cfg.lr, stage.cfg.warmup_steps)
+        batch = stage.prepare(batch, StepInfo(step, total, env.rank))
+        with _autocast(cfg, env.device):
+            loss, loss_dict = run.step_loss(batch)
+        if not torch.isfinite(loss):
+            raise FloatingPointError(f"stage {n} step {step}: non-finite loss {float(loss)}")
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(run.params, stage.cfg.grad_clip)
+        opt.step()
+        for k, v in {"loss": loss, **loss_dict}.items():
+            window[k] = window.get(k, 0.0) + float(v.detach())
+        window_steps += 1
+        done_steps = step + 1
+        if done_steps % cfg.log_every == 0 or done_steps == total:
+            elapsed = time.perf_counter() - t_window
+            last = mean_across_ranks({k: v / window_steps for k, v in window.items()}, env)
+            sps = window_steps / max(elapsed, 1e-9)
+            if env.is_main:
+                run.logger.write({"stage": n, "step": done_steps, "lr": opt.param_groups[0]["lr"], **last,
+                                  "steps_per_s": sps, "samples_per_s": sps * cfg.batch_size * env.world_size})
+            window, window_steps, t_window = {}, 0, time.perf_counter()
+        if done_steps % cfg.checkpoint_every == 0 and done_steps < total:
+            checkpoint(done_steps)
+    return last, step
+
+
+def run_stage(stage: Stage, model: HandTouch, cfg: TrainConfig, data: TrainData, env: DistEnv,
               out: Path, logger: JsonlLog, heldout: dict | None = None) -> dict:
-    """Train stage n (resuming / skipping from OUT/stageN.pt); returns the stage summary."""
-    scfg = cfg.stage(n)
+    """Train one stage (resuming / skipping from OUT/stageN.pt); returns the stage summary."""
+    n, steps = stage.number, stage.cfg.steps
     ckpt_path = out / f"stage{n}.pt"
     state = read_checkpoint(ckpt_path) if ckpt_path.is_file() else None
     if state is not None and state["done"]:
@@ -161,91 +246,44 @@ def run_stage(n: int, model: HandTouch, cfg: TrainConfig, data: TrainData, env: 
         logger.write({"event": "stage_skipped", "stage": n, "reason": f"{ckpt_path} is finished"})
         return state["summary"]
 
-    model.set_trainable(scfg.trainable)
+    stage.configure(model)
     model.train()
     params = [p for p in model.parameters() if p.requires_grad]
-    opt = torch.optim.AdamW(params, lr=scfg.lr, weight_decay=scfg.weight_decay)
+    opt = torch.optim.AdamW(params, lr=stage.cfg.lr, weight_decay=stage.cfg.weight_decay)
     start = 0
     if state is not None:
         model.load_state_dict(state["model"])
         opt.load_state_dict(state["optimizer"])
         start = state["step"]
         logger.write({"event": "stage_resumed", "stage": n, "step": start})
-    dataset = data.windows if n == 3 else data.frames
-    if dataset is None:
-        raise ValueError("stage 3 needs window data (TrainData.windows is None)")
-    try:
-        sampler = StepBatchSampler(len(dataset), cfg.batch_size, cfg.seed + n, start, scfg.steps,
-                                   env.rank, env.world_size)
-    except ValueError as e:
-        kind = "window (T >= 2)" if n == 3 else "frame"
-        raise ValueError(f"stage {n} ({kind} items from {cfg.data_root}): {e}") from None
-    loader = DataLoader(dataset, batch_sampler=sampler, num_workers=cfg.workers,
-                        generator=torch.Generator().manual_seed(cfg.seed),  # keep global RNG untouched
-                        persistent_workers=False, pin_memory=env.device.type == "cuda")
+    loader = _stage_loader(stage, cfg, data, env, start)
     if state is not None:
         _set_rng_state(state["rng"])
-    ddp = wrap(model, env)
-    weights: LossConfig = cfg.loss
 
-    def checkpoint(step: int, done: bool, summary: dict | None) -> None:
+    def checkpoint(step: int, done: bool = False, summary: dict | None = None) -> None:
         if env.is_main:
             save_checkpoint(ckpt_path, {
                 "format": CHECKPOINT_FORMAT, "stage": n, "step": step, "done": done,
-                "model": unwrap(ddp).state_dict(), "optimizer": opt.state_dict(), "rng": _rng_state(),
+                "model": model.state_dict(), "optimizer": opt.state_dict(), "rng": _rng_state(),
                 "model_config": dataclasses.asdict(cfg.model),
                 "rgb_encoder": {"spec": model.rgb_encoder.info.spec, "sha256": model.rgb_encoder.info.sha256},
                 "summary": summary or {}})
         barrier(env)
 
-    window: dict[str, float] = {}
-    window_steps, t_window, t_start = 0, time.perf_counter(), time.perf_counter()
-    last: dict[str, float] = {}
-    step = start
-    for step, batch in zip(range(start, scfg.steps), loader):
-        batch = _to_device(batch, env.device)
-        for group in opt.param_groups:
-            group["lr"] = lr_at(step, scfg.steps, scfg.lr, scfg.warmup_steps)
-        mask = None
-        if n == 2:
-            g = step / max(scfg.steps - 1, 1)
-            mask, _ = sample_masks(batch["regions"].cpu(), g, cfg.masking.p_min, cfg.masking.p_max,
-                                   cfg.masking.max_parts, _mask_generator(cfg.seed, n, step, env.rank))
-            mask = mask.to(env.device)
-        with _autocast(cfg, env.device):
-            losses = ddp(batch, n, mask=mask, weights=weights)
-        loss = losses["loss"]
-        if not torch.isfinite(loss):
-            raise FloatingPointError(f"stage {n} step {step}: non-finite loss {float(loss)}")
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(params, scfg.grad_clip)
-        opt.step()
-        for k, v in losses.items():
-            window[k] = window.get(k, 0.0) + float(v.detach())
-        window_steps += 1
-        done_steps = step + 1
-        if done_steps % cfg.log_every == 0 or done_steps == scfg.steps:
-            elapsed = time.perf_counter() - t_window
-            last = mean_across_ranks({k: v / window_steps for k, v in window.items()}, env)
-            sps = window_steps / max(elapsed, 1e-9)
-            if env.is_main:
-                logger.write({"stage": n, "step": done_steps, "lr": opt.param_groups[0]["lr"], **last,
-                              "steps_per_s": sps, "samples_per_s": sps * cfg.batch_size * env.world_size})
-            window, window_steps, t_window = {}, 0, time.perf_counter()
-        if done_steps % cfg.checkpoint_every == 0 and done_steps < scfg.steps:
-            checkpoint(done_steps, False, None)
+    run = _StageRun(stage, wrap(StageLoss(stage, model), env), opt, params, cfg, env, logger)
+    t_start = time.perf_counter()
+    last, step = _train_steps(run, loader, start, checkpoint)
     seconds = time.perf_counter() - t_start
-    ran = scfg.steps - start
-    summary = {"steps": scfg.steps, "resumed_from": start, "final": last, "seconds": seconds,
+    ran = steps - start
+    summary = {"steps": steps, "resumed_from": start, "final": last, "seconds": seconds,
                "steps_per_s": ran / max(seconds, 1e-9),
                "samples_per_s": ran * cfg.batch_size * env.world_size / max(seconds, 1e-9)}
-    if ran and step + 1 != scfg.steps:
-        raise RuntimeError(f"stage {n}: data loader stopped at step {step + 1} of {scfg.steps}")
+    if ran and step + 1 != steps:
+        raise RuntimeError(f"stage {n}: data loader stopped at step {step + 1} of {steps}")
     if heldout is not None:   # how each stage leaves reconstruction (stage 3 fine-tunes vq + decoder)
         summary["heldout"] = evaluate_heldout(model, heldout, env.device)
         model.train()
-    checkpoint(scfg.steps, True, summary)
+    checkpoint(steps, True, summary)
     return summary
 
 
@@ -269,8 +307,8 @@ def evaluate_heldout(model: HandTouch, batch: dict, device: torch.device) -> dic
     """
     model.eval()
     batch = _to_device(batch, device)
-    cov = batch["coverage"]
-    target = covered(batch["tactile"], cov)
+    cov = batch[keys.COVERAGE]
+    target = covered(batch[keys.TACTILE], cov)
     pred, _, _, stats = model.quantise_decode(model.encode(target), cov)
     out = {"recon_rmse": math.sqrt(float(masked_mse(pred, target, cov))),
            "zeros_rmse": math.sqrt(float(masked_mse(torch.zeros_like(target), target, cov))),
@@ -278,7 +316,7 @@ def evaluate_heldout(model: HandTouch, batch: dict, device: torch.device) -> dic
                         "active_fraction": float((model.vq.usage >= model.vq.dead_threshold).float().mean()),
                         "size": model.vq.codebook_size},
            "heldout_items": int(target.shape[0])}
-    rgb_pred = model.rgb_to_tactile(batch["rgb"], cov, batch["hand"])
+    rgb_pred = model.rgb_to_tactile(batch[keys.RGB], cov, batch[keys.HAND])
     out["rgb_to_tactile_rmse"] = math.sqrt(float(masked_mse(rgb_pred, target, cov)))
     return out
 
@@ -290,8 +328,12 @@ def _seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-def train(cfg: TrainConfig, data: TrainData | None = None) -> dict:
-    """Run the configured stages; returns (and on rank 0 writes) OUT/metrics.json's content."""
+def train(cfg: TrainConfig, data: TrainData | None = None,
+          on_record: Callable[[dict], None] | None = None) -> dict:
+    """Run the configured stages; returns (and on rank 0 writes) OUT/metrics.json's content.
+
+    Every log record goes to OUT/log.jsonl and to `on_record` (default: logging at INFO).
+    """
     cfg.validate()
     threads_before = torch.get_num_threads()
     if cfg.threads:
@@ -301,7 +343,7 @@ def train(cfg: TrainConfig, data: TrainData | None = None) -> dict:
         cfg.check_codebook_load(env.world_size)
         out = Path(cfg.out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        logger = JsonlLog(out / "log.jsonl" if env.is_main else None)
+        logger = JsonlLog(out / "log.jsonl" if env.is_main else None, on_record)
         _seed_everything(cfg.seed)   # same on every rank: identical initial weights
         data = data or load_data(cfg)
         model = build_model(cfg).to(env.device)
@@ -318,8 +360,8 @@ def train(cfg: TrainConfig, data: TrainData | None = None) -> dict:
         heldout = (heldout_batch(data.eval_frames, cfg.eval_batch_size, data.eval_source)
                    if env.is_main else None)
         summaries = {}
-        for n in cfg.stages:
-            summaries[str(n)] = run_stage(n, model, cfg, data, env, out, logger, heldout)
+        for stage in build_stages(cfg):
+            summaries[str(stage.number)] = run_stage(stage, model, cfg, data, env, out, logger, heldout)
         metrics = {"model": model.name, "encoder": cfg.model.encoder, "world_size": env.world_size,
                    "device": str(env.device), "rgb_encoder": dataclasses.asdict(model.rgb_encoder.info),
                    "stages": summaries, "heldout_source": data.eval_source}
@@ -328,9 +370,7 @@ def train(cfg: TrainConfig, data: TrainData | None = None) -> dict:
         metrics["steps_per_s"] = total_steps / max(sum(s["seconds"] for s in ran), 1e-9) if ran else 0.0
         if env.is_main:
             metrics.update(evaluate_heldout(model, heldout, env.device))
-            tmp = out / "metrics.json.tmp"
-            tmp.write_text(json.dumps(metrics, indent=2))
-            os.replace(tmp, out / "metrics.json")
+            write_json_atomic(out / "metrics.json", metrics)
             logger.write({"event": "done", "metrics": str(out / "metrics.json"),
                           "recon_rmse": metrics["recon_rmse"]})
         barrier(env)
@@ -340,19 +380,32 @@ def train(cfg: TrainConfig, data: TrainData | None = None) -> dict:
         torch.set_num_threads(threads_before)   # cfg.threads is this training run's budget only
 
 
+def _config_path(arg: str) -> Path:
+    """A path to a TOML file, else a bare name resolved among the shipped configs."""
+    path = Path(arg)
+    if path.is_file() or path.name != arg:
+        return path
+    return config_file(arg)
+
+
+def _print_record(record: dict) -> None:
+    print(json.dumps(record), flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m handtouch.train", description=__doc__.splitlines()[0])
-    parser.add_argument("--config", required=True, help="TOML file (configs/smoke.toml, configs/full.toml)")
+    parser.add_argument("--config", required=True,
+                        help="TOML file, or the name of a shipped config (smoke, full: handtouch.resources)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a config key, e.g. --set model.dim=64 --set stage1.steps=10")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
-        cfg = load_train_config(args.config, args.set)
+        cfg = load_train_config(_config_path(args.config), args.set)
     except (ValueError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    train(cfg)
+    train(cfg, on_record=_print_record)
     return 0
 
 

@@ -1,30 +1,41 @@
-"""`htdata bench` (`make bench`): every benchmark side by side, one run, one report.
+"""Every benchmark side by side, one run, one report (`htdata bench`, `make bench`).
 
-    htdata bench --out bench            # full: ~6-10 min on 2 cores
-    htdata bench --quick --out /tmp/b   # tiny sizes (tests)
+`run_bench(cfg)` writes OUT/results.json (every number) and OUT/REPORT.md
+(tables, chosen defaults with their reasons, targets met or missed). Scratch
+data (sample corpus, datasets, synthetic long episodes, index files) goes to
+OUT/.work, reused across runs only for the deterministic sample corpus.
 
-Writes OUT/results.json (every number) and OUT/REPORT.md (tables, chosen
-defaults with their reasons, targets met or missed). Scratch data (sample
-corpus, datasets, synthetic long episodes, index files) goes to OUT/.work,
-reused across runs only for the deterministic sample corpus.
-A section that fails is recorded under "errors" and the command exits 1.
+Built-in sections live in htdata/benchmarks/ (one module per area). Other
+packages add sections through the entry point group "htdata.bench_sections":
+each entry point loads a callable `section(ctx) -> dict` that receives a
+`SectionContext` (an ingested sample dataset, a scratch folder, quick, seed)
+and returns JSON-able results; an optional "markdown" string is rendered
+verbatim in REPORT.md under a heading with the section's name. Discovered
+sections run after the built-in ones, so htdata never imports their code
+(HandTouch's training benchmark is one). A section that fails, built-in or
+discovered, is recorded under "errors" and the others still run.
 """
 
 from __future__ import annotations
 
-import argparse
 import datetime as _dt
 import json
 import math
 import os
 import shutil
-import sys
 import time
 import traceback
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from importlib import metadata
 from pathlib import Path
 
-ADAPTERS = ("opentouch", "touchanything", "native")
+from htdata.fsutil import write_bytes_atomic
+
+SECTION_GROUP = "htdata.bench_sections"
+BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate")
+# Top-level keys of results.json that are not sections: no section may take these names.
+RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds")
 
 
 @dataclass
@@ -33,7 +44,7 @@ class BenchConfig:
     quick: bool = False
     seed: int = 0
     scale: str = "small"                   # sample corpus scale
-    codec_maps_per_glove: int = 96
+    codec_maps_per_glove: int = 96         # per glove layout
     rgb_frames: int = 12
     raster_frames: int = 256
     ingest_workers: tuple[int, ...] = (1, 2)
@@ -42,16 +53,13 @@ class BenchConfig:
     loader_windows: int = 100
     index_rows: tuple[int, ...] = (1_000_000, 10_000_000)
     validate_workers: tuple[int, ...] = (1, 2)
-    train_steps: int = 40
-    train_warmup: bool = True
-    sections: tuple[str, ...] = field(default_factory=lambda: (
-        "codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate", "training"))
+    sections: tuple[str, ...] | None = None   # None: every built-in and discovered section
 
     @classmethod
     def quick_config(cls, out: Path, seed: int = 0) -> "BenchConfig":
         return cls(out=out, quick=True, seed=seed, scale="tiny", codec_maps_per_glove=8, rgb_frames=2,
                    raster_frames=8, rss_lengths=(20, 40), loader_random=20, loader_windows=5,
-                   index_rows=(10_000,), train_steps=2, train_warmup=False)
+                   index_rows=(10_000,))
 
     def validate(self) -> "BenchConfig":
         self.out = Path(self.out)
@@ -59,7 +67,7 @@ class BenchConfig:
             raise ValueError(f"scale must be tiny or small, got {self.scale!r}")
         positive = {"codec_maps_per_glove": self.codec_maps_per_glove, "rgb_frames": self.rgb_frames,
                     "raster_frames": self.raster_frames, "loader_random": self.loader_random,
-                    "loader_windows": self.loader_windows, "train_steps": self.train_steps}
+                    "loader_windows": self.loader_windows}
         bad = {k: v for k, v in positive.items() if not isinstance(v, int) or v < 1}
         if bad:
             raise ValueError(f"bench sizes must be integers >= 1, got {bad}")
@@ -69,11 +77,38 @@ class BenchConfig:
             raise ValueError(f"rss_lengths must be >= 2 increasing lengths >= 2 frames, got {self.rss_lengths}")
         if not self.index_rows or min(self.index_rows) < 1:
             raise ValueError(f"index_rows must be positive, got {self.index_rows}")
+        if self.sections is not None:
+            known = BUILTIN_SECTIONS + tuple(discover_sections())
+            unknown = [s for s in self.sections if s not in known]
+            if unknown or not self.sections:
+                raise ValueError(f"unknown section(s) {unknown or list(self.sections)}; known: {list(known)}")
         return self
 
     @property
     def work(self) -> Path:
         return self.out / ".work"
+
+
+@dataclass(frozen=True)
+class SectionContext:
+    """What a discovered section gets: `section(ctx) -> dict`."""
+
+    dataset: Path      # every sample source ingested into one committed dataset
+    work: Path         # scratch folder of this section (exists, kept between runs)
+    quick: bool        # tiny sizes: a smoke run
+    seed: int
+
+
+def discover_sections() -> dict[str, metadata.EntryPoint]:
+    """Installed sections of the entry point group, by name (not loaded yet)."""
+    return {ep.name: ep for ep in sorted(metadata.entry_points(group=SECTION_GROUP), key=lambda e: e.name)}
+
+
+def bench_sources() -> tuple[str, ...]:
+    """Sources benchmarked: the sample corpus formats, named like their adapter and shipped pipeline."""
+    from htdata.sample.corpus import FORMATS
+
+    return FORMATS
 
 
 def ensure_corpus(cfg: BenchConfig) -> Path:
@@ -112,7 +147,7 @@ def finite_json(obj):
 class Sections:
     """Runs the benchmark sections in order, sharing the corpus and datasets they need."""
 
-    def __init__(self, cfg: BenchConfig, log):
+    def __init__(self, cfg: BenchConfig, log: Callable[[str], None]):
         self.cfg, self.log = cfg, log
         self._corpus: Path | None = None
         self._dataset: Path | None = None
@@ -126,13 +161,13 @@ class Sections:
 
     @property
     def dataset(self) -> Path:
-        """All three adapters in one dataset, ingested with the most workers (loader/validate/train)."""
+        """Every source in one dataset, ingested with the most workers (loader, validate, plugins)."""
         if self._dataset is None:
             from htdata.benchmarks.ingest import ingest_run
 
             out = self.cfg.work / "dataset_all"
-            self.log("ingest: all adapters into one dataset")
-            self.combined_run = ingest_run([(a, self.corpus / a) for a in ADAPTERS], out,
+            self.log("ingest: all sources into one dataset")
+            self.combined_run = ingest_run([(s, self.corpus / s) for s in bench_sources()], out,
                                            max(self.cfg.ingest_workers))
             self._dataset = out
         return self._dataset
@@ -140,17 +175,17 @@ class Sections:
     def codecs(self) -> dict:
         from htdata.benchmarks.codecs import codec_rows, real_maps
 
-        maps = {g: real_maps(self.corpus, g, self.cfg.codec_maps_per_glove) for g in ("opentouch", "touchanything")}
-        return codec_rows(maps)
+        return codec_rows(real_maps(self.corpus, bench_sources(), self.cfg.codec_maps_per_glove))
 
     def rgb(self) -> dict:
         from htdata.benchmarks.rgb import rgb_section
         from htdata.benchmarks.sources import discover, source_rgb_frames
 
         frames = []
-        for name in ADAPTERS:     # every camera resolution of the corpus
+        sources = bench_sources()
+        for name in sources:     # every camera resolution of the corpus
             pcfg, adapter, refs = discover(name, self.corpus / name)
-            frames += source_rgb_frames(adapter, pcfg, refs[0], max(1, self.cfg.rgb_frames // len(ADAPTERS)))
+            frames += source_rgb_frames(adapter, pcfg, refs[0], max(1, self.cfg.rgb_frames // len(sources)))
         by_size: dict[tuple, list] = {}
         for f in frames:
             by_size.setdefault(f.shape, []).append(f)
@@ -168,7 +203,7 @@ class Sections:
     def ingest(self) -> dict:
         from htdata.benchmarks.ingest import adapter_rows
 
-        result = adapter_rows(self.corpus, self.cfg.work, ADAPTERS, self.cfg.ingest_workers)
+        result = adapter_rows(self.corpus, self.cfg.work, bench_sources(), self.cfg.ingest_workers)
         self.dataset   # noqa: B018 (build the combined dataset now so its run is reported here)
         result["runs"].append(self.combined_run)
         return result
@@ -184,7 +219,7 @@ class Sections:
         return loader_rows(self.dataset, self.cfg.loader_random, self.cfg.loader_windows, self.cfg.seed)
 
     def index(self) -> list:
-        from htdata.benchmarks.loader import index_rows
+        from htdata.benchmarks.index import index_rows
 
         tmp = self.cfg.work / "index"
         tmp.mkdir(parents=True, exist_ok=True)
@@ -195,36 +230,59 @@ class Sections:
 
         return validate_rows(self.dataset, self.cfg.validate_workers)
 
-    def training(self) -> dict:
-        from htdata.benchmarks.training import training_rows
+    def discovered(self, name: str, entry_point: metadata.EntryPoint) -> dict:
+        """Load and run one discovered section; its result must be a JSON-able dict."""
+        section = entry_point.load()
+        work = self.cfg.work / "sections" / name
+        work.mkdir(parents=True, exist_ok=True)
+        result = section(SectionContext(dataset=self.dataset, work=work, quick=self.cfg.quick, seed=self.cfg.seed))
+        if not isinstance(result, dict):
+            raise TypeError(f"{entry_point.value} returned {type(result).__name__}, expected a dict")
+        if not isinstance(result.get("markdown", ""), str):
+            raise TypeError(f"{entry_point.value}: 'markdown' must be a string")
+        try:
+            json.dumps(finite_json(result), allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"{entry_point.value} returned results that are not JSON-able: {exc}") from None
+        return result
 
-        return training_rows(self.dataset, self.cfg.work, self.cfg.train_steps,
-                             warmup=self.cfg.train_warmup)
 
+def run_bench(cfg: BenchConfig, command: str = "htdata bench",
+              log: Callable[[str], None] | None = None) -> dict:
+    """Run the sections; write OUT/results.json and OUT/REPORT.md; return the results.
 
-def run_bench(cfg: BenchConfig, command: str = "htdata bench", progress: bool = True) -> dict:
-    """Run every section; write OUT/results.json and OUT/REPORT.md; return the results."""
+    `log(message)` receives progress lines (section starts, failures with traceback).
+    """
     from htdata.benchmarks.machine import machine_info
     from htdata.benchmarks.report import render_report
 
     cfg.validate()
     cfg.work.mkdir(parents=True, exist_ok=True)
+    log = log or (lambda message: None)
+    plugins = discover_sections()
+    wanted = cfg.sections or BUILTIN_SECTIONS + tuple(plugins)
     t_start = time.perf_counter()
-
-    def log(msg: str) -> None:
-        if progress:
-            print(f"[bench {time.perf_counter() - t_start:6.1f}s] {msg}", file=sys.stderr, flush=True)
-
     results: dict = {"command": command, "quick": cfg.quick,
                      "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                      "config": {k: v for k, v in asdict(cfg).items() if k != "out"},
-                     "machine": machine_info(), "timings_s": {}, "errors": {}}
+                     "machine": machine_info(), "timings_s": {}, "errors": {}, "plugins": {}}
+    for name, ep in list(plugins.items()):
+        if name in BUILTIN_SECTIONS + RESERVED_KEYS:   # never displaces a built-in section or a key
+            results["errors"][f"{name} ({ep.value})"] = (f"ValueError: entry point named {name!r}, which a "
+                                                         "built-in section or a results.json key already uses")
+            del plugins[name]
+        elif name in wanted:
+            results["plugins"][name] = ep.value
     sections = Sections(cfg, log)
-    for name in cfg.sections:
+    # Built-in sections first, then discovered ones (in name order).
+    for name in [s for s in BUILTIN_SECTIONS if s in wanted] + [s for s in plugins if s in wanted]:
         log(name)
         t0 = time.perf_counter()
         try:
-            results[name] = getattr(sections, name)()
+            if name in plugins:
+                results[name] = sections.discovered(name, plugins[name])
+            else:
+                results[name] = getattr(sections, name)()
         except Exception as exc:   # one broken section must not hide the others' numbers
             results["errors"][name] = f"{type(exc).__name__}: {exc}"
             log(f"{name} FAILED: {exc}\n{traceback.format_exc()}")
@@ -232,44 +290,7 @@ def run_bench(cfg: BenchConfig, command: str = "htdata bench", progress: bool = 
     results["machine"]["loadavg_1m_end"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     results["seconds"] = time.perf_counter() - t_start
     results = finite_json(results)
-    cfg.out.mkdir(parents=True, exist_ok=True)
-    for name, text in (("results.json", json.dumps(results, indent=2, allow_nan=False) + "\n"),
-                       ("REPORT.md", render_report(results))):
-        tmp = cfg.out / f".{name}.tmp"
-        tmp.write_text(text)
-        os.replace(tmp, cfg.out / name)
+    write_bytes_atomic(cfg.out / "results.json", (json.dumps(results, indent=2, allow_nan=False) + "\n").encode())
+    write_bytes_atomic(cfg.out / "REPORT.md", render_report(results).encode())
     log(f"wrote {cfg.out / 'results.json'} and {cfg.out / 'REPORT.md'}")
     return results
-
-
-def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = __doc__.split("\n\n")[1]
-    parser.add_argument("--out", type=Path, default=Path("bench"), help="output folder (default: bench)")
-    parser.add_argument("--quick", action="store_true", help="tiny sizes: a smoke run of every section (< 1 min)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the sample corpus and of random access")
-    parser.add_argument("--only", default=None, metavar="A,B",
-                        help="comma-separated sections to run (default: all)")
-    parser.add_argument("--quiet", action="store_true", help="no progress lines")
-
-
-def run(args: argparse.Namespace) -> int:
-    cfg = BenchConfig.quick_config(args.out, args.seed) if args.quick else BenchConfig(out=args.out, seed=args.seed)
-    if args.only:
-        wanted = tuple(s.strip() for s in args.only.split(",") if s.strip())
-        unknown = [s for s in wanted if s not in cfg.sections]
-        if unknown:
-            print(f"htdata bench: error: unknown section(s) {unknown}; known: {list(cfg.sections)}", file=sys.stderr)
-            return 2
-        cfg.sections = wanted
-    try:
-        results = run_bench(cfg, command="htdata bench " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["bench"]
-                            else "htdata bench", progress=not args.quiet)
-    except ValueError as exc:
-        print(f"htdata bench: error: {exc}", file=sys.stderr)
-        return 2
-    if results["errors"]:
-        for name, msg in results["errors"].items():
-            print(f"htdata bench: section {name} failed: {msg}", file=sys.stderr)
-        return 1
-    print(f"htdata bench: {cfg.out / 'REPORT.md'} ({results['seconds']:.0f} s)", file=sys.stderr)
-    return 0

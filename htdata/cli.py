@@ -13,14 +13,20 @@ import sys
 
 # name -> (module, one-line help). Order is the order of the data path.
 COMMANDS: dict[str, tuple[str, str]] = {
-    "sample": ("htdata.sample.cli", "generate a small raw corpus in all three source formats"),
-    "ingest": ("htdata.ingest", "read raw recordings and write a validated, sharded dataset"),
-    "split": ("htdata.split", "task-level OOD hold-out + 9:1 episode split (or --list-tasks)"),
-    "validate": ("htdata.validate", "prove a dataset is sound (structure, content, time, splits)"),
-    "preview": ("htdata.preview", "render a contact sheet: RGB beside left/right tactile maps"),
-    "layouts": ("htdata.layouts", "list, check and render hand layouts (register a glove)"),
-    "publish": ("htdata.remote", "upload a dataset to an fsspec URL (s3://, gs://, memory://), manifest last"),
-    "bench": ("htdata.bench", "run the benchmarks and write bench/results.json + report"),
+    "sample": ("htdata.commands.sample", "generate a small raw corpus in all three source formats"),
+    "ingest": ("htdata.commands.ingest", "read raw recordings and write a validated, sharded dataset"),
+    "split": ("htdata.commands.split", "task-level OOD hold-out + 9:1 episode split (or --list-tasks)"),
+    "validate": ("htdata.commands.validate", "prove a dataset is sound (structure, content, time, splits)"),
+    "log": ("htdata.commands.log", "list the versions of a dataset (every write makes one)"),
+    "diff": ("htdata.commands.diff", "episodes added / removed / changed between two versions"),
+    "rm": ("htdata.commands.rm", "remove episodes (ids or globs) as a new version; --dry-run"),
+    "trim": ("htdata.commands.trim", "keep frames A:B of an episode as a new version; --dry-run"),
+    "merge": ("htdata.commands.merge", "merge two datasets into a new one without re-encoding"),
+    "gc": ("htdata.commands.gc", "delete old versions and shards no kept version lists; --dry-run"),
+    "preview": ("htdata.commands.preview", "render a contact sheet: RGB beside left/right tactile maps"),
+    "layouts": ("htdata.commands.layouts", "list, check and render hand layouts (register a glove)"),
+    "publish": ("htdata.commands.publish", "upload a dataset to an fsspec URL (s3://, gs://, memory://), manifest last"),
+    "bench": ("htdata.commands.bench", "run the benchmarks and write bench/results.json + report"),
 }
 
 

@@ -15,6 +15,11 @@ class HtdataError(Exception):
     """Base class of every error htdata raises on purpose."""
 
 
+class LayoutNotFound(HtdataError, FileNotFoundError):
+    """A glove layout id or file that is on no search path; the message is one line
+    naming where it looked and the layouts that exist (htdata.layouts.resolve_layout)."""
+
+
 class EpisodeError(HtdataError):
     """A recording (or one frame of it) cannot be read.
 
@@ -53,6 +58,12 @@ class EpisodeError(HtdataError):
         if self.frame is not None:
             head += f" frame {self.frame}"
         return f"{head}: {self.message}"
+
+    def at_frame(self, frame: int | None) -> "EpisodeError":
+        """This error, naming `frame` when it did not name one yet (the frame being processed)."""
+        if self.frame is not None or frame is None:
+            return self
+        return EpisodeError(None, frame, self.message, file=self.file, episode_id=self.episode_id)
 
     def __reduce__(self):
         # Keep the fields across process-pool pickling (Exception's default

@@ -16,7 +16,7 @@ usable cores // workers (at least 1): with 2 workers on 2 cores each uses
 one thread in OpenCV (resize, JPEG), torch (if loaded) and OpenMP/BLAS,
 instead of every worker starting a pool as wide as the machine. Ray tasks
 (1 CPU each) use one thread. Video decoders are single-threaded anyway
-(adapters/base.py).
+(adapters/video.py).
 
 Progress: a unit function may call `report_progress(event)` (a small dict,
 e.g. one per finished episode). `map_units(fn, tasks, on_progress=cb)`

@@ -40,6 +40,7 @@ PARTS_FILE = "parts.png"           # part ids: thumb=1 .. palm=6 (stage-2 maskin
 SPLITS_DIR = "splits"
 REPORTS_DIR = "reports"
 INGEST_REPORT = f"{REPORTS_DIR}/ingest.json"
+VALIDATE_REPORT = f"{REPORTS_DIR}/validate.json"   # default report of `htdata validate`
 WORK_DIR = ".work"                 # resume state and temp files of a running ingest
 
 

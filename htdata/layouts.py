@@ -4,23 +4,33 @@
 right-hand palmar canvas; `schemas/layouts/<layout_id>.json` says which
 rectangle ("block") of a glove's raw taxel grid lands on which place. A new
 glove is registered by writing one such file (docs/LAYOUTS.md); this module
-loads and validates both and exposes the `htdata layouts` command.
+finds, loads and validates both (the `htdata layouts` command is
+htdata/commands/layouts.py).
+
+Where glove layouts are found (`layout_dirs`), first hit wins:
+1. folders given by the caller (`htdata ingest/layouts --layouts DIR`),
+2. folders in the HTDATA_LAYOUTS environment variable (os.pathsep-separated),
+3. the shipped `schemas/layouts/`.
+A layout may also be named by a path to its JSON file (`load_layout(path)`;
+relative paths are taken from `base`, e.g. the pipeline file's or the
+recording's folder). Parsed layouts are cached per (file, mtime, size).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
+import os
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
+from htdata.errors import LayoutNotFound
+from htdata.format import CANONICAL_FILE, CANVAS
 from htdata.resources import LAYOUTS_DIR, validate_json
 
-CANVAS = 224
-CANONICAL_FILE = "canonical_hand.json"
+LAYOUTS_ENV = "HTDATA_LAYOUTS"
 PART_NAMES: dict[int, str] = {1: "thumb", 2: "index", 3: "middle", 4: "ring", 5: "little", 6: "palm"}
 GROUPS: tuple[str, ...] = ("thumb", "index", "middle", "ring", "little", "palm")
 
@@ -247,107 +257,74 @@ def parse_layout(doc: dict, where: str = "<layout>", canonical: CanonicalHand | 
                   path=where)
 
 
-def layout_path(layout_id_or_path: str | Path) -> Path:
-    """A shipped layout id (`opentouch_right_16x16`) or a path to a JSON file."""
-    s = str(layout_id_or_path)
-    p = Path(s)
-    if s.endswith(".json") or p.is_file() or "/" in s:
-        return p
-    return LAYOUTS_DIR / f"{s}.json"
+def layout_dirs(extra: tuple[str | Path, ...] | list = ()) -> list[Path]:
+    """Folders searched for a layout id, in order: `extra`, then $HTDATA_LAYOUTS, then the shipped folder."""
+    env = [d for d in os.environ.get(LAYOUTS_ENV, "").split(os.pathsep) if d]
+    out: list[Path] = []
+    for d in [*extra, *env, LAYOUTS_DIR]:
+        p = Path(d).expanduser().resolve()
+        if p not in out:
+            out.append(p)
+    return out
 
 
-def load_layout(layout_id_or_path: str | Path) -> Layout:
-    path = layout_path(layout_id_or_path)
-    if not path.is_file():
-        raise FileNotFoundError(f"layout {str(layout_id_or_path)!r} not found (looked at {path}; "
-                                f"shipped layouts: {list_layouts()})")
+def is_layout_path(name: str | Path) -> bool:
+    """True when `name` names a JSON file rather than a layout id."""
+    s = str(name)
+    return isinstance(name, Path) or s.endswith(".json") or "/" in s or os.sep in s
+
+
+def resolve_layout(name: str | Path, dirs: tuple | list = (), base: str | Path | None = None) -> Path:
+    """The JSON file of a layout id (searched in `layout_dirs(dirs)`) or of a path (relative to `base`).
+
+    Raises LayoutNotFound with a one-line message naming where it looked and
+    the layouts that exist there.
+    """
+    if is_layout_path(name):
+        p = Path(name).expanduser()
+        if not p.is_absolute() and base is not None:
+            p = Path(base) / p
+        if p.is_file():
+            return p.resolve()
+        raise LayoutNotFound(f"layout file {str(name)!r} not found (looked at {p}; "
+                             f"available layouts: {list_layouts(dirs)})")
+    searched = layout_dirs(dirs)
+    for d in searched:
+        p = d / f"{name}.json"
+        if p.is_file() and p.name != CANONICAL_FILE:
+            return p
+    raise LayoutNotFound(f"layout {str(name)!r} not found (looked in {', '.join(str(d) for d in searched)}; "
+                         f"available layouts: {list_layouts(dirs)}); add its JSON to one of those folders, "
+                         f"pass --layouts DIR or set {LAYOUTS_ENV}")
+
+
+@lru_cache(maxsize=128)
+def _load_layout_file(path: str, mtime_ns: int, size: int) -> Layout:
+    """Parse one file version once per process (mtime and size are part of the key)."""
     try:
-        doc = json.loads(path.read_text())
+        doc = json.loads(Path(path).read_text())
     except json.JSONDecodeError as e:
         raise ValueError(f"{path}: not valid JSON: {e}") from None
-    layout = parse_layout(doc, str(path))
-    if path.parent == LAYOUTS_DIR and path.stem != layout.layout_id:
-        raise ValueError(f"{path}: layout_id {layout.layout_id!r} must equal the file name")
+    return parse_layout(doc, path)
+
+
+def load_layout(name: str | Path, dirs: tuple | list = (), base: str | Path | None = None) -> Layout:
+    """A validated layout from its id or JSON path (see `resolve_layout`), cached per file version.
+
+    A layout found by id must carry that id (`<id>.json` holds layout_id <id>).
+    """
+    path = resolve_layout(name, dirs, base)
+    st = path.stat()
+    layout = _load_layout_file(str(path), st.st_mtime_ns, st.st_size)
+    if not is_layout_path(name) and layout.layout_id != str(name):
+        raise ValueError(f"{path}: layout_id {layout.layout_id!r} must equal the file name ({str(name)!r})")
     return layout
 
 
-def list_layouts() -> list[str]:
-    """Ids of the shipped glove layouts (every JSON in schemas/layouts/ but the template)."""
-    return sorted(p.stem for p in LAYOUTS_DIR.glob("*.json") if p.name != CANONICAL_FILE)
-
-
-# --------------------------------------------------------------------------- CLI
-
-# BGR colours per part id (0 = background), for `htdata layouts render`.
-_PART_BGR = np.array([[0, 0, 0], [60, 60, 230], [60, 200, 60], [230, 140, 40], [200, 60, 200],
-                      [40, 200, 230], [150, 150, 150]], np.uint8)
-
-
-def render_layout_png(layout: Layout, out: Path, scale: int = 2) -> None:
-    """Two panels: the canonical regions coloured by part, and this glove's coverage."""
-    import cv2
-
-    from htdata.rasterise import Rasteriser
-
-    canon = load_canonical()
-    r = Rasteriser(layout, canonical=canon)
-    regions = _PART_BGR[canon.part_map].astype(np.float32)
-    regions *= np.where(canon.region_map % 2 == 1, 1.0, 0.7)[..., None]  # tell neighbouring regions apart
-    cov = np.zeros_like(regions)
-    inside = canon.region_map > 0
-    cov[inside] = regions[inside] * 0.25
-    cov[r.coverage == 1] = 255
-    img = np.concatenate([regions, np.full((CANVAS, 4, 3), 255, np.float32), cov], axis=1).astype(np.uint8)
-    img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
-    text = f"{layout.layout_id}  coverage {r.coverage_fraction:.3f}"
-    cv2.putText(img, text, (6, img.shape[0] - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(out), img):
-        raise OSError(f"could not write {out}")
-
-
-def describe(layout: Layout) -> dict:
-    """Numbers shown by `htdata layouts`: live taxels, bend cells, coverage."""
-    from htdata.rasterise import Rasteriser
-
-    r = Rasteriser(layout)
-    return {"layout_id": layout.layout_id, "hand": layout.hand, "grid": f"{layout.grid[0]}x{layout.grid[1]}",
-            "live": layout.num_live, "bend": len(layout.bend_cells), "blocks": len(layout.blocks),
-            "coverage": r.coverage_fraction}
-
-
-def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = ("examples:\n  htdata layouts\n  htdata layouts check my_glove.json\n"
-                     "  htdata layouts render opentouch_right_16x16 out.png")
-    sub = parser.add_subparsers(dest="action", metavar="ACTION")
-    sub.add_parser("list", help="list shipped layouts (default)")
-    p = sub.add_parser("check", help="validate a layout JSON file and print its coverage")
-    p.add_argument("file", help="path to a layout JSON")
-    p = sub.add_parser("render", help="draw the region map + coverage of a layout as a PNG")
-    p.add_argument("layout", help="layout id or path to a layout JSON")
-    p.add_argument("out", help="output .png path")
-
-
-def _print_rows(rows: list[dict]) -> None:
-    print(f"{'layout':32s} {'hand':5s} {'grid':6s} {'blocks':>6s} {'live':>5s} {'bend':>5s} {'coverage':>8s}")
-    for d in rows:
-        print(f"{d['layout_id']:32s} {d['hand']:5s} {d['grid']:6s} {d['blocks']:6d} {d['live']:5d} "
-              f"{d['bend']:5d} {d['coverage']:8.3f}")
-
-
-def run(args: argparse.Namespace) -> int:
-    action = getattr(args, "action", None) or "list"
-    try:
-        if action == "list":
-            _print_rows([describe(load_layout(i)) for i in list_layouts()])
-            print("coverage = fraction of the canonical hand's pixels this glove has a sensor under")
-        elif action == "check":
-            _print_rows([describe(load_layout(args.file))])
-            print(f"OK: {args.file}")
-        elif action == "render":
-            render_layout_png(load_layout(args.layout), Path(args.out))
-            print(f"wrote {args.out}")
-    except (ValueError, FileNotFoundError, OSError) as e:
-        print(f"error: {e}")
-        return 1
-    return 0
+def list_layouts(dirs: tuple | list = ()) -> list[str]:
+    """Ids of every glove layout on the search path (every JSON there but the template)."""
+    ids: set[str] = set()
+    for d in layout_dirs(dirs):
+        if d.is_dir():
+            ids.update(p.stem for p in d.glob("*.json") if p.name != CANONICAL_FILE)
+    return sorted(ids)

@@ -73,78 +73,21 @@ class BuiltIndex:
 
 
 def build_index(units: list[UnitResult]) -> BuiltIndex:
-    """Concatenate units (sorted by unit number) into global rows/episodes/shards."""
+    """Concatenate units (sorted by unit number) into global rows/episodes/shards (htdata/parts.py)."""
+    from htdata.parts import assemble, part_from_unit
+
     units = sorted(units, key=lambda u: u.unit)
     seen_units = [u.unit for u in units]
     if len(set(seen_units)) != len(seen_units):
         raise ValueError(f"duplicate work unit numbers in commit: {seen_units}")
-    n = sum(len(u.samples) for u in units)
-    rows = np.zeros(n, dtype=INDEX_DTYPE)
-    episodes: list[dict] = []
-    episode_pos: dict[str, int] = {}
-    shards: list[dict] = []
-    i = 0
-    for unit in units:
-        where = f"unit {unit.unit}"
-        records = {}
-        for rec in unit.episodes:
-            eid = rec["episode_id"]
-            if eid in episode_pos or eid in records:
-                raise ValueError(f"{where}: episode {eid!r} appears twice in the dataset")
-            records[eid] = rec
-        shard_base = len(shards)
-        for s in unit.shards:
-            shards.append({"name": s.name, "sha256": s.sha256, "bytes": int(s.bytes),
-                           "samples": int(s.samples), "first_sample": 0})
-        current = None
-        for sample in unit.samples:
-            eid, frame = parse_key(sample.key)
-            if eid not in records:
-                raise ValueError(f"{where}: sample {sample.key} has no episode record")
-            if eid != current:
-                if eid in episode_pos:
-                    raise ValueError(f"{where}: frames of episode {eid!r} are not contiguous (at {sample.key})")
-                rec = dict(records[eid])
-                rec["first_sample"] = i
-                rec["shards"] = []
-                episode_pos[eid] = len(episodes)
-                episodes.append(rec)
-                current, expected = eid, 0
-            if frame != expected:
-                raise ValueError(f"{where}: episode {eid!r}: expected frame {expected}, got {sample.key}")
-            expected += 1
-            if not 0 <= sample.shard < len(unit.shards):
-                raise ValueError(f"{where}: sample {sample.key} names shard {sample.shard} of {len(unit.shards)}")
-            row = rows[i]
-            row["shard"] = shard_base + sample.shard
-            row["offset"] = sample.offset
-            row["episode"] = episode_pos[eid]
-            row["frame"] = frame
-            for suffix, size in sample.sizes.items():
-                row[SIZE_FIELDS[suffix]] = size
-            name = shards[shard_base + sample.shard]["name"]
-            if name not in episodes[-1]["shards"]:
-                episodes[-1]["shards"].append(name)
-            i += 1
-        missing = set(records) - set(episode_pos)
-        if missing:
-            raise ValueError(f"{where}: episode record(s) without samples: {sorted(missing)}")
-    # per-shard first_sample and sample counts must agree with the rows
-    counts = np.bincount(rows["shard"], minlength=len(shards)) if n else np.zeros(len(shards), int)
-    first = 0
-    for pos, entry in enumerate(shards):
-        if counts[pos] != entry["samples"]:
-            raise ValueError(f"shard {entry['name']}: records {entry['samples']} samples, index has {counts[pos]}")
-        entry["first_sample"] = first
-        first += entry["samples"]
-    ep_counts = np.bincount(rows["episode"], minlength=len(episodes)) if n else np.zeros(0, int)
-    for pos, ep in enumerate(episodes):
-        count = int(ep_counts[pos])
-        if "num_frames" in ep and ep["num_frames"] != count:
-            raise ValueError(f"episode {ep['episode_id']!r}: record says num_frames={ep['num_frames']}, "
-                             f"shards hold {count} samples")
-        ep["num_frames"] = count
-    return BuiltIndex(rows=rows, episodes=episodes, shards=shards)
+    owner: dict[str, int] = {}
+    for u in units:
+        for rec in u.episodes:
+            if owner.setdefault(rec["episode_id"], u.unit) != u.unit:
+                raise ValueError(f"unit {u.unit}: episode {rec['episode_id']!r} appears twice in the dataset "
+                                 f"(also in unit {owner[rec['episode_id']]})")
+    built = assemble([part_from_unit(u) for u in units])
+    return BuiltIndex(rows=built.rows, episodes=built.episodes, shards=built.shards)
 
 
 def _frames_per_hand(rows: np.ndarray) -> dict[str, int]:
@@ -231,16 +174,29 @@ def commit_dataset(root: str | os.PathLike, units: list[UnitResult], layouts: li
 
 # -- loading ---------------------------------------------------------------
 
-def load_manifest(root: str | os.PathLike, validate: bool = True) -> dict:
-    path = storage.join(root, MANIFEST_FILE)
+def load_manifest(root: str | os.PathLike, validate: bool = True, version: int | None = None) -> dict:
+    """The current version's manifest (dataset.json), or version `version`'s (versions/vN.json)."""
+    from htdata.versions import manifest_path
+
+    path = manifest_path(root, version)
     if not storage.exists(path):
         raise FileNotFoundError(f"{path}: no manifest: not a committed htdata dataset")
-    manifest = json.loads(storage.read_text(path))
+    return parse_manifest(storage.read_text(path), path, validate)
+
+
+def parse_manifest(data: str | bytes, where: str, validate: bool = True) -> dict:
+    """dataset.json text/bytes -> manifest (for callers that hash the bytes they parse).
+
+    Invalid JSON raises json.JSONDecodeError; another format or a schema error, ValueError naming `where`.
+    """
+    manifest = json.loads(data)
+    if not isinstance(manifest, dict):
+        raise ValueError(f"{where}: a manifest is a JSON object, found {type(manifest).__name__}")
     if manifest.get("format") != FORMAT or manifest.get("format_version") != FORMAT_VERSION:
-        raise ValueError(f"{path}: format {manifest.get('format')!r} v{manifest.get('format_version')!r}, "
+        raise ValueError(f"{where}: format {manifest.get('format')!r} v{manifest.get('format_version')!r}, "
                          f"expected {FORMAT!r} v{FORMAT_VERSION}")
     if validate:
-        validate_json(manifest, "manifest", where=str(path))
+        validate_json(manifest, "manifest", where=str(where))
     return manifest
 
 
@@ -256,14 +212,23 @@ def parse_episodes(text: str, where: str) -> list[dict]:
     return episodes
 
 
-def load_episodes(root: str | os.PathLike) -> list[dict]:
-    path = storage.join(root, EPISODES_FILE)
+def load_episodes(root: str | os.PathLike, manifest: dict | None = None) -> list[dict]:
+    """Episode records of `manifest`'s version (its "episodes_file"; episodes.jsonl without one)."""
+    path = storage.join(root, (manifest or {}).get("episodes_file", EPISODES_FILE))
     return parse_episodes(storage.read_text(path), path)
+
+
+class IndexDtypeError(ValueError):
+    """index.npy is readable but its rows are not INDEX_DTYPE (`found`: their dtype)."""
+
+    def __init__(self, where: str, found: np.dtype):
+        super().__init__(f"{where}: index dtype {found} != {INDEX_DTYPE}")
+        self.found = found
 
 
 def _check_index_dtype(rows: np.ndarray, where: str) -> np.ndarray:
     if rows.dtype != INDEX_DTYPE:
-        raise ValueError(f"{where}: index dtype {rows.dtype} != {INDEX_DTYPE}")
+        raise IndexDtypeError(where, rows.dtype)
     return rows
 
 
@@ -276,9 +241,9 @@ def parse_index(data: bytes, where: str) -> np.ndarray:
     return _check_index_dtype(rows, where)
 
 
-def load_index(root: str | os.PathLike, mmap: bool = True) -> np.ndarray:
-    """index.npy as INDEX_DTYPE; memory-mapped for local datasets when `mmap`."""
-    path = storage.join(root, INDEX_FILE)
+def load_index(root: str | os.PathLike, mmap: bool = True, manifest: dict | None = None) -> np.ndarray:
+    """`manifest`'s index (its "index_file"; index.npy without one) as INDEX_DTYPE; mmap for local datasets."""
+    path = storage.join(root, (manifest or {}).get("index_file", INDEX_FILE))
     local = storage.local_path(path)
     if local is None:
         return parse_index(storage.read_bytes(path), path)

@@ -73,7 +73,9 @@ class ShardsConfig:
 class PipelineConfig:
     name: str
     adapter: AdapterConfig
-    layouts: dict[str, str] = field(default_factory=dict)            # hand -> layout id override
+    # hand -> layout id, or path to a layout JSON relative to the pipeline file; overrides the source's
+    # layout for that hand (resolved once per episode when the ingest plans: htdata.ingest.plan)
+    layouts: dict[str, str] = field(default_factory=dict)
     normalise: dict[str, NormaliseConfig] = field(default_factory=dict)  # layout id -> config
     sync: SyncConfig = field(default_factory=SyncConfig)
     rgb: RgbConfig = field(default_factory=RgbConfig)
@@ -94,9 +96,6 @@ class PipelineConfig:
         if layout.layout_id in self.normalise:
             return self.normalise[layout.layout_id]
         return NormaliseConfig.from_layout_value(layout.value)
-
-    def layout_for(self, hand: str, adapter_layout: str) -> str:
-        return self.layouts.get(hand, adapter_layout)
 
     def to_dict(self) -> dict:
         """Plain dict (the TOML content with defaults filled in); recorded in the manifest."""

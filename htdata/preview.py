@@ -13,19 +13,18 @@ Sheet size is fixed by the row count: see `sheet_size`.
 
 from __future__ import annotations
 
-import argparse
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-CANVAS = 224
+from htdata.format import CANVAS, HANDS
+
 PAD = 8
 TITLE_H = 30
 HEADER_H = 22
-COLUMNS = ("rgb", "left", "right")
-COLUMN_TITLES = ("RGB", "left tactile", "right tactile")
+COLUMNS = ("rgb", *HANDS)
+COLUMN_TITLES = ("RGB", *(f"{hand} tactile" for hand in HANDS))
 BACKGROUND = (32, 32, 32)        # BGR
 ABSENT_GREY = (128, 128, 128)
 OUTLINE = (255, 255, 255)
@@ -142,7 +141,7 @@ def render_contact_sheet(dataset, episode: str | None = None, frames: int = 6) -
             sample = reader.decoded(first + int(frame))
             y = TITLE_H + HEADER_H + r * (CANVAS + PAD)
             panels = [cv2.cvtColor(sample["rgb"], cv2.COLOR_RGB2BGR)]
-            for hand in ("left", "right"):
+            for hand in HANDS:
                 if hand in sample["tactile"]:
                     panels.append(render_tactile(sample["tactile"][hand], coverage[hand], outline))
                 else:
@@ -165,22 +164,3 @@ def write_preview(dataset, out, episode: str | None = None, frames: int = 6) -> 
     if not cv2.imwrite(str(out), sheet):
         raise OSError(f"{out}: cv2 could not write the PNG")
     return out
-
-
-def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = __doc__
-    parser.add_argument("dataset", type=Path, help="committed dataset directory")
-    parser.add_argument("out", type=Path, metavar="OUT.png", help="contact sheet to write")
-    parser.add_argument("--episode", default=None, metavar="ID", help="episode id (default: the two-handed episode with the most contact)")
-    parser.add_argument("--frames", type=int, default=6, metavar="N",
-                        help="rows: N frames evenly spaced over the episode (default 6)")
-
-
-def run(args: argparse.Namespace) -> int:
-    try:
-        out = write_preview(args.dataset, args.out, episode=args.episode, frames=args.frames)
-    except (ValueError, FileNotFoundError, OSError) as exc:
-        print(f"htdata preview: error: {exc}", file=sys.stderr)
-        return 2
-    print(f"wrote {out}")
-    return 0

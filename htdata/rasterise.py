@@ -14,20 +14,20 @@ caller (normalise) checks finiteness first and drops such frames.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
-from htdata.layouts import CANVAS, Block, CanonicalHand, Layout, load_canonical, load_layout
+from htdata.format import CANVAS
+from htdata.layouts import Block, CanonicalHand, Layout, load_canonical, load_layout
 
 MODES = ("nearest", "bilinear")
 NPIX = CANVAS * CANVAS
 # Max |sample(render(g)) - g| over live taxels for uniform random g in
 # bilinear mode: measured 0.068 (opentouch) and 0.107 (touchanything, palm
 # rows whose centres fall in the gaps between palm places) with
-# raster_benchmark(..., frames=256); tests assert this bound. Nearest mode
+# htdata.benchmarks.raster.raster_benchmark(..., frames=256); tests assert this bound. Nearest mode
 # round-trips exactly (float64 footprint means).
 BILINEAR_ROUNDTRIP_BOUND = 0.15
 
@@ -249,23 +249,3 @@ class Rasteriser:
         """(T,H,W) -> (T,K) float32 values of the bend cells, in the layout's order."""
         g = self._check(grids, self.layout.grid, "bend_vector: grids")
         return g[:, self._bend_r, self._bend_c].astype(np.float32)
-
-
-def raster_benchmark(layout_id: str, mode: str, frames: int = 256, seed: int = 0) -> dict:
-    """Render speed and round-trip error on uniform random taxels (live cells only)."""
-    r = Rasteriser(load_layout(layout_id), mode=mode)
-    rng = np.random.default_rng(seed)
-    H, W = r.layout.grid
-    grids = rng.random((frames, H, W), dtype=np.float32)
-    grids[:, ~r.layout.live_mask] = np.nan  # dead cells must be ignored
-    r.render(grids[:2])  # warm-up
-    t0 = time.perf_counter()
-    maps = r.render(grids)
-    elapsed = time.perf_counter() - t0
-    back = r.sample(maps)
-    err = (back - grids)[:, r.layout.live_mask]
-    return {"layout_id": layout_id, "mode": mode, "frames": frames,
-            "ms_per_frame": 1e3 * elapsed / max(frames, 1),
-            "max_roundtrip_error": float(np.abs(err).max()) if err.size else 0.0,
-            "rmse": float(np.sqrt(np.mean(err.astype(np.float64) ** 2))) if err.size else 0.0,
-            "coverage": r.coverage_fraction}

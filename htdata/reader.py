@@ -64,10 +64,12 @@ def member_layout(sizes: tuple[int, ...], wanted=None) -> tuple[list[tuple[str, 
 
 
 class DatasetReader:
-    def __init__(self, root: str | os.PathLike, validate_manifest: bool = True):
+    def __init__(self, root: str | os.PathLike, validate_manifest: bool = True, version: int | None = None):
+        """Open the current version of the dataset at `root`, or version `version` (htdata log lists them)."""
         self.root = os.fspath(root)
-        self.manifest = load_manifest(self.root, validate=validate_manifest)
-        self.episodes: list[dict] = load_episodes(self.root)
+        self.manifest = load_manifest(self.root, validate=validate_manifest, version=version)
+        self.version: int | None = self.manifest.get("version")
+        self.episodes: list[dict] = load_episodes(self.root, self.manifest)
         if len(self.episodes) != self.manifest["counts"]["episodes"]:
             raise ValueError(f"{self.root}: episodes.jsonl has {len(self.episodes)} records, "
                              f"manifest counts {self.manifest['counts']['episodes']}")
@@ -118,7 +120,7 @@ class DatasetReader:
                 from htdata.remote import load_cached_index
                 rows = load_cached_index(self.root, self.manifest)
             else:
-                rows = load_index(self.root, mmap=True)
+                rows = load_index(self.root, mmap=True, manifest=self.manifest)
             if len(rows) != self._n:
                 raise ValueError(f"{self.root}: index has {len(rows)} rows, manifest counts {self._n}")
             self._index = rows
@@ -291,8 +293,13 @@ class DatasetReader:
 
     # -- splits ------------------------------------------------------------
     def split(self, name: str) -> dict:
-        """DATASET/splits/NAME.json: {"parts": {part: {"episodes": [...]}, ...}, ...}."""
-        path = storage.join(self.root, SPLITS_DIR, f"{name}.json")
+        """Split NAME of this version: {"parts": {part: {"episodes": [...]}, ...}, ...}.
+
+        A versioned dataset keeps each version's splits with it (manifest "splits"); an
+        unversioned one has DATASET/splits/NAME.json.
+        """
+        entry = self.manifest.get("splits", {}).get(name)
+        path = storage.join(self.root, entry["file"] if entry else f"{SPLITS_DIR}/{name}.json")
         if not storage.exists(path):
             raise FileNotFoundError(f"{path}: no split named {name!r} (run `htdata split`)")
         doc = json.loads(storage.read_text(path))

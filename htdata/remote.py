@@ -1,6 +1,6 @@
 """Remote datasets: publish a committed dataset to an fsspec URL; cache a remote index locally.
 
-    htdata publish DATASET URL        # s3://bucket/ds, gs://bucket/ds, memory://ds, file:///x
+`htdata publish DATASET URL` (htdata/commands/publish.py) runs `publish_dataset`.
 
 Publishing uploads layouts/, splits/, shards/, episodes.jsonl and index.npy,
 reads every uploaded file back to check its sha256 against the local file
@@ -17,25 +17,22 @@ index_sha256, and memory-map it from there; a second open downloads nothing.
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import os
 import posixpath
-import sys
-import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from htdata import storage
-from htdata.fsutil import sha256_file, sha256_stream
-from htdata.manifest import (EPISODES_FILE, INDEX_DTYPE, INDEX_FILE, LAYOUTS_DIR, MANIFEST_FILE, SHARDS_DIR,
-                             load_manifest)
+from htdata.format import EPISODES_FILE, INDEX_FILE, LAYOUTS_DIR, MANIFEST_FILE, SHARDS_DIR, SPLITS_DIR
+from htdata.fsutil import atomic_open, sha256_file, sha256_stream
+from htdata.manifest import load_index, load_manifest
 
 CACHE_ENV = "HTDATA_CACHE"
-SPLITS_DIR = "splits"
 CHUNK = 1 << 20
 
 
@@ -51,14 +48,6 @@ def cache_dir() -> Path:
     """Local cache root: $HTDATA_CACHE, else ~/.cache/htdata."""
     env = os.environ.get(CACHE_ENV)
     return Path(env) if env else Path.home() / ".cache" / "htdata"
-
-
-def _fs(url: str):
-    import fsspec
-
-    return fsspec.core.url_to_fs(url)
-
-
 
 
 # -- publish ----------------------------------------------------------------
@@ -104,8 +93,12 @@ def remote_sha256(fs, remote: str) -> str:
         return sha256_stream(f)
 
 
-def publish_dataset(local_root: str | os.PathLike, url: str, progress: bool = False) -> PublishResult:
-    """Upload a committed local dataset to an fsspec URL, verified, manifest last."""
+def publish_dataset(local_root: str | os.PathLike, url: str,
+                    on_file: Callable[[int, int, str], None] | None = None) -> PublishResult:
+    """Upload a committed local dataset to an fsspec URL, verified, manifest last.
+
+    `on_file(done, total, relative path)` is called after each verified file.
+    """
     root = Path(local_root)
     if storage.is_url(os.fspath(local_root)):
         raise ValueError(f"{local_root}: publish reads a LOCAL dataset directory")
@@ -113,7 +106,7 @@ def publish_dataset(local_root: str | os.PathLike, url: str, progress: bool = Fa
     if not manifest_path.is_file():
         raise FileNotFoundError(f"{manifest_path}: no manifest: not a committed htdata dataset")
     _, plan = publish_plan(root)
-    fs, base = _fs(url)
+    fs, base = storage.url_to_fs(url)
     base = base.rstrip("/")
     t0 = time.perf_counter()
     remote_manifest = f"{base}/{MANIFEST_FILE}"
@@ -130,68 +123,45 @@ def publish_dataset(local_root: str | os.PathLike, url: str, progress: bool = Fa
         if back != written:
             raise IOError(f"{url}/{rel}: uploaded sha256 {written[:12]} but read back {back[:12]}")
         total += local.stat().st_size
-        if progress:
-            print(f"[{n}/{len(plan) + 1}] {rel}", file=sys.stderr)
+        if on_file is not None:
+            on_file(n, len(plan) + 1, rel)
     # The manifest goes last: only now does the URL hold a valid dataset.
     written = upload_file(fs, manifest_path, remote_manifest)
     if remote_sha256(fs, remote_manifest) != written:
         raise IOError(f"{url}/{MANIFEST_FILE}: read-back sha256 differs from what was uploaded")
     total += manifest_path.stat().st_size
+    if on_file is not None:
+        on_file(len(plan) + 1, len(plan) + 1, MANIFEST_FILE)
     return PublishResult(url=url, files=len(plan) + 1, bytes=total, seconds=time.perf_counter() - t0)
 
 
 # -- index cache for remote readers ----------------------------------------
 
 def cached_index_path(root_url: str, manifest: dict) -> Path:
-    """Local copy of a remote dataset's index.npy, downloaded once (keyed by its sha256)."""
+    """Local copy of a remote dataset's index.npy, downloaded once.
+
+    Kept as CACHE/index/<index_sha256>/index.npy (a dataset folder of its own,
+    so `manifest.load_index` opens it). The download is checked against the
+    manifest's sha256 before it replaces anything; concurrent readers each
+    write their own temp file and the rename is atomic.
+    """
     sha = manifest.get("index_sha256")
     if not isinstance(sha, str) or len(sha) != 64:
         raise ValueError(f"{root_url}: manifest has no index_sha256; cannot cache the index")
-    target = cache_dir() / "index" / f"{sha}.npy"
+    target = cache_dir() / "index" / sha / INDEX_FILE
     if target.is_file():
         return target
-    target.parent.mkdir(parents=True, exist_ok=True)
     src = storage.join(root_url, manifest.get("index_file", INDEX_FILE))
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=".index-", suffix=".tmp")
-    try:
+    with atomic_open(target) as out, storage.open_binary(src) as f:
         h = hashlib.sha256()
-        with os.fdopen(fd, "wb") as out, storage.open_binary(src) as f:
-            for block in iter(lambda: f.read(CHUNK), b""):
-                h.update(block)
-                out.write(block)
+        for block in iter(lambda: f.read(CHUNK), b""):
+            h.update(block)
+            out.write(block)
         if h.hexdigest() != sha:
             raise ValueError(f"{src}: downloaded index sha256 {h.hexdigest()[:12]} != manifest {sha[:12]}")
-        os.replace(tmp, target)   # concurrent readers each write their own tmp; replace is atomic
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return target
 
 
 def load_cached_index(root_url: str, manifest: dict) -> np.ndarray:
     """The remote dataset's index, memory-mapped from the local cache."""
-    path = cached_index_path(root_url, manifest)
-    rows = np.load(path, mmap_mode="r", allow_pickle=False)
-    if rows.dtype != INDEX_DTYPE:
-        raise ValueError(f"{path} (cache of {root_url}): index dtype {rows.dtype} != {INDEX_DTYPE}")
-    return rows
-
-
-# -- CLI --------------------------------------------------------------------
-
-def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = __doc__.split("\n\n")[1]
-    parser.add_argument("dataset", type=Path, help="committed local dataset directory")
-    parser.add_argument("url", help="fsspec URL to upload to (s3://, gs://, memory://, file://)")
-    parser.add_argument("--quiet", action="store_true", help="no per-file progress")
-
-
-def run(args: argparse.Namespace) -> int:
-    try:
-        result = publish_dataset(args.dataset, args.url, progress=not args.quiet)
-    except (FileNotFoundError, ValueError, OSError) as exc:
-        print(f"htdata publish: error: {exc}", file=sys.stderr)
-        return 2
-    print(f"published {result.files} files, {result.bytes / 2**20:.1f} MiB to {result.url} "
-          f"in {result.seconds:.1f} s (verified sha256; dataset.json written last)", file=sys.stderr)
-    return 0
+    return load_index(cached_index_path(root_url, manifest).parent)

@@ -30,6 +30,8 @@ from htdata.format import MEMBER_ORDER
 BLOCK = 512
 MAX_NAME = 100  # USTAR name field; longer names would need the prefix field
 MAX_PARTS_PER_UNIT = 1000
+MAX_KEY_STEM = 64   # + "__" + frame (up to 8 digits) + "." + longest member suffix stays <= MAX_NAME
+assert MAX_KEY_STEM + 2 + 8 + 1 + max(len(s) for s in MEMBER_ORDER) <= MAX_NAME
 _USTAR_SIZE = slice(124, 136)   # size field: 11 octal digits + NUL
 KEY_RE = re.compile(r"^[A-Za-z0-9_-]+__[0-9]{6,}$")
 
@@ -42,20 +44,34 @@ def shard_name(unit: int, part: int) -> str:
     return f"shard-{unit:06d}-{part:03d}.tar"
 
 
+def key_stem(episode_id: str) -> str:
+    """The episode part of a sample key: the id itself, or a deterministic shortening of a long id.
+
+    USTAR member names hold 100 bytes, so `{stem}__{frame}.{suffix}` must fit:
+    ids longer than MAX_KEY_STEM keep their first characters plus a hash of
+    the whole id (unique, stable, same on write and read). The full id stays
+    in the sample JSON, episodes.jsonl and (by position) index.npy.
+    """
+    if len(episode_id) <= MAX_KEY_STEM:
+        return episode_id
+    digest = hashlib.sha256(episode_id.encode()).hexdigest()[:16]
+    return f"{episode_id[:MAX_KEY_STEM - 17]}-{digest}"
+
+
 def sample_key(episode_id: str, frame: int) -> str:
     """The DESIGN key: no dots (webdataset splits the key at the first dot)."""
-    key = f"{episode_id}__{frame:06d}"
+    key = f"{key_stem(episode_id)}__{frame:06d}"
     if not KEY_RE.match(key):
         raise ValueError(f"invalid sample key {key!r}: episode ids are [A-Za-z0-9_-]+, frame >= 0")
     return key
 
 
 def parse_key(key: str) -> tuple[str, int]:
-    """Inverse of sample_key: (episode_id, frame)."""
+    """Inverse of sample_key: (key stem, frame); the stem is the episode id unless it was shortened."""
     if not KEY_RE.match(key):
         raise ValueError(f"invalid sample key {key!r}")
-    episode_id, frame = key.rsplit("__", 1)
-    return episode_id, int(frame)
+    stem, frame = key.rsplit("__", 1)
+    return stem, int(frame)
 
 
 def padded(size: int) -> int:

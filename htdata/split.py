@@ -31,21 +31,22 @@ A split records the sha256 of the dataset.json it was made from, so
 
 from __future__ import annotations
 
-import argparse
 import difflib
 import hashlib
 import json
 import re
-import sys
 from collections import defaultdict
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
+from htdata.format import EPISODES_FILE, MANIFEST_FILE, SPLITS_DIR
 from htdata.fsutil import write_json_atomic
+from htdata.manifest import parse_episodes, parse_manifest
 from htdata.resources import validate_json
+from htdata.splitversions import PARTS, count_parts
+from htdata.versions import split_file
 
-PARTS = ("train", "test", "ood")
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9_-]+$")
 RULE = (
     "ood: episodes of params.ood_tasks; other episodes: "
@@ -157,48 +158,31 @@ def assign_episodes(episodes: list[dict], ood_tasks: list[str], test_ratio: floa
     return assignment, corrections, warnings
 
 
-def _fraction(num: int, den: int) -> float:
-    return float(num) / den if den else 0.0
+def build_split(episodes: list[dict], config: SplitConfig, manifest_sha256: str | None = None,
+                episodes_sha256: str | None = None) -> dict:
+    """Pure part of `make_split`: the split document for these episode records.
 
-
-def build_split(episodes: list[dict], config: SplitConfig, manifest_sha256: str) -> dict:
-    """Pure part of `make_split`: the split document for these episode records."""
+    A split of a versioned dataset (format_version 2) names the episode file
+    it describes (`episodes_sha256`); an unversioned one (v1) its manifest.
+    """
     config.validate()
     check_ood_tasks([ep["task"] for ep in episodes], config.ood_tasks)
     assignment, corrections, warnings = assign_episodes(
         episodes, config.ood_tasks, float(config.test_ratio), int(config.seed))
 
-    parts = {p: {"episodes": [], "frames": 0} for p in PARTS}
-    tasks: dict[str, dict] = {}
-    for ep in sorted(episodes, key=lambda e: e["episode_id"]):
-        part = assignment[ep["episode_id"]]
-        frames = int(ep["num_frames"])
-        parts[part]["episodes"].append(ep["episode_id"])
-        parts[part]["frames"] += frames
-        counts = tasks.setdefault(ep["task"], {p: {"episodes": 0, "frames": 0} for p in PARTS})
-        counts[part]["episodes"] += 1
-        counts[part]["frames"] += frames
-
-    n = {p: len(parts[p]["episodes"]) for p in PARTS}
-    f = {p: parts[p]["frames"] for p in PARTS}
-    ratios = {
-        "test_of_in_distribution": {"episodes": _fraction(n["test"], n["train"] + n["test"]),
-                                    "frames": _fraction(f["test"], f["train"] + f["test"])},
-        "ood_of_all": {"episodes": _fraction(n["ood"], sum(n.values())),
-                       "frames": _fraction(f["ood"], sum(f.values()))},
-    }
+    parts, tasks, ratios = count_parts(assignment, episodes)
     doc = {
         "format": "htdata-split",
-        "format_version": 1,
+        "format_version": 1 if episodes_sha256 is None else 2,
         "name": config.resolved_name(),
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "params": {"ood_tasks": sorted(config.ood_tasks), "test_ratio": float(config.test_ratio),
                    "seed": int(config.seed)},
         "rule": RULE,
-        "manifest_sha256": manifest_sha256,
+        **({"manifest_sha256": manifest_sha256} if episodes_sha256 is None else {"episodes_sha256": episodes_sha256}),
         "parts": parts,
         "ratios": ratios,
-        "tasks": dict(sorted(tasks.items())),
+        "tasks": tasks,
         "corrections": corrections,
         "warnings": warnings,
     }
@@ -206,50 +190,93 @@ def build_split(episodes: list[dict], config: SplitConfig, manifest_sha256: str)
     return doc
 
 
+def _current_manifest(dataset) -> dict | None:
+    path = Path(dataset) / MANIFEST_FILE
+    try:
+        return json.loads(path.read_bytes())
+    except (OSError, ValueError):
+        return None
+
+
+def split_path(dataset, name: str, manifest: dict | None = None) -> Path:
+    """Where split NAME of a dataset's version lives (the current one unless `manifest` is given).
+
+    Versioned: versions/vN/splits/NAME.json (the manifest's "splits" entry);
+    written before versions: DATASET/splits/NAME.json.
+    """
+    manifest = manifest if manifest is not None else _current_manifest(dataset)
+    if manifest is not None and "version" in manifest:
+        entry = manifest.get("splits", {}).get(name)
+        return Path(dataset) / (entry["file"] if entry else split_file(manifest["version"], name))
+    return Path(dataset) / SPLITS_DIR / f"{name}.json"
+
+
+def list_splits(dataset, manifest: dict | None = None) -> list[str]:
+    """Names of the splits of a dataset's version (the current one unless `manifest` is given), sorted."""
+    manifest = manifest if manifest is not None else _current_manifest(dataset)
+    if manifest is not None and "version" in manifest:
+        return sorted(manifest.get("splits", {}))
+    folder = Path(dataset) / SPLITS_DIR
+    return sorted(p.stem for p in folder.glob("*.json")) if folder.is_dir() else []
+
+
 def read_dataset_episodes(dataset: Path) -> tuple[bytes, list[dict]]:
-    """(dataset.json bytes, episode records) of a committed dataset."""
-    manifest_path = dataset / "dataset.json"
+    """(dataset.json bytes, episode records) of a committed dataset.
+
+    The manifest bytes are parsed (format checked, schema not: a split needs
+    only the episode records) and returned as read, for the split's
+    manifest_sha256; the episodes are read from the file the manifest names.
+    """
+    dataset = Path(dataset)
+    manifest_path = dataset / MANIFEST_FILE
     if not manifest_path.is_file():
-        raise SplitError(f"{dataset}: no dataset.json (not a committed htdata dataset)")
+        raise SplitError(f"{dataset}: no {MANIFEST_FILE} (not a committed htdata dataset)")
     manifest_bytes = manifest_path.read_bytes()
     try:
-        manifest = json.loads(manifest_bytes)
+        manifest = parse_manifest(manifest_bytes, str(manifest_path), validate=False)
     except json.JSONDecodeError as exc:
         raise SplitError(f"{manifest_path}: invalid JSON: {exc}") from exc
-    episodes_path = dataset / manifest.get("episodes_file", "episodes.jsonl")
-    episodes = []
-    with open(episodes_path, encoding="utf-8") as fh:
-        for line_no, line in enumerate(fh, 1):
-            if not line.strip():
-                continue
-            try:
-                rec = json.loads(line)
-            except json.JSONDecodeError as exc:
-                raise SplitError(f"{episodes_path}:{line_no}: invalid JSON: {exc}") from exc
-            for key in ("episode_id", "task", "scene", "num_frames"):
-                if key not in rec:
-                    raise SplitError(f"{episodes_path}:{line_no}: episode record lacks {key!r}")
-            episodes.append(rec)
+    except ValueError as exc:
+        raise SplitError(str(exc)) from exc
+    episodes_path = dataset / manifest.get("episodes_file", EPISODES_FILE)
+    try:
+        episodes = parse_episodes(episodes_path.read_text(encoding="utf-8"), str(episodes_path))
+    except ValueError as exc:      # names the file and line
+        raise SplitError(str(exc)) from exc
+    for number, rec in enumerate(episodes, 1):
+        for key in ("episode_id", "task", "scene", "num_frames"):
+            if key not in rec:
+                raise SplitError(f"{episodes_path}: episode record {number} "
+                                 f"({rec.get('episode_id', '?')}) lacks {key!r}")
     return manifest_bytes, episodes
-
-
 
 
 def make_split(dataset, ood_tasks, test_ratio: float = 0.1, seed: int = 0,
                name: str | None = None, force: bool = False) -> dict:
-    """Compute a split of a committed dataset and write DATASET/splits/NAME.json."""
+    """Compute a split of a committed dataset and write it; returns the split document."""
+    return write_split(dataset, ood_tasks, test_ratio, seed, name, force).doc
+
+
+def write_split(dataset, ood_tasks, test_ratio: float = 0.1, seed: int = 0, name: str | None = None,
+                force: bool = False, command: str = "htdata split") -> "SplitResult":
+    """Split a dataset: a versioned one gets a new version (splitversions.py); an
+    unversioned one (written before versions) gets DATASET/splits/NAME.json."""
+    from htdata.splitversions import SplitResult, write_versioned_split
+
     dataset = Path(dataset)
     config = SplitConfig(ood_tasks=list(ood_tasks), test_ratio=test_ratio, seed=seed,
                          name=name, force=force)
     config.validate()
-    out = dataset / "splits" / f"{config.resolved_name()}.json"
+    manifest_bytes, episodes = read_dataset_episodes(dataset)
+    if "version" in json.loads(manifest_bytes):
+        return write_versioned_split(dataset, config, command)
+    out = split_path(dataset, config.resolved_name())
     if out.exists() and not force:
         raise SplitError(f"split {config.resolved_name()!r} already exists at {out}; "
                          f"choose another --name or pass --force to overwrite it")
-    manifest_bytes, episodes = read_dataset_episodes(dataset)
     doc = build_split(episodes, config, hashlib.sha256(manifest_bytes).hexdigest())
     write_json_atomic(out, doc)
-    return doc
+    return SplitResult(doc=doc, path=out, version=None)
 
 
 def task_table(episodes: list[dict]) -> list[tuple[str, str, int, int]]:
@@ -294,34 +321,3 @@ def format_summary(doc: dict, path: Path) -> str:
     for c in doc["corrections"]:
         lines.append(f"  correction: {c['episode_id']} -> {c['part']} ({c['reason']})")
     return "\n".join(lines)
-
-
-def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = __doc__
-    parser.add_argument("dataset", type=Path, help="committed dataset directory")
-    parser.add_argument("--ood-task", action="append", default=[], dest="ood_tasks", metavar="TASK",
-                        help="task held out whole as out-of-distribution (repeatable)")
-    parser.add_argument("--test-ratio", type=float, default=0.1,
-                        help="fraction of each in-distribution task's episodes in test (default 0.1)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the episode hash (default 0)")
-    parser.add_argument("--name", default=None, help="split name (file splits/NAME.json)")
-    parser.add_argument("--force", action="store_true", help="overwrite an existing split of that name")
-    parser.add_argument("--list-tasks", action="store_true",
-                        help="print tasks with episode and frame counts per scene, then exit")
-
-
-def run(args: argparse.Namespace) -> int:
-    try:
-        if args.list_tasks:
-            _, episodes = read_dataset_episodes(Path(args.dataset))
-            print(format_task_table(episodes))
-            return 0
-        doc = make_split(args.dataset, args.ood_tasks, test_ratio=args.test_ratio, seed=args.seed,
-                         name=args.name, force=args.force)
-    except (SplitError, FileNotFoundError) as exc:
-        print(f"htdata split: error: {exc}", file=sys.stderr)
-        return 2
-    for w in doc["warnings"]:
-        print(f"htdata split: warning: {w}", file=sys.stderr)
-    print(format_summary(doc, Path(args.dataset) / "splits" / f"{doc['name']}.json"))
-    return 0

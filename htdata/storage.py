@@ -2,7 +2,8 @@
 
 Readers accept "/data/ds", "file:///data/ds", "memory://ds", "s3://bucket/ds".
 Local paths use the builtin `open` (fastest seek+read); anything with a
-protocol goes through fsspec. Writers in this project are local-only.
+protocol goes through fsspec. Dataset writers are local-only; `htdata publish`
+(htdata/remote.py) uploads a committed dataset with `url_to_fs`.
 """
 
 from __future__ import annotations
@@ -31,7 +32,8 @@ def join(root: str | os.PathLike, *parts: str) -> str:
     return os.path.join(_local(root), *parts)
 
 
-def _fs(location: str):
+def url_to_fs(location: str):
+    """(fsspec filesystem, path inside it) for a URL."""
     import fsspec
 
     return fsspec.core.url_to_fs(location)
@@ -41,7 +43,7 @@ def open_binary(location: str | os.PathLike) -> IO[bytes]:
     """Open a file for binary reading (seekable)."""
     if not is_url(location):
         return open(_local(location), "rb")
-    fs, path = _fs(os.fspath(location))
+    fs, path = url_to_fs(os.fspath(location))
     return fs.open(path, "rb")
 
 
@@ -57,7 +59,7 @@ def read_text(location: str | os.PathLike) -> str:
 def exists(location: str | os.PathLike) -> bool:
     if not is_url(location):
         return os.path.exists(_local(location))
-    fs, path = _fs(os.fspath(location))
+    fs, path = url_to_fs(os.fspath(location))
     return fs.exists(path)
 
 
@@ -65,7 +67,7 @@ def listdir(location: str | os.PathLike) -> list[str]:
     """Sorted base names of the entries of a directory."""
     if not is_url(location):
         return sorted(os.listdir(_local(location)))
-    fs, path = _fs(os.fspath(location))
+    fs, path = url_to_fs(os.fspath(location))
     return sorted(posixpath.basename(p.rstrip("/")) for p in fs.ls(path, detail=False))
 
 

@@ -13,6 +13,12 @@ Everything goes through the real writer APIs (codec, ShardWriter,
 commit_dataset). Layout ids default to "test_full" with full-canvas
 coverage; pass `coverages={layout_id: (224,224) uint8}` for real ones (e.g.
 from htdata.layouts + Rasteriser) and `canonical=CanonicalArtifact(...)`.
+
+Also here: the episode tables the dataset tests share (`episode_table`,
+MIXED_HANDS_EPISODES, PREVIEW_EPISODES, SPLIT_EPISODES, TRAIN_EPISODES) and
+tiny raw corpora in the three source formats plus the in-process ingest CLI
+(`make_opentouch`, `make_touchanything`, `make_native`, `small_pipeline`,
+`ingest_cli`, `temp_leftovers`) for the ingest, Ray and benchmark tests.
 """
 
 from __future__ import annotations
@@ -23,14 +29,19 @@ import zlib
 from pathlib import Path
 
 import cv2
+import h5py
 import numpy as np
 
 from htdata.codec import DEFAULT_CODEC_INFO, encode_rgb, encode_tactile
+from htdata.format import CANVAS
 from htdata.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, commit_dataset
+from htdata.resources import PIPELINES_DIR
+from htdata.sample.formats import (NativeHand, NativeRecording, OpenTouchClip, TouchAnythingEpisode,
+                                   write_native_recording, write_opentouch_annotations,
+                                   write_opentouch_scene, write_touchanything_episode)
 from htdata.shardio import ShardWriter, sample_key
 
 DEFAULT_LAYOUT = "test_full"
-CANVAS = 224
 FRAME_NS = 33_333_333
 
 
@@ -167,12 +178,139 @@ def write_synthetic_dataset(root, episodes: list[dict], seed: int = 0,
     return root
 
 
-# Three episodes covering one hand, two hands and a single frame; used by the reader and torch tests.
-MIXED_HANDS_EPISODES = [
-    {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": ("right",), "num_frames": 5,
-     "layouts": {"right": "glove_r"}},
-    {"episode_id": "ep_b", "task": "wipe", "scene": "office", "hands": ("left", "right"), "num_frames": 4,
-     "layouts": {"left": "glove_l", "right": "glove_r"}},
-    {"episode_id": "ep_c", "task": "pour", "scene": "office", "hands": ("left",), "num_frames": 1,
-     "layouts": {"left": "glove_l"}},
-]
+# --------------------------------------------------------------------------- episode tables
+# The episode lists the dataset tests share (write_synthetic_dataset specs), built by one factory.
+
+HAND_CODES = {"R": ("right",), "L": ("left",), "LR": ("left", "right")}
+GLOVE_LAYOUTS = {"left": "glove_l", "right": "glove_r"}
+
+
+def episode_table(*rows: tuple, glove_layouts: bool = False) -> list[dict]:
+    """Episode specs from (episode_id, task, scene, hands "R" | "L" | "LR", num_frames) rows.
+
+    glove_layouts: each hand gets its own layout id (GLOVE_LAYOUTS); otherwise
+    every hand uses DEFAULT_LAYOUT (full coverage unless `coverages` says otherwise).
+    """
+    specs = []
+    for episode_id, task, scene, hands, num_frames in rows:
+        spec = {"episode_id": episode_id, "task": task, "scene": scene, "hands": HAND_CODES[hands],
+                "num_frames": num_frames}
+        if glove_layouts:
+            spec["layouts"] = {h: GLOVE_LAYOUTS[h] for h in HAND_CODES[hands]}
+        specs.append(spec)
+    return specs
+
+
+# Three episodes covering one hand, two hands and a single frame: reader, torch and remote tests.
+MIXED_HANDS_ROWS = (("ep_a", "pour", "kitchen", "R", 5), ("ep_b", "wipe", "office", "LR", 4),
+                    ("ep_c", "pour", "office", "L", 1))
+MIXED_HANDS_EPISODES = episode_table(*MIXED_HANDS_ROWS, glove_layouts=True)
+MIXED_HANDS_ONE_LAYOUT_EPISODES = episode_table(*MIXED_HANDS_ROWS)
+# The preview's contact sheet: an odd frame count, both hands, a one-frame left-only episode.
+PREVIEW_EPISODES = episode_table(("ep_r", "pour", "kitchen", "R", 7), ("ep_lr", "wipe", "office", "LR", 3),
+                                 ("ep_one", "wipe", "office", "L", 1))
+# Five episodes, three tasks (one to hold out as OOD), one- and two-hand: split / validate tests.
+SPLIT_EPISODES = episode_table(("ep_a", "pour", "kitchen", "R", 5), ("ep_b", "wipe", "office", "LR", 4),
+                               ("ep_c", "wipe", "kitchen", "R", 3), ("ep_d", "grasp", "office", "R", 3),
+                               ("ep_e", "grasp", "office", "R", 1))
+# Five episodes for the trainer: "grab" is the held-out task, both hands seen.
+TRAIN_EPISODES = episode_table(("ep_a", "pour", "kitchen", "R", 6), ("ep_b", "pour", "office", "LR", 5),
+                               ("ep_c", "wipe", "kitchen", "R", 4), ("ep_d", "wipe", "office", "L", 4),
+                               ("ep_e", "grab", "office", "R", 3))
+
+
+# --------------------------------------------------------------------------- raw recordings + the ingest CLI
+# Tiny raw corpora in the three source formats (htdata.sample.formats), for the ingest, Ray and
+# benchmark tests: 3 OpenTouch clips (39 frames), 2 TouchAnything episodes (11), 1 native (9).
+
+PERIOD = 33_333_333
+COLOURS = [(200, 40, 90), (30, 160, 220), (250, 250, 10), (90, 90, 90)]
+
+
+def small_pipeline(tmp_path: Path, name: str, samples_per_shard: int = 8) -> Path:
+    """A shipped pipeline with a tiny shard size (more units, more shards)."""
+    text = (PIPELINES_DIR / f"{name}.toml").read_text()
+    text = text.replace("samples_per_shard = 256", f"samples_per_shard = {samples_per_shard}")
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text)
+    return path
+
+
+def ot_clip(demo_id: str, t: int, colour, pressure: np.ndarray | None = None) -> OpenTouchClip:
+    if pressure is None:
+        rng = np.random.default_rng(len(demo_id) * 7 + t)
+        pressure = rng.uniform(1000, 3072, size=(t, 16, 16)).astype(np.float32)
+    frames = [np.full((48, 64, 3), colour, np.uint8) for _ in range(t)]
+    return OpenTouchClip(demo_id, np.arange(t, dtype=np.int64) * PERIOD + 10**12, pressure, frames)
+
+
+def make_opentouch(root: Path, bad: bool = False) -> Path:
+    clips = [ot_clip("demo_01", 12, COLOURS[0]), ot_clip("demo_02", 7, COLOURS[1]),
+             ot_clip("demo_003", 20, COLOURS[2])]
+    write_opentouch_scene(root / "home_kitchen_p1.hdf5", clips)
+    rows = [{"id": f"home_kitchen_p1::{c.demo_id}", "action": a} for c, a in zip(clips, ["pour", "cut", "wipe"])]
+    if bad:
+        nan = np.full((6, 16, 16), np.nan, np.float32)
+        bad_clips = [ot_clip("demo_01", 6, COLOURS[3], pressure=nan),   # all-NaN
+                     ot_clip("demo_02", 0, COLOURS[3]),                  # zero frames
+                     ot_clip("demo_03", 6, COLOURS[3])]                  # undecodable JPEG at frame 4
+        write_opentouch_scene(root / "office_desk_p2.hdf5", bad_clips)
+        with h5py.File(root / "office_desk_p2.hdf5", "r+") as f:
+            f["data/demo_03/rgb_images_jpeg"][4] = np.frombuffer(b"not a jpeg at all", np.uint8)
+        rows += [{"id": f"office_desk_p2::demo_0{i}", "action": "type"} for i in (1, 2, 3)]
+    write_opentouch_annotations(root / "annotations.csv", rows)
+    return root
+
+
+def make_touchanything(root: Path, truncated: bool = False) -> Path:
+    from htdata.layouts import load_layout
+
+    for n, (scene, task, traj) in enumerate([("Home", "plug_usb", "20260320_135743_682"),
+                                             ("Office", "open_drawer", "20260321_101010_001")]):
+        t = 5 + n
+        grids = {}
+        for hand in ("left", "right"):
+            lay = load_layout(f"touchanything_{hand}_21x21")
+            g = np.full((t, 21, 21), np.nan, np.float32)
+            g[:, lay.live_mask] = np.linspace(0, 1, t, dtype=np.float32)[:, None]
+            g[:, lay.bend_cells[:, 0], lay.bend_cells[:, 1]] = 0.25
+            grids[hand] = g
+        ep = TouchAnythingEpisode(left_grid=grids["left"], right_grid=grids["right"],
+                                  chest_frames=[np.full((480, 640, 3), COLOURS[n], np.uint8)] * t,
+                                  ts_epoch_s=1.7e9 + np.arange(t) / 30.0)
+        folder = root / scene / task / traj
+        write_touchanything_episode(folder, ep, wrist_videos=False)
+        if truncated and n == 1:
+            npz = folder / "pressure_grids.npz"
+            data = npz.read_bytes()
+            npz.write_bytes(data[: len(data) // 2])
+    return root
+
+
+def make_native(root: Path, wrong_grid: bool = False) -> Path:
+    t_video = np.arange(9, dtype=np.int64) * PERIOD
+    t_glove = np.arange(0, 9 * PERIOD, 10_000_000, dtype=np.int64)   # 100 Hz glove, 30 Hz video
+    values = np.full((t_glove.size, 16, 16), 1536.0, np.float32)
+    rec = NativeRecording(task="grasp_cup", scene="lab", video_storage="jpeg",
+                          video_frames=[np.full((40, 40, 3), COLOURS[0], np.uint8)] * 9,
+                          video_timestamps_ns=t_video,
+                          hands={"right": NativeHand("opentouch_right_16x16", values, t_glove)})
+    write_native_recording(root / "rec_good", rec)
+    if wrong_grid:
+        rec.hands = {"right": NativeHand("opentouch_right_16x16", np.zeros((t_glove.size, 8, 8), np.float32),
+                                         t_glove)}
+        rec.video_frames = [np.full((40, 40, 3), COLOURS[1], np.uint8)] * 9
+        write_native_recording(root / "rec_wrong_grid", rec)
+    return root
+
+
+def ingest_cli(*args, workers: int = 0) -> int:
+    """In-process CLI; workers=0 runs units inline (fast), >0 uses the process pool."""
+    from htdata.cli import main
+
+    return main(["ingest", "--workers", str(workers), "--quiet", *map(str, args)])
+
+
+def temp_leftovers(out: Path) -> list[str]:
+    return sorted(str(p.relative_to(out)) for p in out.rglob("*")
+                  if p.name.endswith(".tmp") or p.name.startswith("spool-"))

@@ -1,16 +1,14 @@
-"""Per-episode costs of the shared adapter helpers: single-threaded video decode, cached layout grids."""
+"""Per-episode costs of the shared adapter helpers: single-threaded, bit-exact video decode.
+
+(Layouts parsed once per file version: tests/test_layouts.py.)
+"""
 
 from __future__ import annotations
 
-import os
-import shutil
-
 import av
 import numpy as np
-import pytest
 
-from htdata.adapters import base
-from htdata.adapters.base import configure_decoder_threads, iter_video_rgb, layout_grid
+from htdata.adapters.video import configure_decoder_threads, iter_video_rgb
 from htdata.sample.formats import write_h264
 
 
@@ -42,27 +40,3 @@ def test_configure_decoder_threads(tmp_path):
         assert s.codec_context.thread_count == 1 and "SLICE" in str(s.thread_type)
         configure_decoder_threads(s, 2)
         assert s.codec_context.thread_count == 2
-
-
-def test_layout_grid_parsed_once_per_file_version(tmp_path, monkeypatch):
-    from htdata import layouts
-
-    src = layouts.layout_path("opentouch_right_16x16")
-    path = tmp_path / "my_glove.json"
-    shutil.copy(src, path)
-    calls = []
-    real = layouts.load_layout
-    monkeypatch.setattr(layouts, "load_layout", lambda p: calls.append(p) or real(p))
-    base._cached_layout_grid.cache_clear()
-    assert layout_grid(str(path)) == (16, 16)
-    assert layout_grid(str(path)) == (16, 16)
-    assert len(calls) == 1
-    st = path.stat()
-    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))   # the file changed: parsed again
-    assert layout_grid(str(path)) == (16, 16) and len(calls) == 2
-    assert layout_grid("opentouch_right_16x16") == (16, 16)
-
-
-def test_layout_grid_missing_layout_names_it():
-    with pytest.raises(FileNotFoundError, match="no_such_glove"):
-        layout_grid("no_such_glove")

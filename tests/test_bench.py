@@ -1,26 +1,66 @@
 """`htdata bench --quick`: every section present, finite numbers, every table rendered.
 
 One quick run (module fixture, ~1 min on 2 shared cores) feeds all checks.
-No timed assertions: the numbers only have to exist and be finite.
+No timed assertions: the numbers only have to exist and be finite. The run
+also sees a throwaway distribution on sys.path whose entry points (group
+htdata.bench_sections) add a working section, a failing one and one named
+like a built-in, so discovery, the context, REPORT.md rendering and error
+isolation are exercised as an installed plugin would be.
 """
 
 import json
 import math
+import sys
+import textwrap
 
 import pytest
 
-from htdata.bench import BenchConfig, finite_json
+from htdata.bench import BUILTIN_SECTIONS, BenchConfig, discover_sections, finite_json
 from htdata.benchmarks.report import HEADINGS, render_report
 from htdata.cli import main as cli_main
 
-SECTIONS = ("machine", "codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate", "training")
+SECTIONS = ("machine",) + BUILTIN_SECTIONS
+PLUGIN_MODULE = "htdata_bench_probe_plugin"
+PLUGIN_CODE = """
+    from htdata.manifest import load_manifest
+
+    def probe(ctx):
+        (ctx.work / "probe.txt").write_text("scratch")
+        n = load_manifest(ctx.dataset)["counts"]["samples"]
+        return {"samples": n, "quick": ctx.quick, "seed": ctx.seed, "work": str(ctx.work),
+                "markdown": "| probe | samples |\\n|---|---|\\n| ok | %d |" % n}
+
+    def broken(ctx):
+        raise RuntimeError("probe plugin exploded")
+"""
+PLUGIN_ENTRY_POINTS = f"""
+    [htdata.bench_sections]
+    probe = {PLUGIN_MODULE}:probe
+    zz_broken = {PLUGIN_MODULE}:broken
+    codecs = {PLUGIN_MODULE}:probe
+"""
+
+
+def install_probe_plugin(folder):
+    """A minimal installed distribution: a module plus its .dist-info with entry points."""
+    (folder / f"{PLUGIN_MODULE}.py").write_text(textwrap.dedent(PLUGIN_CODE))
+    dist = folder / "htdata_bench_probe-0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: htdata-bench-probe\nVersion: 0\n")
+    (dist / "entry_points.txt").write_text(textwrap.dedent(PLUGIN_ENTRY_POINTS))
 
 
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("bench")
-    rc = cli_main(["bench", "--quick", "--quiet", "--out", str(out)])
-    return rc, out
+    plugin_dir = tmp_path_factory.mktemp("plugin")
+    install_probe_plugin(plugin_dir)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.syspath_prepend(str(plugin_dir))
+        rc = cli_main(["bench", "--quick", "--quiet", "--out", str(out)])
+        discovered = set(discover_sections())
+    sys.modules.pop(PLUGIN_MODULE, None)
+    return rc, out, discovered
 
 
 def numbers(obj, path="results"):
@@ -35,10 +75,11 @@ def numbers(obj, path="results"):
 
 
 def test_quick_bench_writes_every_section_with_finite_numbers(quick_run):
-    rc, out = quick_run
+    rc, out, _ = quick_run
     results = json.loads((out / "results.json").read_text())
-    assert results["errors"] == {}, results["errors"]
-    assert rc == 0
+    # Only the probe distribution's failing and misnamed sections fail; everything else ran.
+    assert set(results["errors"]) == {"zz_broken", f"codecs ({PLUGIN_MODULE}:probe)"}, results["errors"]
+    assert rc == 1
     for section in SECTIONS:
         assert section in results, section
         found = list(numbers(results[section], section))
@@ -48,11 +89,33 @@ def test_quick_bench_writes_every_section_with_finite_numbers(quick_run):
     assert (out / ".work").is_dir()
 
 
+def test_discovered_sections_run_after_builtins_with_context(quick_run):
+    _, out, discovered = quick_run
+    r = json.loads((out / "results.json").read_text())
+    assert {"probe", "zz_broken", "codecs"} <= discovered
+    assert r["plugins"]["probe"] == f"{PLUGIN_MODULE}:probe" and "codecs" not in r["plugins"]
+    probe = r["probe"]
+    assert probe["quick"] is True and probe["seed"] == 0
+    assert probe["samples"] == r["loader"]["samples_in_dataset"] > 0      # ctx.dataset = the combined dataset
+    assert (out / ".work" / "sections" / "probe" / "probe.txt").read_text() == "scratch"
+    assert "zz_broken" not in r and "RuntimeError: probe plugin exploded" in r["errors"]["zz_broken"]
+    assert r["codecs"]["default"] == "exr_half_zip"                       # the built-in section was not displaced
+    order = list(r["timings_s"])
+    assert order[:len(BUILTIN_SECTIONS)] == list(BUILTIN_SECTIONS)
+    assert set(order[len(BUILTIN_SECTIONS):]) == set(r["plugins"])
+    # Any other installed section (HandTouch's "training") ran cleanly too.
+    for name in set(r["plugins"]) - {"probe", "zz_broken"}:
+        assert name in r and name not in r["errors"], name
+
+
 def test_quick_bench_content_is_consistent(quick_run):
-    _, out = quick_run
+    _, out, _ = quick_run
     r = json.loads((out / "results.json").read_text())
     assert {row["codec"] for row in r["codecs"]["rows"]} == set(r["codecs"]["codecs"])
-    assert {m["glove"] for m in r["codecs"]["margins"]} == {"opentouch", "touchanything"}
+    assert {m["layout"] for m in r["codecs"]["margins"]} == {
+        "opentouch_right_16x16", "touchanything_left_21x21", "touchanything_right_21x21"}
+    steps = {m["layout"]: m["step"] for m in r["codecs"]["margins"]}
+    assert steps["opentouch_right_16x16"] == 1 / 3072 and steps["touchanything_left_21x21"] == 1 / 255
     lossless = [row for row in r["codecs"]["rows"] if row["codec"] in ("exr_float_zip",)]
     assert lossless[0]["max_error"] == 0.0
     assert {s["adapter"] for s in r["ingest"]["summary"]} == {"opentouch", "touchanything", "native"}
@@ -63,26 +126,31 @@ def test_quick_bench_content_is_consistent(quick_run):
     assert {row["mode"] for row in r["raster"]} == {"nearest", "bilinear"}
     assert all(row["max_roundtrip_error"] == 0 for row in r["raster"] if row["mode"] == "nearest")
     assert [row["workers"] for row in r["validate"]] == [1, 2] and all(row["ok"] for row in r["validate"])
-    assert [row["precision"] for row in r["training"]["rows"]] == ["fp32", "bf16 autocast"]
     assert r["loader"]["bound"]["samples_per_s"] > 0 and len(r["loader"]["rows"]) == 7
     assert r["machine"]["cpu_count"] >= 1 and r["machine"]["cpu_model"]
 
 
 def test_report_has_every_table_heading(quick_run):
-    _, out = quick_run
+    _, out, _ = quick_run
     report = (out / "REPORT.md").read_text()
     for heading in HEADINGS.values():
         assert heading in report, heading
     assert "**Default: exr_half_zip**" in report and "**Defaults: JPEG q95, cv2_area**" in report
-    assert "Not measured" not in report
+    # The probe's markdown verbatim under its name, after the built-in tables; the broken one named.
+    assert "## probe" in report and "| ok | " in report
+    assert report.index("## probe") > report.index(HEADINGS["validate"])
+    assert "## zz_broken" in report and "Not measured: RuntimeError: probe plugin exploded" in report
+    assert report.count("Not measured") == 1
     assert report.count("|---|") >= 10
 
 
 def test_report_names_failed_sections():
     results = {"command": "htdata bench", "quick": True, "seconds": 1.0, "created": "now",
-               "errors": {"training": "RuntimeError: boom"}}
+               "errors": {"raster": "RuntimeError: boom", "training": "ImportError: no torch"},
+               "plugins": {"training": "handtouch.benchmark:training_section"}}
     text = render_report(results)
     assert "Not measured: RuntimeError: boom" in text
+    assert "## training" in text and "Not measured: ImportError: no torch" in text
     assert all(h in text for h in HEADINGS.values())
 
 
@@ -95,7 +163,8 @@ def test_finite_json_replaces_non_finite():
 
 @pytest.mark.parametrize("change, match", [
     ({"rss_lengths": (40, 20)}, "rss_lengths"),
-    ({"train_steps": 0}, "train_steps"),
+    ({"rgb_frames": 0}, "rgb_frames"),
+    ({"sections": ("nope",)}, "unknown section"),
     ({"ingest_workers": ()}, "ingest_workers"),
     ({"scale": "huge"}, "scale"),
 ])

@@ -9,7 +9,7 @@ import numpy as np
 
 from htdata.benchmarks.ingest import own_peak_rss_kb
 from htdata.benchmarks.sources import bare_bound, discover
-from tests.test_ingest import make_opentouch
+from tests.factories import make_opentouch
 
 
 def test_own_peak_rss_parses_vmhwm():

@@ -9,10 +9,11 @@ import torch
 import torch.multiprocessing as mp
 from torch.utils.data import Dataset
 
-from handtouch.config import ModelConfig, train_config_from_dict
+from handtouch.config import ModelConfig, StageConfig, train_config_from_dict
 from handtouch.distributed import init_distributed, unwrap, wrap
 from handtouch.model import HandTouch
 from handtouch.rgb_encoder import load_rgb_encoder
+from handtouch.stages import Reconstruction, StageLoss
 from handtouch.train import TrainData, evaluate_heldout, heldout_batch, train
 
 JOIN_TIMEOUT_S = 240      # a deadlocked collective must fail the test, never hang the suite
@@ -58,21 +59,22 @@ def _worker(rank: int, world: int, port: int, out: str) -> None:
     env = init_distributed("cpu")
     torch.manual_seed(0)
     model = HandTouch(ModelConfig(**TINY), load_rgb_encoder("random:0"))
-    model.set_trainable(["encoder", "vq", "decoder"])
+    stage = Reconstruction(StageConfig(trainable=["encoder", "vq", "decoder"]))
+    stage.configure(model)
     model.train()
-    ddp = wrap(model, env)
+    ddp = wrap(StageLoss(stage, model), env)
     opt = torch.optim.AdamW([p for p in model.parameters() if p.requires_grad], lr=1e-3)
     data = TinyFrames(8)
     restarts = []
     for step in range(3):
         items = [data[(2 * step + rank) % 8], data[(2 * step + rank + 4) % 8]]   # different data per rank
         batch = torch.utils.data.default_collate(items)
-        losses = ddp(batch, 1)
+        loss, terms = ddp(batch)
         opt.zero_grad()
-        losses["loss"].backward()
+        loss.backward()
         opt.step()
-        restarts.append(float(losses["restarts"]))
-    torch.save({"state": unwrap(ddp).state_dict(), "restarts": restarts}, os.path.join(out, f"rank{rank}.pt"))
+        restarts.append(float(terms["restarts"]))
+    torch.save({"state": unwrap(ddp).model.state_dict(), "restarts": restarts}, os.path.join(out, f"rank{rank}.pt"))
 
     # Rank 0 alone evaluates a model left in training mode while rank 1 goes straight to a
     # barrier: any collective inside evaluation (VQ usage all_reduce, restart broadcast)

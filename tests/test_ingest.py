@@ -17,97 +17,9 @@ import numpy as np
 import pytest
 
 from htdata.ingest import pack_units, parse_sources, unit_target_frames
-from htdata.resources import PIPELINES_DIR
-from htdata.sample.formats import (NativeHand, NativeRecording, OpenTouchClip, TouchAnythingEpisode,
-                                   write_native_recording, write_opentouch_annotations,
-                                   write_opentouch_scene, write_touchanything_episode)
-
-PERIOD = 33_333_333
-COLOURS = [(200, 40, 90), (30, 160, 220), (250, 250, 10), (90, 90, 90)]
-
-
-def small_pipeline(tmp_path: Path, name: str, samples_per_shard: int = 8) -> Path:
-    """A shipped pipeline with a tiny shard size (more units, more shards)."""
-    text = (PIPELINES_DIR / f"{name}.toml").read_text()
-    text = text.replace("samples_per_shard = 256", f"samples_per_shard = {samples_per_shard}")
-    path = tmp_path / f"{name}.toml"
-    path.write_text(text)
-    return path
-
-
-def ot_clip(demo_id: str, t: int, colour, pressure: np.ndarray | None = None) -> OpenTouchClip:
-    if pressure is None:
-        rng = np.random.default_rng(len(demo_id) * 7 + t)
-        pressure = rng.uniform(1000, 3072, size=(t, 16, 16)).astype(np.float32)
-    frames = [np.full((48, 64, 3), colour, np.uint8) for _ in range(t)]
-    return OpenTouchClip(demo_id, np.arange(t, dtype=np.int64) * PERIOD + 10**12, pressure, frames)
-
-
-def make_opentouch(root: Path, bad: bool = False) -> Path:
-    clips = [ot_clip("demo_01", 12, COLOURS[0]), ot_clip("demo_02", 7, COLOURS[1]),
-             ot_clip("demo_003", 20, COLOURS[2])]
-    write_opentouch_scene(root / "home_kitchen_p1.hdf5", clips)
-    rows = [{"id": f"home_kitchen_p1::{c.demo_id}", "action": a} for c, a in zip(clips, ["pour", "cut", "wipe"])]
-    if bad:
-        nan = np.full((6, 16, 16), np.nan, np.float32)
-        bad_clips = [ot_clip("demo_01", 6, COLOURS[3], pressure=nan),   # all-NaN
-                     ot_clip("demo_02", 0, COLOURS[3]),                  # zero frames
-                     ot_clip("demo_03", 6, COLOURS[3])]                  # undecodable JPEG at frame 4
-        write_opentouch_scene(root / "office_desk_p2.hdf5", bad_clips)
-        with h5py.File(root / "office_desk_p2.hdf5", "r+") as f:
-            f["data/demo_03/rgb_images_jpeg"][4] = np.frombuffer(b"not a jpeg at all", np.uint8)
-        rows += [{"id": f"office_desk_p2::demo_0{i}", "action": "type"} for i in (1, 2, 3)]
-    write_opentouch_annotations(root / "annotations.csv", rows)
-    return root
-
-
-def make_touchanything(root: Path, truncated: bool = False) -> Path:
-    from htdata.layouts import load_layout
-
-    for n, (scene, task, traj) in enumerate([("Home", "plug_usb", "20260320_135743_682"),
-                                             ("Office", "open_drawer", "20260321_101010_001")]):
-        t = 5 + n
-        grids = {}
-        for hand in ("left", "right"):
-            lay = load_layout(f"touchanything_{hand}_21x21")
-            g = np.full((t, 21, 21), np.nan, np.float32)
-            g[:, lay.live_mask] = np.linspace(0, 1, t, dtype=np.float32)[:, None]
-            g[:, lay.bend_cells[:, 0], lay.bend_cells[:, 1]] = 0.25
-            grids[hand] = g
-        ep = TouchAnythingEpisode(left_grid=grids["left"], right_grid=grids["right"],
-                                  chest_frames=[np.full((480, 640, 3), COLOURS[n], np.uint8)] * t,
-                                  ts_epoch_s=1.7e9 + np.arange(t) / 30.0)
-        folder = root / scene / task / traj
-        write_touchanything_episode(folder, ep, wrist_videos=False)
-        if truncated and n == 1:
-            npz = folder / "pressure_grids.npz"
-            data = npz.read_bytes()
-            npz.write_bytes(data[: len(data) // 2])
-    return root
-
-
-def make_native(root: Path, wrong_grid: bool = False) -> Path:
-    t_video = np.arange(9, dtype=np.int64) * PERIOD
-    t_glove = np.arange(0, 9 * PERIOD, 10_000_000, dtype=np.int64)   # 100 Hz glove, 30 Hz video
-    values = np.full((t_glove.size, 16, 16), 1536.0, np.float32)
-    rec = NativeRecording(task="grasp_cup", scene="lab", video_storage="jpeg",
-                          video_frames=[np.full((40, 40, 3), COLOURS[0], np.uint8)] * 9,
-                          video_timestamps_ns=t_video,
-                          hands={"right": NativeHand("opentouch_right_16x16", values, t_glove)})
-    write_native_recording(root / "rec_good", rec)
-    if wrong_grid:
-        rec.hands = {"right": NativeHand("opentouch_right_16x16", np.zeros((t_glove.size, 8, 8), np.float32),
-                                         t_glove)}
-        rec.video_frames = [np.full((40, 40, 3), COLOURS[1], np.uint8)] * 9
-        write_native_recording(root / "rec_wrong_grid", rec)
-    return root
-
-
-def ingest_cli(*args, workers: int = 0) -> int:
-    """In-process CLI; workers=0 runs units inline (fast), >0 uses the process pool."""
-    from htdata.cli import main
-
-    return main(["ingest", "--workers", str(workers), "--quiet", *map(str, args)])
+from htdata.sample.formats import write_opentouch_annotations, write_opentouch_scene
+from tests.factories import (COLOURS, ingest_cli, make_native, make_opentouch, make_touchanything, ot_clip,
+                             small_pipeline, temp_leftovers)
 
 
 def read_all(out: Path) -> dict[str, dict[str, bytes]]:
@@ -119,11 +31,6 @@ def read_all(out: Path) -> dict[str, dict[str, bytes]]:
         s = reader.sample(i)
         samples[json.loads(s["json"])["key"]] = s
     return samples
-
-
-def temp_leftovers(out: Path) -> list[str]:
-    return sorted(str(p.relative_to(out)) for p in out.rglob("*")
-                  if p.name.endswith(".tmp") or p.name.startswith("spool-"))
 
 
 # --------------------------------------------------------------------------- planning / CLI forms
@@ -532,3 +439,27 @@ def test_report_has_stage_timing(tmp_path):
     resumed = json.loads((out / "reports" / "ingest.json").read_text())["timing"]
     assert resumed["frames"] == 0 and resumed["worker_s"] == 0 and resumed["decode_s"] == 0
     assert resumed["total_s"] > 0
+
+
+def test_benchmark_maps_are_the_maps_ingest_stores(tmp_path):
+    """The benchmarks read episodes through the ingest's own generator: same frames, same maps."""
+    from htdata.benchmarks.sources import discover, episode_maps
+    from htdata.reader import DatasetReader
+
+    raw = make_touchanything(tmp_path / "raw")
+    out = tmp_path / "ds"
+    pipe = small_pipeline(tmp_path, "touchanything")
+    assert ingest_cli("--pipeline", pipe, raw, out) == 0
+    reader = DatasetReader(out)
+    position = {e["episode_id"]: i for i, e in enumerate(reader.episodes)}
+    cfg, adapter, refs = discover(str(pipe), raw)
+    assert sorted(r.episode_id for r in refs) == sorted(position)
+    for ref in refs:
+        em = episode_maps(cfg, adapter, ref)
+        first, n = reader.episode_range(position[ref.episode_id])
+        assert n == len(em.rgb_index) and set(em.maps) == {"left", "right"}
+        for k in range(n):
+            d = reader.decoded(first + k)
+            assert d["meta"]["source_frame"] == em.rgb_index[k]
+            for hand, maps in em.maps.items():   # stored as EXR half: |error| <= 2**-11 in [0,1]
+                np.testing.assert_allclose(d["tactile"][hand], maps[k], atol=5e-4)

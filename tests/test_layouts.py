@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import copy
 import json
+import os
 import numpy as np
 import pytest
 
 from htdata import layouts as L
-from htdata.layouts import CANVAS, list_layouts, load_canonical, load_layout, parse_layout
+from htdata.format import CANVAS
+from htdata.layouts import LAYOUTS_ENV, list_layouts, load_canonical, load_layout, parse_layout
 
 SHIPPED = ["opentouch_right_16x16", "touchanything_left_21x21", "touchanything_right_21x21"]
 
@@ -212,6 +214,11 @@ def test_rejects_block_larger_than_place():
 def test_load_layout_errors(tmp_path):
     with pytest.raises(FileNotFoundError, match="no_such_glove"):
         load_layout("no_such_glove")
+    wrong_id = tmp_path / "dir" / "named_a.json"
+    wrong_id.parent.mkdir()
+    wrong_id.write_text(json.dumps(_doc("opentouch_right_16x16")))
+    with pytest.raises(ValueError, match=r"must equal the file name \('named_a'\)"):
+        load_layout("named_a", [wrong_id.parent])
     bad = tmp_path / "bad.json"
     bad.write_text("{not json")
     with pytest.raises(ValueError, match="bad.json: not valid JSON"):
@@ -241,7 +248,7 @@ def test_cli_list_check_render(tmp_path, capsys):
     broken = tmp_path / "broken.json"
     broken.write_text(json.dumps(doc))
     assert main(["layouts", "check", str(broken)]) == 1
-    assert "block 'little_tip'" in capsys.readouterr().out
+    assert "block 'little_tip'" in capsys.readouterr().err
 
     import cv2
 
@@ -260,3 +267,71 @@ def test_docs_example_layout_is_valid():
     doc = json.loads(re.search(r"```json\n(.*?)```", text, re.S).group(1))
     lay = parse_layout(doc, "LAYOUTS.md example")
     assert lay.num_live == 9 + 4 * 12 - 1 and len(lay.bend_cells) == 2
+
+
+# --------------------------------------------------------------------------- search path + cache
+
+
+def _write_layout(folder, layout_id, like="opentouch_right_16x16"):
+    folder.mkdir(parents=True, exist_ok=True)
+    doc = _doc(like)
+    doc["layout_id"] = layout_id
+    path = folder / f"{layout_id}.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_search_path_order_dirs_then_env_then_shipped(tmp_path, monkeypatch):
+    a = _write_layout(tmp_path / "a", "glove_x")
+    b = _write_layout(tmp_path / "b", "glove_x", like="touchanything_left_21x21")
+    _write_layout(tmp_path / "b", "glove_y")
+    monkeypatch.setenv(LAYOUTS_ENV, f"{tmp_path / 'b'}")
+    assert load_layout("glove_x").path == str(b)                  # env only
+    assert load_layout("glove_x", [tmp_path / "a"]).path == str(a)  # --layouts DIR comes first
+    assert load_layout("glove_y", [tmp_path / "a"]).grid == (16, 16)
+    assert {"glove_x", "glove_y", *SHIPPED} <= set(list_layouts([tmp_path / "a"]))
+    assert load_layout("opentouch_right_16x16", [tmp_path / "a"]).layout_id == "opentouch_right_16x16"
+    # a path is taken relative to `base` (a pipeline file's or a recording's folder)
+    assert load_layout("a/glove_x.json", base=tmp_path).path == str(a)
+
+
+def test_missing_layout_is_one_line_naming_places_and_layouts(tmp_path, monkeypatch):
+    _write_layout(tmp_path / "mine", "glove_z")
+    monkeypatch.setenv(LAYOUTS_ENV, str(tmp_path / "mine"))
+    with pytest.raises(FileNotFoundError) as err:
+        load_layout("no_such_glove", [tmp_path / "extra"])
+    msg = str(err.value)
+    assert "\n" not in msg and "no_such_glove" in msg
+    for where in (str(tmp_path / "extra"), str(tmp_path / "mine"), str(L.LAYOUTS_DIR)):
+        assert where in msg
+    assert "glove_z" in msg and "opentouch_right_16x16" in msg
+
+
+def test_layout_parsed_once_per_file_version(tmp_path, monkeypatch):
+    path = _write_layout(tmp_path, "my_glove")
+    calls = []
+    real = L.parse_layout
+    monkeypatch.setattr(L, "parse_layout", lambda doc, where: calls.append(where) or real(doc, where))
+    L._load_layout_file.cache_clear()
+    assert load_layout(path) is load_layout(str(path))
+    assert load_layout("my_glove", [tmp_path]).path == str(path) and len(calls) == 1
+    st = path.stat()
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))   # the file changed: parsed again
+    assert load_layout(path).grid == (16, 16) and len(calls) == 2
+
+
+def test_cli_missing_layout_is_one_line(tmp_path, capsys):
+    from htdata.cli import main
+
+    assert main(["layouts", "--layouts", str(tmp_path), "render", "no_such_glove", str(tmp_path / "x.png")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "no_such_glove" in err and str(tmp_path) in err
+    assert "opentouch_right_16x16" in err and "Traceback" not in err
+
+
+def test_cli_lists_user_layouts(tmp_path, capsys):
+    from htdata.cli import main
+
+    _write_layout(tmp_path, "my_glove_32")
+    assert main(["layouts", "--layouts", str(tmp_path)]) == 0
+    assert "my_glove_32" in capsys.readouterr().out

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from handtouch.bench.metrics import MapMetrics, frame_scores
+from handtouch.bench.metrics import REGIONS, MapMetrics, TrackMetrics, frame_scores
 
 
 def _b(*maps):
@@ -86,3 +86,44 @@ def test_float16_inputs_and_extremes():
     s = frame_scores(pred, target, torch.ones(1, 1, 1, 2))
     assert math.isfinite(s.rmse.item()) and math.isfinite(s.ciou.item())
     assert s.ciou.item() == pytest.approx(float(pred[0, 0, 0, 0]) / 2.0, rel=1e-3)
+
+
+def test_track_metrics_covered_and_whole_canvas_hand_computed():
+    target = _b([[0.5, 1.0], [0.0, 0.2]])
+    pred = _b([[0.25, 1.0], [0.1, 0.9]])
+    coverage = _b([[1, 1], [1, 0]])          # the 0.2/0.9 pixel has no sensor
+    mask = _b([[0, 1], [0, 1]])              # hidden part: the right column
+    m = TrackMetrics(holes=True)
+    m.update(pred, target, coverage, mask)
+    r = m.result()
+    assert tuple(r) == REGIONS
+    assert r["f_covered"]["rmse"] == pytest.approx(math.sqrt(0.0725 / 3))
+    assert r["f_full"]["rmse"] == pytest.approx(math.sqrt((0.0725 + 0.49) / 4))
+    assert r["f_full"]["ciou"] == pytest.approx((1.25 + 0.2) / (1.6 + 0.9))
+    assert r["h_covered"]["rmse"] == 0.0 and r["h_covered"]["ciou"] == 1.0       # only the 1.0/1.0 pixel
+    assert r["h_full"]["rmse"] == pytest.approx(math.sqrt(0.49 / 2))
+    assert r["h_full"]["ciou"] == pytest.approx((1.0 + 0.2) / (1.0 + 0.9))
+
+
+def test_track_metrics_empty_regions_and_all_zero_frames():
+    z = _b([[0.0, 0.0]], [[0.0, 0.0]])
+    coverage = _b([[0, 0]], [[1, 0]])                     # frame 0: no covered pixel
+    mask = _b([[0, 0]], [[0, 0]])                         # no hidden part in either frame
+    m = TrackMetrics(holes=True)
+    m.update(z, z, coverage, mask)
+    r = m.result()
+    assert r["f_covered"]["frames"] == 1 and r["f_covered"]["skipped"] == 1
+    assert r["f_full"]["frames"] == 2 and r["f_full"]["skipped"] == 0          # the canvas is never empty
+    assert r["f_full"]["ciou"] == 1.0 and r["f_full"]["rmse"] == 0.0           # 0/0 contact: a right "no contact"
+    for region in ("h_covered", "h_full"):                                     # nothing hidden: null, never NaN
+        assert r[region]["rmse"] is None and r[region]["ciou"] is None and r[region]["skipped"] == 2
+    assert set(TrackMetrics().result()) == {"f_covered", "f_full"}
+    assert TrackMetrics().result()["f_full"]["rmse"] is None                   # no frame at all
+
+
+def test_track_metrics_mask_matches_holes_flag():
+    t = _b([[0.1, 0.2]])
+    with pytest.raises(ValueError, match="mask"):
+        TrackMetrics().update(t, t, torch.ones_like(t), torch.ones_like(t))
+    with pytest.raises(ValueError, match="mask"):
+        TrackMetrics(holes=True).update(t, t, torch.ones_like(t))

@@ -1,9 +1,10 @@
 import pytest
 import torch
 
-from handtouch.config import MODULE_NAMES, LossConfig, ModelConfig
+from handtouch.config import MODULE_NAMES, LossConfig, ModelConfig, StageConfig
 from handtouch.model import HandTouch, masked_mse
 from handtouch.rgb_encoder import SmallConvRGB, load_rgb_encoder
+from handtouch.stages import MASK, STAGES
 
 STAGE_TRAINABLE = {
     1: ["encoder", "vq", "decoder"],
@@ -34,6 +35,18 @@ def frame_batch(b=2, seed=0, coverage=None):
     return {"tactile": torch.rand(b, 1, 224, 224, generator=g) * cov, "coverage": cov, "regions": regions,
             "rgb": torch.randint(0, 256, (b, 3, 224, 224), generator=g, dtype=torch.uint8),
             "hand": torch.tensor([0, 1] * (b // 2) + [1] * (b % 2))}
+
+
+def make_stage(n, weights=None):
+    return STAGES[n](StageConfig(trainable=STAGE_TRAINABLE[n]), weights)
+
+
+def stage_losses(model, n, batch, mask=None, weights=None):
+    """{"loss", its terms, VQ stats}: stage n's loss on a batch, as the trainer computes it."""
+    if mask is not None:
+        batch = {**batch, MASK: mask}
+    loss, terms = make_stage(n, weights).loss(model, batch)
+    return {"loss": loss, **terms}
 
 
 def window_batch(b=2, seed=0):
@@ -80,11 +93,11 @@ def test_losses_ignore_uncovered_pixels(stage):
     mask = torch.zeros(2, 1, 224, 224)
     mask[:, :, :112] = 1
     with torch.no_grad():
-        ref = model(batch, stage, mask=mask)
+        ref = stage_losses(model, stage, batch, mask)
         noisy = dict(batch)
         junk = torch.where(cov.bool(), torch.zeros(()), torch.full((), float("nan")))
         noisy["tactile"] = batch["tactile"] + (junk[:, None] if stage == 3 else junk)
-        out = model(noisy, stage, mask=mask)
+        out = stage_losses(model, stage, noisy, mask)
     for key in ref:
         assert torch.isfinite(out[key]).all(), key
         assert torch.allclose(ref[key], out[key]), key
@@ -109,13 +122,13 @@ def test_stage2_weights_visible_and_masked_terms():
     mask[:, :, :112] = 1
     w = LossConfig(lambda_vis=0.25, lambda_mask=2.0, vq_weight=0.0, lambda_replay=0.5)
     with torch.no_grad():
-        out = model(b, 2, mask=mask, weights=w)
-        full = model(b, 2, mask=torch.ones_like(mask), weights=w)
+        out = stage_losses(model, 2, b, mask, w)
+        full = stage_losses(model, 2, b, torch.ones_like(mask), w)
     assert float(out["loss"]) == pytest.approx(
         0.25 * float(out["visible"]) + 2.0 * float(out["masked"]) + 0.5 * float(out["replay"]), rel=1e-5)
     assert float(full["visible"]) == 0.0          # complete masking: nothing visible, 0/0 guarded
     with pytest.raises(ValueError, match="mask"):
-        model(b, 2)
+        stage_losses(model, 2, b)
 
 
 @pytest.mark.parametrize("stage", [2, 3])
@@ -134,8 +147,8 @@ def test_replay_term_is_stage1_reconstruction(stage):
     mask = torch.zeros(2, 1, 224, 224)
     mask[:, :, :100] = 1
     with torch.no_grad():
-        out = model(batch, stage, mask=mask, weights=LossConfig(vq_weight=0.0, lambda_replay=0.0))
-        weighted = model(batch, stage, mask=mask, weights=LossConfig(vq_weight=0.0, lambda_replay=3.0))
+        out = stage_losses(model, stage, batch, mask, LossConfig(vq_weight=0.0, lambda_replay=0.0))
+        weighted = stage_losses(model, stage, batch, mask, LossConfig(vq_weight=0.0, lambda_replay=3.0))
         recon = masked_mse(model.reconstruct(target, cov), target * cov, cov)
     assert float(out["replay"]) == pytest.approx(float(recon), rel=1e-5)
     assert float(weighted["loss"] - out["loss"]) == pytest.approx(3.0 * float(recon), rel=1e-4)
@@ -151,7 +164,7 @@ def test_all_zero_inputs_train_without_nan():
     b = frame_batch(2)
     b["tactile"].zero_()
     b["rgb"].zero_()
-    out = model(b, 2, mask=torch.zeros(2, 1, 224, 224))
+    out = stage_losses(model, 2, b, torch.zeros(2, 1, 224, 224))
     out["loss"].backward()
     assert torch.isfinite(out["loss"])
     for name, p in model.named_parameters():
@@ -162,10 +175,10 @@ def test_all_zero_inputs_train_without_nan():
 @pytest.mark.parametrize("stage", [1, 2, 3])
 def test_stage_freezing_freezes_exactly_the_named_parts(stage):
     model = tiny_model().train()
-    model.set_trainable(STAGE_TRAINABLE[stage])
-    assert model.frozen == set(MODULE_NAMES) - set(STAGE_TRAINABLE[stage])
+    make_stage(stage).configure(model)
+    assert model.frozen == set(MODULE_NAMES) - set(STAGE_TRAINABLE[stage]) == set(make_stage(stage).frozen)
     batch = window_batch(2) if stage == 3 else frame_batch(2)
-    out = model(batch, stage, mask=torch.zeros(2, 1, 224, 224))
+    out = stage_losses(model, stage, batch, torch.zeros(2, 1, 224, 224))
     out["loss"].backward()
     for name in MODULE_NAMES:
         params = list(getattr(model, name).parameters())
@@ -197,11 +210,11 @@ def test_freeze_unfreeze_by_name_and_unknown_names():
 def test_stage3_encoder_frozen_gets_no_gradient():
     model = tiny_model().train()
     model.set_trainable(STAGE_TRAINABLE[3])
-    out = model(window_batch(2), 3)
+    out = stage_losses(model, 3, window_batch(2))
     out["loss"].backward()
     assert all(p.grad is None for p in model.encoder.parameters())
     with pytest.raises(ValueError, match="window"):
-        model(frame_batch(2), 3)
+        stage_losses(model, 3, frame_batch(2))
 
 
 def test_rgb_encoder_specs(tmp_path):
@@ -276,7 +289,7 @@ def test_bf16_autocast_training_step_is_finite():
     model = tiny_model().train()
     b = frame_batch(2)
     with torch.autocast(device_type="cpu", dtype=torch.bfloat16):
-        out = model(b, 2, mask=torch.zeros(2, 1, 224, 224))
+        out = stage_losses(model, 2, b, torch.zeros(2, 1, 224, 224))
     assert out["loss"].dtype == torch.float32
     out["loss"].backward()
     assert torch.isfinite(out["loss"])

@@ -76,4 +76,10 @@ def test_normalise_falls_back_to_layout_value(tmp_path):
     b = SimpleNamespace(layout_id="b", value={"convention": "inverted", "max": 3072})
     assert cfg.normalise_for(a).max_value == 4095.0
     assert cfg.normalise_for(b).convention == "inverted" and cfg.normalise_for(b).max_value == 3072.0
-    assert cfg.layout_for("left", "adapter_layout") == "adapter_layout"
+
+
+def test_layouts_accept_ids_and_json_paths(tmp_path):
+    cfg = load_pipeline(write(tmp_path, MINIMAL + "[layouts]\nleft = \"gloves/my_left.json\"\nright = \"my_right\"\n"))
+    assert cfg.layouts == {"left": "gloves/my_left.json", "right": "my_right"}
+    with pytest.raises(ValueError, match="layouts/left"):
+        load_pipeline(write(tmp_path, MINIMAL + "[layouts]\nleft = \"not an id\"\n", "bad.toml"))

@@ -8,14 +8,7 @@ import pytest
 
 from htdata import preview as pv
 from htdata.cli import main as cli_main
-from tests.factories import write_synthetic_dataset
-
-EPISODES = [
-    {"episode_id": "ep_r", "task": "pour", "scene": "kitchen", "hands": ("right",), "num_frames": 7},
-    {"episode_id": "ep_lr", "task": "wipe", "scene": "office", "hands": ("left", "right"), "num_frames": 3},
-    {"episode_id": "ep_one", "task": "wipe", "scene": "office", "hands": ("left",), "num_frames": 1},
-]
-
+from tests.factories import PREVIEW_EPISODES as EPISODES, write_synthetic_dataset
 
 @pytest.fixture(scope="module")
 def ds(tmp_path_factory):

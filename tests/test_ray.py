@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tests.test_ingest import (COLOURS, PERIOD, ingest_cli, small_pipeline, temp_leftovers)
+from tests.factories import (COLOURS, PERIOD, ingest_cli, small_pipeline, temp_leftovers)
 from htdata.sample.formats import (OpenTouchClip, TouchAnythingEpisode, write_opentouch_annotations,
                                    write_opentouch_scene, write_touchanything_episode)
 

@@ -8,14 +8,7 @@ import pytest
 from htdata import remote
 from htdata.cli import main as cli_main
 from htdata.reader import DatasetReader
-from tests.factories import write_synthetic_dataset
-
-EPISODES = [
-    {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": ("right",), "num_frames": 5},
-    {"episode_id": "ep_b", "task": "wipe", "scene": "office", "hands": ("left", "right"), "num_frames": 4},
-    {"episode_id": "ep_c", "task": "pour", "scene": "office", "hands": ("left",), "num_frames": 1},
-]
-
+from tests.factories import MIXED_HANDS_ONE_LAYOUT_EPISODES as EPISODES, write_synthetic_dataset
 
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
@@ -105,8 +98,8 @@ def test_cached_index_is_reused_without_download(dataset, cache, monkeypatch):
     first = DatasetReader(url)
     rows = first.index
     assert isinstance(rows, np.memmap)
-    cached = list((cache / "index").glob("*.npy"))
-    assert len(cached) == 1 and cached[0].stem == first.manifest["index_sha256"]
+    cached = list((cache / "index").glob("*/index.npy"))
+    assert len(cached) == 1 and cached[0].parent.name == first.manifest["index_sha256"]
     mtime = cached[0].stat().st_mtime_ns
     # Remove the remote index: a second open can only work from the cache.
     fs, path = fsspec.core.url_to_fs(url)
@@ -133,7 +126,7 @@ def test_cached_index_rejects_wrong_sha(dataset, cache):
     manifest["index_sha256"] = "0" * 64
     with pytest.raises(ValueError, match="sha256"):
         remote.cached_index_path(url, manifest)
-    assert not list((cache / "index").glob("*"))     # no partial file left behind
+    assert not [p for p in (cache / "index").rglob("*") if p.is_file()]     # no partial file left behind
 
 
 def test_publish_refuses_uncommitted_directory(tmp_path):
@@ -142,9 +135,18 @@ def test_publish_refuses_uncommitted_directory(tmp_path):
         remote.publish_dataset(tmp_path, fresh_url())
 
 
+def test_publish_reports_each_verified_file(dataset):
+    seen = []
+    result = remote.publish_dataset(dataset, fresh_url(),
+                                    on_file=lambda done, total, rel: seen.append((done, total, rel)))
+    assert [d for d, _, _ in seen] == list(range(1, result.files + 1))
+    assert {t for _, t, _ in seen} == {result.files} and seen[-1][2] == "dataset.json"
+
+
 def test_publish_command(dataset, capsys):
     url = fresh_url()
-    assert cli_main(["publish", str(dataset), url, "--quiet"]) == 0
+    assert cli_main(["publish", str(dataset), url]) == 0
+    assert "dataset.json" in capsys.readouterr().err     # per-file progress on stderr
     assert len(DatasetReader(url)) == 10
     assert cli_main(["publish", str(dataset / "missing"), fresh_url(), "--quiet"]) == 2
     assert "no manifest" in capsys.readouterr().err

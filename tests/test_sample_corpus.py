@@ -14,7 +14,7 @@ import pytest
 
 from htdata.cli import main as htdata_main
 from htdata.sample.corpus import CorpusConfig, plan_corpus, write_corpus
-from htdata.sample.world import TASKS
+from htdata.sample.tasks import TASKS
 
 OT_KEYS = {"camera_poses", "labels", "rgb_images_jpeg", "right_hand_landmarks", "right_palm_pos",
            "right_wrist_pos", "right_pressure", "timestamps"}
@@ -40,6 +40,17 @@ def _video_frames(path: Path) -> list[np.ndarray]:
 
 
 # ---- plan -------------------------------------------------------------------------
+
+def test_formats_are_registered_adapters_with_a_writer_and_plans():
+    from htdata.adapters import ADAPTERS
+    from htdata.sample import corpus
+
+    assert corpus.FORMATS == ("opentouch", "touchanything", "native")
+    assert list(corpus.FORMATS) == [name for name in ADAPTERS if name in corpus.FORMATS]   # registry order
+    assert set(corpus._WRITERS) == set(corpus.FORMATS)
+    for scale in corpus.SCALES:
+        assert set(corpus._PLANS[scale]) == set(corpus.FORMATS), scale
+
 
 def test_small_plan_supports_task_splits():
     plan = plan_corpus(CorpusConfig(out=Path("unused"), scale="small"))

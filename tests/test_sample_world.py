@@ -8,11 +8,10 @@ import numpy as np
 import pytest
 
 from htdata.layouts import load_canonical, load_layout
-from htdata.sample import world as W
-from htdata.sample.world import (
-    PHASE_APPROACH, PHASE_CONTACT, PHASE_RELEASE, PLACE_NAMES, TASKS, EpisodeSpec, World,
-    contact_grid, contact_grids, place_intensity,
-)
+from htdata.sample.glove import contact_grid, contact_grids, place_intensity
+from htdata.sample.render import camera_view, draw_hand
+from htdata.sample.tasks import PLACE_NAMES, TASKS
+from htdata.sample.world import PHASE_APPROACH, PHASE_CONTACT, PHASE_RELEASE, EpisodeSpec, World
 
 OT = "opentouch_right_16x16"
 
@@ -189,11 +188,11 @@ def test_determinism_by_seed(ot_layout):
 
 def test_rgb_follows_hand_closure():
     """Open vs closed hand at the same place: a large image difference at the hand."""
-    view = W._camera("ego", (320, 240), {})
+    view = camera_view("ego", (320, 240), {})
     bg = np.full((240, 320, 3), 128, np.uint8)
     open_img, closed_img = bg.copy(), bg.copy()
-    W._draw_hand(open_img, "right", (0.5, 0.6), np.zeros(5), view)
-    W._draw_hand(closed_img, "right", (0.5, 0.6), np.ones(5), view)
+    draw_hand(open_img, "right", (0.5, 0.6), np.zeros(5), view)
+    draw_hand(closed_img, "right", (0.5, 0.6), np.ones(5), view)
     changed = np.abs(open_img.astype(int) - closed_img.astype(int)).sum(axis=2) > 30
     assert changed.sum() > 800  # fingers moved: a few thousand pixels at 320x240
 

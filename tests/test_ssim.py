@@ -102,3 +102,47 @@ def test_query_candidates_uses_cache_and_matches_pairwise():
         for c, j in enumerate(cands[r].tolist()):
             assert abs(got[r, c] - _ref(maps[q], maps[j])) < 1e-5
     assert got[1, 2] == pytest.approx(1.0)  # a map against itself
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_constant_map_against_itself_is_one(dtype):
+    """float32 window statistics gave 1.0000379 here (mean 0.7 rounded to float32)."""
+    m = np.full((224, 224), 0.7, dtype)
+    assert abs(ssim(m, m, data_range=1.0).item() - 1.0) < 1e-7
+    got = ssim_query_candidates(map_stats(m), torch.tensor([0]), torch.tensor([[0]]), data_range=1.0)
+    assert abs(got.item() - 1.0) < 1e-7
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_near_ties_rank_like_skimage(dtype):
+    """Query constant 0.7; candidates 0.70000003 and 0.7001 (float32 statistics ranked them the wrong way)."""
+    q, near, far = (np.full((224, 224), v, dtype) for v in (0.7, 0.70000003, 0.7001))
+    stats = map_stats(np.stack([q, near, far]))
+    got = ssim_query_candidates(stats, torch.tensor([0, 0]), torch.tensor([[1, 2], [2, 1]]), data_range=1.0).numpy()
+    want = np.array([_ref(q, near), _ref(q, far)])
+    assert want[0] > want[1]
+    assert got[0, 0] > got[0, 1] and got[1, 1] > got[1, 0]                # same order, either candidate order
+    assert np.abs(got[0] - want).max() < 1e-12 and np.abs(got[1][::-1] - want).max() < 1e-12
+    assert got[0, 0] - got[0, 1] > 1e-9                                   # well outside the retrieval tie tolerance
+
+
+def test_zero_over_zero_cases_are_defined():
+    """Constant / empty maps have zero variance: the structure term is C2 / C2 = 1, never 0/0."""
+    z = np.zeros((2, 32, 32))
+    assert ssim(z, z, data_range=1.0).tolist() == [1.0, 1.0]                # two empty maps: exactly 1
+    c1, c2 = (0.01 ** 2, 0.03 ** 2)
+    for a, b in ((0.3, 0.0), (1.0, 0.25), (0.5, 0.5)):
+        got = ssim(np.full((32, 32), a), np.full((32, 32), b), data_range=1.0).item()
+        assert got == pytest.approx((2 * a * b + c1) / (a * a + b * b + c1), abs=1e-12)
+        assert got == pytest.approx(_ref(np.full((32, 32), a), np.full((32, 32), b)), abs=1e-12)
+    # data_range 2 scales C1/C2: still defined
+    assert ssim(z[0], z[0], data_range=2.0).item() == 1.0
+
+
+def test_empty_batches_give_empty_results():
+    none = np.zeros((0, 16, 16))
+    assert ssim(none, none, data_range=1.0).shape == (0,)
+    stats = map_stats(np.zeros((3, 16, 16)))
+    out = ssim_query_candidates(stats, torch.zeros(0, dtype=torch.long), torch.zeros((0, 4), dtype=torch.long),
+                                data_range=1.0)
+    assert out.shape == (0, 4) and out.dtype == torch.float64

@@ -1,4 +1,5 @@
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -6,19 +7,15 @@ import pytest
 import torch
 from torch.utils.data import Dataset
 
-from handtouch.config import (TrainConfig, apply_overrides, load_train_config, parse_override,
-                              train_config_from_dict)
-from handtouch.distributed import StepBatchSampler
-from handtouch.train import TrainData, load_data, load_model, lr_at, main, read_checkpoint, train
-from tests.factories import write_synthetic_dataset
-
-EPISODES = [
-    {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": ("right",), "num_frames": 6},
-    {"episode_id": "ep_b", "task": "pour", "scene": "office", "hands": ("left", "right"), "num_frames": 5},
-    {"episode_id": "ep_c", "task": "wipe", "scene": "kitchen", "hands": ("right",), "num_frames": 4},
-    {"episode_id": "ep_d", "task": "wipe", "scene": "office", "hands": ("left",), "num_frames": 4},
-    {"episode_id": "ep_e", "task": "grab", "scene": "office", "hands": ("right",), "num_frames": 3},
-]
+from handtouch.config import (MODULE_NAMES, StageConfig, TrainConfig, apply_overrides, load_train_config,
+                              parse_override, train_config_from_dict)
+from handtouch.distributed import StepBatchSampler, init_distributed
+from handtouch.resources import config_file
+from handtouch.stages import (FRAMES, MASK, WINDOWS, MaskedFusion, NextFramePrediction, Reconstruction, StepInfo,
+                              build_stages)
+from handtouch.train import (JsonlLog, TrainData, build_model, load_data, load_model, lr_at, main, read_checkpoint,
+                             run_stage, train)
+from tests.factories import TRAIN_EPISODES as EPISODES, write_synthetic_dataset
 
 TINY_MODEL = {"encoder": "vit", "patch": 32, "dim": 32, "depth": 1, "heads": 2, "mlp_ratio": 2.0,
               "code_dim": 8, "codebook_size": 16, "vq_usage_decay": 0.9, "decoder_depth": 1,
@@ -178,6 +175,8 @@ def test_config_files_load_and_reject_bad_input(tmp_path):
     with pytest.raises(FileNotFoundError):
         load_train_config(tmp_path / "absent.toml")
     assert main(["--config", str(tmp_path / "c.toml")]) == 2     # CLI reports config errors, exit 2
+    assert main(["--config", "no_such_config"]) == 2              # a bare name is looked up among shipped configs
+    assert load_train_config(config_file("smoke")).model.codebook_size == smoke.model.codebook_size
 
 
 def test_cli_runs_with_overrides(dataset_root, tmp_path, capsys):
@@ -200,3 +199,91 @@ def test_single_frame_episodes_give_a_clear_stage3_error(tmp_path):
     cfg = tiny_config(root, tmp_path / "o", **{"stage1.steps": 1, "stage2.steps": 1})
     with pytest.raises(ValueError, match=r"stage 3 \(window"):
         train(cfg)
+
+
+class SpyStage(Reconstruction):
+    """Stage 1 that records what the generic loop asks of it and adds a term of its own."""
+
+    def __init__(self, cfg):
+        super().__init__(cfg)
+        self.prepared, self.losses = [], 0
+
+    def prepare(self, batch, at):
+        self.prepared.append((at.step, at.steps, at.rank))
+        return batch
+
+    def loss(self, model, batch):
+        self.losses += 1
+        loss, terms = super().loss(model, batch)
+        return loss, {**terms, "spy": torch.tensor(float(self.losses))}
+
+
+def test_generic_loop_runs_whatever_the_stage_object_says(dataset_root, tmp_path):
+    cfg = tiny_config(dataset_root, tmp_path / "spy", stages="[1]", log_every=3, **{"stage1.steps": 3})
+    stage = SpyStage(StageConfig(steps=3, lr=1e-3, warmup_steps=1, trainable=["encoder", "decoder"]))
+    model = build_model(cfg)
+    records = []
+    (tmp_path / "spy").mkdir()
+    summary = run_stage(stage, model, cfg, load_data(cfg), init_distributed("cpu"), tmp_path / "spy",
+                        JsonlLog(None, records.append))
+    assert stage.losses == 3 and stage.prepared == [(0, 3, 0), (1, 3, 0), (2, 3, 0)]
+    assert summary["final"]["spy"] == pytest.approx(2.0)          # mean of the stage's own term over 3 steps
+    assert [r["step"] for r in records] == [3] and "recon" in records[0]
+    assert model.frozen == {n for n in MODULE_NAMES if n not in ("encoder", "decoder")}   # its own names
+    assert read_checkpoint(tmp_path / "spy" / "stage1.pt")["done"]
+
+
+def test_stage_objects_from_the_config(dataset_root, tmp_path):
+    cfg = tiny_config(dataset_root, tmp_path / "x")
+    stages = build_stages(cfg)
+    assert [type(s) for s in stages] == [Reconstruction, MaskedFusion, NextFramePrediction]
+    assert [s.data for s in stages] == [FRAMES, FRAMES, WINDOWS]
+    for s in stages:
+        assert s.cfg is cfg.stage(s.number) and s.weights is cfg.loss
+        assert set(s.trainable) | set(s.frozen) == set(MODULE_NAMES) and not set(s.trainable) & set(s.frozen)
+    assert stages[1].frozen == ("temporal", "predictor")
+    assert stages[2].frozen == ("encoder", "fusion")
+
+    # stage 2's mask depends only on (seed, step, rank): a resumed run redraws the same one
+    regions = torch.zeros(4, 224, 224, dtype=torch.uint8)
+    regions[:, :100] = 1
+    regions[:, 100:] = 6
+    batch = {"regions": regions}
+    a = stages[1].prepare(batch, StepInfo(2, 4, 0))[MASK]
+    assert a.shape == (4, 1, 224, 224) and MASK not in batch
+    assert torch.equal(a, stages[1].prepare(batch, StepInfo(2, 4, 0))[MASK])
+    draws = [stages[1].prepare(batch, StepInfo(s, 4, r))[MASK] for s in range(4) for r in range(2)]
+    assert any(not torch.equal(a, d) for d in draws)
+    assert stages[0].prepare(batch, StepInfo(0, 4)) is batch      # stage 1 needs nothing added
+
+
+def test_train_reports_records_through_logging_or_a_callback(dataset_root, tmp_path, capsys, caplog):
+    cfg = tiny_config(dataset_root, tmp_path / "l", stages="[1]", **{"stage1.steps": 2})
+    with caplog.at_level(logging.INFO, logger="handtouch.train"):
+        train(cfg)
+    assert capsys.readouterr().out == ""                       # the library never prints
+    logged = [json.loads(r.getMessage()) for r in caplog.records if r.name == "handtouch.train"]
+    assert logged == read_log(tmp_path / "l")                  # same records as log.jsonl
+    got = []
+    train(tiny_config(dataset_root, tmp_path / "m", stages="[1]", **{"stage1.steps": 2}), on_record=got.append)
+    assert [r.get("event") for r in got] == ["start", None, "done"] and got == read_log(tmp_path / "m")
+
+
+def test_training_bench_section_plugin(dataset_root, tmp_path):
+    """The "training" section `htdata bench` discovers by entry point, run in quick mode."""
+    import tomllib
+    from importlib.metadata import EntryPoint
+    from types import SimpleNamespace
+
+    repo = Path(__file__).resolve().parents[1]
+    declared = tomllib.loads((repo / "pyproject.toml").read_text())["project"]["entry-points"]
+    value = declared["htdata.bench_sections"]["training"]
+    section = EntryPoint("training", value, "htdata.bench_sections").load()
+    result = section(SimpleNamespace(dataset=dataset_root, work=tmp_path, quick=True, seed=0))
+    json.dumps(result, allow_nan=False)                              # JSON-able, finite
+    assert [r["precision"] for r in result["rows"]] == ["fp32", "bf16 autocast"]
+    assert all(r["steps"] == 2 and r["steps_per_s"] > 0 and 0 < r["recon_rmse"] < 1 for r in result["rows"])
+    assert result["bf16_speedup"] == pytest.approx(result["rows"][1]["steps_per_s"] / result["rows"][0]["steps_per_s"])
+    assert not result["warmup_run"] and Path(result["config"]).name == "smoke.toml"
+    md = result["markdown"]
+    assert md.count("\n| fp32 |") == 1 and "| bf16 autocast |" in md and "bf16 / fp32 speed:" in md

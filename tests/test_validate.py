@@ -11,22 +11,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from htdata.benchmarks.validation import validate_benchmark
 from htdata.cli import main as cli_main
 from htdata.codec import encode_exr
 from htdata.manifest import INDEX_FILE, MANIFEST_FILE, SHARDS_DIR, SIZE_FIELDS, load_index
 from htdata.shardio import BLOCK, member_header, padded
 from htdata.split import make_split
-from htdata.validate import group_rows, validate_benchmark, validate_dataset
-from tests.factories import FRAME_NS, write_synthetic_dataset
-
-EPISODES = [
-    {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": ("right",), "num_frames": 5},
-    {"episode_id": "ep_b", "task": "wipe", "scene": "office", "hands": ("left", "right"), "num_frames": 4},
-    {"episode_id": "ep_c", "task": "wipe", "scene": "kitchen", "hands": ("right",), "num_frames": 3},
-    {"episode_id": "ep_d", "task": "grasp", "scene": "office", "hands": ("right",), "num_frames": 3},
-    {"episode_id": "ep_e", "task": "grasp", "scene": "office", "hands": ("right",), "num_frames": 1},
-]
-
+from htdata.validate import group_rows, validate_dataset
+from tests.factories import FRAME_NS, SPLIT_EPISODES as EPISODES, write_synthetic_dataset
 
 @pytest.fixture(scope="module")
 def pristine(tmp_path_factory) -> Path:

@@ -9,9 +9,12 @@ Tracks (per split part, e.g. test and ood):
 - inpaint: one anatomical part (thumb..palm) per frame is hidden, drawn by a
   seeded RNG among the parts the glove covers in that frame. Hidden pixels
   are zeroed before the model sees the map (a model cannot leak them). F-
-  metrics over covered pixels, H- metrics over covered hidden pixels;
+  and H- (hidden part) metrics;
 - rgb2tactile: `rgb_to_tactile`, F- metrics;
-- prediction: `predict_next` on windows of 3 frames, F- metrics on frame T.
+- prediction: `predict_next` on windows of WINDOW (3) frames, F- metrics on frame T.
+Every F-/H- metric is reported over covered pixels and over the whole
+canvas / hidden part, labelled (`f_covered`, `f_full`, `h_covered`, `h_full`;
+metrics.py). Retrieval carries its chance levels (retrieval.py).
 
 Items: at most `max_items` frames (and windows) per part, drawn without
 replacement by a seeded RNG, sorted, so every model sees the same items.
@@ -41,8 +44,10 @@ import numpy as np
 import torch
 
 from handtouch.api import TactileModel
-from handtouch.bench.metrics import MapMetrics
+from handtouch.bench.metrics import TrackMetrics
 from handtouch.bench.retrieval import RetrievalConfig, RetrievalReference, retrieval_reference, score_retrieval
+from handtouch.config import WINDOW
+from htdata import keys
 
 NUM_PARTS = 6          # part ids 1..6 (thumb, index, middle, ring, little, palm)
 TRACKS = ("retrieval", "reconstruction", "inpaint", "rgb2tactile", "prediction")
@@ -77,7 +82,7 @@ def load_part(dataset_root: str | Path, split_name: str | None, part: str) -> Ev
 
     root = str(dataset_root)
     return EvalPart(frames=TactileFrameDataset(root, split=split_name, part=part),
-                    windows=TactileWindowDataset(root, window=3, split=split_name, part=part))
+                    windows=TactileWindowDataset(root, window=WINDOW, split=split_name, part=part))
 
 
 def subsample(n: int, max_items: int, seed: int) -> np.ndarray:
@@ -107,7 +112,7 @@ def iterate_batches(dataset, indices: np.ndarray, batch_size: int):
 
 def _hand(batch: dict) -> torch.Tensor:
     """(B,) long; window items may carry a per-frame hand (B,W): the last frame's is used."""
-    h = batch["hand"]
+    h = batch[keys.HAND]
     return (h[:, -1] if h.ndim == 2 else h.reshape(-1)).long()
 
 
@@ -173,13 +178,13 @@ def prepare_part(part: EvalPart, cfg: EvalConfig) -> PreparedPart:
     rng = np.random.default_rng(cfg.seed + 1)
     frames, maps, episodes, frame_ids = [], [], [], []
     for b in iterate_batches(part.frames, idx, cfg.batch_size):
-        tactile, coverage = b["tactile"].float(), b["coverage"].float()
-        frames.append({"tactile": _compact(tactile), "coverage": (coverage > 0.5).to(torch.uint8),
-                       "rgb": b["rgb"], "hand": _hand(b),
-                       "mask": part_masks(b["regions"], coverage, rng).to(torch.uint8)})
+        tactile, coverage = b[keys.TACTILE].float(), b[keys.COVERAGE].float()
+        frames.append({keys.TACTILE: _compact(tactile), keys.COVERAGE: (coverage > 0.5).to(torch.uint8),
+                       keys.RGB: b[keys.RGB], keys.HAND: _hand(b),
+                       "mask": part_masks(b[keys.REGIONS], coverage, rng).to(torch.uint8)})
         maps.append(tactile[:, 0])
-        episodes.append(b["episode"].reshape(-1))
-        frame_ids.append(b["frame"].reshape(-1))
+        episodes.append(b[keys.EPISODE].reshape(-1))
+        frame_ids.append(b[keys.FRAME].reshape(-1))
     reference = retrieval_reference(
         torch.cat(maps), torch.cat(episodes).numpy(), torch.cat(frame_ids).numpy(),
         RetrievalConfig(num_candidates=cfg.num_candidates, exclude_radius=cfg.exclude_radius, seed=cfg.seed))
@@ -190,7 +195,7 @@ def prepare_part(part: EvalPart, cfg: EvalConfig) -> PreparedPart:
         wrng = np.random.default_rng(cfg.seed + 2)
         for b in iterate_batches(part.windows, widx, cfg.batch_size):
             rgb_w, tac_w, cov_t, hand, target = window_inputs(b)
-            regions = b["regions"][:, -1] if b["regions"].ndim == 4 else b["regions"]
+            regions = b[keys.REGIONS][:, -1] if b[keys.REGIONS].ndim == 4 else b[keys.REGIONS]
             windows.append({"rgb_window": rgb_w, "tactile_window": _compact(tac_w),
                             "coverage": (cov_t > 0.5).to(torch.uint8), "hand": hand, "target": _compact(target),
                             # frame T's inpainting mask, for the predictions figure
@@ -199,7 +204,7 @@ def prepare_part(part: EvalPart, cfg: EvalConfig) -> PreparedPart:
 
 
 def _frame_tracks(model: TactileModel, prep: PreparedPart) -> dict:
-    recon, inp_full, inp_hole, r2t = MapMetrics(), MapMetrics(), MapMetrics(), MapMetrics()
+    recon, inpaint, r2t = TrackMetrics(), TrackMetrics(holes=True), TrackMetrics()
     embs = []
     times = {"embed": 0.0, "reconstruct": 0.0, "inpaint": 0.0, "rgb2tactile": 0.0}
 
@@ -210,7 +215,7 @@ def _frame_tracks(model: TactileModel, prep: PreparedPart) -> dict:
         return out
 
     for b in prep.frames:
-        tactile, coverage, rgb, hand = b["tactile"].float(), b["coverage"].float(), b["rgb"], b["hand"]
+        tactile, coverage, rgb, hand = b[keys.TACTILE].float(), b[keys.COVERAGE].float(), b[keys.RGB], b[keys.HAND]
         mask = b["mask"].float()
         e = torch.as_tensor(timed("embed", model.embed, tactile, coverage, hand)).float()
         if e.ndim != 2 or e.shape[0] != tactile.shape[0]:
@@ -220,37 +225,36 @@ def _frame_tracks(model: TactileModel, prep: PreparedPart) -> dict:
         recon.update(_checked(rec, tactile, f"{model.name}.reconstruct"), tactile, coverage)
         filled = timed("inpaint", model.inpaint, tactile * (1 - mask), coverage, mask, rgb, hand)
         filled = _checked(filled, tactile, f"{model.name}.inpaint")
-        inp_full.update(filled, tactile, coverage)
-        inp_hole.update(filled, tactile, coverage * mask)
+        inpaint.update(filled, tactile, coverage, mask)
         guess = timed("rgb2tactile", model.rgb_to_tactile, rgb, coverage, hand)
         r2t.update(_checked(guess, tactile, f"{model.name}.rgb_to_tactile"), tactile, coverage)
     return {
         "retrieval": score_retrieval(prep.reference, torch.cat(embs)),
-        "reconstruction": {"full": recon.result()},
-        "inpaint": {"full": inp_full.result(), "hole": inp_hole.result()},
-        "rgb2tactile": {"full": r2t.result()},
+        "reconstruction": recon.result(),
+        "inpaint": inpaint.result(),
+        "rgb2tactile": r2t.result(),
         "seconds": times,
     }
 
 
 def window_inputs(b: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Window batch -> (rgb_window (B,W,3,H,W), tactile_window (B,W-1,1,H,W), coverage_T, hand, target_T)."""
-    tactile = b["tactile"].float()
-    coverage = b["coverage"].float()
+    tactile = b[keys.TACTILE].float()
+    coverage = b[keys.COVERAGE].float()
     cov_t = coverage[:, -1] if coverage.ndim == 5 else coverage
-    return b["rgb"], tactile[:, :-1], cov_t, _hand(b), tactile[:, -1]
+    return b[keys.RGB], tactile[:, :-1], cov_t, _hand(b), tactile[:, -1]
 
 
 def _prediction_track(model: TactileModel, prep: PreparedPart) -> tuple[dict, float]:
-    pred_full = MapMetrics()
+    pred_metrics = TrackMetrics()
     seconds = 0.0
     for b in prep.windows:
         target, cov_t = b["target"].float(), b["coverage"].float()
         t0 = time.perf_counter()
         pred = model.predict_next(b["rgb_window"], b["tactile_window"].float(), cov_t, b["hand"])
         seconds += time.perf_counter() - t0
-        pred_full.update(_checked(pred, target, f"{model.name}.predict_next"), target, cov_t)
-    return {"full": pred_full.result()}, seconds
+        pred_metrics.update(_checked(pred, target, f"{model.name}.predict_next"), target, cov_t)
+    return pred_metrics.result(), seconds
 
 
 def score_part(model: TactileModel, prep: PreparedPart) -> dict:

@@ -1,22 +1,39 @@
 """Map metrics of HT-Bench: RMSE and contact IoU over a pixel region.
 
-The region is the glove's covered pixels (F- metrics, full map) or the
-covered pixels inside the hidden part (H- metrics, holes). Pixels outside
-the region are never read, so a model is not rewarded for the empty canvas.
+Every map track is scored over two regions, both reported and labelled
+(`REGIONS`):
 
-    rmse  = sqrt( sum_region (P_hat - P)^2 / |region| )        raw predictions
-    cIoU  = sum_region min(P, P_hat) / sum_region max(P, P_hat)  P_hat clamped to [0,1]
+    f_covered  the glove's sensor-covered pixels            (F- metrics)
+    f_full     every pixel of the 224x224 canvas            (F-, the paper's "full tactile map")
+    h_covered  covered pixels of the hidden part            (H- metrics, inpainting only)
+    h_full     every pixel of the hidden part               (H-, paper convention)
+
+The covered figures are the honest ones for partial-coverage gloves: the
+target is 0 wherever there is no sensor, so whole-canvas figures reward a
+model for the empty canvas (an all-zeros predictor looks better the smaller
+the glove). The full figures are there to be set beside the paper's.
+
+    rmse  = sqrt( sum_region (P_hat - P)^2 / |region| )          raw predictions
+    cIoU  = sum_region min(P, P_hat) / sum_region max(P, P_hat)    P_hat clamped to [0,1]
+
+cIoU clamps the prediction to the target's range [0,1] (a deviation from the
+literal formula): with a raw regression output, a negative prediction makes
+the intersection negative (cIoU < 0) and a prediction above 1 inflates the
+union without bound, so the ratio would no longer be an overlap fraction of
+contact mass. Out-of-range values are still penalised, by the RMSE, which
+uses the raw prediction.
 
 Defined edge cases:
 - both maps zero over a non-empty region -> cIoU = 1 (a correct "no
   contact" prediction); a zero denominator never yields NaN;
-- a frame whose region is empty (no covered pixel in it) is skipped and
-  counted in `skipped`; it contributes to no mean;
+- a frame whose region is empty (no covered pixel, or no hidden part) is
+  skipped and counted in `skipped`; it contributes to no mean, and a region
+  no frame has gives None (JSON null) values, never NaN;
 - NaN/Inf in a prediction or target -> ValueError (a broken model must
   not score).
 
-Two aggregations are reported: the mean of per-frame values (`rmse`,
-`ciou`) and the pooled value over all counted pixels of all frames
+Two aggregations are reported per region: the mean of per-frame values
+(`rmse`, `ciou`) and the pooled value over all counted pixels of all frames
 (`rmse_pooled` = sqrt(total squared error / total pixels), `ciou_pooled`
 = total min / total max), which weights frames by their contact.
 """
@@ -136,3 +153,30 @@ class MapMetrics:
             "frames": self.frames,
             "skipped": self.skipped,
         }
+
+
+REGIONS = ("f_covered", "f_full", "h_covered", "h_full")
+
+
+class TrackMetrics:
+    """One track's F- metrics (and H- metrics with `holes`), each over covered pixels and
+    over the whole canvas / hidden part: `result()` -> {region: MapMetrics.result()}."""
+
+    def __init__(self, holes: bool = False):
+        self.holes = holes
+        self.regions = {name: MapMetrics() for name in REGIONS if holes or name.startswith("f_")}
+
+    def update(self, pred, target, coverage, mask=None) -> None:
+        """pred/target/coverage (B,1,H,W); mask (B,1,H,W) 1 = hidden, required iff `holes`."""
+        if self.holes != (mask is not None):
+            raise ValueError(f"TrackMetrics(holes={self.holes}) needs {'a' if self.holes else 'no'} hidden-part mask")
+        coverage = torch.as_tensor(coverage)
+        self.regions["f_covered"].update(pred, target, coverage)
+        self.regions["f_full"].update(pred, target, torch.ones_like(coverage))
+        if self.holes:
+            mask = torch.as_tensor(mask)
+            self.regions["h_covered"].update(pred, target, coverage * mask)
+            self.regions["h_full"].update(pred, target, mask)
+
+    def result(self) -> dict[str, dict]:
+        return {name: m.result() for name, m in self.regions.items()}

@@ -1,6 +1,11 @@
-"""HT-Bench report: results JSON, a markdown table, a predictions PNG.
+"""HT-Bench report: results JSON, markdown tables, a predictions PNG.
 
-The table follows the paper's column order, one row per model per part;
+results.md holds three tables, one row per model per part:
+- the paper's column order with F-/H- metrics over sensor-covered pixels
+  (`COLUMNS`; regions f_covered / h_covered);
+- the same map metrics over the whole canvas / hidden part (`FULL_COLUMNS`;
+  f_full / h_full), the figures comparable with the paper's "full tactile map";
+- retrieval next to its chance levels (`RETRIEVAL_COLUMNS`).
 RMSE / cIoU cells are per-frame means (pooled values are in the JSON).
 """
 
@@ -14,18 +19,44 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-# (header, track, region, key) in the paper's order.
-COLUMNS: tuple[tuple[str, str, str | None, str], ...] = (
+Column = tuple[str, str, "str | None", str]     # (header, track, region, key)
+
+# Map-metric columns in the paper's order; "{}" is the scope, "covered" or "full".
+_MAP_COLUMNS: tuple[Column, ...] = (
+    ("Inpaint F-RMSE", "inpaint", "f_{}", "rmse"),
+    ("F-cIoU", "inpaint", "f_{}", "ciou"),
+    ("H-RMSE", "inpaint", "h_{}", "rmse"),
+    ("H-cIoU", "inpaint", "h_{}", "ciou"),
+    ("RGB2T F-RMSE", "rgb2tactile", "f_{}", "rmse"),
+    ("F-cIoU", "rgb2tactile", "f_{}", "ciou"),
+    ("Pred F-RMSE", "prediction", "f_{}", "rmse"),
+    ("F-cIoU", "prediction", "f_{}", "ciou"),
+)
+
+
+def map_columns(scope: str) -> tuple[Column, ...]:
+    """The map-metric columns over one scope: "covered" or "full"."""
+    if scope not in ("covered", "full"):
+        raise ValueError(f"scope must be 'covered' or 'full', got {scope!r}")
+    return tuple((h, t, r.format(scope), k) for h, t, r, k in _MAP_COLUMNS)
+
+
+# The paper's table: retrieval, then map metrics over covered pixels.
+COLUMNS: tuple[Column, ...] = (
     ("Retrieval Hit@1", "retrieval", None, "hit_at_1"),
     ("Retrieval R@5", "retrieval", None, "recall_at_5"),
-    ("Inpaint F-RMSE", "inpaint", "full", "rmse"),
-    ("F-cIoU", "inpaint", "full", "ciou"),
-    ("H-RMSE", "inpaint", "hole", "rmse"),
-    ("H-cIoU", "inpaint", "hole", "ciou"),
-    ("RGB2T F-RMSE", "rgb2tactile", "full", "rmse"),
-    ("F-cIoU", "rgb2tactile", "full", "ciou"),
-    ("Pred F-RMSE", "prediction", "full", "rmse"),
-    ("F-cIoU", "prediction", "full", "ciou"),
+    *map_columns("covered"),
+)
+FULL_COLUMNS: tuple[Column, ...] = map_columns("full")
+RETRIEVAL_COLUMNS: tuple[Column, ...] = (
+    ("Hit@1", "retrieval", None, "hit_at_1"),
+    ("Hit@1 constant", "retrieval", None, "constant_hit_at_1"),
+    ("Hit@1 shuffled", "retrieval", None, "shuffled_hit_at_1"),
+    ("Hit@1 theory", "retrieval", None, "chance_hit_at_1"),
+    ("R@5", "retrieval", None, "recall_at_5"),
+    ("R@5 constant", "retrieval", None, "constant_recall_at_5"),
+    ("R@5 shuffled", "retrieval", None, "shuffled_recall_at_5"),
+    ("R@5 theory", "retrieval", None, "chance_recall_at_5"),
 )
 PANEL_COLUMNS = ("RGB", "GT", "inpaint", "rgb2tactile", "prediction", "|pred-GT|")
 
@@ -46,16 +77,37 @@ def _fmt(v) -> str:
     return "–" if v is None else f"{v:.3f}"
 
 
-def markdown_table(results: dict[str, dict[str, dict]]) -> str:
+def markdown_table(results: dict[str, dict[str, dict]], columns: tuple[Column, ...] = COLUMNS) -> str:
     """results: {model name: {part: tracks}} -> markdown table, rows 'model (part)'."""
-    header = "| Model | " + " | ".join(h for h, *_ in COLUMNS) + " |"
-    rule = "|---|" + "---:|" * len(COLUMNS)
+    header = "| Model | " + " | ".join(h for h, *_ in columns) + " |"
+    rule = "|---|" + "---:|" * len(columns)
     rows = [header, rule]
     for model, parts in results.items():
         for part, metrics in parts.items():
-            vals = [_fmt(cell(metrics, t, r, k)) for _, t, r, k in COLUMNS]
+            vals = [_fmt(cell(metrics, t, r, k)) for _, t, r, k in columns]
             rows.append(f"| {model} ({part}) | " + " | ".join(vals) + " |")
     return "\n".join(rows) + "\n"
+
+
+def results_markdown(results: dict[str, dict[str, dict]]) -> str:
+    """The results.md document: covered-pixel table, whole-canvas table, retrieval chance table."""
+    return "\n".join([
+        "# HT-Bench results\n",
+        "RMSE / cIoU: per-frame means; cIoU clamps predictions to [0,1]. Definitions: README, "
+        "\"HT-Bench metrics: definitions\".\n",
+        "## Covered pixels (f_covered, h_covered)\n",
+        "F- over the glove's sensor-covered pixels, H- over the covered pixels of the hidden part.\n",
+        markdown_table(results, COLUMNS),
+        "## Whole canvas (f_full, h_full)\n",
+        "F- over all 224x224 canvas pixels, H- over every pixel of the hidden part (the paper's "
+        "\"full tactile map\" convention; uncovered pixels have target 0).\n",
+        markdown_table(results, FULL_COLUMNS),
+        "## Retrieval and its chance levels\n",
+        "1-vs-20, tie-aware (SSIM ties are equally right; embedding ties broken at random, in expectation). "
+        "constant: a constant embedding (per-query chance given SSIM ties); shuffled: the model's "
+        "embeddings permuted across items; theory: 1/C and 5/C, chance without ties.\n",
+        markdown_table(results, RETRIEVAL_COLUMNS),
+    ])
 
 
 def write_text_atomic(path: str | Path, text: str) -> None:
@@ -72,9 +124,7 @@ def write_results(out_dir: str | Path, results: dict[str, dict[str, dict]], meta
     """Write results.json ({"meta", "results"}) and results.md; returns the JSON document."""
     doc = {"meta": meta or {}, "results": results}
     write_text_atomic(Path(out_dir) / "results.json", json.dumps(doc, indent=2, sort_keys=True) + "\n")
-    note = ("RMSE / cIoU: per-frame means over covered pixels (F) or covered hidden pixels (H); "
-            "retrieval: 1-vs-20, chance Hit@1 0.050, R@5 0.250.\n\n")
-    write_text_atomic(Path(out_dir) / "results.md", "# HT-Bench results\n\n" + note + markdown_table(results))
+    write_text_atomic(Path(out_dir) / "results.md", results_markdown(results))
     return doc
 
 

@@ -17,10 +17,14 @@ from typing import Iterator
 import numpy as np
 
 from htdata.adapters.base import (
-    EpisodeRef, EpisodeStreams, FileDiscovery, NpzRowError, NpzRows, VideoError, check_tactile_shape, file_frame_mismatch_note,
-    fingerprint_files, iter_episode_video, probe_video_pts_ns, relpath_inside, sanitise_id,
+    EpisodeRef, EpisodeStreams, FileDiscovery, check_tactile_shape, file_frame_mismatch_note, fingerprint_files,
+    iter_episode_video, relpath_inside, sanitise_id,
 )
+from htdata.adapters.npzrows import NpzRowError, NpzRows
+from htdata.adapters.video import VideoError, probe_video_pts_ns
 from htdata.errors import EpisodeError
+from htdata.layouts import is_layout_path
+from htdata.rgb import to_rgb
 
 SOURCE = "native"
 RECORDING_JSON = "recording.json"
@@ -57,6 +61,24 @@ def _recording_paths(folder: Path, doc: dict, where: Path) -> dict:
     return out
 
 
+def _recording_layouts(folder: Path, doc: dict, where: Path, episode_id: str) -> dict[str, str]:
+    """hand -> layout id, or the absolute path of a layout JSON the recording keeps in its folder."""
+    out = {}
+    for hand in sorted(doc["hands"]):
+        name = doc["hands"][hand]["layout"]
+        if is_layout_path(name):
+            try:
+                path = relpath_inside(folder, name, str(where))
+            except ValueError as exc:
+                raise EpisodeError(None, None, str(exc), file=where, episode_id=episode_id) from exc
+            if not path.is_file():
+                raise EpisodeError(None, None, f"{hand} hand layout file {name!r} not found in the recording folder "
+                                   f"({path})", file=where, episode_id=episode_id)
+            name = str(path)
+        out[hand] = name
+    return out
+
+
 def _frame_files(frames_dir: Path) -> list[Path]:
     return sorted(p for p in frames_dir.iterdir() if p.suffix.lower() in JPEG_SUFFIXES)
 
@@ -85,9 +107,10 @@ class NativeAdapter(FileDiscovery):
         files = [rec_path, paths["timestamps"], *paths["hands"].values()]
         files += [paths["video_file"]] if "video_file" in paths else _frame_files(paths["frames_dir"])
         hands = tuple(sorted(doc["hands"]))
+        layouts = _recording_layouts(folder, doc, rec_path, episode_id)
         return [EpisodeRef(
             episode_id=episode_id, source=SOURCE, source_ref=str(folder), task=doc["task"], scene=doc["scene"],
-            hands=hands, layouts={h: doc["hands"][h]["layout"] for h in hands}, est_frames=est_frames,
+            hands=hands, layouts=layouts, est_frames=est_frames,
             fingerprint=fingerprint_files(root, files),
             extra={"operator": doc.get("operator", ""), "clock_offset_ns":
                    {h: int(doc["hands"][h].get("clock_offset_ns", 0)) for h in hands}},
@@ -175,7 +198,7 @@ class NativeStreams(EpisodeStreams):
             img = cv2.imread(str(path), cv2.IMREAD_COLOR)
             if img is None:
                 raise EpisodeError(self.ref, i, "JPEG does not decode", file=path)
-            yield i, np.ascontiguousarray(img[..., ::-1])
+            yield i, np.ascontiguousarray(to_rgb(img, "bgr", where=str(path)))  # cv2 decodes to BGR
 
     def read_tactile(self, hand: str, indices: np.ndarray) -> np.ndarray:
         self._check_hand(hand)

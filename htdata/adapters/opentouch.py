@@ -39,12 +39,19 @@ from htdata.adapters.base import (
     EpisodeRef, EpisodeStreams, FileDiscovery, check_tactile_shape, fingerprint_files, sanitise_id,
 )
 from htdata.errors import EpisodeError
+from htdata.rgb import CHANNEL_ORDERS, to_rgb
 
 SOURCE = "opentouch"
 GRID = (16, 16)
-DEFAULT_LAYOUTS = {"right": "opentouch_right_16x16", "left": "opentouch_left_16x16"}
+# Only the right-hand glove is described by a shipped layout. The release's left glove
+# has no layout file yet (there is no "opentouch_left_16x16"): a clip with left_pressure
+# needs params layouts.left (an id or a layout JSON path), or hands = ["right"].
+DEFAULT_LAYOUTS = {"right": "opentouch_right_16x16"}
+MISSING_LEFT_LAYOUT = "opentouch_left_16x16"
 FALLBACK_TASK = "unlabelled"
-CHANNEL_ORDERS = ("bgr", "rgb")
+# cv2 decodes a JPEG to BGR. When the release stored R and B swapped (channel_order "bgr"),
+# the decoded array already is the scene in RGB; true-colour JPEGs ("rgb") decode to BGR.
+DECODED_ORDER = {"bgr": "rgb", "rgb": "bgr"}
 _CLIP_RE = re.compile(r"^demo_(\d+)$")
 
 
@@ -149,9 +156,10 @@ class OpenTouchAdapter(FileDiscovery):
         for demo_id, n_frames, has_left in clips:
             episode_id = sanitise_id(f"ot-{scene}-{demo_id}")
             hands = tuple(h for h in ("left", "right") if h in context.allowed_hands and (h == "right" or has_left))
-            if "left" in hands and not self._layout_exists(layouts["left"]):
-                raise EpisodeError(None, None, f"clip has left_pressure but layout {layouts['left']!r} does not "
-                                   "exist: pass params layouts.left, or hands=['right'] to skip it",
+            if "left" in hands and "left" not in layouts:
+                raise EpisodeError(None, None, f"clip has left_pressure but no left-hand layout is shipped for "
+                                   f"OpenTouch ({MISSING_LEFT_LAYOUT!r} does not exist): pass adapter params "
+                                   "layouts.left = <layout id or JSON path>, or hands = ['right'] to skip it",
                                    file=path, episode_id=episode_id)
             task, task_source = _task_for(scene, demo_id, context.tasks, context.by_number)
             refs.append(EpisodeRef(
@@ -160,12 +168,6 @@ class OpenTouchAdapter(FileDiscovery):
                 fingerprint=fingerprint, extra={"task_source": task_source, "demo_id": demo_id},
             ))
         return refs
-
-    @staticmethod
-    def _layout_exists(layout_id: str) -> bool:
-        from htdata.layouts import list_layouts
-
-        return layout_id in list_layouts() or Path(layout_id).is_file()
 
     @staticmethod
     def _list_clips(f, path: Path) -> list[tuple[str, int, bool]]:
@@ -242,10 +244,7 @@ class OpenTouchStreams(EpisodeStreams):
             img = cv2.imdecode(buf, cv2.IMREAD_COLOR) if buf.size else None
             if img is None or img.ndim != 3:
                 raise EpisodeError(self.ref, i, "JPEG does not decode")
-            # cv2 returns the JPEG's colours as BGR. When the release stored
-            # R and B swapped ("bgr"), that array already is the scene in RGB.
-            rgb = img if self.channel_order == "bgr" else img[..., ::-1]
-            yield i, np.ascontiguousarray(rgb)
+            yield i, np.ascontiguousarray(to_rgb(img, DECODED_ORDER[self.channel_order], where=f"frame {i}"))
 
     def read_tactile(self, hand: str, indices: np.ndarray) -> np.ndarray:
         self._check_hand(hand)

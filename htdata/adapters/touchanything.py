@@ -30,9 +30,11 @@ from typing import Iterator
 import numpy as np
 
 from htdata.adapters.base import (
-    EpisodeRef, EpisodeStreams, FileDiscovery, NpzRowError, NpzRows, VideoError, check_tactile_shape, file_frame_mismatch_note,
-    fingerprint_files, iter_episode_video, probe_video_pts_ns, sanitise_id,
+    EpisodeRef, EpisodeStreams, FileDiscovery, check_tactile_shape, file_frame_mismatch_note, fingerprint_files,
+    iter_episode_video, sanitise_id,
 )
+from htdata.adapters.npzrows import NpzRowError, NpzRows
+from htdata.adapters.video import VideoError, probe_video_pts_ns
 from htdata.errors import EpisodeError
 
 SOURCE = "touchanything"

@@ -1,7 +1,7 @@
 """Tactile map codecs on real maps, and the stored error against each glove's quantisation step.
 
-Maps are the sample corpus rasterised exactly as the ingest does (both
-gloves), so sizes reflect real sparsity. A codec whose max error stays below
+Maps are the sample corpus rasterised exactly as the ingest does (every
+glove layout the corpus uses), so sizes reflect real sparsity. A codec whose max error stays below
 half a source step keeps every source level recoverable by rounding.
 """
 
@@ -16,6 +16,7 @@ import numpy as np
 from htdata.benchmarks.sources import discover, episode_maps
 from htdata.codec import check_tactile_values, decode_exr, decode_png16, encode_exr, encode_png16
 from htdata.format import MAP_SHAPE
+from htdata.layouts import Layout, load_layout
 
 # Alternatives measured against the dataset's codec (EXR half ZIP, codec.DEFAULT_CODEC_INFO).
 def _exr_codec(compression: str, pixel_type) -> tuple[Callable, Callable]:
@@ -65,39 +66,62 @@ def codec_benchmark(maps: np.ndarray, codecs: dict | None = None) -> list[dict]:
     return results
 
 
-# Source quantisation of each glove in [0,1] units (see pipelines/ and the layouts' value blocks).
-GLOVE_STEPS = {"opentouch": 1.0 / 3072.0, "touchanything": 1.0 / 255.0}
 DEFAULT_CODEC = "exr_half_zip"   # DEFAULT_CODEC_INFO: EXR half, ZIP
+DIRECT_SOURCE_LEVELS = 255       # see source_step
 
 
-def real_maps(corpus: Path, adapter_name: str, max_maps: int) -> np.ndarray:
-    """Up to `max_maps` rasterised maps spread evenly over the adapter's episodes and hands."""
-    cfg, adapter, refs = discover(adapter_name, corpus / adapter_name)
-    per_ep = max(1, -(-max_maps // max(len(refs), 1)))
-    chosen, rasters = [], {}
-    for ref in refs:
-        em = episode_maps(cfg, adapter, ref, rasters)
-        for maps in em.maps.values():
-            take = np.linspace(0, len(maps) - 1, num=min(per_ep, len(maps))).round().astype(int)
-            chosen.append(maps[np.unique(take)])
-        if sum(len(c) for c in chosen) >= max_maps:
-            break
+def source_step(layout: Layout) -> tuple[float, str]:
+    """One source quantisation level of a glove in [0,1] units, and where the number comes from.
+
+    An "inverted" glove counts integer firmware units 0..max, so its value
+    block gives the step (1/max). A "direct" glove delivers [0, max] floats
+    and its value block does not state their resolution: the only shipped one,
+    TouchAnything, computes them from uint8 sensor bytes (SOURCE_FORMATS.md,
+    jq_pressure.json), so 8 bits is assumed, and the row says so.
+    """
+    if layout.value["convention"] == "inverted":
+        return 1.0 / float(layout.value["max"]), "value block (integer units)"
+    return 1.0 / DIRECT_SOURCE_LEVELS, f"assumed {DIRECT_SOURCE_LEVELS} levels (direct values)"
+
+
+def real_maps(corpus: Path, sources: tuple[str, ...], max_maps: int) -> dict[str, np.ndarray]:
+    """layout id -> up to `max_maps` rasterised maps, spread evenly over each source's episodes and hands.
+
+    `sources` are corpus folders named like their shipped pipeline; an episode
+    whose layouts all have `max_maps` maps already is not read.
+    """
+    chosen: dict[str, list[np.ndarray]] = {}
+
+    def full(layout_id: str) -> bool:
+        return sum(len(c) for c in chosen.get(layout_id, [])) >= max_maps
+
+    for source in sources:
+        cfg, adapter, refs = discover(source, corpus / source)
+        per_ep = max(1, -(-max_maps // max(len(refs), 1)))
+        for ref in refs:
+            if all(full(layout_id) for layout_id in ref.layouts.values()):
+                continue
+            em = episode_maps(cfg, adapter, ref)
+            for hand, maps in em.maps.items():
+                if len(maps) and not full(em.layouts[hand]):
+                    take = np.linspace(0, len(maps) - 1, num=min(per_ep, len(maps))).round().astype(int)
+                    chosen.setdefault(em.layouts[hand], []).append(maps[np.unique(take)])
     if not chosen:
-        raise ValueError(f"{corpus / adapter_name}: no episode gave a tactile map")
-    return np.concatenate(chosen)[:max_maps]
+        raise ValueError(f"{corpus}: no episode of {list(sources)} gave a tactile map")
+    return {layout_id: np.concatenate(parts)[:max_maps] for layout_id, parts in sorted(chosen.items())}
 
 
-def codec_rows(maps_by_glove: dict[str, np.ndarray]) -> dict:
-    """Codec table over all gloves' maps, plus per-glove error margins of every codec."""
-    all_maps = np.concatenate(list(maps_by_glove.values()))
+def codec_rows(maps_by_layout: dict[str, np.ndarray]) -> dict:
+    """Codec table over all gloves' maps, plus each glove layout's error margin for every codec."""
+    all_maps = np.concatenate(list(maps_by_layout.values()))
     rows = codec_benchmark(all_maps)
     by_codec = {r["codec"]: r for r in rows}
     margins = []
-    for glove, maps in maps_by_glove.items():
-        step = GLOVE_STEPS[glove]
+    for layout_id, maps in maps_by_layout.items():
+        step, step_from = source_step(load_layout(layout_id))
         for r in codec_benchmark(maps):
-            margins.append({"glove": glove, "codec": r["codec"], "maps": int(len(maps)),
-                            "step": step, "max_error": r["max_error"],
+            margins.append({"layout": layout_id, "codec": r["codec"], "maps": int(len(maps)),
+                            "step": step, "step_from": step_from, "max_error": r["max_error"],
                             # None = exact (no error to divide by): rendered as "exact", kept valid JSON
                             "step_over_max_error": step / r["max_error"] if r["max_error"] > 0 else None,
                             "levels_recoverable": bool(r["max_error"] < step / 2)})

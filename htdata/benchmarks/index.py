@@ -59,3 +59,12 @@ def index_load_benchmark(n_rows: int, tmpdir: str | os.PathLike) -> dict:
         "full_rss_delta_mb": (rss_full - rss0) / 2**20,
         "probe_episode": first_touch,
     }
+
+
+def index_rows(rows_counts: tuple[int, ...], tmpdir: Path) -> list[dict]:
+    """One row per index size; each synthetic file is removed before the next is written."""
+    out = []
+    for n in rows_counts:
+        out.append(index_load_benchmark(n, tmpdir))
+        (Path(tmpdir) / "bench_index.npy").unlink(missing_ok=True)
+    return out

@@ -16,7 +16,6 @@
 
 from __future__ import annotations
 
-import json
 import shutil
 import subprocess
 import sys
@@ -26,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata.benchmarks.sources import bare_bound, discover
+from htdata.manifest import load_manifest
 from htdata.ingest import Source, ingest
 from htdata.pipeline import load_pipeline
 
@@ -42,7 +42,7 @@ def ingest_run(pipelines: list[tuple[str, Path]], out: Path, workers: int) -> di
     wall = time.perf_counter() - t0
     if report["failures"]:
         raise RuntimeError(f"bench ingest into {out} had failures: {report['failures'][:3]}")
-    units = json.loads((out / "dataset.json").read_text())["shards"]
+    units = load_manifest(out)["shards"]
     timing = report.get("timing") or {}
     frames = int(report["samples"])
     seconds = float(timing.get("total_s", report["seconds"]))

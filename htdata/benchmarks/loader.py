@@ -1,4 +1,4 @@
-"""Read paths of a committed dataset vs the bare decode bound; index load at scale.
+"""Read paths of a committed dataset vs the bare decode bound.
 
 Like with like: every access pattern gets its own bound, the time to decode
 exactly the members that access decodes (same samples, same hands, same
@@ -32,7 +32,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from htdata.benchmarks.index import index_load_benchmark
 from htdata.codec import decode_npy, decode_rgb, decode_tactile
 from htdata.format import HANDS
 from htdata.reader import DatasetReader
@@ -119,18 +118,22 @@ def measure_access(name: str, blocks: list[Block], passes: int = 2) -> dict:
 
 def loader_rows(root: Path, n_random: int, n_windows: int, seed: int = 0, passes: int = 2,
                 block: int = 20) -> dict:
-    from htdata.torchdata import (
-        TactileFrameDataset,
-        TactileStream,
-        TactileWindowDataset,
-    )
-
+    """Every access pattern's row against its bound: the reader's, then the torch datasets'."""
     reader = DatasetReader(root)
     n = len(reader)
     rng = np.random.default_rng(seed)
     idx = [int(i) for i in rng.integers(0, n, size=min(n_random, n))]
     full = {i: reader.sample(i) for i in idx}
     bound = decode_bound([_pick(full[i], ("json",) + IMAGES) for i in idx], passes)
+    by_shard = [[m for _, m in reader.iter_samples([s])] for s in range(len(reader.manifest["shards"]))]
+    rows = _reader_rows(root, reader, rng, idx, full, by_shard, n_windows, passes, block)
+    rows += _torch_rows(root, reader, rng, by_shard, n_random, n_windows, passes, block)
+    return {"samples_in_dataset": n, "bound": bound, "rows": rows}
+
+
+def _reader_rows(root: Path, reader: DatasetReader, rng: np.random.Generator, idx: list[int], full: dict,
+                 by_shard: list[list[dict]], n_windows: int, passes: int, block: int) -> list[dict]:
+    """DatasetReader: random decoded(i) / sample(i), windows, shard streams (a fresh reader times them)."""
     fresh = DatasetReader(root)
     rows = []
 
@@ -157,15 +160,20 @@ def loader_rows(root: Path, n_random: int, n_windows: int, seed: int = 0, passes
         Block(reader_windows(c), [reader.sample(reader.locate(p, f - j)) for p, f in c for j in (2, 1, 0)], len(c))
         for c in _chunks(picks, max(1, block // 3))], passes))
 
-    shards = range(len(reader.manifest["shards"]))
-    by_shard = [[m for _, m in reader.iter_samples([s])] for s in shards]
-
     def reader_stream(shard):
         return lambda: sum(1 for _ in fresh.iter_samples([shard], decode=True))
 
     rows.append(measure_access("reader stream iter_samples", [
-        Block(reader_stream(s), by_shard[s], len(by_shard[s])) for s in shards], passes))
+        Block(reader_stream(s), by_shard[s], len(by_shard[s])) for s in range(len(by_shard))], passes))
+    return rows
 
+
+def _torch_rows(root: Path, reader: DatasetReader, rng: np.random.Generator, by_shard: list[list[dict]],
+                n_random: int, n_windows: int, passes: int, block: int) -> list[dict]:
+    """Torch datasets: random frame items, window items, one worker's stream."""
+    from htdata.torchdata import TactileFrameDataset, TactileStream, TactileWindowDataset
+
+    rows = []
     frames = TactileFrameDataset(root)
     fidx = [int(i) for i in rng.integers(0, len(frames), size=min(n_random, len(frames)))]
 
@@ -204,16 +212,7 @@ def loader_rows(root: Path, n_random: int, n_windows: int, seed: int = 0, passes
         return [_pick(m, IMAGES) for m in members if "tactile_left.exr" in m or "tactile_right.exr" in m]
 
     row = measure_access("TactileStream (one worker)", [
-        Block(stream_samples(s), with_tactile(by_shard[s]), 0) for s in shards], passes)
+        Block(stream_samples(s), with_tactile(by_shard[s]), 0) for s in range(len(by_shard))], passes)
     row["items"] = len(stream)
     rows.append(row)
-    return {"samples_in_dataset": n, "bound": bound, "rows": rows}
-
-
-def index_rows(rows_counts: tuple[int, ...], tmpdir: Path) -> list[dict]:
-    out = []
-    for n in rows_counts:
-        r = index_load_benchmark(n, tmpdir)
-        (Path(tmpdir) / "bench_index.npy").unlink(missing_ok=True)
-        out.append(r)
-    return out
+    return rows

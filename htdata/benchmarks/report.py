@@ -12,7 +12,6 @@ HEADINGS = {
     "loader": "## Loader access patterns",
     "index": "## Index load at scale",
     "validate": "## validate --deep",
-    "training": "## Training: fp32 vs bf16 autocast (stage 1, smoke config)",
 }
 TARGET_OVERHEAD_PCT = 30.0
 TARGET_SCALING = 1.8
@@ -52,14 +51,17 @@ def _machine(m: dict) -> list[str]:
 
 
 def _codecs(c: dict) -> list[str]:
-    lines = [f"{c['maps']} maps ({c['zero_fraction'] * 100:.0f}% zero pixels), rasterised from both gloves.", ""]
+    layouts = sorted({m["layout"] for m in c["margins"]})
+    lines = [f"{c['maps']} maps ({c['zero_fraction'] * 100:.0f}% zero pixels), rasterised from "
+             f"{', '.join(layouts)}.", ""]
     lines += table(c["rows"], [("codec", "codec"), ("bytes_per_frame", "bytes/frame"), ("encode_ms", "encode ms"),
                                ("decode_ms", "decode ms"), ("max_error", "max error"), ("rmse", "RMSE")])
     lines += ["Stored error vs each glove's source quantisation step (step / max error > 1: below one step; "
               "levels recoverable = max error < step/2):", ""]
-    lines += table([m for m in c["margins"]], [("glove", "glove"), ("codec", "codec"), ("step", "step"),
-                                               ("max_error", "max error"), ("step_over_max_error", "step / max error"),
-                                               ("levels_recoverable", "levels recoverable")])
+    lines += table(c["margins"], [("layout", "glove layout"), ("codec", "codec"), ("step", "step"),
+                                  ("step_from", "step from"), ("max_error", "max error"),
+                                  ("step_over_max_error", "step / max error"),
+                                  ("levels_recoverable", "levels recoverable")])
     lines += [f"**Default: {c['default']}** — {c['reason']}.", ""]
     return lines
 
@@ -181,18 +183,19 @@ def _validate(rows: list[dict]) -> list[str]:
                         ("frames_per_s", "frames/s"), ("scaling", "vs 1 worker"), ("ok", "dataset ok")])
 
 
-def _training(t: dict) -> list[str]:
-    lines = table(t["rows"], [("precision", "precision"), ("steps", "steps"), ("batch_size", "batch"),
-                              ("steps_per_s", "steps/s"), ("samples_per_s", "samples/s"),
-                              ("final_loss", "final loss"), ("recon_rmse", "recon RMSE")])
-    return lines + [f"bf16 / fp32 speed: {t['bf16_speedup']:.2f}x; recon RMSE ratio {t['recon_rmse_ratio_bf16_fp32']:.3f} "
-                    f"(held-out batch: {t['rows'][0]['eval_source']}). "
-                    + ("An untimed 2-step warm-up run came first." if t.get("warmup_run") else
-                       "No warm-up run: fp32 (run first) carries one-off start-up costs."), ""]
-
-
 RENDERERS = {"machine": _machine, "codecs": _codecs, "rgb": _rgb, "raster": _raster, "ingest": _ingest,
-             "rss": _rss, "loader": _loader, "index": _index, "validate": _validate, "training": _training}
+             "rss": _rss, "loader": _loader, "index": _index, "validate": _validate}
+
+
+def _discovered(name: str, results: dict) -> list[str]:
+    """A section found through the entry point group: its own markdown, verbatim."""
+    lines = [f"## {name}", "", f"From `{results['plugins'][name]}` (entry point group htdata.bench_sections).", ""]
+    if name not in results:
+        return lines + [f"Not measured: {results.get('errors', {}).get(name, 'section skipped')}", ""]
+    markdown = results[name].get("markdown")
+    if not markdown:
+        return lines + [f"No markdown returned; the numbers are in results.json under `{name}`.", ""]
+    return lines + [markdown.rstrip(), ""]
 
 
 def render_report(results: dict) -> str:
@@ -207,4 +210,6 @@ def render_report(results: dict) -> str:
             lines += RENDERERS[key](results[key])
         else:
             lines += [f"Not measured: {results.get('errors', {}).get(key, 'section skipped')}", ""]
+    for name in results.get("plugins", {}):
+        lines += _discovered(name, results)
     return "\n".join(lines).rstrip() + "\n"

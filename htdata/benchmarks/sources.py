@@ -1,10 +1,12 @@
 """Real frames for the benchmarks: episodes of the sample corpus read through the adapters.
 
-`episode_maps` reproduces the ingest's tactile path (sync -> normalise ->
-rasterise) without encoding or writing, so codec numbers are measured on the
-maps a dataset really stores; `bare_bound` times only the unavoidable work of
-an ingest (source decode, resize, JPEG + EXR encode) on the same frames with
-the same settings, each stage defined as in the ingest's stage timing.
+`episode_maps` consumes the ingest's own episode generator
+(`htdata.ingest.episode.episode_frames`: sync -> normalise -> non-finite drop
+-> rasterise) without RGB, encoding or writing, so codec numbers are
+measured on the maps a dataset really stores and cannot drift from what
+ingest does; `bare_bound` times only the unavoidable work of an ingest
+(source decode, resize, JPEG + EXR encode) on the same frames with the
+same settings, each stage defined as in the ingest's stage timing.
 """
 
 from __future__ import annotations
@@ -15,16 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.adapters import get_adapter
 from htdata.codec import encode_rgb, encode_tactile
-from htdata.ingest import get_adapter
-from htdata.layouts import load_layout
-from htdata.normalise import Normaliser
+from htdata.ingest.episode import EpisodeTally, episode_frames
+from htdata.ingest.plan import resolve_layouts
 from htdata.pipeline import PipelineConfig, load_pipeline
-from htdata.rasterise import Rasteriser
 from htdata.rgb import to_square_224
-from htdata.sync import pair
-
-HANDS = ("left", "right")
 
 
 @dataclass
@@ -38,35 +36,21 @@ class EpisodeMaps:
 
 
 def discover(pipeline: str, root: Path) -> tuple[PipelineConfig, object, list]:
+    """The pipeline, its adapter and its episodes, planned as ingest plans them (layouts resolved)."""
     cfg = load_pipeline(pipeline)
     adapter = get_adapter(cfg.adapter.name)
-    return cfg, adapter, adapter.discover(Path(root), cfg.adapter.params)
+    return cfg, adapter, [resolve_layouts(r, cfg) for r in adapter.discover(Path(root), cfg.adapter.params)]
 
 
-def episode_maps(cfg: PipelineConfig, adapter, ref, rasters: dict | None = None) -> EpisodeMaps:
-    """Synchronised, normalised, rasterised maps of one episode (frames with NaN taxels dropped)."""
-    rasters = {} if rasters is None else rasters
-    hands = [h for h in HANDS if h in ref.hands]
-    layouts = {h: load_layout(cfg.layout_for(h, ref.layouts[h])) for h in hands}
-    with adapter.open(ref, cfg.adapter.params) as streams:
-        sync = pair(streams.rgb_timestamps_ns, {h: streams.tactile_timestamps_ns[h] for h in hands},
-                    cfg.sync.max_skew_ns, cfg.sync.policy)
-        values, ok = {}, np.ones(sync.rgb_index.size, dtype=bool)
-        for h in hands:
-            uniq, inverse = np.unique(sync.tactile_index[h], return_inverse=True)
-            raw = np.asarray(streams.read_tactile(h, uniq))[inverse.reshape(-1)]
-            norm = Normaliser(cfg.normalise_for(layouts[h]), layouts[h])
-            norm.fit_baseline(raw)
-            values[h], finite = norm.apply(raw)
-            ok &= finite
-    out = EpisodeMaps(ref.episode_id, {h: layouts[h].layout_id for h in hands}, sync.rgb_index[ok],
-                      tactile_index={h: sync.tactile_index[h].copy() for h in hands})
-    for h in hands:
-        key = (layouts[h].layout_id, cfg.tactile.raster_mode)
-        if key not in rasters:
-            rasters[key] = Rasteriser(layouts[h], mode=cfg.tactile.raster_mode)
-        out.maps[h] = rasters[key].render(values[h][ok])
-    return out
+def episode_maps(cfg: PipelineConfig, adapter, ref) -> EpisodeMaps:
+    """Synchronised, normalised, rasterised maps of one planned episode (frames with NaN taxels dropped)."""
+    tally = EpisodeTally()
+    frames = list(episode_frames(ref, cfg, adapter, tally, with_rgb=False))
+    hands = tally.hands
+    return EpisodeMaps(ref.episode_id, {h: tally.layouts[h].layout_id for h in hands},
+                       np.array([f.source_frame for f in frames], dtype=np.int64),
+                       maps={h: np.stack([f.maps[h] for f in frames]) for h in hands},
+                       tactile_index={h: tally.sync.tactile_index[h].copy() for h in hands})
 
 
 def source_rgb_frames(adapter, cfg: PipelineConfig, ref, count: int) -> list[np.ndarray]:
@@ -102,10 +86,10 @@ def bare_bound(cfg: PipelineConfig, adapter, refs: list) -> dict:
     `tactile_read_s` split decode_s.
     """
     t = {"open_s": 0.0, "rgb_decode_s": 0.0, "tactile_read_s": 0.0, "resize_s": 0.0, "jpeg_s": 0.0, "exr_s": 0.0}
-    frames, rasters = 0, {}
+    frames = 0
     rgb = cfg.rgb
     for ref in refs:
-        em = episode_maps(cfg, adapter, ref, rasters)
+        em = episode_maps(cfg, adapter, ref)
         wanted = {int(i): k for k, i in enumerate(em.rgb_index)}
         last = max(wanted) if wanted else -1
         t0 = time.perf_counter()

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.adapters import ADAPTERS
 from htdata.layouts import load_layout
 from htdata.sample.formats import (
     NativeHand,
@@ -34,9 +35,9 @@ from htdata.sample.formats import (
     write_touchanything_episode,
     write_touchanything_split,
 )
-from htdata.sample.world import TASKS, EpisodeSpec, World, scene_style, stable_hash
+from htdata.sample.tasks import TASKS, scene_style, stable_hash
+from htdata.sample.world import EpisodeSpec, World
 
-FORMATS = ("opentouch", "touchanything", "native")
 SCALES = ("tiny", "small")
 
 OPENTOUCH_LAYOUT = "opentouch_right_16x16"
@@ -74,6 +75,8 @@ _PLANS = {
                    "frames": (60, 90)},
     },
 }
+# One corpus folder per source adapter the corpus plans (names from the adapter registry).
+FORMATS = tuple(name for name in ADAPTERS if name in _PLANS["small"])
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""`htdata sample OUT`: write the synthetic raw corpus in the three source formats."""
+"""`htdata sample OUT`: write the synthetic raw corpus in the source formats (htdata/sample/corpus.py)."""
 
 from __future__ import annotations
 

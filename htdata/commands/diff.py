@@ -1,0 +1,36 @@
+"""`htdata diff DATASET A B`: episodes added, removed and changed from version A to version B."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from htdata.versions import diff_versions
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = ("'changed' = same episode id, different record (re-ingested from changed inputs, "
+                     "trimmed, relabelled); where an episode sits (shards, first sample) is ignored.")
+    parser.add_argument("dataset", type=Path, help="committed dataset directory")
+    parser.add_argument("a", type=int, help="older version (htdata log lists them)")
+    parser.add_argument("b", type=int, help="newer version")
+    parser.add_argument("--json", action="store_true", help="print the diff as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        diff = diff_versions(args.dataset, args.a, args.b)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"htdata diff: error: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(diff, indent=2))
+        return 0
+    for sign, key in (("+", "added"), ("-", "removed"), ("~", "changed")):
+        for eid in diff[key]:
+            print(f"{sign} {eid}")
+    print(f"v{args.a} -> v{args.b}: {len(diff['added'])} added, {len(diff['removed'])} removed, "
+          f"{len(diff['changed'])} changed; frames {diff['frames_before']} -> {diff['frames_after']}")
+    return 0

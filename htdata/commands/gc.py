@@ -1,0 +1,30 @@
+"""`htdata gc DATASET [--keep-versions K] [--dry-run]`: delete old versions and unlisted shards."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from htdata import gc
+from htdata.lock import DatasetLocked
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = gc.__doc__
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    parser.add_argument("dataset", type=Path, help="committed dataset directory")
+    parser.add_argument("--keep-versions", type=int, default=1, metavar="K",
+                        help="newest versions kept (default 1: only the current one)")
+    parser.add_argument("--dry-run", action="store_true", help="list what would be deleted, delete nothing")
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        plan = gc.collect(args.dataset, args.keep_versions, args.dry_run, f"htdata gc --keep-versions {args.keep_versions}")
+    except (DatasetLocked, FileNotFoundError, ValueError) as exc:
+        print(f"htdata gc: error: {exc}", file=sys.stderr)
+        return 2
+    for line in plan.lines():
+        print(("would " if args.dry_run else "") + line)
+    return 0

@@ -1,0 +1,70 @@
+"""`htdata ingest`: raw recordings -> a committed, sharded dataset (htdata/ingest/).
+
+    htdata ingest --pipeline pipelines/opentouch.toml /raw/opentouch OUT
+    htdata ingest --pipeline pipelines/opentouch.toml=/raw/opentouch \\
+                  --pipeline pipelines/touchanything.toml=/raw/touchanything OUT
+    htdata ingest --pipeline A.toml --pipeline B.toml SRC_A SRC_B OUT
+    htdata ingest --layouts ~/my_gloves --pipeline native.toml /raw/native OUT
+
+Layout ids are searched in --layouts DIR (repeatable), then $HTDATA_LAYOUTS
+(os.pathsep-separated folders), then the shipped layouts; every layout used
+is copied into OUT/layouts/. Failures (file/episode/frame) are listed on
+stderr and in OUT/reports/ingest.json; the exit code is 1 when some episode
+failed (unless --allow-failures), 2 for a usage/plan error, 3 when a work
+unit kept failing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from htdata.executors import UnitFailed
+from htdata.ingest import ingest, parse_sources
+from htdata.layouts import LAYOUTS_ENV
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = __doc__.split("\n\n")[1]
+    parser.add_argument("--pipeline", action="append", required=True, metavar="PIPELINE[=SRC]",
+                        help="pipeline TOML (or a name in pipelines/); repeat for a multi-source dataset")
+    parser.add_argument("paths", nargs="+", metavar="SRC... OUT",
+                        help="one SRC per --pipeline (unless given as PIPELINE=SRC), then OUT")
+    parser.add_argument("--layouts", action="append", default=[], metavar="DIR",
+                        help=f"folder of glove layout JSONs searched for layout ids (repeatable; before "
+                             f"${LAYOUTS_ENV} and the shipped layouts)")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                        help="worker processes (default: CPUs); 0 = run units in this process (debugging)")
+    parser.add_argument("--executor", choices=("process", "ray"), default="process",
+                        help="process: local pool, the progress bar advances per finished episode; "
+                             "ray: one Ray task per work unit, the bar advances per finished unit")
+    parser.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
+    parser.add_argument("--retries", type=int, default=1, help="retries of a unit that raised (default 1)")
+    parser.add_argument("--allow-failures", action="store_true", help="exit 0 even if some episodes failed")
+    parser.add_argument("--quiet", action="store_true",
+                        help="hide the progress bar (stderr: episodes done, frames/s)")
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        sources, out = parse_sources(args.pipeline, args.paths)
+        report = ingest(sources, out, workers=args.workers, executor=args.executor, address=args.address,
+                        retries=args.retries, progress=not args.quiet, layout_dirs=tuple(args.layouts))
+    except (ValueError, FileNotFoundError) as e:   # LayoutNotFound is a FileNotFoundError: one line, no traceback
+        print(f"htdata ingest: error: {e}", file=sys.stderr)
+        return 2
+    except UnitFailed as e:
+        print(f"htdata ingest: error: {e}", file=sys.stderr)
+        return 3
+    n_fail = len(report["failures"])
+    for f in report["failures"]:
+        episode = f" [{f['episode_id']}]" if f["episode_id"] is not None else ""
+        frame = f" frame {f['frame']}" if f["frame"] is not None else ""
+        print(f"FAILED {f['file']}{episode}{frame}: {f['error']}", file=sys.stderr)
+    print(f"ingested {report['episodes_ingested']}/{report['episodes_planned']} episodes, "
+          f"{report['samples']} samples, {len(report['dropped_frames'])} dropped frames, {n_fail} failures "
+          f"({report['units_resumed']} of {report['units']} units resumed) -> {out}", file=sys.stderr)
+    if n_fail and not args.allow_failures:
+        return 1
+    return 0

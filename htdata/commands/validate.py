@@ -1,0 +1,47 @@
+"""`htdata validate DATASET [--split NAME] [--deep]`: print the verdict, write the JSON report."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from htdata import validate
+from htdata.format import VALIDATE_REPORT
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = validate.__doc__
+    parser.add_argument("dataset", type=Path, help="committed dataset directory")
+    parser.add_argument("--split", default=None, metavar="NAME", help="also check split NAME of that version")
+    parser.add_argument("--version", type=int, default=None, metavar="N",
+                        help="validate version N (htdata log lists them; default: the current version)")
+    parser.add_argument("--deep", action="store_true", help="decode every sample (default: a seeded sample)")
+    parser.add_argument("--sample-frac", type=float, default=0.05,
+                        help="fraction of samples decoded without --deep (default 0.05)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the content sample")
+    parser.add_argument("--json", type=Path, default=None, metavar="REPORT",
+                        help=f"report path (default DATASET/{VALIDATE_REPORT})")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="processes over shards (default: all cores with --deep, else 1)")
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        report = validate.validate_dataset(args.dataset, split=args.split, deep=args.deep,
+                                           sample_frac=args.sample_frac, seed=args.seed, workers=args.workers,
+                                           version=args.version)
+    except ValueError as exc:
+        print(f"htdata validate: error: {exc}", file=sys.stderr)
+        return 2
+    out = args.json or Path(args.dataset) / VALIDATE_REPORT
+    print(validate.format_report(report))
+    if args.json is None and not Path(args.dataset).is_dir():
+        print(f"htdata validate: {args.dataset} is not a directory: no report written", file=sys.stderr)
+        return 1
+    try:
+        validate.write_report(report, out)
+        print(f"report: {out}")
+    except OSError as exc:
+        print(f"htdata validate: cannot write report {out}: {exc}", file=sys.stderr)
+    return 0 if report["ok"] else 1

@@ -1,0 +1,76 @@
+"""`htdata gc`: delete old versions and the shards no kept version lists (explicit, dry-runnable).
+
+Keeps the `keep_versions` newest versions and always the current one.
+Deletes, in this order, the manifests of the other versions, their files,
+then every shard file no kept version lists (including shards an
+interrupted write left behind, which no version ever listed). A crash
+between the steps leaves only unreferenced files, which the next gc
+removes. The current version's shards are never deleted (checked again
+right before deleting).
+"""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from htdata.faults import crash_point
+from htdata.format import SHARDS_DIR
+from htdata.lock import WriterLock
+from htdata.manifest import load_manifest
+from htdata.versions import list_versions, version_dir, version_manifest_file
+
+
+@dataclass
+class GcPlan:
+    kept_versions: list[int]
+    dropped_versions: list[int] = field(default_factory=list)
+    dropped_shards: list[tuple[str, int]] = field(default_factory=list)   # (name, bytes)
+
+    @property
+    def bytes_freed(self) -> int:
+        return sum(b for _, b in self.dropped_shards)
+
+    def lines(self) -> list[str]:
+        out = [f"delete version {v}" for v in self.dropped_versions]
+        out += [f"delete shard {name} ({size} B)" for name, size in self.dropped_shards]
+        out.append(f"keep versions {', '.join(map(str, self.kept_versions)) or '(unversioned)'}; "
+                   f"{len(self.dropped_shards)} shards, {self.bytes_freed} bytes freed")
+        return out
+
+
+def plan_gc(root: Path, keep_versions: int) -> GcPlan:
+    if keep_versions < 1:
+        raise ValueError(f"--keep-versions must be >= 1 (the current version is always kept), got {keep_versions}")
+    current = load_manifest(root)
+    versions = list_versions(root)
+    kept = sorted(set(versions[-keep_versions:]) | ({current["version"]} if "version" in current else set()))
+    plan = GcPlan(kept_versions=kept, dropped_versions=[v for v in versions if v not in kept])
+    listed = {s["name"] for s in current["shards"]}
+    for v in kept:
+        listed |= {s["name"] for s in load_manifest(root, version=v)["shards"]}
+    for path in sorted((root / SHARDS_DIR).iterdir()) if (root / SHARDS_DIR).is_dir() else []:
+        if path.name not in listed and (path.suffix == ".tar" or path.name.endswith(".tmp")):
+            plan.dropped_shards.append((path.name, path.stat().st_size))
+    return plan
+
+
+def collect(root, keep_versions: int, dry_run: bool, command: str) -> GcPlan:
+    """Plan (and unless dry_run, carry out) a gc of the dataset at `root`."""
+    root = Path(root)
+    with WriterLock(root, command):
+        plan = plan_gc(root, keep_versions)
+        if dry_run:
+            return plan
+        current = {s["name"] for s in load_manifest(root)["shards"]}
+        doomed = {name for name, _ in plan.dropped_shards}
+        if current & doomed:    # never: plan_gc keeps the current version's shards
+            raise RuntimeError(f"gc would delete shards of the current version: {sorted(current & doomed)[:3]}")
+        for v in plan.dropped_versions:
+            (root / version_manifest_file(v)).unlink(missing_ok=True)
+            shutil.rmtree(root / version_dir(v), ignore_errors=True)
+            crash_point("gc_version_deleted")
+        for name in sorted(doomed):
+            (root / SHARDS_DIR / name).unlink(missing_ok=True)
+        return plan

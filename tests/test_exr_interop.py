@@ -1,0 +1,71 @@
+"""Our tactile EXR members are standard EXR: OpenImageIO, an independent reader, agrees.
+
+htdata writes and reads EXR through the OpenEXR Python binding only; these
+tests keep the stored maps readable by the imaging ecosystem (OIIO backs
+oiiotool, Blender, Nuke): single channel "Y", HALF, ZIP, 224x224, and the
+same float16 bits. The reverse direction proves our decoder reads an EXR
+that another writer made. OIIO traps (TOOLING_FACTS): `read_image` returns
+float32 unless asked for "half"; writers must get (H,W,C), never (H,W).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from htdata.codec import decode_tactile, encode_tactile
+from htdata.format import MAP_SHAPE
+
+oiio = pytest.importorskip("OpenImageIO")
+
+
+def _maps() -> list[np.ndarray]:
+    rng = np.random.default_rng(0)
+    sparse = np.zeros(MAP_SHAPE, np.float32)
+    sparse[40:90, 100:130] = rng.random((50, 30), dtype=np.float32)
+    edges = np.zeros(MAP_SHAPE, np.float32)
+    edges[0, :4] = [1.0, 1.0 - 2.0**-11, 2.0**-24, 2.0**-14]   # exact top, spacing below 1, subnormals
+    return [sparse, edges, rng.random(MAP_SHAPE, dtype=np.float32)]
+
+
+def _oiio_read(path) -> tuple[object, np.ndarray]:
+    inp = oiio.ImageInput.open(str(path))
+    assert inp is not None, oiio.geterror()
+    try:
+        spec = inp.spec()
+        pixels = inp.read_image(0, 0, 0, spec.nchannels, "half")
+        assert pixels is not None, inp.geterror()
+    finally:
+        inp.close()
+    return spec, np.asarray(pixels)
+
+
+@pytest.mark.parametrize("which", range(3))
+def test_oiio_reads_our_tactile_member(tmp_path, which):
+    tactile = _maps()[which]
+    path = tmp_path / "tactile.exr"
+    path.write_bytes(encode_tactile(tactile, where=f"map {which}"))
+    spec, pixels = _oiio_read(path)
+    assert (spec.width, spec.height, spec.nchannels) == (MAP_SHAPE[1], MAP_SHAPE[0], 1)
+    assert list(spec.channelnames) == ["Y"]
+    assert spec.format == oiio.TypeDesc("half")
+    assert spec.getattribute("compression") == "zip"
+    assert pixels.shape == (*MAP_SHAPE, 1) and pixels.dtype == np.float16
+    ours = decode_tactile(path.read_bytes(), where=str(path))
+    np.testing.assert_array_equal(pixels[..., 0].view(np.uint16), ours.astype(np.float16).view(np.uint16))
+    assert np.abs(ours - tactile).max() <= 2.0**-12     # half round-off on [0,1]
+
+
+def test_our_decoder_reads_an_oiio_written_exr(tmp_path):
+    tactile = _maps()[0]
+    path = tmp_path / "oiio.exr"
+    spec = oiio.ImageSpec(MAP_SHAPE[1], MAP_SHAPE[0], 1, "half")
+    spec.channelnames = ("Y",)
+    spec.attribute("compression", "zip")
+    out = oiio.ImageOutput.create(str(path))
+    assert out is not None, oiio.geterror()
+    assert out.open(str(path), spec), out.geterror()
+    assert out.write_image(tactile.astype(np.float16)[..., None]), out.geterror()   # (H,W,C): see module doc
+    out.close()
+    ours = decode_tactile(path.read_bytes(), where=str(path))
+    np.testing.assert_array_equal(ours, tactile.astype(np.float16).astype(np.float32))

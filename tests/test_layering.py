@@ -1,0 +1,129 @@
+"""Layering rules of docs/DESIGN.md, checked on the source (import graph, module and function size).
+
+- htdata never imports handtouch (the data toolkit must not depend on the trainer), not even lazily.
+- No import cycle among htdata's / handtouch's modules at module level.
+- Core modules do not parse arguments: argparse lives in htdata/commands/ (and the CLI table).
+- Modules stay under ~450 lines, functions under ~80, unless the docstring says why ("Long because").
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("htdata", "handtouch")
+MAX_MODULE_LINES = 460
+MAX_FUNCTION_LINES = 80
+LONG_REASON = "Long because"
+
+
+def modules(package: str) -> dict[str, Path]:
+    out = {}
+    for path in sorted((ROOT / package).rglob("*.py")):
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = path
+    return out
+
+
+ALL = {**modules("htdata"), **modules("handtouch")}
+
+
+def imported_names(tree: ast.AST, module: str, top_level_only: bool) -> set[str]:
+    """Absolute module names imported by `tree` (relative imports resolved against `module`)."""
+    nodes = tree.body if top_level_only else list(ast.walk(tree))
+    names = set()
+    for node in nodes:
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                pkg = module.split(".")
+                if not ALL[module].name == "__init__.py":
+                    pkg = pkg[:-1]
+                pkg = pkg[:len(pkg) - (node.level - 1)]
+                base = ".".join(pkg + ([base] if base else []))
+            names.add(base)
+            names.update(f"{base}.{a.name}" for a in node.names)   # `from pkg import submodule`
+    return names
+
+
+def parsed(module: str) -> ast.Module:
+    return ast.parse(ALL[module].read_text(), filename=str(ALL[module]))
+
+
+def test_htdata_never_imports_handtouch():
+    offenders = {m: sorted(n for n in imported_names(parsed(m), m, top_level_only=False)
+                           if n == "handtouch" or n.startswith("handtouch."))
+                 for m in ALL if m.split(".")[0] == "htdata"}
+    offenders = {m: names for m, names in offenders.items() if names}
+    assert not offenders, f"htdata modules importing handtouch: {offenders}"
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                return stack[stack.index(nxt):] + [nxt]
+            if nxt not in state:
+                found = visit(nxt)
+                if found:
+                    return found
+        stack.pop()
+        state[node] = 2
+        return None
+
+    for node in sorted(graph):
+        if node not in state:
+            found = visit(node)
+            if found:
+                return found
+    return None
+
+
+def test_no_module_level_import_cycle():
+    graph = {}
+    for m in ALL:
+        targets = {n for n in imported_names(parsed(m), m, top_level_only=True) if n in ALL and n != m}
+        # A package importing its own submodules (re-exports) is not a cycle of ideas.
+        graph[m] = {t for t in targets if not (ALL[m].name == "__init__.py" and t.startswith(m + "."))}
+    assert find_cycle(graph) is None, f"import cycle: {' -> '.join(find_cycle(graph))}"
+
+
+def test_find_cycle_finds_one():
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b"}, "b": set()}) is None
+
+
+def test_argparse_only_in_commands():
+    allowed = ("htdata.cli", "htdata.commands")
+    offenders = [m for m in ALL if m.startswith("htdata") and not m.startswith(allowed)
+                 and "argparse" in imported_names(parsed(m), m, top_level_only=False)]
+    assert not offenders, f"core modules parsing arguments (move the CLI to htdata/commands/): {offenders}"
+
+
+@pytest.mark.parametrize("module", sorted(ALL))
+def test_module_and_function_size(module):
+    text = ALL[module].read_text()
+    tree = ast.parse(text)
+    doc = ast.get_docstring(tree) or ""
+    lines = len(text.splitlines())
+    assert lines <= MAX_MODULE_LINES or LONG_REASON in doc, (
+        f"{ALL[module]}: {lines} lines; split it by idea or say why in its docstring ({LONG_REASON} ...)")
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            length = node.end_lineno - node.lineno + 1
+            fdoc = ast.get_docstring(node) or ""
+            assert length <= MAX_FUNCTION_LINES or LONG_REASON in fdoc, (
+                f"{ALL[module]}:{node.lineno} {node.name}: {length} lines; split it or say why "
+                f"in its docstring ({LONG_REASON} ...)")

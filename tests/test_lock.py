@@ -1,0 +1,95 @@
+"""Writer lock: one writer per dataset, stale locks taken over, foreign hosts respected."""
+
+import json
+import multiprocessing as mp
+import os
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+
+from htdata.lock import LOCK_FILE, DatasetLocked, WriterLock
+
+
+def write_lock(root, **holder):
+    base = {"host": socket.gethostname(), "pid": os.getpid(), "pid_start": None, "started": "t0",
+            "command": "htdata ingest ..."}
+    (root / LOCK_FILE).write_text(json.dumps({**base, **holder}))
+
+
+def test_lock_is_exclusive_and_released(tmp_path):
+    with WriterLock(tmp_path, "first") as lock:
+        assert lock.note is None
+        holder = json.loads((tmp_path / LOCK_FILE).read_text())
+        assert holder["pid"] == os.getpid() and holder["command"] == "first"
+        with pytest.raises(DatasetLocked, match=f"pid {os.getpid()}.*first"):
+            WriterLock(tmp_path, "second").acquire()
+    assert not (tmp_path / LOCK_FILE).exists()
+    with WriterLock(tmp_path, "third"):   # free again
+        pass
+
+
+def test_live_holder_in_another_process_is_refused(tmp_path):
+    code = ("import sys,time; from htdata.lock import WriterLock; "
+            "l=WriterLock(sys.argv[1],'sleeper').acquire(); print('held', flush=True); time.sleep(60)")
+    proc = subprocess.Popen([sys.executable, "-c", code, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "held"
+        with pytest.raises(DatasetLocked, match=f"pid {proc.pid}.*sleeper"):
+            WriterLock(tmp_path).acquire()
+    finally:
+        proc.kill()
+        proc.wait()
+    # killed without releasing (kill -9): the lock is stale now and is taken over with a note
+    with WriterLock(tmp_path, "after") as lock:
+        assert "no longer running" in lock.note and str(proc.pid) in lock.note
+
+
+def test_dead_pid_and_garbled_lock_are_stale(tmp_path):
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                          text=True).stdout.strip()
+    write_lock(tmp_path, pid=int(dead))
+    with WriterLock(tmp_path) as lock:
+        assert "no longer running" in lock.note
+    (tmp_path / LOCK_FILE).write_text('{"host": "x", "pi')     # writer killed mid-write
+    with WriterLock(tmp_path) as lock:
+        assert "unreadable lock file" in lock.note
+
+
+def test_reused_pid_is_stale(tmp_path):
+    # our own pid, but recorded with another process start time: the pid was reused
+    write_lock(tmp_path, pid_start=1.0)
+    with WriterLock(tmp_path) as lock:
+        assert "no longer running" in lock.note
+
+
+def test_other_host_is_never_broken(tmp_path):
+    write_lock(tmp_path, host="some-other-host", pid=1)
+    with pytest.raises(DatasetLocked, match="another host.*remove .*lock by hand"):
+        WriterLock(tmp_path).acquire()
+    assert json.loads((tmp_path / LOCK_FILE).read_text())["host"] == "some-other-host"
+
+
+def _race(root, barrier, results):
+    barrier.wait()
+    try:
+        lock = WriterLock(root, f"racer {os.getpid()}").acquire()
+        results.put("won")
+        time.sleep(0.5)
+        lock.release()
+    except DatasetLocked:
+        results.put("refused")
+
+
+def test_concurrent_writers_one_wins(tmp_path):
+    ctx = mp.get_context("fork")
+    barrier, results = ctx.Barrier(4), ctx.Queue()
+    procs = [ctx.Process(target=_race, args=(tmp_path, barrier, results)) for _ in range(4)]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(20)
+    outcomes = sorted(results.get(timeout=5) for _ in procs)
+    assert outcomes == ["refused", "refused", "refused", "won"]

@@ -1,0 +1,76 @@
+#!/usr/bin/env bash
+# `make install-check`: prove a real (non-editable) install works, as a new user
+# would use it. Builds the sdist and the wheel from it (python -m build),
+# installs the wheel into a fresh venv under a temp dir, then, from a directory
+# outside the checkout and with HTDATA_ROOT unset, runs
+#   htdata layouts -> sample (tiny) -> ingest (shipped pipelines by name) -> split -> validate --deep
+# and checks that schemas/pipelines/configs resolve inside the installed package and
+# that the entry point of HandTouch's bench section is registered.
+# KEEP=1 keeps the temp dir; PYTHON picks the interpreter (default python3).
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "$0")/.." && pwd)"
+PYTHON="${PYTHON:-python3}"
+TMP="$(mktemp -d "${TMPDIR:-/tmp}/htdata-install-check.XXXXXX")"
+if [ "${KEEP:-0}" = "1" ]; then echo "install-check: keeping $TMP"; else trap 'rm -rf "$TMP"' EXIT; fi
+unset HTDATA_ROOT PYTHONPATH
+step() { echo "install-check [$(( SECONDS ))s]: $*"; }
+# Quiet unless it fails: pip's index warnings go to a log shown on error.
+logged() { local log="$TMP/$1.log"; shift; "$@" >"$log" 2>&1 || { cat "$log"; echo "install-check: FAILED: $*"; exit 1; }; }
+
+step "fresh venv $TMP/venv"
+"$PYTHON" -m venv "$TMP/venv"
+BIN="$TMP/venv/bin"
+logged pip-build "$BIN/python" -m pip install build
+
+step "build sdist + wheel (the wheel is built from the sdist)"
+logged build "$BIN/python" -m build --outdir "$TMP/dist" "$ROOT"
+WHEEL="$(ls "$TMP"/dist/*.whl)"
+
+step "pip install $(basename "$WHEEL")"
+# torch stays pinned (pyproject: torch==2.13.0, the CPU wheel on this machine's disk).
+logged pip-install "$BIN/python" -m pip install "$WHEEL"
+
+mkdir "$TMP/work"
+cd "$TMP/work"          # outside the checkout: nothing may be read from $ROOT
+
+step "data folders resolve inside the installed package"
+"$BIN/python" - "$ROOT" <<'EOF'
+import sys
+from pathlib import Path
+
+import htdata
+from htdata import resources
+from handtouch.resources import config_file
+
+root = Path(sys.argv[1]).resolve()
+package = Path(htdata.__file__).resolve().parent
+assert root not in package.parents, f"htdata imported from the checkout: {package}"
+for path in (resources.SCHEMAS_DIR, resources.LAYOUTS_DIR, resources.PIPELINES_DIR, config_file("smoke")):
+    assert package.parent in Path(path).resolve().parents, f"{path} is not inside the installed package"
+    print("  ", path)
+from htdata.bench import discover_sections
+sections = discover_sections()
+assert "training" in sections, f"HandTouch's bench section is not registered: {sorted(sections)}"
+print("   bench sections:", ", ".join(f"{n} = {ep.value}" for n, ep in sections.items()))
+EOF
+
+step "htdata layouts"
+"$BIN/htdata" layouts >"$TMP/layouts.txt"
+grep -q opentouch_right_16x16 "$TMP/layouts.txt" || { cat "$TMP/layouts.txt"; echo "layouts missing"; exit 1; }
+
+step "htdata sample (tiny)"
+"$BIN/htdata" sample raw --scale tiny --seed 0 --quiet >/dev/null
+
+step "htdata ingest (shipped pipelines by name)"
+"$BIN/htdata" ingest --workers 2 --quiet \
+  --pipeline opentouch=raw/opentouch --pipeline touchanything=raw/touchanything --pipeline native=raw/native \
+  dataset
+
+step "htdata split"
+"$BIN/htdata" split dataset --ood-task power_grasp --seed 0 --name main >/dev/null
+
+step "htdata validate --deep"
+logged validate "$BIN/htdata" validate dataset --split main --deep
+
+step "ok"
