@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import signal
 import sys
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any, Callable, Iterable, Iterator
@@ -88,9 +89,39 @@ def limit_threads(threads: int) -> None:
         torch.set_num_threads(n)
 
 
-def _init_worker(queue, threads: int) -> None:
-    """Process-pool initializer: thread caps, and events of this worker go to the driver's queue."""
+_parent_pid: int | None = None
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """A pool worker must not outlive the ingest that started it (kill -9 of the main process alone).
+
+    Linux: the kernel SIGKILLs this process when its parent dies (prctl
+    PR_SET_PDEATHSIG). Everywhere: `parent_alive()` is checked between
+    episodes, and a parent already gone when this runs ends the worker now.
+    """
+    global _parent_pid
+    _parent_pid = parent_pid
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)   # 1 = PR_SET_PDEATHSIG
+        except (OSError, AttributeError):   # no prctl symbol: the between-episode check still applies
+            pass
+    if os.getppid() != parent_pid:
+        os._exit(1)
+
+
+def parent_alive() -> bool:
+    """False in a pool worker whose parent (the ingest) has died; always True outside pool workers."""
+    return _parent_pid is None or os.getppid() == _parent_pid
+
+
+def _init_worker(queue, threads: int, parent_pid: int | None = None) -> None:
+    """Process-pool initializer: die with the parent, thread caps, events go to the driver's queue."""
     global _progress_sink
+    if parent_pid is not None:
+        die_with_parent(parent_pid)
     limit_threads(threads)
     if queue is not None:
         _progress_sink = queue.put
@@ -154,7 +185,7 @@ class ProcessExecutor:
         attempts: dict[int, int] = {}
         ctx = mp.get_context(self.start_method)
         queue = ctx.Queue() if on_progress is not None else None
-        pool_kwargs = {"initializer": _init_worker, "initargs": (queue, self.threads)}
+        pool_kwargs = {"initializer": _init_worker, "initargs": (queue, self.threads, os.getpid())}
         # With a listener, wake up a few times a second to forward events between unit results.
         timeout = 0.2 if queue is not None else None
         try:

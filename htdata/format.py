@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 FORMAT = "htdata"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2                  # 2: versions (htdata/versions.py); 1: one unversioned commit
+READABLE_FORMAT_VERSIONS = (1, 2)
 
 CANVAS = 224                       # canonical map and RGB frame side, pixels
 MAP_SHAPE = (CANVAS, CANVAS)

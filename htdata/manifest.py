@@ -14,7 +14,6 @@ File names, the index dtype and the member table live in htdata/format.py.
 
 from __future__ import annotations
 
-import datetime as _dt
 import hashlib
 import io
 import json
@@ -26,12 +25,11 @@ import numpy as np
 
 from htdata import storage
 from htdata.codec import encode_png_u8
-from htdata.format import (CANONICAL_FILE, EPISODES_FILE, FORMAT, FORMAT_VERSION, HANDS, INDEX_DTYPE, INDEX_FILE,
-                           LAYOUTS_DIR, MANIFEST_FILE, PARTS_FILE, REGIONS_FILE, SHARDS_DIR, SIZE_FIELDS,
-                           tactile_member)
+from htdata.format import (CANONICAL_FILE, EPISODES_FILE, FORMAT, INDEX_DTYPE, INDEX_FILE, LAYOUTS_DIR, PARTS_FILE,
+                           READABLE_FORMAT_VERSIONS, REGIONS_FILE)
 from htdata.fsutil import write_bytes_atomic
 from htdata.resources import validate_json
-from htdata.shardio import SampleRecord, ShardRecord, parse_key
+from htdata.shardio import SampleRecord, ShardRecord
 
 @dataclass
 class UnitResult:
@@ -90,86 +88,68 @@ def build_index(units: list[UnitResult]) -> BuiltIndex:
     return BuiltIndex(rows=built.rows, episodes=built.episodes, shards=built.shards)
 
 
-def _frames_per_hand(rows: np.ndarray) -> dict[str, int]:
-    return {hand: int(np.count_nonzero(rows[SIZE_FIELDS[tactile_member(hand)]])) for hand in HANDS}
+def _place(root: Path, stem: str, ext: str, data: bytes) -> str:
+    """Write `data` as layouts/{stem}.{ext}, or layouts/{stem}-{sha12}.{ext} when that name holds other bytes.
 
-
-def commit_dataset(root: str | os.PathLike, units: list[UnitResult], layouts: list[LayoutArtifact],
-                   canonical: CanonicalArtifact, codec: dict, sources: list[dict],
-                   created: str | None = None, htdata_version: str | None = None) -> dict:
-    """Write layouts/, episodes.jsonl, index.npy and finally dataset.json. Returns the manifest.
-
-    Shards must already sit in ROOT/shards (ShardWriter put them there); their
-    sizes are checked against the records. sha256 of shards come from the
-    writer (computed while writing), of the other files from disk.
+    Files an earlier version lists are never rewritten: a changed layout
+    document (or coverage) gets a content-addressed name of its own.
     """
-    root = Path(root)
-    built = build_index(units)
-    for entry in built.shards:
-        path = root / SHARDS_DIR / entry["name"]
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: shard listed by a work unit is missing")
-        if path.stat().st_size != entry["bytes"]:
-            raise ValueError(f"{path}: size {path.stat().st_size} != recorded {entry['bytes']}")
-    for ep in built.episodes:
-        validate_json(ep, "episode", where=f"{EPISODES_FILE}: episode {ep.get('episode_id')!r}")
-        for hand, layout_id in ep["layouts"].items():
-            if layout_id not in {lay.layout_id for lay in layouts}:
-                raise ValueError(f"episode {ep['episode_id']!r}: layout {layout_id!r} ({hand}) not provided to commit")
+    rel = f"{LAYOUTS_DIR}/{stem}.{ext}"
+    path = root / rel
+    if path.is_file() and path.read_bytes() != data:
+        rel = f"{LAYOUTS_DIR}/{stem}-{hashlib.sha256(data).hexdigest()[:12]}.{ext}"
+        path = root / rel
+    if not path.is_file():
+        write_bytes_atomic(path, data)
+    return rel
 
-    layout_dir = root / LAYOUTS_DIR
-    layout_dir.mkdir(parents=True, exist_ok=True)
+
+def write_layout_files(root: str | os.PathLike, layouts: list[LayoutArtifact],
+                       canonical: CanonicalArtifact) -> tuple[dict, dict]:
+    """Write the layouts/ files of a version; returns the manifest's (layouts, canonical) entries."""
+    root = Path(root)
+    (root / LAYOUTS_DIR).mkdir(parents=True, exist_ok=True)
     canon_bytes = (json.dumps(canonical.document, indent=2, sort_keys=True) + "\n").encode()
-    write_bytes_atomic(layout_dir / CANONICAL_FILE, canon_bytes)
-    write_bytes_atomic(layout_dir / REGIONS_FILE, encode_png_u8(canonical.region_map, "canonical region map"))
-    write_bytes_atomic(layout_dir / PARTS_FILE, encode_png_u8(canonical.part_map, "canonical part map"))
+    canonical_entry = {
+        "file": _place(root, Path(CANONICAL_FILE).stem, "json", canon_bytes),
+        "regions": _place(root, Path(REGIONS_FILE).stem, "png", encode_png_u8(canonical.region_map, "canonical region map")),
+        "parts": _place(root, Path(PARTS_FILE).stem, "png", encode_png_u8(canonical.part_map, "canonical part map")),
+        "sha256": hashlib.sha256(canon_bytes).hexdigest()}
     layout_entries = {}
     for lay in sorted(layouts, key=lambda x: x.layout_id):
         doc = (json.dumps(lay.document, indent=2, sort_keys=True) + "\n").encode()
         cov = np.asarray(lay.coverage)
         if cov.size and cov.max() > 1:
             raise ValueError(f"layout {lay.layout_id!r}: coverage must be 0/1")
-        write_bytes_atomic(layout_dir / f"{lay.layout_id}.json", doc)
-        write_bytes_atomic(layout_dir / f"coverage_{lay.layout_id}.png",
-                      encode_png_u8(cov.astype(np.uint8), f"coverage of {lay.layout_id}"))
         layout_entries[lay.layout_id] = {
-            "file": f"{LAYOUTS_DIR}/{lay.layout_id}.json",
-            "coverage": f"{LAYOUTS_DIR}/coverage_{lay.layout_id}.png",
+            "file": _place(root, lay.layout_id, "json", doc),
+            "coverage": _place(root, f"coverage_{lay.layout_id}", "png",
+                               encode_png_u8(cov.astype(np.uint8), f"coverage of {lay.layout_id}")),
             "sha256": hashlib.sha256(doc).hexdigest(),
         }
+    return layout_entries, canonical_entry
 
-    episodes_bytes = "".join(json.dumps(ep, sort_keys=True) + "\n" for ep in built.episodes).encode()
-    write_bytes_atomic(root / EPISODES_FILE, episodes_bytes)
-    buf = io.BytesIO()
-    np.save(buf, built.rows, allow_pickle=False)
-    index_bytes = buf.getvalue()
-    write_bytes_atomic(root / INDEX_FILE, index_bytes)
 
-    from htdata import __version__
+def commit_dataset(root: str | os.PathLike, units: list[UnitResult], layouts: list[LayoutArtifact],
+                   canonical: CanonicalArtifact, codec: dict, sources: list[dict],
+                   created: str | None = None, htdata_version: str | None = None,
+                   command: str = "commit") -> dict:
+    """Commit `units` as a new dataset version at `root` (the first, on a fresh directory). Returns its manifest.
 
-    manifest = {
-        "format": FORMAT,
-        "format_version": FORMAT_VERSION,
-        "created": created or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "htdata_version": htdata_version or __version__,
-        "sources": list(sources),
-        "layouts": layout_entries,
-        "canonical": {"file": f"{LAYOUTS_DIR}/{CANONICAL_FILE}", "regions": f"{LAYOUTS_DIR}/{REGIONS_FILE}",
-                      "parts": f"{LAYOUTS_DIR}/{PARTS_FILE}", "sha256": hashlib.sha256(canon_bytes).hexdigest()},
-        "codec": codec,
-        "tasks": sorted({ep["task"] for ep in built.episodes}),
-        "scenes": sorted({ep["scene"] for ep in built.episodes}),
-        "counts": {"episodes": len(built.episodes), "samples": int(len(built.rows)),
-                   "shards": len(built.shards), "frames_per_hand": _frames_per_hand(built.rows)},
-        "shards": built.shards,
-        "episodes_file": EPISODES_FILE,
-        "episodes_sha256": hashlib.sha256(episodes_bytes).hexdigest(),
-        "index_file": INDEX_FILE,
-        "index_sha256": hashlib.sha256(index_bytes).hexdigest(),
-    }
-    validate_json(manifest, "manifest", where=f"{root / MANIFEST_FILE}")
-    write_bytes_atomic(root / MANIFEST_FILE, (json.dumps(manifest, indent=2) + "\n").encode())
-    return manifest
+    Shards must already sit in ROOT/shards (ShardWriter put them there); their
+    sizes are checked against the records. The version holds exactly these
+    units; writers that keep a parent's episodes (ingest's append, rm, trim)
+    build their parts and call snapshot.commit_parts themselves.
+    """
+    from htdata.parts import part_from_unit
+    from htdata.snapshot import commit_parts, current_snapshot
+
+    build_index(units)   # the cross-unit checks, with their messages
+    layout_entries, canonical_entry = write_layout_files(root, layouts, canonical)
+    fields = {"sources": list(sources), "layouts": layout_entries, "canonical": canonical_entry, "codec": codec}
+    parts = [part_from_unit(u) for u in sorted(units, key=lambda u: u.unit)]
+    return commit_parts(root, parts, fields, current_snapshot(root), command, created=created,
+                        htdata_version=htdata_version, splits=lambda eps, sha: {})
 
 
 # -- loading ---------------------------------------------------------------
@@ -192,9 +172,9 @@ def parse_manifest(data: str | bytes, where: str, validate: bool = True) -> dict
     manifest = json.loads(data)
     if not isinstance(manifest, dict):
         raise ValueError(f"{where}: a manifest is a JSON object, found {type(manifest).__name__}")
-    if manifest.get("format") != FORMAT or manifest.get("format_version") != FORMAT_VERSION:
+    if manifest.get("format") != FORMAT or manifest.get("format_version") not in READABLE_FORMAT_VERSIONS:
         raise ValueError(f"{where}: format {manifest.get('format')!r} v{manifest.get('format_version')!r}, "
-                         f"expected {FORMAT!r} v{FORMAT_VERSION}")
+                         f"expected {FORMAT!r} v{' or v'.join(map(str, READABLE_FORMAT_VERSIONS))}")
     if validate:
         validate_json(manifest, "manifest", where=str(where))
     return manifest
@@ -213,8 +193,9 @@ def parse_episodes(text: str, where: str) -> list[dict]:
 
 
 def load_episodes(root: str | os.PathLike, manifest: dict | None = None) -> list[dict]:
-    """Episode records of `manifest`'s version (its "episodes_file"; episodes.jsonl without one)."""
-    path = storage.join(root, (manifest or {}).get("episodes_file", EPISODES_FILE))
+    """Episode records of `manifest`'s version (the current version's when None)."""
+    manifest = manifest if manifest is not None else load_manifest(root, validate=False)
+    path = storage.join(root, manifest.get("episodes_file", EPISODES_FILE))
     return parse_episodes(storage.read_text(path), path)
 
 
@@ -242,8 +223,13 @@ def parse_index(data: bytes, where: str) -> np.ndarray:
 
 
 def load_index(root: str | os.PathLike, mmap: bool = True, manifest: dict | None = None) -> np.ndarray:
-    """`manifest`'s index (its "index_file"; index.npy without one) as INDEX_DTYPE; mmap for local datasets."""
-    path = storage.join(root, (manifest or {}).get("index_file", INDEX_FILE))
+    """`manifest`'s index (the current version's when None) as INDEX_DTYPE; mmap for local datasets."""
+    manifest = manifest if manifest is not None else load_manifest(root, validate=False)
+    return load_index_file(storage.join(root, manifest.get("index_file", INDEX_FILE)), mmap)
+
+
+def load_index_file(path: str, mmap: bool = True) -> np.ndarray:
+    """An index.npy file (local path or URL) as INDEX_DTYPE; memory-mapped when local and `mmap`."""
     local = storage.local_path(path)
     if local is None:
         return parse_index(storage.read_bytes(path), path)

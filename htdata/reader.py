@@ -298,8 +298,15 @@ class DatasetReader:
         A versioned dataset keeps each version's splits with it (manifest "splits"); an
         unversioned one has DATASET/splits/NAME.json.
         """
-        entry = self.manifest.get("splits", {}).get(name)
-        path = storage.join(self.root, entry["file"] if entry else f"{SPLITS_DIR}/{name}.json")
+        if "version" in self.manifest:
+            entry = self.manifest.get("splits", {}).get(name)
+            if entry is None:
+                raise FileNotFoundError(f"{self.root}: version {self.version} has no split named {name!r} "
+                                        f"(splits: {sorted(self.manifest.get('splits', {})) or 'none'}; "
+                                        f"run `htdata split`)")
+            path = storage.join(self.root, entry["file"])
+        else:
+            path = storage.join(self.root, f"{SPLITS_DIR}/{name}.json")
         if not storage.exists(path):
             raise FileNotFoundError(f"{path}: no split named {name!r} (run `htdata split`)")
         doc = json.loads(storage.read_text(path))

@@ -2,7 +2,9 @@
 
 `htdata publish DATASET URL` (htdata/commands/publish.py) runs `publish_dataset`.
 
-Publishing uploads layouts/, splits/, shards/, episodes.jsonl and index.npy,
+Publishing uploads layouts/, shards/ and every committed version (its
+manifest, episode file, index and splits; unversioned datasets: splits/,
+episodes.jsonl and index.npy),
 reads every uploaded file back to check its sha256 against the local file
 (and against the manifest where the manifest records one), and writes
 dataset.json LAST. A previous dataset.json at the URL is deleted first, so
@@ -30,7 +32,8 @@ import numpy as np
 from htdata import storage
 from htdata.format import EPISODES_FILE, INDEX_FILE, LAYOUTS_DIR, MANIFEST_FILE, SHARDS_DIR, SPLITS_DIR
 from htdata.fsutil import atomic_open, sha256_file, sha256_stream
-from htdata.manifest import load_index, load_manifest
+from htdata.manifest import load_index_file, load_manifest
+from htdata.versions import list_versions, version_manifest_file
 
 CACHE_ENV = "HTDATA_CACHE"
 CHUNK = 1 << 20
@@ -61,14 +64,22 @@ def publish_plan(local_root: str | os.PathLike) -> tuple[dict, list[tuple[str, s
     """
     root = Path(local_root)
     manifest = load_manifest(root)
+    versions = list_versions(root)
+    # every committed version travels (remote readers can open any of them), current last
+    manifests = [load_manifest(root, version=v) for v in versions if v != manifest.get("version")] + [manifest]
     plan: list[tuple[str, str | None]] = []
     for sub in (LAYOUTS_DIR, SPLITS_DIR):
         folder = root / sub
         if folder.is_dir():
             plan += [(f"{sub}/{p.name}", None) for p in sorted(folder.iterdir()) if p.is_file()]
-    plan += [(f"{SHARDS_DIR}/{s['name']}", s["sha256"]) for s in manifest["shards"]]
-    plan.append((manifest.get("episodes_file", EPISODES_FILE), manifest.get("episodes_sha256")))
-    plan.append((manifest.get("index_file", INDEX_FILE), manifest.get("index_sha256")))
+    for m in manifests:
+        plan += [(f"{SHARDS_DIR}/{s['name']}", s["sha256"]) for s in m["shards"]]
+    for m in manifests:
+        plan.append((m.get("episodes_file", EPISODES_FILE), m.get("episodes_sha256")))
+        plan.append((m.get("index_file", INDEX_FILE), m.get("index_sha256")))
+        plan += [(e["file"], e["sha256"]) for e in m.get("splits", {}).values()]
+    plan += [(version_manifest_file(v), None) for v in versions]
+    plan = list(dict.fromkeys(plan))   # shards shared by versions once, in first-listed order
     for rel, _ in plan:
         if not (root / rel).is_file():
             raise FileNotFoundError(f"{root / rel}: listed by the dataset but missing; cannot publish")
@@ -141,7 +152,7 @@ def cached_index_path(root_url: str, manifest: dict) -> Path:
     """Local copy of a remote dataset's index.npy, downloaded once.
 
     Kept as CACHE/index/<index_sha256>/index.npy (a dataset folder of its own,
-    so `manifest.load_index` opens it). The download is checked against the
+    so `manifest.load_index_file` opens it). The download is checked against the
     manifest's sha256 before it replaces anything; concurrent readers each
     write their own temp file and the rename is atomic.
     """
@@ -164,4 +175,4 @@ def cached_index_path(root_url: str, manifest: dict) -> Path:
 
 def load_cached_index(root_url: str, manifest: dict) -> np.ndarray:
     """The remote dataset's index, memory-mapped from the local cache."""
-    return load_index(cached_index_path(root_url, manifest).parent)
+    return load_index_file(str(cached_index_path(root_url, manifest)))

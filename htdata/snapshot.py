@@ -133,8 +133,8 @@ def commit_parts(root: str | os.PathLike, parts: list[Part], fields: dict, paren
         "change": change_record(command, summarise(diff), time),
     }
     # file names are filled by write_version; validate the rest with placeholders
-    validate_json({**manifest, "episodes_file": EPISODES_FILE, "index_file": "index.npy"}, "manifest",
-                  where=str(root / MANIFEST_FILE))
+    validate_json({**manifest, "version": (manifest["parent"] or 0) + 1, "splits": {},
+                   "episodes_file": EPISODES_FILE, "index_file": "index.npy"}, "manifest", where=str(root / MANIFEST_FILE))
     if splits is None:
         splits = (lambda eps, sha: carried_splits(parent, eps, sha)) if parent else (lambda eps, sha: {})
     split_files = splits(built.episodes, manifest["episodes_sha256"])

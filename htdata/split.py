@@ -258,9 +258,9 @@ def make_split(dataset, ood_tasks, test_ratio: float = 0.1, seed: int = 0,
 
 
 def write_split(dataset, ood_tasks, test_ratio: float = 0.1, seed: int = 0, name: str | None = None,
-                force: bool = False, command: str = "htdata split") -> "SplitResult":
-    """Split a dataset: a versioned one gets a new version (splitversions.py); an
-    unversioned one (written before versions) gets DATASET/splits/NAME.json."""
+                force: bool = False, command: str = "htdata split"):
+    """Split a dataset -> splitversions.SplitResult. A versioned dataset gets a new version
+    (splitversions.py); an unversioned one (written before versions) gets DATASET/splits/NAME.json."""
     from htdata.splitversions import SplitResult, write_versioned_split
 
     dataset = Path(dataset)

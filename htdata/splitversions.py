@@ -27,12 +27,16 @@ def _fraction(num: int, den: int) -> float:
     return float(num) / den if den else 0.0
 
 
-def count_parts(assignment: dict[str, str], episodes: list[dict]) -> tuple[dict, dict, dict]:
+def count_parts(assignment: dict[str, str], episodes: list[dict],
+                part_names: tuple[str, ...] = PARTS) -> tuple[dict, dict, dict]:
     """(parts, per-task counts, ratios) of a split document for episode records -> part.
 
     Episodes missing from `assignment` are counted nowhere (unassigned).
+    `part_names`: train / test / ood for `htdata split`'s splits; a hand-made
+    split may name others (counted, ratios over train / test / ood only).
     """
-    parts = {p: {"episodes": [], "frames": 0} for p in PARTS}
+    part_names = tuple(dict.fromkeys((*part_names, *assignment.values())))
+    parts = {p: {"episodes": [], "frames": 0} for p in part_names}
     tasks: dict[str, dict] = {}
     for ep in sorted(episodes, key=lambda e: e["episode_id"]):
         part = assignment.get(ep["episode_id"])
@@ -41,11 +45,11 @@ def count_parts(assignment: dict[str, str], episodes: list[dict]) -> tuple[dict,
         frames = int(ep["num_frames"])
         parts[part]["episodes"].append(ep["episode_id"])
         parts[part]["frames"] += frames
-        counts = tasks.setdefault(ep["task"], {p: {"episodes": 0, "frames": 0} for p in PARTS})
+        counts = tasks.setdefault(ep["task"], {p: {"episodes": 0, "frames": 0} for p in part_names})
         counts[part]["episodes"] += 1
         counts[part]["frames"] += frames
-    n = {p: len(parts[p]["episodes"]) for p in PARTS}
-    f = {p: parts[p]["frames"] for p in PARTS}
+    n = {p: len(parts[p]["episodes"]) if p in parts else 0 for p in PARTS}
+    f = {p: parts[p]["frames"] if p in parts else 0 for p in PARTS}
     ratios = {
         "test_of_in_distribution": {"episodes": _fraction(n["test"], n["train"] + n["test"]),
                                     "frames": _fraction(f["test"], f["train"] + f["test"])},
@@ -56,7 +60,7 @@ def count_parts(assignment: dict[str, str], episodes: list[dict]) -> tuple[dict,
 
 
 def assignment_of(doc: dict) -> dict[str, str]:
-    return {eid: part for part in PARTS for eid in doc["parts"][part]["episodes"]}
+    return {eid: part for part, entry in doc["parts"].items() for eid in entry["episodes"]}
 
 
 def parent_split_docs(snap) -> dict[str, dict]:
@@ -75,11 +79,11 @@ def carry_split(doc: dict, episodes: list[dict], from_version: int | None, episo
     ids = {e["episode_id"] for e in episodes}
     gone = sorted(set(old) - ids)
     unassigned = sorted(ids - set(old))
-    parts, tasks, ratios = count_parts({e: p for e, p in old.items() if e in ids}, episodes)
+    parts, tasks, ratios = count_parts({e: p for e, p in old.items() if e in ids}, episodes, tuple(doc["parts"]))
     out = {k: v for k, v in doc.items() if k != "manifest_sha256"}
     out.update({"format_version": 2, "parts": parts, "tasks": tasks, "ratios": ratios,
                 "episodes_sha256": episodes_sha256})
-    out["corrections"] = [c for c in doc["corrections"] if c["episode_id"] in ids]
+    out["corrections"] = [c for c in doc.get("corrections", []) if c["episode_id"] in ids]
     out["carried"] = {"from_version": from_version, "left": gone, "unassigned": unassigned}
     return out
 

@@ -33,13 +33,14 @@ import h5py
 import numpy as np
 
 from htdata.codec import DEFAULT_CODEC_INFO, encode_rgb, encode_tactile
-from htdata.format import CANVAS
+from htdata.format import CANVAS, MANIFEST_FILE
 from htdata.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, commit_dataset
 from htdata.resources import PIPELINES_DIR
 from htdata.sample.formats import (NativeHand, NativeRecording, OpenTouchClip, TouchAnythingEpisode,
                                    write_native_recording, write_opentouch_annotations,
                                    write_opentouch_scene, write_touchanything_episode)
 from htdata.shardio import ShardWriter, sample_key
+from htdata.versions import version_manifest_file
 
 DEFAULT_LAYOUT = "test_full"
 FRAME_NS = 33_333_333
@@ -176,6 +177,25 @@ def write_synthetic_dataset(root, episodes: list[dict], seed: int = 0,
                    codec=DEFAULT_CODEC_INFO, sources=[{"name": "synthetic", "seed": seed}],
                    created="2000-01-01T00:00:00+00:00")
     return root
+
+
+def rewrite_manifest(root, manifest: dict) -> None:
+    """Overwrite the current version's manifest in BOTH places (dataset.json, the pointer, and
+    versions/vN.json), as a test that edits a committed dataset by hand must to keep them equal."""
+    data = json.dumps(manifest, indent=2) + "\n"
+    (Path(root) / MANIFEST_FILE).write_text(data)
+    (Path(root) / version_manifest_file(manifest["version"])).write_text(data)
+
+
+def commit_split(root, name: str, parts: dict[str, list[str]]) -> int:
+    """Commit a new version whose split NAME places episodes as given (a hand-made split, for
+    reader / torch tests that need particular parts). Returns the new version number."""
+    from htdata.snapshot import commit_parts, open_snapshot
+
+    snap = open_snapshot(root)
+    data = (json.dumps({"name": name, "parts": {p: {"episodes": ids} for p, ids in parts.items()}}) + "\n").encode()
+    return commit_parts(root, snap.parts(), {}, snap, f"test: split {name}",
+                        splits=lambda episodes, sha: {name: data})["version"]
 
 
 # --------------------------------------------------------------------------- episode tables

@@ -16,7 +16,7 @@ import h5py
 import numpy as np
 import pytest
 
-from htdata.ingest import pack_units, parse_sources, unit_target_frames
+from htdata.ingest import parse_sources
 from htdata.sample.formats import write_opentouch_annotations, write_opentouch_scene
 from tests.factories import (COLOURS, ingest_cli, make_native, make_opentouch, make_touchanything, ot_clip,
                              small_pipeline, temp_leftovers)
@@ -35,22 +35,6 @@ def read_all(out: Path) -> dict[str, dict[str, bytes]]:
 
 # --------------------------------------------------------------------------- planning / CLI forms
 
-def test_pack_units_is_greedy_in_order():
-    assert pack_units([3, 3, 3, 10, 1], 6) == [[0, 1], [2, 3], [4]]
-    assert pack_units([100], 8) == [[0]]          # a long episode is its own unit
-    assert pack_units([], 8) == []
-    assert pack_units([0, 0], 8) == [[0, 1]]
-
-
-def test_unit_target_comes_from_the_shard_size_only():
-    assert unit_target_frames(256) == 64
-    assert unit_target_frames(8) == 2
-    assert unit_target_frames(3) == 1 and unit_target_frames(1) == 1   # ceil, never 0
-    # 21 episodes of ~65 frames (the bench corpus): enough units for 2 workers (>= 8)
-    frames = [80, 54, 64, 79, 76, 83, 86, 56, 86, 58, 78, 52, 72, 48, 51, 49, 54, 63, 68, 61, 62]
-    assert len(pack_units(frames, unit_target_frames(256))) >= 8
-
-
 def test_resume_with_other_worker_count_keeps_every_unit(tmp_path):
     raw = make_opentouch(tmp_path / "raw")
     pipe = small_pipeline(tmp_path, "opentouch")
@@ -59,7 +43,8 @@ def test_resume_with_other_worker_count_keeps_every_unit(tmp_path):
     first = dataset_bytes(out)
     assert ingest_cli("--pipeline", pipe, raw, out, workers=2) == 0
     report = json.loads((out / "reports" / "ingest.json").read_text())
-    assert report["units_run"] == 0 and report["units_resumed"] == report["units"] == 3
+    # nothing changed: no unit at all, no new version
+    assert report["units"] == 0 and report["episodes_unchanged"] == 3 and report["version"] == 1
     assert dataset_bytes(out) == first
 
 
@@ -268,7 +253,7 @@ def test_nonfinite_frames_are_dropped_and_counted(tmp_path):
                                          "reason": "nonfinite_tactile:right"} for i in (2, 7)]
 
 
-def test_refuses_foreign_or_different_output_dirs(tmp_path, capsys):
+def test_refuses_foreign_dirs_and_codec_changes(tmp_path, capsys):
     raw = make_native(tmp_path / "raw")
     foreign = tmp_path / "foreign"
     foreign.mkdir()
@@ -277,9 +262,14 @@ def test_refuses_foreign_or_different_output_dirs(tmp_path, capsys):
     assert "not empty" in capsys.readouterr().err and (foreign / "notes.txt").read_text() == "mine"
     out = tmp_path / "ds"
     assert ingest_cli("--pipeline", small_pipeline(tmp_path, "native"), raw, out) == 0
-    other = small_pipeline(tmp_path, "native", samples_per_shard=3)
+    capsys.readouterr()
+    other = small_pipeline(tmp_path, "native")
+    other.write_text(other.read_text().replace('compression = "zip"', 'compression = "piz"'))
+    assert 'compression = "piz"' in other.read_text()
     assert ingest_cli("--pipeline", other, raw, out) == 2
-    assert "different pipeline" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "tactile.compression = 'zip'" in err and "'piz'" in err
+    assert json.loads((out / "dataset.json").read_text())["version"] == 1     # nothing written
 
 
 # --------------------------------------------------------------------------- crash + resume
@@ -291,9 +281,10 @@ def cli_subprocess(args, env_extra=None, **kw):
 
 
 def dataset_bytes(out: Path) -> dict[str, bytes]:
+    manifest = json.loads((out / "dataset.json").read_text())
     files = {p.name: p.read_bytes() for p in (out / "shards").glob("*.tar")}
-    files["index.npy"] = (out / "index.npy").read_bytes()
-    files["episodes.jsonl"] = (out / "episodes.jsonl").read_bytes()
+    files["index.npy"] = (out / manifest["index_file"]).read_bytes()
+    files["episodes.jsonl"] = (out / manifest["episodes_file"]).read_bytes()
     return files
 
 
@@ -362,8 +353,10 @@ def test_changed_source_redoes_only_its_unit(tmp_path, clean_run):
         f.write("z_scene::demo_01,lift,,,,\n")
     assert ingest_cli("--pipeline", pipe, raw, out) == 0
     report = json.loads((out / "reports" / "ingest.json").read_text())
-    # 8 samples per shard -> units of >= 2 frames: one episode each; only the new episode's unit runs
-    assert report["units"] == 4 and report["units_run"] == 1 and report["samples"] == 48
+    # one unit per episode: only the new episode's unit exists and runs; the others are reused as committed
+    assert report["units"] == 1 and report["units_run"] == 1 and report["samples"] == 9
+    assert report["episodes_unchanged"] == 3 and report["version"] == 2
+    assert len(read_all(out)) == 48
 
 
 # --------------------------------------------------------------------------- progress + timing

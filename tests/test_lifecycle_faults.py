@@ -10,7 +10,6 @@ import pytest
 
 from htdata.faults import ENV
 from htdata.reader import DatasetReader
-from htdata.snapshot import commit_parts, open_snapshot
 from htdata.versions import list_versions
 from tests.factories import write_synthetic_dataset
 
@@ -23,10 +22,7 @@ TIME_FIELDS = ("created",)
 
 
 def versioned(root, episodes=EPISODES):
-    write_synthetic_dataset(root, episodes)
-    snap = open_snapshot(root)
-    commit_parts(root, snap.parts(), {}, snap, "first", created="2000-01-01T00:00:00+00:00")
-    return root
+    return write_synthetic_dataset(root, episodes)
 
 
 def htdata(args, crash_at=None):

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from tests.factories import (COLOURS, PERIOD, ingest_cli, small_pipeline, temp_leftovers)
+from htdata.format import MANIFEST_FILE
 from htdata.sample.formats import (OpenTouchClip, TouchAnythingEpisode, write_opentouch_annotations,
                                    write_opentouch_scene, write_touchanything_episode)
 
@@ -109,8 +110,9 @@ def test_ray_executor_equals_process_pool(tmp_path, monkeypatch):
     for key, members in pool_samples.items():
         assert ray_samples[key] == members, key             # same member bytes
     assert ray_shards == pool_shards                        # same shard names and sha256
-    assert (ray_out / "index.npy").read_bytes() == (pool_out / "index.npy").read_bytes()
-    assert (ray_out / "episodes.jsonl").read_bytes() == (pool_out / "episodes.jsonl").read_bytes()
+    ray_manifest, pool_manifest = (json.loads((out / MANIFEST_FILE).read_text()) for out in (ray_out, pool_out))
+    for listed in ("index_file", "episodes_file"):          # the current version's index.npy / episodes.jsonl
+        assert (ray_out / ray_manifest[listed]).read_bytes() == (pool_out / pool_manifest[listed]).read_bytes()
     # Ray left nothing in the dataset, the sources or the working directory
     assert temp_leftovers(ray_out) == []
     assert sorted(p.name for p in ray_out.iterdir()) == sorted(p.name for p in pool_out.iterdir())

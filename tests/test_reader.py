@@ -5,8 +5,11 @@ import pickle
 import numpy as np
 import pytest
 
+from htdata.format import INDEX_FILE, MANIFEST_FILE
 from htdata.reader import DatasetReader
+from htdata.versions import VERSIONS_DIR, version_dir
 from tests.factories import (
+    commit_split,
     MIXED_HANDS_EPISODES,
     default_canonical,
     synthetic_members,
@@ -112,16 +115,15 @@ def test_split_selection(dataset, tmp_path):
     r = DatasetReader(dataset)
     with pytest.raises(FileNotFoundError, match="main"):
         r.split("main")
-    splits = dataset / "splits"
-    splits.mkdir(exist_ok=True)
-    (splits / "main.json").write_text(json.dumps(
-        {"parts": {"train": {"episodes": ["ep_c", "ep_a"]}, "val": {"episodes": ["ep_b"]}}}))
+    commit_split(dataset, "main", {"train": ["ep_c", "ep_a"], "val": ["ep_b"]})
+    with pytest.raises(FileNotFoundError, match="main"):
+        r.split("main")                  # r reads the version it opened: the split is in the next one
+    r = DatasetReader(dataset)
     assert set(r.split("main")["parts"]) == {"train", "val"}
     assert list(r.sample_indices("main", "train")) == [0, 1, 2, 3, 4, 9]
     assert list(r.sample_indices("main", "val")) == [5, 6, 7, 8]
     with pytest.raises(KeyError, match="test"):
         r.sample_indices("main", "test")
-    (splits / "main.json").unlink()
 
 
 def test_corrupt_index_offset_is_detected(dataset, tmp_path):
@@ -129,9 +131,10 @@ def test_corrupt_index_offset_is_detected(dataset, tmp_path):
 
     copy = tmp_path / "copy"
     shutil.copytree(dataset, copy)
-    rows = np.load(copy / "index.npy")
+    index_path = copy / json.loads((copy / MANIFEST_FILE).read_text())["index_file"]
+    rows = np.load(index_path)
     rows["offset"][1] = rows["offset"][2]
-    np.save(copy / "index.npy", rows)
+    np.save(index_path, rows)
     r = DatasetReader(copy)
     with pytest.raises(ValueError, match="index and shard disagree"):
         r.sample(1)
@@ -182,8 +185,9 @@ def test_storage_helpers_local_and_memory(dataset):
 
     from htdata import storage
 
-    assert storage.exists(storage.join(dataset, "dataset.json"))
-    assert "index.npy" in storage.listdir(dataset)
+    assert storage.exists(storage.join(dataset, MANIFEST_FILE))
+    assert VERSIONS_DIR in storage.listdir(dataset)
+    assert INDEX_FILE in storage.listdir(storage.join(dataset, version_dir(1)))
     fs = fsspec.filesystem("memory")
     fs.pipe("/st/a/x.bin", b"abc")
     assert storage.is_url("memory://st") and not storage.is_url(f"file://{dataset}")

@@ -1,5 +1,6 @@
 import json
 import uuid
+from pathlib import Path
 
 import fsspec
 import numpy as np
@@ -8,15 +9,13 @@ import pytest
 from htdata import remote
 from htdata.cli import main as cli_main
 from htdata.reader import DatasetReader
-from tests.factories import MIXED_HANDS_ONE_LAYOUT_EPISODES as EPISODES, write_synthetic_dataset
+from tests.factories import commit_split, MIXED_HANDS_ONE_LAYOUT_EPISODES as EPISODES, write_synthetic_dataset
 
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
     root = write_synthetic_dataset(tmp_path_factory.mktemp("ds") / "ds", EPISODES, seed=3,
                                    samples_per_shard=3, bend_dims=2)
-    (root / "splits").mkdir()
-    (root / "splits" / "main.json").write_text(json.dumps(
-        {"parts": {"train": {"episodes": ["ep_a", "ep_c"]}, "test": {"episodes": ["ep_b"]}}}))
+    commit_split(root, "main", {"train": ["ep_a", "ep_c"], "test": ["ep_b"]})
     return root
 
 
@@ -34,7 +33,10 @@ def test_publish_round_trip_is_byte_equal(dataset):
     url = fresh_url()
     result = remote.publish_dataset(dataset, url)
     manifest = json.loads((dataset / "dataset.json").read_text())
-    assert result.files == len(manifest["shards"]) + 2 + 1 + len(list((dataset / "layouts").iterdir())) + 1
+    versions = [json.loads(p.read_text()) for p in (dataset / "versions").glob("v*.json")]
+    # shards + each version's (manifest, episodes, index, splits) + layouts + dataset.json
+    assert result.files == (len(manifest["shards"]) + sum(3 + len(v["splits"]) for v in versions)
+                            + len(list((dataset / "layouts").iterdir())) + 1)
     local, far = DatasetReader(dataset), DatasetReader(url)
     assert len(far) == len(local) == 10
     assert far.manifest == local.manifest and far.episodes == local.episodes
@@ -52,6 +54,21 @@ def test_publish_round_trip_is_byte_equal(dataset):
         assert np.array_equal(far.coverage(layout_id), local.coverage(layout_id))
     fs = fsspec.filesystem("memory")
     assert not fs.exists(url.replace("memory://", "/") + "/.work")
+
+
+def test_publish_keeps_the_versions_and_their_splits(dataset, tmp_path):
+    import shutil
+
+    from htdata.split import make_split
+
+    copy = Path(shutil.copytree(dataset, tmp_path / "copy"))
+    make_split(copy, ["pour"], name="rule")                # version 3, beside the fixture's split of version 2
+    url = fresh_url()
+    remote.publish_dataset(copy, url)
+    local, far = DatasetReader(copy), DatasetReader(url)
+    assert far.version == local.version == 3 and far.split("rule") == local.split("rule")
+    assert far.split("main") == local.split("main")
+    assert DatasetReader(url, version=1).manifest == DatasetReader(copy, version=1).manifest
 
 
 def test_interrupted_upload_leaves_no_manifest(dataset, monkeypatch):
@@ -103,7 +120,7 @@ def test_cached_index_is_reused_without_download(dataset, cache, monkeypatch):
     mtime = cached[0].stat().st_mtime_ns
     # Remove the remote index: a second open can only work from the cache.
     fs, path = fsspec.core.url_to_fs(url)
-    fs.rm(f"{path}/index.npy")
+    fs.rm(f"{path}/{first.manifest['index_file']}")
     downloads = {"n": 0}
     real_open = remote.storage.open_binary
 

@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 from htdata.benchmarks.index import index_load_benchmark
-from htdata.format import INDEX_DTYPE
+from htdata.format import EPISODES_FILE, INDEX_DTYPE, INDEX_FILE, MANIFEST_FILE
 from htdata.manifest import UnitResult, build_index, load_episodes, load_index, load_manifest
 from htdata.resources import validate_json
 from htdata.shardio import ShardWriter, member_offsets, parse_key, sample_key
+from htdata.versions import version_dir, version_manifest_file
 from tests.factories import write_synthetic_dataset
 
 EPISODES = [
@@ -145,14 +146,19 @@ def test_webdataset_reads_our_shards(tmp_path):
 def test_commit_writes_consistent_index_and_manifest(tmp_path):
     root = write_synthetic_dataset(tmp_path / "ds", EPISODES, samples_per_shard=3)
     manifest = load_manifest(root)
-    index = load_index(root)
-    episodes = load_episodes(root)
+    index = load_index(root, manifest=manifest)
+    episodes = load_episodes(root, manifest)
     assert index.dtype == INDEX_DTYPE and isinstance(index, np.memmap)
     assert manifest["counts"] == {"episodes": 3, "samples": 9, "shards": 4,
                                   "frames_per_hand": {"left": 4, "right": 8}}
     assert manifest["tasks"] == ["pour", "wipe"] and manifest["scenes"] == ["kitchen", "office"]
-    assert hashlib.sha256((root / "index.npy").read_bytes()).hexdigest() == manifest["index_sha256"]
-    assert hashlib.sha256((root / "episodes.jsonl").read_bytes()).hexdigest() == manifest["episodes_sha256"]
+    assert (manifest["version"], manifest["parent"]) == (1, None)
+    assert manifest["index_file"] == f"{version_dir(1)}/{INDEX_FILE}"
+    assert manifest["episodes_file"] == f"{version_dir(1)}/{EPISODES_FILE}"
+    assert (root / version_manifest_file(1)).read_bytes() == (root / MANIFEST_FILE).read_bytes()
+    assert not (root / INDEX_FILE).exists() and not (root / EPISODES_FILE).exists()
+    assert hashlib.sha256((root / manifest["index_file"]).read_bytes()).hexdigest() == manifest["index_sha256"]
+    assert hashlib.sha256((root / manifest["episodes_file"]).read_bytes()).hexdigest() == manifest["episodes_sha256"]
     for s in manifest["shards"]:
         assert hashlib.sha256((root / "shards" / s["name"]).read_bytes()).hexdigest() == s["sha256"]
     assert [s["first_sample"] for s in manifest["shards"]] == [0, 3, 6, 8]

@@ -1,4 +1,3 @@
-import json
 
 import numpy as np
 import pytest
@@ -13,6 +12,7 @@ from htdata.torchdata import (
     shuffled_indices,
 )
 from tests.factories import (
+    commit_split,
     MIXED_HANDS_EPISODES,
     default_canonical,
     synthetic_rgb,
@@ -36,9 +36,7 @@ def coverages():
 def dataset(tmp_path_factory):
     root = tmp_path_factory.mktemp("tds") / "ds"
     write_synthetic_dataset(root, EPISODES, seed=SEED, coverages=coverages(), samples_per_shard=2)
-    (root / "splits").mkdir()
-    (root / "splits" / "main.json").write_text(json.dumps(
-        {"parts": {"train": {"episodes": ["ep_a", "ep_c"]}, "val": {"episodes": ["ep_b"]}}}))
+    commit_split(root, "main", {"train": ["ep_a", "ep_c"], "val": ["ep_b"]})
     return root
 
 

@@ -14,11 +14,13 @@ import pytest
 from htdata.benchmarks.validation import validate_benchmark
 from htdata.cli import main as cli_main
 from htdata.codec import encode_exr
-from htdata.manifest import INDEX_FILE, MANIFEST_FILE, SHARDS_DIR, SIZE_FIELDS, load_index
+from htdata.format import EPISODES_FILE, FORMAT_VERSION, INDEX_FILE, MANIFEST_FILE, SHARDS_DIR, SIZE_FIELDS
+from htdata.manifest import load_episodes, load_index
 from htdata.shardio import BLOCK, member_header, padded
-from htdata.split import make_split
+from htdata.split import make_split, split_path
 from htdata.validate import group_rows, validate_dataset
-from tests.factories import FRAME_NS, SPLIT_EPISODES as EPISODES, write_synthetic_dataset
+from htdata.versions import VERSIONS_DIR
+from tests.factories import FRAME_NS, SPLIT_EPISODES as EPISODES, rewrite_manifest, write_synthetic_dataset
 
 @pytest.fixture(scope="module")
 def pristine(tmp_path_factory) -> Path:
@@ -37,15 +39,39 @@ def _manifest(root: Path) -> dict:
     return json.loads((root / MANIFEST_FILE).read_text())
 
 
+def _index(root: Path) -> np.ndarray:
+    """The current version's index rows (a writable copy)."""
+    return load_index(root, mmap=False, manifest=_manifest(root)).copy()
+
+
+def _episode_ids(root: Path) -> list[str]:
+    return [e["episode_id"] for e in load_episodes(root, _manifest(root))]
+
+
+def _unversioned(root: Path) -> Path:
+    """Turn a (version 1) synthetic dataset into one written before versions existed (format_version 1):
+    episodes.jsonl and index.npy at the root, no versions/, a manifest without version fields."""
+    manifest = _manifest(root)
+    assert manifest["version"] == 1 and not manifest["splits"]
+    (root / manifest["episodes_file"]).rename(root / EPISODES_FILE)
+    (root / manifest["index_file"]).rename(root / INDEX_FILE)
+    shutil.rmtree(root / VERSIONS_DIR)
+    for field in ("version", "parent", "change", "splits", "next_unit"):
+        manifest.pop(field, None)
+    manifest.update(format_version=1, episodes_file=EPISODES_FILE, index_file=INDEX_FILE)
+    (root / MANIFEST_FILE).write_text(json.dumps(manifest, indent=2))
+    return root
+
+
 def _row_of(root: Path, episode_id: str, frame: int) -> int:
-    eps = [json.loads(l)["episode_id"] for l in (root / "episodes.jsonl").read_text().splitlines()]
-    index = load_index(root, mmap=False)
+    eps = _episode_ids(root)
+    index = _index(root)
     pos = eps.index(episode_id)
     return int(np.flatnonzero((index["episode"] == pos) & (index["frame"] == frame))[0])
 
 
 def _read_members(root: Path, row: int) -> dict[str, bytes]:
-    index = load_index(root, mmap=False)
+    index = _index(root)
     r = index[row]
     shard = _manifest(root)["shards"][int(r["shard"])]["name"]
     out = {}
@@ -62,13 +88,13 @@ def _read_members(root: Path, row: int) -> dict[str, bytes]:
 
 def rewrite_members(root: Path, row: int, replacement: dict[str, bytes]) -> None:
     """Replace member bytes of one sample, bypassing every writer check, then fix the
-    shard's offsets/sizes in index.npy and the sha256/bytes in dataset.json so that only
-    the content (or time / split) checks can notice."""
+    shard's offsets/sizes in the version's index.npy and the sha256/bytes in its manifest
+    (both copies) so that only the content (or time / split) checks can notice."""
     manifest = _manifest(root)
-    index = load_index(root, mmap=False).copy()
+    index = _index(root)
     shard_pos = int(index[row]["shard"])
     entry = manifest["shards"][shard_pos]
-    eps = [json.loads(l)["episode_id"] for l in (root / "episodes.jsonl").read_text().splitlines()]
+    eps = _episode_ids(root)
     out = bytearray()
     for r in np.flatnonzero(index["shard"] == shard_pos):
         members = _read_members(root, int(r))
@@ -87,9 +113,9 @@ def rewrite_members(root: Path, row: int, replacement: dict[str, bytes]) -> None
     entry["bytes"] = len(out)
     buf = io.BytesIO()
     np.save(buf, index, allow_pickle=False)
-    (root / INDEX_FILE).write_bytes(buf.getvalue())
+    (root / manifest["index_file"]).write_bytes(buf.getvalue())
     manifest["index_sha256"] = hashlib.sha256(buf.getvalue()).hexdigest()
-    (root / MANIFEST_FILE).write_text(json.dumps(manifest, indent=2))
+    rewrite_manifest(root, manifest)
 
 
 def _failures(report: dict, check: str, what: str) -> list[dict]:
@@ -185,15 +211,26 @@ def test_deleted_shard(ds):
     assert f"({shard['samples']} samples lost)" in fail["message"]
 
 
-def test_extra_shard_is_a_failure(ds):
+def test_extra_shard_is_a_failure_before_versions(ds):
+    _unversioned(ds)
+    assert validate_dataset(ds)["ok"]
     shutil.copy(ds / SHARDS_DIR / _manifest(ds)["shards"][0]["name"], ds / SHARDS_DIR / "shard-999999-000.tar")
     report = validate_dataset(ds)
     [fail] = _failures(report, "structure", "shard_extra")
     assert fail["shard"] == "shard-999999-000.tar"
 
 
+def test_shard_no_version_lists_is_a_warning(ds):
+    # versioned: a shard no version lists is an interrupted write's leftover (htdata gc removes it)
+    shutil.copy(ds / SHARDS_DIR / _manifest(ds)["shards"][0]["name"], ds / SHARDS_DIR / "shard-999999-000.tar")
+    report = validate_dataset(ds)
+    assert report["ok"] and not _failures(report, "structure", "shard_extra")
+    [warn] = [w for w in report["checks"]["structure"]["warnings"] if w["what"] == "shard_unlisted"]
+    assert warn["shard"] == "shard-999999-000.tar"
+
+
 def test_index_offset_pointing_at_the_wrong_member(ds):
-    index = load_index(ds, mmap=False).copy()
+    index = _index(ds)
     index[1]["offset"], index[2]["offset"] = index[2]["offset"], index[1]["offset"]
     _write_index(ds, index)
     report = validate_dataset(ds)
@@ -206,14 +243,14 @@ def test_index_offset_pointing_at_the_wrong_member(ds):
 def _write_index(root: Path, index: np.ndarray) -> None:
     buf = io.BytesIO()
     np.save(buf, index, allow_pickle=False)
-    (root / INDEX_FILE).write_bytes(buf.getvalue())
     manifest = _manifest(root)
+    (root / manifest["index_file"]).write_bytes(buf.getvalue())
     manifest["index_sha256"] = hashlib.sha256(buf.getvalue()).hexdigest()
-    (root / MANIFEST_FILE).write_text(json.dumps(manifest))
+    rewrite_manifest(root, manifest)
 
 
 def test_swapped_index_rows_break_frame_order(ds):
-    index = load_index(ds, mmap=False).copy()
+    index = _index(ds)
     index[[1, 2]] = index[[2, 1]]           # ep_a frames 0,2,1,3,4
     _write_index(ds, index)
     report = validate_dataset(ds)
@@ -223,7 +260,7 @@ def test_swapped_index_rows_break_frame_order(ds):
 
 
 def test_interleaved_episodes_are_not_contiguous(ds):
-    index = load_index(ds, mmap=False).copy()
+    index = _index(ds)
     index[[4, 5]] = index[[5, 4]]           # ep_a frame 4 and ep_b frame 0 swap places
     _write_index(ds, index)
     report = validate_dataset(ds)
@@ -238,11 +275,11 @@ def test_group_rows_handles_empty_groups():
 
 
 def test_tampered_episodes_file_fails_checksum(ds):
-    path = ds / "episodes.jsonl"
+    path = ds / _manifest(ds)["episodes_file"]
     path.write_text(path.read_text().replace('"kitchen"', '"garage"', 1))
     report = validate_dataset(ds)
     [fail] = _failures(report, "structure", "episodes_sha256")
-    assert fail["file"] == "episodes.jsonl"
+    assert fail["file"] == _manifest(ds)["episodes_file"] == "versions/v000001/episodes.jsonl"
 
 
 def test_missing_manifest_is_reported_not_raised(tmp_path):
@@ -354,10 +391,16 @@ def test_all_zero_and_dead_regions_are_warnings(tmp_path):
 # -- split faults ---------------------------------------------------------------------------------
 
 def _edit_split(root: Path, name: str, edit) -> None:
-    path = root / "splits" / f"{name}.json"
+    """Edit the current version's split file, and its sha256 in the manifest (both copies, when the
+    version lists it) so that only the split content checks can notice."""
+    path = split_path(root, name)
     doc = json.loads(path.read_text())
     edit(doc)
     path.write_text(json.dumps(doc))
+    manifest = _manifest(root)
+    if name in manifest.get("splits", {}):
+        manifest["splits"][name]["sha256"] = hashlib.sha256(path.read_bytes()).hexdigest()
+        rewrite_manifest(root, manifest)
 
 
 def test_episode_in_two_parts(ds):
@@ -395,13 +438,40 @@ def test_duplicated_frame_across_parts(ds):
 
 
 def test_split_of_another_commit_and_unknown_split(ds):
-    make_split(ds, ["pour"], name="s")
-    _edit_split(ds, "s", lambda d: d.update(manifest_sha256="0" * 64))
+    # versioned (format_version 2): a split names the episode file of the version it describes
+    doc = make_split(ds, ["pour"], name="s")
+    assert doc["format_version"] == FORMAT_VERSION == 2
+    assert doc["episodes_sha256"] == _manifest(ds)["episodes_sha256"]
+    assert validate_dataset(ds, split="s")["ok"]
+    _edit_split(ds, "s", lambda d: d.update(episodes_sha256="0" * 64))
     report = validate_dataset(ds, split="s")
-    assert _failures(report, "splits", "split_manifest")
+    assert _failing_checks(report) == {"splits"}
+    [fail] = _failures(report, "splits", "split_manifest")
+    assert fail["expected"] == "0" * 64 and fail["found"] == _manifest(ds)["episodes_sha256"]
     report = validate_dataset(ds, split="nope")
     [fail] = _failures(report, "splits", "split_missing")
     assert "known splits: s" in fail["message"]
+
+
+def test_split_file_edited_behind_the_manifest_fails_its_sha256(ds):
+    make_split(ds, ["pour"], name="s")
+    path = split_path(ds, "s")
+    path.write_text(path.read_text().replace('"rule"', '"rule" ', 1))    # same document, other bytes
+    report = validate_dataset(ds, split="s")
+    [fail] = _failures(report, "splits", "split_sha256")
+    assert fail["file"] == str(path) and fail["expected"] == _manifest(ds)["splits"]["s"]["sha256"]
+
+
+def test_split_of_another_manifest_before_versions(ds):
+    # unversioned (format_version 1): a split names the sha256 of the dataset.json it was made from
+    _unversioned(ds)
+    doc = make_split(ds, ["pour"], name="s")
+    assert doc["format_version"] == 1 and split_path(ds, "s") == ds / "splits" / "s.json"
+    assert validate_dataset(ds, split="s")["ok"]
+    _edit_split(ds, "s", lambda d: d.update(manifest_sha256="0" * 64))
+    report = validate_dataset(ds, split="s")
+    [fail] = _failures(report, "splits", "split_manifest")
+    assert fail["expected"] == "0" * 64
 
 
 def test_bad_arguments():

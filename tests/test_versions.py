@@ -21,11 +21,8 @@ EPISODES = [
 
 
 def versioned(root, episodes=EPISODES):
-    """A synthetic dataset committed as version 1 (units of 2 episodes, shards of 4 samples)."""
-    write_synthetic_dataset(root, episodes)
-    snap = open_snapshot(root)
-    commit_parts(root, snap.parts(), {}, snap, "test: first version")
-    return root
+    """A synthetic dataset: version 1, units of 2 episodes, shards of 4 samples."""
+    return write_synthetic_dataset(root, episodes)
 
 
 def all_samples(root, version=None):
@@ -34,7 +31,7 @@ def all_samples(root, version=None):
 
 
 def test_parts_round_trip_reassembles_the_same_index(tmp_path):
-    root = write_synthetic_dataset(tmp_path / "ds", EPISODES)
+    root = versioned(tmp_path / "ds")
     snap = open_snapshot(root)
     parts = snap.parts()
     assert [p.unit for p in parts] == [0, 1, 2]
@@ -48,13 +45,17 @@ def test_first_version_and_log_fields(tmp_path):
     root = versioned(tmp_path / "ds")
     assert list_versions(root) == [1]
     manifest = json.loads((root / MANIFEST_FILE).read_text())
-    assert manifest["version"] == 1 and manifest["parent"] is None
-    assert manifest["change"]["command"] == "test: first version"
-    # upgraded from an unversioned commit of the same episodes: nothing added
-    assert manifest["change"]["summary"] == {"episodes_added": 0, "episodes_removed": 0, "episodes_changed": 0,
-                                             "frames_added": 0, "frames_removed": 0, "frames": 25}
+    assert manifest["version"] == 1 and manifest["parent"] is None and manifest["format_version"] == 2
+    assert manifest["change"]["command"] == "commit"
+    assert manifest["change"]["summary"] == {"episodes_added": 5, "episodes_removed": 0, "episodes_changed": 0,
+                                             "frames_added": 25, "frames_removed": 0, "frames": 25}
     assert (root / version_manifest_file(1)).read_bytes() == (root / MANIFEST_FILE).read_bytes()
     assert manifest["episodes_file"] == "versions/v000001/episodes.jsonl"
+    # the same episodes committed again on top: nothing added, nothing removed
+    snap = open_snapshot(root)
+    again = commit_parts(root, snap.parts(), {}, snap, "again")
+    assert again["version"] == 2 and again["parent"] == 1
+    assert again["change"]["summary"]["episodes_added"] == 0 and again["change"]["summary"]["frames"] == 25
 
 
 def test_a_version_without_parent_counts_everything_added(tmp_path):
@@ -135,18 +136,16 @@ def test_trim_renumbers_frames_and_keeps_source_time(tmp_path):
 def test_splits_carry_over_removed_episodes_leave_their_part(tmp_path):
     from htdata.split import make_split
 
-    root = write_synthetic_dataset(tmp_path / "ds", EPISODES)
-    make_split(root, ["pour"], name="main", seed=0)
-    snap = open_snapshot(root)
-    commit_parts(root, snap.parts(), {}, snap, "v1")
+    root = versioned(tmp_path / "ds")
+    make_split(root, ["pour"], name="main", seed=0)        # version 2
     v1 = DatasetReader(root).split("main")
     remove_episodes(root, ["ep_1"], dry_run=False, command="rm")
     v2 = DatasetReader(root).split("main")
     assert "ep_1" in v1["parts"]["ood"]["episodes"] and "ep_1" not in v2["parts"]["ood"]["episodes"]
     for part in ("train", "test"):
         assert v2["parts"][part]["episodes"] == v1["parts"][part]["episodes"]
-    assert v2["carried"] == {"from_version": 1, "left": ["ep_1"], "unassigned": []}
-    assert DatasetReader(root, version=1).split("main")["parts"] == v1["parts"]
+    assert v2["carried"] == {"from_version": 2, "left": ["ep_1"], "unassigned": []}
+    assert DatasetReader(root, version=2).split("main")["parts"] == v1["parts"]
 
 
 def test_gc_keeps_current_and_frees_unlisted_shards(tmp_path):

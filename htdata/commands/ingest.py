@@ -6,6 +6,9 @@
     htdata ingest --pipeline A.toml --pipeline B.toml SRC_A SRC_B OUT
     htdata ingest --layouts ~/my_gloves --pipeline native.toml /raw/native OUT
 
+Ingesting into an existing dataset APPENDS, as a new version: unchanged
+episodes are kept as they are, changed inputs are re-ingested, edited labels
+are updated, and episodes whose source is gone are kept (htdata rm removes).
 Layout ids are searched in --layouts DIR (repeatable), then $HTDATA_LAYOUTS
 (os.pathsep-separated folders), then the shipped layouts; every layout used
 is copied into OUT/layouts/. Failures (file/episode/frame) are listed on
@@ -23,6 +26,7 @@ import sys
 from htdata.executors import UnitFailed
 from htdata.ingest import ingest, parse_sources
 from htdata.layouts import LAYOUTS_ENV
+from htdata.lock import DatasetLocked
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -50,8 +54,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         sources, out = parse_sources(args.pipeline, args.paths)
         report = ingest(sources, out, workers=args.workers, executor=args.executor, address=args.address,
-                        retries=args.retries, progress=not args.quiet, layout_dirs=tuple(args.layouts))
-    except (ValueError, FileNotFoundError) as e:   # LayoutNotFound is a FileNotFoundError: one line, no traceback
+                        retries=args.retries, progress=not args.quiet, layout_dirs=tuple(args.layouts),
+                        command="htdata ingest " + " ".join(sys.argv[2:]))
+    except (ValueError, FileNotFoundError, DatasetLocked) as e:   # LayoutNotFound is a FileNotFoundError: one line, no traceback
         print(f"htdata ingest: error: {e}", file=sys.stderr)
         return 2
     except UnitFailed as e:
@@ -62,9 +67,13 @@ def run(args: argparse.Namespace) -> int:
         episode = f" [{f['episode_id']}]" if f["episode_id"] is not None else ""
         frame = f" frame {f['frame']}" if f["frame"] is not None else ""
         print(f"FAILED {f['file']}{episode}{frame}: {f['error']}", file=sys.stderr)
+    for note in report["notes"]:
+        print(f"note: {note}", file=sys.stderr)
     print(f"ingested {report['episodes_ingested']}/{report['episodes_planned']} episodes, "
           f"{report['samples']} samples, {len(report['dropped_frames'])} dropped frames, {n_fail} failures "
-          f"({report['units_resumed']} of {report['units']} units resumed) -> {out}", file=sys.stderr)
+          f"({report['units_resumed']} of {report['units']} units resumed); unchanged "
+          f"{report['episodes_unchanged']}, relabelled {len(report['episodes_relabelled'])}, replaced "
+          f"{len(report['episodes_replaced'])} -> {out} version {report['version']}", file=sys.stderr)
     if n_fail and not args.allow_failures:
         return 1
     return 0

@@ -128,7 +128,7 @@ class EpisodeTally:
             reasons[r] = reasons.get(r, 0) + 1
         record = {
             "episode_id": ref.episode_id, "source": ref.source, "source_ref": ref.source_ref,
-            "task": ref.task, "scene": ref.scene, "hands": hands,
+            "input_fingerprint": ref.fingerprint, "task": ref.task, "scene": ref.scene, "hands": hands,
             "layouts": {h: self.layouts[h].layout_id for h in hands},
             "num_frames": n, "fps": self.fps,
             "stats": {"mean_contact": {h: self.contact_sum[h] / (n * self.layouts[h].num_live) for h in hands},

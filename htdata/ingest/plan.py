@@ -8,13 +8,13 @@ paths taken relative to the pipeline file; the ref that goes to the
 workers carries the layout ids and files, and its fingerprint covers the
 layout files' bytes (an edited layout re-runs its units on resume).
 
-In pipeline order, episodes are packed into work units of >= samples_per_shard
-/ UNITS_PER_SHARD estimated frames (a long episode is a unit of its own and
-spans several shards). Unit numbers are therefore fixed by the sorted
-episode lists and the pipeline config, never by --workers, so a run resumed
-with another worker count finds the same units. Small units (a quarter
-shard: 64 frames by default) give a pool enough units to balance on small
-corpora.
+A work unit is ONE episode (a long one spans several shards): units are
+keyed by episode, so appending or changing an episode never moves another
+(htdata/ingest/append.py decides which episodes need a unit at all). Units
+are numbered from the parent version's `next_unit`, in pipeline order then
+sorted episode id: fixed by the parent and the discovered episodes, never
+by --workers, so a run resumed with another worker count finds the same
+units and a shard name is never reused across versions.
 """
 
 from __future__ import annotations
@@ -63,9 +63,6 @@ class UnitTask:
         return f"unit {self.unit:06d} ({len(self.episodes)} episodes)"
 
 
-# Units per shard's worth of frames: the unit target is samples_per_shard / 4.
-UNITS_PER_SHARD = 4
-
 # Settings every pipeline of one dataset must share: the manifest records one codec and raster mode.
 SHARED_SETTINGS = {
     "tactile.compression": lambda c: c.tactile.compression,
@@ -77,40 +74,20 @@ SHARED_SETTINGS = {
 }
 
 
-def unit_target_frames(samples_per_shard: int) -> int:
-    """Estimated frames a work unit is packed up to (from the pipeline config only)."""
-    return max(1, -(-int(samples_per_shard) // UNITS_PER_SHARD))
-
-
-def pack_units(episode_frames: list[int], target_frames: int) -> list[list[int]]:
-    """Group consecutive episodes (by position) into units of >= target_frames est. frames."""
-    units, current, total = [], [], 0
-    for i, n in enumerate(episode_frames):
-        current.append(i)
-        total += max(int(n), 0)
-        if total >= target_frames:
-            units.append(current)
-            current, total = [], 0
-    if current:
-        units.append(current)
-    return units
-
-
-def plan_units(sources: list[Source], refs_per_source: list[list], out: Path) -> list[UnitTask]:
+def check_unique_ids(sources: list[Source], refs_per_source: list[list]) -> None:
     seen: dict[str, str] = {}
-    tasks: list[UnitTask] = []
-    for src, refs in zip(sources, refs_per_source):
-        refs = sorted(refs, key=lambda r: r.episode_id)
+    for refs in refs_per_source:
         for r in refs:
             if r.episode_id in seen:
                 raise ValueError(f"episode id {r.episode_id!r} found twice: {seen[r.episode_id]} and {r.source_ref}")
             seen[r.episode_id] = r.source_ref
-        target = unit_target_frames(src.pipeline.shards.samples_per_shard)
-        for group in pack_units([r.est_frames for r in refs], target):
-            tasks.append(UnitTask(unit=len(tasks), out=str(out), pipeline=src.pipeline.to_dict(),
-                                  pipeline_path=src.pipeline.path, root=str(src.root),
-                                  episodes=[refs[i] for i in group]))
-    return tasks
+
+
+def plan_units(todo: list[tuple], out: Path, first_unit: int) -> list[UnitTask]:
+    """One unit per (ref, Source) to ingest, in the order given, numbered from `first_unit`."""
+    return [UnitTask(unit=first_unit + k, out=str(out), pipeline=src.pipeline.to_dict(),
+                     pipeline_path=src.pipeline.path, root=str(src.root), episodes=[ref])
+            for k, (ref, src) in enumerate(todo)]
 
 
 # --------------------------------------------------------------------------- sources and settings

@@ -17,12 +17,16 @@ from pathlib import Path
 from htdata.executors import make_executor
 from htdata.format import INGEST_REPORT
 from htdata.fsutil import write_bytes_atomic
-from htdata.ingest.commit import commit
-from htdata.ingest.plan import Source, UnitTask, check_settings_agree, discover_sources, plan_units
+from htdata.ingest.append import kept_unavailable, plan_append
+from htdata.ingest.commit import check_compatible, commit
+from htdata.ingest.plan import (Source, UnitTask, check_settings_agree, check_unique_ids, discover_sources,
+                                plan_units)
 from htdata.ingest.timing import timing_summary
 from htdata.ingest.unit import run_unit
-from htdata.ingest.workdir import (clear_unit_files, directory_identity, dumps, load_valid_record, prepare_output,
+from htdata.ingest.workdir import (check_output, clear_unit_files, dumps, load_valid_record, prepare_output,
                                    remove_strays)
+from htdata.lock import WriterLock
+from htdata.snapshot import current_snapshot
 
 
 class EpisodeProgress:
@@ -76,18 +80,50 @@ class EpisodeProgress:
 
 def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "process",
            address: str | None = None, retries: int = 1, progress: bool = True,
-           layout_dirs: tuple = ()) -> dict:
-    """Run (or resume) an ingest; returns the report dict (also written to reports/ingest.json).
+           layout_dirs: tuple = (), command: str = "htdata ingest") -> dict:
+    """Ingest (or resume, or append to) the dataset at `out`; returns the report (also reports/ingest.json).
 
-    `layout_dirs` are searched for layout ids before $HTDATA_LAYOUTS and the
-    shipped layouts (`htdata ingest --layouts DIR`).
+    Holds the dataset's writer lock throughout. `layout_dirs` are searched for
+    layout ids before $HTDATA_LAYOUTS and the shipped layouts (`--layouts DIR`).
     """
     t_start = time.perf_counter()
     check_settings_agree(sources)
-    prepare_output(out, directory_identity(sources))
-    refs, plan_failures = discover_sources(sources, tuple(layout_dirs))
-    tasks = plan_units(sources, refs, out)
-    remove_strays(out, tasks)
+    check_output(out)
+    with WriterLock(out, command) as lock:
+        prepare_output(out)
+        parent = current_snapshot(out)
+        check_compatible(parent, sources)
+        refs, plan_failures = discover_sources(sources, tuple(layout_dirs))
+        check_unique_ids(sources, refs)
+        plan = plan_append(parent, [r for rs in refs for r in sorted(rs, key=lambda r: r.episode_id)],
+                           [s.pipeline.to_dict() for s, rs in zip(sources, refs) for _ in rs])
+        source_of = {r.episode_id: s for s, rs in zip(sources, refs) for r in rs}
+        first_unit = parent.next_unit() if parent else 0
+        tasks = plan_units([(r, source_of[r.episode_id]) for r in plan.todo], out, first_unit)
+        remove_strays(out, tasks, first_unit)
+        records, ran = run_units(tasks, out, workers, executor, address, retries, progress)
+        report = build_report(sources, tasks, records, ran, plan_failures, plan, parent,
+                              discovered={r.episode_id for rs in refs for r in rs}, t_start=t_start)
+        if lock.note:
+            report["notes"].append(lock.note)
+        write_bytes_atomic(out / INGEST_REPORT, dumps(report))   # explains a run that commits nothing too
+        if parent is None and report["episodes_ingested"] == 0:
+            raise ValueError(f"no episode could be ingested ({len(report['failures'])} failures); "
+                             f"see {out / INGEST_REPORT}")
+        if report["episodes_ingested"] or plan.relabelled:
+            manifest = commit(out, sources, records, plan, command)
+            report["version"] = manifest["version"]
+        else:
+            report["version"] = parent.version
+            report["notes"].append(f"nothing changed: version {parent.version} stays current")
+    report["timing"]["total_s"] = time.perf_counter() - t_start
+    write_bytes_atomic(out / INGEST_REPORT, dumps(report))
+    return report
+
+
+def run_units(tasks: list[UnitTask], out: Path, workers: int, executor: str, address: str | None,
+              retries: int, progress: bool) -> tuple[list[dict], list[dict]]:
+    """Resume finished units, run the rest (largest first); returns (records in unit order, records run now)."""
     records, todo = {}, []
     for t in tasks:
         rec = load_valid_record(t)
@@ -99,33 +135,37 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
     # Largest first: a long unit started last would leave the other workers idle at the end.
     todo.sort(key=lambda t: -t.est_frames)
     bar = EpisodeProgress(tasks, set(records), progress)
-    t0 = time.perf_counter()
     try:
-        runner = make_executor(executor, workers, address, retries)
-        for task, rec in runner.map_units(run_unit, todo, on_progress=bar.event):
-            records[task.unit] = rec
-            bar.unit_done(task, rec)
+        if todo:
+            runner = make_executor(executor, workers, address, retries)
+            for task, rec in runner.map_units(run_unit, todo, on_progress=bar.event):
+                records[task.unit] = rec
+                bar.unit_done(task, rec)
     finally:
         bar.close()
-    ordered = [records[t.unit] for t in tasks]
-    report = {
+    return [records[t.unit] for t in tasks], [records[t.unit] for t in todo]
+
+
+def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, discovered, t_start) -> dict:
+    """reports/ingest.json: counts, failures, what was kept/reused/replaced, sync reports, timing."""
+    failures = plan_failures + [f for r in ordered for f in r["failures"]]
+    failed_replacements = sorted({f["episode_id"] for f in failures} & plan.replaced)
+    kept = kept_unavailable(parent, discovered, [s.root for s in sources])
+    notes = [f"source unavailable: {e} kept from version {parent.version}" for e in kept]
+    notes += [f"re-ingest failed: {e} kept from version {parent.version}" for e in failed_replacements]
+    return {
         "pipelines": [s.pipeline.name for s in sources],
-        "units": len(tasks), "units_run": len(todo), "units_resumed": len(tasks) - len(todo),
-        "episodes_planned": sum(len(t.episodes) for t in tasks),
+        "parent_version": parent.version if parent else None,
+        "units": len(tasks), "units_run": len(ran), "units_resumed": len(tasks) - len(ran),
+        "episodes_planned": len(tasks),
         "episodes_ingested": sum(len(r["episodes"]) for r in ordered),
         "samples": sum(len(r["samples"]) for r in ordered),
-        "seconds": time.perf_counter() - t0,
-        "failures": plan_failures + [f for r in ordered for f in r["failures"]],
+        "episodes_unchanged": len(plan.reused), "episodes_relabelled": sorted(plan.relabelled),
+        "episodes_replaced": sorted(plan.replaced - set(failed_replacements)),
+        "episodes_kept_unavailable": kept, "notes": notes,
+        "seconds": time.perf_counter() - t_start,
+        "failures": failures,
         "dropped_frames": [d for r in ordered for d in r["dropped"]],
         "sync": {ep["episode_id"]: ep["sync"] for r in ordered for ep in r["episodes"]},
-        "timing": timing_summary([records[t.unit] for t in todo], time.perf_counter() - t_start),
+        "timing": timing_summary(ran, time.perf_counter() - t_start),
     }
-    # Written before the commit too, so a run that commits nothing still explains why.
-    write_bytes_atomic(out / INGEST_REPORT, dumps(report))
-    if report["episodes_ingested"] == 0:
-        raise ValueError(f"no episode could be ingested ({len(report['failures'])} failures); "
-                         f"see {out / INGEST_REPORT}")
-    commit(out, sources, ordered)
-    report["timing"]["total_s"] = time.perf_counter() - t_start
-    write_bytes_atomic(out / INGEST_REPORT, dumps(report))
-    return report

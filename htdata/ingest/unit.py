@@ -33,7 +33,7 @@ import numpy as np
 
 from htdata.adapters import get_adapter
 from htdata.errors import EpisodeError
-from htdata.executors import report_progress
+from htdata.executors import parent_alive, report_progress
 from htdata.format import MAP_SHAPE, SHARDS_DIR, CodecSettings, encode_sample
 from htdata.fsutil import write_bytes_atomic
 from htdata.ingest.episode import EpisodeTally, episode_frames, frame_errors, rasteriser_for
@@ -140,6 +140,8 @@ def run_unit(task) -> dict:
     try:
         with ShardWriter(out / SHARDS_DIR, task.unit, cfg.shards.samples_per_shard) as writer:
             for ref in task.episodes:
+                if not parent_alive():   # the ingest that asked for this unit is gone: stop, commit nothing
+                    os._exit(1)
                 try:
                     tally = spool_episode(ref, cfg, adapter, spool, clock)
                 except Exception as exc:  # the error policy: a failure stays inside its episode

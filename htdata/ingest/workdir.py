@@ -1,11 +1,13 @@
 """The output directory while an ingest runs: ownership check, unit records, leftovers.
 
 Crash safety and resume: a finished unit writes DATASET/.work/unit-UUUUUU.json
-atomically (its records, its fingerprint = pipeline + episode ids + source
-and layout fingerprints, its shards' sha256). A re-run skips units whose
-record, fingerprint and shards (sha256) all match, removes temp files and
-rewrites every other unit from scratch. dataset.json is removed at start and
-written LAST by the commit, so a crashed run is never mistaken for a dataset.
+atomically (its records, its fingerprint = pipeline + episode ids + input
+fingerprints, its shards' sha256). A re-run skips units whose record,
+fingerprint and shards (sha256) all match, removes temp files and rewrites
+every other unit from scratch. Units of a run are numbered from the current
+version's `next_unit`: shards of committed versions are never touched, and
+the current version stays current (and readable) until the new one is
+committed, so a crashed or failed run damages nothing.
 """
 
 from __future__ import annotations
@@ -14,9 +16,9 @@ import json
 from pathlib import Path
 
 from htdata.format import MANIFEST_FILE, SHARDS_DIR, WORK_DIR
-from htdata.fsutil import sha256_file, write_bytes_atomic
+from htdata.fsutil import sha256_file
+from htdata.lock import LOCK_FILE
 
-STATE_FILE = "ingest.json"          # under .work: which pipelines this directory belongs to
 # Keys a unit record must hold to be reused (records of older versions lack some: their units re-run).
 RECORD_KEYS = ("unit", "fingerprint", "shards", "samples", "episodes", "failures", "dropped", "layouts")
 
@@ -62,41 +64,31 @@ def load_valid_record(task) -> dict | None:
     return record
 
 
-def directory_identity(sources: list) -> dict:
-    return {"pipelines": [s.pipeline.to_dict() for s in sources]}
-
-
-def prepare_output(out: Path, identity: dict) -> None:
-    """Refuse a non-empty directory that is not a previous ingest of the same pipeline(s)."""
+def check_output(out: Path) -> None:
+    """Refuse a non-empty directory that is neither an htdata dataset nor an interrupted first ingest
+    (a writer's lock file alone does not count: the lock then names that writer)."""
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out}: exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()):
-        state = out / WORK_DIR / STATE_FILE
-        if not state.is_file():
-            raise ValueError(f"{out}: directory is not empty and is not an htdata ingest output; "
-                             f"refusing to write into it (choose an empty or new directory)")
-        try:
-            previous = json.loads(state.read_text())
-        except json.JSONDecodeError:
-            previous = None
-        if previous != identity:
-            names = [p["name"] for p in (previous or {}).get("pipelines", [])]
-            raise ValueError(f"{out}: holds an ingest of different pipeline(s) {names} or different settings; "
-                             f"refusing to mix datasets (use a new directory)")
+    content = [p for p in out.iterdir() if p.name != LOCK_FILE] if out.is_dir() else []
+    if content and not (out / MANIFEST_FILE).is_file() and not (out / WORK_DIR).is_dir():
+        raise ValueError(f"{out}: directory is not empty and is not an htdata dataset; "
+                         f"refusing to write into it (choose an empty or new directory)")
+
+
+def prepare_output(out: Path) -> None:
+    """The work and shard folders (the caller checked the directory and holds its lock)."""
     (out / WORK_DIR).mkdir(parents=True, exist_ok=True)
     (out / SHARDS_DIR).mkdir(parents=True, exist_ok=True)
-    write_bytes_atomic(out / WORK_DIR / STATE_FILE, dumps(identity))
-    # Not committed while we work: a crash must not leave a manifest naming rewritten shards.
-    (out / MANIFEST_FILE).unlink(missing_ok=True)
 
 
-def remove_strays(out: Path, tasks: list) -> None:
-    """Temp files, spools, and shards/records of unit numbers outside the plan."""
+def remove_strays(out: Path, tasks: list, first_unit: int) -> None:
+    """Temp files, spools, and uncommitted shards/records (units >= first_unit) outside the plan."""
     planned = {t.unit for t in tasks}
     for p in list(out.rglob(".*.tmp")) + list((out / WORK_DIR).glob("spool-*.bin")):
         p.unlink()
     for p in (out / SHARDS_DIR).glob("shard-*.tar"):
-        if int(p.name.split("-")[1]) not in planned:
+        unit = int(p.name.split("-")[1])
+        if unit >= first_unit and unit not in planned:
             p.unlink()
     for p in (out / WORK_DIR).glob("unit-*.json"):
         if int(p.stem.split("-")[1]) not in planned:

@@ -26,7 +26,7 @@ from htdata.manifest import IndexDtypeError, load_manifest, parse_episodes, pars
 from htdata.resources import validate_json
 from htdata.shardio import BLOCK, member_offsets, parse_header, sample_key
 from htdata.validate.report import Check, Recorder
-from htdata.versions import list_versions, manifest_path
+from htdata.versions import list_versions, manifest_path, version_manifest_file
 
 
 @dataclass
@@ -74,6 +74,11 @@ def _load_manifest(root: Path, check: Check, version: int | None) -> tuple[dict,
     except ValueError as exc:             # also a truncated version file (JSONDecodeError is a ValueError)
         check.fail("manifest_schema", f"{rel}: {exc}", file=rel)
         return None
+    if version is None and "version" in manifest:   # the pointer must be a copy of the version it names
+        vfile = root / version_manifest_file(manifest["version"])
+        if not vfile.is_file() or vfile.read_bytes() != manifest_bytes:
+            check.fail("manifest_pointer", f"{MANIFEST_FILE} differs from {version_manifest_file(manifest['version'])}, "
+                       f"the version it names (edited by hand?)", file=MANIFEST_FILE)
     check.checked["manifest"] += 1
     return manifest, manifest_bytes
 
@@ -87,8 +92,8 @@ def _read_listed(root: Path, manifest: dict, stem: str, check: Check) -> tuple[P
     data = path.read_bytes()
     found = hashlib.sha256(data).hexdigest()
     if found != manifest[f"{stem}_sha256"]:
-        check.fail(f"{stem}_sha256", f"{path.name}: sha256 differs from the manifest",
-                   file=path.name, expected=manifest[f"{stem}_sha256"], found=found)
+        check.fail(f"{stem}_sha256", f"{manifest[f'{stem}_file']}: sha256 differs from the manifest",
+                   file=manifest[f"{stem}_file"], expected=manifest[f"{stem}_sha256"], found=found)
     return path, data
 
 
