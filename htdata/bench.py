@@ -33,7 +33,7 @@ from pathlib import Path
 from htdata.fsutil import write_bytes_atomic
 
 SECTION_GROUP = "htdata.bench_sections"
-BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate")
+BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate", "append")
 # Top-level keys of results.json that are not sections: no section may take these names.
 RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds")
 
@@ -53,13 +53,14 @@ class BenchConfig:
     loader_windows: int = 100
     index_rows: tuple[int, ...] = (1_000_000, 10_000_000)
     validate_workers: tuple[int, ...] = (1, 2)
+    append_sizes: tuple[int, ...] = (20, 200)    # episodes before the one appended (an order of magnitude apart)
     sections: tuple[str, ...] | None = None   # None: every built-in and discovered section
 
     @classmethod
     def quick_config(cls, out: Path, seed: int = 0) -> "BenchConfig":
         return cls(out=out, quick=True, seed=seed, scale="tiny", codec_maps_per_glove=8, rgb_frames=2,
                    raster_frames=8, rss_lengths=(20, 40), loader_random=20, loader_windows=5,
-                   index_rows=(10_000,))
+                   index_rows=(10_000,), append_sizes=(2, 20))
 
     def validate(self) -> "BenchConfig":
         self.out = Path(self.out)
@@ -75,6 +76,8 @@ class BenchConfig:
             raise ValueError(f"ingest_workers must be >= 1, got {self.ingest_workers}")
         if len(self.rss_lengths) < 2 or list(self.rss_lengths) != sorted(set(self.rss_lengths)) or self.rss_lengths[0] < 2:
             raise ValueError(f"rss_lengths must be >= 2 increasing lengths >= 2 frames, got {self.rss_lengths}")
+        if len(self.append_sizes) < 2 or min(self.append_sizes) < 1:
+            raise ValueError(f"append_sizes must be >= 2 dataset sizes >= 1, got {self.append_sizes}")
         if not self.index_rows or min(self.index_rows) < 1:
             raise ValueError(f"index_rows must be positive, got {self.index_rows}")
         if self.sections is not None:
@@ -229,6 +232,11 @@ class Sections:
         from htdata.benchmarks.validation import validate_rows
 
         return validate_rows(self.dataset, self.cfg.validate_workers)
+
+    def append(self) -> dict:
+        from htdata.benchmarks.append import append_rows
+
+        return append_rows(self.cfg.work, self.cfg.append_sizes)
 
     def discovered(self, name: str, entry_point: metadata.EntryPoint) -> dict:
         """Load and run one discovered section; its result must be a JSON-able dict."""

@@ -34,7 +34,7 @@ from htdata.format import INDEX_DTYPE, LAYOUTS_DIR, MEMBER_ORDER, SHARDS_DIR, SI
 from htdata.manifest import load_episodes, load_index, load_manifest
 from htdata.shardio import BLOCK, describe_header, header_matches, padded, sample_key
 
-MAX_OPEN_SHARDS = 32
+MAX_OPEN_SHARDS = 128   # an LRU of open shard files; one-episode units make many small shards
 _SIZE_POS = tuple(INDEX_DTYPE.names.index(SIZE_FIELDS[s]) for s in MEMBER_ORDER)
 
 

@@ -144,6 +144,12 @@ def write_versioned_split(root, config, command: str) -> SplitResult:
                                  f"to recompute it (version {snap.version} keeps the old one) or choose another --name")
         elif previous is not None:
             doc = keep_parts(previous, doc, snap.episodes)
+            if (assignment_of(doc) == assignment_of(previous) and not previous.get("carried")
+                    and previous.get("episodes_sha256") == doc["episodes_sha256"]):
+                # nothing to change: no new version (re-running `htdata split` is idempotent)
+                return SplitResult(doc=previous, path=root / snap.manifest["splits"][name]["file"],
+                                   version=snap.version, gained={p: [] for p in PARTS},
+                                   lost={p: [] for p in PARTS})
         validate_json(doc, "split", where=f"split {name!r}")
         data = (json.dumps(doc, indent=2) + "\n").encode()
 

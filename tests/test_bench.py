@@ -128,6 +128,11 @@ def test_quick_bench_content_is_consistent(quick_run):
     assert [row["workers"] for row in r["validate"]] == [1, 2] and all(row["ok"] for row in r["validate"])
     assert r["loader"]["bound"]["samples_per_s"] > 0 and len(r["loader"]["rows"]) == 7
     assert r["machine"]["cpu_count"] >= 1 and r["machine"]["cpu_model"]
+    small, large = r["append"]["rows"]
+    assert (small["episodes_before"], large["episodes_before"]) == BenchConfig.quick_config(out).append_sizes
+    for row in (small, large):   # the append ran only the new episode and kept every other one as committed
+        assert row["units_run"] == 1 and row["episodes_unchanged"] == row["episodes_before"]
+        assert 0 < row["bytes_shards"] < row["bytes_written"]
 
 
 def test_report_has_every_table_heading(quick_run):

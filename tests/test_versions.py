@@ -251,3 +251,13 @@ def test_split_update_keeps_parts_and_reports_changes(tmp_path):
     forced = write_split(root, ["wipe"], name="main", seed=0, force=True)
     assert set(forced.doc["parts"]["ood"]["episodes"]) == {"ep_0", "ep_4"}
     assert DatasetReader(root, version=again.version).split("main")["params"]["ood_tasks"] == ["pour"]
+
+
+def test_split_again_with_nothing_new_makes_no_version(tmp_path):
+    from htdata.split import write_split
+
+    root = versioned(tmp_path / "ds")
+    first = write_split(root, ["pour"], name="main", seed=0)
+    again = write_split(root, ["pour"], name="main", seed=0)
+    assert again.version == first.version == 2 and list_versions(root) == [1, 2]
+    assert again.doc == first.doc and again.path == first.path

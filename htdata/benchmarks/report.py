@@ -12,6 +12,7 @@ HEADINGS = {
     "loader": "## Loader access patterns",
     "index": "## Index load at scale",
     "validate": "## validate --deep",
+    "append": "## Append one episode to N and 10N episodes",
 }
 TARGET_OVERHEAD_PCT = 30.0
 TARGET_SCALING = 1.8
@@ -183,8 +184,19 @@ def _validate(rows: list[dict]) -> list[str]:
                         ("frames_per_s", "frames/s"), ("scaling", "vs 1 worker"), ("ok", "dataset ok")])
 
 
+def _append(d: dict) -> list[str]:
+    lines = table(d["rows"], [("episodes_before", "episodes before"), ("frames_before", "frames before"),
+                              ("seconds", "append s"), ("units_run", "units run"), ("bytes_written", "bytes written"),
+                              ("bytes_shards", "of which shards"), ("bytes_index_and_episodes", "index + episodes"),
+                              ("files_written", "files written")])
+    return lines + ["", f"10x the dataset: {_fmt(d['time_ratio_large_over_small'])}x the append time, "
+                    f"{_fmt(d['bytes_ratio_large_over_small'])}x the bytes written (target: O(episode) + O(index): "
+                    f"only index + episode records grow with N).", ""]
+
+
 RENDERERS = {"machine": _machine, "codecs": _codecs, "rgb": _rgb, "raster": _raster, "ingest": _ingest,
-             "rss": _rss, "loader": _loader, "index": _index, "validate": _validate}
+             "rss": _rss, "loader": _loader, "index": _index, "validate": _validate,
+             "append": _append}
 
 
 def _discovered(name: str, results: dict) -> list[str]:

@@ -1,4 +1,4 @@
-"""`htdata split DATASET --ood-task TASK [...]`: write DATASET/splits/NAME.json (or --list-tasks)."""
+"""`htdata split DATASET --ood-task TASK [...]`: a new version holding split NAME (or --list-tasks)."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--test-ratio", type=float, default=0.1,
                         help="fraction of each in-distribution task's episodes in test (default 0.1)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the episode hash (default 0)")
-    parser.add_argument("--name", default=None, help="split name (file splits/NAME.json)")
+    parser.add_argument("--name", default=None, help="split name (versions/vN/splits/NAME.json)")
     parser.add_argument("--force", action="store_true",
                         help="recompute a split of that name made with other params (versioned datasets keep "
                              "the old one in the parent version); without it, a split of the same name and "
