@@ -70,12 +70,14 @@ class Edit:
     dropped_shards: list[str] = field(default_factory=list)
     frames_removed: int = 0
 
-    def lines(self) -> list[str]:
-        out = [f"remove episode {e}" for e in self.removed]
-        out += [f"trim episode {e}: keep frames {r.start}:{r.stop}" for e, r in self.trimmed.items()]
-        out += [f"re-pack work unit {u} (its other samples are copied into new shards)" for u in self.repacked_units]
-        out += [f"stop listing shard {s}" for s in self.dropped_shards]
-        out.append(f"{self.frames_removed} frames removed")
+    def lines(self, dry_run: bool = False) -> list[str]:
+        would = "would " if dry_run else ""
+        out = [f"{would}remove episode {e}" for e in self.removed]
+        out += [f"{would}trim episode {e}: keep frames {r.start}:{r.stop}" for e, r in self.trimmed.items()]
+        out += [f"{would}re-pack work unit {u} (its other samples are copied into new shards)"
+                for u in self.repacked_units]
+        out += [f"{would}stop listing shard {s}" for s in self.dropped_shards]
+        out.append(f"{self.frames_removed} frames {'would be ' if dry_run else ''}removed")
         return out
 
 

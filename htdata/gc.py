@@ -32,11 +32,12 @@ class GcPlan:
     def bytes_freed(self) -> int:
         return sum(b for _, b in self.dropped_shards)
 
-    def lines(self) -> list[str]:
-        out = [f"delete version {v}" for v in self.dropped_versions]
-        out += [f"delete shard {name} ({size} B)" for name, size in self.dropped_shards]
-        out.append(f"keep versions {', '.join(map(str, self.kept_versions)) or '(unversioned)'}; "
-                   f"{len(self.dropped_shards)} shards, {self.bytes_freed} bytes freed")
+    def lines(self, dry_run: bool = False) -> list[str]:
+        would = "would " if dry_run else ""
+        out = [f"{would}delete version {v}" for v in self.dropped_versions]
+        out += [f"{would}delete shard {name} ({size} B)" for name, size in self.dropped_shards]
+        out.append(f"{would}keep versions {', '.join(map(str, self.kept_versions)) or '(unversioned)'}; "
+                   f"{len(self.dropped_shards)} shards, {self.bytes_freed} bytes {'would be ' if dry_run else ''}freed")
         return out
 
 

@@ -127,16 +127,18 @@ def diff_episodes(old: list[dict], new: list[dict]) -> dict:
     """{added, removed, changed: [episode ids]} and frame counts between two episode lists.
 
     "changed" = same id, different record (positions ignored): re-ingested
-    from changed inputs, trimmed, renormalised or relabelled.
+    from changed inputs, trimmed, renormalised or relabelled. Frames added /
+    removed count whole episodes plus what changed episodes gained or lost.
     """
     a = {e["episode_id"]: e for e in old}
     b = {e["episode_id"]: e for e in new}
     added = sorted(set(b) - set(a))
     removed = sorted(set(a) - set(b))
     changed = sorted(e for e in set(a) & set(b) if content_view(a[e]) != content_view(b[e]))
+    delta = [int(b[e]["num_frames"]) - int(a[e]["num_frames"]) for e in changed]
     return {"added": added, "removed": removed, "changed": changed,
-            "frames_added": sum(int(b[e]["num_frames"]) for e in added),
-            "frames_removed": sum(int(a[e]["num_frames"]) for e in removed),
+            "frames_added": sum(int(b[e]["num_frames"]) for e in added) + sum(d for d in delta if d > 0),
+            "frames_removed": sum(int(a[e]["num_frames"]) for e in removed) - sum(d for d in delta if d < 0),
             "frames_before": sum(int(e["num_frames"]) for e in old),
             "frames_after": sum(int(e["num_frames"]) for e in new)}
 

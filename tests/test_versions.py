@@ -202,6 +202,7 @@ def test_log_and_diff_commands(tmp_path, capsys):
     assert main(["log", str(root)]) == 0
     out = capsys.readouterr().out.splitlines()
     assert len(out) == 4 and out[-1].startswith("* v3") and "htdata trim ep_4 --frames 1:3" in out[-1]
+    assert "+0/-0/~1 episodes  +0/-5 frames" in out[-1]        # a trimmed episode's lost frames count
     assert "-1/~0 episodes" in out[-2]
     assert main(["diff", str(root), "1", "3"]) == 0
     out = capsys.readouterr().out

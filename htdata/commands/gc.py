@@ -25,6 +25,6 @@ def run(args: argparse.Namespace) -> int:
     except (DatasetLocked, FileNotFoundError, ValueError) as exc:
         print(f"htdata gc: error: {exc}", file=sys.stderr)
         return 2
-    for line in plan.lines():
-        print(("would " if args.dry_run else "") + line)
+    for line in plan.lines(args.dry_run):
+        print(line)
     return 0

@@ -31,8 +31,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def report(edit: curate.Edit, manifest: dict | None, dry_run: bool) -> None:
-    for line in edit.lines():
-        print(("would " if dry_run else "") + line)
+    for line in edit.lines(dry_run):
+        print(line)
     if manifest is not None:
         print(f"version {manifest['version']} (parent {manifest['parent']}): {manifest['counts']['episodes']} "
               f"episodes, {manifest['counts']['samples']} frames; the parent stays readable until htdata gc")
