@@ -33,6 +33,16 @@ def shard_names(out: Path, version=None) -> list[str]:
     return [s["name"] for s in DatasetReader(out, version=version).manifest["shards"]]
 
 
+@pytest.fixture
+def ingested(tmp_path):
+    """An OpenTouch raw folder, its small pipeline and a dataset ingested from it (version 1)."""
+    raw = make_opentouch(tmp_path / "raw")
+    pipe = small_pipeline(tmp_path, "opentouch")
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", pipe, raw, out) == 0
+    return raw, pipe, out
+
+
 def test_second_source_is_appended_not_replacing_the_first(tmp_path):
     ot, nat = make_opentouch(tmp_path / "ot"), make_native(tmp_path / "nat")
     out = tmp_path / "ds"
@@ -47,11 +57,8 @@ def test_second_source_is_appended_not_replacing_the_first(tmp_path):
     assert manifest["change"]["summary"]["episodes_added"] == 1
 
 
-def test_appending_one_episode_touches_only_that_episode(tmp_path):
-    raw = make_opentouch(tmp_path / "raw")
-    pipe = small_pipeline(tmp_path, "opentouch")
-    out = tmp_path / "ds"
-    assert ingest_cli("--pipeline", pipe, raw, out) == 0
+def test_appending_one_episode_touches_only_that_episode(ingested, tmp_path):
+    raw, pipe, out = ingested
     before = {p.name: p.stat().st_mtime_ns for p in (out / "shards").glob("*.tar")}
     write_opentouch_scene(raw / "a_first_scene.hdf5", [ot_clip("demo_01", 5, COLOURS[3])])   # sorts first
     assert ingest_cli("--pipeline", pipe, raw, out) == 0
@@ -62,11 +69,8 @@ def test_appending_one_episode_touches_only_that_episode(tmp_path):
     assert set(shard_names(out)) - set(shard_names(out, 1)) == {"shard-000003-000.tar"}
 
 
-def test_edited_labels_update_records_without_re_ingesting(tmp_path):
-    raw = make_opentouch(tmp_path / "raw")
-    pipe = small_pipeline(tmp_path, "opentouch")
-    out = tmp_path / "ds"
-    assert ingest_cli("--pipeline", pipe, raw, out) == 0
+def test_edited_labels_update_records_without_re_ingesting(ingested, tmp_path):
+    raw, pipe, out = ingested
     first = samples(out)
     csv = raw / "annotations.csv"
     csv.write_text(csv.read_text().replace(",cut", ",slice"))
@@ -80,11 +84,8 @@ def test_edited_labels_update_records_without_re_ingesting(tmp_path):
     assert old.episodes[old.episode_position("ot-home_kitchen_p1-demo_02")]["task"] == "cut"
 
 
-def test_changed_source_replaces_the_episode_and_keeps_the_old_version(tmp_path):
-    raw = make_opentouch(tmp_path / "raw")
-    pipe = small_pipeline(tmp_path, "opentouch")
-    out = tmp_path / "ds"
-    assert ingest_cli("--pipeline", pipe, raw, out) == 0
+def test_changed_source_replaces_the_episode_and_keeps_the_old_version(ingested, tmp_path):
+    raw, pipe, out = ingested
     first = samples(out)
     clips = [ot_clip("demo_01", 12, COLOURS[0]), ot_clip("demo_02", 4, COLOURS[2]), ot_clip("demo_003", 20, COLOURS[2])]
     write_opentouch_scene(raw / "home_kitchen_p1.hdf5", clips)        # re-recorded: every clip's file changed
@@ -96,11 +97,8 @@ def test_changed_source_replaces_the_episode_and_keeps_the_old_version(tmp_path)
     assert samples(out, version=1) == first
 
 
-def test_unavailable_source_keeps_its_episodes_and_says_so(tmp_path, capsys):
-    raw = make_opentouch(tmp_path / "raw")
-    pipe = small_pipeline(tmp_path, "opentouch")
-    out = tmp_path / "ds"
-    assert ingest_cli("--pipeline", pipe, raw, out) == 0
+def test_unavailable_source_keeps_its_episodes_and_says_so(ingested, tmp_path, capsys):
+    raw, pipe, out = ingested
     first = samples(out)
     data = (raw / "home_kitchen_p1.hdf5").read_bytes()
     (raw / "home_kitchen_p1.hdf5").write_bytes(data[:len(data) // 2])     # the source became unreadable
@@ -147,13 +145,10 @@ def test_second_writer_is_refused_with_the_holder_named(tmp_path, capsys):
     assert ingest_cli("--pipeline", "native", raw, out) == 0     # the dead holder's lock is stale
 
 
-def test_split_after_append_keeps_parts_and_assigns_new_episodes(tmp_path):
+def test_split_after_append_keeps_parts_and_assigns_new_episodes(ingested, tmp_path):
     from htdata.split import write_split
 
-    raw = make_opentouch(tmp_path / "raw")
-    pipe = small_pipeline(tmp_path, "opentouch")
-    out = tmp_path / "ds"
-    assert ingest_cli("--pipeline", pipe, raw, out) == 0
+    raw, pipe, out = ingested
     first = write_split(out, ["wipe"], name="main", seed=0)
     write_opentouch_scene(raw / "z.hdf5", [ot_clip("demo_01", 5, COLOURS[3])])
     with open(raw / "annotations.csv", "a") as f:
