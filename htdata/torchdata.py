@@ -7,7 +7,8 @@
 - TactileStream: IterableDataset reading shards front to back; shards are
   split across DataLoader workers and DDP ranks deterministically.
 
-Each dataset holds a DatasetReader whose file handles open lazily per
+Every dataset takes `version=N` to read a committed older version (default:
+the current one). Each dataset holds a DatasetReader whose file handles open lazily per
 process, so DataLoader workers (fork or spawn) each open their own files.
 Item tensors: tactile (1,224,224) f32, coverage (1,224,224) f32, regions
 (224,224) u8 part ids, rgb (3,224,224) u8 (or f32 in [0,1] with
@@ -67,8 +68,8 @@ class _ItemBuilder:
     read: every id an item carries comes from index.npy and episodes.jsonl.
     """
 
-    def __init__(self, root, rgb_float: bool):
-        self.reader = DatasetReader(root)
+    def __init__(self, root, rgb_float: bool, version: int | None = None):
+        self.reader = DatasetReader(root, version=version)
         self.rgb_float = rgb_float
         self._task_ids = {t: i for i, t in enumerate(self.reader.manifest["tasks"])}
         self._scene_ids = {s: i for i, s in enumerate(self.reader.manifest["scenes"])}
@@ -179,9 +180,9 @@ class TactileFrameDataset(_ItemDataset):
     """One item per (frame, hand present) of the selected split part."""
 
     def __init__(self, root, split: str | None = None, part: str | None = None,
-                 hands=HANDS, rgb_float: bool = False):
+                 hands=HANDS, rgb_float: bool = False, version: int | None = None):
         self.hands = _check_hands(hands)
-        self._builder = _ItemBuilder(root, rgb_float)
+        self._builder = _ItemBuilder(root, rgb_float, version)
         reader = self._builder.reader
         self.items = _frame_items(reader, reader.sample_indices(split, part), self.hands)
 
@@ -198,12 +199,12 @@ class TactileWindowDataset(_ItemDataset):
     """
 
     def __init__(self, root, window: int = 3, split: str | None = None, part: str | None = None,
-                 hands=HANDS, rgb_float: bool = False):
+                 hands=HANDS, rgb_float: bool = False, version: int | None = None):
         if window < 1:
             raise ValueError(f"window must be >= 1, got {window}")
         self.window = window
         self.hands = _check_hands(hands)
-        self._builder = _ItemBuilder(root, rgb_float)
+        self._builder = _ItemBuilder(root, rgb_float, version)
         reader = self._builder.reader
         ends = []
         for ep_pos in reader.episode_positions(split, part):
@@ -259,9 +260,9 @@ class TactileStream(IterableDataset):
 
     def __init__(self, root, split: str | None = None, part: str | None = None,
                  hands=HANDS, rgb_float: bool = False,
-                 shuffle_seed: int | None = None):
+                 shuffle_seed: int | None = None, version: int | None = None):
         self.hands = _check_hands(hands)
-        self._builder = _ItemBuilder(root, rgb_float)
+        self._builder = _ItemBuilder(root, rgb_float, version)
         reader = self._builder.reader
         selected = np.zeros(len(reader), bool)
         selected[reader.sample_indices(split, part)] = True

@@ -265,3 +265,15 @@ def test_loader_bench_rows_decode_what_each_access_decodes(dataset):
         assert r["seconds"] > 0 and r["bound_seconds"] > 0
         assert r["ratio_to_bound"] == pytest.approx(r["bound_seconds"] / r["seconds"])
         assert r["samples_per_s"] == pytest.approx(r["samples_decoded"] / r["seconds"])
+
+
+def test_datasets_read_an_older_version(tmp_path):
+    from htdata.curate import remove_episodes
+
+    root = write_synthetic_dataset(tmp_path / "ds", MIXED_HANDS_EPISODES, seed=SEED, coverages=coverages())
+    remove_episodes(root, ["ep_b"], dry_run=False, command="rm")
+    assert len(TactileFrameDataset(root)) == 5 + 1
+    old = TactileFrameDataset(root, version=1)
+    assert len(old) == 5 + 8 + 1 and old.reader.version == 1
+    assert len(TactileWindowDataset(root, window=2, version=1)) > len(TactileWindowDataset(root, window=2))
+    assert len(list(TactileStream(root, version=1))) == len(old)
