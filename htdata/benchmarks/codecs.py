@@ -126,12 +126,18 @@ def codec_rows(maps_by_layout: dict[str, np.ndarray]) -> dict:
                             "step_over_max_error": step / r["max_error"] if r["max_error"] > 0 else None,
                             "levels_recoverable": bool(r["max_error"] < step / 2)})
     sparsity = float(np.mean(all_maps == 0))
-    lossless = [r for r in rows if not r["codec"].endswith("lossy")]
-    smallest = min(lossless, key=lambda r: r["bytes_per_frame"])
+    lossless = [r for r in rows if r["max_error"] == 0]          # lossless means exact, nothing less
+    smallest = min(lossless, key=lambda r: r["bytes_per_frame"]) if lossless else None
+    keeps_all = [r for r in rows if all(m["levels_recoverable"] for m in margins if m["codec"] == r["codec"])]
+    by_rule = min(keeps_all, key=lambda r: r["bytes_per_frame"]) if keeps_all else None
     d = by_codec[DEFAULT_CODEC]
+    lost = sorted(m["layout"] for m in margins if m["codec"] == DEFAULT_CODEC and not m["levels_recoverable"])
+    exact = f"{smallest['codec']} ({smallest['bytes_per_frame'] / 1024:.1f} KiB)" if smallest else "none"
     reason = (f"{DEFAULT_CODEC}: {d['bytes_per_frame'] / 1024:.1f} KiB/frame "
               f"({d['bytes_per_frame'] / by_codec['exr_float_zip']['bytes_per_frame']:.2f}x of float ZIP), "
-              f"encode {d['encode_ms']:.2f} ms, decode {d['decode_ms']:.2f} ms, max error {d['max_error']:.2e}; "
-              f"smallest lossless here: {smallest['codec']} ({smallest['bytes_per_frame'] / 1024:.1f} KiB)")
+              f"encode {d['encode_ms']:.2f} ms, decode {d['decode_ms']:.2f} ms, max error {d['max_error']:.2e} "
+              f"(not lossless; source levels NOT recoverable for: {', '.join(lost) or 'none'}); "
+              f"smallest exact codec: {exact}; the rule 'smallest codec keeping every glove's levels "
+              f"(max error < step/2)' would pick {by_rule['codec'] if by_rule else 'none'}")
     return {"maps": int(len(all_maps)), "zero_fraction": sparsity, "rows": rows, "margins": margins,
             "default": DEFAULT_CODEC, "reason": reason, "codecs": list(TACTILE_CODECS)}
