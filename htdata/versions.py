@@ -190,6 +190,12 @@ def write_version(root: str | os.PathLike, manifest: dict, episodes_bytes: bytes
     then swaps dataset.json. The caller holds the writer lock.
     """
     root = Path(root)
+    pointer = root / MANIFEST_FILE
+    current = json.loads(pointer.read_text()).get("version") if pointer.is_file() else None
+    if pointer.is_file() and current != manifest.get("parent"):
+        # a write must build on the current version: anything else would drop what came after its parent
+        raise RuntimeError(f"{root}: the current version is {current}, this write was built on "
+                           f"{manifest.get('parent')}; nothing was written (run the command again)")
     clear_orphans(root, manifest.get("parent"))
     n = (manifest.get("parent") or 0) + 1
     files_dir = root / version_dir(n)

@@ -59,10 +59,15 @@ def test_first_version_and_log_fields(tmp_path):
 
 
 def test_a_version_without_parent_counts_everything_added(tmp_path):
+    import shutil
+
     src = write_synthetic_dataset(tmp_path / "src", EPISODES)
     snap = open_snapshot(src)
+    fresh = tmp_path / "fresh"
+    for sub in ("shards", "layouts"):
+        shutil.copytree(src / sub, fresh / sub)
     fields = {k: snap.manifest[k] for k in ("sources", "layouts", "canonical", "codec")}
-    manifest = commit_parts(src, snap.parts(), fields, None, "fresh")
+    manifest = commit_parts(fresh, snap.parts(), fields, None, "fresh")
     assert manifest["parent"] is None and manifest["change"]["summary"]["episodes_added"] == 5
     assert manifest["change"]["summary"]["frames_added"] == 25
 
@@ -262,3 +267,15 @@ def test_split_again_with_nothing_new_makes_no_version(tmp_path):
     again = write_split(root, ["pour"], name="main", seed=0)
     assert again.version == first.version == 2 and list_versions(root) == [1, 2]
     assert again.doc == first.doc and again.path == first.path
+
+
+def test_a_write_built_on_a_stale_parent_is_refused(tmp_path):
+    root = versioned(tmp_path / "ds")
+    stale = open_snapshot(root)
+    remove_episodes(root, ["ep_1"], dry_run=False, command="rm")          # version 2 is current now
+    with pytest.raises(RuntimeError, match="current version is 2, this write was built on 1"):
+        commit_parts(root, stale.parts(), {}, stale, "late writer")
+    with pytest.raises(RuntimeError, match="current version is 2, this write was built on None"):
+        commit_parts(root, stale.parts(), {k: stale.manifest[k] for k in ("sources", "layouts", "canonical",
+                                                                           "codec")}, None, "fresh?")
+    assert list_versions(root) == [1, 2] and len(DatasetReader(root)) == 25 - 4
