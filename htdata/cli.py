@@ -17,6 +17,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "ingest": ("htdata.commands.ingest", "read raw recordings and write a validated, sharded dataset"),
     "split": ("htdata.commands.split", "task-level OOD hold-out + 9:1 episode split (or --list-tasks)"),
     "validate": ("htdata.commands.validate", "prove a dataset is sound (structure, content, time, splits)"),
+    "stats": ("htdata.commands.stats", "frames, contact, value quantiles, regions and taxel health; --health OUT.png"),
+    "card": ("htdata.commands.card", "a self-contained HTML dataset card (+ Markdown) with stats and plots"),
     "log": ("htdata.commands.log", "list the versions of a dataset (every write makes one)"),
     "diff": ("htdata.commands.diff", "episodes added / removed / changed between two versions"),
     "rm": ("htdata.commands.rm", "remove episodes (ids or globs) as a new version; --dry-run"),

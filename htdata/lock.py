@@ -1,8 +1,9 @@
 """One writer per dataset: a lock file naming its holder (host, pid, start time, command).
 
-Every command that writes a dataset (ingest, split, rm, trim, merge, gc,
-renormalise) holds `DATASET/.lock` while it works. The file is created with
-O_CREAT|O_EXCL, so two writers can never both get it. A second writer is
+Every command that writes a dataset (ingest, split, rm, trim, merge, gc)
+holds `DATASET/.lock` while it works. The file is written complete to a
+temp file and linked into place (link fails if the lock exists), so two
+writers can never both get it and nobody ever reads a half-written lock. A second writer is
 refused with a message naming the holder. A lock whose holder is dead (same
 host, pid no longer running, or running but started after the lock was
 taken, i.e. the pid was reused) is stale: it is taken over, and the
@@ -20,9 +21,11 @@ import json
 import os
 import socket
 import sys
+import time
 from pathlib import Path
 
 LOCK_FILE = ".lock"
+TAKEOVER_STALE_S = 30.0   # a takeover mutex older than this was left by a writer killed inside it
 
 
 class DatasetLocked(RuntimeError):
@@ -86,15 +89,45 @@ class WriterLock:
                             "started": _now(), "command": self.command}) + "\n").encode()
 
     def _try_create(self) -> bool:
-        try:
-            fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-        except FileExistsError:
-            return False
-        with os.fdopen(fd, "wb") as f:
+        """Create the lock with its content complete: written to a temp file, then linked (fails if taken).
+
+        A lock file is therefore never seen half written by another writer.
+        """
+        tmp = self.path.with_name(f"{LOCK_FILE}.{os.getpid()}.tmp")
+        with open(tmp, "wb") as f:
             f.write(self._record())
             f.flush()
             os.fsync(f.fileno())
-        return True
+        try:
+            os.link(tmp, self.path)
+            return True
+        except FileExistsError:
+            return False
+        finally:
+            tmp.unlink(missing_ok=True)
+
+    def _take_over(self, stale: dict) -> None:
+        """Remove the lock if it still holds `stale`, under a short mutex so two writers cannot both
+        take it over (one could otherwise remove the other's fresh lock)."""
+        mutex = self.path.with_name(f"{LOCK_FILE}.takeover")
+        try:
+            fd = os.open(mutex, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            try:
+                if time.time() - mutex.stat().st_mtime > TAKEOVER_STALE_S:   # its writer died inside
+                    mutex.unlink(missing_ok=True)
+            except FileNotFoundError:
+                pass
+            time.sleep(0.01)
+            return
+        try:
+            if self.read_holder() == stale:
+                self.path.unlink(missing_ok=True)
+                self.note = (f"took over a stale lock of a writer that is no longer running: "
+                             f"{describe(stale) if stale else 'unreadable lock file'}")
+        finally:
+            os.close(fd)
+            mutex.unlink(missing_ok=True)
 
     def read_holder(self) -> dict | None:
         try:
@@ -106,7 +139,7 @@ class WriterLock:
 
     def acquire(self) -> "WriterLock":
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        for _ in range(3):   # bounded: a racing writer may take a stale lock between our steps
+        for _ in range(200):   # bounded: racing writers may release / take over between our steps
             if self._try_create():
                 self._held = True
                 return self
@@ -119,15 +152,7 @@ class WriterLock:
                                     f"if that writer is gone, remove {self.path} by hand")
             if alive:
                 raise DatasetLocked(f"{self.path.parent}: another writer holds the dataset: {describe(holder)}")
-            # Stale: move it aside atomically (only one of several racers wins the rename).
-            stale = self.path.with_name(f"{LOCK_FILE}.stale-{os.getpid()}")
-            try:
-                os.rename(self.path, stale)
-            except FileNotFoundError:
-                continue
-            stale.unlink(missing_ok=True)
-            self.note = (f"took over a stale lock of a writer that is no longer running: "
-                         f"{describe(holder) if holder else 'unreadable lock file'}")
+            self._take_over(holder)
         raise DatasetLocked(f"{self.path.parent}: could not take the writer lock (contended); try again")
 
     def release(self) -> None:

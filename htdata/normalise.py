@@ -12,6 +12,11 @@ saturated or zero-range sensors come out as 0 or 1, never NaN.
 Non-finite live taxels are NOT repaired: they become NaN and the frame is
 flagged False in `finite_mask` (the ingest drops and counts such frames).
 
+Out-of-range raw values (outside [0, max_value] in raw units, live finite
+taxels only) are counted per frame by `out_of_range`; what happens to them
+(clip, drop the frame, fail) is the pipeline's `[normalise] out_of_range`
+policy, applied by the ingest (htdata.ingest.episode).
+
 Streaming: the baseline is fitted once on the first chunk (`fit_baseline`),
 then `apply` is called chunk by chunk with the same result as on the whole.
 """
@@ -85,6 +90,14 @@ class Normaliser:
             if self.cfg.convention == "inverted":
                 return (np.float32(self.cfg.max_value) - raw) / np.float32(self.cfg.max_value)
             return raw / np.float32(self.cfg.max_value)
+
+    def out_of_range(self, raw) -> tuple[np.ndarray, np.ndarray]:
+        """(below, above): per frame, how many live finite taxels of `raw` lie below 0 / above max_value."""
+        live = self._check(raw)[:, self.live_mask]
+        with np.errstate(invalid="ignore"):
+            below = (live < 0.0).sum(axis=1)
+            above = (live > np.float32(self.cfg.max_value)).sum(axis=1)
+        return below.astype(np.int64), above.astype(np.int64)
 
     def fit_baseline(self, first_chunk) -> np.ndarray:
         """Fix the per-taxel baseline from the episode's first frames (idempotent per episode)."""

@@ -3,9 +3,24 @@
 A pipeline says how one source format becomes canonical samples: which
 adapter reads it (and its params), which glove layout each hand uses, how
 glove units are normalised (per layout), the sync tolerance, RGB and tactile
-encoding, and the shard size. Files are checked twice: against
-`schemas/pipeline.schema.json` (unknown keys are errors, named with the file)
-and by `validate()` (cross-field rules the schema cannot express).
+encoding, and the shard size. Files are checked three times: against
+`schemas/pipeline.schema.json` (unknown keys are errors, named with the file),
+for non-finite numbers (TOML allows `nan`/`inf`, JSON Schema's "number"
+accepts them: `max_skew_ms = nan` would fail every episode later), and by
+`validate()` (cross-field rules the schema cannot express, and
+`[adapter.params]` against the params the adapter declares).
+
+Settings can be overridden from the command line without copying the file
+(`htdata ingest --set adapter.params.annotations=labels.csv`):
+`with_overrides` applies dotted keys to the TOML content and validates the
+result like a file; the effective settings are what the manifest records.
+
+Out-of-range raw values: `[normalise] out_of_range = "clip" | "drop_frame" |
+"fail"` (pipeline-wide; default "clip") and `out_of_range_warn_share`
+(default 0.01: with "clip", a hand whose share of out-of-range frames in an
+episode exceeds 1% gets a warning note). These two keys sit beside the
+per-layout tables, so no layout may be named like them. Range = [0,
+max_value] in raw units of the layout's normalise config.
 
 Example (pipelines/opentouch.toml):
 
@@ -23,6 +38,7 @@ Example (pipelines/opentouch.toml):
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -64,6 +80,56 @@ class TactileConfig:
     chunk_frames: int = 64   # tactile frames read/normalised/rasterised per step (memory bound)
 
 
+OUT_OF_RANGE_POLICIES = ("clip", "drop_frame", "fail")
+# keys of [normalise] that are not layout ids
+NORMALISE_POLICY_KEYS = ("out_of_range", "out_of_range_warn_share")
+
+
+@dataclass
+class OutOfRangeConfig:
+    """What to do with raw values outside [0, max_value] (counted per episode and hand whatever the policy)."""
+    policy: str = "clip"          # clip: values clipped, counted, warning note above warn_share
+    warn_share: float = 0.01      # share of an episode's frames (per hand) above which clip warns
+
+    def validate(self, where: str) -> "OutOfRangeConfig":
+        if self.policy not in OUT_OF_RANGE_POLICIES:
+            raise ValueError(f"{where}: normalise.out_of_range must be one of {OUT_OF_RANGE_POLICIES}, "
+                             f"got {self.policy!r}")
+        if not (isinstance(self.warn_share, (int, float)) and 0.0 <= self.warn_share <= 1.0):
+            raise ValueError(f"{where}: normalise.out_of_range_warn_share must be in [0, 1], got {self.warn_share!r}")
+        return self
+
+    def to_dict(self) -> dict:
+        """Only non-default keys: a pipeline that never sets them keeps its to_dict() (and input fingerprints)."""
+        d = {}
+        if self.policy != "clip":
+            d["out_of_range"] = self.policy
+        if self.warn_share != 0.01:
+            d["out_of_range_warn_share"] = self.warn_share
+        return d
+
+
+def non_finite_numbers(data, path: str = "") -> list[str]:
+    """Dotted keys of every NaN/Inf float in a nested dict/list (TOML allows them, no setting wants them)."""
+    if isinstance(data, float):
+        return [] if math.isfinite(data) else [path or "<value>"]
+    if isinstance(data, dict):
+        return [k for key, v in data.items() for k in non_finite_numbers(v, f"{path}.{key}" if path else str(key))]
+    if isinstance(data, list):
+        return [k for i, v in enumerate(data) for k in non_finite_numbers(v, f"{path}[{i}]")]
+    return []
+
+
+def check_adapter_params(adapter: str, params: dict, where: str) -> None:
+    """`params` against what the adapter declares (`PARAMS`): unknown keys and wrong types are errors."""
+    from htdata.adapters import ADAPTERS
+    from htdata.adapters.base import check_adapter_params as check
+
+    if adapter not in ADAPTERS:
+        raise ValueError(f"{where}: unknown adapter {adapter!r}; known: {sorted(ADAPTERS)}")
+    check(adapter, tuple(getattr(ADAPTERS[adapter], "PARAMS", ())), params, where)
+
+
 @dataclass
 class ShardsConfig:
     samples_per_shard: int = 256
@@ -77,6 +143,7 @@ class PipelineConfig:
     # layout for that hand (resolved once per episode when the ingest plans: htdata.ingest.plan)
     layouts: dict[str, str] = field(default_factory=dict)
     normalise: dict[str, NormaliseConfig] = field(default_factory=dict)  # layout id -> config
+    out_of_range: OutOfRangeConfig = field(default_factory=OutOfRangeConfig)  # [normalise] out_of_range*
     sync: SyncConfig = field(default_factory=SyncConfig)
     rgb: RgbConfig = field(default_factory=RgbConfig)
     tactile: TactileConfig = field(default_factory=TactileConfig)
@@ -86,9 +153,15 @@ class PipelineConfig:
 
     def validate(self) -> "PipelineConfig":
         where = self.path or f"pipeline {self.name!r}"
-        validate_json(self.to_dict(), "pipeline", where)
+        d = self.to_dict()
+        bad = non_finite_numbers(d)
+        if bad:
+            raise ValueError(f"{where}: {', '.join(bad)} must be a finite number (NaN/Inf are not settings)")
+        validate_json(d, "pipeline", where)
         for layout_id, cfg in self.normalise.items():
             cfg.validate(f"{where}: normalise.{layout_id}")
+        self.out_of_range.validate(where)
+        check_adapter_params(self.adapter.name, self.adapter.params, where)
         return self
 
     def normalise_for(self, layout) -> NormaliseConfig:
@@ -103,7 +176,7 @@ class PipelineConfig:
             "name": self.name,
             "adapter": {"name": self.adapter.name, "params": dict(self.adapter.params)},
             "layouts": dict(self.layouts),
-            "normalise": {k: v.to_dict() for k, v in self.normalise.items()},
+            "normalise": {**{k: v.to_dict() for k, v in self.normalise.items()}, **self.out_of_range.to_dict()},
             "sync": asdict(self.sync),
             "rgb": asdict(self.rgb),
             "tactile": asdict(self.tactile),
@@ -115,12 +188,19 @@ class PipelineConfig:
 
     @classmethod
     def from_dict(cls, data: dict, where: str = "pipeline") -> "PipelineConfig":
+        bad = non_finite_numbers(data)
+        if bad:
+            raise ValueError(f"{where}: {', '.join(bad)} must be a finite number (NaN/Inf are not settings)")
         validate_json(data, "pipeline", where)
+        norm = dict(data.get("normalise", {}))
+        policy = {k: norm.pop(k) for k in NORMALISE_POLICY_KEYS if k in norm}
         cfg = cls(
             name=data["name"],
             adapter=AdapterConfig(name=data["adapter"]["name"], params=dict(data["adapter"].get("params", {}))),
             layouts=dict(data.get("layouts", {})),
-            normalise={k: NormaliseConfig(**v) for k, v in data.get("normalise", {}).items()},
+            normalise={k: NormaliseConfig(**v) for k, v in norm.items()},
+            out_of_range=OutOfRangeConfig(policy=policy.get("out_of_range", "clip"),
+                                          warn_share=float(policy.get("out_of_range_warn_share", 0.01))),
             sync=SyncConfig(**data.get("sync", {})),
             rgb=RgbConfig(**data.get("rgb", {})),
             tactile=TactileConfig(**data.get("tactile", {})),
@@ -134,6 +214,38 @@ class PipelineConfig:
             n.scale = float(n.scale)
         cfg.sync.max_skew_ms = float(cfg.sync.max_skew_ms)
         return cfg.validate()
+
+
+    def with_overrides(self, settings: list[str]) -> "PipelineConfig":
+        """A copy with `dotted.key=value` settings applied (values parsed as TOML, else taken as text), validated."""
+        data = self.to_dict()
+        for item in settings:
+            key, value = parse_setting(item)
+            node = data
+            parts = key.split(".")
+            for part in parts[:-1]:
+                child = node.setdefault(part, {})
+                if not isinstance(child, dict):
+                    raise ValueError(f"--set {item}: {part!r} is a value, not a table")
+                node = child
+            node[parts[-1]] = value
+        where = f"{self.path or self.name} (with --set {' '.join(settings)})"
+        cfg = PipelineConfig.from_dict(data, where=where)
+        cfg.path = self.path
+        return cfg
+
+
+def parse_setting(item: str) -> tuple[str, object]:
+    """"a.b.c=value" -> ("a.b.c", value): TOML literal when it parses (true, 20, 0.5, ["right"]), else the text."""
+    key, sep, text = item.partition("=")
+    key = key.strip()
+    if not sep or not key or any(not p for p in key.split(".")):
+        raise ValueError(f"--set {item!r}: expected dotted.key=value (e.g. adapter.params.annotations=labels.csv)")
+    try:
+        value = tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = text
+    return key, value
 
 
 def resolve_pipeline_path(name_or_path: str | Path) -> Path:

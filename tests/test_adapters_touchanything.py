@@ -139,18 +139,18 @@ def _npy_bytes_claiming(rows_claimed, arr):
     return buf.getvalue()
 
 
-def test_truncated_npz_member_names_frame(tmp_path, adapter):
+def test_member_declaring_more_rows_than_it_holds_is_refused_before_reading(tmp_path, adapter):
+    # Declared sizes are checked against the bytes present (issue #11): a member whose header claims
+    # 8 rows but holds 4 is refused at discovery, naming the file, the episode and both sizes.
     folder = write(tmp_path, "Home/t/a", episode(8))
     good = grid(4)
     with zipfile.ZipFile(folder / "pressure_grids.npz", "w") as z:
         z.writestr("left_pressure_grid.npy", _npy_bytes_claiming(8, good))
-    (ref,) = adapter.discover(tmp_path, {})
-    with adapter.open(ref, {}) as st:
-        np.testing.assert_array_equal(st.read_tactile("left", np.arange(3)), good[:3])
-        with pytest.raises(EpisodeError) as err:
-            st.read_tactile("left", np.arange(3, 8))
+    with pytest.raises(EpisodeError) as err:
+        adapter.discover(tmp_path, {})
     msg = str(err.value)
-    assert "pressure_grids.npz [ta-Home-t-a] frame 4" in msg and "truncated" in msg
+    assert "pressure_grids.npz [ta-Home-t-a]" in msg and "declares shape (8, 21, 21)" in msg
+    assert f"holds {good.nbytes} bytes" in msg
 
 
 def test_truncated_npz_file_fails_discovery_with_names(tmp_path, adapter):

@@ -6,7 +6,6 @@ import os
 import socket
 import subprocess
 import sys
-import time
 
 import pytest
 
@@ -72,12 +71,12 @@ def test_other_host_is_never_broken(tmp_path):
     assert json.loads((tmp_path / LOCK_FILE).read_text())["host"] == "some-other-host"
 
 
-def _race(root, barrier, results):
+def _race(root, barrier, results, done):
     barrier.wait()
     try:
         lock = WriterLock(root, f"racer {os.getpid()}").acquire()
         results.put("won")
-        time.sleep(0.5)
+        done.wait(30)            # hold the lock until every racer has tried (however slow the machine)
         lock.release()
     except DatasetLocked:
         results.put("refused")
@@ -85,11 +84,30 @@ def _race(root, barrier, results):
 
 def test_concurrent_writers_one_wins(tmp_path):
     ctx = mp.get_context("fork")
-    barrier, results = ctx.Barrier(4), ctx.Queue()
-    procs = [ctx.Process(target=_race, args=(tmp_path, barrier, results)) for _ in range(4)]
+    barrier, results, done = ctx.Barrier(4), ctx.Queue(), ctx.Event()
+    procs = [ctx.Process(target=_race, args=(tmp_path, barrier, results, done)) for _ in range(4)]
     for p in procs:
         p.start()
+    outcomes = sorted(results.get(timeout=30) for _ in procs)
+    done.set()
     for p in procs:
-        p.join(20)
-    outcomes = sorted(results.get(timeout=5) for _ in procs)
+        p.join(30)
     assert outcomes == ["refused", "refused", "refused", "won"]
+
+
+def test_racing_takeovers_of_a_stale_lock_one_wins(tmp_path):
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                          text=True).stdout.strip()
+    ctx = mp.get_context("fork")
+    for _ in range(5):
+        write_lock(tmp_path, pid=int(dead))
+        barrier, results, done = ctx.Barrier(4), ctx.Queue(), ctx.Event()
+        procs = [ctx.Process(target=_race, args=(tmp_path, barrier, results, done)) for _ in range(4)]
+        for p in procs:
+            p.start()
+        outcomes = sorted(results.get(timeout=30) for _ in procs)
+        done.set()
+        for p in procs:
+            p.join(30)
+        assert outcomes == ["refused", "refused", "refused", "won"]
+        assert not (tmp_path / LOCK_FILE).exists()

@@ -83,3 +83,77 @@ def test_layouts_accept_ids_and_json_paths(tmp_path):
     assert cfg.layouts == {"left": "gloves/my_left.json", "right": "my_right"}
     with pytest.raises(ValueError, match="layouts/left"):
         load_pipeline(write(tmp_path, MINIMAL + "[layouts]\nleft = \"not an id\"\n", "bad.toml"))
+
+
+# --------------------------------------------------------------------------- issue #11: hostile settings
+
+@pytest.mark.parametrize("extra,key", [
+    ("[sync]\nmax_skew_ms = nan\n", "sync.max_skew_ms"),
+    ("[sync]\nmax_skew_ms = inf\n", "sync.max_skew_ms"),
+    ("[normalise.glove]\nmax_value = inf\n", "normalise.glove.max_value"),
+    ("[normalise.glove]\nscale = -nan\n", "normalise.glove.scale"),
+    ("[normalise]\nout_of_range_warn_share = nan\n", "normalise.out_of_range_warn_share"),
+])
+def test_nan_and_inf_are_refused_naming_the_key(tmp_path, extra, key):
+    p = write(tmp_path, MINIMAL + extra)
+    with pytest.raises(ValueError, match=rf"{p}: {key} must be a finite number"):
+        load_pipeline(p)
+
+
+def test_nan_anywhere_in_a_dict_is_refused_naming_the_key():
+    base = PipelineConfig.from_dict({"name": "x", "adapter": {"name": "native"}}).to_dict()
+    with pytest.raises(ValueError, match=r"pipeline: sync.max_skew_ms must be a finite number"):
+        PipelineConfig.from_dict({**base, "sync": {"max_skew_ms": float("nan")}})
+    nested = {"name": "x", "adapter": {"name": "opentouch", "params": {"hands": ["right", float("inf")]}}}
+    with pytest.raises(ValueError, match=r"adapter.params.hands\[1\] must be a finite number"):
+        PipelineConfig.from_dict(nested)
+
+
+@pytest.mark.parametrize("adapter,params,match", [
+    ("opentouch", 'anotations = "a.csv"', r"adapter.params.anotations is not a param of adapter 'opentouch'; "
+                                          r"known params: channel_order \(str, default 'bgr'\), annotations"),
+    ("native", "video = \"chest\"", r"adapter.params.video is not a param of adapter 'native'; known params: none"),
+    ("touchanything", "video = 3", r"adapter.params.video must be str .*got int 3"),
+    ("opentouch", "allow_unlabelled = 1", r"adapter.params.allow_unlabelled must be bool .*got int 1"),
+    ("opentouch", "hands = \"right\"", r"adapter.params.hands must be list"),
+])
+def test_adapter_params_checked_against_declared(tmp_path, adapter, params, match):
+    p = write(tmp_path, f'name = "x"\n[adapter]\nname = "{adapter}"\n[adapter.params]\n{params}\n')
+    with pytest.raises(ValueError, match=match):
+        load_pipeline(p)
+
+
+def test_every_adapter_declares_its_params():
+    from htdata.adapters import ADAPTERS
+
+    for name, cls in ADAPTERS.items():
+        assert isinstance(cls.PARAMS, tuple), name
+        assert len({p.name for p in cls.PARAMS}) == len(cls.PARAMS)
+
+
+def test_out_of_range_policy_parsed_and_kept_out_of_to_dict_when_default(tmp_path):
+    cfg = load_pipeline(write(tmp_path, MINIMAL))
+    assert (cfg.out_of_range.policy, cfg.out_of_range.warn_share) == ("clip", 0.01)
+    assert cfg.to_dict()["normalise"] == {}         # defaults add nothing: input fingerprints unchanged
+    p = write(tmp_path, MINIMAL + '[normalise]\nout_of_range = "drop_frame"\nout_of_range_warn_share = 0.2\n'
+                                  '[normalise.g]\nconvention = "direct"\n', "q.toml")
+    cfg = load_pipeline(p)
+    assert cfg.out_of_range.policy == "drop_frame" and list(cfg.normalise) == ["g"]
+    assert PipelineConfig.from_dict(cfg.to_dict()).to_dict() == cfg.to_dict()
+    assert cfg.to_dict()["normalise"]["out_of_range"] == "drop_frame"
+    with pytest.raises(ValueError, match="out_of_range"):
+        load_pipeline(write(tmp_path, MINIMAL + '[normalise]\nout_of_range = "ignore"\n', "r.toml"))
+
+
+def test_with_overrides_parses_values_and_validates():
+    cfg = load_pipeline("opentouch")
+    new = cfg.with_overrides(["adapter.params.annotations=labels v2.tsv", "adapter.params.hands=[\"right\"]",
+                              "sync.max_skew_ms=12", "normalise.out_of_range=fail"])
+    assert new.adapter.params["annotations"] == "labels v2.tsv" and new.adapter.params["hands"] == ["right"]
+    assert new.sync.max_skew_ms == 12.0 and new.out_of_range.policy == "fail" and new.path == cfg.path
+    assert cfg.adapter.params["annotations"] == "annotations.csv"      # the original is untouched
+    for bad, match in [("sync.max_skew_ms", "expected dotted.key=value"), ("sync..x=1", "expected dotted"),
+                       ("sync.max_skew_ms=-1", "max_skew_ms"), ("name.x=1", "is a value, not a table"),
+                       ("rgb.bogus=1", "bogus")]:
+        with pytest.raises(ValueError, match=match):
+            cfg.with_overrides([bad])

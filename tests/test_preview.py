@@ -46,7 +46,7 @@ def test_cli_writes_png_of_expected_size(ds, tmp_path):
     out = tmp_path / "sheet.png"
     assert cli_main(["preview", str(ds), "--episode", "ep_r", "--frames", "4", str(out)]) == 0
     img = cv2.imread(str(out), cv2.IMREAD_COLOR)
-    assert img.shape[:2] == pv.sheet_size(4) == (pv.TITLE_H + pv.HEADER_H + 4 * 232 + 8, 8 + 3 * 232)
+    assert img.shape[:2] == pv.sheet_size(4) == (pv.TITLE_H + pv.HEADER_H + 4 * 232 + 8 + pv.BAR_H, 8 + 3 * 232)
 
 
 def test_absent_hand_is_a_grey_panel_and_tactile_is_drawn(ds):
@@ -93,3 +93,39 @@ def test_errors_unknown_episode_and_bad_suffix(ds, tmp_path, capsys):
     assert "no episode 'nope'" in capsys.readouterr().err
     with pytest.raises(ValueError, match="give a .png path"):
         pv.write_preview(ds, tmp_path / "a.jpg")
+
+
+def _bar(sheet: np.ndarray) -> np.ndarray:
+    y = sheet.shape[0] - pv.BAR_H + 4
+    x = pv.PAD + pv.CANVAS + pv.PAD
+    return sheet[y:y + pv.BAR_STRIP_H, x:x + 2 * pv.CANVAS + pv.PAD]
+
+
+def test_colour_bar_is_drawn_with_its_values(ds):
+    sheet = pv.render_contact_sheet(ds, episode="ep_lr", frames=2)
+    strip = _bar(sheet)
+    ramp = cv2.applyColorMap(np.linspace(0, 255, strip.shape[1]).astype(np.uint8)[None, :], cv2.COLORMAP_INFERNO)[0]
+    assert np.array_equal(strip[0], ramp) and np.array_equal(strip[-1], ramp)     # the inferno scale, left to right
+    labels = sheet[sheet.shape[0] - pv.BAR_H + 4 + pv.BAR_STRIP_H + 5:, pv.PAD + pv.CANVAS:]
+    assert (labels.mean(axis=2) > 120).sum() > 100                               # tick values + caption drawn
+    with pytest.raises(ValueError, match="--contrast"):
+        pv.render_contact_sheet(ds, episode="ep_lr", frames=2, contrast="auto")
+
+
+def test_quantile_contrast_brightens_faint_maps(tmp_path):
+    from tests.tactile_factories import RIGHT, clean_series, write_taxel_dataset
+    faint = clean_series(RIGHT, 8, seed=4, blobs=4) * 0.15                    # contact at 0.02-0.15
+    root = write_taxel_dataset(tmp_path / "faint", [{"episode_id": "f", "hands": {"right": (RIGHT, faint)}}])
+    vmax = pv.contrast_vmax(root, "quantile")
+    assert 0.05 < vmax < 0.2 and pv.contrast_vmax(root, "fixed") == 1.0
+    fixed = pv.render_contact_sheet(root, frames=8, contrast="fixed")
+    quant = pv.render_contact_sheet(root, frames=8, contrast="quantile")
+    rows = range(8)
+    lum = [np.mean([_panel(s, r, 2).astype(float).sum(axis=2).mean() for r in rows]) for s in (fixed, quant)]
+    assert lum[1] > lum[0] + 20
+    def hottest(panel: np.ndarray) -> int:
+        lum = panel.astype(int).sum(axis=2)
+        return int(lum[~(panel == pv.OUTLINE).all(axis=2)].max())      # outlines are white by design
+    hot = [max(hottest(_panel(s, r, 2)) for r in rows) for s in (fixed, quant)]
+    assert hot[0] < 400 < hot[1]                                              # faint stays dark unless stretched
+    assert cli_main(["preview", str(root), str(tmp_path / "q.png"), "--contrast", "quantile"]) == 0

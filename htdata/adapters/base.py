@@ -3,8 +3,10 @@
 An adapter turns one source format into `EpisodeRef`s (cheap, picklable,
 found by `discover`) and `EpisodeStreams` (opened per episode, streaming
 RGB frames and tactile rows on demand). Helpers here: per-file discovery,
-stable episode ids, source fingerprints, the grid check against a layout
-and the episode-video iterator. Row reads from an .npz member live in
+stable episode ids, source fingerprints, the grid check against a layout,
+the episode-video iterator, the source-tree rules every adapter follows
+(`walk_source`, `check_source_file`) and declared adapter params
+(`AdapterParam`, `check_adapter_params`). Row reads from an .npz member live in
 `npzrows.py`, video probing/decoding in `video.py`; the registry of
 adapters is `htdata/adapters/__init__.py`.
 """
@@ -15,6 +17,7 @@ import abc
 import hashlib
 import os
 import re
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Iterator, Protocol, runtime_checkable
@@ -84,6 +87,13 @@ class EpisodeStreams(abc.ABC):
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+    def _check_file(self, path: Path | str) -> Path:
+        """Re-check at open that `path` is a regular file (discovery placed it in the tree): no FIFO blocks us."""
+        try:
+            return check_source_file(path, None)
+        except EpisodeError as exc:
+            raise EpisodeError(self.ref, None, exc.message, file=path) from exc
 
     def _check_hand(self, hand: str) -> None:
         if hand not in self.tactile_timestamps_ns:
@@ -164,6 +174,7 @@ def discover_all(adapter: FileDiscovery, root: Path | str, params: dict) -> tupl
     seen: dict[str, str] = {}
     for path in adapter.discovery_files(root, params):
         try:
+            check_source_file(path, root)
             found = adapter.discover_file(path, root, params, context)
         except Exception as exc:  # any unreadable file is reported, never fatal for the source
             failures.append(discovery_failure(path, exc))
@@ -198,10 +209,16 @@ def natural_key(text: str) -> tuple:
 
 
 def fingerprint_files(root: Path, files: Iterable[Path]) -> str:
-    """sha1 over (path relative to root, size, mtime_ns) of the files, in sorted order."""
+    """sha1 over (path relative to root, size, mtime_ns) of the files, in sorted order.
+
+    Each file is first checked by `check_source_file` (regular, inside the
+    tree): adapters list every file an episode reads here, so the rule holds
+    for all of them (a FIFO named chest.mp4 is refused at discovery).
+    """
     h = hashlib.sha1()
     root = Path(root)
     for path in sorted(Path(p) for p in files):
+        check_source_file(path, root)   # every file an episode reads passes the source-tree rules
         st = path.stat()
         try:
             rel = path.relative_to(root).as_posix()
@@ -263,3 +280,97 @@ def iter_episode_video(ref: EpisodeRef, video: Path, n_frames: int) -> Iterator[
         raise EpisodeError(ref, exc.frame, str(exc), file=video) from exc
     if count < n_frames:
         raise EpisodeError(ref, count, f"video decoded only {count} of {n_frames} frames", file=video)
+
+
+# --------------------------------------------------------------------------
+# the source tree: what an adapter may read
+#
+# Rules (the same for every adapter): a source file must be a regular file
+# (a FIFO, socket or device would block or never end: refused with a
+# message); a symlink is resolved and accepted only when its target lies
+# inside the source root (a link to another tree could ingest someone
+# else's data silently). Directory symlinks: one pointing outside the root
+# is refused (reported, not skipped); one pointing inside leads to folders
+# the walk reaches anyway at their real path, so their recordings are
+# ingested once, under that real path (stable source_ref, no loop, no
+# episode found twice).
+
+
+def _inside(path: Path, root: Path) -> bool:
+    return os.path.commonpath([str(path), str(root)]) == str(root)
+
+
+def check_source_file(path: Path | str, root: Path | str | None) -> Path:
+    """Raise EpisodeError (naming `path`) unless it is a regular file whose real path is inside `root`.
+
+    `root=None` checks only the file type (e.g. when an opened episode
+    re-checks a file that discovery already placed). Returns the path.
+    Never opens the file, so a FIFO cannot block here.
+    """
+    path = Path(path)
+    try:
+        st = os.stat(path)   # follows symlinks: the type of what would be read
+    except OSError as exc:
+        raise EpisodeError(None, None, f"source file cannot be read: {exc.strerror or exc}", file=path) from exc
+    real = path.resolve()
+    outside = root is not None and not _inside(real, Path(root).resolve())
+    if outside:
+        what = "directory symlink" if stat.S_ISDIR(st.st_mode) else "symlink" if path.is_symlink() else "path"
+        raise EpisodeError(None, None, f"{what} leaves the source tree {root} (-> {real}): refused", file=path)
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("FIFO" if stat.S_ISFIFO(st.st_mode) else "socket" if stat.S_ISSOCK(st.st_mode)
+                else "directory" if stat.S_ISDIR(st.st_mode) else "device or special file")
+        raise EpisodeError(None, None, f"not a regular file ({kind}): refused", file=path)
+    return path
+
+
+def walk_source(root: Path | str, match) -> list[Path]:
+    """Sorted paths under `root` whose name satisfies `match(name)`, following the tree rules above.
+
+    Real folders are walked; a directory symlink that leaves the tree is
+    listed itself so that `discover_all` reports it (via
+    `check_source_file`) instead of skipping it silently; one inside the
+    tree is not descended (its target is walked at its real path). Matched
+    files are listed whatever their type: the check that refuses FIFOs and
+    outside links runs per file in `discover_all`.
+    """
+    root = Path(root)
+    real_root = root.resolve()
+    out: list[Path] = []
+    for folder, dirs, files in os.walk(root):   # os.walk never descends into directory symlinks
+        here = Path(folder)
+        for name in dirs:
+            path = here / name
+            if path.is_symlink() and not _inside(path.resolve(), real_root):
+                out.append(path)             # refused later, with a message
+        out += [here / name for name in files if match(name)]
+    return sorted(out)
+
+
+# --------------------------------------------------------------------------
+# adapter params: each adapter declares what [adapter.params] may hold
+
+
+@dataclass(frozen=True)
+class AdapterParam:
+    """One `[adapter.params]` key an adapter understands."""
+    name: str
+    types: tuple[type, ...]   # accepted TOML value types (bool is never taken for int)
+    default: object
+    help: str
+
+
+def check_adapter_params(adapter: str, declared: tuple[AdapterParam, ...], params: dict, where: str) -> None:
+    """Raise ValueError naming the key and listing the known params when `params` does not fit `declared`."""
+    known = {p.name: p for p in declared}
+    listing = ", ".join(f"{p.name} ({'/'.join(t.__name__ for t in p.types)}, default {p.default!r})"
+                        for p in declared) or "none"
+    for key, value in params.items():
+        if key not in known:
+            raise ValueError(f"{where}: adapter.params.{key} is not a param of adapter {adapter!r}; "
+                             f"known params: {listing}")
+        spec = known[key]
+        ok = isinstance(value, spec.types) and not (isinstance(value, bool) and bool not in spec.types)
+        if not ok:
+            raise ValueError(f"{where}: adapter.params.{key} must be {'/'.join(t.__name__ for t in spec.types)} "
+                             f"({spec.help}), got {type(value).__name__} {value!r}")

@@ -17,10 +17,10 @@ from typing import Iterator
 import numpy as np
 
 from htdata.adapters.base import (
-    EpisodeRef, EpisodeStreams, FileDiscovery, check_tactile_shape, file_frame_mismatch_note, fingerprint_files,
-    iter_episode_video, relpath_inside, sanitise_id,
+    AdapterParam, EpisodeRef, EpisodeStreams, FileDiscovery, check_source_file, check_tactile_shape,
+    file_frame_mismatch_note, fingerprint_files, iter_episode_video, relpath_inside, sanitise_id, walk_source,
 )
-from htdata.adapters.npzrows import NpzRowError, NpzRows
+from htdata.adapters.npzrows import NpzRowError, NpzRows, check_npy_file
 from htdata.adapters.video import VideoError, probe_video_pts_ns
 from htdata.errors import EpisodeError
 from htdata.layouts import is_layout_path
@@ -85,9 +85,11 @@ def _frame_files(frames_dir: Path) -> list[Path]:
 
 class NativeAdapter(FileDiscovery):
     name = SOURCE
+    # Everything a native recording needs is in its recording.json: no params.
+    PARAMS: tuple[AdapterParam, ...] = ()
 
     def discovery_files(self, root: Path, params: dict) -> list[Path]:
-        return sorted(Path(root).rglob(RECORDING_JSON))
+        return walk_source(root, lambda name: name == RECORDING_JSON)
 
     def discover_file(self, rec_path: Path, root: Path, params: dict, context) -> list[EpisodeRef]:
         folder = rec_path.parent
@@ -100,7 +102,8 @@ class NativeAdapter(FileDiscovery):
             raise EpisodeError(None, None, f"missing files {[str(p) for p in missing]}", file=rec_path,
                                episode_id=episode_id)
         try:
-            est_frames = int(np.load(paths["timestamps"], mmap_mode="r").shape[0])
+            check_source_file(paths["timestamps"], root)
+            est_frames = int(check_npy_file(paths["timestamps"])[0][0])
         except (OSError, ValueError, IndexError) as exc:
             raise EpisodeError(None, None, f"timestamps .npy unreadable: {exc}", file=paths["timestamps"],
                                episode_id=episode_id) from exc
@@ -139,6 +142,7 @@ class NativeStreams(EpisodeStreams):
 
         ts_path = paths["timestamps"]
         try:
+            check_npy_file(self._check_file(ts_path))
             video_ts = np.load(ts_path)
         except (OSError, ValueError) as exc:
             raise EpisodeError(ref, None, f"timestamps .npy unreadable: {exc}", file=ts_path) from exc
@@ -157,6 +161,7 @@ class NativeStreams(EpisodeStreams):
 
     def _open_hand(self, hand: str, path: Path, offset_ns: int) -> None:
         ref = self.ref
+        self._check_file(path)
         try:
             rows = NpzRows(path, "values")
             self._rows[hand] = rows
@@ -180,6 +185,7 @@ class NativeStreams(EpisodeStreams):
     def _count_video_frames(self) -> int:
         if self._frames is not None:
             return len(self._frames)
+        self._check_file(self._video_file)
         try:
             return int(probe_video_pts_ns(self._video_file).size)
         except VideoError as exc:

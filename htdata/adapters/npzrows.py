@@ -2,6 +2,12 @@
 
 Long tactile streams (native, TouchAnything) are read a chunk of rows at a
 time: memory stays flat in episode length.
+
+Declared sizes are checked against the bytes present before anything is
+allocated: a member whose header declares more data than the member holds
+(or whose zip entry claims more than deflate can expand to) is refused, as
+is a standalone .npy (`check_npy_file`) whose header outgrows the file. A
+138 KB npz declaring 2e8 timestamps is an error, not a 1.6 GB allocation.
 """
 
 from __future__ import annotations
@@ -22,6 +28,33 @@ class NpzRowError(Exception):
 
 
 _ZIP_ERRORS = (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError)
+# deflate expands at most ~1032:1; a zip entry claiming more is lying about its size
+MAX_DEFLATE_RATIO = 1100
+
+
+def declared_nbytes(shape: tuple[int, ...], dtype: np.dtype) -> int:
+    """Bytes an array of `shape` and `dtype` occupies (Python ints: no overflow on absurd shapes)."""
+    n = 1
+    for d in shape:
+        n *= int(d)
+    return n * int(dtype.itemsize)
+
+
+def check_npy_file(path: Path | str) -> tuple[tuple[int, ...], np.dtype]:
+    """(shape, dtype) of a standalone .npy, refused (ValueError) when its header declares more than the file holds."""
+    path = Path(path)
+    with open(path, "rb") as f:
+        try:
+            shape, _, dtype = _read_npy_header(f)
+        except NpzRowError as exc:
+            raise ValueError(str(exc)) from exc
+        offset = f.tell()
+    present = path.stat().st_size - offset
+    need = declared_nbytes(shape, dtype)
+    if need > present:
+        raise ValueError(f"{path.name}: header declares shape {tuple(shape)} {dtype} ({need} bytes) but the file "
+                         f"holds {present} bytes of data: refused before allocating")
+    return tuple(shape), dtype
 
 
 def _read_npy_header(stream) -> tuple[tuple[int, ...], bool, np.dtype]:
@@ -75,10 +108,26 @@ class NpzRows:
             raise NpzRowError(None, f"{self.member}: object arrays are not supported")
         if fortran and len(shape) > 1:
             raise NpzRowError(None, f"{self.member}: Fortran-ordered arrays cannot be read row by row")
+        self._check_declared_size(tuple(shape), dtype)
         self.shape, self.dtype = tuple(shape), dtype
         self.row_shape = self.shape[1:]
         self.row_bytes = int(np.prod(self.row_shape, dtype=np.int64)) * dtype.itemsize
         self._next_row = 0
+
+    def _check_declared_size(self, shape: tuple[int, ...], dtype: np.dtype) -> None:
+        """Refuse a header that declares more bytes than the zip member holds (checked before any read)."""
+        info = self._zip.getinfo(self.member)
+        present = info.file_size - self._stream.tell()
+        need = declared_nbytes(shape, dtype)
+        if need > present:
+            raise NpzRowError(None, f"{self.member}: header declares shape {shape} {dtype} ({need} bytes) but the "
+                              f"member holds {present} bytes of data: refused before allocating")
+        archive = self.path.stat().st_size
+        max_expand = 1 if info.compress_type == zipfile.ZIP_STORED else MAX_DEFLATE_RATIO
+        if info.compress_size > archive or info.file_size > info.compress_size * max_expand + 4096:
+            raise NpzRowError(None, f"{self.member}: zip entry claims {info.file_size} bytes from {info.compress_size} "
+                              f"compressed in a {archive}-byte archive (more than the data can expand to): "
+                              f"refused before allocating")
 
     def _read_block(self, n: int) -> np.ndarray:
         want = n * self.row_bytes

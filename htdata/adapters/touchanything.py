@@ -23,6 +23,7 @@ cells only).
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -30,8 +31,8 @@ from typing import Iterator
 import numpy as np
 
 from htdata.adapters.base import (
-    EpisodeRef, EpisodeStreams, FileDiscovery, check_tactile_shape, file_frame_mismatch_note, fingerprint_files,
-    iter_episode_video, sanitise_id,
+    AdapterParam, EpisodeRef, EpisodeStreams, FileDiscovery, check_tactile_shape, file_frame_mismatch_note,
+    fingerprint_files, iter_episode_video, sanitise_id, walk_source,
 )
 from htdata.adapters.npzrows import NpzRowError, NpzRows
 from htdata.adapters.video import VideoError, probe_video_pts_ns
@@ -88,6 +89,10 @@ class TouchAnythingContext:
 
 class TouchAnythingAdapter(FileDiscovery):
     name = SOURCE
+    PARAMS: tuple[AdapterParam, ...] = (
+        AdapterParam("video", (str,), "chest", f"which camera is the RGB stream: one of {sorted(VIDEO_NAMES)}"),
+        AdapterParam("layouts", (dict,), {}, "{hand: layout id} overriding the defaults"),
+    )
 
     def discovery_context(self, root: Path, params: dict) -> TouchAnythingContext:
         video = params.get("video", "chest")
@@ -97,7 +102,7 @@ class TouchAnythingAdapter(FileDiscovery):
                                     layouts={**DEFAULT_LAYOUTS, **params.get("layouts", {})}, video=video)
 
     def discovery_files(self, root: Path, params: dict) -> list[Path]:
-        return sorted(Path(root).rglob(NPZ_NAME))
+        return walk_source(root, lambda name: name == NPZ_NAME)
 
     def discover_file(self, npz: Path, root: Path, params: dict, context: TouchAnythingContext) -> list[EpisodeRef]:
         folder = npz.parent
@@ -112,7 +117,8 @@ class TouchAnythingAdapter(FileDiscovery):
             raise EpisodeError(None, None, f"no usable tactile grid ({excluded or 'no grid arrays'})",
                                file=npz, episode_id=episode_id)
         video = context.video
-        files = [npz] + [folder / n for n in (VIDEO_NAMES[video], JQ_NAME) if (folder / n).is_file()]
+        # exists(), not is_file(): a FIFO or an outside symlink must reach fingerprint_files' check and be refused
+        files = [npz] + [folder / n for n in (VIDEO_NAMES[video], JQ_NAME) if os.path.lexists(folder / n)]
         extra: dict = {"video": video}
         if (scene, task, traj) in context.splits:
             extra["source_split"] = context.splits[(scene, task, traj)]
@@ -132,6 +138,7 @@ class TouchAnythingAdapter(FileDiscovery):
                 rows = NpzRows(npz, GRID_KEYS[hand])
             except NpzRowError as exc:
                 if "has no array" in str(exc):
+                    excluded[hand] = f"no {GRID_KEYS[hand]} array in {NPZ_NAME}"
                     continue
                 raise EpisodeError(None, exc.row, str(exc), file=npz, episode_id=episode_id) from exc
             try:
@@ -186,6 +193,10 @@ class TouchAnythingStreams(EpisodeStreams):
 
     def _setup(self) -> None:
         ref = self.ref
+        for hand, why in sorted(ref.extra.get("hands_excluded", {}).items()):
+            self.notes.append(f"{hand} hand not ingested: {why}")
+        self._check_file(self.npz)
+        self._check_file(self.video)
         for hand in ref.hands:
             try:
                 self._rows[hand] = NpzRows(self.npz, GRID_KEYS[hand])
@@ -215,11 +226,11 @@ class TouchAnythingStreams(EpisodeStreams):
     def _tactile_clock(self, n_rows: int) -> tuple[np.ndarray, np.ndarray]:
         """Tactile timestamps and, for each, the npz row it stamps."""
         jq = self.folder / JQ_NAME
-        if not jq.is_file():
+        if not os.path.lexists(jq):
             self.notes.append(f"{JQ_NAME} absent: tactile clock = frame_index / {FPS} s")
             rows = np.arange(n_rows, dtype=np.int64)
             return rows * 1_000_000_000 // FPS, rows
-        ts, idx = read_jq_timestamps(jq, self.ref)
+        ts, idx = read_jq_timestamps(self._check_file(jq), self.ref)
         keep = (idx >= 0) & (idx < n_rows)
         if (~keep).any():
             self.notes.append(f"{JQ_NAME}: {int((~keep).sum())} rows point past the {n_rows} npz rows: ignored")

@@ -82,6 +82,12 @@ def iter_video_rgb(path: Path | str) -> Iterator[np.ndarray]:
     the file is named by its own presentation index (`VideoError.frame`):
     the decoder holds a few frames back for reordering, so the count of
     frames delivered so far would point a little before it.
+
+    Damage the decoder conceals instead of reporting (e.g. 3000 bytes of
+    0xFF inside an H.264 slice: no error, a smeared picture) is caught by
+    FFmpeg's per-frame corrupt flag (AV_FRAME_FLAG_CORRUPT, `is_corrupt`):
+    such a frame raises VideoError naming its presentation index, so a
+    damaged file fails its episode instead of ingesting smeared frames.
     """
     import av
 
@@ -110,6 +116,9 @@ def iter_video_rgb(path: Path | str) -> Iterator[np.ndarray]:
                 raise VideoError(bad, f"video frame does not decode: corrupt packet at frame {bad}, "
                                  f"{count} frames decoded before it ({exc})") from exc
             for frame in frames:
+                if frame.is_corrupt:
+                    raise VideoError(count, f"video frame {count} is damaged: the decoder concealed corrupt "
+                                     f"data (corrupt-frame flag set), {count} frames decoded before it")
                 yield frame.to_ndarray(format="rgb24")
                 count += 1
     finally:

@@ -5,6 +5,7 @@
                   --pipeline pipelines/touchanything.toml=/raw/touchanything OUT
     htdata ingest --pipeline A.toml --pipeline B.toml SRC_A SRC_B OUT
     htdata ingest --layouts ~/my_gloves --pipeline native.toml /raw/native OUT
+    htdata ingest --pipeline opentouch --set adapter.params.annotations=labels.tsv /raw/opentouch OUT
 
 Ingesting into an existing dataset APPENDS, as a new version: unchanged
 episodes are kept as they are, changed inputs are re-ingested, edited labels
@@ -14,7 +15,10 @@ Layout ids are searched in --layouts DIR (repeatable), then $HTDATA_LAYOUTS
 is copied into OUT/layouts/. Failures (file/episode/frame) are listed on
 stderr and in OUT/reports/ingest.json; the exit code is 1 when some episode
 failed (unless --allow-failures), 2 for a usage/plan error, 3 when a work
-unit kept failing.
+unit kept failing. `--set [PIPELINE:]dotted.key=value` overrides a pipeline
+setting without copying its file (value parsed as TOML, else text; checked
+like the file; with several pipelines, prefix the pipeline name to aim at
+one); the dataset's manifest records the effective settings.
 """
 
 from __future__ import annotations
@@ -35,6 +39,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="pipeline TOML (or a name in pipelines/); repeat for a multi-source dataset")
     parser.add_argument("paths", nargs="+", metavar="SRC... OUT",
                         help="one SRC per --pipeline (unless given as PIPELINE=SRC), then OUT")
+    parser.add_argument("--set", action="append", default=[], dest="settings", metavar="[PIPELINE:]KEY=VALUE",
+                        help="override a pipeline setting, e.g. adapter.params.annotations=labels.csv or "
+                             "normalise.out_of_range=fail (repeatable; validated like the TOML)")
     parser.add_argument("--layouts", action="append", default=[], metavar="DIR",
                         help=f"folder of glove layout JSONs searched for layout ids (repeatable; before "
                              f"${LAYOUTS_ENV} and the shipped layouts)")
@@ -53,6 +60,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         sources, out = parse_sources(args.pipeline, args.paths)
+        apply_settings(sources, args.settings)
         report = ingest(sources, out, workers=args.workers, executor=args.executor, address=args.address,
                         retries=args.retries, progress=not args.quiet, layout_dirs=tuple(args.layouts),
                         command="htdata ingest " + " ".join(sys.argv[2:]))
@@ -77,3 +85,22 @@ def run(args: argparse.Namespace) -> int:
     if n_fail and not args.allow_failures:
         return 1
     return 0
+
+
+def apply_settings(sources, settings: list[str]) -> None:
+    """Apply `--set [PIPELINE:]key=value` overrides to the sources' pipelines (in place, validated)."""
+    names = {s.pipeline.name for s in sources}
+    aimed: dict[str | None, list[str]] = {}
+    for item in settings:
+        key = item.partition("=")[0]
+        target, sep, _ = key.partition(":")
+        if sep:
+            if target not in names:
+                raise ValueError(f"--set {item}: no pipeline named {target!r} (pipelines: {sorted(names)})")
+            aimed.setdefault(target, []).append(item[len(target) + 1:])
+        else:
+            aimed.setdefault(None, []).append(item)
+    for source in sources:
+        mine = aimed.get(None, []) + aimed.get(source.pipeline.name, [])
+        if mine:
+            source.pipeline = source.pipeline.with_overrides(mine)

@@ -4,8 +4,10 @@
 clocks (sync.py), reads tactile rows `chunk_frames` at a time, checks their
 shape against the planned layout, normalises, drops frames with non-finite
 live taxels, rasterises and yields one `Frame` per kept frame (meta, RGB,
-maps, bend vectors), in frame order. It encodes and writes nothing: the
-ingest unit encodes each frame with `htdata.format.encode_sample`, the
+maps, bend vectors), in frame order. Raw values outside the layout's range
+[0, max_value] are counted per hand and handled by the pipeline's
+`[normalise] out_of_range` policy (clip / drop_frame / fail). It encodes
+and writes nothing: the ingest unit encodes each frame with `htdata.format.encode_sample`, the
 benchmarks (htdata/benchmarks/sources.py) keep the maps. What the episode
 record needs (sync report, dropped frames, contact stats, notes, fps) is
 accumulated in the caller's `EpisodeTally`, complete once the generator is
@@ -99,11 +101,43 @@ class EpisodeTally:
         self.contact_max: dict[str, float] = {}
         self.notes: list[str] = []
         self.fps: float | None = None
+        # hand -> [below taxel values, above taxel values, frames with any] over the synchronised frames
+        self.out_of_range: dict[str, list[int]] = {}
+        self.raw_max: dict[str, float] = {}
+        self.oor_policy = None
 
-    def start(self, ref, hands: list[str], layouts: dict[str, Layout]) -> None:
+    def start(self, ref, hands: list[str], layouts: dict[str, Layout], oor_policy=None) -> None:
         self.ref, self.hands, self.layouts = ref, hands, layouts
         self.contact_sum = {h: 0.0 for h in hands}
         self.contact_max = {h: 0.0 for h in hands}
+        self.out_of_range = {h: [0, 0, 0] for h in hands}
+        self.oor_policy = oor_policy
+
+    def add_out_of_range(self, hand: str, below: np.ndarray, above: np.ndarray) -> np.ndarray:
+        """Count one chunk's out-of-range taxels; returns the per-frame mask of frames holding any."""
+        bad = (below > 0) | (above > 0)
+        c = self.out_of_range[hand]
+        c[0] += int(below.sum())
+        c[1] += int(above.sum())
+        c[2] += int(bad.sum())
+        return bad
+
+    def out_of_range_record(self) -> dict:
+        """{hand: {"below", "above", "frames"}} for hands with any out-of-range value ({} when clean)."""
+        return {h: {"below": c[0], "above": c[1], "frames": c[2]} for h, c in self.out_of_range.items() if c[2]}
+
+    def _out_of_range_notes(self) -> list[str]:
+        if self.oor_policy is None or self.sync is None:
+            return []
+        total = max(int(self.sync.rgb_index.size), 1)
+        notes = []
+        for h, c in self.out_of_range_record().items():
+            share = c["frames"] / total
+            if self.oor_policy.policy == "clip" and share > self.oor_policy.warn_share:
+                notes.append(f"warning: {h} hand: {c['frames']} of {total} frames ({share:.1%}) hold raw values "
+                             f"outside [0, {self.raw_max.get(h, '?'):g}] ({c['below']} below, {c['above']} above): "
+                             f"clipped (pipeline [normalise] out_of_range = \"clip\")")
+        return notes
 
     def add_contact(self, hand: str, live: np.ndarray) -> None:
         self.contact_sum[hand] += float(live.sum(dtype=np.float64))
@@ -111,7 +145,7 @@ class EpisodeTally:
 
     def finish(self, streams) -> None:
         ref = self.ref
-        self.notes = list(streams.notes) + list(self.sync.report.get("warnings", []))
+        self.notes = list(streams.notes) + list(self.sync.report.get("warnings", [])) + self._out_of_range_notes()
         self.fps = _fps(streams.rgb_timestamps_ns)
         if self.fps is None:
             self.fps = float(ref.extra.get("fps", 30.0)) if isinstance(ref.extra, dict) else 30.0
@@ -138,6 +172,11 @@ class EpisodeTally:
         }
         if isinstance(ref.extra, dict) and ref.extra.get("source_split"):
             record["source_split"] = str(ref.extra["source_split"])
+        # Added only when there is something to say: a clean episode's record keeps its exact bytes.
+        if self.out_of_range_record():
+            record["out_of_range"] = self.out_of_range_record()
+        if isinstance(ref.extra, dict) and ref.extra.get("hands_excluded"):
+            record["hands_excluded"] = dict(sorted(ref.extra["hands_excluded"].items()))
         return record
 
 
@@ -216,11 +255,34 @@ def _read_chunk(ref, streams, tally: EpisodeTally, normalisers: dict, start: int
             if start == 0:
                 normalisers[h].fit_baseline(raw)
             v, finite = normalisers[h].apply(raw)
+            below, above = normalisers[h].out_of_range(raw)
         for j in np.flatnonzero(ok & ~finite):
             tally.dropped.append((int(rgb_idx[j]), f"nonfinite_tactile:{h}"))
         ok &= finite
+        ok &= _out_of_range_policy(ref, tally, h, normalisers[h], raw, below, above, rgb_idx, ok)
         values[h] = v
     return values, ok
+
+
+def _out_of_range_policy(ref, tally: EpisodeTally, hand: str, normaliser, raw, below, above, rgb_idx,
+                         ok: np.ndarray) -> np.ndarray:
+    """Count a chunk's out-of-range raw values and apply the policy; returns the mask of frames that stay."""
+    bad = tally.add_out_of_range(hand, below, above)
+    tally.raw_max[hand] = float(normaliser.cfg.max_value)
+    policy = tally.oor_policy.policy if tally.oor_policy is not None else "clip"
+    if not bad.any() or policy == "clip":
+        return np.ones_like(ok)
+    if policy == "fail":
+        j = int(np.flatnonzero(bad)[0])
+        live = raw[j][normaliser.live_mask]
+        with np.errstate(invalid="ignore"):
+            worst = float(live[(live < 0) | (live > np.float32(normaliser.cfg.max_value))][0])
+        raise EpisodeError(ref, int(rgb_idx[j]), f"{hand} hand raw value {worst:g} outside [0, "
+                           f"{normaliser.cfg.max_value:g}] (layout {normaliser.layout_id}; {int(below[j])} taxels "
+                           f"below, {int(above[j])} above); pipeline [normalise] out_of_range = \"fail\"")
+    for j in np.flatnonzero(ok & bad):   # drop_frame
+        tally.dropped.append((int(rgb_idx[j]), f"out_of_range:{hand}"))
+    return ~bad
 
 
 def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock: StageClock | None = None,
@@ -234,7 +296,7 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
     """
     clock = clock or StageClock()
     hands = [h for h in HANDS if h in ref.hands]
-    tally.start(ref, hands, planned_layouts(ref, hands))
+    tally.start(ref, hands, planned_layouts(ref, hands), cfg.out_of_range)
     layouts = tally.layouts
     with clock.stage("decode"):
         opened = adapter.open(ref, cfg.adapter.params)
@@ -286,6 +348,8 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
                 yield Frame(key=key, source_frame=i, meta=meta, rgb=rgb, maps={h: maps[h][n] for h in hands},
                             bends={h: b[n] for h, b in bends.items()})
         if tally.frames == 0:
-            raise EpisodeError(ref, None, f"no frame left: all {total} synchronised frames had non-finite "
+            why = ("non-finite or out-of-range (out_of_range = \"drop_frame\")"
+                   if any(r.startswith("out_of_range:") for _, r in tally.dropped) else "non-finite")
+            raise EpisodeError(ref, None, f"no frame left: all {total} synchronised frames had {why} "
                                f"tactile values")
         tally.finish(streams)

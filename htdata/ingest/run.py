@@ -3,7 +3,8 @@
 Failures (any exception inside an episode, every source file discovery
 could not read, every episode whose layout does not resolve) are reported
 with file/episode/frame in DATASET/reports/ingest.json, with every dropped
-frame, every sync report and a per-stage timing breakdown of the units run.
+frame, every sync report, out-of-range raw value counts and hands not
+ingested per episode, and a per-stage timing breakdown of the units run.
 Progress goes to `progress` (a tqdm bar on stderr when enabled): it advances
 per finished episode (per finished unit with Ray).
 """
@@ -167,5 +168,10 @@ def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, disc
         "failures": failures,
         "dropped_frames": [d for r in ordered for d in r["dropped"]],
         "sync": {ep["episode_id"]: ep["sync"] for r in ordered for ep in r["episodes"]},
+        # raw values outside the layout range and hands not ingested, per episode (only episodes that have any)
+        "out_of_range": {ep["episode_id"]: ep["out_of_range"] for r in ordered for ep in r["episodes"]
+                         if ep.get("out_of_range")},
+        "hands_excluded": {ep["episode_id"]: ep["hands_excluded"] for r in ordered for ep in r["episodes"]
+                           if ep.get("hands_excluded")},
         "timing": timing_summary(ran, time.perf_counter() - t_start),
     }

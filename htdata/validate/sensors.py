@@ -7,6 +7,8 @@ changes over an episode's decoded frames (dead if always 0, stuck
 otherwise), a saturated fraction above SATURATED_WARN_FRACTION, and hands
 whose every decoded map is all zero. The accumulator also collects the
 contact-area and pressure histograms of the report's stats.
+`check_taxel_health` warns about episode hands with many faulty taxels
+(htdata/health.py), from the stats cache or, with --deep, computed.
 
 Accumulator: {hand_key(episode, hand): {"frames", "region_means", "max",
 "saturated", "covered"}, "_contact_area": [fractions], "_pressure_hist": counts}.
@@ -98,6 +100,46 @@ def check_sensors(sensor: dict, check: Check) -> None:
                        **where, found=round(frac, 4))
         if len(acc["region_means"]) >= 2:
             _check_regions(np.stack(acc["region_means"]), eid, hand, where, check)
+
+
+def check_taxel_health(root, version: int | None, check: Check, compute: bool = False) -> None:
+    """Warn ("taxel_health") for episode hands whose share of faulty taxels passes health.WARN_SHARE.
+
+    Health comes from the stats cache (`htdata stats`, DATASET/stats/); with
+    `compute` (validate --deep) episodes without an entry are computed here
+    (nothing is written). Otherwise they are counted as skipped.
+    """
+    from htdata.health import WARN_SHARE, flagged_share
+    from htdata.reader import DatasetReader
+    from htdata.stats import cached_episode_stats, episode_stats
+
+    with DatasetReader(root, version=version) as reader:
+        cached = cached_episode_stats(reader)
+        missing = [p for p in range(len(reader.episodes)) if p not in cached]
+        if compute and missing:
+            try:
+                cached.update(zip(missing, episode_stats(reader, missing, cache_dir=None)[0]))
+                missing = []
+            except (ValueError, OSError, KeyError) as exc:   # the content check reports unreadable samples
+                check.skipped.append(f"taxel health not computed: {exc}")
+                return
+        if missing:
+            check.skipped.append(f"taxel health: {len(missing)} of {len(reader.episodes)} episodes have no "
+                                 f"cached stats (run `htdata stats` or validate --deep)")
+        for pos in sorted(cached):
+            eid = reader.episodes[pos]["episode_id"]
+            for hand, h in cached[pos]["hands"].items():
+                health = h["health"]
+                if not health.get("assessed"):
+                    continue
+                check.checked["taxel_health_hands"] += 1
+                share = flagged_share(health)
+                if share > WARN_SHARE:
+                    found = {k: v for k, v in health["counts"].items() if v}
+                    check.warn("taxel_health", f"episode {eid}: {share:.1%} of the {health['live']} live {hand} "
+                               f"taxels look faulty ({', '.join(f'{k} {v}' for k, v in found.items())}; "
+                               f"htdata stats --health OUT.png draws them)", episode=eid, hand=hand,
+                               found=found, share=round(share, 4))
 
 
 def _check_regions(means: np.ndarray, eid: str, hand: str, where: dict, check: Check) -> None:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from htdata.validate.content import decode_mask, layout_maps
 from htdata.validate.report import CHECKS, Check
-from htdata.validate.sensors import check_sensors, merge_sensor
+from htdata.validate.sensors import check_sensors, check_taxel_health, merge_sensor
 from htdata.validate.shards import run_jobs, shard_jobs
 from htdata.validate.splits import check_splits
 from htdata.validate.stats import dataset_stats
@@ -92,6 +92,7 @@ def _check_dataset(ds: Loaded, cfg: ValidateConfig, checks: dict[str, Check], pa
         merge_sensor(sensor, res["sensor"])
     check_time(ds, ts, checks["time"])
     check_sensors(sensor, checks["sensors"])
+    check_taxel_health(ds.root, ds.manifest.get("version"), checks["sensors"], compute=cfg.deep)
     if cfg.split is not None:
         check_splits(ds, cfg.split, hashes, checks["splits"])
     return dataset_stats(ds, sensor)

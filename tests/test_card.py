@@ -1,0 +1,64 @@
+"""htdata card: a self-contained HTML page (no external resource) with its tables and embedded PNGs, and a Markdown twin."""
+
+from __future__ import annotations
+
+import base64
+from html.parser import HTMLParser
+
+import cv2
+import numpy as np
+
+from htdata.cli import main as cli_main
+from tests.factories import commit_split
+from tests.tactile_factories import LEFT, RIGHT, clean_series, write_taxel_dataset
+
+
+class _Page(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.images, self.links, self.tables, self.stack = [], [], 0, []
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if tag not in ("br", "img", "meta"):
+            self.stack.append(tag)
+        if tag == "img":
+            self.images.append(a)
+        if tag == "table":
+            self.tables += 1
+        for key in ("href", "src"):
+            if key in a and not a[key].startswith("data:"):
+                self.links.append(a[key])
+        if tag in ("script", "link", "iframe"):
+            self.links.append(tag)
+
+    def handle_endtag(self, tag):
+        assert self.stack and self.stack.pop() == tag, f"unbalanced </{tag}>"
+
+
+def test_card_is_self_contained_with_tables_and_images(tmp_path, capsys):
+    root = write_taxel_dataset(tmp_path / "ds", [
+        {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": {"right": (RIGHT, clean_series(RIGHT, 32, 1))}},
+        {"episode_id": "ep_b", "task": "wipe", "scene": "office",
+         "sync": {"hands": {h: {"median_abs_skew_ns": 2_000_000, "offset_ns": 5_000_000} for h in ("left", "right")}},
+         "hands": {"right": (RIGHT, clean_series(RIGHT, 31, 2)), "left": (LEFT, clean_series(LEFT, 31, 3))}}])
+    commit_split(root, "main", {"train": ["ep_a"], "val": ["ep_b"]})
+    out = tmp_path / "card" / "card.html"
+    assert cli_main(["card", str(root), str(out)]) == 0
+    page = _Page()
+    page.feed(out.read_text())
+    page.close()
+    assert page.links == [] and page.stack == []                   # offline, and every tag closed
+    assert page.tables == 4                                        # tasks, scenes, gloves, split "main"
+    # frames/task + frames/scene + 2 gloves x (regions + values) + health + 2 sync + 2 previews
+    assert len(page.images) == 11
+    for img in page.images:
+        assert img["alt"] and img["src"].startswith("data:image/png;base64,")
+        png = cv2.imdecode(np.frombuffer(base64.b64decode(img["src"].split(",", 1)[1]), np.uint8), cv2.IMREAD_COLOR)
+        assert png is not None and png.shape[0] >= 60 and png.shape[1] >= 200 and png.std() > 10   # drawn, not blank
+    text = out.read_text()
+    assert "split main: part" in text and "<td>pour</td>" in text and RIGHT in text
+    md = out.with_suffix(".md").read_text()
+    assert "| task | episodes |" in md and "](card_files/health.png)" in md
+    assert len(list((out.parent / "card_files").glob("*.png"))) == 11
+    assert cli_main(["card", str(root), str(tmp_path / "card.txt")]) == 2

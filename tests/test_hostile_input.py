@@ -1,0 +1,284 @@
+"""Damaged and hostile source files (issue #11 item 4): refused or failed with file/episode/frame named.
+
+Damaged H.264 (3000 x 0xFF inside a packet, random bytes in one packet), headers declaring more data
+than the file holds (npz member, standalone .npy, HDF5 dataset), a FIFO named chest.mp4, symlinks
+leaving the source tree (files and directories) and directory symlinks inside it (followed).
+Every case: the bad episode fails, the others are ingested, nothing hangs or allocates GBs.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import signal
+import zipfile
+from contextlib import contextmanager
+from pathlib import Path
+
+import cv2
+import h5py
+import numpy as np
+import pytest
+
+from htdata.adapters import get_adapter
+from htdata.adapters.npzrows import NpzRowError, NpzRows, check_npy_file
+from htdata.adapters.video import VideoError, iter_video_rgb
+from htdata.layouts import load_layout
+from htdata.manifest import load_episodes
+from htdata.sample.formats import TouchAnythingEpisode, write_touchanything_episode
+from tests.factories import ingest_cli, make_native, make_opentouch, make_touchanything
+
+
+@contextmanager
+def deadline(seconds: int):
+    """Fail (instead of hanging the suite) when the body blocks, e.g. opening a FIFO."""
+    def boom(*_):
+        raise TimeoutError(f"blocked for more than {seconds} s")
+    old = signal.signal(signal.SIGALRM, boom)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+
+
+def report_of(out: Path) -> dict:
+    return json.loads((out / "reports" / "ingest.json").read_text())
+
+
+def npy_header(shape, dtype="<i8") -> bytes:
+    from numpy.lib import format as npy
+
+    buf = io.BytesIO()
+    npy.write_array_header_1_0(buf, {"descr": dtype, "fortran_order": False, "shape": shape})
+    return buf.getvalue()
+
+
+# --------------------------------------------------------------------------- declared sizes
+
+def test_npz_member_declaring_2e8_timestamps_is_refused_before_allocating(tmp_path):
+    path = tmp_path / "tactile_right.npz"
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("timestamps_ns.npy", npy_header((200_000_000,)) + np.arange(17_000, dtype=np.int64).tobytes())
+    assert path.stat().st_size < 200_000
+    with pytest.raises(NpzRowError, match=r"declares shape \(200000000,\) int64 \(1600000000 bytes\) but the "
+                                          r"member holds 136000 bytes"):
+        NpzRows(path, "timestamps_ns")
+
+
+def test_npz_entry_claiming_more_than_deflate_can_expand_is_refused(tmp_path):
+    path = tmp_path / "x.npz"
+    np.savez_compressed(path, values=np.zeros((4, 16, 16), np.float32))
+    data = bytearray(path.read_bytes())
+    # forge the central directory's uncompressed size (offset 24 in the entry) to 4 GB - 1
+    cd = data.rfind(b"PK\x01\x02")
+    data[cd + 24:cd + 28] = (0xFFFFFFF0).to_bytes(4, "little")
+    path.write_bytes(bytes(data))
+    with pytest.raises(NpzRowError, match="more than the data can expand to"):
+        NpzRows(path, "values")
+
+
+def test_native_forged_timestamps_npz_fails_its_episode_only(tmp_path, capsys):
+    raw = make_native(tmp_path / "raw")
+    bad = raw / "rec_bad"
+    import shutil
+
+    shutil.copytree(raw / "rec_good", bad)
+    npz = bad / "tactile_right.npz"
+    values = np.load(npz)["values"]
+    with zipfile.ZipFile(npz, "w", zipfile.ZIP_DEFLATED) as z:
+        buf = io.BytesIO()
+        np.save(buf, values)
+        z.writestr("values.npy", buf.getvalue())
+        forged = npy_header((200_000_000,)) + np.arange(values.shape[0], dtype=np.int64).tobytes()
+        z.writestr("timestamps_ns.npy", forged)
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", "native", raw, out) == 1
+    err = capsys.readouterr().err
+    assert "tactile_right.npz [nat-rec_bad]" in err and "declares shape (200000000,)" in err
+    assert [e["episode_id"] for e in load_episodes(out)] == ["nat-rec_good"]
+
+
+def test_standalone_npy_header_larger_than_file_is_refused(tmp_path):
+    path = tmp_path / "video_timestamps.npy"
+    path.write_bytes(npy_header((1_000_000_000,)) + np.arange(5, dtype=np.int64).tobytes())
+    with pytest.raises(ValueError, match=r"declares shape \(1000000000,\).*holds 40 bytes"):
+        check_npy_file(path)
+    ok = tmp_path / "ok.npy"
+    np.save(ok, np.arange(5, dtype=np.int64))
+    assert check_npy_file(ok)[0] == (5,)
+
+
+def test_hdf5_dataset_shape_beyond_its_storage_is_refused(tmp_path, capsys):
+    raw = make_opentouch(tmp_path / "raw")
+    with h5py.File(raw / "home_kitchen_p1.hdf5", "r+") as f:
+        g = f["data/demo_02"]
+        del g["timestamps"]
+        ds = g.create_dataset("timestamps", shape=(7,), maxshape=(None,), chunks=(1024,), dtype="<i8")
+        ds[:] = np.arange(7) * 33_333_333
+        ds.resize((200_000_000,))   # declared 1.6 GB, stored one chunk
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", "opentouch", raw, out) == 1
+    err = capsys.readouterr().err
+    assert "home_kitchen_p1.hdf5 [ot-home_kitchen_p1-demo_02]" in err
+    assert "declared shape (200000000,) int64 needs 1600000000 bytes" in err
+    assert sorted(e["episode_id"] for e in load_episodes(out)) == ["ot-home_kitchen_p1-demo_003",
+                                                                   "ot-home_kitchen_p1-demo_01"]
+
+
+# --------------------------------------------------------------------------- non-regular files, symlinks
+
+def test_fifo_named_chest_mp4_is_refused_not_hanging(tmp_path, capsys):
+    raw = make_touchanything(tmp_path / "raw")
+    video = raw / "Office" / "open_drawer" / "20260321_101010_001" / "chest.mp4"
+    video.unlink()
+    os.mkfifo(video)
+    out = tmp_path / "ds"
+    with deadline(60):
+        assert ingest_cli("--pipeline", "touchanything", raw, out) == 1
+    err = capsys.readouterr().err
+    assert f"FAILED {video}" in err and "not a regular file (FIFO): refused" in err
+    assert [e["episode_id"] for e in load_episodes(out)] == ["ta-Home-plug_usb-20260320_135743_682"]
+
+
+def test_file_symlink_leaving_the_tree_is_refused_inside_is_followed(tmp_path):
+    raw = make_touchanything(tmp_path / "raw")
+    outside = make_touchanything(tmp_path / "elsewhere")
+    folder = raw / "Office" / "open_drawer" / "20260321_101010_001"
+    (folder / "pressure_grids.npz").unlink()
+    (folder / "pressure_grids.npz").symlink_to(outside / "Home" / "plug_usb" / "20260320_135743_682" /
+                                               "pressure_grids.npz")
+    adapter = get_adapter("touchanything")
+    refs, failures = adapter.discover_all(raw, {})
+    assert [r.episode_id for r in refs] == ["ta-Home-plug_usb-20260320_135743_682"]
+    (failure,) = failures
+    assert failure.file == str(folder / "pressure_grids.npz") and "symlink leaves the source tree" in str(failure)
+    # the same link pointing inside the tree is an ordinary file
+    (folder / "pressure_grids.npz").unlink()
+    (folder / "pressure_grids.npz").symlink_to(raw / "Home" / "plug_usb" / "20260320_135743_682" /
+                                               "pressure_grids.npz")
+    refs, failures = adapter.discover_all(raw, {})
+    assert len(refs) == 2 and failures == []
+
+
+def test_video_symlink_leaving_the_tree_is_refused(tmp_path):
+    raw = make_touchanything(tmp_path / "raw")
+    outside = tmp_path / "other.mp4"
+    folder = raw / "Home" / "plug_usb" / "20260320_135743_682"
+    (folder / "chest.mp4").rename(outside)
+    (folder / "chest.mp4").symlink_to(outside)
+    refs, failures = get_adapter("touchanything").discover_all(raw, {})
+    assert len(refs) == 1 and len(failures) == 1
+    assert failures[0].file == str(folder / "chest.mp4") and "leaves the source tree" in failures[0].message
+
+
+def test_directory_symlinks_inside_found_once_at_real_path_outside_refused(tmp_path):
+    raw = tmp_path / "raw"
+    make_native(raw / "real")
+    make_native(tmp_path / "elsewhere")
+    (raw / "alias").symlink_to(raw / "real")                 # inside: the same recordings, found once
+    (raw / "real" / "loop").symlink_to(raw)                  # a cycle: never walked twice
+    (raw / "linked").mkdir()
+    (raw / "linked" / "more").symlink_to(tmp_path / "elsewhere")   # outside: reported
+    with deadline(30):
+        refs, failures = get_adapter("native").discover_all(raw, {})
+    assert [(r.episode_id, r.source_ref) for r in refs] == [("nat-rec_good", str(raw / "real" / "rec_good"))]
+    (failure,) = failures
+    assert failure.file == str(raw / "linked" / "more") and "directory symlink leaves the source tree" in str(failure)
+
+
+# --------------------------------------------------------------------------- damaged H.264
+
+def textured_frames(n: int) -> list[np.ndarray]:
+    """Moving blurred noise: packets of several KB, like real footage (flat colours encode to ~100 bytes)."""
+    rng = np.random.default_rng(3)
+    base = cv2.GaussianBlur(rng.integers(0, 256, (480 + 40, 640 + 40, 3), dtype=np.uint8), (5, 5), 0)
+    return [np.ascontiguousarray(base[i * 2:i * 2 + 480, i * 3:i * 3 + 640]) for i in range(n)]
+
+
+def packets(path: Path) -> list[tuple[int, int]]:
+    import av
+
+    with av.open(str(path)) as c:
+        return [(p.pos, p.size) for p in c.demux(c.streams.video[0]) if p.size]
+
+
+def damaged_episode(root: Path, how: str) -> Path:
+    lay = {h: load_layout(f"touchanything_{h}_21x21") for h in ("left", "right")}
+    t = 8
+    grids = {}
+    for h in ("left", "right"):
+        g = np.full((t, 21, 21), np.nan, np.float32)
+        g[:, lay[h].live_mask] = 0.3
+        grids[h] = g
+    folder = root / "Home" / "pour" / "t1"
+    write_touchanything_episode(folder, TouchAnythingEpisode(
+        left_grid=grids["left"], right_grid=grids["right"], chest_frames=textured_frames(t),
+        ts_epoch_s=1.7e9 + np.arange(t) / 30.0), wrist_videos=False)
+    video = folder / "chest.mp4"
+    data = bytearray(video.read_bytes())
+    if how == "ff":           # 3000 x 0xFF in the middle of the largest packet (the key frame)
+        pos, size = max(packets(video), key=lambda p: p[1])
+        assert size > 6000
+        start = pos + size // 2 - 1500
+        data[start:start + 3000] = b"\xff" * 3000
+    else:                     # random bytes over the second half of one inter-frame packet
+        pos, size = max(packets(video)[1:], key=lambda p: p[1])
+        rng = np.random.default_rng(7)
+        data[pos + size // 2:pos + size] = rng.integers(0, 256, size - size // 2, dtype=np.uint8).tobytes()
+    video.write_bytes(bytes(data))
+    return video
+
+
+@pytest.mark.parametrize("how", ["ff", "random"])
+def test_damaged_h264_is_not_decoded_silently(tmp_path, how):
+    video = damaged_episode(tmp_path / "raw", how)
+    with pytest.raises(VideoError) as err:
+        for _ in iter_video_rgb(video):
+            pass
+    assert err.value.frame is not None and f"frame {err.value.frame}" in str(err.value)
+    if how == "random":   # concealed by the decoder (no error returned): caught by the corrupt-frame flag
+        assert "concealed corrupt data" in str(err.value)
+
+
+def test_damaged_h264_fails_its_episode_naming_file_and_frame(tmp_path, capsys):
+    raw = make_touchanything(tmp_path / "raw")
+    video = damaged_episode(raw, "random")
+    with pytest.raises(VideoError) as damage:
+        for _ in iter_video_rgb(video):
+            pass
+    n = damage.value.frame
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", "touchanything", raw, out) == 1
+    err = capsys.readouterr().err
+    assert f"FAILED {video} [ta-Home-pour-t1] frame {n}: video frame {n} is damaged" in err
+    assert len(load_episodes(out)) == 2
+    (failure,) = report_of(out)["failures"]
+    assert failure["file"] == str(video) and failure["frame"] == n
+
+
+def test_clean_textured_h264_decodes_every_frame(tmp_path):
+    from htdata.sample.formats.media import write_h264
+
+    path = tmp_path / "clean.mp4"
+    write_h264(path, textured_frames(8))
+    assert sum(1 for _ in iter_video_rgb(path)) == 8
+
+
+def test_0xff_run_in_key_frame_concealed_by_decoder_is_caught(tmp_path):
+    # FFmpeg returns no error for this damage (it conceals it and outputs a smeared picture):
+    # only the frame's corrupt flag tells, and it must fail the read naming the frame.
+    from htdata.sample.formats.media import write_h264
+
+    path = tmp_path / "ego.mp4"
+    write_h264(path, textured_frames(8))
+    data = bytearray(path.read_bytes())
+    pos, size = max(packets(path), key=lambda p: p[1])
+    start = pos + size // 3
+    data[start:start + 3000] = b"\xff" * 3000
+    path.write_bytes(bytes(data))
+    with pytest.raises(VideoError, match="video frame 0 is damaged: the decoder concealed corrupt data"):
+        for _ in iter_video_rgb(path):
+            pass

@@ -1,0 +1,148 @@
+"""Out-of-range raw glove values and unusable hands (issue #11 item 4): counted, recorded, handled by policy.
+
+Hard cases from the issue: OpenTouch -500 and 1e9 (inverted, range [0, 3072]), TouchAnything 1.5
+(direct, [0, 1]), native -1e9. Default policy "clip" keeps the episode and records the counts (with a
+warning note above 1% of frames); "drop_frame" drops the frames; "fail" fails the episode naming
+file, episode and frame while the rest of the source is ingested.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from htdata.layouts import load_layout
+from htdata.manifest import load_episodes
+from htdata.sample.formats import (NativeHand, NativeRecording, TouchAnythingEpisode, write_native_recording,
+                                   write_opentouch_annotations, write_opentouch_scene, write_touchanything_episode)
+from tests.factories import COLOURS, PERIOD, ingest_cli, ot_clip
+
+
+def report_of(out: Path) -> dict:
+    return json.loads((out / "reports" / "ingest.json").read_text())
+
+
+def episodes_of(out: Path) -> dict[str, dict]:
+    return {e["episode_id"]: e for e in load_episodes(out)}
+
+
+def opentouch_raw(root: Path) -> Path:
+    """demo_01: clean; demo_02: -500 at frame 2 (3 taxels) and 1e9 at frames 5,6 (1 taxel each) of 10."""
+    clean = np.full((8, 16, 16), 2000.0, np.float32)
+    hostile = np.full((10, 16, 16), 2000.0, np.float32)
+    hostile[2, 0, :3] = -500.0
+    hostile[5, 3, 3] = 1e9
+    hostile[6, 4, 4] = 1e9
+    write_opentouch_scene(root / "kitchen.hdf5", [ot_clip("demo_01", 8, COLOURS[0], pressure=clean),
+                                                  ot_clip("demo_02", 10, COLOURS[1], pressure=hostile)])
+    write_opentouch_annotations(root / "annotations.csv", [{"id": "kitchen::demo_01", "action": "pour"},
+                                                           {"id": "kitchen::demo_02", "action": "cut"}])
+    return root
+
+
+def live_taxels(layout_id: str) -> np.ndarray:
+    return np.argwhere(load_layout(layout_id).live_mask)
+
+
+def test_clip_default_counts_and_records_out_of_range(tmp_path):
+    raw, out = opentouch_raw(tmp_path / "raw"), tmp_path / "ds"
+    assert ingest_cli("--pipeline", "opentouch", raw, out) == 0
+    eps = episodes_of(out)
+    lay = load_layout("opentouch_right_16x16")
+    expect_below = int(lay.live_mask[0, :3].sum())
+    expect_above = int(lay.live_mask[3, 3]) + int(lay.live_mask[4, 4])
+    assert expect_below and expect_above
+    counts = eps["ot-kitchen-demo_02"]["out_of_range"]["right"]
+    assert counts == {"below": expect_below, "above": expect_above, "frames": 3}
+    assert eps["ot-kitchen-demo_02"]["num_frames"] == 10                      # clipped, kept
+    assert any(n.startswith("warning: right hand: 3 of 10 frames (30.0%)") and "clipped" in n
+               for n in eps["ot-kitchen-demo_02"]["notes"])
+    assert "out_of_range" not in eps["ot-kitchen-demo_01"]                     # clean record unchanged
+    assert report_of(out)["out_of_range"] == {"ot-kitchen-demo_02": {"right": counts}}
+
+
+def test_clip_below_warn_share_counts_without_warning(tmp_path):
+    raw, out = opentouch_raw(tmp_path / "raw"), tmp_path / "ds"
+    assert ingest_cli("--pipeline", "opentouch", "--set", "normalise.out_of_range_warn_share=0.5", raw, out) == 0
+    ep = episodes_of(out)["ot-kitchen-demo_02"]
+    assert ep["out_of_range"]["right"]["frames"] == 3
+    assert not any("outside" in n for n in ep["notes"])
+
+
+def test_drop_frame_policy_drops_and_counts(tmp_path):
+    raw, out = opentouch_raw(tmp_path / "raw"), tmp_path / "ds"
+    assert ingest_cli("--pipeline", "opentouch", "--set", "normalise.out_of_range=drop_frame", raw, out) == 0
+    ep = episodes_of(out)["ot-kitchen-demo_02"]
+    assert ep["num_frames"] == 7 and ep["dropped_frames"] == {"out_of_range:right": 3}
+    assert ep["out_of_range"]["right"]["frames"] == 3
+    assert report_of(out)["dropped_frames"] == [
+        {"episode_id": "ot-kitchen-demo_02", "rgb_index": i, "reason": "out_of_range:right"} for i in (2, 5, 6)]
+
+
+def test_fail_policy_fails_only_that_episode_naming_the_frame(tmp_path, capsys):
+    raw, out = opentouch_raw(tmp_path / "raw"), tmp_path / "ds"
+    assert ingest_cli("--pipeline", "opentouch", "--set", "normalise.out_of_range=fail", raw, out) == 1
+    err = capsys.readouterr().err
+    assert "kitchen.hdf5 [ot-kitchen-demo_02] frame 2: right hand raw value -500 outside [0, 3072]" in err
+    assert set(episodes_of(out)) == {"ot-kitchen-demo_01"}
+    (failure,) = report_of(out)["failures"]
+    assert failure["episode_id"] == "ot-kitchen-demo_02" and failure["frame"] == 2
+
+
+def ta_episode(folder: Path, t: int, *, left=True, left_value=None, right_value=None) -> None:
+    grids = {}
+    for hand, value in (("left", left_value), ("right", right_value)):
+        lay = load_layout(f"touchanything_{hand}_21x21")
+        g = np.full((t, 21, 21), np.nan, np.float32)
+        g[:, lay.live_mask] = 0.5 if value is None else np.float32(0.5)
+        if value is not None:
+            r, c = live_taxels(f"touchanything_{hand}_21x21")[0]
+            g[1, r, c] = value
+        grids[hand] = g
+    ep = TouchAnythingEpisode(left_grid=grids["left"] if left is True else
+                              (np.full((t, 21, 21), np.nan, np.float32) if left == "nan" else None),
+                              right_grid=grids["right"],
+                              chest_frames=[np.full((480, 640, 3), COLOURS[0], np.uint8)] * t,
+                              ts_epoch_s=1.7e9 + np.arange(t) / 30.0)
+    write_touchanything_episode(folder, ep, wrist_videos=False)
+
+
+def test_touchanything_value_above_one_is_counted(tmp_path):
+    raw, out = tmp_path / "raw", tmp_path / "ds"
+    ta_episode(raw / "Home" / "pour" / "t1", 6, right_value=1.5)
+    assert ingest_cli("--pipeline", "touchanything", raw, out) == 0
+    ep = episodes_of(out)["ta-Home-pour-t1"]
+    assert ep["out_of_range"] == {"right": {"below": 0, "above": 1, "frames": 1}}
+    assert report_of(out)["out_of_range"]["ta-Home-pour-t1"]["right"]["above"] == 1
+
+
+@pytest.mark.parametrize("left", ["nan", None], ids=["all_nan", "missing"])
+def test_touchanything_unusable_hand_is_recorded(tmp_path, left):
+    raw, out = tmp_path / "raw", tmp_path / "ds"
+    ta_episode(raw / "Home" / "pour" / "t1", 5, left=left)
+    assert ingest_cli("--pipeline", "touchanything", raw, out) == 0
+    ep = episodes_of(out)["ta-Home-pour-t1"]
+    assert ep["hands"] == ["right"]
+    why = "all-NaN" if left == "nan" else "no left_pressure_grid array in pressure_grids.npz"
+    assert ep["hands_excluded"] == {"left": why}
+    assert f"left hand not ingested: {why}" in ep["notes"]
+    assert report_of(out)["hands_excluded"] == {"ta-Home-pour-t1": {"left": why}}
+
+
+def test_native_minus_1e9_is_counted_not_silently_saturated(tmp_path):
+    raw, out = tmp_path / "raw", tmp_path / "ds"
+    t_video = np.arange(6, dtype=np.int64) * PERIOD
+    values = np.full((6, 16, 16), 1536.0, np.float32)
+    values[3] = -1e9
+    rec = NativeRecording(task="grasp", scene="lab", video_storage="jpeg",
+                          video_frames=[np.full((40, 40, 3), COLOURS[0], np.uint8)] * 6, video_timestamps_ns=t_video,
+                          hands={"right": NativeHand("opentouch_right_16x16", values, t_video)})
+    write_native_recording(raw / "rec", rec)
+    assert ingest_cli("--pipeline", "native", raw, out) == 0
+    ep = episodes_of(out)["nat-rec"]
+    n_live = int(load_layout("opentouch_right_16x16").live_mask.sum())
+    assert ep["out_of_range"] == {"right": {"below": n_live, "above": 0, "frames": 1}}
+    assert any("1 of 6 frames" in n for n in ep["notes"])

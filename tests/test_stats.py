@@ -1,0 +1,186 @@
+"""htdata stats: numbers from known taxel series, the content-addressed cache, bad input, CLI, benchmark."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from htdata import stats
+from htdata.cli import main as cli_main
+from htdata.episodestats import HIST_BINS, quantile, value_histogram
+from htdata.layouts import load_layout
+from htdata.reader import DatasetReader
+from tests.tactile_factories import LEFT, RIGHT, clean_series, write_taxel_dataset
+
+N = 40
+
+
+def _one_taxel(value: float, frames: range, cell=(0, 0), n=N) -> np.ndarray:
+    g = np.zeros((n, 16, 16), np.float32)
+    g[list(frames), cell[0], cell[1]] = value
+    return g
+
+
+@pytest.fixture(scope="module")
+def known(tmp_path_factory):
+    """ep_a: taxel (0,0) at 0.5 in frames 0..9 of 40, right only; ep_b: smooth contact, both hands."""
+    root = tmp_path_factory.mktemp("st") / "ds"
+    return write_taxel_dataset(root, [
+        {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": {"right": (RIGHT, _one_taxel(0.5, range(10)))}},
+        {"episode_id": "ep_b", "task": "wipe", "scene": "kitchen", "fps": 20.0,
+         "hands": {"right": (RIGHT, clean_series(RIGHT, 30, seed=1)), "left": (LEFT, clean_series(LEFT, 30, seed=2))}},
+    ])
+
+
+def _glove(summary: dict, **match) -> dict:
+    hits = [g for g in summary["gloves"] if all(g.get(k) == v for k, v in match.items())]
+    assert len(hits) == 1, (match, [(g.get("layout"), g.get("hand")) for g in summary["gloves"]])
+    return hits[0]
+
+
+def test_histogram_quantiles_are_exact_to_a_bin():
+    rng = np.random.default_rng(0)
+    values = np.concatenate([np.zeros(5000), rng.beta(0.5, 3.0, 20000), [1.0]])
+    zeros, hist = value_histogram(values)
+    assert zeros == 5000 and hist.sum() == 20001 and hist[-1] >= 1       # 1.0 lands in the last bin
+    for q in (0.01, 0.5, 0.75, 0.99):
+        assert abs(quantile(zeros, hist, q) - np.quantile(values, q)) <= 2.0 / HIST_BINS
+    assert quantile(0, np.zeros(HIST_BINS, np.int64), 0.5) is None
+
+
+def test_numbers_of_a_known_episode(known, tmp_path):
+    s = stats.dataset_stats(known, cache_dir=tmp_path / "c")
+    with DatasetReader(known) as r:
+        per_ep, _ = stats.episode_stats(r, [0], cache_dir=tmp_path / "c")
+    h = per_ep[0]["hands"]["right"]
+    assert h["frames"] == N and h["contact_frames"] == 10
+    assert h["max"] == pytest.approx(0.5, abs=1e-3)
+    layout = load_layout(RIGHT)
+    mean = np.asarray(h["taxel_sum"]) / N
+    assert mean[0] == pytest.approx(0.5 * 10 / N, abs=1e-3) and np.all(mean[1:] == 0)
+    assert list(np.argwhere(layout.live_mask)[0]) == [0, 0]
+    (region,) = [name for name, r in h["regions"].items() if r["contact_frames"]]
+    assert h["regions"][region]["contact_frames"] == 10
+    assert h["regions"][region]["pressure_sum"] / h["regions"][region]["pressure_count"] == pytest.approx(0.5, abs=1e-3)
+    right = _glove(s, layout=RIGHT, hand="right")
+    assert right["episodes"] == 2 and right["frames"] == N + 30
+    assert right["taxel_mean"][0][0] is not None and right["taxel_mean"][0][2] is None   # (0,2) is not live
+    assert s["tasks"]["wipe"] == {"episodes": 1, "frames": 30, "duration_s": 1.5, "hands": {"left": 1, "right": 1}}
+    assert s["scenes"]["kitchen"]["episodes"] == 2
+
+
+def test_merged_sums_equal_one_pass_over_all_frames(known, tmp_path):
+    s = stats.dataset_stats(known, cache_dir=tmp_path / "c")
+    from htdata.rasterise import Rasteriser
+    layout = load_layout(RIGHT)
+    r = Rasteriser(layout)
+    with DatasetReader(known) as reader:
+        maps = np.stack([reader.decoded(i)["tactile"]["right"] for i in range(len(reader))])
+    x = r.sample(maps)[:, layout.live_mask]
+    right = _glove(s, layout=RIGHT, hand="right")
+    got = np.asarray([v for row in right["taxel_mean"] for v in row if v is not None])
+    assert np.allclose(got, x.mean(axis=0), atol=1e-6)
+    std = np.asarray([v for row in right["taxel_std"] for v in row if v is not None])
+    assert np.allclose(std, x.std(axis=0), atol=1e-5)
+    assert right["contact_fraction"] == pytest.approx((x > 0.02).any(axis=1).mean(), abs=1e-6)
+
+
+def test_cache_is_content_addressed_and_incremental(known, tmp_path):
+    cache = tmp_path / "c"
+    first = stats.dataset_stats(known, cache_dir=cache)
+    assert first["cache"]["computed"] == 2 and len(list(cache.glob("*.json"))) == 2
+    mtimes = {p.name: p.stat().st_mtime_ns for p in cache.glob("*.json")}
+    again = stats.dataset_stats(known, cache_dir=cache)
+    assert again["cache"] == {**first["cache"], "computed": 0, "cached": 2, "frames_computed": 0}
+    assert {p.name: p.stat().st_mtime_ns for p in cache.glob("*.json")} == mtimes      # never rewritten
+    assert {k: v for k, v in again.items() if k != "cache"} == {k: v for k, v in first.items() if k != "cache"}
+    # the same two episodes (same shard bytes) plus one more: only the new one is computed
+    bigger = write_taxel_dataset(tmp_path / "bigger", [
+        {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": {"right": (RIGHT, _one_taxel(0.5, range(10)))}},
+        {"episode_id": "ep_b", "task": "wipe", "scene": "kitchen", "fps": 20.0,
+         "hands": {"right": (RIGHT, clean_series(RIGHT, 30, seed=1)), "left": (LEFT, clean_series(LEFT, 30, seed=2))}},
+        {"episode_id": "ep_c", "hands": {"right": (RIGHT, clean_series(RIGHT, 12, seed=5))}}])
+    third = stats.dataset_stats(bigger, cache_dir=cache)
+    assert third["cache"]["computed"] == 1 and third["cache"]["frames_computed"] == 12
+
+
+def test_default_cache_lives_in_the_dataset(known):
+    stats.dataset_stats(known)
+    assert len(list((known / stats.STATS_DIR).glob("*.json"))) == 2
+
+
+def test_by_groupings(known, tmp_path):
+    cache = tmp_path / "c"
+    by_task = stats.dataset_stats(known, by="task", cache_dir=cache)
+    assert _glove(by_task, task="pour", layout=RIGHT, hand="right")["frames"] == N
+    assert _glove(by_task, task="wipe", layout=LEFT, hand="left")["frames"] == 30
+    by_hand = stats.dataset_stats(known, by="hand", cache_dir=cache)
+    assert _glove(by_hand, hand="right")["frames"] == N + 30
+    by_layout = stats.dataset_stats(known, by="layout", cache_dir=cache)
+    assert _glove(by_layout, layout=LEFT)["frames"] == 30
+    with pytest.raises(ValueError, match="--by"):
+        stats.dataset_stats(known, by="colour", cache_dir=cache)
+
+
+def test_bad_input_empty_one_frame_all_zero_absent_hand_nan(tmp_path, capsys):
+    empty = write_taxel_dataset(tmp_path / "empty", [])
+    s = stats.dataset_stats(empty)
+    assert s["episodes"] == 0 and s["gloves"] == [] and s["tasks"] == {}
+    assert cli_main(["stats", str(empty)]) == 0 and "no tactile frames" in capsys.readouterr().out
+
+    one = write_taxel_dataset(tmp_path / "one", [{"episode_id": "ep1", "hands": {"right": (RIGHT, _one_taxel(0.3, [0], n=1))}}])
+    g = _glove(stats.dataset_stats(one), layout=RIGHT, hand="right")
+    assert g["frames"] == 1 and g["contact_fraction"] == 1.0
+    assert g["health"]["episodes_not_assessed"] == 1 and g["health"]["taxels_assessed"] == 0
+
+    zero = write_taxel_dataset(tmp_path / "zero", [{"episode_id": "z", "hands": {"right": (RIGHT, np.zeros((35, 16, 16)))}}])
+    s = stats.dataset_stats(zero)
+    g = _glove(s, layout=RIGHT, hand="right")
+    assert g["contact_fraction"] == 0.0 and g["quantiles"] == {"p1": 0.0, "p50": 0.0, "p99": 0.0, "max": 0.0}
+    assert all(r["mean_pressure"] is None for r in g["regions"].values())
+    assert sum(g["health"]["counts"].values()) == 0
+    assert s["tasks"]["pour"]["hands"] == {"left": 0, "right": 1}        # the left hand is absent everywhere
+    assert [x["hand"] for x in s["gloves"]] == ["right"]
+
+    nan = write_taxel_dataset(tmp_path / "nan", [{"episode_id": "n", "nan_frames": {"right": [3]},
+                                                  "hands": {"right": (RIGHT, _one_taxel(0.5, range(5), n=8))}}])
+    s = stats.dataset_stats(nan)
+    assert [(b["episode"], b["frame"], b["hand"], b["key"]) for b in s["nan_samples"]] == [("n", 3, "right", "n__000003")]
+    assert _glove(s, layout=RIGHT, hand="right")["frames"] == 7
+    assert cli_main(["stats", str(nan)]) == 0
+    assert "n__000003 (right hand, episode n frame 3)" in capsys.readouterr().err
+
+
+def test_cli_text_json_and_health_png(known, tmp_path, capsys):
+    assert cli_main(["stats", str(known)]) == 0
+    out = capsys.readouterr().out
+    assert f"{RIGHT} / right: 2 episodes, {N + 30} frames" in out and "wipe" in out
+    assert cli_main(["stats", str(known), "--json", "--by", "scene", "--no-cache"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["by"] == "scene" and doc["cache"]["dir"] is None
+    png = tmp_path / "health.png"
+    assert cli_main(["stats", str(known), "--health", str(png)]) == 0
+    img = cv2.imread(str(png))
+    assert img is not None and img.shape[0] > 224 and img.shape[1] >= 2 * 224   # one panel per glove
+    assert cli_main(["stats", str(tmp_path / "missing")]) == 2
+
+
+def test_stats_benchmark_reports_cold_warm_incremental(known):
+    runs = stats.stats_benchmark(known)
+    assert set(runs) == {"cold", "warm", "incremental"}
+    assert runs["cold"]["episodes_computed"] == 1 and runs["warm"]["episodes_computed"] == 0
+    assert runs["incremental"]["episodes_computed"] == 1 and runs["incremental"]["frames_computed"] == 30
+    assert all(r["frames_per_s"] > 0 for r in runs.values())
+    assert not (known / stats.STATS_DIR).exists() or all(
+        p.stat().st_size for p in (known / stats.STATS_DIR).glob("*.json"))
+
+
+def test_unwritable_cache_still_gives_stats(known, tmp_path, capsys):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a directory")                     # the cache dir cannot be created under it
+    s = stats.dataset_stats(known, cache_dir=blocker / "stats")
+    assert s["cache"]["computed"] == 2 and "a_file" in s["cache"]["cache_error"]
+    assert _glove(s, layout=RIGHT, hand="right")["frames"] == N + 30
