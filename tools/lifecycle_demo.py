@@ -50,6 +50,7 @@ def main(argv: list[str]) -> int:
     run("trim", str(ds), longest["episode_id"], "--frames", f"5:{longest['num_frames'] - 5}")
     run("ingest", "--quiet", "--workers", "2", "--pipeline", f"native={raw / 'native'}", str(other))
     run("merge", str(ds), str(other), str(merged))
+    run("log", str(ds))
     run("gc", str(ds), "--keep-versions", "3", "--dry-run")
     run("gc", str(ds), "--keep-versions", "3")
     run("log", str(ds))
