@@ -46,6 +46,9 @@ class ModelConfig:
     predictor_depth: int = 2      # stage 3 cross-attention layers
     cnn_widths: list[int] = field(default_factory=lambda: [32, 64, 128])   # baseline CNN: stem, 2 stages
     resnet_widths: list[int] = field(default_factory=lambda: [64, 128, 256, 512])  # baseline ResNet-18 stages
+    # Ablations of the paper's comparison; both True is HandTouch.
+    codebook: bool = True         # False = "w/o codebook": continuous latent, the VQ is bypassed
+    vision: bool = True           # False = "w/o vision": stages 2-3 attend to the hand token, never to RGB
 
     @property
     def grid(self) -> int:
@@ -84,6 +87,9 @@ class ModelConfig:
             raise ValueError("model.mlp_ratio must be > 0")
         if self.vq_beta < 0 or self.vq_dead_threshold < 0 or self.vq_restart_noise < 0:
             raise ValueError("model.vq_beta, vq_dead_threshold, vq_restart_noise must be >= 0")
+        if not isinstance(self.codebook, bool) or not isinstance(self.vision, bool):
+            raise ValueError(f"model.codebook and model.vision must be true/false, got {self.codebook!r}, "
+                             f"{self.vision!r}")
         if not 0.0 < self.vq_usage_decay < 1.0:
             raise ValueError(f"model.vq_usage_decay must be in (0,1), got {self.vq_usage_decay}")
 
@@ -115,10 +121,15 @@ class MaskingConfig:
     p_min: float = 0.1
     p_max: float = 0.9
     max_parts: int = 2            # a regional mask hides 1..max_parts anatomical parts
+    # False = the paper's "w/o drop" ablation: no curriculum, P_full stays at its midpoint
+    # (p_min + p_max) / 2 for the whole stage (the same average share of complete masks).
+    curriculum: bool = True
 
     def validate(self) -> None:
         if not 0.0 <= self.p_min <= self.p_max <= 1.0:
             raise ValueError(f"masking: need 0 <= p_min <= p_max <= 1, got {self.p_min}, {self.p_max}")
+        if not isinstance(self.curriculum, bool):
+            raise ValueError(f"masking.curriculum must be true/false, got {self.curriculum!r}")
         if not 1 <= self.max_parts <= 6:
             raise ValueError(f"masking.max_parts must be in 1..6, got {self.max_parts}")
 

@@ -15,6 +15,8 @@ rgb_encoder is always frozen and is not one of them.
 The model holds no training logic: each stage's loss is built from the blocks
 below in `handtouch.stages` (1 reconstruct, 2 masked reconstruction with RGB,
 3 predict t_T). Predictions are zero where coverage is 0.
+Ablation switches (ModelConfig): codebook=False bypasses the VQ (continuous latent),
+vision=False gives stages 2-3 the hand token as their only memory (no RGB).
 """
 
 from __future__ import annotations
@@ -181,12 +183,24 @@ class HandTouch(nn.Module):
         return torch.cat([self.hand_token(_hand_ids(hand).to(tokens.device))[:, None], tokens], dim=1)
 
     def fuse(self, tokens: torch.Tensor, rgb: torch.Tensor, hand: torch.Tensor) -> torch.Tensor:
-        """Tactile tokens (B,N,D) + hand token cross-attend to the RGB frame's tokens -> (B,N,D)."""
-        return self.fusion(self._with_hand(tokens, hand), self.visual_tokens(rgb))[:, 1:]
+        """Tactile tokens (B,N,D) + hand token cross-attend to the RGB frame's tokens -> (B,N,D).
+        Without vision (ablation) they attend to the hand token alone: same layers, no RGB."""
+        x = self._with_hand(tokens, hand)
+        return self.fusion(x, self.visual_tokens(rgb) if self.cfg.vision else x[:, :1])[:, 1:]
+
+    def latent(self, tokens: torch.Tensor):
+        """tokens -> (z, indices, losses, stats) of the VQ; without the codebook (ablation) z is
+        the tokens themselves, indices 0, no VQ loss and NaN statistics (not applicable)."""
+        if self.cfg.codebook:
+            return self.vq(tokens)
+        zero, nan = tokens.new_zeros((), dtype=torch.float32), torch.tensor(float("nan"))
+        indices = torch.zeros(tokens.shape[:2], dtype=torch.long, device=tokens.device)
+        return tokens.float(), indices, {"codebook": zero, "commit": zero}, \
+            {"perplexity": nan, "usage": nan, "restarts": torch.tensor(0.0)}
 
     def quantise_decode(self, tokens: torch.Tensor, coverage: torch.Tensor):
         """tokens -> VQ -> map * coverage; returns (map, indices, vq losses, vq stats)."""
-        z, indices, losses, stats = self.vq(tokens)
+        z, indices, losses, stats = self.latent(tokens)
         return self.decoder(z) * coverage, indices, losses, stats
 
     def _inpaint(self, tactile, coverage, mask, rgb, hand):
@@ -195,6 +209,9 @@ class HandTouch(nn.Module):
     def predicted_tokens(self, rgb_window, past_tokens, hand):
         """Encoded past frames (B,T-1,N,D) + RGB v_{T-2..T} -> predicted t_T tokens (B,N,D), before VQ."""
         past = self.temporal(past_tokens)
+        if not self.cfg.vision:      # ablation: the hand token is the only memory
+            x = self._with_hand(past, hand)
+            return self.predictor(x, x[:, :1])[:, 1:]
         b, tv = rgb_window.shape[:2]
         vis = self.visual_tokens(rgb_window.reshape(b * tv, *rgb_window.shape[2:]))
         vis = self.temporal.stamp(vis.reshape(b, tv, *vis.shape[1:]))
@@ -213,7 +230,7 @@ class HandTouch(nn.Module):
     # ---- TactileModel API ---------------------------------------------------------
     def embed(self, tactile, coverage, hand) -> torch.Tensor:
         """(B,D): mean of the quantised tokens of the (unmasked) map."""
-        z, _, _, _ = self.vq(self.encode(covered(tactile, coverage)))
+        z, _, _, _ = self.latent(self.encode(covered(tactile, coverage)))
         return z.mean(dim=1)
 
     def reconstruct(self, tactile, coverage) -> torch.Tensor:

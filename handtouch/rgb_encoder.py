@@ -4,7 +4,8 @@ Specs:
   "random:SEED"      a seeded random small conv encoder, explicitly for smoke runs
   "PATH.pt2"         a torch.export archive: torch.export.load(PATH).module(); export it
                      with a dynamic batch dimension (dynamic_shapes={0: Dim("batch")})
-  "PATH.pt"          {"arch": NAME, "state_dict": ...} for an architecture in ARCHS
+  "PATH.pt"          {"arch": NAME, "state_dict": ..., optional "config": {kwargs}} for an
+                     architecture in ARCHS (handtouch.rgb_pretrain writes "tactile_grid" files)
 
 The encoder receives float32 (B,3,224,224) in [0,1] (any normalisation the
 weights expect must live inside the exported module / architecture) and
@@ -44,7 +45,47 @@ class SmallConvRGB(nn.Module):
         return self.features((x - self.mean) / self.std)
 
 
-ARCHS = {"small_conv": SmallConvRGB}
+class TactileGridRGB(nn.Module):
+    """A small RGB encoder whose output lives on the tactile canvas: (B,C,grid,grid) features,
+    one cell per ViT patch of the tactile map, read out per hand by `readout` (C -> 2 maps).
+
+    Trained by handtouch.rgb_pretrain to predict each hand's coarse contact map from the
+    frame. The image is average-pooled to `size` first (the sample scenes need no more
+    detail; ~7x cheaper than SmallConvRGB at 224); conv features are pooled over the image
+    (mean and max), so what the hand does counts, not where it is in the frame.
+    """
+
+    def __init__(self, size: int = 56, width: int = 64, channels: int = 16, grid: int = 14, hidden: int = 128):
+        super().__init__()
+        self.config = {"size": size, "width": width, "channels": channels, "grid": grid, "hidden": hidden}
+        self.size, self.channels, self.grid = size, channels, grid
+        self.register_buffer("mean", torch.tensor([0.485, 0.456, 0.406]).view(1, 3, 1, 1))
+        self.register_buffer("std", torch.tensor([0.229, 0.224, 0.225]).view(1, 3, 1, 1))
+        layers, c = [], 3
+        for i, w in enumerate((width // 2, width, width, width)):      # size / 8 per side, e.g. 56 -> 7
+            layers += [nn.Conv2d(c, w, 3, stride=2 if i < 3 else 1, padding=1), nn.GELU()]
+            c = w
+        self.features = nn.Sequential(*layers)
+        self.to_grid = nn.Sequential(nn.Linear(2 * c, hidden), nn.LayerNorm(hidden), nn.GELU(),
+                                     nn.Linear(hidden, channels * grid * grid))
+        self.readout = nn.Conv2d(channels, 2, 1)   # per hand (htdata.keys.HAND_IDS order)
+
+    def pooled(self, x: torch.Tensor) -> torch.Tensor:
+        """(B,3,H,W) float [0,1] -> (B,3,size,size) (the input the pretraining caches)."""
+        return x if x.shape[-1] == self.size else nn.functional.adaptive_avg_pool2d(x, self.size)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        z = self.features((self.pooled(x) - self.mean) / self.std)
+        z = torch.cat([z.mean((2, 3)), z.amax((2, 3))], 1)
+        return self.to_grid(z).view(-1, self.channels, self.grid, self.grid)
+
+    def predict(self, features: torch.Tensor, hand: torch.Tensor) -> torch.Tensor:
+        """(B,C,grid,grid) features + (B,) hand ids -> (B,1,grid,grid) coarse contact map."""
+        maps = self.readout(features)
+        return maps.gather(1, hand.long().view(-1, 1, 1, 1).expand(-1, 1, *maps.shape[2:]))
+
+
+ARCHS = {"small_conv": SmallConvRGB, "tactile_grid": TactileGridRGB}
 
 
 def sha256_file(path: Path) -> str:
@@ -134,7 +175,10 @@ def load_rgb_encoder(spec: str) -> RGBEncoder:
             raise ValueError(f"{path}: expected a dict with 'arch' and 'state_dict'")
         if blob["arch"] not in ARCHS:
             raise ValueError(f"{path}: unknown arch {blob['arch']!r}; known: {sorted(ARCHS)}")
-        backbone = ARCHS[blob["arch"]]()
+        try:
+            backbone = ARCHS[blob["arch"]](**blob.get("config", {}))
+        except TypeError as e:
+            raise ValueError(f"{path}: bad config for arch {blob['arch']!r}: {e}") from None
         backbone.load_state_dict(blob["state_dict"])
         info = RGBEncoderInfo(spec, "state_dict", digest)
     else:

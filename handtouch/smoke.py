@@ -3,24 +3,34 @@
 1. data: `htdata sample RAW --scale small` if RAW has no corpus; `htdata ingest`
    of all three pipelines into DATASET if it has no dataset.json; `htdata split
    --ood-task palm_push --name smoke` (task palm_push held out as ood);
-2. train HandTouch (vit) and the baselines (cnn, resnet18) with the SAME config
+2. the frozen RGB encoder: trained on the train part's frames to predict their
+   coarse contact maps (handtouch.rgb_pretrain; cached under OUT/rgb_encoder),
+   plus the same probe on RGB shifted >= 1 s and on RGB of other episodes (the
+   misalignment control); `--set rgb_encoder=FILE` trains with your own weights;
+3. train HandTouch (vit) and the baselines (cnn, resnet18) with the SAME config
    and budget (configs/smoke.toml, only model.encoder overridden);
-3. HT-Bench on the test and ood parts (at most --max-items items per part) for
+4. HT-Bench on the test and ood parts (at most --max-items items per part) for
    the three models and the reference predictors (zeros-ref, copy-last-ref);
-4. write OUT/results.json (with the wall time of every phase under
-   meta.seconds), OUT/results.md, OUT/predictions.png (the test windows with
-   the most contact);
-5. assert that HandTouch learned (exit 1 with the failed checks otherwise):
+5. write OUT/results.json (with the wall time of every phase under
+   meta.seconds), OUT/results.md (verdicts of every track against all zeros /
+   copy-last first: handtouch.bench.verdicts), OUT/predictions.png (the test
+   windows with the most contact);
+6. assert that HandTouch learned (exit 1 with the failed checks otherwise):
    - stage-1 reconstruction F-RMSE of the stage-1 checkpoint on the held-out
      test items <= RECON_RATIO x the all-zeros predictor's on the same items,
-   - retrieval Hit@1 (test, final model) > chance 1/20,
+   - retrieval Hit@1 (test, final model) > chance (the highest of 1/20 and the
+     measured constant-embedding and shuffled-embedding levels),
    - codebook perplexity of the final model over every token of the test
-     maps >= PERPLEXITY_FLOOR codes.
+     maps >= PERPLEXITY_FLOOR codes,
+   - (reported, not required yet: RGB-to-tactile F-RMSE (test) < all zeros),
+   - the aligned RGB probe beats the shifted and the shuffled controls on test
+     by rgb_pretrain.CONTROL_MARGIN (a sync or pairing bug fails this).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import subprocess
@@ -35,7 +45,10 @@ from handtouch.bench.evaluate import (CopyLastModel, EvalConfig, PreparedPart, Z
                                       load_part, prepare, reconstruct)
 from handtouch.bench.metrics import MapMetrics
 from handtouch.bench.report import render_predictions, write_results
+from handtouch.bench.verdicts import ZEROS
 from handtouch.resources import config_file
+from handtouch.rgb_pretrain import (PAIRINGS, RGBPretrainConfig, control_checks, control_scores, ensure_probes,
+                                    episode_fps, load_items, paired_rgb2tactile)
 from htdata import keys
 from htdata.adapters import ADAPTERS
 from htdata.format import MANIFEST_FILE
@@ -153,16 +166,41 @@ def learning_checks(stage1_rmse: float | None, zeros_rmse: float | None, retriev
     def known(x) -> bool:
         return x is not None and math.isfinite(x)
 
-    hit, chance = retrieval.get("hit_at_1"), retrieval.get("chance_hit_at_1")
+    hit = retrieval.get("hit_at_1")
+    # the highest chance level: 1/20, a constant embedding (ties of empty maps), shuffled embeddings
+    levels = [retrieval.get(k) for k in ("chance_hit_at_1", "constant_hit_at_1", "shuffled_hit_at_1")]
+    chance = max(levels) if all(known(x) for x in levels) else None
     return [
         {"check": f"stage-1 reconstruction F-RMSE <= {RECON_RATIO} x all-zeros (same held-out items)",
          "value": stage1_rmse, "limit": RECON_RATIO * zeros_rmse if known(zeros_rmse) else None,
          "ok": known(stage1_rmse) and known(zeros_rmse) and stage1_rmse <= RECON_RATIO * zeros_rmse},
-        {"check": "retrieval Hit@1 above chance", "value": hit, "limit": chance,
+        {"check": "retrieval Hit@1 above chance (max of 1/20, constant and shuffled embeddings)",
+         "value": hit, "limit": chance,
          "ok": known(hit) and known(chance) and hit > chance},
         {"check": f"codebook perplexity >= {PERPLEXITY_FLOOR}", "value": perplexity,
          "limit": PERPLEXITY_FLOOR, "ok": known(perplexity) and perplexity >= PERPLEXITY_FLOOR},
     ]
+
+
+def rgb_check(results: dict, model: str, part: str = "test") -> dict:
+    """RGB-to-tactile F-RMSE (covered) of `model` below all zeros' on the same items."""
+    value = results[model][part]["rgb2tactile"]["f_covered"]["rmse"]
+    limit = results[ZEROS][part]["rgb2tactile"]["f_covered"]["rmse"]
+    ok = value is not None and limit is not None and math.isfinite(value) and value < limit
+    # Not required yet: the per-frame F-RMSE punishes any contact predicted on a contact-free
+    # frame, and 100 stage-2 steps do not get the fusion there (README, "not yet").
+    return {"check": f"RGB-to-tactile F-RMSE ({part}) < all zeros", "value": value, "limit": limit, "ok": ok,
+            "required": False}
+
+
+def misalignment_control(args, probes: dict, pre_cfg: RGBPretrainConfig, model, prepared: dict) -> dict:
+    """Probe scores per part and pairing, and `model`'s RGB-to-tactile under eval-time mis-pairing (test)."""
+    parts = {p: load_items(args.dataset, SPLIT_NAME, p, pre_cfg) for p in prepared}
+    fps = episode_fps(args.dataset)
+    return {"probe": control_scores(probes, parts, pre_cfg),
+            "model": {"test": {p: paired_rgb2tactile(model, prepared["test"], fps, p, pre_cfg.shift_seconds,
+                                                     pre_cfg.seed) for p in PAIRINGS[1:]}},
+            "model_name": model.name}
 
 
 def _jsonable(obj):
@@ -240,11 +278,15 @@ def main(argv=None) -> int:
     parts = {p: load_part(args.dataset, SPLIT_NAME, p) for p in ("test", "ood")}
     # decoded once, same items / masks / SSIM reference for every model
     prepared = timer.run("eval_prepare", prepare, parts, cfg=EvalConfig(max_items=args.max_items, seed=args.seed))
+    pre_cfg = RGBPretrainConfig(seed=args.seed)
+    probes = timer.run("rgb_pretrain", ensure_probes, args.dataset, SPLIT_NAME, args.out / "rgb_encoder", pre_cfg)
+    # the aligned probe is the frozen RGB encoder; a user's --set rgb_encoder=FILE comes later and wins
+    sets = [f"rgb_encoder={_toml_str(probes['aligned'].resolve())}", *args.set]
     models, stage1_models, train_metrics = {}, {}, {}
     for enc in args.encoders:
         print(f"smoke: training encoder={enc}", flush=True)
         model, stage1, metrics = timer.run(f"train_{enc}", train_encoder, args.config, enc, args.dataset,
-                                           args.out / "train" / enc, args.set)
+                                           args.out / "train" / enc, sets)
         models[model.name], stage1_models[model.name], train_metrics[model.name] = model, stage1, metrics
     handtouch = next(iter(models))
 
@@ -255,6 +297,9 @@ def main(argv=None) -> int:
     zeros_rmse = results[ZerosModel.name]["test"]["reconstruction"]["f_covered"]["rmse"]   # same items
     perplexity = timer.run("checks", codebook_perplexity, models[handtouch], prepared["test"])
     checks = learning_checks(stage1_rmse, zeros_rmse, results[handtouch]["test"]["retrieval"], perplexity)
+    checks.append(rgb_check(results, handtouch, "test"))
+    control = timer.run("rgb_control", misalignment_control, args, probes, pre_cfg, models[handtouch], prepared)
+    checks += control_checks(control["probe"], "test")
     examples = timer.run("report", collect_examples, models[handtouch], prepared["test"], count=4)
     timer.run("report", render_predictions, examples, args.out / "predictions.png",
               title=f"{handtouch} on test: the 4 windows with the most contact")
@@ -264,15 +309,18 @@ def main(argv=None) -> int:
             "encoders": args.encoders, "max_items": args.max_items, "seed": args.seed,
             "handtouch": handtouch, "stage1_reconstruction_rmse": stage1_rmse,
             "zeros_reconstruction_rmse": zeros_rmse, "codebook_perplexity": perplexity, "checks": checks,
+            "rgb_encoder": {"pretrain": dataclasses.asdict(pre_cfg), "probes": probes},
+            "misalignment_control": control,
             "train_metrics": train_metrics, "seconds": seconds}
     write_results(args.out, results, _jsonable(meta))
     print((args.out / "results.md").read_text())
     for name, sec in seconds.items():
         print(f"smoke: {name:<28} {sec:8.1f} s")
     for c in checks:
-        print(f"smoke: [{'ok' if c['ok'] else 'FAILED'}] {c['check']}: value {c['value']}, limit {c['limit']}")
+        state = "ok" if c["ok"] else ("FAILED" if c.get("required", True) else "not yet")
+        print(f"smoke: [{state}] {c['check']}: value {c['value']}, limit {c['limit']}")
     print(f"smoke: {seconds['total']:.0f} s total; results in {args.out}", flush=True)
-    failed = [c["check"] for c in checks if not c["ok"]]
+    failed = [c["check"] for c in checks if not c["ok"] and c.get("required", True)]
     if failed:
         print(f"smoke: HandTouch did not learn: failed {failed}", file=sys.stderr)
         return 1

@@ -117,8 +117,8 @@ class MaskedFusion(Stage):
 
     def prepare(self, batch: dict, at: StepInfo) -> dict:
         """Add this step's curriculum mask (regional or complete), drawn on the CPU."""
-        g = at.step / max(at.steps - 1, 1)
         m = self.masking
+        g = at.step / max(at.steps - 1, 1) if m.curriculum else 0.5   # 0.5: P_full's midpoint
         mask, _ = sample_masks(batch[keys.REGIONS].cpu(), g, m.p_min, m.p_max, m.max_parts,
                                mask_generator(self.seed, self.number, at.step, at.rank))
         return {**batch, MASK: mask.to(batch[keys.REGIONS].device)}

@@ -190,7 +190,10 @@ def test_report_table_json_and_png(tmp_path):
     doc = write_results(tmp_path, results, {"seed": 0})
     assert json.loads((tmp_path / "results.json").read_text())["results"].keys() == results.keys()
     table = (tmp_path / "results.md").read_text()
-    sections = table.split("\n## ")
+    verdicts, *sections = table.split("\n## ")[1:]
+    assert verdicts.splitlines()[0] == "Verdicts against the references"
+    assert len([l for l in verdicts.splitlines() if l.startswith("|")]) == 2     # references get no verdict row
+    sections = [table, *sections]
     assert [sec.splitlines()[0] for sec in sections[1:]] == [
         "Covered pixels (f_covered, h_covered)", "Whole canvas (f_full, h_full)", "Retrieval and its chance levels"]
     for sec in sections[1:]:
@@ -260,13 +263,16 @@ def test_prepared_parts_are_reused_with_identical_scores():
 def test_smoke_learning_checks_compare_against_references():
     from handtouch.smoke import learning_checks
 
-    good = {"hit_at_1": 0.3, "chance_hit_at_1": 0.05}
+    levels = {"chance_hit_at_1": 0.05, "constant_hit_at_1": 0.05, "shuffled_hit_at_1": 0.06}
+    good = {"hit_at_1": 0.3, **levels}
     assert all(c["ok"] for c in learning_checks(0.02, 0.1, good, perplexity=10.0))
-    chance = {"hit_at_1": 0.05, "chance_hit_at_1": 0.05}
+    tied = {"hit_at_1": 0.2, **levels, "constant_hit_at_1": 0.25}   # empty-map ties lift the constant level
+    assert not learning_checks(0.02, 0.1, tied, perplexity=10.0)[1]["ok"]
+    chance = {"hit_at_1": 0.05, **levels}
     failed = [c["check"] for c in learning_checks(0.08, 0.1, chance, perplexity=2.0) if not c["ok"]]
     assert len(failed) == 3                              # no better than zeros, chance retrieval, collapsed
     assert not learning_checks(0.0701, 0.1, good, 10.0)[0]["ok"]     # just above 0.7 x zeros
-    unscored = {"hit_at_1": None, "chance_hit_at_1": 0.05}
+    unscored = {"hit_at_1": None, **levels}
     assert not any(c["ok"] for c in learning_checks(None, 0.1, unscored, perplexity=float("nan")))
     assert not learning_checks(0.0, None, good, 10.0)[0]["ok"]      # no reference -> failed, never passed
 
@@ -297,3 +303,46 @@ def test_smoke_checks_fail_for_an_untrained_model():
     assert zeros > 0 and rmse > RECON_RATIO * zeros
     assert not checks[0]["ok"] and not checks[1]["ok"]
     assert math.isfinite(perplexity) and 1.0 <= perplexity <= 16.0
+
+
+def _verdict_tracks(rmse, hole, pred, hit, rgb=None):
+    chance = {"chance_hit_at_1": 0.05, "constant_hit_at_1": 0.06, "shuffled_hit_at_1": 0.05}
+    return {"retrieval": {"hit_at_1": hit, **chance}, "reconstruction": {"f_covered": {"rmse": rmse}},
+            "inpaint": {"f_covered": {"rmse": rmse}, "h_covered": {"rmse": hole}},
+            "rgb2tactile": {"f_covered": {"rmse": rmse if rgb is None else rgb}},
+            "prediction": {"f_covered": {"rmse": pred}}}
+
+
+def test_verdicts_compare_every_track_with_the_references(tmp_path):
+    from handtouch.bench.report import results_markdown
+    from handtouch.bench.verdicts import model_verdicts, verdict_table
+
+    results = {"m": {"test": _verdict_tracks(0.05, 0.04, 0.02, 0.3, rgb=0.12)},
+               "zeros-ref": {"test": _verdict_tracks(0.09, 0.057, 0.088, 0.05)},
+               "copy-last-ref": {"test": _verdict_tracks(0.02, 0.057, 0.013, 0.4, rgb=0.09)}}
+    got = {v["label"]: (v["ok"], v["against"]) for v in model_verdicts(results)["m"]["test"]}
+    assert got == {"retrieval Hit@1": (True, "chance"), "reconstruction F-RMSE": (True, "zeros-ref"),
+                   "inpaint F-RMSE": (False, "copy-last-ref"), "inpaint H-RMSE": (True, "zeros-ref"),
+                   "rgb2tactile F-RMSE": (False, "zeros-ref"),
+                   "prediction F-RMSE": (False, "copy-last-ref")}   # the better of the two references
+    table = verdict_table(results)
+    assert "not yet 0.120 >= 0.090 zeros-ref" in table and "ok 0.300 > 0.060 chance" in table
+    assert "zeros-ref (test)" not in table                          # references get no verdict row
+    results["m"]["test"]["rgb2tactile"] = {"f_covered": {"rmse": None}}
+    assert model_verdicts(results)["m"]["test"][4]["ok"] is None    # unmeasured: neither ok nor not yet
+    checks = [{"check": "a", "value": 0.1, "limit": 0.09, "ok": False, "required": False},
+              {"check": "b", "value": 0.1, "limit": 0.09, "ok": False}]
+    md = results_markdown(results, {"checks": checks})
+    assert "| a | 0.1000 | 0.0900 | not yet (not required) |" in md and "| b | 0.1000 | 0.0900 | FAILED |" in md
+    assert md.index("## Verdicts") < md.index("## Covered pixels")
+
+
+def test_smoke_rgb_check_is_reported_but_not_required():
+    from handtouch.smoke import rgb_check
+
+    results = {"m": {"test": {"rgb2tactile": {"f_covered": {"rmse": 0.12}}}},
+               "zeros-ref": {"test": {"rgb2tactile": {"f_covered": {"rmse": 0.09}}}}}
+    check = rgb_check(results, "m")
+    assert check["ok"] is False and check["required"] is False and check["limit"] == 0.09
+    results["m"]["test"]["rgb2tactile"]["f_covered"]["rmse"] = 0.05
+    assert rgb_check(results, "m")["ok"] is True

@@ -78,3 +78,22 @@ def test_part_mask_rejects_unknown_part_ids_and_bad_shapes():
         part_mask(torch.zeros(4, 4, dtype=torch.uint8), chosen)
     with pytest.raises(ValueError):
         choose_parts(2, max_parts=0)
+
+
+def test_without_the_curriculum_the_complete_share_stays_at_its_midpoint():
+    """The "w/o drop" ablation: MaskingConfig.curriculum = False."""
+    from handtouch.config import MaskingConfig, StageConfig
+    from handtouch.stages import MASK, MaskedFusion, StepInfo
+
+    regions = torch.zeros(400, 224, 224, dtype=torch.uint8)
+    regions[:, :, :112] = 1
+    batch = {"regions": regions}
+
+    def complete_share(curriculum: bool, step: int) -> float:
+        stage = MaskedFusion(StageConfig(trainable=["fusion"]), masking=MaskingConfig(0.0, 1.0, 1, curriculum))
+        mask = stage.prepare(batch, StepInfo(step, 100))[MASK]
+        return float((mask.flatten(1).min(1).values == 1).float().mean())
+
+    assert complete_share(True, 0) < 0.05 and complete_share(True, 99) > 0.95     # the curriculum
+    for step in (0, 99):
+        assert 0.4 < complete_share(False, step) < 0.6                            # flat at p_full(0.5)

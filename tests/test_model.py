@@ -294,3 +294,31 @@ def test_bf16_autocast_training_step_is_finite():
     out["loss"].backward()
     assert torch.isfinite(out["loss"])
     assert all(torch.isfinite(p.grad).all() for p in model.parameters() if p.grad is not None)
+
+
+def test_ablation_without_codebook_uses_the_continuous_latent():
+    model = tiny_model(codebook=False).eval()
+    b = frame_batch()
+    tokens = model.encode(b["tactile"])
+    pred, idx, losses, stats = model.quantise_decode(tokens, b["coverage"])
+    assert torch.equal(pred, model.decoder(tokens) * b["coverage"])          # no quantisation in between
+    assert float(losses["codebook"] + losses["commit"]) == 0.0 and torch.isnan(stats["perplexity"])
+    assert (idx == 0).all()
+    with_vq = tiny_model().eval()
+    assert not torch.equal(with_vq.quantise_decode(tokens, b["coverage"])[0], with_vq.decoder(tokens) * b["coverage"])
+    loss, _ = make_stage(1).loss(model.train(), b)
+    loss.backward()
+    assert all(p.grad is None for p in model.vq.parameters())               # the VQ is bypassed entirely
+
+
+def test_ablation_without_vision_ignores_the_rgb_frame():
+    b, other = frame_batch(seed=0), frame_batch(seed=1)
+    blind, seeing = tiny_model(vision=False).eval(), tiny_model().eval()
+    for model, same in ((blind, True), (seeing, False)):
+        a = model.rgb_to_tactile(b["rgb"], b["coverage"], b["hand"])
+        c = model.rgb_to_tactile(other["rgb"], b["coverage"], b["hand"])
+        assert torch.equal(a, c) == same
+        window = torch.stack([b["rgb"]] * 3, 1), torch.stack([other["rgb"]] * 3, 1)
+        past = torch.stack([b["tactile"]] * 2, 1)
+        p1, p2 = (model.predict_next(w, past, b["coverage"], b["hand"]) for w in window)
+        assert torch.equal(p1, p2) == same

@@ -287,3 +287,15 @@ def test_training_bench_section_plugin(dataset_root, tmp_path):
     assert not result["warmup_run"] and Path(result["config"]).name == "smoke.toml"
     md = result["markdown"]
     assert md.count("\n| fp32 |") == 1 and "| bf16 autocast |" in md and "bf16 / fp32 speed:" in md
+
+
+def test_ablation_switches_load_from_overrides(tmp_path):
+    cfg = load_train_config(config_file("smoke"), ["model.codebook=false", "model.vision=false",
+                                                   "masking.curriculum=false"])
+    assert (cfg.model.codebook, cfg.model.vision, cfg.masking.curriculum) == (False, False, False)
+    default = load_train_config(config_file("smoke"))
+    assert (default.model.codebook, default.model.vision, default.masking.curriculum) == (True, True, True)
+    with pytest.raises(ValueError, match="model.codebook"):
+        load_train_config(config_file("smoke"), ['model.codebook="no"'])
+    with pytest.raises(ValueError, match="masking.curriculum"):
+        load_train_config(config_file("smoke"), ["masking.curriculum=1"])

@@ -162,7 +162,7 @@ class PreparedPart:
     """A part's evaluation items decoded once, in batches, with everything model-independent
     (inpainting masks, the retrieval SSIM reference) fixed, so every model sees the same."""
 
-    frames: list[dict]          # tactile, coverage (u8), regions, rgb, hand, mask (u8, 1 = hidden)
+    frames: list[dict]          # tactile, coverage (u8), rgb, hand, episode, frame, mask (u8, 1 = hidden)
     windows: list[dict]         # rgb_window, tactile_window, coverage, hand, target, mask (u8, frame T)
     reference: RetrievalReference
     items: int
@@ -181,6 +181,7 @@ def prepare_part(part: EvalPart, cfg: EvalConfig) -> PreparedPart:
         tactile, coverage = b[keys.TACTILE].float(), b[keys.COVERAGE].float()
         frames.append({keys.TACTILE: _compact(tactile), keys.COVERAGE: (coverage > 0.5).to(torch.uint8),
                        keys.RGB: b[keys.RGB], keys.HAND: _hand(b),
+                       keys.EPISODE: b[keys.EPISODE].reshape(-1), keys.FRAME: b[keys.FRAME].reshape(-1),
                        "mask": part_masks(b[keys.REGIONS], coverage, rng).to(torch.uint8)})
         maps.append(tactile[:, 0])
         episodes.append(b[keys.EPISODE].reshape(-1))

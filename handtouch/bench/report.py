@@ -1,6 +1,8 @@
 """HT-Bench report: results JSON, markdown tables, a predictions PNG.
 
-results.md holds three tables, one row per model per part:
+results.md opens with the verdicts against the reference predictors (verdicts.py) and, when
+the run's meta has them, its checks and misalignment control; then three tables, one row
+per model per part:
 - the paper's column order with F-/H- metrics over sensor-covered pixels
   (`COLUMNS`; regions f_covered / h_covered);
 - the same map metrics over the whole canvas / hidden part (`FULL_COLUMNS`;
@@ -89,12 +91,56 @@ def markdown_table(results: dict[str, dict[str, dict]], columns: tuple[Column, .
     return "\n".join(rows) + "\n"
 
 
-def results_markdown(results: dict[str, dict[str, dict]]) -> str:
-    """The results.md document: covered-pixel table, whole-canvas table, retrieval chance table."""
+def _fmt_any(v) -> str:
+    return f"{v:.4f}" if isinstance(v, float) else ("–" if v is None else str(v))
+
+
+def checks_markdown(checks: list[dict]) -> str:
+    """The run's pass/fail checks (meta["checks"]): check, value, limit, verdict."""
+    rows = ["| Check | Value | Limit | Verdict |", "|---|---:|---:|---|"]
+    rows += [f"| {c['check']} | {_fmt_any(c['value'])} | {_fmt_any(c['limit'])} | "
+             f"{'ok' if c['ok'] else ('FAILED' if c.get('required', True) else 'not yet (not required)')} |"
+             for c in checks]
+    return "\n".join(rows) + "\n"
+
+
+def control_markdown(control: dict) -> str:
+    """Misalignment control (meta["misalignment_control"]): the RGB probes' coarse-map MSE
+    relative to all zeros per pairing, and the trained model's RGB-to-tactile F-RMSE with the
+    frame mis-paired at evaluation time."""
+    rows = ["| Part | Pairing | Probe coarse MSE / zeros | Probe items | Model RGB2T F-RMSE | "
+            "same items, aligned |", "|---|---|---:|---:|---:|---:|"]
+    for part, pairings in control.get("probe", {}).items():
+        for pairing, score in pairings.items():
+            model = control.get("model", {}).get(part, {}).get(pairing, {})
+            rows.append(f"| {part} | {pairing} | {_fmt_any(score.get('ratio'))} | {score.get('items')} | "
+                        f"{_fmt_any(model.get('rmse'))} | {_fmt_any(model.get('aligned_rmse'))} |")
+    return "\n".join(rows) + "\n"
+
+
+def results_markdown(results: dict[str, dict[str, dict]], meta: dict | None = None) -> str:
+    """The results.md document: verdicts (and the run's checks / misalignment control when
+    meta has them), covered-pixel table, whole-canvas table, retrieval chance table."""
+    from handtouch.bench.verdicts import verdict_table
+
+    meta = meta or {}
+    head = ["# HT-Bench results\n",
+            "RMSE / cIoU: per-frame means; cIoU clamps predictions to [0,1]. Definitions: README, "
+            "\"HT-Bench metrics: definitions\".\n",
+            "## Verdicts against the references\n",
+            "Each trained model against the reference predictors on the same items (covered pixels; "
+            "handtouch/bench/verdicts.py): ok = better than the reference, not yet = measured, not better.\n",
+            verdict_table(results)]
+    if meta.get("checks"):
+        head += ["## Checks of this run\n", checks_markdown(meta["checks"])]
+    if meta.get("misalignment_control"):
+        head += ["## Misalignment control\n",
+                 "RGB probes (handtouch/rgb_pretrain.py) trained and scored with RGB aligned, shifted by >= "
+                 "1 s within the episode, and taken from another episode; the model column re-runs the "
+                 "trained model's RGB-to-tactile track with the frame mis-paired at evaluation time.\n",
+                 control_markdown(meta["misalignment_control"])]
     return "\n".join([
-        "# HT-Bench results\n",
-        "RMSE / cIoU: per-frame means; cIoU clamps predictions to [0,1]. Definitions: README, "
-        "\"HT-Bench metrics: definitions\".\n",
+        *head,
         "## Covered pixels (f_covered, h_covered)\n",
         "F- over the glove's sensor-covered pixels, H- over the covered pixels of the hidden part.\n",
         markdown_table(results, COLUMNS),
@@ -124,7 +170,7 @@ def write_results(out_dir: str | Path, results: dict[str, dict[str, dict]], meta
     """Write results.json ({"meta", "results"}) and results.md; returns the JSON document."""
     doc = {"meta": meta or {}, "results": results}
     write_text_atomic(Path(out_dir) / "results.json", json.dumps(doc, indent=2, sort_keys=True) + "\n")
-    write_text_atomic(Path(out_dir) / "results.md", results_markdown(results))
+    write_text_atomic(Path(out_dir) / "results.md", results_markdown(results, meta))
     return doc
 
 

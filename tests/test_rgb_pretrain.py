@@ -1,0 +1,113 @@
+"""The pretrained frozen RGB encoder and the misalignment control (handtouch.rgb_pretrain)."""
+
+import zlib
+
+import numpy as np
+import pytest
+import torch
+
+from handtouch.rgb_encoder import TactileGridRGB, load_rgb_encoder
+from handtouch.rgb_pretrain import (CONTROL_MARGIN, RGBPretrainConfig, control_checks, control_scores,
+                                    ensure_probes, load_items, partners, save_probe)
+from htdata.format import CANVAS
+from tests import factories
+from tests.factories import commit_split, episode_table, write_synthetic_dataset
+
+FPS = 4.0          # 1 s = 4 frames: short episodes can be shifted by a second
+TINY = RGBPretrainConfig(steps=150, batch_size=16, lr=3e-3, warmup_steps=5, shift_pixels=1, brightness=0.0,
+                         arch={"size": 16, "width": 16, "channels": 4, "grid": 14, "hidden": 32})
+EPISODES = episode_table(*[(f"ep{i}", "grab", "lab", "R", 12) for i in range(10)])
+
+
+def _level(seed: int, episode_id: str, frame: int) -> float:
+    """How hard the hand presses at a frame: random per frame, so a 1 s shift carries nothing."""
+    # salt 7: factories' streams use salts 0-3 (and numpy seeds [a, b, c] like [a, b, c, 0])
+    return float(np.random.default_rng([seed, zlib.crc32(episode_id.encode()), frame, 7]).choice(
+        [0.0, 0.25, 0.5, 0.75, 1.0]))
+
+
+def _tactile(seed, episode_id, frame, hand, coverage):
+    yy, xx = np.mgrid[0:CANVAS, 0:CANVAS].astype(np.float32)
+    blob = np.exp(-((yy - 112) ** 2 + (xx - 112) ** 2) / (2 * 40.0 ** 2))
+    return (_level(seed, episode_id, frame) * blob * (coverage > 0)).astype(np.float32)
+
+
+def _dataset(root, monkeypatch, rgb_shift: int | None):
+    """RGB brightness shows the pressure of frame + rgb_shift (None: RGB unrelated to touch)."""
+    monkeypatch.setattr(factories, "synthetic_tactile", _tactile)
+    if rgb_shift is not None:
+        def rgb(seed, episode_id, frame):
+            return np.full((CANVAS, CANVAS, 3), int(40 + 200 * _level(seed, episode_id, frame + rgb_shift)), np.uint8)
+        monkeypatch.setattr(factories, "synthetic_rgb", rgb)
+    write_synthetic_dataset(root, EPISODES, seed=1, fps=FPS)
+    ids = [e["episode_id"] for e in EPISODES]
+    commit_split(root, "s", {"train": ids[:7], "test": ids[7:]})
+    return root
+
+
+def _control(root, tmp_path):
+    paths = ensure_probes(root, "s", tmp_path / "probes", TINY)
+    parts = {"test": load_items(root, "s", "test", TINY)}
+    scores = control_scores(paths, parts, TINY)
+    return scores, control_checks(scores, "test"), paths
+
+
+def test_partners_shift_by_at_least_a_second_and_shuffle_across_episodes():
+    episode = np.repeat([0, 1, 2], 10)
+    frame = np.tile(np.arange(10), 3)
+    fps = np.full(30, 4.0)
+    shifted = partners(episode, frame, fps, "shifted")
+    assert (shifted >= 0).all()
+    assert (episode[shifted] == episode).all() and (np.abs(frame[shifted] - frame) >= 4).all()
+    assert frame[shifted][0] == 4 and frame[shifted][9] == 5            # the nearest frame >= 1 s away
+    shuffled = partners(episode, frame, fps, "shuffled", seed=3)
+    assert (episode[shuffled] != episode).all()
+    assert (partners(episode, frame, fps, "aligned") == np.arange(30)).all()
+    short = partners(np.zeros(4, int), np.arange(4), np.full(4, 4.0), "shifted")   # < 1 s of frames: none
+    assert (short == -1).all()
+    with pytest.raises(ValueError, match="pairing"):
+        partners(episode, frame, fps, "rolled")
+
+
+def test_probe_is_saved_in_the_file_based_encoder_format(tmp_path):
+    model = TactileGridRGB(**TINY.arch)
+    save_probe(model, tmp_path / "enc.pt", {"pairing": "aligned"})
+    enc = load_rgb_encoder(str(tmp_path / "enc.pt"))
+    assert enc.info.kind == "state_dict" and len(enc.info.sha256) == 64
+    rgb = torch.randint(0, 256, (2, 3, CANVAS, CANVAS), dtype=torch.uint8)
+    tokens = enc(rgb)
+    assert tokens.shape == (2, 14 * 14, 4)                                 # one token per canvas cell
+    assert torch.allclose(tokens, model(rgb.float() / 255).flatten(2).transpose(1, 2))
+    assert not any(p.requires_grad for p in enc.parameters())
+
+
+def test_aligned_dataset_passes_the_misalignment_control(tmp_path, monkeypatch):
+    root = _dataset(tmp_path / "aligned", monkeypatch, rgb_shift=0)
+    scores, checks, paths = _control(root, tmp_path)
+    assert scores["test"]["aligned"]["ratio"] < 0.5
+    assert all(c["ok"] for c in checks), checks
+    stamps = {p: path.stat().st_mtime_ns for p, path in paths.items()}
+    assert ensure_probes(root, "s", tmp_path / "probes", TINY) == paths      # cached: reused, not retrained
+    assert {p: path.stat().st_mtime_ns for p, path in paths.items()} == stamps
+
+
+def test_rgb_shifted_by_a_second_in_the_data_fails_the_control(tmp_path, monkeypatch):
+    """The sync bug the control exists for: every RGB frame shows the scene 1 s later."""
+    root = _dataset(tmp_path / "shifted", monkeypatch, rgb_shift=int(FPS))
+    scores, checks, _ = _control(root, tmp_path)
+    assert not any(c["ok"] for c in checks), (scores, checks)
+
+
+def test_rgb_unrelated_to_touch_fails_the_control(tmp_path, monkeypatch):
+    root = _dataset(tmp_path / "random", monkeypatch, rgb_shift=None)
+    scores, checks, _ = _control(root, tmp_path)
+    assert not all(c["ok"] for c in checks), (scores, checks)     # the smoke fails on any failed check
+
+
+def test_control_checks_use_the_margin():
+    def scores(aligned, shifted, shuffled):
+        return {"test": {"aligned": {"ratio": aligned}, "shifted": {"ratio": shifted},
+                         "shuffled": {"ratio": shuffled}}}
+    assert all(c["ok"] for c in control_checks(scores(0.4, 0.4 + CONTROL_MARGIN + 0.01, 0.8)))
+    assert [c["ok"] for c in control_checks(scores(0.4, 0.4 + CONTROL_MARGIN - 0.01, 0.8))] == [False, True]
+    assert not any(c["ok"] for c in control_checks(scores(None, 0.9, 0.9)))
