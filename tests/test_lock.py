@@ -82,32 +82,28 @@ def _race(root, barrier, results, done):
         results.put("refused")
 
 
-def test_concurrent_writers_one_wins(tmp_path):
+def race(root, racers: int = 4) -> list[str]:
+    """Start `racers` processes that try to lock `root` at once; the winner holds until all have tried."""
     ctx = mp.get_context("fork")
-    barrier, results, done = ctx.Barrier(4), ctx.Queue(), ctx.Event()
-    procs = [ctx.Process(target=_race, args=(tmp_path, barrier, results, done)) for _ in range(4)]
+    barrier, results, done = ctx.Barrier(racers), ctx.Queue(), ctx.Event()
+    procs = [ctx.Process(target=_race, args=(root, barrier, results, done)) for _ in range(racers)]
     for p in procs:
         p.start()
     outcomes = sorted(results.get(timeout=30) for _ in procs)
     done.set()
     for p in procs:
         p.join(30)
-    assert outcomes == ["refused", "refused", "refused", "won"]
+    return outcomes
+
+
+def test_concurrent_writers_one_wins(tmp_path):
+    assert race(tmp_path) == ["refused", "refused", "refused", "won"]
 
 
 def test_racing_takeovers_of_a_stale_lock_one_wins(tmp_path):
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
                           text=True).stdout.strip()
-    ctx = mp.get_context("fork")
     for _ in range(5):
         write_lock(tmp_path, pid=int(dead))
-        barrier, results, done = ctx.Barrier(4), ctx.Queue(), ctx.Event()
-        procs = [ctx.Process(target=_race, args=(tmp_path, barrier, results, done)) for _ in range(4)]
-        for p in procs:
-            p.start()
-        outcomes = sorted(results.get(timeout=30) for _ in procs)
-        done.set()
-        for p in procs:
-            p.join(30)
-        assert outcomes == ["refused", "refused", "refused", "won"]
+        assert race(tmp_path) == ["refused", "refused", "refused", "won"]
         assert not (tmp_path / LOCK_FILE).exists()
