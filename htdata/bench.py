@@ -33,7 +33,7 @@ from pathlib import Path
 from htdata.fsutil import write_bytes_atomic
 
 SECTION_GROUP = "htdata.bench_sections"
-BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate", "append")
+BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate", "append", "stats")
 # Top-level keys of results.json that are not sections: no section may take these names.
 RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds")
 
@@ -237,6 +237,11 @@ class Sections:
         from htdata.benchmarks.append import append_rows
 
         return append_rows(self.cfg.work, self.cfg.append_sizes)
+
+    def stats(self) -> dict:
+        from htdata.benchmarks.stats import stats_rows
+
+        return stats_rows(self.dataset)
 
     def discovered(self, name: str, entry_point: metadata.EntryPoint) -> dict:
         """Load and run one discovered section; its result must be a JSON-able dict."""

@@ -204,7 +204,11 @@ class Rasteriser:
                      for b, g in zip(self.layout.blocks, geoms)])
         # float64 so a footprint mean of equal values reproduces the value exactly.
         sample = sp.csr_matrix((s.vals, (s.rows, s.cols)), shape=(ncell, NPIX))
-        self._sample_live = sample[self.live_index].tocsr()  # (L, P)
+        live = sample[self.live_index].tocsr()  # (L, P)
+        # Only the pixels some taxel reads: gathering them first shrinks the float64 copy scipy
+        # needs ~5x (same rows, same entry order: bit-identical results).
+        self._sample_pixels = np.unique(live.indices)
+        self._sample_live = live[:, self._sample_pixels].tocsr()  # (L, pixels read)
         self.coverage = coverage.reshape(CANVAS, CANVAS)
         self.coverage.setflags(write=False)
         bend = self.layout.bend_cells
@@ -241,7 +245,7 @@ class Rasteriser:
         H, W = self.layout.grid
         out = np.full((T, H * W), np.nan, np.float32)
         if T:
-            flat = m.reshape(T, -1).astype(np.float64)
+            flat = m.reshape(T, -1)[:, self._sample_pixels].astype(np.float64)
             out[:, self.live_index] = (self._sample_live @ flat.T).T
         return out.reshape(T, H, W)
 

@@ -133,6 +133,9 @@ def test_quick_bench_content_is_consistent(quick_run):
     for row in (small, large):   # the append ran only the new episode and kept every other one as committed
         assert row["units_run"] == 1 and row["episodes_unchanged"] == row["episodes_before"]
         assert 0 < row["bytes_shards"] < row["bytes_written"]
+    stats = r["stats"]
+    assert stats["tactile_decode"]["frames"] == stats["runs"]["incremental"]["frames"] > 0
+    assert stats["runs"]["warm"]["episodes_computed"] == 0 and stats["runs"]["incremental"]["episodes_computed"] == 1
 
 
 def test_report_has_every_table_heading(quick_run):

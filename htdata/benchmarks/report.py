@@ -13,6 +13,7 @@ HEADINGS = {
     "index": "## Index load at scale",
     "validate": "## validate --deep",
     "append": "## Append one episode to N and 10N episodes",
+    "stats": "## htdata stats vs tactile-only decode",
 }
 TARGET_OVERHEAD_PCT = 30.0
 TARGET_SCALING = 1.8
@@ -194,9 +195,20 @@ def _append(d: dict) -> list[str]:
                     f"only index + episode records grow with N).", ""]
 
 
+def _stats(d: dict) -> list[str]:
+    rows = [{"run": "tactile-only decode (loader, streamed)", **d["tactile_decode"],
+             "episodes_computed": None}]
+    rows += [{"run": f"stats {name}", **r} for name, r in d["runs"].items()]
+    lines = table(rows, [("run", "run"), ("frames", "frames"), ("seconds", "seconds"), ("frames_per_s", "frames/s"),
+                         ("episodes_computed", "episodes computed")])
+    ok = "met" if d["cold_over_decode"] >= 1 else "not met"
+    return lines + ["", f"Cold stats / tactile decode = {_fmt(d['cold_over_decode'])} (target >= 1: {ok}). "
+                    "Warm = every episode cached; incremental = one more episode than the cold run.", ""]
+
+
 RENDERERS = {"machine": _machine, "codecs": _codecs, "rgb": _rgb, "raster": _raster, "ingest": _ingest,
              "rss": _rss, "loader": _loader, "index": _index, "validate": _validate,
-             "append": _append}
+             "append": _append, "stats": _stats}
 
 
 def _discovered(name: str, results: dict) -> list[str]:
