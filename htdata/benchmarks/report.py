@@ -197,7 +197,7 @@ def _append(d: dict) -> list[str]:
 
 def _stats(d: dict) -> list[str]:
     rows = [{"run": "tactile-only decode (loader, streamed)", **d["tactile_decode"],
-             "episodes_computed": None}]
+             "episodes_computed": "-"}]
     rows += [{"run": f"stats {name}", **r} for name, r in d["runs"].items()]
     lines = table(rows, [("run", "run"), ("frames", "frames"), ("seconds", "seconds"), ("frames_per_s", "frames/s"),
                          ("episodes_computed", "episodes computed")])
