@@ -130,7 +130,7 @@ def test_zero_over_zero_cases_are_defined():
     """Constant / empty maps have zero variance: the structure term is C2 / C2 = 1, never 0/0."""
     z = np.zeros((2, 32, 32))
     assert ssim(z, z, data_range=1.0).tolist() == [1.0, 1.0]                # two empty maps: exactly 1
-    c1, c2 = (0.01 ** 2, 0.03 ** 2)
+    c1 = 0.01 ** 2                    # K1 = 0.01, data_range 1; the structure term cancels for constant maps
     for a, b in ((0.3, 0.0), (1.0, 0.25), (0.5, 0.5)):
         got = ssim(np.full((32, 32), a), np.full((32, 32), b), data_range=1.0).item()
         assert got == pytest.approx((2 * a * b + c1) / (a * a + b * b + c1), abs=1e-12)
