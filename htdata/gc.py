@@ -6,7 +6,8 @@ then every shard file no kept version lists (including shards an
 interrupted write left behind, which no version ever listed). A crash
 between the steps leaves only unreferenced files, which the next gc
 removes. The current version's shards are never deleted (checked again
-right before deleting).
+right before deleting). Entries of the `htdata stats` cache that no kept
+version's episode uses go too.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from htdata.faults import crash_point
 from htdata.format import SHARDS_DIR
 from htdata.lock import WriterLock
 from htdata.manifest import load_manifest
+from htdata.stats import STATS_DIR
 from htdata.versions import list_versions, version_dir, version_manifest_file
 
 
@@ -27,15 +29,18 @@ class GcPlan:
     kept_versions: list[int]
     dropped_versions: list[int] = field(default_factory=list)
     dropped_shards: list[tuple[str, int]] = field(default_factory=list)   # (name, bytes)
+    dropped_stats: list[tuple[str, int]] = field(default_factory=list)    # stats cache entries (name, bytes)
 
     @property
     def bytes_freed(self) -> int:
-        return sum(b for _, b in self.dropped_shards)
+        return sum(b for _, b in self.dropped_shards) + sum(b for _, b in self.dropped_stats)
 
     def lines(self, dry_run: bool = False) -> list[str]:
         would = "would " if dry_run else ""
         out = [f"{would}delete version {v}" for v in self.dropped_versions]
         out += [f"{would}delete shard {name} ({size} B)" for name, size in self.dropped_shards]
+        if self.dropped_stats:
+            out.append(f"{would}delete {len(self.dropped_stats)} stats cache entries no kept version's episode uses")
         out.append(f"{would}keep versions {', '.join(map(str, self.kept_versions)) or '(unversioned)'}; "
                    f"{len(self.dropped_shards)} shards, {self.bytes_freed} bytes {'would be ' if dry_run else ''}freed")
         return out
@@ -54,7 +59,23 @@ def plan_gc(root: Path, keep_versions: int) -> GcPlan:
     for path in sorted((root / SHARDS_DIR).iterdir()) if (root / SHARDS_DIR).is_dir() else []:
         if path.name not in listed and (path.suffix == ".tar" or path.name.endswith(".tmp")):
             plan.dropped_shards.append((path.name, path.stat().st_size))
+    plan.dropped_stats = unused_stats_entries(root, kept or [None])
     return plan
+
+
+def unused_stats_entries(root: Path, versions: list) -> list[tuple[str, int]]:
+    """Entries of the `htdata stats` cache whose episode no kept version holds (name, bytes)."""
+    from htdata.reader import DatasetReader
+    from htdata.stats import episode_key
+
+    cache = root / STATS_DIR
+    if not cache.is_dir():
+        return []
+    used = set()
+    for v in versions:
+        with DatasetReader(root, version=v) as reader:
+            used |= {f"{episode_key(reader, pos)}.json" for pos in range(len(reader.episodes))}
+    return [(p.name, p.stat().st_size) for p in sorted(cache.iterdir()) if p.is_file() and p.name not in used]
 
 
 def collect(root, keep_versions: int, dry_run: bool, command: str) -> GcPlan:
@@ -74,4 +95,6 @@ def collect(root, keep_versions: int, dry_run: bool, command: str) -> GcPlan:
             crash_point("gc_version_deleted")
         for name in sorted(doomed):
             (root / SHARDS_DIR / name).unlink(missing_ok=True)
+        for name, _ in plan.dropped_stats:
+            (root / STATS_DIR / name).unlink(missing_ok=True)
         return plan

@@ -279,3 +279,24 @@ def test_a_write_built_on_a_stale_parent_is_refused(tmp_path):
         commit_parts(root, stale.parts(), {k: stale.manifest[k] for k in ("sources", "layouts", "canonical",
                                                                            "codec")}, None, "fresh?")
     assert list_versions(root) == [1, 2] and len(DatasetReader(root)) == 25 - 4
+
+
+def test_gc_also_drops_stats_cache_entries_no_kept_version_uses(tmp_path):
+    from htdata.gc import collect
+    from htdata.stats import STATS_DIR, episode_key, episode_stats
+    from tests.tactile_factories import clean_series, write_taxel_dataset
+
+    glove = "opentouch_right_16x16"
+    root = write_taxel_dataset(tmp_path / "ds", [          # one work unit per episode
+        {"episode_id": f"ep_{i}", "task": "pour", "scene": "lab", "hands": {"right": (glove, clean_series(glove, 6, i))}}
+        for i in range(3)])
+    with DatasetReader(root) as reader:
+        episode_stats(reader, cache_dir=root / STATS_DIR)
+    assert len(list((root / STATS_DIR).iterdir())) == 3
+    remove_episodes(root, ["ep_0"], dry_run=False, command="rm")
+    with DatasetReader(root) as reader:
+        current = {f"{episode_key(reader, p)}.json" for p in range(len(reader.episodes))}
+    assert collect(root, keep_versions=2, dry_run=True, command="gc").dropped_stats == []   # version 1 uses it
+    plan = collect(root, keep_versions=1, dry_run=False, command="gc")
+    assert len(plan.dropped_stats) == 1 and any("stats cache entries" in line for line in plan.lines())
+    assert {p.name for p in (root / STATS_DIR).iterdir()} == current
