@@ -74,7 +74,8 @@ SHARED_SETTINGS = {
 }
 
 
-def check_unique_ids(sources: list[Source], refs_per_source: list[list]) -> None:
+def check_unique_ids(refs_per_source: list[list]) -> None:
+    """An episode id names one episode across all sources of a run."""
     seen: dict[str, str] = {}
     for refs in refs_per_source:
         for r in refs:

@@ -95,10 +95,12 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         parent = current_snapshot(out)
         check_compatible(parent, sources)
         refs, plan_failures = discover_sources(sources, tuple(layout_dirs))
-        check_unique_ids(sources, refs)
-        plan = plan_append(parent, [r for rs in refs for r in sorted(rs, key=lambda r: r.episode_id)],
-                           [s.pipeline.to_dict() for s, rs in zip(sources, refs) for _ in rs])
-        source_of = {r.episode_id: s for s, rs in zip(sources, refs) for r in rs}
+        check_unique_ids(refs)
+        # pipeline (CLI) order, then episode id: the order units are numbered in
+        pairs = [(r, s) for s, rs in zip(sources, refs) for r in sorted(rs, key=lambda r: r.episode_id)]
+        settings = {id(s): s.pipeline.to_dict() for s in sources}
+        plan = plan_append(parent, [r for r, _ in pairs], [settings[id(s)] for _, s in pairs])
+        source_of = {r.episode_id: s for r, s in pairs}
         first_unit = parent.next_unit() if parent else 0
         tasks = plan_units([(r, source_of[r.episode_id]) for r in plan.todo], out, first_unit)
         remove_strays(out, tasks, first_unit)
