@@ -8,7 +8,7 @@ SEED   ?= 0
 OOD    ?= palm_push
 JOBS   ?= 2
 
-.PHONY: setup demo sample ingest split validate preview train-smoke test install-check bench clean
+.PHONY: setup demo sample ingest split validate preview train-smoke compare test install-check bench clean
 
 setup: $(VENV)/.installed
 
@@ -44,6 +44,11 @@ preview: validate
 # Trains the three HandTouch stages + baselines on the sample data, scores HT-Bench.
 train-smoke: setup
 	$(PY) -m handtouch.smoke --out runs/smoke --raw $(DATA)/raw --dataset $(DATA)/dataset
+
+# HandTouch vs the 4 encoder baselines, 3 ablations and 2 design rows, same data / split / budget.
+compare: setup
+	$(PY) -m handtouch.compare --config configs/compare_smoke.toml --out runs/compare --raw $(DATA)/raw \
+	  --dataset $(DATA)/dataset --rgb-cache runs/smoke/rgb_encoder
 
 demo: preview train-smoke
 	@echo "demo done: $(DATA)/dataset, $(DATA)/preview.png, runs/smoke/results.md"

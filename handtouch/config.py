@@ -14,7 +14,20 @@ from typing import Any
 
 from htdata.format import CANVAS
 
-ENCODERS = ("vit", "cnn", "resnet18")
+# model.encoder -> (tactile decoder, quantised latent). "vit" is HandTouch; the others are the
+# paper's four encoder baselines (README "Baselines"): cnn and resnet18 swap the tactile encoder
+# only; vqvae is a conv VQ-VAE tokeniser (conv encoder -> the same VQ -> conv decoder, no attention
+# in the autoencoder); vit_plain is a plain ViT regressor (the ViT encoder, no codebook, a linear
+# per-patch pixel head). Stages 2-3 keep the same fusion / temporal / predictor for every one, so a
+# row measures the tokeniser, not a different way of using RGB.
+ARCHITECTURES = {
+    "vit": ("attention", True),
+    "cnn": ("attention", True),
+    "resnet18": ("attention", True),
+    "vqvae": ("conv", True),
+    "vit_plain": ("linear", False),
+}
+ENCODERS = tuple(ARCHITECTURES)
 # Frames per stage-3 window (t_{T-2..T}): the temporal model's length, the trainer's and
 # HT-Bench's window datasets.
 WINDOW = 3
@@ -27,8 +40,8 @@ RESNET_GRID = 7
 
 @dataclass
 class ModelConfig:
-    encoder: str = "vit"          # vit | cnn | resnet18 (the last two are the baselines)
-    patch: int = 16               # ViT patch size (224 / patch must be a power-of-two grid divisor)
+    encoder: str = "vit"          # vit (HandTouch) | cnn | resnet18 | vqvae | vit_plain (baselines, ARCHITECTURES)
+    patch: int = 16               # ViT patch size (vit, vit_plain; 224 / patch must be a power-of-two divisor)
     dim: int = 384                # token width D
     depth: int = 8                # ViT encoder depth
     heads: int = 6
@@ -46,6 +59,10 @@ class ModelConfig:
     predictor_depth: int = 2      # stage 3 cross-attention layers
     cnn_widths: list[int] = field(default_factory=lambda: [32, 64, 128])   # baseline CNN: stem, 2 stages
     resnet_widths: list[int] = field(default_factory=lambda: [64, 128, 256, 512])  # baseline ResNet-18 stages
+    vqvae_widths: list[int] = field(default_factory=lambda: [32, 64, 128])  # baseline VQ-VAE: stem, 2 stages
+    # Encoder input: True = 2 channels (the map with hidden pixels zeroed + the hidden-pixel mask),
+    # False = the paper's 1 channel (the map only: a hidden pixel looks like "no contact").
+    mask_channel: bool = True
     # Ablations of the paper's comparison; both True is HandTouch.
     codebook: bool = True         # False = "w/o codebook": continuous latent, the VQ is bypassed
     vision: bool = True           # False = "w/o vision": stages 2-3 attend to the hand token, never to RGB
@@ -53,9 +70,24 @@ class ModelConfig:
     @property
     def grid(self) -> int:
         """Tokens per side produced by the tactile encoder."""
-        if self.encoder == "vit":
+        if self.encoder in ("vit", "vit_plain"):
             return CANVAS // self.patch
-        return CNN_GRID if self.encoder == "cnn" else RESNET_GRID
+        return RESNET_GRID if self.encoder == "resnet18" else CNN_GRID
+
+    @property
+    def decoder_kind(self) -> str:
+        """attention | conv | linear (ARCHITECTURES)."""
+        return ARCHITECTURES[self.encoder][0]
+
+    @property
+    def quantised(self) -> bool:
+        """Whether the latent goes through the VQ: the architecture has a codebook and the
+        "w/o codebook" ablation is off."""
+        return ARCHITECTURES[self.encoder][1] and self.codebook
+
+    @property
+    def in_chans(self) -> int:
+        return 2 if self.mask_channel else 1
 
     @property
     def num_tokens(self) -> int:
@@ -64,7 +96,7 @@ class ModelConfig:
     def validate(self) -> None:
         if self.encoder not in ENCODERS:
             raise ValueError(f"model.encoder must be one of {ENCODERS}, got {self.encoder!r}")
-        if self.encoder == "vit":
+        if self.encoder in ("vit", "vit_plain"):
             if self.patch <= 0 or CANVAS % self.patch:
                 raise ValueError(f"model.patch={self.patch} must divide {CANVAS}")
         up = CANVAS // self.grid
@@ -81,15 +113,18 @@ class ModelConfig:
         if len(self.cnn_widths) != 3 or any(int(w) <= 0 or int(w) % 8 for w in self.cnn_widths):
             raise ValueError(f"model.cnn_widths must be 3 positive multiples of 8 (GroupNorm(8)), "
                              f"got {self.cnn_widths}")
+        if len(self.vqvae_widths) != 3 or any(int(w) <= 0 or int(w) % 8 for w in self.vqvae_widths):
+            raise ValueError(f"model.vqvae_widths must be 3 positive multiples of 8 (GroupNorm(8)), "
+                             f"got {self.vqvae_widths}")
         if len(self.resnet_widths) != 4 or any(int(w) <= 0 for w in self.resnet_widths):
             raise ValueError(f"model.resnet_widths must be 4 positive widths, got {self.resnet_widths}")
         if self.mlp_ratio <= 0:
             raise ValueError("model.mlp_ratio must be > 0")
         if self.vq_beta < 0 or self.vq_dead_threshold < 0 or self.vq_restart_noise < 0:
             raise ValueError("model.vq_beta, vq_dead_threshold, vq_restart_noise must be >= 0")
-        if not isinstance(self.codebook, bool) or not isinstance(self.vision, bool):
-            raise ValueError(f"model.codebook and model.vision must be true/false, got {self.codebook!r}, "
-                             f"{self.vision!r}")
+        for name in ("codebook", "vision", "mask_channel"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"model.{name} must be true/false, got {getattr(self, name)!r}")
         if not 0.0 < self.vq_usage_decay < 1.0:
             raise ValueError(f"model.vq_usage_decay must be in (0,1), got {self.vq_usage_decay}")
 
@@ -139,15 +174,21 @@ class LossConfig:
     lambda_vis: float = 0.5       # stage 2, visible covered pixels
     lambda_mask: float = 1.0      # stage 2, masked covered pixels (must exceed lambda_vis)
     vq_weight: float = 1.0        # weight of the VQ codebook + commitment terms
-    # Reconstruction replay in stages 2 and 3: the whole map (stage 2) / t_T (stage 3)
-    # through encoder -> VQ -> decoder, as in stage 1. Both stages fine-tune the shared
-    # VQ and decoder; without this term stage 3's next-frame loss alone collapsed the
-    # codebook (perplexity 1.0) and pulled reconstruction back to the all-zeros level.
+    # Stage-2 reconstruction replay: the whole map through encoder -> VQ -> decoder, as in
+    # stage 1, next to the masked terms (stage 2 fine-tunes the shared encoder, VQ and decoder).
     lambda_replay: float = 1.0
+    # Stage 3 is the paper's |t_T - t^_T|^2 by default. Opt-in additions (README, "Stage-3
+    # loss"): stage3_replay x the reconstruction of t_T through encoder -> VQ -> decoder, and
+    # stage3_vq = add vq_weight x the VQ codebook + commitment terms of the predicted tokens.
+    stage3_replay: float = 0.0
+    stage3_vq: bool = False
 
     def validate(self) -> None:
-        if self.lambda_vis < 0 or self.vq_weight < 0 or self.lambda_replay < 0:
-            raise ValueError("loss.lambda_vis, loss.vq_weight and loss.lambda_replay must be >= 0")
+        if self.lambda_vis < 0 or self.vq_weight < 0 or self.lambda_replay < 0 or self.stage3_replay < 0:
+            raise ValueError("loss.lambda_vis, loss.vq_weight, loss.lambda_replay and loss.stage3_replay "
+                             "must be >= 0")
+        if not isinstance(self.stage3_vq, bool):
+            raise ValueError(f"loss.stage3_vq must be true/false, got {self.stage3_vq!r}")
         if not self.lambda_mask > self.lambda_vis:
             raise ValueError(f"loss.lambda_mask ({self.lambda_mask}) must exceed lambda_vis ({self.lambda_vis})")
 
@@ -213,6 +254,8 @@ class TrainConfig:
         step are below 2 x the dead threshold, healthy codes look dead and get restarted
         every step (the usage EMA of a code used ~once per step hovers around the threshold)."""
         m = self.model
+        if not m.quantised:      # no codebook in the latent: nothing to starve
+            return
         per_code = self.batch_size * world_size * m.num_tokens / m.codebook_size
         if per_code < 2 * m.vq_dead_threshold:
             raise ValueError(

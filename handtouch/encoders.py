@@ -1,8 +1,8 @@
 """Tactile encoders with one interface: (B, C, 224, 224) -> tokens (B, N, D).
 
-ViTEncoder is HandTouch's; CNNEncoder and ResNet18Encoder are the baselines
-(tokens = final feature map flattened and projected to D; widths from
-ModelConfig.cnn_widths / resnet_widths). Each exposes
+ViTEncoder is HandTouch's (and the plain-ViT baseline's); CNNEncoder, ResNet18Encoder and
+VQVAEEncoder are the conv baselines (tokens = final feature map flattened and projected to D;
+widths from ModelConfig.cnn_widths / resnet_widths / vqvae_widths). Each exposes
 `.grid` (tokens per side) so the decoder knows how far to upsample.
 """
 
@@ -130,11 +130,57 @@ class ResNet18Encoder(nn.Module):
         return self.tokens(self.stages(self.stem(x)))
 
 
+class ResidualStack(nn.Module):
+    """VQ-VAE residual blocks (van den Oord et al. 2017): x + conv1x1(ReLU(conv3x3(ReLU(x)))),
+    `depth` times, then a ReLU. Works on (B,C,g,g) maps; no normalisation, as in the paper."""
+
+    def __init__(self, channels: int, hidden: int, depth: int):
+        super().__init__()
+        self.blocks = nn.ModuleList(
+            nn.Sequential(nn.ReLU(), nn.Conv2d(channels, hidden, 3, padding=1), nn.ReLU(),
+                          nn.Conv2d(hidden, channels, 1)) for _ in range(depth))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        for block in self.blocks:
+            x = x + block(x)
+        return torch.relu(x)
+
+
+class VQVAEEncoder(nn.Module):
+    """The encoder of a conv VQ-VAE, stride 16 (224 -> 14): strided 4x4 convs (a stride-4 stem,
+    then two stride-2 stages, widths = vqvae_widths), a 3x3 conv and two residual blocks.
+
+    The original downsamples with stride-2 4x4 convs from full resolution; the stride-4 stem is the
+    CNN baseline's CPU concession (a full-resolution conv costs several ViT steps). Tokens get the
+    same learned positions + LayerNorm as the other conv encoders (_FeatureMapTokens), so the
+    shared stage-2/3 attention can tell places apart.
+    """
+
+    def __init__(self, in_chans: int, dim: int, widths: tuple[int, ...] = (32, 64, 128), res_depth: int = 2):
+        super().__init__()
+        if len(widths) != 3:
+            raise ValueError(f"VQVAEEncoder needs 3 widths (stem + 2 stride-2 stages), got {list(widths)}")
+        layers: list[nn.Module] = [nn.Conv2d(in_chans, widths[0], 4, stride=4), nn.ReLU()]
+        c = widths[0]
+        for w in widths[1:]:
+            layers += [nn.Conv2d(c, w, 4, stride=2, padding=1), nn.ReLU()]
+            c = w
+        layers += [nn.Conv2d(c, c, 3, padding=1), ResidualStack(c, max(c // 2, 8), res_depth)]
+        self.features = nn.Sequential(*layers)
+        self.grid = CNN_GRID
+        self.tokens = _FeatureMapTokens(c, dim, self.grid)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.tokens(self.features(x))
+
+
 def build_tactile_encoder(cfg: ModelConfig, in_chans: int) -> nn.Module:
-    if cfg.encoder == "vit":
+    if cfg.encoder in ("vit", "vit_plain"):
         return ViTEncoder(in_chans, cfg.patch, cfg.dim, cfg.depth, cfg.heads, cfg.mlp_ratio)
     if cfg.encoder == "cnn":
         return CNNEncoder(in_chans, cfg.dim, tuple(cfg.cnn_widths))
     if cfg.encoder == "resnet18":
         return ResNet18Encoder(in_chans, cfg.dim, tuple(cfg.resnet_widths))
+    if cfg.encoder == "vqvae":
+        return VQVAEEncoder(in_chans, cfg.dim, tuple(cfg.vqvae_widths))
     raise ValueError(f"unknown tactile encoder {cfg.encoder!r}")

@@ -1,10 +1,12 @@
 """HandTouch: tactile encoder -> (fusion | temporal prediction) -> factorised VQ -> decoder.
 
 Top-level modules (the names stages freeze / unfreeze, config.MODULE_NAMES):
-  encoder     tactile encoder (ViT, or the CNN / ResNet-18 baselines); input is two
-              channels: the map with masked pixels zeroed, and the mask itself
-  vq          FactorisedVQ, the shared discrete token space
-  decoder     attention blocks + conv upsampling -> (B,1,224,224) in [0,1]
+  encoder     tactile encoder (ViT, or a baseline's: config.ARCHITECTURES); input is two
+              channels, the map with masked pixels zeroed and the mask itself, or the map
+              alone with ModelConfig.mask_channel=False (the paper's single channel)
+  vq          FactorisedVQ, the shared discrete token space (bypassed without a codebook)
+  decoder     -> (B,1,224,224) in [0,1]: attention blocks + conv upsampling (HandTouch), or a
+              baseline's conv / linear-patch decoder (decoder.py)
   rgb_proj    frozen-RGB tokens (B,M,C) -> (B,M,D) + positions
   hand_token  learnable left / right token prepended to the tactile tokens
   fusion      stage 2: tactile tokens self-attend and cross-attend to visual tokens
@@ -15,8 +17,9 @@ rgb_encoder is always frozen and is not one of them.
 The model holds no training logic: each stage's loss is built from the blocks
 below in `handtouch.stages` (1 reconstruct, 2 masked reconstruction with RGB,
 3 predict t_T). Predictions are zero where coverage is 0.
-Ablation switches (ModelConfig): codebook=False bypasses the VQ (continuous latent),
-vision=False gives stages 2-3 the hand token as their only memory (no RGB).
+Ablation switches (ModelConfig): codebook=False bypasses the VQ (continuous latent; the
+vit_plain baseline has none either), vision=False gives stages 2-3 the hand token as their
+only memory (no RGB).
 """
 
 from __future__ import annotations
@@ -28,12 +31,13 @@ import torch
 import torch.nn as nn
 
 from .config import MODULE_NAMES, WINDOW, ModelConfig
-from .decoder import TactileDecoder
+from .decoder import build_tactile_decoder
 from .encoders import build_tactile_encoder, transformer_stack
 from .rgb_encoder import RGBEncoder
 from .vq import FactorisedVQ
 
-MODEL_NAMES = {"vit": "handtouch-vit", "cnn": "baseline-cnn", "resnet18": "baseline-resnet18"}
+MODEL_NAMES = {"vit": "handtouch-vit", "cnn": "baseline-cnn", "resnet18": "baseline-resnet18",
+               "vqvae": "baseline-vqvae", "vit_plain": "baseline-vit"}
 
 
 def masked_mse(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
@@ -111,11 +115,10 @@ class HandTouch(nn.Module):
         self.cfg = cfg
         self.name = MODEL_NAMES[cfg.encoder]
         d = cfg.dim
-        self.encoder = build_tactile_encoder(cfg, in_chans=2)
+        self.encoder = build_tactile_encoder(cfg, in_chans=cfg.in_chans)
         self.vq = FactorisedVQ(d, cfg.code_dim, cfg.codebook_size, cfg.vq_beta, cfg.vq_dead_threshold,
                                cfg.vq_usage_decay, cfg.vq_restart_noise)
-        self.decoder = TactileDecoder(d, self.encoder.grid, cfg.decoder_depth, cfg.heads, cfg.mlp_ratio,
-                                      cfg.decoder_channels)
+        self.decoder = build_tactile_decoder(cfg, self.encoder.grid)
         self.rgb_encoder = rgb_encoder
         self.rgb_proj = RGBProjector(rgb_encoder.out_dim, rgb_encoder.num_tokens, d)
         self.hand_token = nn.Embedding(2, d)
@@ -168,10 +171,13 @@ class HandTouch(nn.Module):
         return torch.no_grad() if name in self._frozen else contextlib.nullcontext()
 
     def encode(self, tactile: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
-        """(B,1,224,224) map (+ mask, 1 = hidden) -> tokens (B,N,D); hidden pixels are zeroed."""
+        """(B,1,224,224) map (+ mask, 1 = hidden) -> tokens (B,N,D); hidden pixels are zeroed.
+        The mask is the second input channel unless cfg.mask_channel is False."""
         if mask is None:
             mask = torch.zeros_like(tactile)
-        x = torch.cat([tactile.float() * (1 - mask), mask.float()], dim=1)
+        x = tactile.float() * (1 - mask)
+        if self.cfg.mask_channel:
+            x = torch.cat([x, mask.float()], dim=1)
         with self._grad_context("encoder"):
             return self.encoder(x)
 
@@ -191,7 +197,7 @@ class HandTouch(nn.Module):
     def latent(self, tokens: torch.Tensor):
         """tokens -> (z, indices, losses, stats) of the VQ; without the codebook (ablation) z is
         the tokens themselves, indices 0, no VQ loss and NaN statistics (not applicable)."""
-        if self.cfg.codebook:
+        if self.cfg.quantised:
             return self.vq(tokens)
         zero, nan = tokens.new_zeros((), dtype=torch.float32), torch.tensor(float("nan"))
         indices = torch.zeros(tokens.shape[:2], dtype=torch.long, device=tokens.device)

@@ -98,7 +98,7 @@ def make_split(dataset: Path, ood_task: str, seed: int) -> None:
     _htdata("split", str(dataset), "--ood-task", ood_task, "--seed", str(seed), "--name", SPLIT_NAME, "--force")
 
 
-def _toml_str(value: str) -> str:
+def toml_str(value: str) -> str:
     return json.dumps(str(value))   # a JSON string is a valid TOML basic string
 
 
@@ -110,9 +110,9 @@ def train_encoder(config: Path, encoder: str, dataset: Path, out_dir: Path, extr
     from handtouch.config import load_train_config
     from handtouch.train import load_model, train
 
-    overrides = [f"model.encoder={_toml_str(encoder)}", f"data_root={_toml_str(dataset)}",
-                 f"out_dir={_toml_str(out_dir)}", f"split={_toml_str(SPLIT_NAME)}",
-                 f"train_part={_toml_str('train')}", f"eval_part={_toml_str('test')}", *extra]
+    overrides = [f"model.encoder={toml_str(encoder)}", f"data_root={toml_str(dataset)}",
+                 f"out_dir={toml_str(out_dir)}", f"split={toml_str(SPLIT_NAME)}",
+                 f"train_part={toml_str('train')}", f"eval_part={toml_str('test')}", *extra]
     cfg = load_train_config(config, overrides)
     if 1 not in cfg.stages:
         raise SystemExit("smoke: the config must run stage 1 (the reconstruction check uses its checkpoint)")
@@ -203,11 +203,11 @@ def misalignment_control(args, probes: dict, pre_cfg: RGBPretrainConfig, model, 
             "model_name": model.name}
 
 
-def _jsonable(obj):
+def jsonable(obj):
     if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
+        return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
+        return [jsonable(v) for v in obj]
     if isinstance(obj, torch.Tensor):
         return obj.tolist()
     if isinstance(obj, (np.generic,)):
@@ -281,7 +281,7 @@ def main(argv=None) -> int:
     pre_cfg = RGBPretrainConfig(seed=args.seed)
     probes = timer.run("rgb_pretrain", ensure_probes, args.dataset, SPLIT_NAME, args.out / "rgb_encoder", pre_cfg)
     # the aligned probe is the frozen RGB encoder; a user's --set rgb_encoder=FILE comes later and wins
-    sets = [f"rgb_encoder={_toml_str(probes['aligned'].resolve())}", *args.set]
+    sets = [f"rgb_encoder={toml_str(probes['aligned'].resolve())}", *args.set]
     models, stage1_models, train_metrics = {}, {}, {}
     for enc in args.encoders:
         print(f"smoke: training encoder={enc}", flush=True)
@@ -312,7 +312,7 @@ def main(argv=None) -> int:
             "rgb_encoder": {"pretrain": dataclasses.asdict(pre_cfg), "probes": probes},
             "misalignment_control": control,
             "train_metrics": train_metrics, "seconds": seconds}
-    write_results(args.out, results, _jsonable(meta))
+    write_results(args.out, results, jsonable(meta))
     print((args.out / "results.md").read_text())
     for name, sec in seconds.items():
         print(f"smoke: {name:<28} {sec:8.1f} s")

@@ -8,8 +8,10 @@ and which of HandTouch's modules it trains (by name, config.MODULE_NAMES; the re
 `Stage.loss(model, batch) -> (loss, loss_dict)` (LeRobot's `policy.forward` contract):
 loss is the scalar to back-propagate, loss_dict its terms and the VQ statistics. The
 trainer's loop (`handtouch.train.run_stage`) knows nothing else about a stage.
-Stages 2 and 3 also replay stage 1's reconstruction (LossConfig.lambda_replay) because
-they fine-tune the VQ and decoder that reconstruction shares. Every loss ignores
+Stage 2 also replays stage 1's reconstruction (LossConfig.lambda_replay) because it
+fine-tunes the encoder, VQ and decoder that reconstruction shares. Stage 3 is the paper's
+|t_T - t^_T|^2 alone unless LossConfig.stage3_replay / stage3_vq opt in to a replay of
+t_T's reconstruction and to the VQ terms (README, "Stage-3 loss"). Every loss ignores
 uncovered pixels (coverage 0).
 """
 
@@ -70,8 +72,25 @@ class Stage(ABC):
         return tuple(n for n in MODULE_NAMES if n not in self.cfg.trainable)
 
     def configure(self, model: HandTouch) -> None:
-        """Train exactly this stage's modules; freeze (and put in eval mode) the others."""
+        """Train exactly this stage's modules; freeze (and put in eval mode) the others. Parameters
+        of trained modules that this stage's loss never reaches are frozen too (`unused`): DDP
+        requires every trainable parameter to get a gradient."""
         model.set_trainable(self.trainable)
+        for p in self.unused(model):
+            p.requires_grad_(False)
+
+    def unused(self, model: HandTouch) -> list[nn.Parameter]:
+        """Parameters of this stage's modules that get no gradient under the model's switches and
+        this stage's loss: the VQ without a codebook (bypassed), the codebook when the VQ terms
+        have weight 0 (the straight-through path skips it), the RGB projection without vision."""
+        out = []
+        if "vq" in self.trainable and not model.cfg.quantised:
+            out += list(model.vq.parameters())
+        elif "vq" in self.trainable and not self.vq_weight:
+            out.append(model.vq.codebook)
+        if "rgb_proj" in self.trainable and not model.cfg.vision:
+            out += list(model.rgb_proj.parameters())
+        return out
 
     def prepare(self, batch: dict, at: StepInfo) -> dict:
         """The batch as this stage's loss reads it (already on the training device)."""
@@ -81,11 +100,18 @@ class Stage(ABC):
     def forward(self, model: HandTouch, batch: dict) -> Losses:
         """Run the model on a prepared batch."""
 
+    @property
+    def vq_weight(self) -> float:
+        """Weight of the VQ codebook + commitment terms in this stage's loss."""
+        return self.weights.vq_weight
+
     def loss(self, model: HandTouch, batch: dict) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-        """-> (loss, {"vq", the stage's terms, VQ statistics})."""
+        """-> (loss, {"vq", the stage's terms, VQ statistics}); "vq" is logged even when its weight is 0."""
         out = self.forward(model, batch)
         vq_total = out.vq["codebook"] + out.vq["commit"]
-        loss = out.main + self.weights.vq_weight * vq_total
+        # weight 0: left out of the graph, so the codebook gets no (zero) gradient and AdamW's
+        # weight decay and momentum leave it alone
+        loss = out.main + self.vq_weight * vq_total if self.vq_weight else out.main
         device = out.main.device
         return loss, {"vq": vq_total, **out.terms, **{k: v.to(device) for k, v in out.stats.items()}}
 
@@ -144,7 +170,14 @@ class MaskedFusion(Stage):
 
 
 class NextFramePrediction(Stage):
+    """The paper's |t_T - t^_T|^2 (covered pixels); opt-in: + stage3_replay x the reconstruction
+    of t_T (encoder -> VQ -> decoder), + vq_weight x the VQ terms when stage3_vq."""
+
     number, data, items = 3, WINDOWS, "window (T >= 2)"
+
+    @property
+    def vq_weight(self) -> float:
+        return self.weights.vq_weight if self.weights.stage3_vq else 0.0
 
     def forward(self, model: HandTouch, batch: dict) -> Losses:
         tac, cov = batch[keys.TACTILE], batch[keys.COVERAGE]
@@ -154,13 +187,19 @@ class NextFramePrediction(Stage):
         cov_t = cov_w[:, -1]
         frames = covered(tac, cov_w)
         target = frames[:, -1]
-        tokens = model.encode_frames(frames)            # past frames + t_T (replay) in one call
-        pred_tokens = model.predicted_tokens(batch[keys.RGB], tokens[:, :-1], batch[keys.HAND])
+        replay = self.weights.stage3_replay > 0
+        # past frames (+ t_T when replaying) in one encoder call
+        tokens = model.encode_frames(frames if replay else frames[:, :-1])
+        pred_tokens = model.predicted_tokens(batch[keys.RGB], tokens[:, :WINDOW - 1], batch[keys.HAND])
         b = target.shape[0]
+        if not replay:
+            pred, _, vq_l, stats = model.quantise_decode(pred_tokens, cov_t)
+            terms = {"next": masked_mse(pred, target, cov_t)}
+            return Losses(terms["next"], terms, vq_l, stats)
         maps, _, vq_l, stats = model.quantise_decode(torch.cat([pred_tokens, tokens[:, -1]]),
                                                      torch.cat([cov_t, cov_t]))
         terms = {"next": masked_mse(maps[:b], target, cov_t), "replay": masked_mse(maps[b:], target, cov_t)}
-        return Losses(terms["next"] + self.weights.lambda_replay * terms["replay"], terms, vq_l, stats)
+        return Losses(terms["next"] + self.weights.stage3_replay * terms["replay"], terms, vq_l, stats)
 
 
 STAGES: dict[int, type[Stage]] = {s.number: s for s in (Reconstruction, MaskedFusion, NextFramePrediction)}

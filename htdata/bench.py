@@ -33,7 +33,8 @@ from pathlib import Path
 from htdata.fsutil import write_bytes_atomic
 
 SECTION_GROUP = "htdata.bench_sections"
-BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate", "append", "stats")
+BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate", "append", "stats",
+                    "lag", "raw")
 # Top-level keys of results.json that are not sections: no section may take these names.
 RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds")
 
@@ -198,7 +199,7 @@ class Sections:
         section["source_sizes_available"] = [f"{s[1]}x{s[0]}" for s in by_size]
         return section
 
-    def raster(self) -> list:
+    def raster(self) -> dict:
         from htdata.benchmarks.raster import raster_rows
 
         return raster_rows(self.cfg.raster_frames)
@@ -242,6 +243,16 @@ class Sections:
         from htdata.benchmarks.stats import stats_rows
 
         return stats_rows(self.dataset)
+
+    def lag(self) -> dict:
+        from htdata.benchmarks.lag import lag_rows
+
+        return lag_rows(self.cfg.work, self.cfg.quick, self.cfg.seed)
+
+    def raw(self) -> dict:
+        from htdata.benchmarks.raw import raw_rows
+
+        return raw_rows(self.corpus, self.cfg.work, bench_sources(), self.dataset, self.cfg.quick)
 
     def discovered(self, name: str, entry_point: metadata.EntryPoint) -> dict:
         """Load and run one discovered section; its result must be a JSON-able dict."""

@@ -3,7 +3,7 @@
 The card holds the `htdata stats` numbers of one version and these plots:
 frames per task and per scene, the contact frequency of each canonical
 region per glove (drawn on the canonical hand), the value histogram per
-glove, the taxel health map, the sync skew and clock-offset distributions
+glove, the taxel health map, the sync skew, clock-offset and lag distributions
 (episode records' "sync"), the split sizes, and preview strips of a few
 episodes. Every image is a PNG embedded as a data: URI and there is no
 script, stylesheet or font from elsewhere, so the page opens offline. The
@@ -199,6 +199,19 @@ def _sync(card: Card, reader) -> None:
             counts = np.histogram(values, bins=30, range=(lo, hi))[0].tolist()
             card.image(f"sync_{name.split()[0]}", histogram_chart(counts, round(lo, 3), round(hi, 3), name, log=False),
                        name)
+    lags = [(ep.get("sync") or {}).get("lag") for ep in reader.episodes]
+    lags = [lag for lag in lags if lag]
+    if lags:   # only pipelines with [sync] lag set report one (htdata/lag.py)
+        applied = [float(lag["lag_ms"]) for lag in lags if lag.get("applied")]
+        card.text(f"Tactile-video lag ([sync] lag): {len(lags)} episodes asked, {len(applied)} applied "
+                  f"(median {np.median(applied):.1f} ms), {len(lags) - len(applied)} declined." if applied else
+                  f"Tactile-video lag ([sync] lag): {len(lags)} episodes asked, none applied.")
+        if applied:
+            lo, hi = min(applied), max(applied)
+            hi = hi if hi > lo else lo + 1.0
+            counts = np.histogram(applied, bins=30, range=(lo, hi))[0].tolist()
+            card.image("sync_lag", histogram_chart(counts, round(lo, 3), round(hi, 3), "applied lag (ms)", log=False),
+                       "applied lag (ms)")
 
 
 def _splits(card: Card, reader) -> None:

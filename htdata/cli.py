@@ -23,6 +23,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "diff": ("htdata.commands.diff", "episodes added / removed / changed between two versions"),
     "rm": ("htdata.commands.rm", "remove episodes (ids or globs) as a new version; --dry-run"),
     "trim": ("htdata.commands.trim", "keep frames A:B of an episode as a new version; --dry-run"),
+    "renormalise": ("htdata.commands.renormalise",
+                    "new maps from the stored raw glove rows under a new calibration, as a new version"),
     "merge": ("htdata.commands.merge", "merge two datasets into a new one without re-encoding"),
     "gc": ("htdata.commands.gc", "delete old versions and shards no kept version lists; --dry-run"),
     "preview": ("htdata.commands.preview", "render a contact sheet: RGB beside left/right tactile maps"),

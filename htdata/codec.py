@@ -1,8 +1,12 @@
 """Tactile map and RGB frame codecs, and the tactile value rule.
 
 Stored format (DESIGN.md "Value rule"): tactile maps are float32 in [0,1],
-written as single-channel ("Y") OpenEXR HALF, ZIP by default; RGB frames are
-JPEG. Everything works in memory (BytesIO), so tar members need no temp files.
+written as single-channel ("Y") OpenEXR, ZIP by default, with HALF or FLOAT
+pixels: the pipeline's `[codec] tactile = "auto"` picks the pixel type by the
+rule in htdata/codecrule.py (smallest codec keeping every glove's levels).
+FLOAT is exact; HALF is NOT lossless (max error 2**-12, below). The decoder
+reads either. RGB frames are JPEG (lossy). Everything works in memory
+(BytesIO), so tar members need no temp files.
 
 float16 facts that matter for [0,1] maps (checked in tests/test_codec.py):
 - 0.0 and 1.0 are exact; spacing just below 1.0 is 2**-11, so the round-trip
@@ -103,7 +107,7 @@ def encode_exr(tactile_map: np.ndarray, compression: str = "zip", pixel_type=np.
 
 
 def decode_exr_pixels(data: bytes, where: str = "EXR") -> np.ndarray:
-    """Channel "Y" of an in-memory EXR in its stored pixel type (float16 for dataset maps).
+    """Channel "Y" of an in-memory EXR in its stored pixel type (float16 or float32 for dataset maps).
 
     OpenEXR's own exceptions name no file: they are re-raised as ValueError naming `where`.
     """
@@ -121,9 +125,15 @@ def decode_exr(data: bytes, where: str = "EXR") -> np.ndarray:
     return decode_exr_pixels(data, where).astype(np.float32, copy=False)
 
 
-def encode_tactile(tactile_map: np.ndarray, compression: str = "zip", where: str = "tactile map") -> bytes:
-    """Value rule + EXR HALF, channel "Y" (the dataset format)."""
-    return encode_exr(check_tactile_values(tactile_map, where), compression, np.float16)
+EXR_PIXEL_TYPES = {"half": np.float16, "float": np.float32}
+
+
+def encode_tactile(tactile_map: np.ndarray, compression: str = "zip", where: str = "tactile map",
+                   pixel_type: str = "half") -> bytes:
+    """Value rule + EXR of `pixel_type` ("half" or "float"), channel "Y" (the dataset format)."""
+    if pixel_type not in EXR_PIXEL_TYPES:
+        raise ValueError(f"{where}: unknown EXR pixel type {pixel_type!r}; known: {sorted(EXR_PIXEL_TYPES)}")
+    return encode_exr(check_tactile_values(tactile_map, where), compression, EXR_PIXEL_TYPES[pixel_type])
 
 
 def decode_tactile(data: bytes, where: str = "tactile map") -> np.ndarray:
@@ -151,7 +161,8 @@ def decode_png16(data: bytes) -> np.ndarray:
     return arr.astype(np.float32) / 65535.0
 
 
-# What the dataset uses; recorded in the manifest's "codec" section.
+# The manifest's "codec" section before the codec rule's choice is filled in (htdata.codecrule
+# CodecChoice.manifest_info replaces the tactile pixel type, codec name and reason).
 DEFAULT_CODEC_INFO = {
     "tactile": {"format": "exr", "channel": EXR_CHANNEL, "pixel_type": "half", "compression": "zip",
                 "shape": list(MAP_SHAPE), "range": [0.0, 1.0]},
@@ -256,6 +267,7 @@ def decode_json(data: bytes, where: str = "json") -> dict:
 MEMBER_CODECS = {
     "json": (lambda obj, settings, where: encode_json(obj), decode_json),
     "jpeg": (lambda rgb, settings, where: encode_rgb(rgb, settings.rgb_quality, where), decode_rgb),
-    "exr": (lambda m, settings, where: encode_tactile(m, settings.tactile_compression, where), decode_tactile),
+    "exr": (lambda m, settings, where: encode_tactile(m, settings.tactile_compression, where,
+                                                      settings.tactile_pixel_type), decode_tactile),
     "npy": (lambda arr, settings, where: encode_npy(arr), decode_npy),
 }

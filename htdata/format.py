@@ -11,8 +11,13 @@ entries and the order of the index's size columns: never reorder it, append.
 
 A sample in memory (what `decode_sample` returns and `encode_sample` takes):
     {"meta": dict, "rgb": (224,224,3) uint8,
-     "tactile": {hand: (224,224) float32}, "bend": {hand: (K,) float32}}
-with only the members the sample holds.
+     "tactile": {hand: (224,224) float32}, "bend": {hand: (K,) float32},
+     "raw": {hand: (R,H,W) source dtype}}
+with only the members the sample holds. `raw` holds the glove's rows exactly
+as read (format 3): the row paired with this frame (position
+meta["raw_paired"][hand]) and every unpaired row of the full-rate stream
+whose time falls after this frame and before the next one (their timestamps
+and source row numbers in meta["raw_t_ns"][hand] / meta["raw_row"][hand]).
 """
 
 from __future__ import annotations
@@ -22,8 +27,10 @@ from dataclasses import dataclass
 import numpy as np
 
 FORMAT = "htdata"
-FORMAT_VERSION = 2                  # 2: versions (htdata/versions.py); 1: one unversioned commit
-READABLE_FORMAT_VERSIONS = (1, 2)
+# 3: raw glove rows (members raw_{hand}.npy) + calibrations; 2: versions (htdata/versions.py);
+# 1: one unversioned commit. Indexes of 1 and 2 lack the raw size columns (LEGACY_INDEX_DTYPE).
+FORMAT_VERSION = 3
+READABLE_FORMAT_VERSIONS = (1, 2, 3)
 
 CANVAS = 224                       # canonical map and RGB frame side, pixels
 MAP_SHAPE = (CANVAS, CANVAS)
@@ -68,6 +75,7 @@ MEMBERS: tuple[Member, ...] = (
     Member("rgb.jpg", "size_rgb", "rgb", "jpeg"),
     *_per_hand("tactile", "exr", "tactile", "exr"),
     *_per_hand("bend", "npy", "bend", "npy"),
+    *_per_hand("raw", "npy", "raw", "npy"),      # format 3
 )
 JSON_MEMBER = MEMBERS[0].suffix
 RGB_MEMBER = MEMBERS[1].suffix
@@ -77,13 +85,15 @@ SIZE_FIELDS = {m.suffix: m.column for m in MEMBERS}     # member suffix -> index
 PER_HAND_FIELDS = tuple(dict.fromkeys(m.field for m in MEMBERS if m.hand))
 
 # index.npy, little endian, one row per sample; a size of 0 = member absent.
-INDEX_DTYPE = np.dtype([
+_INDEX_HEAD = [
     ("shard", "<u4"),      # position in manifest["shards"]
     ("offset", "<u8"),     # byte offset of the sample's FIRST member header
     ("episode", "<u4"),    # position in episodes.jsonl
     ("frame", "<u4"),
-    *[(m.column, "<u4") for m in MEMBERS],
-])
+]
+INDEX_DTYPE = np.dtype([*_INDEX_HEAD, *[(m.column, "<u4") for m in MEMBERS]])
+# Formats 1 and 2 (before the raw members): htdata.manifest converts such indexes on load.
+LEGACY_INDEX_DTYPE = np.dtype([*_INDEX_HEAD, *[(m.column, "<u4") for m in MEMBERS if m.field != "raw"]])
 
 
 def tactile_member(hand: str) -> str:
@@ -92,6 +102,10 @@ def tactile_member(hand: str) -> str:
 
 def bend_member(hand: str) -> str:
     return _hand_member("bend", hand)
+
+
+def raw_member(hand: str) -> str:
+    return _hand_member("raw", hand)
 
 
 def _hand_member(field: str, hand: str) -> str:
@@ -103,9 +117,15 @@ def _hand_member(field: str, hand: str) -> str:
 
 @dataclass(frozen=True)
 class CodecSettings:
-    """The per-dataset codec choices an encoder needs (recorded in the manifest's "codec")."""
+    """The per-dataset codec choices an encoder needs (recorded in the manifest's "codec").
+
+    `tactile_pixel_type` is the EXR pixel type of the maps ("half" or
+    "float"), already resolved: the pipeline's `[codec] tactile = "auto"` is
+    turned into one by the rule in htdata/codecrule.py.
+    """
     tactile_compression: str = "zip"
     rgb_quality: int = 95
+    tactile_pixel_type: str = "half"
 
 
 def encode_sample(sample: dict, settings: CodecSettings, where: str) -> dict[str, bytes]:

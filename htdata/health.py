@@ -1,8 +1,9 @@
 """Taxel health: classify every live taxel of one episode hand from its sampled value series.
 
 Input is the (T, L) series of a glove's L live taxels over an episode's T
-frames (normalised values sampled at the taxel centres of the stored maps,
-`Rasteriser(layout).sample`), plus the layout geometry (`TaxelGrid`). Each
+frames (normalised values: the stored raw rows under the episode's
+calibration, or the stored maps sampled at the taxel centres on datasets
+without raw rows; htdata/episodestats.py), plus the layout geometry (`TaxelGrid`). Each
 taxel gets at most one class, checked in this order:
 
 - saturated: at the top of the scale (>= SATURATION_LEVEL) in more than
@@ -134,24 +135,43 @@ def _neighbour_median(values: np.ndarray, taxels: TaxelGrid) -> np.ndarray:
     return np.nanmedian(table, axis=1)
 
 
+def _neighbour_tables(taxels: TaxelGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(near (L,8) neighbour index or -1, opposite pairs (L,4,2) index or -1, neighbour counts (L,)).
+
+    Kept on the (frozen) TaxelGrid after the first call: a glove's tables serve all its episodes.
+    """
+    cached = taxels.__dict__.get("_tables")
+    if cached is not None:
+        return cached
+    L = len(taxels.neighbours)
+    near = np.full((L, 8), -1, np.int64)
+    pairs = np.full((L, 4, 2), -1, np.int64)
+    counts = np.zeros(L, np.int64)
+    for i, nb in enumerate(taxels.neighbours):
+        near[i, :len(nb)] = nb
+        counts[i] = len(nb)
+        at = {tuple(o): int(k) for k, o in zip(nb, (taxels.cells[nb] - taxels.cells[i]).tolist())}
+        for p, o in enumerate(((-1, -1), (-1, 0), (-1, 1), (0, -1))):     # one of each opposite pair
+            a, b = at.get(o), at.get((-o[0], -o[1]))
+            if a is not None and b is not None:
+                pairs[i, p] = (a, b)
+    object.__setattr__(taxels, "_tables", (near, pairs, counts))
+    return near, pairs, counts
+
+
 def _exercised(x: np.ndarray, taxels: TaxelGrid, ignore: np.ndarray) -> np.ndarray:
-    """(L,) bool: enough neighbours (not in `ignore`) were pressed in enough frames to expect a reading."""
+    """(L,) bool: enough neighbours (not in `ignore`) were pressed in enough frames to expect a reading.
+
+    Per frame and taxel: at least min(DEAD_NEIGHBOURS, its neighbour count) neighbours pressed, two of
+    them on opposite sides; vectorised over frames and taxels through padded neighbour tables.
+    """
+    near, pairs, counts = _neighbour_tables(taxels)
     pressed = (x >= PRESSED_LEVEL) & ~ignore
-    out = np.zeros(x.shape[1], bool)
-    for i, near in enumerate(taxels.neighbours):
-        if not len(near):
-            continue
-        p = pressed[:, near]
-        d = taxels.cells[near] - taxels.cells[i]
-        offsets = {tuple(o): k for k, o in enumerate(d.tolist())}
-        around = np.zeros(len(x), bool)
-        for o, k in offsets.items():           # a pressed pair on opposite sides of the taxel
-            opposite = offsets.get((-o[0], -o[1]))
-            if opposite is not None:
-                around |= p[:, k] & p[:, opposite]
-        enough = p.sum(axis=1) >= min(DEAD_NEIGHBOURS, len(near))
-        out[i] = int((around & enough).sum()) >= EXERCISED_FRAMES
-    return out
+    padded = np.concatenate([pressed, np.zeros((len(x), 1), bool)], axis=1)   # index -1 = never pressed
+    n_pressed = padded[:, near].sum(axis=2)                                    # (T, L)
+    around = (padded[:, pairs[:, :, 0]] & padded[:, pairs[:, :, 1]]).any(axis=2)
+    enough = n_pressed >= np.minimum(DEAD_NEIGHBOURS, counts)
+    return (counts > 0) & ((around & enough).sum(axis=0) >= EXERCISED_FRAMES)
 
 
 def _crosstalk(x: np.ndarray, taxels: TaxelGrid) -> np.ndarray:

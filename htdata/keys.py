@@ -16,5 +16,7 @@ SCENE = "scene"          # int64: position in manifest["scenes"]
 EPISODE = "episode"      # int64: position in episodes.jsonl
 FRAME = "frame"          # int64: frame index within the episode
 INDEX = "index"          # int64: global sample index
+T_NS = "t_ns"            # (window,) int64 recorded glove timestamps (htdata.torchglove windows)
+HAS_RGB = "has_rgb"      # bool: the item's RGB is real (frames="tactile" items of glove-only samples: zeros)
 
 HAND_IDS = {"left": 0, "right": 1}

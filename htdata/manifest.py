@@ -25,8 +25,8 @@ import numpy as np
 
 from htdata import storage
 from htdata.codec import encode_png_u8
-from htdata.format import (CANONICAL_FILE, EPISODES_FILE, FORMAT, INDEX_DTYPE, INDEX_FILE, LAYOUTS_DIR, PARTS_FILE,
-                           READABLE_FORMAT_VERSIONS, REGIONS_FILE)
+from htdata.format import (CANONICAL_FILE, EPISODES_FILE, FORMAT, INDEX_DTYPE, INDEX_FILE, LAYOUTS_DIR,
+                           LEGACY_INDEX_DTYPE, PARTS_FILE, READABLE_FORMAT_VERSIONS, REGIONS_FILE)
 from htdata.fsutil import write_bytes_atomic
 from htdata.resources import validate_json
 from htdata.shardio import SampleRecord, ShardRecord
@@ -208,6 +208,12 @@ class IndexDtypeError(ValueError):
 
 
 def _check_index_dtype(rows: np.ndarray, where: str) -> np.ndarray:
+    """Rows as INDEX_DTYPE: a format 1/2 index (no raw columns) is converted in memory, sizes 0."""
+    if rows.dtype == LEGACY_INDEX_DTYPE:
+        converted = np.zeros(rows.shape, dtype=INDEX_DTYPE)
+        for name in LEGACY_INDEX_DTYPE.names:
+            converted[name] = rows[name]
+        return converted
     if rows.dtype != INDEX_DTYPE:
         raise IndexDtypeError(where, rows.dtype)
     return rows
@@ -229,7 +235,11 @@ def load_index(root: str | os.PathLike, mmap: bool = True, manifest: dict | None
 
 
 def load_index_file(path: str, mmap: bool = True) -> np.ndarray:
-    """An index.npy file (local path or URL) as INDEX_DTYPE; memory-mapped when local and `mmap`."""
+    """An index.npy file (local path or URL) as INDEX_DTYPE; memory-mapped when local and `mmap`.
+
+    A format 1/2 index is converted to INDEX_DTYPE in memory (not mapped); a
+    new version of such a dataset writes its index in the current dtype.
+    """
     local = storage.local_path(path)
     if local is None:
         return parse_index(storage.read_bytes(path), path)

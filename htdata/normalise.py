@@ -3,6 +3,7 @@
     inverted:  v = (max_value - p) / max_value     (OpenTouch: 3072 = no load, 0 = saturated)
     direct:    v = p / max_value                   (TouchAnything: already [0,1])
     baseline:  v -= b  per taxel, then clip at 0   (b from the first frames, see below)
+    noise:     v -= f  per taxel, then clip at 0   (f = noise_floor + noise_k * rest-window spread)
     scale:     v *= scale
     clip:      true  -> clip to [0,1];
                false -> strict: a finite live value outside [0,1] raises ValueError.
@@ -17,8 +18,18 @@ taxels only) are counted per frame by `out_of_range`; what happens to them
 (clip, drop the frame, fail) is the pipeline's `[normalise] out_of_range`
 policy, applied by the ingest (htdata.ingest.episode).
 
-Streaming: the baseline is fitted once on the first chunk (`fit_baseline`),
-then `apply` is called chunk by chunk with the same result as on the whole.
+Noise floor: a per-taxel baseline alone leaves raw-count gloves (e.g. 10-bit
+counts ~490..1022) showing small non-zero values on every taxel while the
+hands rest: sensor noise around the baseline reads as contact everywhere.
+`noise_k` sets a per-taxel floor of k robust standard deviations
+(1.4826 * MAD) of the rest window (needs baseline = "rest_window"), and
+`noise_floor` a constant one in unit values; values up to the floor read 0.
+
+Streaming: the baseline (and floor) is fitted once on the first chunk
+(`fit_baseline`), then `apply` is called chunk by chunk with the same result
+as on the whole. `fitted()` / `restore()` carry the fitted arrays into the
+episode record and back (htdata.calibration), so the stored raw rows can be
+renormalised later without the first chunk.
 """
 
 from __future__ import annotations
@@ -39,6 +50,13 @@ class NormaliseConfig:
     rest_frames: int = 10     # frames averaged (median) for baseline="rest_window"
     clip: bool = True
     scale: float = 1.0
+    noise_floor: float = 0.0  # constant floor in unit values (after the baseline)
+    noise_k: float = 0.0      # + k x robust spread of the rest window, per taxel
+
+    @property
+    def fits(self) -> bool:
+        """True when the calibration has per-episode fitted arrays (baseline / noise floor)."""
+        return self.baseline != "none" or self.noise_k > 0
 
     def validate(self, where: str = "normalise") -> "NormaliseConfig":
         if self.convention not in CONVENTIONS:
@@ -54,6 +72,16 @@ class NormaliseConfig:
             raise ValueError(f"{where}: scale must be a finite number > 0, got {self.scale!r}")
         if not isinstance(self.clip, bool):
             raise ValueError(f"{where}: clip must be true or false, got {self.clip!r}")
+        for name in ("noise_floor", "noise_k"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
+                    and 0 <= value):
+                raise ValueError(f"{where}: {name} must be a finite number >= 0, got {value!r}")
+        if self.noise_floor >= 1:
+            raise ValueError(f"{where}: noise_floor must be < 1 (unit values), got {self.noise_floor!r}")
+        if self.noise_k > 0 and self.baseline != "rest_window":
+            raise ValueError(f"{where}: noise_k needs baseline = \"rest_window\" (the floor is k x the rest "
+                             f"window's spread), got baseline = {self.baseline!r}")
         return self
 
     @classmethod
@@ -74,6 +102,7 @@ class Normaliser:
         self.grid = tuple(self.live_mask.shape)
         self.layout_id = getattr(layout, "layout_id", "?")
         self.baseline: np.ndarray | None = None
+        self.floor = np.full(self.grid, cfg.noise_floor, dtype=np.float32)
         if cfg.baseline == "none":
             self.baseline = np.zeros(self.grid, dtype=np.float32)
 
@@ -116,7 +145,36 @@ class Normaliser:
         if has.any():
             base[has] = np.nanmedian(filled[:, has], axis=0)
         self.baseline = np.clip(base, 0.0, 1.0).astype(np.float32)
+        if self.cfg.noise_k > 0:
+            spread = np.zeros(self.grid, dtype=np.float32)
+            if has.any():
+                mad = np.nanmedian(np.abs(filled[:, has] - base[has]), axis=0)
+                spread[has] = np.float32(1.4826) * mad
+            self.floor = (np.float32(self.cfg.noise_floor)
+                          + np.float32(self.cfg.noise_k) * spread).astype(np.float32)
         return self.baseline
+
+    def fitted(self) -> dict[str, np.ndarray]:
+        """The per-episode fitted arrays ({} when the config fits nothing): "baseline", "noise_floor"."""
+        if not self.cfg.fits:
+            return {}
+        if self.baseline is None:
+            raise RuntimeError(f"layout {self.layout_id}: nothing fitted yet")
+        return {"baseline": self.baseline, "noise_floor": self.floor}
+
+    def restore(self, fitted: dict[str, np.ndarray]) -> "Normaliser":
+        """Set the arrays `fitted()` returned (an episode's calibration), instead of fitting them."""
+        for name, arr in fitted.items():
+            arr = np.asarray(arr, dtype=np.float32)
+            if arr.shape != self.grid:
+                raise ValueError(f"layout {self.layout_id}: fitted {name} has shape {arr.shape}, expected {self.grid}")
+        if self.cfg.fits:
+            missing = {"baseline", "noise_floor"} - set(fitted)
+            if missing:
+                raise ValueError(f"layout {self.layout_id}: fitted calibration lacks {sorted(missing)}")
+            self.baseline = np.asarray(fitted["baseline"], dtype=np.float32)
+            self.floor = np.asarray(fitted["noise_floor"], dtype=np.float32)
+        return self
 
     def apply(self, raw) -> tuple[np.ndarray, np.ndarray]:
         """raw (T,H,W) -> (values (T,H,W) float32, finite_mask (T,) bool).
@@ -133,6 +191,8 @@ class Normaliser:
             v = self.to_unit(arr)
             if self.cfg.baseline != "none":
                 v = np.maximum(v - self.baseline, 0.0)
+            if self.cfg.noise_k > 0 or self.cfg.noise_floor > 0:
+                v = np.maximum(v - self.floor, 0.0)
             if self.cfg.scale != 1.0:
                 v = v * np.float32(self.cfg.scale)
             if self.cfg.clip:

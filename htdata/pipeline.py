@@ -2,8 +2,9 @@
 
 A pipeline says how one source format becomes canonical samples: which
 adapter reads it (and its params), which glove layout each hand uses, how
-glove units are normalised (per layout), the sync tolerance, RGB and tactile
-encoding, and the shard size. Files are checked three times: against
+glove units are normalised (per layout), the sync tolerance and clock lag
+(`[sync] lag`: htdata/lag.py), RGB and tactile encoding, and the shard
+size. Files are checked three times: against
 `schemas/pipeline.schema.json` (unknown keys are errors, named with the file),
 for non-finite numbers (TOML allows `nan`/`inf`, JSON Schema's "number"
 accepts them: `max_skew_ms = nan` would fail every episode later), and by
@@ -38,6 +39,8 @@ Example (pipelines/opentouch.toml):
 
 from __future__ import annotations
 
+import dataclasses
+import datetime
 import math
 import tomllib
 from dataclasses import asdict, dataclass, field
@@ -58,10 +61,38 @@ class AdapterConfig:
 class SyncConfig:
     max_skew_ms: float = 20.0
     policy: str = "nearest"
+    # Tactile-video lag (htdata/lag.py): "none" (clocks as recorded), "estimate" (per episode from the
+    # content, applied when confidence >= min_confidence, searched within +-max_lag_ms), or a number of
+    # ms (tactile - RGB clock, subtracted from every tactile timestamp).
+    lag: str | float = "none"
+    max_lag_ms: float = 500.0
+    min_confidence: float = 0.5
 
     @property
     def max_skew_ns(self) -> int:
         return int(round(self.max_skew_ms * 1e6))
+
+    def validate(self, where: str) -> "SyncConfig":
+        from htdata.lag import LAG_MODES
+
+        if isinstance(self.lag, bool) or not (self.lag in LAG_MODES if isinstance(self.lag, str)
+                                              else isinstance(self.lag, (int, float)) and math.isfinite(self.lag)):
+            raise ValueError(f"{where}: sync.lag must be one of {LAG_MODES} or a finite number of ms, got {self.lag!r}")
+        if not (isinstance(self.max_lag_ms, (int, float)) and 0 < self.max_lag_ms <= 10_000):
+            raise ValueError(f"{where}: sync.max_lag_ms must be in (0, 10000], got {self.max_lag_ms!r}")
+        if not (isinstance(self.min_confidence, (int, float)) and 0 <= self.min_confidence <= 1):
+            raise ValueError(f"{where}: sync.min_confidence must be in [0, 1], got {self.min_confidence!r}")
+        return self
+
+    def to_dict(self) -> dict:
+        """Lag keys only when not default: a pipeline that never sets them keeps its to_dict() (and input
+        fingerprints)."""
+        d = {"max_skew_ms": self.max_skew_ms, "policy": self.policy}
+        defaults = SyncConfig()
+        for key in ("lag", "max_lag_ms", "min_confidence"):
+            if getattr(self, key) != getattr(defaults, key):
+                d[key] = getattr(self, key)
+        return d
 
 
 @dataclass
@@ -70,6 +101,7 @@ class RgbConfig:
     quality: int = 95
     crop: str = "center"
     interpolation: str = "area"
+    keep_unpaired: bool = True   # RGB frames without tactile within the skew become RGB-only samples
 
 
 @dataclass
@@ -77,7 +109,23 @@ class TactileConfig:
     compression: str = "zip"
     raster_mode: str = "nearest"
     keep_bend: bool = True
+    keep_raw: bool = True    # raw_<hand>.npy: every glove row as read (source dtype), full rate
     chunk_frames: int = 64   # tactile frames read/normalised/rasterised per step (memory bound)
+
+
+@dataclass
+class CodecConfig:
+    """[codec]: tactile = "auto" (default: the EXR pixel type the rule in htdata/codecrule.py picks for the
+    dataset's gloves) or an explicit "exr_half" / "exr_float"; the compression is [tactile] compression.
+
+    `choice` is not written by hand: the ingest fills it in when it resolves the setting for a run
+    (`PipelineConfig.with_codec_choice`), so workers and the manifest see one resolved codec.
+    """
+    tactile: str = "auto"
+    choice: dict | None = None       # htdata.codecrule.CodecChoice.info()
+
+    def to_dict(self) -> dict:
+        return {"tactile": self.tactile, **({"choice": dict(self.choice)} if self.choice else {})}
 
 
 OUT_OF_RANGE_POLICIES = ("clip", "drop_frame", "fail")
@@ -143,10 +191,14 @@ class PipelineConfig:
     # layout for that hand (resolved once per episode when the ingest plans: htdata.ingest.plan)
     layouts: dict[str, str] = field(default_factory=dict)
     normalise: dict[str, NormaliseConfig] = field(default_factory=dict)  # layout id -> config
+    # layout id -> the keys its [normalise.<layout>] table sets; convention / max_value it leaves out come
+    # from the layout's value block (so `--set normalise.L.noise_k=3` keeps the glove's units)
+    normalise_given: dict[str, tuple[str, ...]] = field(default_factory=dict)
     out_of_range: OutOfRangeConfig = field(default_factory=OutOfRangeConfig)  # [normalise] out_of_range*
     sync: SyncConfig = field(default_factory=SyncConfig)
     rgb: RgbConfig = field(default_factory=RgbConfig)
     tactile: TactileConfig = field(default_factory=TactileConfig)
+    codec: CodecConfig = field(default_factory=CodecConfig)
     shards: ShardsConfig = field(default_factory=ShardsConfig)
     description: str = ""
     path: str = ""   # where it was loaded from (not part of the config's identity)
@@ -161,14 +213,45 @@ class PipelineConfig:
         for layout_id, cfg in self.normalise.items():
             cfg.validate(f"{where}: normalise.{layout_id}")
         self.out_of_range.validate(where)
+        self.sync.validate(where)
         check_adapter_params(self.adapter.name, self.adapter.params, where)
         return self
 
+    def codec_choice(self):
+        """The resolved tactile codec (htdata.codecrule.CodecChoice); the ingest resolves it first."""
+        from htdata.codecrule import CodecChoice
+
+        if self.codec.choice is None:
+            raise ValueError(f"{self.path or self.name}: [codec] tactile = {self.codec.tactile!r} is not resolved "
+                             f"for a dataset yet (htdata.codecrule.resolve_sources / with_codec_choice)")
+        return CodecChoice.from_info(self.codec.choice)
+
+    def with_codec_choice(self, choice) -> "PipelineConfig":
+        """A copy whose [codec] carries `choice` (a CodecChoice for this pipeline's compression)."""
+        import copy
+
+        if choice.compression != self.tactile.compression:
+            raise ValueError(f"{self.path or self.name}: codec choice {choice.codec} does not match "
+                             f"[tactile] compression {self.tactile.compression!r}")
+        cfg = copy.deepcopy(self)
+        cfg.codec.choice = choice.info()
+        return cfg
+
+    def codec_settings(self):
+        """What the encoders need (htdata.format.CodecSettings), from the resolved codec."""
+        from htdata.format import CodecSettings
+
+        return CodecSettings(tactile_compression=self.tactile.compression, rgb_quality=self.rgb.quality,
+                             tactile_pixel_type=self.codec_choice().pixel_type)
+
     def normalise_for(self, layout) -> NormaliseConfig:
-        """The pipeline's config for this layout, else the layout's own value block."""
-        if layout.layout_id in self.normalise:
-            return self.normalise[layout.layout_id]
-        return NormaliseConfig.from_layout_value(layout.value)
+        """The pipeline's config for this layout over the layout's own value block."""
+        base = NormaliseConfig.from_layout_value(layout.value)
+        if layout.layout_id not in self.normalise:
+            return base
+        cfg = self.normalise[layout.layout_id]
+        given = self.normalise_given.get(layout.layout_id, tuple(cfg.to_dict()))
+        return dataclasses.replace(base, **{k: getattr(cfg, k) for k in given}).validate()
 
     def to_dict(self) -> dict:
         """Plain dict (the TOML content with defaults filled in); recorded in the manifest."""
@@ -176,10 +259,13 @@ class PipelineConfig:
             "name": self.name,
             "adapter": {"name": self.adapter.name, "params": dict(self.adapter.params)},
             "layouts": dict(self.layouts),
-            "normalise": {**{k: v.to_dict() for k, v in self.normalise.items()}, **self.out_of_range.to_dict()},
-            "sync": asdict(self.sync),
+            "normalise": {**{k: {kk: vv for kk, vv in v.to_dict().items()
+                                 if k not in self.normalise_given or kk in self.normalise_given[k]}
+                             for k, v in self.normalise.items()}, **self.out_of_range.to_dict()},
+            "sync": self.sync.to_dict(),
             "rgb": asdict(self.rgb),
             "tactile": asdict(self.tactile),
+            "codec": self.codec.to_dict(),
             "shards": asdict(self.shards),
         }
         if self.description:
@@ -199,11 +285,13 @@ class PipelineConfig:
             adapter=AdapterConfig(name=data["adapter"]["name"], params=dict(data["adapter"].get("params", {}))),
             layouts=dict(data.get("layouts", {})),
             normalise={k: NormaliseConfig(**v) for k, v in norm.items()},
+            normalise_given={k: tuple(sorted(v)) for k, v in norm.items()},
             out_of_range=OutOfRangeConfig(policy=policy.get("out_of_range", "clip"),
                                           warn_share=float(policy.get("out_of_range_warn_share", 0.01))),
             sync=SyncConfig(**data.get("sync", {})),
             rgb=RgbConfig(**data.get("rgb", {})),
             tactile=TactileConfig(**data.get("tactile", {})),
+            codec=CodecConfig(**data.get("codec", {})),
             shards=ShardsConfig(**data.get("shards", {})),
             description=data.get("description", ""),
             path=where,
@@ -212,7 +300,12 @@ class PipelineConfig:
         for n in cfg.normalise.values():
             n.max_value = float(n.max_value)
             n.scale = float(n.scale)
+            n.noise_floor = float(n.noise_floor)
+            n.noise_k = float(n.noise_k)
         cfg.sync.max_skew_ms = float(cfg.sync.max_skew_ms)
+        for key in ("max_lag_ms", "min_confidence") + (() if isinstance(cfg.sync.lag, str) else ("lag",)):
+            if isinstance(getattr(cfg.sync, key), int) and not isinstance(getattr(cfg.sync, key), bool):
+                setattr(cfg.sync, key, float(getattr(cfg.sync, key)))
         return cfg.validate()
 
 
@@ -244,6 +337,8 @@ def parse_setting(item: str) -> tuple[str, object]:
     try:
         value = tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
+        value = text
+    if isinstance(value, (datetime.date, datetime.time)):   # TOML dates/times: no setting takes one
         value = text
     return key, value
 

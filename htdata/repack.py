@@ -5,7 +5,8 @@ re-packed into NEW units (fresh unit numbers, so fresh shard names) holding
 only the samples kept, and the parent's shards stay as they are for the
 versions that list them. A sample's members are copied as stored; only a
 trimmed episode's json member is rewritten, because its key and frame index
-are renumbered so frames stay 0..n-1.
+are renumbered so frames stay 0..n-1, and `htdata renormalise` passes a
+`rewrite` that re-encodes the maps of the episodes it recalibrates.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
 from htdata.codec import encode_json
 from htdata.format import JSON_MEMBER, SHARDS_DIR
@@ -28,6 +30,14 @@ class KeptEpisode:
     """One episode to copy: its record (without computed fields) and the frames kept, in order."""
     record: dict
     frames: range           # source frame numbers within the episode; renumbered from 0 when not 0..n-1
+
+
+class SampleRewrite(Protocol):
+    """Changes some episodes' members while re-packing (htdata.renormalise.Recalibration)."""
+
+    def members(self, episode_id: str, frame: int, members: dict[str, bytes]) -> dict[str, bytes]: ...
+
+    def record(self, record: dict) -> dict: ...
 
 
 def clear_uncommitted(root: Path, next_unit: int) -> list[str]:
@@ -47,10 +57,11 @@ def clear_uncommitted(root: Path, next_unit: int) -> list[str]:
 
 
 def repack_unit(reader: DatasetReader, kept: list[KeptEpisode], unit: int, samples_per_shard: int,
-                out_root: Path | None = None) -> Part:
+                out_root: Path | None = None, rewrite: SampleRewrite | None = None) -> Part:
     """Write `kept` episodes' samples (read through `reader`) into unit `unit`'s shards.
 
     The shards go to the reader's dataset, or to `out_root`'s (merge writes B's samples into OUT).
+    `rewrite`, when given, sees every sample's members and every episode record on the way.
     """
     out_dir = Path(out_root if out_root is not None else reader.root) / SHARDS_DIR
     records = []
@@ -68,9 +79,12 @@ def repack_unit(reader: DatasetReader, kept: list[KeptEpisode], unit: int, sampl
                     meta = json.loads(members[JSON_MEMBER])
                     meta.update({"key": key, "frame_index": new_frame})
                     members = {**members, JSON_MEMBER: encode_json(meta)}
+                if rewrite is not None:
+                    members = rewrite.members(eid, frame, members)
                 writer.add_sample(key, members)
                 crash_point("repack_sample_written")
-            records.append({**ep.record, "num_frames": len(ep.frames)})
+            record = {**ep.record, "num_frames": len(ep.frames)}
+            records.append(rewrite.record(record) if rewrite is not None else record)
     return part_from_unit(UnitResult(unit=unit, shards=writer.shards, samples=writer.samples, episodes=records))
 
 

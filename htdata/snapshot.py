@@ -24,6 +24,7 @@ import numpy as np
 from htdata import storage
 from htdata.format import (EPISODES_FILE, FORMAT, FORMAT_VERSION, HANDS, MANIFEST_FILE, SHARDS_DIR, SIZE_FIELDS,
                            tactile_member)
+from htdata.calibration import merge_calibrations
 from htdata.manifest import load_episodes, load_index, load_manifest
 from htdata.parts import Part, assemble, parts_of_version, unit_of_shard
 from htdata.resources import validate_json
@@ -92,7 +93,8 @@ def commit_parts(root: str | os.PathLike, parts: list[Part], fields: dict, paren
     """Write a new version made of `parts`; returns its manifest.
 
     `fields` holds sources / layouts / canonical / codec (missing ones come
-    from the parent). `splits(episodes, episodes_sha256)` returns the new
+    from the parent) and "calibrations" (new ones; the parent's are kept for
+    the episodes that still name them, htdata.calibration.merge_calibrations). `splits(episodes, episodes_sha256)` returns the new
     version's split files (name -> bytes); by default the parent's splits are
     carried over (htdata.splitversions.py). `next_unit` = first unit number
     free after this version.
@@ -115,11 +117,17 @@ def commit_parts(root: str | os.PathLike, parts: list[Part], fields: dict, paren
 
     carried = {k: fields[k] if k in fields else (parent.manifest[k] if parent else None) for k in CARRIED_FIELDS}
     carried["layouts"] = {k: v for k, v in layouts.items() if k in used_layouts}
+    used_calibrations = {cid for ep in built.episodes for cid in ep.get("calibration", {}).values()}
+    calibrations = merge_calibrations(parent.manifest.get("calibrations", {}) if parent else {},
+                                      fields.get("calibrations", {}), used_calibrations)
+    unknown = used_calibrations - set(calibrations)
+    if unknown:
+        raise ValueError(f"calibration(s) {sorted(unknown)} named by episode records but not provided to commit")
     diff = diff_episodes(parent.episodes if parent else [], built.episodes)
     time = created or now_utc()
     manifest = {
         "format": FORMAT, "format_version": FORMAT_VERSION, "created": time,
-        "htdata_version": htdata_version or __version__, **carried,
+        "htdata_version": htdata_version or __version__, **carried, "calibrations": calibrations,
         "tasks": sorted({ep["task"] for ep in built.episodes}),
         "scenes": sorted({ep["scene"] for ep in built.episodes}),
         "counts": {"episodes": len(built.episodes), "samples": int(len(built.rows)),

@@ -38,7 +38,8 @@ from htdata.health import CLASSES, HEALTH_VERSION, merge_counts
 from htdata.reader import DatasetReader
 
 STATS_DIR = "stats"
-STATS_SCHEMA = f"htdata-episode-stats/1 health/{HEALTH_VERSION} bins/{HIST_BINS} contact/{CONTACT_THRESHOLD}"
+# /2: values from the raw rows where stored (format 3), raw-unit sketches; the key covers the calibration
+STATS_SCHEMA = f"htdata-episode-stats/2 health/{HEALTH_VERSION} bins/{HIST_BINS} contact/{CONTACT_THRESHOLD}"
 GROUPINGS = ("task", "scene", "source", "layout", "hand")
 QUANTILES = {"p1": 0.01, "p50": 0.50, "p99": 0.99}
 HIST_COARSE = 50                  # bins of the summary's value_histogram (divides HIST_BINS)
@@ -54,12 +55,25 @@ def episode_key(reader: DatasetReader, pos: int) -> str:
     doc = {"schema": STATS_SCHEMA, "shards": [manifest["shards"][s]["sha256"] for s in shards],
            "first_offset": int(reader.index["offset"][first]) if n else None, "frames": n,
            "layouts": {h: manifest["layouts"].get(lid, {}).get("sha256") for h, lid in sorted(ep["layouts"].items())},
-           "canonical": manifest.get("canonical", {}).get("sha256")}
+           "canonical": manifest.get("canonical", {}).get("sha256"),
+           # values from raw rows depend on the calibration: its settings and the episode's fitted arrays
+           "calibration": {h: [cid, manifest.get("calibrations", {}).get(cid)]
+                           for h, cid in sorted((ep.get("calibration") or {}).items())},
+           "calibration_fit": ep.get("calibration_fit")}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
 
 
 def default_cache_dir(root) -> Path | None:
     return None if storage.is_url(root) else Path(root) / STATS_DIR
+
+
+def _read_cached(path: Path | None) -> dict | None:
+    if path is None or not path.exists():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None          # a damaged entry is recomputed (and not rewritten: its name is taken)
 
 
 def episode_stats(reader: DatasetReader, positions: list[int] | None = None, cache_dir=None,
@@ -70,34 +84,43 @@ def episode_stats(reader: DatasetReader, positions: list[int] | None = None, cac
     """
     positions = list(range(len(reader.episodes))) if positions is None else positions
     cache = Path(cache_dir) if cache_dir is not None else None
-    gloves = None
-    out, info = [], {"computed": 0, "cached": 0, "frames_computed": 0}
-    for done, pos in enumerate(positions):
-        key = episode_key(reader, pos)
-        path = cache / f"{key}.json" if cache is not None else None
-        entry = None
-        if path is not None and path.exists():
+    keys = {pos: episode_key(reader, pos) for pos in positions}
+    paths = {pos: cache / f"{keys[pos]}.json" if cache is not None else None for pos in positions}
+    entries = {pos: _read_cached(paths[pos]) for pos in dict.fromkeys(positions)}
+    info = {"computed": 0, "cached": sum(e is not None for e in entries.values()), "frames_computed": 0}
+    missing = [pos for pos, e in entries.items() if e is None]
+    done = len(entries) - len(missing)
+    if progress and done:
+        progress(done, len(entries))
+    for pos, entry in compute_missing(reader, missing):
+        entry["key"] = keys[pos]
+        entries[pos] = entry
+        info["computed"] += 1
+        info["frames_computed"] += entry["frames"]
+        path = paths[pos]
+        if path is not None and not path.exists():
             try:
-                entry = json.loads(path.read_text())
-                info["cached"] += 1
-            except (OSError, ValueError):
-                entry = None          # a damaged entry is recomputed (and not rewritten: its name is taken)
-        if entry is None:
-            gloves = gloves if gloves is not None else dataset_gloves(reader)
-            entry = compute_episode(reader, pos, gloves)
-            entry["key"] = key
-            info["computed"] += 1
-            info["frames_computed"] += entry["frames"]
-            if path is not None and not path.exists():
-                try:
-                    path.parent.mkdir(parents=True, exist_ok=True)
-                    write_bytes_atomic(path, (json.dumps(entry, separators=(",", ":")) + "\n").encode())
-                except OSError as exc:        # a read-only dataset still gets its stats, uncached
-                    info["cache_error"] = f"{path.parent}: {exc}"
-        out.append(entry)
+                path.parent.mkdir(parents=True, exist_ok=True)
+                write_bytes_atomic(path, (json.dumps(entry, separators=(",", ":")) + "\n").encode())
+            except OSError as exc:        # a read-only dataset still gets its stats, uncached
+                info["cache_error"] = f"{path.parent}: {exc}"
+        done += 1
         if progress:
-            progress(done + 1, len(positions))
-    return out, info
+            progress(done, len(entries))
+    return [entries[pos] for pos in positions], info
+
+
+def compute_missing(reader: DatasetReader, positions: list[int]):
+    """Yield (position, stats) of each episode in `positions`, one process.
+
+    (Spreading episodes over worker processes was measured on this 2-core
+    machine while it was shared: no gain over one process, and a spawned pool
+    would re-run an unguarded calling script; the raw-row path made one
+    process fast enough.)
+    """
+    gloves = dataset_gloves(reader) if positions else {}
+    for pos in positions:
+        yield pos, compute_episode(reader, pos, gloves)
 
 
 def _group_key(by: str | None, ep: dict, hand: str, layout: str) -> tuple:
@@ -118,6 +141,12 @@ def _glove_summary(acc: dict, gloves: dict, health: dict) -> dict:
            "quantiles": {k: quantile(acc["zeros"], hist, q) for k, q in QUANTILES.items()},
            "regions": {}, "health": health}
     out["quantiles"]["max"] = acc["max"] if frames else None
+    out["frames_from_raw"] = acc["frames_from_raw"]
+    if acc.get("raw_hist") is not None and acc["raw_count"]:
+        # raw glove units (the layout's value convention); quantiles of values clipped to [0, raw_top]
+        raw_hist, top = np.asarray(acc["raw_hist"], np.int64), acc["raw_top"]
+        out["raw_quantiles"] = {k: _scaled(quantile(acc["raw_zeros"], raw_hist, q), top) for k, q in QUANTILES.items()}
+        out["raw_quantiles"].update({"min": acc["raw_min"], "max": acc["raw_max"], "range": [0.0, top]})
     # coarse twin of the fixed-bin histogram for plots: exact zeros + HIST_COARSE bins over (0, 1]
     out["value_histogram"] = {"zeros": int(acc["zeros"]),
                               "counts": hist.reshape(HIST_COARSE, -1).sum(axis=1).tolist()}
@@ -132,6 +161,10 @@ def _glove_summary(acc: dict, gloves: dict, health: dict) -> dict:
         std = np.sqrt(np.maximum(np.asarray(acc["taxel_sumsq"]) / frames - mean ** 2, 0.0))
         out["taxel_mean"], out["taxel_std"] = _on_grid(mean, glove), _on_grid(std, glove)
     return out
+
+
+def _scaled(q: float | None, top: float) -> float | None:
+    return None if q is None else round(q * top, 6)
 
 
 def _on_grid(values: np.ndarray, glove) -> list:
@@ -161,7 +194,9 @@ def summarise(reader: DatasetReader, per_episode: list[dict], by: str | None = N
         groups.append(row)
     return {"dataset": str(reader.root), "version": reader.version, "episodes": len(reader.episodes),
             "frames": len(reader), "contact_threshold": CONTACT_THRESHOLD, "by": by,
-            "values": "normalised [0,1] map values sampled at taxel centres (raw glove values not stored)",
+            "values": ("normalised [0,1] taxel values: from the stored raw rows under each episode's calibration "
+                       "(exact; frames_from_raw) where the dataset has them, else the stored maps sampled at "
+                       "taxel centres; raw_quantiles in raw glove units"),
             "gloves": groups, "tasks": _table(reader, "task"), "scenes": _table(reader, "scene"),
             "health_classes": list(CLASSES), "nan_samples": nan_samples}
 
@@ -246,8 +281,11 @@ def stats_benchmark(root) -> dict:
                 summarise(reader, per_episode, None)
                 dt = time.perf_counter() - t0
                 frames = frames_before if name != "incremental" else len(reader)
+                hands = [h for st in per_episode for h in st["hands"].values()]
                 runs[name] = {"seconds": round(dt, 4), "frames": frames, "frames_per_s": round(frames / dt, 1),
-                              "episodes_computed": info["computed"], "frames_computed": info["frames_computed"]}
+                              "episodes_computed": info["computed"], "frames_computed": info["frames_computed"],
+                              "hand_frames": sum(h["frames"] for h in hands),
+                              "hand_frames_from_raw": sum(h["frames"] for h in hands if h.get("values_from") == "raw")}
         return runs
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -5,6 +5,13 @@ nearest tactile frame of every present hand (vectorised `np.searchsorted`).
 A frame whose skew exceeds `max_skew_ns` for any hand is dropped and listed
 with a reason: nothing is ever paired silently across a large gap.
 
+Clock lag (htdata/lag.py, pipeline `[sync] lag`): `pair(..., lag=decision)`
+subtracts `decision.shift_ns` from every tactile timestamp before pairing
+(the paired t_tactile_ns are then on the RGB clock) and records
+`decision.to_dict()` as the report's "lag" entry, applied or not (a declined
+one also as a warning). Without a decision the clocks are paired as recorded
+and the report has no "lag" key.
+
 Timestamp cleaning (`clean_timestamps`), applied to every stream first:
 - non-monotonic timestamps are put in time order by a STABLE sort (equal
   timestamps keep their file order) and a warning is recorded;
@@ -116,8 +123,12 @@ def _skew_stats(skew: np.ndarray, t_rgb: np.ndarray) -> dict:
 
 
 def pair(rgb_ts, tactile_ts: dict[str, np.ndarray], max_skew_ns: int,
-         policy: str = "nearest") -> SyncResult:
+         policy: str = "nearest", lag=None) -> SyncResult:
     """Pair each RGB frame with the nearest tactile frame of every hand.
+
+    `lag`: an `htdata.lag.LagDecision` (or None): its `shift_ns` (0 when not
+    applied) comes off every tactile timestamp first; its `to_dict()` is the
+    report's "lag" entry.
 
     Drop reasons: "duplicate_timestamp" (RGB duplicate), "tactile_out_of_range:<hand>"
     (the RGB frame lies outside that hand's recorded span by more than the
@@ -130,6 +141,7 @@ def pair(rgb_ts, tactile_ts: dict[str, np.ndarray], max_skew_ns: int,
         raise ValueError(f"max_skew_ns must be >= 0, got {max_skew_ns}")
     if not tactile_ts:
         raise ValueError("no tactile stream to pair with")
+    shift = np.int64(lag.shift_ns if lag is not None and lag.applied else 0)
     rgb_raw = _as_timestamps(rgb_ts, "rgb")
     rgb_order, rgb_rep = clean_timestamps(rgb_raw, "rgb")
     t_rgb = rgb_raw[rgb_order]
@@ -139,7 +151,7 @@ def pair(rgb_ts, tactile_ts: dict[str, np.ndarray], max_skew_ns: int,
     hands = sorted(tactile_ts)
     per_hand = {}
     for hand in hands:
-        raw = _as_timestamps(tactile_ts[hand], f"tactile_{hand}")
+        raw = _as_timestamps(tactile_ts[hand], f"tactile_{hand}") - shift
         order, rep = clean_timestamps(raw, f"tactile_{hand}")
         t_tac = raw[order]
         pos = nearest(t_tac, t_rgb)
@@ -173,6 +185,10 @@ def pair(rgb_ts, tactile_ts: dict[str, np.ndarray], max_skew_ns: int,
         "hands": hand_reports,
         "warnings": rgb_rep.warnings + [w for h in per_hand.values() for w in h[3].warnings],
     }
+    if lag is not None:
+        report["lag"] = lag.to_dict()
+        if not lag.applied:   # asked for and declined: a note in the episode record too
+            report["warnings"].append(f"tactile-video lag {lag.reason}")
     return SyncResult(
         rgb_index=rgb_order[keep],
         tactile_index={h: v[0][keep] for h, v in per_hand.items()},

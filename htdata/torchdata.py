@@ -7,6 +7,21 @@
 - TactileStream: IterableDataset reading shards front to back; shards are
   split across DataLoader workers and DDP ranks deterministically.
 
+Which samples: `frames="paired"` (default) = samples with the hand's map AND
+an RGB frame, what the HandTouch stages train on; `frames="tactile"` adds
+the tactile-only samples of glove-only recordings (e.g. for stage-1
+tokeniser training): their RGB is zeros and `has_rgb` is False. RGB-only
+samples (RGB frames without tactile, format 3) are never items: there is
+no map to learn from.
+
+Where maps come from: `map_source="auto"` (default) renders each map from the
+sample's stored raw glove row under its recorded calibration when the
+dataset has raw rows and was rasterised in nearest mode (a gather of the
+exact normalised values, ~1.4x faster than decoding the EXR on the sample
+data: `make bench`, section "maps from raw rows"); otherwise, and with
+`map_source="stored"`, the stored EXR is decoded (values rounded to half,
+<= 2.4e-4 away). `map_source="raw"` insists on raw rows.
+
 Every dataset takes `version=N` to read a committed older version (default:
 the current one). Each dataset holds a DatasetReader whose file handles open lazily per
 process, so DataLoader workers (fork or spawn) each open their own files.
@@ -28,15 +43,29 @@ from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
 from htdata import keys
 from htdata.codec import decode_rgb, decode_tactile
-from htdata.format import CANVAS, HANDS, RGB_MEMBER, SIZE_FIELDS, tactile_member
+from htdata.format import (CANVAS, HANDS, JSON_MEMBER, MEMBER_ORDER, RGB_MEMBER, SIZE_FIELDS, raw_member,
+                           tactile_member)
 from htdata.keys import HAND_IDS
+from htdata.rawstream import RawMapRenderer
 from htdata.reader import DatasetReader, SampleRow
 
 HAND_NAMES = HANDS   # hand id -> name (HAND_IDS inverted: left=0, right=1)
 
 
-def _tactile_present(rows: np.ndarray, hand: str) -> np.ndarray:
-    return rows[SIZE_FIELDS[tactile_member(hand)]] > 0
+FRAME_KINDS = ("paired", "tactile")
+MAP_SOURCES = ("auto", "stored", "raw")
+_RGB_POS = MEMBER_ORDER.index(RGB_MEMBER)   # in SampleRow.sizes
+
+
+def _tactile_present(rows: np.ndarray, hand: str, frames: str = "paired") -> np.ndarray:
+    present = rows[SIZE_FIELDS[tactile_member(hand)]] > 0
+    return present & (rows[SIZE_FIELDS[RGB_MEMBER]] > 0) if frames == "paired" else present
+
+
+def _check_frames(frames: str) -> str:
+    if frames not in FRAME_KINDS:
+        raise ValueError(f"frames must be one of {FRAME_KINDS}, got {frames!r}")
+    return frames
 
 
 def shuffled_indices(n: int, seed: int, epoch: int) -> np.ndarray:
@@ -68,9 +97,16 @@ class _ItemBuilder:
     read: every id an item carries comes from index.npy and episodes.jsonl.
     """
 
-    def __init__(self, root, rgb_float: bool, version: int | None = None):
+    def __init__(self, root, rgb_float: bool, version: int | None = None, map_source: str = "auto"):
         self.reader = DatasetReader(root, version=version)
         self.rgb_float = rgb_float
+        if map_source not in MAP_SOURCES:
+            raise ValueError(f"map_source must be one of {MAP_SOURCES}, got {map_source!r}")
+        codec = self.reader.manifest["codec"]["tactile"]
+        self.from_raw = map_source == "raw" or (map_source == "auto" and codec.get("raster_mode") == "nearest"
+                                                 and self.reader.manifest.get("format_version", 1) >= 3)
+        self.strict_raw = map_source == "raw"
+        self.renderer = RawMapRenderer(self.reader) if self.from_raw else None
         self._task_ids = {t: i for i, t in enumerate(self.reader.manifest["tasks"])}
         self._scene_ids = {s: i for i, s in enumerate(self.reader.manifest["scenes"])}
         self._coverage: dict[str, torch.Tensor] = {}
@@ -105,15 +141,30 @@ class _ItemBuilder:
         if planes is not out:
             np.divide(planes, np.float32(255.0), out=out, dtype=np.float32)
 
-    def decode_into(self, members: dict[str, bytes], hands, where: str, rgb_out) -> list[np.ndarray]:
-        """Decode the JPEG once into each hand's rgb buffer; return each hand's (224,224) map."""
-        rgb = decode_rgb(members[RGB_MEMBER], where=f"{where}.{RGB_MEMBER}")
+    def suffixes(self, hands) -> tuple[str, ...]:
+        """Members an item of these hands reads."""
+        maps = tuple(tactile_member(h) for h in hands)
+        return (RGB_MEMBER, JSON_MEMBER, *maps, *(raw_member(h) for h in hands)) if self.from_raw else (RGB_MEMBER, *maps)
+
+    def tactile_map(self, members: dict[str, bytes], hand: str, episode: int, where: str) -> np.ndarray:
+        if self.from_raw and raw_member(hand) in members:
+            return self.renderer.render(episode, hand, members, where)
+        if self.strict_raw:
+            raise KeyError(f"{where} has no raw {hand} rows (map_source='raw')")
+        suffix = tactile_member(hand)
+        if suffix not in members:
+            raise KeyError(f"{where} has no {hand} tactile map")
+        return decode_tactile(members[suffix], f"{where}.{suffix}")
+
+    def decode_into(self, members: dict[str, bytes], hands, where: str, rgb_out, episode: int) -> list[np.ndarray]:
+        """Decode the JPEG once into each hand's rgb buffer (zeros when the sample has none); each hand's map."""
+        if RGB_MEMBER in members:
+            rgb = decode_rgb(members[RGB_MEMBER], where=f"{where}.{RGB_MEMBER}")
+        else:
+            rgb = np.zeros((CANVAS, CANVAS, 3), np.uint8)
         maps = []
         for k, (hand, r_out) in enumerate(zip(hands, rgb_out)):
-            suffix = tactile_member(hand)
-            if suffix not in members:
-                raise KeyError(f"{where} has no {hand} tactile map")
-            maps.append(decode_tactile(members[suffix], f"{where}.{suffix}"))
+            maps.append(self.tactile_map(members, hand, episode, where))
             if k == 0:
                 self.put_rgb(r_out, rgb)
             else:
@@ -123,10 +174,8 @@ class _ItemBuilder:
     def read_frame(self, index: int, hand: str, rgb_out: np.ndarray) -> tuple[SampleRow, np.ndarray]:
         """Read + decode sample `index` for `hand`: rgb into `rgb_out` (3,224,224); returns (row, map)."""
         reader = self.reader
-        row, key, members = reader.read_sample(index, suffixes=(RGB_MEMBER, tactile_member(hand)))
-        if RGB_MEMBER not in members:
-            raise KeyError(f"{reader.root}: {key} has no rgb frame")
-        return row, self.decode_into(members, (hand,), f"{reader.root}: {key}", [rgb_out])[0]
+        row, key, members = reader.read_sample(index, suffixes=self.suffixes((hand,)))
+        return row, self.decode_into(members, (hand,), f"{reader.root}: {key}", [rgb_out], row.episode)[0]
 
     def ids(self, row: SampleRow, index: int, hand: str) -> dict:
         ep = self.reader.episodes[row.episode]
@@ -139,6 +188,7 @@ class _ItemBuilder:
             keys.EPISODE: _long(row.episode),
             keys.FRAME: _long(row.frame),
             keys.INDEX: _long(index),
+            keys.HAS_RGB: torch.from_numpy(np.array(row.sizes[_RGB_POS] > 0)),
         }
 
     def frame_item(self, index: int, hand: str) -> dict:
@@ -150,12 +200,13 @@ class _ItemBuilder:
         return item
 
 
-def _frame_items(reader: DatasetReader, indices: np.ndarray, hands: tuple[str, ...]) -> np.ndarray:
+def _frame_items(reader: DatasetReader, indices: np.ndarray, hands: tuple[str, ...],
+                 frames: str = "paired") -> np.ndarray:
     """(N,2) int64 [sample index, hand id] for each selected sample with that hand, sample-major."""
     rows = reader.index[indices] if len(indices) else np.zeros(0, reader.index.dtype)
     cols = []
     for hand in HANDS:
-        present = _tactile_present(rows, hand) if hand in hands else np.zeros(len(rows), bool)
+        present = _tactile_present(rows, hand, frames) if hand in hands else np.zeros(len(rows), bool)
         cols.append(present)
     present = np.stack(cols, axis=1)  # (N, 2)
     sample_pos, hand_ids = np.nonzero(present)  # row-major: left before right per sample
@@ -180,11 +231,12 @@ class TactileFrameDataset(_ItemDataset):
     """One item per (frame, hand present) of the selected split part."""
 
     def __init__(self, root, split: str | None = None, part: str | None = None,
-                 hands=HANDS, rgb_float: bool = False, version: int | None = None):
+                 hands=HANDS, rgb_float: bool = False, version: int | None = None, frames: str = "paired",
+                 map_source: str = "auto"):
         self.hands = _check_hands(hands)
-        self._builder = _ItemBuilder(root, rgb_float, version)
+        self._builder = _ItemBuilder(root, rgb_float, version, map_source)
         reader = self._builder.reader
-        self.items = _frame_items(reader, reader.sample_indices(split, part), self.hands)
+        self.items = _frame_items(reader, reader.sample_indices(split, part), self.hands, _check_frames(frames))
 
     def __getitem__(self, i: int) -> dict:
         index, hand_id = self.items[i].tolist()
@@ -199,12 +251,13 @@ class TactileWindowDataset(_ItemDataset):
     """
 
     def __init__(self, root, window: int = 3, split: str | None = None, part: str | None = None,
-                 hands=HANDS, rgb_float: bool = False, version: int | None = None):
+                 hands=HANDS, rgb_float: bool = False, version: int | None = None, frames: str = "paired",
+                 map_source: str = "auto"):
         if window < 1:
             raise ValueError(f"window must be >= 1, got {window}")
         self.window = window
         self.hands = _check_hands(hands)
-        self._builder = _ItemBuilder(root, rgb_float, version)
+        self._builder = _ItemBuilder(root, rgb_float, version, map_source)
         reader = self._builder.reader
         ends = []
         for ep_pos in reader.episode_positions(split, part):
@@ -212,13 +265,13 @@ class TactileWindowDataset(_ItemDataset):
             if n >= window:
                 ends.append(np.arange(first + window - 1, first + n, dtype=np.int64))
         end_idx = np.concatenate(ends) if ends else np.zeros(0, np.int64)
-        items = _frame_items(reader, end_idx, self.hands)
-        # keep a window only if its hand is present in every frame of it
+        items = _frame_items(reader, end_idx, self.hands, _check_frames(frames))
+        # keep a window only if its hand is present in every frame of it (an RGB-only sample breaks it)
         if len(items):
             offsets = np.arange(-(window - 1), 1)
-            frames = items[:, :1] + offsets[None, :]
-            cols = np.stack([_tactile_present(reader.index, h) for h in HANDS], 1)
-            present = cols[frames, items[:, 1:2]]
+            at = items[:, :1] + offsets[None, :]
+            cols = np.stack([_tactile_present(reader.index, h, frames) for h in HANDS], 1)
+            present = cols[at, items[:, 1:2]]
             items = items[present.all(axis=1)]
         self.items = items
 
@@ -260,9 +313,11 @@ class TactileStream(IterableDataset):
 
     def __init__(self, root, split: str | None = None, part: str | None = None,
                  hands=HANDS, rgb_float: bool = False,
-                 shuffle_seed: int | None = None, version: int | None = None):
+                 shuffle_seed: int | None = None, version: int | None = None, frames: str = "paired",
+                 map_source: str = "auto"):
         self.hands = _check_hands(hands)
-        self._builder = _ItemBuilder(root, rgb_float, version)
+        self.frames = _check_frames(frames)
+        self._builder = _ItemBuilder(root, rgb_float, version, map_source)
         reader = self._builder.reader
         selected = np.zeros(len(reader), bool)
         selected[reader.sample_indices(split, part)] = True
@@ -279,7 +334,7 @@ class TactileStream(IterableDataset):
 
     def __len__(self) -> int:
         idx = np.nonzero(self._selected)[0]
-        return len(_frame_items(self.reader, idx, self.hands))
+        return len(_frame_items(self.reader, idx, self.hands, self.frames))
 
     def my_shards(self) -> list[int]:
         rank, world = _dist_rank_world()
@@ -302,16 +357,16 @@ class TactileStream(IterableDataset):
     def iter_shards(self, shards: list[int]) -> Iterator[dict]:
         """Items of the selected samples of `shards`, in order (what __iter__ yields for its shards)."""
         builder, reader = self._builder, self.reader
-        wanted = (RGB_MEMBER,) + tuple(tactile_member(h) for h in self.hands)
+        wanted = builder.suffixes(self.hands)
         for index, members in reader.iter_samples(shards, suffixes=wanted):
             if not self._selected[index]:
                 continue
             hands = [h for h in HAND_NAMES if h in self.hands and tactile_member(h) in members]
-            if not hands:
+            if not hands or (self.frames == "paired" and RGB_MEMBER not in members):
                 continue
             row = reader.row(index)
             rgb = builder.empty_rgb(len(hands))   # JPEG decoded once for both hands
-            maps = builder.decode_into(members, hands, f"{reader.root}: {reader.key(index)}", rgb)
+            maps = builder.decode_into(members, hands, f"{reader.root}: {reader.key(index)}", rgb, row.episode)
             for k, hand in enumerate(hands):
                 item = builder.ids(row, index, hand)
                 item[keys.TACTILE] = torch.from_numpy(maps[k][None])

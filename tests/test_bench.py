@@ -99,7 +99,7 @@ def test_discovered_sections_run_after_builtins_with_context(quick_run):
     assert probe["samples"] == r["loader"]["samples_in_dataset"] > 0      # ctx.dataset = the combined dataset
     assert (out / ".work" / "sections" / "probe" / "probe.txt").read_text() == "scratch"
     assert "zz_broken" not in r and "RuntimeError: probe plugin exploded" in r["errors"]["zz_broken"]
-    assert r["codecs"]["default"] == "exr_half_zip"                       # the built-in section was not displaced
+    assert r["codecs"]["default"] == "exr_float_zip"                      # the built-in section was not displaced
     order = list(r["timings_s"])
     assert order[:len(BUILTIN_SECTIONS)] == list(BUILTIN_SECTIONS)
     assert set(order[len(BUILTIN_SECTIONS):]) == set(r["plugins"])
@@ -123,8 +123,8 @@ def test_quick_bench_content_is_consistent(quick_run):
         assert s["frames"] > 0 and s["bound_frames_per_s"] > 0 and "scaling" in s
     assert [row["frames"] for row in r["rss"]] == list(BenchConfig.quick_config(out).rss_lengths)
     assert all(row["peak_rss_mb"] > 10 for row in r["rss"])
-    assert {row["mode"] for row in r["raster"]} == {"nearest", "bilinear"}
-    assert all(row["max_roundtrip_error"] == 0 for row in r["raster"] if row["mode"] == "nearest")
+    assert {row["mode"] for row in r["raster"]["rows"]} == {"nearest", "bilinear"}
+    assert all(row["max_roundtrip_error"] == 0 for row in r["raster"]["rows"] if row["mode"] == "nearest")
     assert [row["workers"] for row in r["validate"]] == [1, 2] and all(row["ok"] for row in r["validate"])
     assert r["loader"]["bound"]["samples_per_s"] > 0 and len(r["loader"]["rows"]) == 7
     assert r["machine"]["cpu_count"] >= 1 and r["machine"]["cpu_model"]
@@ -136,6 +136,33 @@ def test_quick_bench_content_is_consistent(quick_run):
     stats = r["stats"]
     assert stats["tactile_decode"]["frames"] == stats["runs"]["incremental"]["frames"] > 0
     assert stats["runs"]["warm"]["episodes_computed"] == 0 and stats["runs"]["incremental"]["episodes_computed"] == 1
+    # the bench dataset stores raw rows (format 3): stats read them, not the maps
+    assert stats["runs"]["cold"]["hand_frames_from_raw"] == stats["runs"]["cold"]["hand_frames"] > 0
+
+
+def test_defaults_are_computed_from_the_measured_tables(quick_run):
+    """Each "Default:" is what its stated criterion picks from the rows beside it, recomputed here."""
+    _, out, _ = quick_run
+    r = json.loads((out / "results.json").read_text())
+    c = r["codecs"]
+    # the codec rule on the measured table: smallest EXR codec whose max error keeps every glove's levels
+    steps = {m["layout"]: m["step"] for m in c["margins"]}
+    keeps = {row["codec"] for row in c["rows"] if row["codec"].startswith("exr_")
+             and all(row["max_error"] < step / 2 for step in steps.values())}
+    smallest = min((row for row in c["rows"] if row["codec"] in keeps), key=lambda row: row["bytes_per_frame"])
+    assert c["default"] == smallest["codec"] == c["code_default"], c["reason"]
+    assert c["per_glove"] == {"opentouch_right_16x16": "exr_float_zip", "touchanything_left_21x21": "exr_half_zip",
+                              "touchanything_right_21x21": "exr_half_zip"}
+    exact = {row["mode"] for row in r["raster"]["rows"]} - {row["mode"] for row in r["raster"]["rows"]
+                                                             if row["max_roundtrip_error"] != 0}
+    assert r["raster"]["default"] in exact and r["raster"]["default"] == r["raster"]["code_default"] == "nearest"
+    rgb = r["rgb"]
+    good = [row["quality"] for row in rgb["jpeg"] if row["psnr_db"] >= 40.0]
+    assert rgb["default_quality"] == (min(good) if good else max(rgb["jpeg"], key=lambda x: x["psnr_db"])["quality"])
+    options = [row for row in rgb["resize"] if row["method"] in ("cv2_area", "cv2_linear", "cv2_cubic", "cv2_nearest")]
+    assert rgb["default_resize"] == min(options, key=lambda row: row["mean_abs_error"])["method"]
+    assert ("the same" in rgb["reason"]) == ((rgb["default_quality"], rgb["default_resize"])
+                                             == (rgb["code_default_quality"], rgb["code_default_resize"]))
 
 
 def test_report_has_every_table_heading(quick_run):
@@ -143,7 +170,9 @@ def test_report_has_every_table_heading(quick_run):
     report = (out / "REPORT.md").read_text()
     for heading in HEADINGS.values():
         assert heading in report, heading
-    assert "**Default: exr_half_zip**" in report and "**Defaults: JPEG q95, cv2_area**" in report
+    rgb = json.loads((out / "results.json").read_text())["rgb"]
+    assert "**Default: exr_float_zip**" in report and "**Default: nearest**" in report
+    assert f"**Defaults: JPEG q{rgb['default_quality']}, {rgb['default_resize']}**" in report
     # The probe's markdown verbatim under its name, after the built-in tables; the broken one named.
     assert "## probe" in report and "| ok | " in report
     assert report.index("## probe") > report.index(HEADINGS["validate"])

@@ -3,10 +3,16 @@
 from __future__ import annotations
 
 import base64
+import json
+import os
+import re
+import shutil
+import subprocess
 from html.parser import HTMLParser
 
 import cv2
 import numpy as np
+import pytest
 
 from htdata.cli import main as cli_main
 from tests.factories import commit_split
@@ -62,3 +68,39 @@ def test_card_is_self_contained_with_tables_and_images(tmp_path, capsys):
     assert "| task | episodes |" in md and "](card_files/health.png)" in md
     assert len(list((out.parent / "card_files").glob("*.png"))) == 11
     assert cli_main(["card", str(root), str(tmp_path / "card.txt")]) == 2
+
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+# After the page's load event: how many <img> the browser decoded, and whether anything left the file.
+PROBE = """<script>window.addEventListener("load", () => {
+  const imgs = [...document.images];
+  const out = {images: imgs.length, decoded: imgs.filter(i => i.complete && i.naturalWidth > 0).length,
+               width: document.documentElement.scrollWidth,
+               remote: performance.getEntriesByType("resource").map(e => e.name).filter(n => !n.startsWith("data:"))};
+  const pre = document.createElement("pre"); pre.id = "probe"; pre.textContent = JSON.stringify(out);
+  document.body.appendChild(pre);
+});</script>"""
+
+
+@pytest.mark.skipif(CHROMIUM is None and not os.environ.get("CI"),
+                    reason="no chromium here (.ci/run installs Debian's chromium; CI fails without it)")
+def test_card_renders_in_headless_chromium(tmp_path):
+    """The card opened by a real browser, offline: every embedded image decodes, nothing is fetched."""
+    assert CHROMIUM, "chromium not found: .ci/run installs Debian's chromium package for this test"
+    root = write_taxel_dataset(tmp_path / "ds", [
+        {"episode_id": "ep_a", "task": "pour", "scene": "kitchen", "hands": {"right": (RIGHT, clean_series(RIGHT, 32, 1))}}])
+    out = tmp_path / "card.html"
+    assert cli_main(["card", str(root), str(out)]) == 0
+    probed = tmp_path / "probed.html"
+    probed.write_text(out.read_text().replace("</body>", PROBE + "</body>"))
+    done = subprocess.run(
+        [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync",
+         f"--user-data-dir={tmp_path / 'profile'}", "--virtual-time-budget=5000", "--dump-dom",
+         probed.as_uri()], capture_output=True, text=True, timeout=120)
+    found = re.search(r'<pre id="probe">(.*?)</pre>', done.stdout, re.S)
+    assert found, f"chromium exit {done.returncode}: {done.stderr[-2000:]}"
+    result = json.loads(found.group(1).replace("&quot;", '"'))
+    n_img = out.read_text().count("<img ")
+    assert result["images"] == n_img >= 5 and result["decoded"] == n_img
+    assert result["remote"] == [] and result["width"] > 200

@@ -3,23 +3,28 @@
 import numpy as np
 import pytest
 
-from htdata.format import (HANDS, INDEX_DTYPE, MEMBER_ORDER, MEMBERS, SIZE_FIELDS, CodecSettings, bend_member,
+from htdata.format import (HANDS, INDEX_DTYPE, MEMBER_ORDER, MEMBERS, SIZE_FIELDS, CodecSettings, LEGACY_INDEX_DTYPE,
+                           bend_member, raw_member,
                            decode_sample, encode_sample, tactile_member)
 
 
 def test_member_order_and_index_columns_are_the_published_format():
     # Changing either breaks every dataset already written: append members, never reorder.
     assert MEMBER_ORDER == ("json", "rgb.jpg", "tactile_left.exr", "tactile_right.exr",
-                            "bend_left.npy", "bend_right.npy")
+                            "bend_left.npy", "bend_right.npy", "raw_left.npy", "raw_right.npy")
     assert INDEX_DTYPE.names == ("shard", "offset", "episode", "frame", "size_json", "size_rgb",
-                                 "size_tactile_left", "size_tactile_right", "size_bend_left", "size_bend_right")
-    assert INDEX_DTYPE.itemsize == 44
+                                 "size_tactile_left", "size_tactile_right", "size_bend_left", "size_bend_right",
+                                 "size_raw_left", "size_raw_right")
+    assert INDEX_DTYPE.itemsize == 52
+    # formats 1 and 2: the same columns without the raw ones (converted on load)
+    assert LEGACY_INDEX_DTYPE.names == INDEX_DTYPE.names[:-2] and LEGACY_INDEX_DTYPE.itemsize == 44
     assert [SIZE_FIELDS[s] for s in MEMBER_ORDER] == list(INDEX_DTYPE.names[4:])
     assert {m.hand for m in MEMBERS if m.hand} == set(HANDS)
 
 
 def test_hand_member_names():
     assert tactile_member("left") == "tactile_left.exr" and bend_member("right") == "bend_right.npy"
+    assert raw_member("left") == "raw_left.npy"
     with pytest.raises(ValueError, match="hand 'middle'"):
         tactile_member("middle")
 
@@ -34,6 +39,11 @@ def sample(hands=HANDS, bend=True):
            "tactile": tactile}
     if bend:
         out["bend"] = {h: rng.random(7).astype(np.float32) for h in hands}
+        # raw rows in the source dtype: integer counts, or floats with NaN (stored as read)
+        out["raw"] = {"left": rng.integers(0, 1023, (3, 16, 16)).astype(np.uint16)} if "left" in hands else {}
+        if "right" in hands:
+            out["raw"]["right"] = np.where(rng.random((2, 21, 21)) < 0.1, np.nan, rng.random((2, 21, 21))
+                                           ).astype(np.float32)
     return out
 
 
@@ -46,6 +56,7 @@ def test_encode_decode_round_trip_is_exact_for_lossless_members():
     for h in HANDS:
         assert np.array_equal(back["tactile"][h], s["tactile"][h])
         assert np.array_equal(back["bend"][h], s["bend"][h]) and back["bend"][h].dtype == np.float32
+        assert back["raw"][h].dtype == s["raw"][h].dtype and back["raw"][h].tobytes() == s["raw"][h].tobytes()
     assert back["rgb"].shape == (224, 224, 3)   # JPEG: lossy by design
     # deterministic bytes: same sample, same members
     assert encode_sample(s, CodecSettings(), "x") == members

@@ -246,8 +246,15 @@ def test_nonfinite_frames_are_dropped_and_counted(tmp_path):
     assert ingest_cli("--pipeline", small_pipeline(tmp_path, "opentouch"), raw, out) == 0
     reader = DatasetReader(out)
     ep = reader.episodes[0]
-    assert ep["num_frames"] == 8 and ep["dropped_frames"] == {"nonfinite_tactile:right": 2}
-    assert [json.loads(reader.sample(i)["json"])["source_frame"] for i in range(8)] == [0, 1, 3, 4, 5, 6, 8, 9]
+    # every video frame stays: the two without usable tactile as RGB-only samples, flagged and counted
+    assert ep["num_frames"] == 10 and ep["dropped_frames"] == {"nonfinite_tactile:right": 2}
+    assert ep["stats"]["frames_kept"] == 8 and ep["rgb_only_frames"] == {"nonfinite_tactile:right": 2}
+    metas = [json.loads(reader.sample(i)["json"]) for i in range(10)]
+    assert [m["source_frame"] for m in metas] == list(range(10))
+    assert [i for i, m in enumerate(metas) if m.get("rgb_only")] == [2, 7]
+    assert all("tactile_right.exr" not in reader.sample(i) for i in (2, 7))
+    from htdata.torchdata import TactileFrameDataset
+    assert sorted(int(x[0]) for x in TactileFrameDataset(out).items) == [0, 1, 3, 4, 5, 6, 8, 9]
     report = json.loads((out / "reports" / "ingest.json").read_text())
     assert report["dropped_frames"] == [{"episode_id": ep["episode_id"], "rgb_index": i,
                                          "reason": "nonfinite_tactile:right"} for i in (2, 7)]

@@ -94,7 +94,7 @@ def test_list_layouts():
 def test_opentouch_facts():
     lay = load_layout("opentouch_right_16x16")
     assert lay.hand == "right" and lay.grid == (16, 16)
-    assert lay.value == {"convention": "inverted", "max": 3072}
+    assert lay.value == {"convention": "inverted", "max": 3072, "step": 1}
     assert lay.num_live == 169 and 256 - lay.num_live == 87
     assert {b.name: _block_live_count(lay, b) for b in lay.blocks} == OPENTOUCH_REGION_COUNTS
     assert len(lay.bend_cells) == 0 and lay.bend_cells.shape == (0, 2)
@@ -111,7 +111,7 @@ def test_opentouch_facts():
 def test_touchanything_left_facts():
     lay = load_layout("touchanything_left_21x21")
     assert lay.hand == "left" and lay.grid == (21, 21)
-    assert lay.value == {"convention": "direct", "max": 1.0}
+    assert lay.value == {"convention": "direct", "max": 1.0, "step": 1 / 255}
     assert len(lay.bend_cells) == 66
     assert lay.num_live == 151
     assert lay.num_live + len(lay.bend_cells) == 217

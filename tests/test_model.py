@@ -56,7 +56,7 @@ def window_batch(b=2, seed=0):
             "hand": torch.ones(b, dtype=torch.long)}
 
 
-@pytest.mark.parametrize("encoder", ["vit", "cnn", "resnet18"])
+@pytest.mark.parametrize("encoder", ["vit", "cnn", "resnet18", "vqvae", "vit_plain"])
 def test_api_shapes_for_every_encoder(encoder):
     model = tiny_model(encoder).eval()
     b = frame_batch(2)
@@ -77,7 +77,8 @@ def test_api_shapes_for_every_encoder(encoder):
         assert out.shape == (2, 1, 224, 224)
         assert float(out.min()) >= 0.0 and float(out.max()) <= 1.0
         assert float(out[cov == 0].abs().max()) == 0.0       # nothing predicted where there is no sensor
-    assert model.name == {"vit": "handtouch-vit", "cnn": "baseline-cnn", "resnet18": "baseline-resnet18"}[encoder]
+    assert model.name == {"vit": "handtouch-vit", "cnn": "baseline-cnn", "resnet18": "baseline-resnet18",
+                          "vqvae": "baseline-vqvae", "vit_plain": "baseline-vit"}[encoder]
 
 
 @pytest.mark.parametrize("stage", [1, 2, 3])
@@ -131,9 +132,17 @@ def test_stage2_weights_visible_and_masked_terms():
         stage_losses(model, 2, b)
 
 
+def _replay_weights(stage, weight):
+    """LossConfig with the replay weight of `stage` (stage 2: lambda_replay; stage 3: the opt-in stage3_replay)."""
+    if stage == 3:
+        return LossConfig(vq_weight=0.0, stage3_replay=weight)
+    return LossConfig(vq_weight=0.0, lambda_replay=weight)
+
+
 @pytest.mark.parametrize("stage", [2, 3])
 def test_replay_term_is_stage1_reconstruction(stage):
-    """Stages 2 and 3 replay reconstruction (whole map / t_T through encoder -> VQ -> decoder)."""
+    """Stage 2 (and stage 3 when opted in) replay reconstruction (whole map / t_T through
+    encoder -> VQ -> decoder); stage 3 by default is the next-frame term alone."""
     model = tiny_model().eval()
     cov = torch.zeros(2, 1, 224, 224)
     cov[:, :, 30:200, 20:190] = 1
@@ -147,10 +156,14 @@ def test_replay_term_is_stage1_reconstruction(stage):
     mask = torch.zeros(2, 1, 224, 224)
     mask[:, :, :100] = 1
     with torch.no_grad():
-        out = stage_losses(model, stage, batch, mask, LossConfig(vq_weight=0.0, lambda_replay=0.0))
-        weighted = stage_losses(model, stage, batch, mask, LossConfig(vq_weight=0.0, lambda_replay=3.0))
+        out = stage_losses(model, stage, batch, mask, _replay_weights(stage, 0.0))
+        weighted = stage_losses(model, stage, batch, mask, _replay_weights(stage, 3.0))
         recon = masked_mse(model.reconstruct(target, cov), target * cov, cov)
-    assert float(out["replay"]) == pytest.approx(float(recon), rel=1e-5)
+    assert float(weighted["replay"]) == pytest.approx(float(recon), rel=1e-5)
+    if stage == 2:
+        assert float(out["replay"]) == pytest.approx(float(recon), rel=1e-5)   # logged at weight 0 too
+    else:
+        assert "replay" not in out                                           # not even computed
     assert float(weighted["loss"] - out["loss"]) == pytest.approx(3.0 * float(recon), rel=1e-4)
     if stage == 3:
         assert float(out["loss"]) == pytest.approx(float(out["next"]), rel=1e-6)
@@ -180,8 +193,9 @@ def test_stage_freezing_freezes_exactly_the_named_parts(stage):
     batch = window_batch(2) if stage == 3 else frame_batch(2)
     out = stage_losses(model, stage, batch, torch.zeros(2, 1, 224, 224))
     out["loss"].backward()
+    unused = {id(model.vq.codebook)} if stage == 3 else set()     # the paper's stage-3 loss has no VQ terms
     for name in MODULE_NAMES:
-        params = list(getattr(model, name).parameters())
+        params = [p for p in getattr(model, name).parameters() if id(p) not in unused]
         trainable = name in STAGE_TRAINABLE[stage]
         assert all(p.requires_grad == trainable for p in params), name
         if trainable:   # every trained module is used by this stage's loss
@@ -322,3 +336,120 @@ def test_ablation_without_vision_ignores_the_rgb_frame():
         past = torch.stack([b["tactile"]] * 2, 1)
         p1, p2 = (model.predict_next(w, past, b["coverage"], b["hand"]) for w in window)
         assert torch.equal(p1, p2) == same
+
+
+# ---- the encoder baselines and the design switches ---------------------------------------
+
+def _attention_modules(module):
+    return [m for m in module.modules() if isinstance(m, torch.nn.MultiheadAttention)]
+
+
+def test_vqvae_baseline_is_a_conv_autoencoder_with_the_codebook():
+    from handtouch.decoder import TactileDecoder
+    from handtouch.encoders import VQVAEEncoder
+
+    model = tiny_model("vqvae").train()
+    assert isinstance(model.encoder, VQVAEEncoder) and isinstance(model.decoder, TactileDecoder)
+    assert model.decoder.mixer == "conv"
+    assert not _attention_modules(model.encoder) and not _attention_modules(model.decoder)
+    assert _attention_modules(tiny_model("vit").decoder)            # HandTouch's decoder attends
+    b = frame_batch(2)
+    out = stage_losses(model, 1, b)
+    assert float(out["vq"]) > 0 and torch.isfinite(out["perplexity"])   # the latent is quantised
+    out["loss"].backward()
+    assert model.vq.codebook.grad is not None and float(model.vq.codebook.grad.abs().sum()) > 0
+
+
+def test_plain_vit_baseline_has_no_codebook_and_a_linear_pixel_head():
+    from handtouch.decoder import LinearPatchDecoder
+    from handtouch.encoders import ViTEncoder
+
+    model = tiny_model("vit_plain").train()
+    assert isinstance(model.encoder, ViTEncoder) and isinstance(model.decoder, LinearPatchDecoder)
+    assert not model.cfg.quantised and tiny_cfg("vit").quantised
+    b = frame_batch(2)
+    tokens = model.encode(b["tactile"])
+    pred, _, losses, _ = model.eval().quantise_decode(tokens, b["coverage"])
+    assert torch.equal(pred, model.decoder(tokens) * b["coverage"])     # no quantisation in between
+    out = stage_losses(model.train(), 1, b)
+    assert float(out["vq"]) == 0.0
+    out["loss"].backward()
+    assert all(p.grad is None for p in model.vq.parameters())
+    # each token decodes its own 7x7-patch grid cell (patch 32): changing token 0 moves only that patch
+    moved = tokens.clone()
+    moved[:, 0] += 1.0
+    diff = (model.decoder(moved) - model.decoder(tokens)).abs()[0, 0]
+    assert float(diff[:32, :32].sum()) > 0 and float(diff[32:].sum() + diff[:, 32:].sum()) == 0.0
+
+
+@pytest.mark.parametrize("encoder", ["cnn", "resnet18", "vqvae", "vit_plain"])
+@pytest.mark.parametrize("stage", [1, 2, 3])
+def test_baselines_freeze_by_module_name(encoder, stage):
+    model = tiny_model(encoder, cnn_widths=[8, 16, 24], resnet_widths=[8, 16, 24, 32],
+                       vqvae_widths=[8, 16, 24]).train()
+    make_stage(stage).configure(model)
+    assert model.frozen == set(MODULE_NAMES) - set(STAGE_TRAINABLE[stage])
+    batch = window_batch(2) if stage == 3 else frame_batch(2)
+    out = stage_losses(model, stage, batch, torch.zeros(2, 1, 224, 224))
+    out["loss"].backward()
+    for name in MODULE_NAMES:
+        for p in getattr(model, name).parameters():
+            # DDP's contract: a parameter is trainable exactly when this stage's loss gives it a gradient
+            assert p.requires_grad == (p.grad is not None), name
+            assert not p.requires_grad or name in STAGE_TRAINABLE[stage], name
+    for name in ("encoder", "decoder") if stage < 3 else ("decoder", "predictor"):
+        assert any(p.grad is not None and float(p.grad.abs().sum()) > 0
+                   for p in getattr(model, name).parameters()), name
+
+
+def test_mask_channel_switch_changes_the_encoder_input():
+    two, one = tiny_model(), tiny_model(mask_channel=False)
+    assert two.encoder.patch_embed.in_channels == 2 and one.encoder.patch_embed.in_channels == 1
+    assert tiny_model("cnn", mask_channel=False).encoder.features[0].in_channels == 1
+    b = frame_batch(2)
+    mask = torch.zeros(2, 1, 224, 224)
+    mask[:, :, :112] = 1
+    hidden = b["tactile"] * (1 - mask)
+    with torch.no_grad():
+        # one channel: the mask acts only by zeroing; hiding pixels = showing zeros there
+        assert torch.equal(one.encode(b["tactile"], mask), one.encode(hidden))
+        # two channels: the model is told which zeros are hidden
+        assert not torch.equal(two.encode(b["tactile"], mask), two.encode(hidden))
+    with pytest.raises(ValueError, match="mask_channel"):
+        tiny_cfg(mask_channel=1).validate()
+
+
+def test_stage3_is_the_papers_loss_unless_replay_and_vq_terms_opt_in():
+    batch = window_batch(2)
+    model = tiny_model().train()
+    make_stage(3).configure(model)
+    assert not model.vq.codebook.requires_grad and model.vq.w_in.weight.requires_grad
+    paper = stage_losses(model, 3, batch)
+    assert set(paper) == {"loss", "vq", "next", "perplexity", "usage", "restarts"}
+    assert float(paper["vq"]) > 0 and float(paper["loss"]) == pytest.approx(float(paper["next"]), rel=1e-6)
+    paper["loss"].backward()
+    assert model.vq.codebook.grad is None                  # only the VQ terms move the codebook
+    assert float(model.vq.w_in.weight.grad.abs().sum()) > 0   # the projection learns through the straight-through path
+
+    model = tiny_model().train()
+    opted_stage = STAGES[3](StageConfig(trainable=STAGE_TRAINABLE[3]), LossConfig(stage3_vq=True, stage3_replay=0.5))
+    opted_stage.configure(model)
+    assert model.vq.codebook.requires_grad
+    opted = stage_losses(model, 3, batch, weights=LossConfig(stage3_vq=True, stage3_replay=0.5))
+    assert float(opted["loss"]) == pytest.approx(
+        float(opted["next"]) + float(opted["vq"]) + 0.5 * float(opted["replay"]), rel=1e-5)
+    opted["loss"].backward()
+    assert model.vq.codebook.grad is not None and float(model.vq.codebook.grad.abs().sum()) > 0
+    with pytest.raises(ValueError, match="stage3"):
+        LossConfig(stage3_replay=-1.0).validate()
+    with pytest.raises(ValueError, match="stage3_vq"):
+        LossConfig(stage3_vq=1).validate()
+
+
+def test_without_vision_stage2_trains_no_rgb_projection():
+    for vision, used in ((True, True), (False, False)):
+        model = tiny_model(vision=vision).train()
+        make_stage(2).configure(model)
+        assert all(p.requires_grad == used for p in model.rgb_proj.parameters())
+        stage_losses(model, 2, frame_batch(2), torch.zeros(2, 1, 224, 224))["loss"].backward()
+        assert any(p.grad is not None for p in model.rgb_proj.parameters()) == used

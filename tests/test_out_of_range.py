@@ -76,7 +76,9 @@ def test_drop_frame_policy_drops_and_counts(tmp_path):
     raw, out = opentouch_raw(tmp_path / "raw"), tmp_path / "ds"
     assert ingest_cli("--pipeline", "opentouch", "--set", "normalise.out_of_range=drop_frame", raw, out) == 0
     ep = episodes_of(out)["ot-kitchen-demo_02"]
-    assert ep["num_frames"] == 7 and ep["dropped_frames"] == {"out_of_range:right": 3}
+    # the 3 frames leave the pairing; their RGB frames stay as RGB-only samples (format 3), raw rows stored
+    assert ep["stats"]["frames_kept"] == 7 and ep["dropped_frames"] == {"out_of_range:right": 3}
+    assert ep["num_frames"] == 10 and ep["rgb_only_frames"] == {"out_of_range:right": 3}
     assert ep["out_of_range"]["right"]["frames"] == 3
     assert report_of(out)["dropped_frames"] == [
         {"episode_id": "ot-kitchen-demo_02", "rgb_index": i, "reason": "out_of_range:right"} for i in (2, 5, 6)]

@@ -184,3 +184,111 @@ def test_unwritable_cache_still_gives_stats(known, tmp_path, capsys):
     s = stats.dataset_stats(known, cache_dir=blocker / "stats")
     assert s["cache"]["computed"] == 2 and "a_file" in s["cache"]["cache_error"]
     assert _glove(s, layout=RIGHT, hand="right")["frames"] == N + 30
+
+
+# -- values from the stored raw rows (format 3) --------------------------------------------------------
+
+RAW_FRAMES = 45
+
+
+@pytest.fixture(scope="module")
+def raw_ds(tmp_path_factory):
+    """A native recording (100 Hz OpenTouch-layout glove, 30 Hz video: several raw rows per sample) ingested
+    with raw rows; values are integer firmware counts with a moving press, so every level is known."""
+    from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+    from tests.factories import PERIOD, ingest_cli
+
+    root = tmp_path_factory.mktemp("rawstats")
+    t_video = np.arange(RAW_FRAMES, dtype=np.int64) * PERIOD
+    t_glove = np.arange(0, RAW_FRAMES * PERIOD, 10_000_000, dtype=np.int64)
+    rng = np.random.default_rng(3)
+    values = np.full((t_glove.size, 16, 16), 3072.0, np.float32)           # no load
+    for k in range(t_glove.size):
+        r = (k // 6) % 12
+        values[k, r:r + 3, 4:9] = rng.integers(0, 2900, (3, 5))                # a press moving down the grid
+    rec = NativeRecording(task="grasp", scene="lab", video_storage="jpeg",
+                          video_frames=[np.full((40, 40, 3), (30, 160, 220), np.uint8)] * RAW_FRAMES,
+                          video_timestamps_ns=t_video,
+                          hands={"right": NativeHand("opentouch_right_16x16", values, t_glove)})
+    write_native_recording(root / "src" / "rec_a", rec)
+    assert ingest_cli("--pipeline", "native", root / "src", root / "ds") == 0
+    return root / "ds"
+
+
+def _paired_raw_rows(root) -> np.ndarray:
+    """The raw row paired with every sample, read back independently of htdata.episodestats."""
+    from htdata.codec import decode_json, decode_npy
+
+    out = []
+    with DatasetReader(root) as r:
+        for i in range(len(r)):
+            m = r.sample(i, ("json", "raw_right.npy"))
+            out.append(decode_npy(m["raw_right.npy"])[decode_json(m["json"])["raw_paired"]["right"]])
+    return np.stack(out)
+
+
+def test_values_come_from_the_raw_rows_with_raw_quantiles(raw_ds, tmp_path):
+    s = stats.dataset_stats(raw_ds, cache_dir=tmp_path / "c")
+    g = _glove(s, layout="opentouch_right_16x16", hand="right")
+    assert g["frames"] == g["frames_from_raw"] > 0
+    live = load_layout("opentouch_right_16x16").live_mask
+    raw = _paired_raw_rows(raw_ds)[:, live].astype(np.float64)
+    q = g["raw_quantiles"]
+    assert q["min"] == raw.min() and q["max"] == raw.max() and q["range"] == [0.0, 3072.0]
+    bin_width = 3072.0 / HIST_BINS
+    ordered = np.sort(raw.ravel())
+    for name, level in (("p1", 0.01), ("p50", 0.5), ("p99", 0.99)):
+        rank = level * (ordered.size - 1)     # between the two order statistics around the rank, to a bin
+        lo, hi = ordered[int(np.floor(rank))], ordered[int(np.ceil(rank))]
+        assert lo - bin_width <= q[name] <= hi + bin_width, (name, q[name], lo, hi)
+    # normalised values are exact: (3072 - raw) / 3072 for this inverted glove, no baseline
+    assert g["quantiles"]["max"] == pytest.approx(float(((3072.0 - raw) / 3072.0).max()), abs=1e-7)
+    assert "raw rows" in s["values"]
+
+
+def test_cli_prints_raw_quantiles_only_where_raw_rows_exist(raw_ds, known, capsys):
+    assert cli_main(["stats", str(raw_ds)]) == 0
+    assert "raw (glove units" in capsys.readouterr().out
+    assert cli_main(["stats", str(known)]) == 0
+    assert "raw (glove units" not in capsys.readouterr().out
+
+
+def test_raw_path_and_map_path_agree_to_the_map_codec_error(raw_ds, tmp_path, monkeypatch):
+    from htdata import episodestats
+
+    with DatasetReader(raw_ds) as r:
+        gloves = episodestats.dataset_gloves(r)
+        from_raw = episodestats.compute_episode(r, 0, gloves)["hands"]["right"]
+        monkeypatch.setattr(episodestats, "raw_hands", lambda reader, pos: [])      # what a format 2 dataset gets
+        from_maps = episodestats.compute_episode(r, 0, gloves)["hands"]["right"]
+    assert (from_raw["values_from"], from_maps["values_from"]) == ("raw", "maps") and "raw_hist" not in from_maps
+    assert from_raw["frames"] == from_maps["frames"] and from_raw["contact_frames"] == from_maps["contact_frames"]
+    codec_error = 2.0 ** -12 if r.manifest["codec"]["tactile"].get("pixel_type", "half") == "half" else 0.0
+    n = from_raw["frames"]
+    assert np.allclose(from_raw["taxel_sum"], from_maps["taxel_sum"], atol=n * codec_error + 1e-9)
+    assert from_raw["health"] == from_maps["health"]
+
+
+def test_datasets_without_raw_rows_fall_back_to_maps(known, tmp_path):
+    s = stats.dataset_stats(known, cache_dir=tmp_path / "c")
+    for g in s["gloves"]:
+        assert g["frames_from_raw"] == 0 and "raw_quantiles" not in g
+
+
+
+def test_episode_stats_keep_the_callers_order_and_count_cached_entries(known, tmp_path):
+    with DatasetReader(known) as r:
+        per_ep, info = stats.episode_stats(r, [1, 0], cache_dir=tmp_path / "c")
+        assert [e["episode_id"] for e in per_ep] == ["ep_b", "ep_a"] and info["computed"] == 2
+        seen = []
+        again, info = stats.episode_stats(r, [0, 1, 0], cache_dir=tmp_path / "c", progress=lambda d, n: seen.append((d, n)))
+    assert [e["episode_id"] for e in again] == ["ep_a", "ep_b", "ep_a"] and info["cached"] == 2
+    assert info["computed"] == 0 and seen == [(2, 2)] and again[1] == per_ep[0]
+
+
+def test_map_finiteness_by_bits_matches_numpy_on_every_half_pattern():
+    from htdata.episodestats import all_finite
+
+    halves = np.arange(65536, dtype=np.uint32).astype(np.uint16).view(np.float16)
+    assert [all_finite(halves[i:i + 1]) for i in range(0, 65536, 1)] == np.isfinite(halves).tolist()
+    assert all_finite(np.zeros((224, 224), np.float32)) and not all_finite(np.array([np.inf], np.float32))

@@ -121,3 +121,24 @@ def test_bad_streams_raise_naming_the_stream(rgb, tac, match):
 
 def test_nearest_ties_go_to_earlier():
     np.testing.assert_array_equal(nearest(np.array([0, 10]), np.array([5, -3, 11])), [0, 0, 1])
+
+
+def test_lag_decision_shifts_tactile_onto_the_rgb_clock():
+    from htdata.lag import LagDecision
+
+    t_rgb = np.arange(60, dtype=np.int64) * 33_333_333
+    t_tac = np.arange(0, 2_000 * MS, 10 * MS, dtype=np.int64) + 150 * MS   # glove stamps 150 ms late
+    plain = pair(t_rgb, {"right": t_tac}, max_skew_ns=6 * MS)
+    assert "lag" not in plain.report and plain.report["drop_reasons"] == {"tactile_out_of_range:right": 5}
+    applied = LagDecision("fixed", 150 * MS, True, "fixed")
+    r = pair(t_rgb, {"right": t_tac}, max_skew_ns=6 * MS, lag=applied)
+    assert not r.dropped and r.report["lag"] == applied.to_dict() and r.report["lag"]["lag_ms"] == 150.0
+    np.testing.assert_array_equal(r.t_tactile_ns["right"], t_tac[r.tactile_index["right"]] - 150 * MS)
+    assert np.all(np.abs(r.skew_ns["right"]) <= 5 * MS)
+    declined = LagDecision("estimate", 0, False, "not applied: no contact changes")
+    d = pair(t_rgb, {"right": t_tac}, max_skew_ns=6 * MS, lag=declined)
+    np.testing.assert_array_equal(d.tactile_index["right"], plain.tactile_index["right"])
+    assert d.report["lag"] == {"mode": "estimate", "lag_ms": None, "applied": False,
+                               "reason": "not applied: no contact changes"}
+    assert d.report["warnings"] == ["tactile-video lag not applied: no contact changes"]
+    assert r.report["warnings"] == []

@@ -299,3 +299,36 @@ def test_ablation_switches_load_from_overrides(tmp_path):
         load_train_config(config_file("smoke"), ['model.codebook="no"'])
     with pytest.raises(ValueError, match="masking.curriculum"):
         load_train_config(config_file("smoke"), ["masking.curriculum=1"])
+
+
+def test_baseline_and_design_switches_load_and_change_the_config():
+    base = load_train_config(config_file("compare_smoke"))
+    assert (base.loss.stage3_replay, base.loss.stage3_vq, base.model.mask_channel) == (0.0, False, True)
+    smoke = load_train_config(config_file("smoke"))
+    assert (smoke.loss.stage3_replay, smoke.loss.stage3_vq) == (1.0, True)    # the smoke's documented opt-in
+    cfg = load_train_config(config_file("compare_smoke"), ["loss.stage3_replay=0.5", "loss.stage3_vq=true",
+                                                           "model.mask_channel=false", 'model.encoder="vqvae"'])
+    assert (cfg.loss.stage3_replay, cfg.loss.stage3_vq, cfg.model.mask_channel) == (0.5, True, False)
+    assert cfg.model.decoder_kind == "conv" and cfg.model.quantised and cfg.model.num_tokens == 196
+    starved = ["batch_size=1", "model.codebook_size=1024"]      # 196 tokens / 1024 codes < 2 uses per code
+    plain = load_train_config(config_file("compare_smoke"), ['model.encoder="vit_plain"', *starved])
+    assert plain.model.decoder_kind == "linear" and not plain.model.quantised   # no codebook-load check applies
+    with pytest.raises(ValueError, match="uses per code"):
+        load_train_config(config_file("compare_smoke"), starved)
+    with pytest.raises(ValueError, match="stage3_replay"):
+        load_train_config(config_file("compare_smoke"), ["loss.stage3_replay=-1"])
+
+
+def test_stage3_switches_change_what_stage3_trains(dataset_root, tmp_path):
+    """Paper loss: stage 3 leaves the codebook exactly as stage 2 left it (no gradient, no weight
+    decay); with the VQ terms it moves. Dead-code restarts are off (threshold 0) to isolate that."""
+    moved = {}
+    for vq in (False, True):
+        out = tmp_path / f"vq{vq}"
+        cfg = tiny_config(dataset_root, out, **{"stage1.steps": 4, "loss.stage3_vq": str(vq).lower(),
+                                                "model.vq_dead_threshold": 0.0})
+        train(cfg)
+        before = read_checkpoint(out / "stage2.pt")["model"]["vq.codebook"]
+        after = read_checkpoint(out / "stage3.pt")["model"]["vq.codebook"]
+        moved[vq] = not torch.equal(before, after)
+    assert moved == {False: False, True: True}

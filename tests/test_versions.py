@@ -45,7 +45,7 @@ def test_first_version_and_log_fields(tmp_path):
     root = versioned(tmp_path / "ds")
     assert list_versions(root) == [1]
     manifest = json.loads((root / MANIFEST_FILE).read_text())
-    assert manifest["version"] == 1 and manifest["parent"] is None and manifest["format_version"] == 2
+    assert manifest["version"] == 1 and manifest["parent"] is None and manifest["format_version"] == 3
     assert manifest["change"]["command"] == "commit"
     assert manifest["change"]["summary"] == {"episodes_added": 5, "episodes_removed": 0, "episodes_changed": 0,
                                              "frames_added": 25, "frames_removed": 0, "frames": 25}

@@ -54,7 +54,8 @@ class EpisodeStreams(abc.ABC):
     `rgb_timestamps_ns` (N,) int64 and `tactile_timestamps_ns` {hand: (M_h,)}
     are as recorded (may be unsorted/duplicated; sync cleans them).
     `iter_rgb` yields (rgb index, HxWx3 uint8 RGB) in file order, streamed;
-    `read_tactile(hand, indices)` returns (len, H, W) float32 raw glove units.
+    `read_tactile(hand, indices)` returns (len, H, W) raw glove units in the SOURCE dtype
+    (the raw members store them bit for bit; normalisation converts to float32).
     """
 
     def __init__(self, ref: EpisodeRef):
@@ -62,6 +63,9 @@ class EpisodeStreams(abc.ABC):
         self.rgb_timestamps_ns: np.ndarray = np.zeros(0, dtype=np.int64)
         self.tactile_timestamps_ns: dict[str, np.ndarray] = {}
         self.notes: list[str] = []
+        # False: a glove-only recording; rgb_timestamps_ns is then the clock samples follow and
+        # iter_rgb yields nothing (tactile-only samples, htdata.ingest.episode)
+        self.has_video = True
 
     @abc.abstractmethod
     def iter_rgb(self) -> Iterator[tuple[int, np.ndarray]]:

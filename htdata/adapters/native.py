@@ -49,12 +49,14 @@ def load_recording(path: Path, episode_id: str | None = None) -> dict:
 def _recording_paths(folder: Path, doc: dict, where: Path) -> dict:
     """Absolute paths of every file the recording refers to (no escaping the folder)."""
     try:
-        video = doc["video"]
-        out = {"timestamps": relpath_inside(folder, video["timestamps"], str(where))}
-        if "file" in video:
-            out["video_file"] = relpath_inside(folder, video["file"], str(where))
-        else:
-            out["frames_dir"] = relpath_inside(folder, video["frames_dir"], str(where))
+        out = {}
+        video = doc.get("video")   # absent: a glove-only recording (tactile-only samples)
+        if video is not None:
+            out["timestamps"] = relpath_inside(folder, video["timestamps"], str(where))
+            if "file" in video:
+                out["video_file"] = relpath_inside(folder, video["file"], str(where))
+            else:
+                out["frames_dir"] = relpath_inside(folder, video["frames_dir"], str(where))
         out["hands"] = {h: relpath_inside(folder, spec["file"], str(where)) for h, spec in doc["hands"].items()}
     except ValueError as exc:
         raise EpisodeError(None, None, str(exc), file=where) from exc
@@ -79,6 +81,14 @@ def _recording_layouts(folder: Path, doc: dict, where: Path, episode_id: str) ->
     return out
 
 
+def _npz_rows(path: Path) -> int:
+    rows = NpzRows(path, "timestamps_ns")
+    try:
+        return rows.num_rows
+    finally:
+        rows.close()
+
+
 def _frame_files(frames_dir: Path) -> list[Path]:
     return sorted(p for p in frames_dir.iterdir() if p.suffix.lower() in JPEG_SUFFIXES)
 
@@ -96,19 +106,22 @@ class NativeAdapter(FileDiscovery):
         episode_id = sanitise_id(f"nat-{folder.name}")
         doc = load_recording(rec_path, episode_id)
         paths = _recording_paths(folder, doc, rec_path)
-        missing = [p for p in [paths["timestamps"], *paths["hands"].values(),
-                               paths.get("video_file") or paths["frames_dir"]] if not p.exists()]
+        video_files = [paths["timestamps"], paths.get("video_file") or paths["frames_dir"]] if "timestamps" in paths else []
+        missing = [p for p in [*paths["hands"].values(), *video_files] if not p.exists()]
         if missing:
             raise EpisodeError(None, None, f"missing files {[str(p) for p in missing]}", file=rec_path,
                                episode_id=episode_id)
+        clock_file = paths.get("timestamps") or paths["hands"][sorted(paths["hands"])[0]]
         try:
-            check_source_file(paths["timestamps"], root)
-            est_frames = int(check_npy_file(paths["timestamps"])[0][0])
-        except (OSError, ValueError, IndexError) as exc:
-            raise EpisodeError(None, None, f"timestamps .npy unreadable: {exc}", file=paths["timestamps"],
+            check_source_file(clock_file, root)
+            est_frames = int(check_npy_file(clock_file)[0][0]) if video_files else _npz_rows(clock_file)
+        except (OSError, ValueError, IndexError, NpzRowError) as exc:
+            raise EpisodeError(None, None, f"timestamps unreadable: {exc}", file=clock_file,
                                episode_id=episode_id) from exc
-        files = [rec_path, paths["timestamps"], *paths["hands"].values()]
-        files += [paths["video_file"]] if "video_file" in paths else _frame_files(paths["frames_dir"])
+        files = [rec_path, *paths["hands"].values()]
+        if video_files:
+            files += [paths["timestamps"]]
+            files += [paths["video_file"]] if "video_file" in paths else _frame_files(paths["frames_dir"])
         hands = tuple(sorted(doc["hands"]))
         layouts = _recording_layouts(folder, doc, rec_path, episode_id)
         return [EpisodeRef(
@@ -139,6 +152,12 @@ class NativeStreams(EpisodeStreams):
         self._frames = _frame_files(paths["frames_dir"]) if "frames_dir" in paths else None
         for hand in ref.hands:
             self._open_hand(hand, paths["hands"][hand], int(doc["hands"][hand].get("clock_offset_ns", 0)))
+        if "timestamps" not in paths:   # glove only: the first hand's rows are the samples' clock
+            self.has_video = False
+            self._n_rgb = 0
+            self.rgb_timestamps_ns = self.tactile_timestamps_ns[sorted(ref.hands)[0]].copy()
+            self.notes.append(f"no video: tactile-only samples on the {sorted(ref.hands)[0]} glove's clock")
+            return
 
         ts_path = paths["timestamps"]
         try:
@@ -192,6 +211,8 @@ class NativeStreams(EpisodeStreams):
             raise EpisodeError(self.ref, exc.frame, str(exc), file=self._video_file) from exc
 
     def iter_rgb(self) -> Iterator[tuple[int, np.ndarray]]:
+        if not self.has_video:
+            return
         if self._frames is not None:
             yield from self._iter_jpegs()
             return
@@ -214,7 +235,7 @@ class NativeStreams(EpisodeStreams):
         if idx.size and (idx.min() < 0 or idx.max() >= n):
             raise EpisodeError(self.ref, int(idx.max()), f"tactile index out of range 0..{n - 1}", file=rows.path)
         try:
-            return rows.read(idx).astype(np.float32, copy=False)
+            return rows.read(idx)   # source dtype: stored bit for bit (raw_<hand>.npy)
         except NpzRowError as exc:
             raise EpisodeError(self.ref, exc.row, str(exc), file=rows.path) from exc
 

@@ -369,7 +369,7 @@ class OpenTouchStreams(EpisodeStreams):
                 rows = ds[uniq.tolist()]
         except OSError as exc:
             raise EpisodeError(self.ref, int(uniq[0]), f"{hand}_pressure read failed: {exc}") from exc
-        return np.asarray(rows, dtype=np.float32)[inverse]
+        return np.asarray(rows)[inverse]   # source dtype: stored bit for bit (raw_<hand>.npy)
 
     def close(self) -> None:
         f = getattr(self, "_file", None)

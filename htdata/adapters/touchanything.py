@@ -251,7 +251,7 @@ class TouchAnythingStreams(EpisodeStreams):
             raise EpisodeError(self.ref, int(idx.max()), f"tactile index out of range 0..{self._row_of.size - 1}",
                                file=self.npz)
         try:
-            return self._rows[hand].read(self._row_of[idx]).astype(np.float32, copy=False)
+            return self._rows[hand].read(self._row_of[idx])   # source dtype: stored bit for bit
         except NpzRowError as exc:
             raise EpisodeError(self.ref, exc.row, str(exc), file=self.npz) from exc
 

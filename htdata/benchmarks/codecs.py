@@ -2,7 +2,9 @@
 
 Maps are the sample corpus rasterised exactly as the ingest does (every
 glove layout the corpus uses), so sizes reflect real sparsity. A codec whose max error stays below
-half a source step keeps every source level recoverable by rounding.
+half a source step keeps every source level recoverable by rounding; the
+default is the smallest EXR codec doing so for every glove (htdata/codecrule.py),
+computed from the measured table, not written by hand.
 """
 
 from __future__ import annotations
@@ -15,10 +17,11 @@ import numpy as np
 
 from htdata.benchmarks.sources import discover, episode_maps
 from htdata.codec import check_tactile_values, decode_exr, decode_png16, encode_exr, encode_png16
+from htdata.codecrule import RULE, GloveStep, glove_step, pick_codec, resolve_codec
 from htdata.format import MAP_SHAPE
 from htdata.layouts import Layout, load_layout
 
-# Alternatives measured against the dataset's codec (EXR half ZIP, codec.DEFAULT_CODEC_INFO).
+# Candidates of the codec rule (EXR: what the dataset member can store) and, for comparison, other formats.
 def _exr_codec(compression: str, pixel_type) -> tuple[Callable, Callable]:
     """(encode, decode) of an EXR variant; encode applies the dataset value rule first."""
     def encode(tactile_map: np.ndarray) -> bytes:
@@ -66,22 +69,9 @@ def codec_benchmark(maps: np.ndarray, codecs: dict | None = None) -> list[dict]:
     return results
 
 
-DEFAULT_CODEC = "exr_half_zip"   # DEFAULT_CODEC_INFO: EXR half, ZIP
-DIRECT_SOURCE_LEVELS = 255       # see source_step
-
-
-def source_step(layout: Layout) -> tuple[float, str]:
-    """One source quantisation level of a glove in [0,1] units, and where the number comes from.
-
-    An "inverted" glove counts integer firmware units 0..max, so its value
-    block gives the step (1/max). A "direct" glove delivers [0, max] floats
-    and its value block does not state their resolution: the only shipped one,
-    TouchAnything, computes them from uint8 sensor bytes (SOURCE_FORMATS.md,
-    jq_pressure.json), so 8 bits is assumed, and the row says so.
-    """
-    if layout.value["convention"] == "inverted":
-        return 1.0 / float(layout.value["max"]), "value block (integer units)"
-    return 1.0 / DIRECT_SOURCE_LEVELS, f"assumed {DIRECT_SOURCE_LEVELS} levels (direct values)"
+def source_step(layout: Layout) -> GloveStep:
+    """One source quantisation level of a glove in [0,1] map units (its layout's value block; see codecrule)."""
+    return glove_step(layout)
 
 
 def real_maps(corpus: Path, sources: tuple[str, ...], max_maps: int) -> dict[str, np.ndarray]:
@@ -111,33 +101,47 @@ def real_maps(corpus: Path, sources: tuple[str, ...], max_maps: int) -> dict[str
     return {layout_id: np.concatenate(parts)[:max_maps] for layout_id, parts in sorted(chosen.items())}
 
 
-def codec_rows(maps_by_layout: dict[str, np.ndarray]) -> dict:
-    """Codec table over all gloves' maps, plus each glove layout's error margin for every codec."""
+def codec_rows(maps_by_layout: dict[str, np.ndarray], compression: str | None = None) -> dict:
+    """Codec table over all gloves' maps, each glove's error margin per codec, and the default by the rule.
+
+    "default" is what `codecrule.pick_codec` picks from the measured rows for
+    a dataset holding every glove here (the strictest wins); "code_default" is
+    what the ingest's `[codec] tactile = "auto"` resolves to for the same
+    gloves at `compression` (analytic errors): the two must agree. A
+    codec's error is its max over ALL maps (a glove's few maps may miss the
+    values where float16 rounds most); the margin rows show each glove's own.
+    """
+    from htdata.pipeline import TactileConfig
+
+    compression = compression or TactileConfig().compression      # the pipelines' default
     all_maps = np.concatenate(list(maps_by_layout.values()))
     rows = codec_benchmark(all_maps)
-    by_codec = {r["codec"]: r for r in rows}
-    margins = []
+    gloves = {layout_id: source_step(load_layout(layout_id)) for layout_id in maps_by_layout}
+    margins, per_glove = [], {}
     for layout_id, maps in maps_by_layout.items():
-        step, step_from = source_step(load_layout(layout_id))
-        for r in codec_benchmark(maps):
+        g = gloves[layout_id]
+        glove_rows = codec_benchmark(maps)
+        for r in glove_rows:
             margins.append({"layout": layout_id, "codec": r["codec"], "maps": int(len(maps)),
-                            "step": step, "step_from": step_from, "max_error": r["max_error"],
+                            "step": g.step, "step_from": g.source, "max_error": r["max_error"],
                             # None = exact (no error to divide by): rendered as "exact", kept valid JSON
-                            "step_over_max_error": step / r["max_error"] if r["max_error"] > 0 else None,
-                            "levels_recoverable": bool(r["max_error"] < step / 2)})
-    sparsity = float(np.mean(all_maps == 0))
-    lossless = [r for r in rows if r["max_error"] == 0]          # lossless means exact, nothing less
-    smallest = min(lossless, key=lambda r: r["bytes_per_frame"]) if lossless else None
-    keeps_all = [r for r in rows if all(m["levels_recoverable"] for m in margins if m["codec"] == r["codec"])]
-    by_rule = min(keeps_all, key=lambda r: r["bytes_per_frame"]) if keeps_all else None
-    d = by_codec[DEFAULT_CODEC]
-    lost = sorted(m["layout"] for m in margins if m["codec"] == DEFAULT_CODEC and not m["levels_recoverable"])
-    exact = f"{smallest['codec']} ({smallest['bytes_per_frame'] / 1024:.1f} KiB)" if smallest else "none"
-    reason = (f"{DEFAULT_CODEC}: {d['bytes_per_frame'] / 1024:.1f} KiB/frame "
-              f"({d['bytes_per_frame'] / by_codec['exr_float_zip']['bytes_per_frame']:.2f}x of float ZIP), "
-              f"encode {d['encode_ms']:.2f} ms, decode {d['decode_ms']:.2f} ms, max error {d['max_error']:.2e} "
-              f"(not lossless; source levels NOT recoverable for: {', '.join(lost) or 'none'}); "
-              f"smallest exact codec: {exact}; the rule 'smallest codec keeping every glove's levels "
-              f"(max error < step/2)' would pick {by_rule['codec'] if by_rule else 'none'}")
-    return {"maps": int(len(all_maps)), "zero_fraction": sparsity, "rows": rows, "margins": margins,
-            "default": DEFAULT_CODEC, "reason": reason, "codecs": list(TACTILE_CODECS)}
+                            "step_over_max_error": (g.step / r["max_error"]
+                                                    if g.step is not None and r["max_error"] > 0 else None),
+                            "levels_recoverable": g.keeps_levels(r["max_error"])})
+        # The rule takes each codec's error over ALL maps: any glove's map may hold any value in [0,1].
+        per_glove[layout_id] = (pick_codec([g], rows)[0] or {}).get("codec")
+    chosen, why = pick_codec(list(gloves.values()), rows)
+    code = resolve_codec("auto", compression, list(gloves.values()))
+    by_codec = {r["codec"]: r for r in rows}
+    d = by_codec[chosen["codec"]] if chosen else None
+    lossless = sorted((r for r in rows if r["max_error"] == 0), key=lambda r: r["bytes_per_frame"])
+    reason = (f"rule: {RULE}. Measured: {why}"
+              + (f"; {d['bytes_per_frame'] / 1024:.1f} KiB/frame, encode {d['encode_ms']:.2f} ms, "
+                 f"decode {d['decode_ms']:.2f} ms" if d else "")
+              + f". Per glove alone: {', '.join(f'{k} -> {v}' for k, v in per_glove.items())}"
+              + f". Smallest exact codec: {lossless[0]['codec'] if lossless else 'none'}"
+              + f". The ingest's [codec] tactile = \"auto\" (analytic errors) picks {code.codec}: "
+              + ("the same" if chosen and code.codec == chosen["codec"] else "DIFFERENT"))
+    return {"maps": int(len(all_maps)), "zero_fraction": float(np.mean(all_maps == 0)), "rows": rows,
+            "margins": margins, "default": chosen["codec"] if chosen else None, "code_default": code.codec,
+            "per_glove": per_glove, "reason": reason, "codecs": list(TACTILE_CODECS)}

@@ -14,6 +14,8 @@ HEADINGS = {
     "validate": "## validate --deep",
     "append": "## Append one episode to N and 10N episodes",
     "stats": "## htdata stats vs tactile-only decode",
+    "lag": "## Tactile-video lag estimator (known lags)",
+    "raw": "## Raw glove rows: storage cost and maps from raw rows",
 }
 TARGET_OVERHEAD_PCT = 30.0
 TARGET_SCALING = 1.8
@@ -58,13 +60,14 @@ def _codecs(c: dict) -> list[str]:
              f"{', '.join(layouts)}.", ""]
     lines += table(c["rows"], [("codec", "codec"), ("bytes_per_frame", "bytes/frame"), ("encode_ms", "encode ms"),
                                ("decode_ms", "decode ms"), ("max_error", "max error"), ("rmse", "RMSE")])
-    lines += ["Stored error vs each glove's source quantisation step (step / max error > 1: below one step; "
-              "levels recoverable = max error < step/2):", ""]
+    lines += ["Stored error on each glove's own maps vs its source quantisation step (step / max error > 1: "
+              "below one step; levels recoverable = max error < step/2 on these maps; the default below "
+              "takes each codec's max error over all maps):", ""]
     lines += table(c["margins"], [("layout", "glove layout"), ("codec", "codec"), ("step", "step"),
                                   ("step_from", "step from"), ("max_error", "max error"),
                                   ("step_over_max_error", "step / max error"),
                                   ("levels_recoverable", "levels recoverable")])
-    lines += [f"**Default: {c['default']}** — {c['reason']}.", ""]
+    lines += [f"**Default: {c['default']}** (computed from the tables above) — {c['reason']}.", ""]
     return lines
 
 
@@ -75,16 +78,16 @@ def _rgb(r: dict) -> list[str]:
     lines += ["Resize vs a reference (Lanczos to 4x the target, then 4x4 box average); errors in [0,1] units:", ""]
     lines += table(r["resize"], [("method", "method"), ("ms_per_frame", "ms/frame"),
                                  ("mean_abs_error", "mean abs error"), ("max_abs_error", "max abs error")])
-    lines += [f"**Defaults: JPEG q{r['default_quality']}, {r['default_resize']}** — {r['reason']}.", ""]
+    lines += [f"**Defaults: JPEG q{r['default_quality']}, {r['default_resize']}** (computed from the tables "
+              f"above) — {r['reason']}.", ""]
     return lines
 
 
-def _raster(rows: list[dict]) -> list[str]:
-    return table(rows, [("layout_id", "layout"), ("mode", "mode"), ("ms_per_frame", "ms/frame"),
-                        ("max_roundtrip_error", "max round-trip error"), ("rmse", "RMSE"),
-                        ("coverage", "coverage")]) + [
-        "**Default: nearest** — exact taxel round trip (error 0) at comparable speed; bilinear smooths "
-        "but cannot return the taxel values.", ""]
+def _raster(d: dict) -> list[str]:
+    return table(d["rows"], [("layout_id", "layout"), ("mode", "mode"), ("ms_per_frame", "ms/frame"),
+                             ("max_roundtrip_error", "max round-trip error"), ("rmse", "RMSE"),
+                             ("coverage", "coverage")]) + [
+        f"**Default: {d['default']}** (computed from the table above by: {d['criterion']}) — {d['reason']}.", ""]
 
 
 def _ingest(g: dict) -> list[str]:
@@ -197,18 +200,33 @@ def _append(d: dict) -> list[str]:
 
 def _stats(d: dict) -> list[str]:
     rows = [{"run": "tactile-only decode (loader, streamed)", **d["tactile_decode"],
-             "episodes_computed": "-"}]
+             "episodes_computed": "-", "from_raw": "-"}]
     rows += [{"run": f"stats {name}", **r} for name, r in d["runs"].items()]
+    for row in rows[1:]:
+        if row.get("hand_frames"):
+            row["from_raw"] = f"{100 * row.get('hand_frames_from_raw', 0) / row['hand_frames']:.0f}%"
     lines = table(rows, [("run", "run"), ("frames", "frames"), ("seconds", "seconds"), ("frames_per_s", "frames/s"),
-                         ("episodes_computed", "episodes computed")])
+                         ("episodes_computed", "episodes computed"), ("from_raw", "hand frames from raw rows")])
     ok = "met" if d["cold_over_decode"] >= 1 else "not met"
     return lines + ["", f"Cold stats / tactile decode = {_fmt(d['cold_over_decode'])} (target >= 1: {ok}). "
                     "Warm = every episode cached; incremental = one more episode than the cold run.", ""]
 
 
+def _lag_markdown(d: dict) -> list[str]:
+    from htdata.benchmarks.lag import lag_markdown   # the section's own module renders its table
+
+    return lag_markdown(d)
+
+
+def _raw_markdown(d: dict) -> list[str]:
+    from htdata.benchmarks.raw import raw_markdown   # the section's own module renders its tables
+
+    return raw_markdown(d)
+
+
 RENDERERS = {"machine": _machine, "codecs": _codecs, "rgb": _rgb, "raster": _raster, "ingest": _ingest,
              "rss": _rss, "loader": _loader, "index": _index, "validate": _validate,
-             "append": _append, "stats": _stats}
+             "append": _append, "stats": _stats, "lag": _lag_markdown, "raw": _raw_markdown}
 
 
 def _discovered(name: str, results: dict) -> list[str]:

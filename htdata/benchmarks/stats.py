@@ -1,9 +1,12 @@
 """`htdata stats` speed against the loader's tactile-only decode rate, and its incremental cost.
 
-The issue's target: computing stats must be at least as fast as decoding the
-tactile members the stats read (EXR maps, streamed shard by shard, no JPEG).
-Both are timed in this one run on the same dataset; `stats_benchmark` (cold,
-warm and one-episode-appended runs) uses a temporary cache.
+The issue's target: computing stats must be at least as fast as the loader's
+tactile-only decode (EXR maps, streamed shard by shard, no JPEG). Stats read
+the raw rows where the dataset stores them (format 3: a small npy per hand,
+normalised under the episode's calibration) and the maps otherwise; the
+"from raw" column says which. Both are timed in this one run on the same
+dataset; `stats_benchmark` (cold, warm and one-episode-appended runs) uses a
+temporary cache.
 """
 
 from __future__ import annotations

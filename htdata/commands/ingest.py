@@ -78,7 +78,8 @@ def run(args: argparse.Namespace) -> int:
     for note in report["notes"]:
         print(f"note: {note}", file=sys.stderr)
     print(f"ingested {report['episodes_ingested']}/{report['episodes_planned']} episodes, "
-          f"{report['samples']} samples, {len(report['dropped_frames'])} dropped frames, {n_fail} failures "
+          f"{report['samples']} samples ({sum(report['rgb_only_samples'].values())} RGB-only), "
+          f"{len(report['dropped_frames'])} frames unpaired, {n_fail} failures "
           f"({report['units_resumed']} of {report['units']} units resumed); unchanged "
           f"{report['episodes_unchanged']}, relabelled {len(report['episodes_relabelled'])}, replaced "
           f"{len(report['episodes_replaced'])} -> {out} version {report['version']}", file=sys.stderr)

@@ -66,6 +66,9 @@ def text_lines(s: dict) -> list[str]:
         flagged = ", ".join(f"{k} {h['counts'][k]}" for k in CLASSES if h["counts"][k]) or "none"
         out += [f"\n{name}: {g['episodes']} episodes, {g['frames']} frames, contact {_fmt(g['contact_fraction'])}",
                 f"  values p1 {_fmt(q['p1'])}  p50 {_fmt(q['p50'])}  p99 {_fmt(q['p99'])}  max {_fmt(q['max'])}",
+                *([f"  raw (glove units, {g['frames_from_raw']} frames) " + "  ".join(
+                    f"{k} {_fmt(g['raw_quantiles'][k])}" for k in ("p1", "p50", "p99", "max"))]
+                  if g.get("raw_quantiles") else []),
                 f"  health: {h['taxels_assessed']} taxel-episodes assessed ({h['episodes_not_assessed']} episodes "
                 f"too short), flagged: {flagged}; quiet and never pressed: {h['unexercised']}",
                 "  region              taxels  contact  mean pressure"]

@@ -104,5 +104,6 @@ def commit(out: Path, sources: list, records: list[dict], plan, command: str) ->
     kept, next_unit = parent_parts(plan, ingested, first_free)
     parts = kept + [part_from_unit(unit_result(r)) for r in records if r["episodes"]]
     fields = {"sources": merged_sources(plan.parent, sources), "layouts": layout_entries,
-              "canonical": canonical_entry, "codec": codec_info(sources[0].pipeline)}
+              "canonical": canonical_entry, "codec": codec_info(sources[0].pipeline),
+              "calibrations": {k: v for r in records for k, v in r.get("calibrations", {}).items()}}
     return commit_parts(out, parts, fields, plan.parent, command, next_unit=next_unit)

@@ -4,7 +4,11 @@
 clocks (sync.py), reads tactile rows `chunk_frames` at a time, checks their
 shape against the planned layout, normalises, drops frames with non-finite
 live taxels, rasterises and yields one `Frame` per kept frame (meta, RGB,
-maps, bend vectors), in frame order. Raw values outside the layout's range
+maps, bend vectors, the raw glove rows each sample stores), in time order.
+Every recorded frame stays (htdata/ingest/fullrate.py): unpaired glove rows
+ride in the raw members of the samples around them, RGB frames without
+tactile become RGB-only samples, and a glove-only recording (no video)
+becomes tactile-only samples on its first hand's clock. Raw values outside the layout's range
 [0, max_value] are counted per hand and handled by the pipeline's
 `[normalise] out_of_range` policy (clip / drop_frame / fail). It encodes
 and writes nothing: the ingest unit encodes each frame with `htdata.format.encode_sample`, the
@@ -29,6 +33,8 @@ import numpy as np
 
 from htdata.errors import EpisodeError
 from htdata.format import HANDS
+from htdata.ingest.fullrate import FrameQueue, RawRows, RowPlan
+from htdata.ingest.tally import EpisodeTally
 from htdata.ingest.timing import StageClock
 from htdata.layouts import Layout, load_layout
 from htdata.normalise import Normaliser
@@ -36,6 +42,7 @@ from htdata.pipeline import PipelineConfig
 from htdata.rasterise import Rasteriser
 from htdata.rgb import to_square_224
 from htdata.shardio import sample_key
+from htdata.lag import episode_lag
 from htdata.sync import SyncResult, pair
 
 
@@ -48,9 +55,22 @@ class Frame:
     rgb: np.ndarray | None         # (size,size,3) uint8 RGB; None when RGB was not asked for
     maps: dict[str, np.ndarray]    # hand -> (224,224) float32 in [0,1]
     bends: dict[str, np.ndarray] = field(default_factory=dict)   # hand -> (K,) float32
+    # hand -> rows gathered while the frame waits (htdata.ingest.fullrate); arrays once `finish_raw` ran
+    raw: dict = field(default_factory=dict)
+
+    def finish_raw(self, grids: dict[str, tuple[int, int]]) -> "Frame":
+        """Turn the gathered raw rows into (R,H,W) arrays in time order and name them in meta."""
+        if self.raw and isinstance(next(iter(self.raw.values())), RawRows):
+            arrays, t_ns, rows, paired = {}, {}, {}, {}
+            for h, rr in self.raw.items():
+                arrays[h], info = rr.finish(grids[h], None)
+                t_ns[h], rows[h], paired[h] = info["t_ns"], info["row"], info["paired"]
+            self.raw = arrays
+            self.meta.update({"raw_t_ns": t_ns, "raw_row": rows, "raw_paired": paired})
+        return self
 
     def sample(self) -> dict:
-        return {"meta": self.meta, "rgb": self.rgb, "tactile": self.maps, "bend": self.bends}
+        return {"meta": self.meta, "rgb": self.rgb, "tactile": self.maps, "bend": self.bends, "raw": self.raw}
 
 
 @contextmanager
@@ -85,104 +105,6 @@ def planned_layouts(ref, hands: list[str]) -> dict[str, Layout]:
         raise ValueError(f"episode {ref.episode_id}: no resolved layout for hand(s) {missing}; "
                          f"plan the episode first (htdata.ingest.plan.resolve_layouts)")
     return {h: load_layout(ref.layout_files[h]) for h in hands}
-
-
-class EpisodeTally:
-    """What `episode_frames` learns about an episode while yielding it; read `record()` once exhausted."""
-
-    def __init__(self):
-        self.ref = None
-        self.hands: list[str] = []
-        self.layouts: dict[str, Layout] = {}
-        self.sync: SyncResult | None = None
-        self.dropped: list[tuple[int, str]] = []     # (rgb index, reason)
-        self.frames = 0
-        self.contact_sum: dict[str, float] = {}
-        self.contact_max: dict[str, float] = {}
-        self.notes: list[str] = []
-        self.fps: float | None = None
-        # hand -> [below taxel values, above taxel values, frames with any] over the synchronised frames
-        self.out_of_range: dict[str, list[int]] = {}
-        self.raw_max: dict[str, float] = {}
-        self.oor_policy = None
-
-    def start(self, ref, hands: list[str], layouts: dict[str, Layout], oor_policy=None) -> None:
-        self.ref, self.hands, self.layouts = ref, hands, layouts
-        self.contact_sum = {h: 0.0 for h in hands}
-        self.contact_max = {h: 0.0 for h in hands}
-        self.out_of_range = {h: [0, 0, 0] for h in hands}
-        self.oor_policy = oor_policy
-
-    def add_out_of_range(self, hand: str, below: np.ndarray, above: np.ndarray) -> np.ndarray:
-        """Count one chunk's out-of-range taxels; returns the per-frame mask of frames holding any."""
-        bad = (below > 0) | (above > 0)
-        c = self.out_of_range[hand]
-        c[0] += int(below.sum())
-        c[1] += int(above.sum())
-        c[2] += int(bad.sum())
-        return bad
-
-    def out_of_range_record(self) -> dict:
-        """{hand: {"below", "above", "frames"}} for hands with any out-of-range value ({} when clean)."""
-        return {h: {"below": c[0], "above": c[1], "frames": c[2]} for h, c in self.out_of_range.items() if c[2]}
-
-    def _out_of_range_notes(self) -> list[str]:
-        if self.oor_policy is None or self.sync is None:
-            return []
-        total = max(int(self.sync.rgb_index.size), 1)
-        notes = []
-        for h, c in self.out_of_range_record().items():
-            share = c["frames"] / total
-            if self.oor_policy.policy == "clip" and share > self.oor_policy.warn_share:
-                notes.append(f"warning: {h} hand: {c['frames']} of {total} frames ({share:.1%}) hold raw values "
-                             f"outside [0, {self.raw_max.get(h, '?'):g}] ({c['below']} below, {c['above']} above): "
-                             f"clipped (pipeline [normalise] out_of_range = \"clip\")")
-        return notes
-
-    def add_contact(self, hand: str, live: np.ndarray) -> None:
-        self.contact_sum[hand] += float(live.sum(dtype=np.float64))
-        self.contact_max[hand] = max(self.contact_max[hand], float(live.max(initial=0.0)))
-
-    def finish(self, streams) -> None:
-        ref = self.ref
-        self.notes = list(streams.notes) + list(self.sync.report.get("warnings", [])) + self._out_of_range_notes()
-        self.fps = _fps(streams.rgb_timestamps_ns)
-        if self.fps is None:
-            self.fps = float(ref.extra.get("fps", 30.0)) if isinstance(ref.extra, dict) else 30.0
-            self.notes.append(f"fps unknown (single RGB timestamp): recorded as {self.fps}")
-
-    def dropped_sorted(self) -> list[tuple[int, str]]:
-        return sorted(self.dropped)
-
-    def record(self) -> dict:
-        """The episode's line in episodes.jsonl (schemas/episode.schema.json)."""
-        ref, hands, n = self.ref, self.hands, self.frames
-        reasons: dict[str, int] = {}
-        for _, r in self.dropped:
-            reasons[r] = reasons.get(r, 0) + 1
-        record = {
-            "episode_id": ref.episode_id, "source": ref.source, "source_ref": ref.source_ref,
-            "input_fingerprint": ref.fingerprint, "task": ref.task, "scene": ref.scene, "hands": hands,
-            "layouts": {h: self.layouts[h].layout_id for h in hands},
-            "num_frames": n, "fps": self.fps,
-            "stats": {"mean_contact": {h: self.contact_sum[h] / (n * self.layouts[h].num_live) for h in hands},
-                      "max_contact": self.contact_max, "frames_in": int(self.sync.report["n_rgb"]),
-                      "frames_kept": n, "frames_dropped": len(self.dropped)},
-            "sync": self.sync.report, "dropped_frames": reasons, "notes": self.notes,
-        }
-        if isinstance(ref.extra, dict) and ref.extra.get("source_split"):
-            record["source_split"] = str(ref.extra["source_split"])
-        # Added only when there is something to say: a clean episode's record keeps its exact bytes.
-        if self.out_of_range_record():
-            record["out_of_range"] = self.out_of_range_record()
-        if isinstance(ref.extra, dict) and ref.extra.get("hands_excluded"):
-            record["hands_excluded"] = dict(sorted(ref.extra["hands_excluded"].items()))
-        return record
-
-
-def _fps(rgb_ts: np.ndarray) -> float | None:
-    d = np.diff(np.unique(np.asarray(rgb_ts, dtype=np.int64)))
-    return float(1e9 / np.median(d)) if d.size else None
 
 
 class RgbFetcher:
@@ -220,13 +142,14 @@ class RgbFetcher:
         self.pending.pop(int(index), None)
 
 
-def _pair_clocks(ref, cfg: PipelineConfig, streams, hands: list[str]) -> SyncResult:
+def _pair_clocks(ref, cfg: PipelineConfig, streams, hands: list[str], adapter) -> SyncResult:
     missing = [h for h in hands if h not in streams.tactile_timestamps_ns]
     if missing:
         raise EpisodeError(ref, None, f"no tactile stream for hand(s) {missing}")
+    lag = episode_lag(ref, cfg, adapter, hands)   # [sync] lag: None for "none"; estimates open a 2nd stream
     try:
         sync = pair(streams.rgb_timestamps_ns, {h: streams.tactile_timestamps_ns[h] for h in hands},
-                    cfg.sync.max_skew_ns, cfg.sync.policy)
+                    cfg.sync.max_skew_ns, cfg.sync.policy, lag=lag)
     except ValueError as e:
         raise EpisodeError(ref, None, f"sync: {e}") from e
     if sync.rgb_index.size == 0:
@@ -236,21 +159,31 @@ def _pair_clocks(ref, cfg: PipelineConfig, streams, hands: list[str]) -> SyncRes
 
 
 def _read_chunk(ref, streams, tally: EpisodeTally, normalisers: dict, start: int, stop: int,
-                clock: StageClock) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """Normalised values of every hand for sync rows [start, stop) and the mask of frames kept."""
+                clock: StageClock, plans: dict) -> tuple[dict[str, np.ndarray], np.ndarray, dict]:
+    """Normalised values of every hand for sync rows [start, stop), the mask of frames kept, and the raw rows.
+
+    Raw rows (when `plans` has the hand: keep_raw) = {hand: (paired (n,H,W), extra rows, their slots,
+    their values)}, read in ONE call with the paired rows so streamed sources never rewind.
+    """
     sync = tally.sync
     rgb_idx = sync.rgb_index[start:stop]
     ok = np.ones(stop - start, dtype=bool)
-    values = {}
+    values, raws = {}, {}
     for h in tally.hands:
         layout = tally.layouts[h]
-        uniq, inverse = np.unique(sync.tactile_index[h][start:stop], return_inverse=True)  # increasing rows
+        paired = sync.tactile_index[h][start:stop]
+        extra, slots = plans[h].rows_for(start, stop) if h in plans else (np.zeros(0, np.int64), None)
+        uniq, inverse = np.unique(np.concatenate([paired, extra]), return_inverse=True)  # increasing rows
         with clock.stage("decode"):
-            raw = np.asarray(streams.read_tactile(h, uniq))
-        if raw.ndim != 3 or raw.shape[1:] != tuple(layout.grid) or raw.shape[0] != uniq.size:
-            raise EpisodeError(ref, int(rgb_idx[0]), f"{h} tactile rows have shape {raw.shape}, expected "
+            rows = np.asarray(streams.read_tactile(h, uniq))
+        if rows.ndim != 3 or rows.shape[1:] != tuple(layout.grid) or rows.shape[0] != uniq.size:
+            raise EpisodeError(ref, int(rgb_idx[0]), f"{h} tactile rows have shape {rows.shape}, expected "
                                f"({uniq.size}, {layout.grid[0]}, {layout.grid[1]}) for layout {layout.layout_id}")
-        raw = raw[inverse.reshape(-1)]
+        inverse = inverse.reshape(-1)
+        raw = rows[inverse[:paired.size]]
+        if h in plans:
+            ts = plans[h].timestamps   # as recorded (a lag the sync applied is in the sync report)
+            raws[h] = (raw, ts[paired], extra, slots, rows[inverse[paired.size:]], ts[extra])
         with clock.stage("normalise"):
             if start == 0:
                 normalisers[h].fit_baseline(raw)
@@ -261,7 +194,21 @@ def _read_chunk(ref, streams, tally: EpisodeTally, normalisers: dict, start: int
         ok &= finite
         ok &= _out_of_range_policy(ref, tally, h, normalisers[h], raw, below, above, rgb_idx, ok)
         values[h] = v
-    return values, ok
+    return values, ok, raws
+
+
+def _frame_raw_rows(sync, raws: dict, start: int, j: int) -> dict[str, RawRows]:
+    """The raw rows synchronised frame `start + j` brings: its paired row and the unpaired rows of its slot."""
+    k = start + j
+    out = {}
+    for h, (paired, paired_times, extra, slots, extra_values, extra_times) in raws.items():
+        rr = RawRows(paired_row=int(sync.tactile_index[h][k]))
+        rr.add(rr.paired_row, int(paired_times[j]), paired[j])
+        a, b = np.searchsorted(slots, [k, k + 1], side="left")
+        for row, t, value in zip(extra[a:b], extra_times[a:b], extra_values[a:b]):
+            rr.add(int(row), int(t), value)
+        out[h] = rr
+    return out
 
 
 def _out_of_range_policy(ref, tally: EpisodeTally, hand: str, normaliser, raw, below, above, rgb_idx,
@@ -285,6 +232,62 @@ def _out_of_range_policy(ref, tally: EpisodeTally, hand: str, normaliser, raw, b
     return ~bad
 
 
+def _render_kept(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict, tally: EpisodeTally):
+    """Maps (and bend vectors) of a chunk's kept frames; their contact goes into the tally."""
+    maps, bends = {}, {}
+    for h in tally.hands if keep.size else ():
+        v = values[h][keep]
+        maps[h] = rasters[h].render(v)
+        tally.add_contact(h, v[:, tally.layouts[h].live_mask])
+        if keep_bend[h]:
+            bends[h] = rasters[h].bend_vector(v)
+    return maps, bends
+
+
+def _unpaired_rgb(streams, sync) -> list[tuple[int, int, str]]:
+    """(t_rgb_ns, rgb index, reason) of the RGB frames the pairing dropped, in time order."""
+    ts = np.asarray(streams.rgb_timestamps_ns, dtype=np.int64)
+    return sorted((int(ts[i]), int(i), reason) for i, reason in sync.dropped)
+
+
+class _RgbOnlyFrames:
+    """RGB frames without tactile, handed out in time order between the paired frames (htdata.ingest.fullrate)."""
+
+    def __init__(self, ref, tally: EpisodeTally, fetcher, unpaired: list[tuple[int, int, str]]):
+        self.ref, self.tally, self.fetcher = ref, tally, fetcher
+        self.unpaired = unpaired
+        self.next = 0
+
+    def before(self, when: tuple[int, int] | None) -> Iterator["Frame"]:
+        """Frames of the sync-dropped RGB frames before (t, index) `when` (all the rest when None)."""
+        while self.next < len(self.unpaired) and (when is None or self.unpaired[self.next][:2] < when):
+            t, i, reason = self.unpaired[self.next]
+            self.next += 1
+            yield self.frame(t, i, reason)
+
+    def frame(self, t_rgb: int, i: int, reason: str) -> "Frame":
+        ref, tally = self.ref, self.tally
+        with frame_errors(ref, i):
+            rgb = self.fetcher.get(i)
+        key = sample_key(ref.episode_id, tally.frames)
+        meta = {"key": key, "episode_id": ref.episode_id, "frame_index": tally.frames, "source_frame": i,
+                "t_rgb_ns": t_rgb, "t_tactile_ns": {}, "sync_offset_ns": {},
+                "hands": {h: False for h in HANDS}, "rgb_only": reason}
+        tally.frames += 1
+        tally.rgb_only[reason] = tally.rgb_only.get(reason, 0) + 1
+        return Frame(key=key, source_frame=i, meta=meta, rgb=rgb, maps={}, bends={}, raw={})
+
+
+def _frame_meta(ref, sync, k: int, rgb_index: int, frame_index: int, hands: list[str]) -> dict:
+    """The sample's JSON member for synchronised frame `k` (raw_* fields are added by Frame.finish_raw)."""
+    key = sample_key(ref.episode_id, frame_index)
+    return {"key": key, "episode_id": ref.episode_id, "frame_index": frame_index,
+            "source_frame": rgb_index, "t_rgb_ns": int(sync.t_rgb_ns[k]),
+            "t_tactile_ns": {h: int(sync.t_tactile_ns[h][k]) for h in hands},
+            "sync_offset_ns": {h: int(sync.skew_ns[h][k]) for h in hands},
+            "hands": {h: h in hands for h in HANDS}}
+
+
 def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock: StageClock | None = None,
                    with_rgb: bool = True) -> Iterator[Frame]:
     """Yield the kept frames of one planned episode (see the module docstring); raise EpisodeError on failure.
@@ -301,9 +304,9 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
     with clock.stage("decode"):
         opened = adapter.open(ref, cfg.adapter.params)
     with opened as streams:
-        sync = tally.sync = _pair_clocks(ref, cfg, streams, hands)
+        sync = tally.sync = _pair_clocks(ref, cfg, streams, hands, adapter)
         tally.dropped = list(sync.dropped)
-        normalisers = {h: Normaliser(cfg.normalise_for(layouts[h]), layouts[h]) for h in hands}
+        normalisers = tally.normalisers = {h: Normaliser(cfg.normalise_for(layouts[h]), layouts[h]) for h in hands}
         rasters = {h: rasteriser_for(layouts[h], cfg.tactile.raster_mode) for h in hands}
         keep_bend = {h: cfg.tactile.keep_bend and len(layouts[h].bend_cells) > 0 for h in hands}
         rgb_cfg = cfg.rgb
@@ -312,42 +315,54 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
             return to_square_224(frame, rgb_cfg.size, rgb_cfg.crop, rgb_cfg.interpolation,
                                  where=f"{ref.source_ref} [{ref.episode_id}] frame {i}")
 
-        fetcher = RgbFetcher(ref, streams.iter_rgb(), sync.rgb_index, resize, clock) if with_rgb else None
-        hands_flags = {h: h in hands for h in HANDS}
+        with_rgb = with_rgb and streams.has_video   # glove-only recordings: tactile-only samples
+        unpaired = _unpaired_rgb(streams, sync) if with_rgb and cfg.rgb.keep_unpaired else []
+        wanted = np.concatenate([sync.rgb_index, np.asarray([i for _, i, _ in unpaired], dtype=np.int64)])
+        fetcher = RgbFetcher(ref, streams.iter_rgb(), wanted, resize, clock) if with_rgb else None
+        plans = ({h: RowPlan.build(streams.tactile_timestamps_ns[h], sync.tactile_index[h], sync.t_rgb_ns)
+                  for h in hands} if cfg.tactile.keep_raw else {})
+        grids = {h: tuple(layouts[h].grid) for h in hands}
+        queue = FrameQueue(lambda f: f.finish_raw(grids))
+        emit = _RgbOnlyFrames(ref, tally, fetcher, unpaired)
         total = int(sync.rgb_index.size)
         chunk = cfg.tactile.chunk_frames
         for start in range(0, total, chunk):
             stop = min(total, start + chunk)
             rgb_idx = sync.rgb_index[start:stop]
             with frame_errors(ref, int(rgb_idx[0])):
-                values, ok = _read_chunk(ref, streams, tally, normalisers, start, stop, clock)
-                if fetcher is not None:
+                values, ok, raws = _read_chunk(ref, streams, tally, normalisers, start, stop, clock, plans)
+                if fetcher is not None and not cfg.rgb.keep_unpaired:
                     for j in np.flatnonzero(~ok):
                         fetcher.discard(rgb_idx[j])
-                keep = np.flatnonzero(ok)
-                maps, bends = {}, {}
                 with clock.stage("rasterise"):
-                    for h in hands if keep.size else ():
-                        v = values[h][keep]
-                        maps[h] = rasters[h].render(v)
-                        tally.add_contact(h, v[:, layouts[h].live_mask])
-                        if keep_bend[h]:
-                            bends[h] = rasters[h].bend_vector(v)
-            for n, j in enumerate(keep):
-                i = int(rgb_idx[j])
-                k = start + int(j)
+                    maps, bends = _render_kept(values, np.flatnonzero(ok), rasters, keep_bend, tally)
+            n = 0
+            for j in range(stop - start):
+                k, i = start + j, int(rgb_idx[j])
+                for frame in emit.before((int(sync.t_rgb_ns[k]), i)):
+                    yield from queue.push(frame, paired=False)
+                rows = _frame_raw_rows(sync, raws, start, j)
+                if not ok[j]:   # its rows are unpaired now: stored by the previous paired frame (or the next)
+                    queue.unpaired_rows(rows)
+                    if cfg.rgb.keep_unpaired and fetcher is not None:
+                        reason = next(r for x, r in reversed(tally.dropped) if x == i)
+                        yield from queue.push(emit.frame(int(sync.t_rgb_ns[k]), i, reason), paired=False)
+                    continue
                 with frame_errors(ref, i):
                     rgb = fetcher.get(i) if fetcher is not None else None  # timed inside as decode + resize
-                key = sample_key(ref.episode_id, tally.frames)
-                meta = {"key": key, "episode_id": ref.episode_id, "frame_index": tally.frames,
-                        "source_frame": i, "t_rgb_ns": int(sync.t_rgb_ns[k]),
-                        "t_tactile_ns": {h: int(sync.t_tactile_ns[h][k]) for h in hands},
-                        "sync_offset_ns": {h: int(sync.skew_ns[h][k]) for h in hands},
-                        "hands": hands_flags}
+                meta = _frame_meta(ref, sync, k, i, tally.frames, hands)
+                if not streams.has_video:
+                    meta["tactile_only"] = True
                 tally.frames += 1
-                yield Frame(key=key, source_frame=i, meta=meta, rgb=rgb, maps={h: maps[h][n] for h in hands},
-                            bends={h: b[n] for h, b in bends.items()})
-        if tally.frames == 0:
+                tally.paired += 1
+                yield from queue.push(Frame(key=meta["key"], source_frame=i, meta=meta, rgb=rgb,
+                                            maps={h: maps[h][n] for h in hands},
+                                            bends={h: b[n] for h, b in bends.items()}, raw=rows), paired=True)
+                n += 1
+        for frame in emit.before(None):
+            yield from queue.push(frame, paired=False)
+        yield from queue.close()
+        if tally.paired == 0:
             why = ("non-finite or out-of-range (out_of_range = \"drop_frame\")"
                    if any(r.startswith("out_of_range:") for _, r in tally.dropped) else "non-finite")
             raise EpisodeError(ref, None, f"no frame left: all {total} synchronised frames had {why} "

@@ -163,6 +163,10 @@ def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, disc
         "episodes_planned": len(tasks),
         "episodes_ingested": sum(len(r["episodes"]) for r in ordered),
         "samples": sum(len(r["samples"]) for r in ordered),
+        # samples without tactile (RGB frames the pairing could not use), by reason; tactile-only episodes
+        "rgb_only_samples": _counts(ep.get("rgb_only_frames", {}) for r in ordered for ep in r["episodes"]),
+        "tactile_only_episodes": sorted(ep["episode_id"] for r in ordered for ep in r["episodes"]
+                                        if ep.get("tactile_only")),
         "episodes_unchanged": len(plan.reused), "episodes_relabelled": sorted(plan.relabelled),
         "episodes_replaced": sorted(plan.replaced - set(failed_replacements)),
         "episodes_kept_unavailable": kept, "notes": notes,
@@ -177,3 +181,11 @@ def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, disc
                            if ep.get("hands_excluded")},
         "timing": timing_summary(ran, time.perf_counter() - t_start),
     }
+
+
+def _counts(dicts) -> dict[str, int]:
+    total: dict[str, int] = {}
+    for d in dicts:
+        for k, v in d.items():
+            total[k] = total.get(k, 0) + int(v)
+    return dict(sorted(total.items()))

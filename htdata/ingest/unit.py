@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata.adapters import get_adapter
+from htdata.calibration import episode_calibrations
 from htdata.errors import EpisodeError
 from htdata.executors import parent_alive, report_progress
 from htdata.format import MAP_SHAPE, SHARDS_DIR, CodecSettings, encode_sample
@@ -134,7 +135,7 @@ def run_unit(task) -> dict:
     cfg = PipelineConfig.from_dict(task.pipeline, where=task.pipeline_path or task.pipeline["name"])
     adapter = get_adapter(cfg.adapter.name)
     spool = Spool(spool_path(out, task.unit))
-    episodes, failures, dropped, layouts = [], [], [], {}
+    episodes, failures, dropped, layouts, calibrations = [], [], [], {}, {}
     clock = StageClock()
     t0 = time.perf_counter()
     try:
@@ -157,6 +158,7 @@ def run_unit(task) -> dict:
                 for layout in tally.layouts.values():
                     if layout.layout_id not in layouts:
                         layouts[layout.layout_id] = layout_entry(layout, cfg.tactile.raster_mode)
+                calibrations.update(episode_calibrations(cfg, tally.layouts))
                 report_progress({"unit": task.unit, "episode_id": ref.episode_id, "frames": tally.frames})
                 _fault_hook(task.unit)
             with clock.stage("write"):
@@ -170,6 +172,7 @@ def run_unit(task) -> dict:
         "shards": [dataclasses.asdict(s) for s in shards],
         "samples": [dataclasses.asdict(s) for s in samples],
         "episodes": episodes, "failures": failures, "dropped": dropped, "layouts": layouts,
+        "calibrations": calibrations,
         "seconds": time.perf_counter() - t0, "timing": clock.as_record(),
     }
     write_bytes_atomic(unit_record_path(out, task.unit), dumps(record))

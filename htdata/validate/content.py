@@ -3,8 +3,10 @@
 Every sample with `--deep`, else a seeded fraction plus the first frame of
 every episode (`decode_mask`). RGB decodes to (224,224,3) uint8; each tactile
 EXR is half (224,224), finite, in [0,1] and zero outside the coverage of the
-hand's layout; bend vectors are finite 1-D float vectors. Decoded tactile
-maps feed the sensor accumulator (htdata/validate/sensors.py).
+hand's layout; bend vectors are finite 1-D float vectors; raw glove rows
+(format 3) are (R,H,W) numeric arrays whose R rows the JSON member names
+(raw_t_ns, raw_row, raw_paired). Decoded tactile maps feed the sensor
+accumulator (htdata/validate/sensors.py).
 """
 
 from __future__ import annotations
@@ -14,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.codec import decode_exr_pixels, decode_npy, decode_png_u8, decode_rgb
-from htdata.format import CANVAS, HANDS, MAP_SHAPE, RGB_MEMBER, bend_member, tactile_member
+from htdata.codec import decode_exr_pixels, decode_json, decode_npy, decode_png_u8, decode_rgb
+from htdata.format import CANVAS, HANDS, JSON_MEMBER, MAP_SHAPE, RGB_MEMBER, bend_member, raw_member, tactile_member
 from htdata.validate.report import Check, Recorder
 from htdata.validate.sensors import accumulate, hand_key
 
@@ -85,13 +87,24 @@ def check_content(geometry: dict[str, CoverageGeometry], rec: Recorder, key: str
                   members: dict[str, bytes], hands_present: list[str], sensor: dict) -> None:
     """Decode one sample's members and check shapes, dtypes, values and coverage."""
     rec.checked["samples_decoded"] += 1
-    _check_rgb(rec, key, where, members)
+    if RGB_MEMBER in members or not _tactile_only(members):
+        _check_rgb(rec, key, where, members)
     for hand in hands_present:
         _check_tactile(geometry, rec, key, where, hand, members[tactile_member(hand)], sensor)
     for hand in HANDS:
         member = bend_member(hand)
         if member in members:
             _check_bend(rec, f"{key}.{member}", where, hand, members[member])
+        if raw_member(hand) in members:
+            _check_raw(rec, key, where, hand, members)
+
+
+def _tactile_only(members: dict[str, bytes]) -> bool:
+    """True for a glove-only recording's sample (its JSON says so): no RGB member is expected."""
+    try:
+        return bool(decode_json(members[JSON_MEMBER], "json").get("tactile_only")) if JSON_MEMBER in members else False
+    except ValueError:
+        return False
 
 
 def _check_rgb(rec: Recorder, key: str, where: dict, members: dict[str, bytes]) -> None:
@@ -158,3 +171,23 @@ def _check_bend(rec: Recorder, name: str, where: dict, hand: str, data: bytes) -
     if bend.ndim != 1 or not np.issubdtype(bend.dtype, np.floating) or not np.isfinite(bend).all():
         rec.fail("bend_values", f"{name}: expected a finite 1-D float vector",
                  **where, hand=hand, found=f"{bend.shape} {bend.dtype}")
+
+
+def _check_raw(rec: Recorder, key: str, where: dict, hand: str, members: dict[str, bytes]) -> None:
+    """Raw rows: a numeric (R,H,W) array; the JSON member names each row and the paired one."""
+    name = f"{key}.{raw_member(hand)}"
+    try:
+        rows = decode_npy(members[raw_member(hand)], name)
+        meta = decode_json(members[JSON_MEMBER], f"{key}.{JSON_MEMBER}") if JSON_MEMBER in members else {}
+    except ValueError as exc:
+        rec.fail("raw_decode", str(exc), **where, hand=hand)
+        return
+    if rows.ndim != 3 or not (np.issubdtype(rows.dtype, np.number)) or rows.shape[0] == 0:
+        rec.fail("raw_shape", f"{name}: expected (R,H,W) numeric rows, R >= 1", **where, hand=hand,
+                 found=f"{rows.shape} {rows.dtype}")
+        return
+    named = [len((meta.get(field) or {}).get(hand, [])) for field in ("raw_t_ns", "raw_row")]
+    paired = (meta.get("raw_paired") or {}).get(hand)
+    if named != [rows.shape[0]] * 2 or not (isinstance(paired, int) and 0 <= paired < rows.shape[0]):
+        rec.fail("raw_meta", f"{name}: {rows.shape[0]} rows, but the JSON member names {named[0]} timestamps, "
+                 f"{named[1]} source rows and paired row {paired!r}", **where, hand=hand)

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata.codec import decode_json
-from htdata.format import (HANDS, INDEX_DTYPE, JSON_MEMBER, MANIFEST_FILE, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
+from htdata.format import (HANDS, INDEX_DTYPE, JSON_MEMBER, RGB_MEMBER, MANIFEST_FILE, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
                            tactile_member)
 from htdata.manifest import IndexDtypeError, load_manifest, parse_episodes, parse_index, parse_manifest
 from htdata.resources import validate_json
@@ -249,12 +249,20 @@ def _check_episode_rows(ds: Loaded, ep: dict, pos_rows: np.ndarray, check: Check
     if sorted(ep["shards"]) != shard_names:
         check.fail("episode_shards", f"episode {eid}: shards list disagrees with the index", **where,
                    expected=shard_names, found=sorted(ep["shards"]))
+    # RGB-only samples (format 3: RGB frames kept without tactile) hold no tactile member of any hand
+    no_tactile = np.all([rows[SIZE_FIELDS[tactile_member(h)]][pos_rows] == 0 for h in HANDS], axis=0)
+    rgb_only = no_tactile & (rows[SIZE_FIELDS[RGB_MEMBER]][pos_rows] > 0)
+    declared = sum((ep.get("rgb_only_frames") or {}).values())
+    if int(rgb_only.sum()) != declared:
+        check.fail("rgb_only_count", f"episode {eid}: {int(rgb_only.sum())} index rows hold RGB without tactile, "
+                   f"the record declares {declared} RGB-only frames", **where,
+                   expected=declared, found=int(rgb_only.sum()))
     for hand in HANDS:
         member = tactile_member(hand)
         col = rows[SIZE_FIELDS[member]][pos_rows]
         has = hand in ep["hands"]
-        if has and not (col > 0).all():
-            r = int(pos_rows[np.flatnonzero(col == 0)[0]])
+        if has and not ((col > 0) | rgb_only).all():
+            r = int(pos_rows[np.flatnonzero((col == 0) & ~rgb_only)[0]])
             check.fail("hand_member", f"episode {eid} has a {hand} hand but index row {r} has no "
                        f"{member}", **where, sample=r, frame=int(rows['frame'][r]))
         if not has and (col > 0).any():

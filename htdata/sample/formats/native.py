@@ -33,13 +33,13 @@ class NativeRecording:
     hands: dict[str, NativeHand]         # "left" / "right" -> hand data
     operator: str = ""
     notes: str = ""
-    video_storage: str = "mp4"           # "mp4" -> ego.mp4 ; "jpeg" -> frames/000000.jpg ...
+    video_storage: str = "mp4"           # "mp4" -> ego.mp4 ; "jpeg" -> frames/000000.jpg ... ; "none": glove only
     jpeg_quality: int = 90
     extra: dict = field(default_factory=dict)  # free-form, stored under recording.json "extra"
 
     def validate(self) -> None:
-        if self.video_storage not in ("mp4", "jpeg"):
-            raise ValueError(f"video_storage must be 'mp4' or 'jpeg', got {self.video_storage!r}")
+        if self.video_storage not in ("mp4", "jpeg", "none"):
+            raise ValueError(f"video_storage must be 'mp4', 'jpeg' or 'none', got {self.video_storage!r}")
         ts = np.asarray(self.video_timestamps_ns)
         if ts.ndim != 1 or not np.issubdtype(ts.dtype, np.integer):
             raise ValueError(f"video_timestamps_ns must be a 1-D integer array, got {ts.dtype} {ts.shape}")
@@ -69,11 +69,14 @@ def write_native_recording(folder: Path, rec: NativeRecording) -> None:
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     video_ts = np.asarray(rec.video_timestamps_ns, dtype=np.int64)
-    np.save(folder / "ego_timestamps.npy", video_ts)
-    if rec.video_storage == "mp4":
+    if rec.video_storage == "none":   # a glove-only recording: no "video" in recording.json
+        video = None
+    elif rec.video_storage == "mp4":
+        np.save(folder / "ego_timestamps.npy", video_ts)
         write_h264(folder / "ego.mp4", rec.video_frames, fps=_median_fps(video_ts))
         video = {"file": "ego.mp4", "timestamps": "ego_timestamps.npy"}
     else:
+        np.save(folder / "ego_timestamps.npy", video_ts)
         frames_dir = folder / "frames"
         frames_dir.mkdir(exist_ok=True)
         for i, frame in enumerate(rec.video_frames):
@@ -98,9 +101,10 @@ def write_native_recording(folder: Path, rec: NativeRecording) -> None:
         "scene": rec.scene,
         "operator": rec.operator,
         "notes": rec.notes,
-        "video": video,
         "hands": hands,
     }
+    if video is not None:
+        doc["video"] = video
     if rec.extra:
         doc["extra"] = rec.extra
     validate_json(doc, "recording", where=str(folder / "recording.json"))

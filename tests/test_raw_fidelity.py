@@ -1,0 +1,301 @@
+"""Raw glove rows kept exactly (format 3), calibrations recorded, noise floor, `htdata renormalise`."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from htdata.calibration import calibration_id, episode_normaliser
+from htdata.cli import main as cli
+from htdata.format import INDEX_FILE, LEGACY_INDEX_DTYPE, MANIFEST_FILE, raw_member, tactile_member
+from htdata.layouts import load_layout
+from htdata.manifest import load_episodes, load_index, load_manifest
+from htdata.normalise import NormaliseConfig, Normaliser
+from htdata.reader import DatasetReader
+from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+from tests.factories import COLOURS, PERIOD, ingest_cli, make_opentouch, small_pipeline
+
+LAYOUT = "opentouch_right_16x16"
+
+
+def counts_recording(folder: Path, frames: int = 12, nan_row: int | None = None, dup_row: int | None = None,
+                     dtype=np.uint16, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A native recording: 30 Hz video, 100 Hz glove of integer raw counts; returns (values, timestamps)."""
+    t_video = np.arange(frames, dtype=np.int64) * PERIOD
+    t_glove = np.arange(0, frames * PERIOD, 10_000_000, dtype=np.int64)
+    rng = np.random.default_rng(seed)
+    values = rng.integers(0, 3072, size=(t_glove.size, 16, 16)).astype(dtype)
+    if dup_row is not None:
+        t_glove[dup_row + 1] = t_glove[dup_row]
+    rec = NativeRecording(task="grasp", scene="lab", video_storage="jpeg",
+                          video_frames=[np.full((40, 40, 3), COLOURS[0], np.uint8)] * frames,
+                          video_timestamps_ns=t_video,
+                          hands={"right": NativeHand(LAYOUT, values.astype(np.float32), t_glove)})
+    write_native_recording(folder, rec)
+    stored = values
+    if nan_row is not None:   # float source with one NaN row: the frame paired with it is dropped
+        stored = values.astype(np.float32)
+        stored[nan_row, :, 8:] = np.nan
+    np.savez(folder / "tactile_right.npz", values=stored, timestamps_ns=t_glove)   # source dtype as given
+    return stored, t_glove
+
+
+def stored_rows(root: Path, episode: str, hand: str = "right") -> tuple[dict[int, np.ndarray], dict[int, int], list]:
+    """Union over an episode's samples: source row -> raw row, source row -> timestamp; and per-sample arrays."""
+    reader = DatasetReader(root)
+    first, n = reader.episode_range(episode)
+    rows, times, arrays = {}, {}, []
+    for i in range(first, first + n):
+        s = reader.decoded(i)
+        if hand not in s["raw"]:      # an RGB-only sample (its frame's tactile was dropped) holds no rows
+            assert s["meta"].get("rgb_only")
+            continue
+        arr, meta = s["raw"][hand], s["meta"]
+        arrays.append(arr)
+        assert arr.shape[0] == len(meta["raw_row"][hand]) == len(meta["raw_t_ns"][hand])
+        assert meta["raw_row"][hand][meta["raw_paired"][hand]] >= 0
+        assert meta["raw_t_ns"][hand] == sorted(meta["raw_t_ns"][hand])
+        for r, t, v in zip(meta["raw_row"][hand], meta["raw_t_ns"][hand], arr):
+            rows[r], times[r] = v, t
+    return rows, times, arrays
+
+
+@pytest.fixture
+def native_counts(tmp_path):
+    src = tmp_path / "raw"
+    values, ts = counts_recording(src / "rec_counts")
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", f"{small_pipeline(tmp_path, 'native')}={src}", out) == 0
+    return out, values, ts
+
+
+def test_every_glove_row_is_stored_bit_for_bit_in_the_source_dtype(native_counts):
+    out, values, ts = native_counts
+    episode = load_episodes(out)[0]["episode_id"]
+    rows, times, arrays = stored_rows(out, episode)
+    assert sorted(rows) == list(range(values.shape[0]))          # 100 Hz glove: nothing lost (~3 rows per frame)
+    assert all(a.dtype == np.uint16 for a in arrays)
+    for r, v in rows.items():
+        assert v.dtype == values.dtype and v.tobytes() == values[r].tobytes()
+        assert times[r] == ts[r]
+    assert sum(a.shape[0] for a in arrays) == values.shape[0]    # each row once (no row paired twice here)
+
+
+def test_paired_row_is_the_one_the_map_was_made_from(native_counts):
+    out, _, _ = native_counts
+    reader, manifest = DatasetReader(out), load_manifest(out)
+    episode = load_episodes(out)[0]
+    layout = load_layout(out / manifest["layouts"][LAYOUT]["file"])
+    normaliser = episode_normaliser(manifest, episode, "right", layout)
+    from htdata.rasterise import Rasteriser
+    raster = Rasteriser(layout)
+    for i in range(len(reader)):
+        s = reader.decoded(i)
+        paired = s["raw"]["right"][s["meta"]["raw_paired"]["right"]]
+        values, _ = normaliser.apply(paired[None])
+        expect = raster.render(values)[0]
+        assert np.abs(expect - s["tactile"]["right"]).max() <= 2.5e-4    # the map codec's rounding only
+
+
+def test_manifest_records_the_calibration(native_counts):
+    out, _, _ = native_counts
+    manifest, episode = load_manifest(out), load_episodes(out)[0]
+    cal_id = episode["calibration"]["right"]
+    entry = manifest["calibrations"][cal_id]
+    assert entry["layout"] == LAYOUT and entry["convention"] == "inverted" and entry["max_value"] == 3072
+    assert entry["revision"] == 1 and "value block" in entry["from"]
+    assert cal_id == calibration_id(LAYOUT, NormaliseConfig(convention="inverted", max_value=3072.0))
+
+
+def test_rows_of_dropped_frames_and_duplicate_timestamps_are_kept(tmp_path):
+    src = tmp_path / "raw"
+    values, ts = counts_recording(src / "rec_nan", nan_row=10, dup_row=20)   # row 10 = frame 3's
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", f"{small_pipeline(tmp_path, 'native')}={src}", out) == 0
+    episode = load_episodes(out)[0]
+    assert episode["dropped_frames"].get("nonfinite_tactile:right", 0) == 1
+    rows, times, _ = stored_rows(out, episode["episode_id"])
+    assert sorted(rows) == list(range(values.shape[0]))
+    assert np.isnan(rows[10][:, 8:]).all() and not np.isnan(rows[10][:, :8]).any()   # stored as read
+    assert rows[21].tobytes() == values[21].tobytes() and times[21] == times[20]
+
+
+def test_keep_raw_false_stores_no_raw_and_maps_are_unchanged(tmp_path, native_counts):
+    out, _, _ = native_counts
+    pipeline = small_pipeline(tmp_path, "native")
+    pipeline.write_text(pipeline.read_text().replace("keep_bend = true", "keep_bend = true\nkeep_raw = false"))
+    out2 = tmp_path / "ds_noraw"
+    assert ingest_cli("--pipeline", f"{pipeline}={tmp_path / 'raw'}", out2) == 0
+    a, b = DatasetReader(out), DatasetReader(out2)
+    assert len(a) == len(b)
+    for i in range(len(a)):
+        x, y = a.sample(i), b.sample(i)
+        assert raw_member("right") in x and raw_member("right") not in y
+        assert x[tactile_member("right")] == y[tactile_member("right")]
+
+
+def test_renormalise_with_the_original_calibration_is_byte_identical(tmp_path, native_counts):
+    out, _, _ = native_counts
+    assert cli(["renormalise", str(out), "--pipeline", "native", "--force"]) == 0
+    a, b = DatasetReader(out, version=1), DatasetReader(out, version=2)
+    assert load_manifest(out)["version"] == 2 and len(a) == len(b)
+    for i in range(len(a)):
+        assert a.sample(i) == b.sample(i)
+
+
+def test_renormalise_to_a_new_calibration_and_back(tmp_path, native_counts):
+    out, _, _ = native_counts
+    setting = [f"--set", f"normalise.{LAYOUT}.baseline=rest_window", "--set", f"normalise.{LAYOUT}.noise_k=3"]
+    assert cli(["renormalise", str(out), "--pipeline", "native", "--dry-run", *setting]) == 0
+    assert load_manifest(out)["version"] == 1                         # dry run wrote nothing
+    assert cli(["renormalise", str(out), "--pipeline", "native", *setting]) == 0
+    manifest, episode = load_manifest(out), load_episodes(out)[0]
+    new = manifest["calibrations"][episode["calibration"]["right"]]
+    assert new["baseline"] == "rest_window" and new["noise_k"] == 3 and new["revision"] == 2
+    assert new["convention"] == "inverted" and new["max_value"] == 3072     # kept from the layout's value block
+    assert set(episode["calibration_fit"]["right"]) == {"baseline", "noise_floor"}
+    v1, v2 = DatasetReader(out, version=1), DatasetReader(out, version=2)
+    assert any(v1.sample(i)[tactile_member("right")] != v2.sample(i)[tactile_member("right")] for i in range(len(v1)))
+    assert all(v1.sample(i)[raw_member("right")] == v2.sample(i)[raw_member("right")] for i in range(len(v1)))
+    # back to the layout's calibration: the version-1 maps again, from the raw rows alone
+    assert cli(["renormalise", str(out), "--pipeline", "native"]) == 0
+    v3 = DatasetReader(out, version=3)
+    assert all(v1.sample(i) == v3.sample(i) for i in range(len(v1)))
+    assert cli(["validate", str(out), "--deep"]) == 0
+
+
+def test_renormalise_refuses_episodes_without_raw_rows(tmp_path, capsys):
+    pipeline = small_pipeline(tmp_path, "opentouch")
+    pipeline.write_text(pipeline.read_text() + "\n[tactile]\nkeep_raw = false\n"
+                        if "[tactile]" not in pipeline.read_text()
+                        else pipeline.read_text().replace("[tactile]", "[tactile]\nkeep_raw = false"))
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", f"{pipeline}={make_opentouch(tmp_path / 'ot')}", out) == 0
+    assert cli(["renormalise", str(out), "--pipeline", "opentouch", "--force"]) == 2
+    err = capsys.readouterr().err
+    assert "no stored raw glove rows" in err and "ot-home_kitchen_p1-demo_01" in err
+    assert load_manifest(out)["version"] == 1
+
+
+def test_noise_floor_silences_rest_noise_of_raw_count_gloves():
+    """Raw counts ~490..1022 with per-taxel offsets and noise: a baseline alone leaves fake contact at rest."""
+    layout = load_layout(LAYOUT)
+    rng = np.random.default_rng(3)
+    offset = rng.uniform(490, 560, size=(16, 16))
+    rest = offset + rng.normal(0, 4.0, size=(40, 16, 16))
+    press = rest[-1:] + 0.0
+    press[0, 4:8, 4:8] += 300                                    # a real contact
+    raw = np.concatenate([rest, press]).astype(np.float32)
+    direct = dict(convention="direct", max_value=1023.0, baseline="rest_window", rest_frames=20)
+    plain = Normaliser(NormaliseConfig(**direct), layout)
+    plain.fit_baseline(raw)
+    floored = Normaliser(NormaliseConfig(**direct, noise_k=3.0), layout)
+    floored.fit_baseline(raw)
+    live = layout.live_mask
+    a, _ = plain.apply(raw[20:40])
+    b, _ = floored.apply(raw[20:40])
+    assert (a[:, live] > 0).mean() > 0.3                       # fake contact almost everywhere at rest
+    assert (b[:, live] > 0).mean() < 0.01                      # the floor removes it
+    c, _ = floored.apply(raw[40:])
+    assert c[0, 4:8, 4:8][live[4:8, 4:8]].min() > 0.2          # and keeps the real contact
+    fitted = floored.fitted()
+    restored = Normaliser(NormaliseConfig(**direct, noise_k=3.0), layout).restore(fitted)
+    assert np.array_equal(restored.apply(raw)[0], floored.apply(raw)[0], equal_nan=True)
+
+
+@pytest.mark.parametrize("bad", [dict(noise_k=-1.0), dict(noise_k=2.0, baseline="none"),
+                                 dict(noise_floor=1.5), dict(noise_floor=float("nan"))])
+def test_noise_settings_are_checked(bad):
+    with pytest.raises(ValueError, match="noise"):
+        NormaliseConfig(**{"baseline": "rest_window", **bad}).validate()
+
+
+def test_a_format_2_index_is_read_as_the_current_dtype(native_counts):
+    out, _, _ = native_counts
+    manifest = json.loads((out / MANIFEST_FILE).read_text())
+    index_path = out / manifest["index_file"]
+    rows = load_index(out, mmap=False)
+    legacy = np.zeros(rows.shape, dtype=LEGACY_INDEX_DTYPE)
+    for name in LEGACY_INDEX_DTYPE.names:
+        legacy[name] = rows[name]
+    buf = io.BytesIO()
+    np.save(buf, legacy)
+    index_path.write_bytes(buf.getvalue())
+    again = load_index(out)
+    assert again.dtype == rows.dtype and not again[f"size_raw_right"].any()
+    assert all(np.array_equal(again[n], rows[n]) for n in LEGACY_INDEX_DTYPE.names)
+    assert INDEX_FILE == "index.npy"
+
+
+def test_episode_stream_is_the_recording_full_rate(native_counts):
+    from htdata.rawstream import episode_stream
+
+    out, values, ts = native_counts
+    stream = episode_stream(DatasetReader(out), 0, "right")
+    assert len(stream) == values.shape[0] and stream.rows.dtype == values.dtype
+    assert np.array_equal(stream.source_row, np.arange(values.shape[0]))
+    assert np.array_equal(stream.t_ns, ts) and stream.rows.tobytes() == values.tobytes()
+    with pytest.raises(ValueError, match="no raw left rows"):
+        episode_stream(DatasetReader(out), 0, "left")
+
+
+def test_loader_maps_from_raw_rows_match_the_stored_maps(native_counts):
+    import torch
+
+    from htdata.torchdata import TactileFrameDataset, TactileStream
+
+    out, _, _ = native_counts
+    raw, stored = TactileFrameDataset(out), TactileFrameDataset(out, map_source="stored")
+    assert raw._builder.from_raw and not stored._builder.from_raw     # auto: nearest mode + raw rows
+    diffs = [float((raw[i]["tactile"] - stored[i]["tactile"]).abs().max()) for i in range(len(raw))]
+    assert 0 < max(diffs) <= 2.5e-4                                     # only the map codec's half rounding
+    streamed = torch.stack([x["tactile"] for x in TactileStream(out)])
+    assert torch.equal(streamed, torch.stack([raw[i]["tactile"] for i in range(len(raw))]))
+    with pytest.raises(ValueError, match="map_source"):
+        TactileFrameDataset(out, map_source="exr")
+
+
+def test_episode_record_carries_taxel_health(tmp_path):
+    """A taxel stuck at half scale in a 40-frame episode is named in the record; the rest is clean."""
+    layout = load_layout(LAYOUT)
+    frames = 40
+    t_video = np.arange(frames, dtype=np.int64) * PERIOD
+    values = np.full((frames, 16, 16), 3072.0, np.float32)          # inverted units: 3072 = no load
+    r, c = map(int, np.argwhere(layout.live_mask)[20])
+    values[:, r, c] = 1536.0                                         # stuck at 0.5
+    write_native_recording(tmp_path / "raw" / "rec_stuck", NativeRecording(
+        task="grasp", scene="lab", video_storage="jpeg", video_timestamps_ns=t_video,
+        video_frames=[np.full((40, 40, 3), COLOURS[0], np.uint8)] * frames,
+        hands={"right": NativeHand(LAYOUT, values, t_video)}))
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", f"{small_pipeline(tmp_path, 'native')}={tmp_path / 'raw'}", out) == 0
+    health = load_episodes(out)[0]["taxel_health"]["right"]
+    assert health["assessed"] and health["live"] == int(layout.live_mask.sum())
+    assert health["counts"]["stuck"] == 1 and health["cells"] == {"stuck": [[r, c]]}
+    assert sum(health["counts"].values()) == 1
+
+
+def test_glove_rate_windows_follow_the_full_rate_stream(native_counts):
+    from htdata.rawstream import RawMapRenderer
+    from htdata.torchglove import GloveRateWindowDataset
+
+    out, values, ts = native_counts
+    windows = GloveRateWindowDataset(out, window=4)
+    reader = DatasetReader(out)
+    assert len(windows) == len(reader) - 1          # frame 0's paired row (row 0) has no 3 rows before it
+    item = windows[len(windows) - 1]
+    paired = json.loads(reader.sample(int(item["index"]))["json"])
+    t_paired = paired["raw_t_ns"]["right"][paired["raw_paired"]["right"]]
+    end = int(np.flatnonzero(ts == t_paired)[0])
+    assert item["t_ns"].tolist() == ts[end - 3:end + 1].tolist()       # 10 ms apart: the glove's own rate
+    assert item["tactile"].shape == (4, 1, 224, 224)
+    # the last map is the paired row's, as the loader renders it; the others are rows between frames
+    assert np.array_equal(item["tactile"][-1, 0].numpy(), RawMapRenderer(reader).sample_map(int(item["index"]), "right"))
+    renderer = RawMapRenderer(reader)
+    normaliser, raster = renderer._parts(0, "right")
+    expect = raster.render(normaliser.apply(values[end - 3:end + 1])[0])
+    assert np.array_equal(item["tactile"][:, 0].numpy(), expect)
