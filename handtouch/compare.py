@@ -107,9 +107,10 @@ def train_and_score(cfg, prepared) -> dict:
     metrics = train(cfg)
     model = load_model(Path(cfg.out_dir) / f"stage{max(cfg.stages)}.pt")
     seconds = sum(s.get("seconds", 0.0) for s in metrics["stages"].values())
-    return {"results": evaluate(model, prepared, parts=tuple(prepared)), "perplexity": codebook_perplexity(model, prepared),
-            "train_seconds": seconds, "steps": {k: s["steps"] for k, s in metrics["stages"].items()},
-            "out_dir": cfg.out_dir, "model": model.name}
+    return {"results": evaluate(model, prepared, parts=tuple(prepared)),
+            "perplexity": codebook_perplexity(model, prepared), "train_seconds": seconds,
+            "steps": {k: s["steps"] for k, s in metrics["stages"].items()}, "out_dir": cfg.out_dir,
+            "model": model.name}
 
 
 def compare(config: Path, sets: list[str], prepared: dict, out: Path, rows: list[Row] = ROWS,
@@ -124,7 +125,7 @@ def compare(config: Path, sets: list[str], prepared: dict, out: Path, rows: list
                  "definition": row.definition, "same_as": same_as}
         if same_as:
             log(f"compare: {row.key} has the same resolved config as {same_as}: not trained again")
-            entry.update({k: v for k, v in scored[same_as].items()})
+            entry.update(scored[same_as])
         else:
             log(f"compare: training {row.key} ({' '.join(row.overrides) or 'base config'}) -> {cfg.out_dir}")
             scored[row.key] = train_and_score(cfg, prepared)

@@ -64,9 +64,10 @@ def check_compatible(a: Snapshot, b: Snapshot) -> None:
     if ma["canonical"]["sha256"] != mb["canonical"]["sha256"]:
         raise MergeConflict(f"different canonical hand templates (sha256 {ma['canonical']['sha256'][:12]} in "
                             f"{a.root} vs {mb['canonical']['sha256'][:12]} in {b.root})")
-    if ma["codec"] != mb["codec"]:
-        keys = sorted({f"{k}.{s}" for k in ("tactile", "rgb") for s in set(ma["codec"].get(k, {}))
-                       | set(mb["codec"].get(k, {})) if ma["codec"].get(k, {}).get(s) != mb["codec"].get(k, {}).get(s)})
+    # the settings must agree; codec.choice only says how each dataset arrived at them (reason texts differ)
+    keys = sorted({f"{k}.{s}" for k in ("tactile", "rgb") for s in set(ma["codec"].get(k, {}))
+                   | set(mb["codec"].get(k, {})) if ma["codec"].get(k, {}).get(s) != mb["codec"].get(k, {}).get(s)})
+    if keys:
         raise MergeConflict(f"different codec settings: {', '.join(keys)}")
     for lid in set(ma["layouts"]) & set(mb["layouts"]):
         if ma["layouts"][lid]["sha256"] != mb["layouts"][lid]["sha256"]:
@@ -159,7 +160,9 @@ def merge(a_root, b_root, out_root, command: str) -> MergeReport:
         copy_layout_files(b, out)
         fields = {"sources": a.manifest["sources"] + b.manifest["sources"],
                   "layouts": {**b.manifest["layouts"], **a.manifest["layouts"]},
-                  "canonical": a.manifest["canonical"], "codec": a.manifest["codec"]}
+                  "canonical": a.manifest["canonical"], "codec": a.manifest["codec"],
+                  # content ids: the same calibration in A and B is one entry (revisions renumbered)
+                  "calibrations": {**b.manifest.get("calibrations", {}), **a.manifest.get("calibrations", {})}}
         report.manifest = commit_parts(out, parts, fields, None, command, splits=lambda eps, sha: {}, next_unit=unit)
     return report
 

@@ -89,10 +89,11 @@ def render_tactile(tmap: np.ndarray, coverage: np.ndarray, outline: np.ndarray, 
     return panel
 
 
-def absent_panel(hand: str) -> np.ndarray:
+def absent_panel(what: str) -> np.ndarray:
+    """A grey panel saying what the sample does not hold ("no left hand", "no RGB (glove only)")."""
     panel = np.empty((CANVAS, CANVAS, 3), np.uint8)
     panel[:] = ABSENT_GREY
-    text = f"no {hand} hand"
+    text = f"no {what}"
     (tw, th), _ = cv2.getTextSize(text, FONT, 0.6, 1)
     cv2.putText(panel, text, ((CANVAS - tw) // 2, (CANVAS + th) // 2), FONT, 0.6, (255, 255, 255), 1,
                 cv2.LINE_AA)
@@ -180,12 +181,14 @@ def render_contact_sheet(dataset, episode: str | None = None, frames: int = 6, c
         for r, frame in enumerate(chosen):
             sample = reader.decoded(first + int(frame))
             y = TITLE_H + HEADER_H + r * (CANVAS + PAD)
-            panels = [cv2.cvtColor(sample["rgb"], cv2.COLOR_RGB2BGR)]
+            panels = [cv2.cvtColor(sample["rgb"], cv2.COLOR_RGB2BGR) if "rgb" in sample
+                      else absent_panel("RGB (glove only)")]
             for hand in HANDS:
                 if hand in sample["tactile"]:
                     panels.append(render_tactile(sample["tactile"][hand], coverage[hand], outline, vmax))
-                else:
-                    panels.append(absent_panel(hand))
+                else:   # an RGB-only sample (format 3) or a hand the episode does not have
+                    panels.append(absent_panel("tactile" if sample["meta"].get("rgb_only") and hand in ep["hands"]
+                                              else f"{hand} hand"))
             for c, panel in enumerate(panels):
                 x = PAD + c * (CANVAS + PAD)
                 sheet[y:y + CANVAS, x:x + CANVAS] = panel

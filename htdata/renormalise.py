@@ -102,7 +102,8 @@ class Recalibration:
         self.layouts = dataset_layouts(snap)
         codec = snap.manifest["codec"]["tactile"]
         self.raster_mode = codec.get("raster_mode", "nearest")
-        self.settings = CodecSettings(tactile_compression=codec.get("compression", "zip"))
+        self.settings = CodecSettings(tactile_compression=codec.get("compression", "zip"),
+                                      tactile_pixel_type=codec.get("pixel_type", "half"))   # the dataset's maps
         self.records = {ep["episode_id"]: ep for ep in snap.episodes}
         self.state: dict[str, dict] = {}     # episode -> hand -> (normaliser, rasteriser, [contact sum, max])
 

@@ -101,3 +101,27 @@ def test_frames_option_is_checked(tmp_path):
     out = ingest(tmp_path, tmp_path / "raw")
     with pytest.raises(ValueError, match="frames must be one of"):
         TactileFrameDataset(out, frames="all")
+
+
+def test_preview_stats_and_card_read_rgb_only_and_tactile_only_samples(tmp_path):
+    recording(tmp_path / "raw" / "rec_late", glove_start=4)
+    recording(tmp_path / "raw" / "rec_glove", video="none")
+    out = ingest(tmp_path, tmp_path / "raw")
+    for episode in ("nat-rec_late", "nat-rec_glove"):
+        assert cli(["preview", str(out), str(tmp_path / f"{episode}.png"), "--episode", episode]) == 0
+    assert cli(["stats", str(out), "--json"]) == 0
+    assert cli(["card", str(out), str(tmp_path / "card.html")]) == 0
+    assert cli(["validate", str(out), "--deep"]) == 0
+
+
+def test_rgb_frame_with_a_duplicate_timestamp_stays_dropped_and_counted(tmp_path):
+    folder = tmp_path / "raw" / "rec_dup"
+    recording(folder, frames=10)
+    ts = np.load(folder / "ego_timestamps.npy")
+    ts[5] = ts[4]                                   # the camera stamped two frames alike
+    np.save(folder / "ego_timestamps.npy", ts)
+    out = ingest(tmp_path, tmp_path / "raw")
+    m = metas(out)                                  # a second frame at one time cannot be ordered
+    assert [x["source_frame"] for x in m] == [0, 1, 2, 3, 4, 6, 7, 8, 9]
+    assert load_episodes(out)[0]["dropped_frames"] == {"duplicate_timestamp": 1}
+    assert cli(["validate", str(out), "--deep"]) == 0

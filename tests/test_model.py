@@ -355,7 +355,7 @@ def test_vqvae_baseline_is_a_conv_autoencoder_with_the_codebook():
     assert _attention_modules(tiny_model("vit").decoder)            # HandTouch's decoder attends
     b = frame_batch(2)
     out = stage_losses(model, 1, b)
-    assert float(out["vq"]) > 0 and torch.isfinite(out["perplexity"])   # the latent is quantised
+    assert float(out["vq"].detach()) > 0 and torch.isfinite(out["perplexity"])   # the latent is quantised
     out["loss"].backward()
     assert model.vq.codebook.grad is not None and float(model.vq.codebook.grad.abs().sum()) > 0
 

@@ -19,6 +19,8 @@ import numpy as np
 
 from htdata.adapters import get_adapter
 from htdata.codec import encode_rgb, encode_tactile
+from htdata.codecrule import resolve_sources
+from htdata.ingest import Source
 from htdata.ingest.episode import EpisodeTally, episode_frames
 from htdata.ingest.plan import resolve_layouts
 from htdata.pipeline import PipelineConfig, load_pipeline
@@ -39,7 +41,9 @@ def discover(pipeline: str, root: Path) -> tuple[PipelineConfig, object, list]:
     """The pipeline, its adapter and its episodes, planned as ingest plans them (layouts resolved)."""
     cfg = load_pipeline(pipeline)
     adapter = get_adapter(cfg.adapter.name)
-    return cfg, adapter, [resolve_layouts(r, cfg) for r in adapter.discover(Path(root), cfg.adapter.params)]
+    refs = [resolve_layouts(r, cfg) for r in adapter.discover(Path(root), cfg.adapter.params)]
+    cfg = resolve_sources([Source(pipeline=cfg, root=Path(root))], [refs])[0].pipeline   # the codec an ingest picks
+    return cfg, adapter, refs
 
 
 def episode_maps(cfg: PipelineConfig, adapter, ref) -> EpisodeMaps:
@@ -80,7 +84,7 @@ def bare_bound(cfg: PipelineConfig, adapter, refs: list) -> dict:
     in `chunk_frames` chunks: the ingest's "decode" stage. resize_s:
     `rgb.to_square_224` with the pipeline's size, crop and interpolation.
     jpeg_s: `encode_rgb` at the pipeline's quality. exr_s: `encode_tactile`
-    of every hand's map with the pipeline's compression. Nothing else (sync,
+    of every hand's map with the pipeline's compression and resolved pixel type. Nothing else (sync,
     normalise, rasterise, JSON, spool, shard writing) is timed; the maps are
     rasterised beforehand, untimed. `open_s`, `rgb_decode_s` and
     `tactile_read_s` split decode_s.
@@ -88,6 +92,7 @@ def bare_bound(cfg: PipelineConfig, adapter, refs: list) -> dict:
     t = {"open_s": 0.0, "rgb_decode_s": 0.0, "tactile_read_s": 0.0, "resize_s": 0.0, "jpeg_s": 0.0, "exr_s": 0.0}
     frames = 0
     rgb = cfg.rgb
+    pixel_type = cfg.codec_settings().tactile_pixel_type
     for ref in refs:
         em = episode_maps(cfg, adapter, ref)
         wanted = {int(i): k for k, i in enumerate(em.rgb_index)}
@@ -115,7 +120,7 @@ def bare_bound(cfg: PipelineConfig, adapter, refs: list) -> dict:
                     encode_rgb(square, rgb.quality)
                     t3 = time.perf_counter()
                     for maps in em.maps.values():
-                        encode_tactile(maps[k], cfg.tactile.compression)
+                        encode_tactile(maps[k], cfg.tactile.compression, pixel_type=pixel_type)
                     t4 = time.perf_counter()
                     t["resize_s"] += t2 - t1
                     t["jpeg_s"] += t3 - t2

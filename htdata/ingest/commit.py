@@ -13,6 +13,7 @@ import json
 from pathlib import Path
 
 from htdata.codec import DEFAULT_CODEC_INFO
+from htdata.codecrule import codec_block
 from htdata.ingest.unit import decode_coverage
 from htdata.layouts import load_canonical
 from htdata.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, write_layout_files
@@ -28,7 +29,7 @@ def codec_info(cfg: PipelineConfig) -> dict:
     codec["rgb"]["quality"] = cfg.rgb.quality
     codec["rgb"]["crop"] = cfg.rgb.crop
     codec["rgb"]["interpolation"] = cfg.rgb.interpolation
-    return codec
+    return codec_block(codec, cfg.codec_choice())
 
 
 def unit_result(record: dict) -> UnitResult:

@@ -247,7 +247,8 @@ def _render_kept(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict,
 def _unpaired_rgb(streams, sync) -> list[tuple[int, int, str]]:
     """(t_rgb_ns, rgb index, reason) of the RGB frames the pairing dropped, in time order."""
     ts = np.asarray(streams.rgb_timestamps_ns, dtype=np.int64)
-    return sorted((int(ts[i]), int(i), reason) for i, reason in sync.dropped)
+    # a frame stamped like another has no time of its own (sync kept the first): it stays dropped, counted
+    return sorted((int(ts[i]), int(i), reason) for i, reason in sync.dropped if reason != "duplicate_timestamp")
 
 
 class _RgbOnlyFrames:

@@ -15,12 +15,14 @@ rows are in time order (then source order); meta names their timestamps
 samples, deduplicated by source row (a row paired with two frames is stored
 twice). Rows keep the source dtype, bit for bit.
 
-RGB frames the pairing could not use (no tactile row within the skew,
-duplicate RGB timestamp, or tactile values the ingest dropped) are kept as
-RGB-only samples when `[rgb] keep_unpaired` (default): no tactile member,
-meta "hands" all false and "rgb_only" naming the reason; they hold no raw
-rows. `FrameQueue` puts both kinds out in time order while holding the last
-paired frame open for the rows of frames dropped after it.
+RGB frames the pairing could not use (no tactile row within the skew, or
+tactile values the ingest dropped) are kept as RGB-only samples when
+`[rgb] keep_unpaired` (default): no tactile member, meta "hands" all false
+and "rgb_only" naming the reason; they hold no raw rows. A frame whose
+timestamp duplicates an earlier frame's has no time of its own: it stays
+dropped (counted as "duplicate_timestamp"). `FrameQueue` puts both kinds
+out in time order while holding the last paired frame open for the rows of
+frames dropped after it.
 """
 
 from __future__ import annotations

@@ -66,6 +66,7 @@ class UnitTask:
 # Settings every pipeline of one dataset must share: the manifest records one codec and raster mode.
 SHARED_SETTINGS = {
     "tactile.compression": lambda c: c.tactile.compression,
+    "codec.tactile": lambda c: c.codec.tactile,
     "tactile.raster_mode": lambda c: c.tactile.raster_mode,
     "rgb.quality": lambda c: c.rgb.quality,
     "rgb.crop": lambda c: c.rgb.crop,

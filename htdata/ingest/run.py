@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+from htdata.codecrule import resolve_sources
 from htdata.executors import make_executor
 from htdata.format import INGEST_REPORT
 from htdata.fsutil import write_bytes_atomic
@@ -93,9 +94,11 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
     with WriterLock(out, command) as lock:
         prepare_output(out)
         parent = current_snapshot(out)
-        check_compatible(parent, sources)
         refs, plan_failures = discover_sources(sources, tuple(layout_dirs))
         check_unique_ids(refs)
+        # the codec rule needs the run's gloves: resolved after discovery, before anything is fingerprinted
+        sources = resolve_sources(sources, refs, parent.manifest["codec"]["tactile"] if parent else None)
+        check_compatible(parent, sources)
         # pipeline (CLI) order, then episode id: the order units are numbered in
         pairs = [(r, s) for s, rs in zip(sources, refs) for r in sorted(rs, key=lambda r: r.episode_id)]
         settings = {id(s): s.pipeline.to_dict() for s in sources}

@@ -76,7 +76,7 @@ class Spool:
 
 
 def codec_settings(cfg: PipelineConfig) -> CodecSettings:
-    return CodecSettings(tactile_compression=cfg.tactile.compression, rgb_quality=cfg.rgb.quality)
+    return cfg.codec_settings()
 
 
 def spool_episode(ref, cfg: PipelineConfig, adapter, spool: Spool, clock: StageClock) -> EpisodeTally:

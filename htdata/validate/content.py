@@ -22,7 +22,8 @@ from htdata.validate.report import Check, Recorder
 from htdata.validate.sensors import accumulate, hand_key
 
 RGB_SHAPE = (CANVAS, CANVAS, 3)
-TACTILE_PIXELS = np.dtype(np.float16)     # stored pixel type of tactile maps (EXR half)
+# manifest codec.tactile.pixel_type -> stored pixel type of the tactile maps (htdata/codecrule.py)
+TACTILE_PIXELS = {"half": np.dtype(np.float16), "float": np.dtype(np.float32)}
 
 
 @dataclass
@@ -84,13 +85,15 @@ def decode_mask(frames: np.ndarray, deep: bool, sample_frac: float, seed: int) -
 
 
 def check_content(geometry: dict[str, CoverageGeometry], rec: Recorder, key: str, where: dict,
-                  members: dict[str, bytes], hands_present: list[str], sensor: dict) -> None:
+                  members: dict[str, bytes], hands_present: list[str], sensor: dict,
+                  pixel_type: str = "half") -> None:
     """Decode one sample's members and check shapes, dtypes, values and coverage."""
     rec.checked["samples_decoded"] += 1
     if RGB_MEMBER in members or not _tactile_only(members):
         _check_rgb(rec, key, where, members)
     for hand in hands_present:
-        _check_tactile(geometry, rec, key, where, hand, members[tactile_member(hand)], sensor)
+        _check_tactile(geometry, rec, key, where, hand, members[tactile_member(hand)], sensor,
+                       TACTILE_PIXELS[pixel_type])
     for hand in HANDS:
         member = bend_member(hand)
         if member in members:
@@ -122,8 +125,8 @@ def _check_rgb(rec: Recorder, key: str, where: dict, members: dict[str, bytes]) 
 
 
 def _check_tactile(geometry: dict[str, CoverageGeometry], rec: Recorder, key: str, where: dict, hand: str,
-                   data: bytes, sensor: dict) -> None:
-    """One tactile member: stored as half (224,224), finite, in [0,1], zero outside coverage."""
+                   data: bytes, sensor: dict, pixels_dtype: np.dtype) -> None:
+    """One tactile member: stored as the manifest's pixel type (224,224), finite, in [0,1], zero outside coverage."""
     name = f"{key}.{tactile_member(hand)}"
     rec.checked["tactile_maps_decoded"] += 1
     try:
@@ -131,9 +134,9 @@ def _check_tactile(geometry: dict[str, CoverageGeometry], rec: Recorder, key: st
     except ValueError as exc:
         rec.fail("tactile_decode", str(exc), **where, hand=hand)
         return
-    if pixels.shape != MAP_SHAPE or pixels.dtype != TACTILE_PIXELS:
+    if pixels.shape != MAP_SHAPE or pixels.dtype != pixels_dtype:
         rec.fail("tactile_shape", f"{name}: {pixels.shape} {pixels.dtype}", **where, hand=hand,
-                 expected=f"{MAP_SHAPE} {TACTILE_PIXELS}", found=f"{pixels.shape} {pixels.dtype}")
+                 expected=f"{MAP_SHAPE} {pixels_dtype}", found=f"{pixels.shape} {pixels.dtype}")
         return
     tmap = pixels.astype(np.float32)
     finite = np.isfinite(tmap)

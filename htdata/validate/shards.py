@@ -42,6 +42,7 @@ class ShardJob:
     content_hash: bool                     # hash rgb+tactile bytes (split leakage check)
     coverage: dict[str, np.ndarray] = field(default_factory=dict)   # hand_key -> (224,224) bool
     region_map: np.ndarray | None = None
+    tactile_pixel_type: str = "half"       # manifest codec.tactile.pixel_type
 
 
 def shard_jobs(ds: Loaded, decode: np.ndarray, coverage: dict[str, np.ndarray], region_map: np.ndarray | None,
@@ -65,7 +66,8 @@ def shard_jobs(ds: Loaded, decode: np.ndarray, coverage: dict[str, np.ndarray], 
             shard_pos=pos, name=entry["name"], path=str(ds.root / SHARDS_DIR / entry["name"]),
             sha256=entry["sha256"], bytes=entry["bytes"], rows=shard_rows, row_ids=ids,
             episode_ids=ep_ids, decode=decode[ids], content_hash=content_hash,
-            coverage={k: v for k, v in cov_by_hand.items() if k in needed}, region_map=region_map))
+            coverage={k: v for k, v in cov_by_hand.items() if k in needed}, region_map=region_map,
+            tactile_pixel_type=ds.manifest["codec"]["tactile"].get("pixel_type", "half")))
     return jobs
 
 
@@ -144,4 +146,5 @@ class _ShardCheck:
             self.hashes.append((int(job.row_ids[i]), frame_digest(members)))
         if job.decode[i]:
             hands_present = [h for h in HANDS if tactile_member(h) in members]
-            check_content(self.geometry, self.content, key, where, members, hands_present, self.sensor)
+            check_content(self.geometry, self.content, key, where, members, hands_present, self.sensor,
+                          self.job.tactile_pixel_type)
