@@ -81,7 +81,8 @@ def plan_renormalise(snap: Snapshot, pipeline: PipelineConfig, patterns: list[st
             plan.unchanged += 1
             continue
         rows = snap.index[snap.index["episode"] == pos]
-        if any(not np.all(rows[SIZE_FIELDS[raw_member(h)]] > 0) for h in hands):
+        mapped = {h: rows[SIZE_FIELDS[tactile_member(h)]] > 0 for h in hands}   # RGB-only samples have no map
+        if any(not np.all(rows[SIZE_FIELDS[raw_member(h)]][mapped[h]] > 0) for h in hands):
             no_raw.append(eid)
         plan.changes[eid] = hands
     if no_raw:
@@ -125,9 +126,12 @@ class Recalibration:
         """The paired raw rows of the episode's first `chunk_frames` frames (what the ingest fitted on)."""
         first, n = self.reader.episode_range(eid)
         rows = []
-        for i in range(first, first + min(n, self.pipeline.tactile.chunk_frames)):
-            members = self.reader.sample(i, (JSON_MEMBER, raw_member(hand)))
-            rows.append(_paired_row(members, hand, f"{eid} frame {i - first}"))
+        for i in range(first, first + n):
+            if len(rows) == self.pipeline.tactile.chunk_frames:
+                break
+            members = self.reader.sample(i, (JSON_MEMBER, tactile_member(hand), raw_member(hand)))
+            if tactile_member(hand) in members:   # RGB-only samples hold no rows
+                rows.append(_paired_row(members, hand, f"{eid} frame {i - first}"))
         return np.stack(rows)
 
     def members(self, episode_id: str, frame: int, members: dict[str, bytes]) -> dict[str, bytes]:
@@ -136,6 +140,8 @@ class Recalibration:
         state = self.state.get(episode_id) or self._start(episode_id)
         out = dict(members)
         for hand, (normaliser, raster, contact) in state.items():
+            if tactile_member(hand) not in members:   # an RGB-only sample: nothing to renormalise
+                continue
             where = f"{episode_id} frame {frame} {hand} hand"
             values, finite = normaliser.apply(_paired_row(members, hand, where)[None])
             if not finite.all():
@@ -160,8 +166,9 @@ class Recalibration:
         stats = dict(record.get("stats", {}))
         mean, peak = dict(stats.get("mean_contact", {})), dict(stats.get("max_contact", {}))
         calibration, fits = dict(record.get("calibration", {})), dict(record.get("calibration_fit", {}))
+        paired = int(stats.get("frames_kept", n))   # frames with maps (RGB-only samples have none)
         for hand, (normaliser, _, (total, top)) in state.items():
-            mean[hand] = total / (n * int(normaliser.live_mask.sum()))
+            mean[hand] = total / (paired * int(normaliser.live_mask.sum()))
             peak[hand] = top
             calibration[hand] = self.plan.changes[eid][hand][1]
             fits.pop(hand, None)

@@ -125,3 +125,16 @@ def test_rgb_frame_with_a_duplicate_timestamp_stays_dropped_and_counted(tmp_path
     assert [x["source_frame"] for x in m] == [0, 1, 2, 3, 4, 6, 7, 8, 9]
     assert load_episodes(out)[0]["dropped_frames"] == {"duplicate_timestamp": 1}
     assert cli(["validate", str(out), "--deep"]) == 0
+
+
+def test_renormalise_skips_rgb_only_samples(tmp_path):
+    recording(tmp_path / "raw" / "rec_late", glove_start=4)
+    out = ingest(tmp_path, tmp_path / "raw")
+    assert cli(["renormalise", str(out), "--pipeline", "native", "--force"]) == 0
+    a, b = DatasetReader(out, version=1), DatasetReader(out, version=2)
+    assert all(a.sample(i) == b.sample(i) for i in range(len(a)))     # byte for byte, RGB-only ones too
+    setting = ["--set", f"normalise.{LAYOUT}.baseline=rest_window", "--set", f"normalise.{LAYOUT}.noise_k=3"]
+    assert cli(["renormalise", str(out), "--pipeline", "native", *setting]) == 0
+    assert cli(["validate", str(out), "--deep"]) == 0
+    ep = load_episodes(out)[0]
+    assert ep["stats"]["frames_kept"] == 8 and 0 <= ep["stats"]["mean_contact"]["right"] <= 1   # over the 8 maps

@@ -157,3 +157,24 @@ def test_with_overrides_parses_values_and_validates():
                        ("rgb.bogus=1", "bogus")]:
         with pytest.raises(ValueError, match=match):
             cfg.with_overrides([bad])
+
+
+def test_set_values_parse_as_toml_but_dates_stay_text():
+    from htdata.pipeline import parse_setting
+
+    assert parse_setting("sync.max_skew_ms=20") == ("sync.max_skew_ms", 20)
+    assert parse_setting("tactile.keep_raw=false") == ("tactile.keep_raw", False)
+    assert parse_setting("adapter.params.annotations=labels.csv") == ("adapter.params.annotations", "labels.csv")
+    # TOML would read these as a date / a time: no setting takes one, the text is meant
+    assert parse_setting("adapter.params.session=2026-01-01") == ("adapter.params.session", "2026-01-01")
+    assert parse_setting("adapter.params.at=07:32:00") == ("adapter.params.at", "07:32:00")
+
+
+def test_a_partial_normalise_table_keeps_the_layout_units():
+    from htdata.layouts import load_layout
+    from htdata.pipeline import load_pipeline
+
+    cfg = load_pipeline("native").with_overrides(["normalise.opentouch_right_16x16.noise_floor=0.01"])
+    n = cfg.normalise_for(load_layout("opentouch_right_16x16"))
+    assert (n.convention, n.max_value, n.noise_floor) == ("inverted", 3072.0, 0.01)
+    assert cfg.to_dict()["normalise"]["opentouch_right_16x16"] == {"noise_floor": 0.01}

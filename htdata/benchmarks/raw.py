@@ -114,7 +114,8 @@ def raw_markdown(d: dict) -> list[str]:
                          ("raw_over_stored", "raw / EXR speed"), ("max_abs_difference", "max |difference|"),
                          ("raster_mode", "raster mode")])
     faster = "faster" if m["raw_over_stored"] >= 1 else "slower"
-    return lines + [f"Rendering from raw rows is {faster} ({m['raw_over_stored']:.2f}x) and exact in nearest mode "
-                    f"(the difference is the map codec's rounding of the stored map): the torch loaders' default "
-                    f"`map_source=\"auto\"` renders from raw rows when a dataset has them and was rasterised in "
-                    f"nearest mode.", ""]
+    same = ("identical to the stored maps (this dataset stores float maps)" if m["max_abs_difference"] == 0 else
+            "exact, the stored maps differing by the map codec's rounding")
+    return lines + [f"Rendering from raw rows is {faster} ({m['raw_over_stored']:.2f}x) and, in nearest mode, {same}: "
+                    f"the torch loaders' default `map_source=\"auto\"` renders from raw rows when a dataset has them "
+                    f"and was rasterised in nearest mode.", ""]

@@ -244,6 +244,21 @@ def _render_kept(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict,
     return maps, bends
 
 
+def _rgb_source(ref, cfg: PipelineConfig, streams, sync, clock: StageClock, with_rgb: bool):
+    """(RgbFetcher or None, unpaired RGB frames to keep): none of either for a glove-only recording."""
+    if not (with_rgb and streams.has_video):
+        return None, []
+    rgb_cfg = cfg.rgb
+    unpaired = _unpaired_rgb(streams, sync) if rgb_cfg.keep_unpaired else []
+
+    def resize(frame, i):
+        return to_square_224(frame, rgb_cfg.size, rgb_cfg.crop, rgb_cfg.interpolation,
+                             where=f"{ref.source_ref} [{ref.episode_id}] frame {i}")
+
+    wanted = np.concatenate([sync.rgb_index, np.asarray([i for _, i, _ in unpaired], dtype=np.int64)])
+    return RgbFetcher(ref, streams.iter_rgb(), wanted, resize, clock), unpaired
+
+
 def _unpaired_rgb(streams, sync) -> list[tuple[int, int, str]]:
     """(t_rgb_ns, rgb index, reason) of the RGB frames the pairing dropped, in time order."""
     ts = np.asarray(streams.rgb_timestamps_ns, dtype=np.int64)
@@ -291,12 +306,15 @@ def _frame_meta(ref, sync, k: int, rgb_index: int, frame_index: int, hands: list
 
 def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock: StageClock | None = None,
                    with_rgb: bool = True) -> Iterator[Frame]:
-    """Yield the kept frames of one planned episode (see the module docstring); raise EpisodeError on failure.
+    """Yield the frames of one planned episode in time order (see the module docstring); raise EpisodeError.
 
     `ref` must come from planning (layouts resolved). `with_rgb=False` skips
-    the RGB decode (Frame.rgb is None): the benchmarks that only need maps.
-    Per chunk: the tactile rows are read, normalised and rasterised first,
-    then the chunk's RGB frames are fetched in order and yielded.
+    the RGB decode (Frame.rgb is None, no RGB-only frames): the benchmarks
+    that only need maps. Per chunk: the tactile rows (paired and unpaired)
+    are read, normalised and rasterised first, then the chunk's RGB frames
+    are fetched in order; `FrameQueue` releases each paired frame once no
+    later dropped frame can add raw rows to it. An episode without a single
+    paired frame fails (its RGB-only frames were only spooled).
     """
     clock = clock or StageClock()
     hands = [h for h in HANDS if h in ref.hands]
@@ -310,16 +328,7 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
         normalisers = tally.normalisers = {h: Normaliser(cfg.normalise_for(layouts[h]), layouts[h]) for h in hands}
         rasters = {h: rasteriser_for(layouts[h], cfg.tactile.raster_mode) for h in hands}
         keep_bend = {h: cfg.tactile.keep_bend and len(layouts[h].bend_cells) > 0 for h in hands}
-        rgb_cfg = cfg.rgb
-
-        def resize(frame, i):
-            return to_square_224(frame, rgb_cfg.size, rgb_cfg.crop, rgb_cfg.interpolation,
-                                 where=f"{ref.source_ref} [{ref.episode_id}] frame {i}")
-
-        with_rgb = with_rgb and streams.has_video   # glove-only recordings: tactile-only samples
-        unpaired = _unpaired_rgb(streams, sync) if with_rgb and cfg.rgb.keep_unpaired else []
-        wanted = np.concatenate([sync.rgb_index, np.asarray([i for _, i, _ in unpaired], dtype=np.int64)])
-        fetcher = RgbFetcher(ref, streams.iter_rgb(), wanted, resize, clock) if with_rgb else None
+        fetcher, unpaired = _rgb_source(ref, cfg, streams, sync, clock, with_rgb)
         plans = ({h: RowPlan.build(streams.tactile_timestamps_ns[h], sync.tactile_index[h], sync.t_rgb_ns)
                   for h in hands} if cfg.tactile.keep_raw else {})
         grids = {h: tuple(layouts[h].grid) for h in hands}
