@@ -66,6 +66,14 @@ class ModelConfig:
     # Ablations of the paper's comparison; both True is HandTouch.
     codebook: bool = True         # False = "w/o codebook": continuous latent, the VQ is bypassed
     vision: bool = True           # False = "w/o vision": stages 2-3 attend to the hand token, never to RGB
+    # RGB prior: hidden pixels start from the frozen RGB encoder's own coarse contact map of the
+    # frame (upsampled; needs a readout, e.g. TactileGridRGB) instead of 0, in stage 2 and in
+    # inpainting / RGB-to-tactile alike; the mask channel still marks them. Off = the paper's zeros.
+    # Why: with zeros, 100 stage-2 steps never learned to read the frame (README, "RGB prior").
+    rgb_prior: bool = False
+    # Measured, not adopted (README, "RGB prior"): add each RGB token to the tactile token of the
+    # same canvas cell before the fusion (needs one RGB token per tactile token).
+    rgb_skip: bool = False
 
     @property
     def grid(self) -> int:
@@ -122,7 +130,7 @@ class ModelConfig:
             raise ValueError("model.mlp_ratio must be > 0")
         if self.vq_beta < 0 or self.vq_dead_threshold < 0 or self.vq_restart_noise < 0:
             raise ValueError("model.vq_beta, vq_dead_threshold, vq_restart_noise must be >= 0")
-        for name in ("codebook", "vision", "mask_channel"):
+        for name in ("codebook", "vision", "mask_channel", "rgb_prior", "rgb_skip"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"model.{name} must be true/false, got {getattr(self, name)!r}")
         if not 0.0 < self.vq_usage_decay < 1.0:

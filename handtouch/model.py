@@ -19,7 +19,9 @@ below in `handtouch.stages` (1 reconstruct, 2 masked reconstruction with RGB,
 3 predict t_T). Predictions are zero where coverage is 0.
 Ablation switches (ModelConfig): codebook=False bypasses the VQ (continuous latent; the
 vit_plain baseline has none either), vision=False gives stages 2-3 the hand token as their
-only memory (no RGB).
+only memory (no RGB). rgb_prior=True fills hidden pixels with the frozen RGB encoder's own
+coarse contact map (`rgb_fill`) instead of zeros; rgb_skip=True adds each RGB token to the
+tactile token of the same cell before the fusion (measured, not adopted: README, "RGB prior").
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ import torch.nn as nn
 from .config import MODULE_NAMES, WINDOW, ModelConfig
 from .decoder import build_tactile_decoder
 from .encoders import build_tactile_encoder, transformer_stack
-from .rgb_encoder import RGBEncoder
+from .rgb_encoder import RGBEncoder, to_unit_float
 from .vq import FactorisedVQ
 
 MODEL_NAMES = {"vit": "handtouch-vit", "cnn": "baseline-cnn", "resnet18": "baseline-resnet18",
@@ -126,6 +128,9 @@ class HandTouch(nn.Module):
         self.temporal = TemporalAggregator(d, cfg.heads, cfg.mlp_ratio, cfg.temporal_depth, WINDOW)
         self.predictor = CrossAttentionStack(d, cfg.heads, cfg.mlp_ratio, cfg.predictor_depth)
         self._frozen: set[str] = set()
+        if cfg.rgb_prior and cfg.vision and not callable(getattr(rgb_encoder.backbone, "predict", None)):
+            raise ValueError(f"model.rgb_prior needs an RGB encoder with a contact readout (predict, e.g. "
+                             f"TactileGridRGB); {rgb_encoder.info.spec!r} has none: set model.rgb_prior=false")
 
     # ---- freezing by module name -------------------------------------------------
     def _named(self, names: Iterable[str]) -> list[str]:
@@ -170,16 +175,31 @@ class HandTouch(nn.Module):
     def _grad_context(self, name: str):
         return torch.no_grad() if name in self._frozen else contextlib.nullcontext()
 
-    def encode(self, tactile: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
-        """(B,1,224,224) map (+ mask, 1 = hidden) -> tokens (B,N,D); hidden pixels are zeroed.
-        The mask is the second input channel unless cfg.mask_channel is False."""
+    def encode(self, tactile: torch.Tensor, mask: torch.Tensor | None = None,
+               fill: torch.Tensor | None = None) -> torch.Tensor:
+        """(B,1,224,224) map (+ mask, 1 = hidden) -> tokens (B,N,D); hidden pixels are zeroed, or
+        set to `fill` (the RGB prior, `rgb_fill`). The mask is the second input channel unless
+        cfg.mask_channel is False."""
         if mask is None:
             mask = torch.zeros_like(tactile)
         x = tactile.float() * (1 - mask)
+        if fill is not None:
+            x = x + fill.float() * mask
         if self.cfg.mask_channel:
             x = torch.cat([x, mask.float()], dim=1)
         with self._grad_context("encoder"):
             return self.encoder(x)
+
+    def rgb_fill(self, rgb: torch.Tensor, hand: torch.Tensor, coverage: torch.Tensor) -> torch.Tensor | None:
+        """The frozen RGB encoder's own coarse contact map of the frame, upsampled to the canvas and
+        zeroed off the glove: what hidden pixels start from with cfg.rgb_prior (None without it).
+        Needs an encoder with a per-hand readout (`predict`, e.g. TactileGridRGB)."""
+        if not (self.cfg.rgb_prior and self.cfg.vision):
+            return None
+        backbone = self.rgb_encoder.backbone      # has `predict`: checked in __init__
+        with torch.no_grad():
+            coarse = backbone.predict(backbone(to_unit_float(rgb)), _hand_ids(hand).to(rgb.device))
+            return nn.functional.interpolate(coarse.float(), size=coverage.shape[-2:]) * (coverage > 0)
 
     def visual_tokens(self, rgb: torch.Tensor) -> torch.Tensor:
         """(B,3,224,224) uint8 or [0,1] -> (B,M,D)."""
@@ -191,8 +211,16 @@ class HandTouch(nn.Module):
     def fuse(self, tokens: torch.Tensor, rgb: torch.Tensor, hand: torch.Tensor) -> torch.Tensor:
         """Tactile tokens (B,N,D) + hand token cross-attend to the RGB frame's tokens -> (B,N,D).
         Without vision (ablation) they attend to the hand token alone: same layers, no RGB."""
-        x = self._with_hand(tokens, hand)
-        return self.fusion(x, self.visual_tokens(rgb) if self.cfg.vision else x[:, :1])[:, 1:]
+        if not self.cfg.vision:
+            x = self._with_hand(tokens, hand)
+            return self.fusion(x, x[:, :1])[:, 1:]
+        vis = self.visual_tokens(rgb)
+        if self.cfg.rgb_skip:
+            if vis.shape[1] != tokens.shape[1]:
+                raise ValueError(f"model.rgb_skip needs one RGB token per tactile token: the RGB encoder "
+                                 f"gives {vis.shape[1]}, the tactile encoder {tokens.shape[1]}")
+            tokens = tokens + vis
+        return self.fusion(self._with_hand(tokens, hand), vis)[:, 1:]
 
     def latent(self, tokens: torch.Tensor):
         """tokens -> (z, indices, losses, stats) of the VQ; without the codebook (ablation) z is
@@ -210,7 +238,8 @@ class HandTouch(nn.Module):
         return self.decoder(z) * coverage, indices, losses, stats
 
     def _inpaint(self, tactile, coverage, mask, rgb, hand):
-        return self.quantise_decode(self.fuse(self.encode(tactile, mask), rgb, hand), coverage)
+        tokens = self.encode(tactile, mask, self.rgb_fill(rgb, hand, coverage))
+        return self.quantise_decode(self.fuse(tokens, rgb, hand), coverage)
 
     def predicted_tokens(self, rgb_window, past_tokens, hand):
         """Encoded past frames (B,T-1,N,D) + RGB v_{T-2..T} -> predicted t_T tokens (B,N,D), before VQ."""

@@ -22,7 +22,7 @@
      measured constant-embedding and shuffled-embedding levels),
    - codebook perplexity of the final model over every token of the test
      maps >= PERPLEXITY_FLOOR codes,
-   - (reported, not required yet: RGB-to-tactile F-RMSE (test) < all zeros),
+   - RGB-to-tactile F-RMSE (test) < all zeros (on ood: reported, not required),
    - the aligned RGB probe beats the shifted and the shuffled controls on test
      by rgb_pretrain.CONTROL_MARGIN (a sync or pairing bug fails this).
 """
@@ -182,15 +182,17 @@ def learning_checks(stage1_rmse: float | None, zeros_rmse: float | None, retriev
     ]
 
 
-def rgb_check(results: dict, model: str, part: str = "test") -> dict:
-    """RGB-to-tactile F-RMSE (covered) of `model` below all zeros' on the same items."""
+def rgb_check(results: dict, model: str, part: str = "test", required: bool = True) -> dict:
+    """RGB-to-tactile F-RMSE (covered) of `model` below all zeros' on the same items.
+
+    Required on test (with the RGB prior, README "RGB prior": 0.079-0.085 vs 0.091 over the
+    measured seeds); reported only on ood, where the frozen probe itself is worse than all zeros
+    (an unseen task: its coarse map is 1.05x zeros' MSE there), so no RGB path can pass yet."""
     value = results[model][part]["rgb2tactile"]["f_covered"]["rmse"]
     limit = results[ZEROS][part]["rgb2tactile"]["f_covered"]["rmse"]
     ok = value is not None and limit is not None and math.isfinite(value) and value < limit
-    # Not required yet: the per-frame F-RMSE punishes any contact predicted on a contact-free
-    # frame, and 100 stage-2 steps do not get the fusion there (README, "not yet").
     return {"check": f"RGB-to-tactile F-RMSE ({part}) < all zeros", "value": value, "limit": limit, "ok": ok,
-            "required": False}
+            "required": required}
 
 
 def misalignment_control(args, probes: dict, pre_cfg: RGBPretrainConfig, model, prepared: dict) -> dict:
@@ -280,8 +282,10 @@ def main(argv=None) -> int:
     prepared = timer.run("eval_prepare", prepare, parts, cfg=EvalConfig(max_items=args.max_items, seed=args.seed))
     pre_cfg = RGBPretrainConfig(seed=args.seed)
     probes = timer.run("rgb_pretrain", ensure_probes, args.dataset, SPLIT_NAME, args.out / "rgb_encoder", pre_cfg)
-    # the aligned probe is the frozen RGB encoder; a user's --set rgb_encoder=FILE comes later and wins
-    sets = [f"rgb_encoder={toml_str(probes['aligned'].resolve())}", *args.set]
+    # the aligned probe is the frozen RGB encoder, and its coarse contact map is the RGB prior of
+    # hidden pixels (README, "RGB prior"); a user's --set rgb_encoder=FILE comes later and wins
+    # (with --set model.rgb_prior=false unless FILE has a readout)
+    sets = [f"rgb_encoder={toml_str(probes['aligned'].resolve())}", "model.rgb_prior=true", *args.set]
     models, stage1_models, train_metrics = {}, {}, {}
     for enc in args.encoders:
         print(f"smoke: training encoder={enc}", flush=True)
@@ -298,6 +302,7 @@ def main(argv=None) -> int:
     perplexity = timer.run("checks", codebook_perplexity, models[handtouch], prepared["test"])
     checks = learning_checks(stage1_rmse, zeros_rmse, results[handtouch]["test"]["retrieval"], perplexity)
     checks.append(rgb_check(results, handtouch, "test"))
+    checks.append(rgb_check(results, handtouch, "ood", required=False))
     control = timer.run("rgb_control", misalignment_control, args, probes, pre_cfg, models[handtouch], prepared)
     checks += control_checks(control["probe"], "test")
     examples = timer.run("report", collect_examples, models[handtouch], prepared["test"], count=4)

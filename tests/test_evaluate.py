@@ -337,12 +337,15 @@ def test_verdicts_compare_every_track_with_the_references(tmp_path):
     assert md.index("## Verdicts") < md.index("## Covered pixels")
 
 
-def test_smoke_rgb_check_is_reported_but_not_required():
+def test_smoke_rgb_check_is_required_on_test_and_reported_on_ood():
     from handtouch.smoke import rgb_check
 
     results = {"m": {"test": {"rgb2tactile": {"f_covered": {"rmse": 0.12}}}},
                "zeros-ref": {"test": {"rgb2tactile": {"f_covered": {"rmse": 0.09}}}}}
     check = rgb_check(results, "m")
-    assert check["ok"] is False and check["required"] is False and check["limit"] == 0.09
+    assert check["ok"] is False and check["required"] is True and check["limit"] == 0.09
+    assert rgb_check(results, "m", "test", required=False)["required"] is False   # how ood is reported
+    results["m"]["test"]["rgb2tactile"]["f_covered"]["rmse"] = 0.09
+    assert rgb_check(results, "m")["ok"] is False                    # a tie with all zeros is not better
     results["m"]["test"]["rgb2tactile"]["f_covered"]["rmse"] = 0.05
     assert rgb_check(results, "m")["ok"] is True

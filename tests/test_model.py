@@ -453,3 +453,71 @@ def test_without_vision_stage2_trains_no_rgb_projection():
         assert all(p.requires_grad == used for p in model.rgb_proj.parameters())
         stage_losses(model, 2, frame_batch(2), torch.zeros(2, 1, 224, 224))["loss"].backward()
         assert any(p.grad is not None for p in model.rgb_proj.parameters()) == used
+
+
+def grid_rgb_model(**kw):
+    """A tiny model whose frozen RGB encoder is a (seeded, untrained) TactileGridRGB, which has
+    the per-hand contact readout `rgb_prior` needs."""
+    from handtouch.rgb_encoder import RGBEncoder, RGBEncoderInfo, TactileGridRGB
+    torch.manual_seed(0)
+    backbone = TactileGridRGB(size=28, width=16, channels=4, grid=7, hidden=16)
+    torch.manual_seed(1)
+    return HandTouch(tiny_cfg(**kw), RGBEncoder(backbone, RGBEncoderInfo("test-grid", "state_dict", "")))
+
+
+def test_rgb_prior_fills_hidden_pixels_with_the_rgb_encoders_coarse_map():
+    model, plain = grid_rgb_model(rgb_prior=True), grid_rgb_model()
+    b = frame_batch(2)
+    b["coverage"][:, :, :, :50] = 0                   # part of the canvas has no sensor
+    cov = b["coverage"]
+    fill = model.rgb_fill(b["rgb"], b["hand"], cov)
+    bb = model.rgb_encoder.backbone
+    with torch.no_grad():
+        coarse = bb.predict(bb(b["rgb"].float() / 255), b["hand"])          # (B,1,7,7), per hand
+    expected = coarse.repeat_interleave(32, 2).repeat_interleave(32, 3) * cov
+    assert fill.shape == (2, 1, 224, 224) and torch.allclose(fill, expected)
+    assert plain.rgb_fill(b["rgb"], b["hand"], cov) is None                # off: the paper's zeros
+    mask = torch.zeros(2, 1, 224, 224)
+    mask[:, :, :112] = 1
+    target = b["tactile"] * cov
+    shown = target * (1 - mask) + expected * mask
+    with torch.no_grad():
+        # the encoder sees the prior where pixels are hidden (the mask channel still marks them)
+        assert torch.allclose(model.encode(target, mask, fill), model.encoder(torch.cat([shown, mask], 1)))
+        assert not torch.equal(model.encode(target, mask, fill), model.encode(target, mask))
+        # RGB-to-tactile now depends on the frame through the prior too, and visible pixels are kept
+        other = torch.roll(b["rgb"], 1, 0)
+        assert not torch.equal(model.rgb_to_tactile(b["rgb"], cov, b["hand"]),
+                               model.rgb_to_tactile(other, cov, b["hand"]))
+
+
+def test_rgb_prior_needs_an_encoder_with_a_readout():
+    b = frame_batch(2)
+    with pytest.raises(ValueError, match="readout"):    # random SmallConvRGB: no `predict`
+        tiny_model(rgb_prior=True)
+    assert tiny_model(rgb_prior=True, vision=False).rgb_fill(b["rgb"], b["hand"], b["coverage"]) is None
+    with pytest.raises(ValueError, match="rgb_prior"):
+        tiny_cfg(rgb_prior=1).validate()
+
+
+def test_stage2_trains_on_the_rgb_prior():
+    model = grid_rgb_model(rgb_prior=True)
+    b = frame_batch(2)
+    mask = torch.ones(2, 1, 224, 224)                    # complete: the RGB-to-tactile case
+    with torch.no_grad():
+        loss = stage_losses(model, 2, b, mask)["masked"]
+        pred = model.rgb_to_tactile(b["rgb"], b["coverage"], b["hand"])
+    # with everything hidden, stage 2's masked term is exactly the RGB-to-tactile error
+    assert torch.allclose(loss, masked_mse(pred, b["tactile"] * b["coverage"], b["coverage"]), atol=1e-6)
+
+
+def test_rgb_skip_adds_the_rgb_token_of_each_cell_before_the_fusion():
+    b = frame_batch(2)
+    model = grid_rgb_model(rgb_skip=True, patch=32)      # 7x7 tactile tokens, 7x7 RGB grid
+    tokens = torch.randn(2, 49, 32)
+    with torch.no_grad():
+        vis = model.visual_tokens(b["rgb"])
+        expected = model.fusion(model._with_hand(tokens + vis, b["hand"]), vis)[:, 1:]
+        assert torch.allclose(model.fuse(tokens, b["rgb"], b["hand"]), expected)
+    with pytest.raises(ValueError, match="one RGB token per tactile token"):
+        tiny_model(rgb_skip=True, patch=16).fuse(torch.randn(2, 196, 32), b["rgb"], b["hand"])  # 196 vs 49
