@@ -205,6 +205,23 @@ def _crosstalk(x: np.ndarray, taxels: TaxelGrid) -> np.ndarray:
     return found
 
 
+def record_entry(chunks: list[np.ndarray], layout: Layout) -> dict:
+    """An episode hand's `taxel_health` in its episode record, from its (T_i, L) live-value chunks.
+
+    The ingest (htdata.ingest.tally) and `htdata renormalise` write it:
+    version, assessed, live, counts per class, unexercised, and the raw-grid
+    cells of each flagged class.
+    """
+    series = np.concatenate(chunks) if chunks else np.zeros((0, int(layout.live_mask.sum())), np.float32)
+    result = classify(series, TaxelGrid.of(layout))
+    out = {"version": HEALTH_VERSION, "assessed": result["assessed"], "live": result["live"],
+           "counts": result["counts"], "unexercised": result["unexercised"]}
+    flagged = {c: cells for c, cells in result["cells"].items() if cells}
+    if flagged:
+        out["cells"] = flagged
+    return out
+
+
 def merge_counts(into: dict, health: dict) -> None:
     """Add one episode hand's classification to a running summary (counts, taxels assessed)."""
     into.setdefault("episodes_assessed", 0)

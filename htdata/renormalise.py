@@ -27,6 +27,7 @@ from htdata.calibration import (calibration_id, episode_calibrations, episode_no
 from htdata.codec import MEMBER_CODECS, decode_json, decode_npy
 from htdata.curate import resolve_episodes
 from htdata.format import JSON_MEMBER, SIZE_FIELDS, CodecSettings, bend_member, raw_member, tactile_member
+from htdata.health import record_entry
 from htdata.layouts import Layout, load_layout
 from htdata.lock import WriterLock
 from htdata.normalise import Normaliser
@@ -106,7 +107,8 @@ class Recalibration:
         self.settings = CodecSettings(tactile_compression=codec.get("compression", "zip"),
                                       tactile_pixel_type=codec.get("pixel_type", "half"))   # the dataset's maps
         self.records = {ep["episode_id"]: ep for ep in snap.episodes}
-        self.state: dict[str, dict] = {}     # episode -> hand -> (normaliser, rasteriser, [contact sum, max])
+        # episode -> hand -> (normaliser, rasteriser, [contact sum, max], live-value rows for taxel health)
+        self.state: dict[str, dict] = {}
 
     def _start(self, eid: str) -> dict:
         ep = self.records[eid]
@@ -118,7 +120,7 @@ class Recalibration:
             else:
                 normaliser = Normaliser(self.pipeline.normalise_for(layout), layout)
                 normaliser.fit_baseline(self._first_rows(eid, hand))
-            state[hand] = (normaliser, Rasteriser(layout, mode=self.raster_mode), [0.0, 0.0])
+            state[hand] = (normaliser, Rasteriser(layout, mode=self.raster_mode), [0.0, 0.0], [])
         self.state = {eid: state}    # one episode at a time: repack walks episodes in order
         return state
 
@@ -139,14 +141,18 @@ class Recalibration:
             return members
         state = self.state.get(episode_id) or self._start(episode_id)
         out = dict(members)
-        for hand, (normaliser, raster, contact) in state.items():
+        for hand, (normaliser, raster, contact, series) in state.items():
             if tactile_member(hand) not in members:   # an RGB-only sample: nothing to renormalise
                 continue
             where = f"{episode_id} frame {frame} {hand} hand"
-            values, finite = normaliser.apply(_paired_row(members, hand, where)[None])
+            try:
+                values, finite = normaliser.apply(_paired_row(members, hand, where)[None])
+            except ValueError as exc:   # e.g. clip = false and a value outside [0,1] under the new settings
+                raise ValueError(f"{where}: {exc}") from exc
             if not finite.all():
                 raise ValueError(f"{where}: stored raw row has non-finite live taxels")
             live = values[0][normaliser.live_mask]
+            series.append(live[None])
             contact[0] += float(live.sum(dtype=np.float64))
             contact[1] = max(contact[1], float(live.max(initial=0.0)))
             out[tactile_member(hand)] = MEMBER_CODECS["exr"][0](raster.render(values)[0], self.settings,
@@ -167,7 +173,9 @@ class Recalibration:
         mean, peak = dict(stats.get("mean_contact", {})), dict(stats.get("max_contact", {}))
         calibration, fits = dict(record.get("calibration", {})), dict(record.get("calibration_fit", {}))
         paired = int(stats.get("frames_kept", n))   # frames with maps (RGB-only samples have none)
-        for hand, (normaliser, _, (total, top)) in state.items():
+        health = dict(record.get("taxel_health", {}))
+        for hand, (normaliser, _, (total, top), series) in state.items():
+            health[hand] = record_entry(series, self.layouts[record["layouts"][hand]])
             mean[hand] = total / (paired * int(normaliser.live_mask.sum()))
             peak[hand] = top
             calibration[hand] = self.plan.changes[eid][hand][1]
@@ -175,6 +183,7 @@ class Recalibration:
             if fit_record(normaliser):
                 fits[hand] = fit_record(normaliser)
         record["stats"] = {**stats, "mean_contact": mean, "max_contact": peak}
+        record["taxel_health"] = health
         record["calibration"] = calibration
         record.pop("calibration_fit", None)
         if fits:
@@ -204,16 +213,20 @@ def renormalise(root, pipeline: PipelineConfig, patterns: list[str] | None, dry_
             return plan, None
         reader = DatasetReader(snap.root, version=snap.version)
         rewrite = Recalibration(reader, snap, pipeline, plan)
-        unit = snap.next_unit()
+        first = unit = snap.next_unit()
         clear_uncommitted(snap.root, unit)
         parts = []
-        for part in snap.parts():
-            if part.unit not in plan.repacked_units:
-                parts.append(part)
-                continue
-            kept = [KeptEpisode(record=rec, frames=range(int(rec["num_frames"]))) for rec in part.episodes]
-            parts.append(repack_unit(reader, kept, unit, samples_per_shard_of(part), rewrite=rewrite))
-            unit += 1
+        try:
+            for part in snap.parts():
+                if part.unit not in plan.repacked_units:
+                    parts.append(part)
+                    continue
+                kept = [KeptEpisode(record=rec, frames=range(int(rec["num_frames"]))) for rec in part.episodes]
+                parts.append(repack_unit(reader, kept, unit, samples_per_shard_of(part), rewrite=rewrite))
+                unit += 1
+        except ValueError:   # bad settings for some frame: leave no shard of this attempt behind
+            clear_uncommitted(snap.root, first)
+            raise
         manifest = commit_parts(snap.root, parts, {"calibrations": plan.calibrations}, snap, command,
                                 next_unit=unit)
         return plan, manifest

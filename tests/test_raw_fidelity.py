@@ -260,8 +260,8 @@ def test_loader_maps_from_raw_rows_match_the_stored_maps(native_counts):
         TactileFrameDataset(out, map_source="exr")
 
 
-def test_episode_record_carries_taxel_health(tmp_path):
-    """A taxel stuck at half scale in a 40-frame episode is named in the record; the rest is clean."""
+def stuck_taxel_dataset(tmp_path) -> tuple[Path, tuple[int, int]]:
+    """A 40-frame native episode, no load anywhere but one taxel stuck at half scale; (dataset, its cell)."""
     layout = load_layout(LAYOUT)
     frames = 40
     t_video = np.arange(frames, dtype=np.int64) * PERIOD
@@ -274,6 +274,13 @@ def test_episode_record_carries_taxel_health(tmp_path):
         hands={"right": NativeHand(LAYOUT, values, t_video)}))
     out = tmp_path / "ds"
     assert ingest_cli("--pipeline", f"{small_pipeline(tmp_path, 'native')}={tmp_path / 'raw'}", out) == 0
+    return out, (r, c)
+
+
+def test_episode_record_carries_taxel_health(tmp_path):
+    """A taxel stuck at half scale in a 40-frame episode is named in the record; the rest is clean."""
+    layout = load_layout(LAYOUT)
+    out, (r, c) = stuck_taxel_dataset(tmp_path)
     health = load_episodes(out)[0]["taxel_health"]["right"]
     assert health["assessed"] and health["live"] == int(layout.live_mask.sum())
     assert health["counts"]["stuck"] == 1 and health["cells"] == {"stuck": [[r, c]]}
@@ -317,3 +324,19 @@ def test_merge_keeps_the_calibrations_of_both_datasets(tmp_path, native_counts):
     assert len(used) == 2 and used == set(manifest["calibrations"])
     assert sorted(e["revision"] for e in manifest["calibrations"].values()) == [1, 2]
     assert cli(["validate", str(merged), "--deep"]) == 0
+
+
+def test_renormalise_recomputes_taxel_health_and_names_the_frame_on_bad_settings(tmp_path, capsys):
+    out, _ = stuck_taxel_dataset(tmp_path)
+    assert load_episodes(out)[0]["taxel_health"]["right"]["counts"]["stuck"] == 1
+    # a 1e-3 scale puts the stuck taxel at 5e-4, below the stuck level: the record's health follows the maps
+    assert cli(["renormalise", str(out), "--pipeline", "native", "--set", f"normalise.{LAYOUT}.scale=0.001"]) == 0
+    health = load_episodes(out)[0]["taxel_health"]["right"]
+    assert health["assessed"] and sum(health["counts"].values()) == 0
+    # clip = false with a scale pushing the stuck taxel above 1: refused, naming episode, frame and hand
+    assert cli(["renormalise", str(out), "--pipeline", "native", "--set", f"normalise.{LAYOUT}.scale=50",
+                "--set", f"normalise.{LAYOUT}.clip=false"]) == 2
+    err = capsys.readouterr().err
+    assert "nat-rec_stuck frame 0 right hand" in err and "clip=false" in err
+    assert load_manifest(out)["version"] == 2                      # nothing written
+    assert cli(["validate", str(out)]) == 0 and not list((out / "shards").glob("*.tmp"))

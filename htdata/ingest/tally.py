@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from htdata.calibration import calibration_id, fit_record
-from htdata.health import HEALTH_VERSION, TaxelGrid, classify
+from htdata.health import record_entry
 from htdata.layouts import Layout
 from htdata.sync import SyncResult
 
@@ -90,17 +90,6 @@ class EpisodeTally:
             self.fps = float(ref.extra.get("fps", 30.0)) if isinstance(ref.extra, dict) else 30.0
             self.notes.append(f"fps unknown (single RGB timestamp): recorded as {self.fps}")
 
-    def _health(self, hand: str) -> dict:
-        """Taxel health of this hand over the episode's paired frames (htdata.health), for the record."""
-        chunks = self.live_series.get(hand) or [np.zeros((0, int(self.layouts[hand].num_live)), np.float32)]
-        result = classify(np.concatenate(chunks), TaxelGrid.of(self.layouts[hand]))
-        out = {"version": HEALTH_VERSION, "assessed": result["assessed"], "live": result["live"],
-               "counts": result["counts"], "unexercised": result["unexercised"]}
-        flagged = {c: cells for c, cells in result["cells"].items() if cells}
-        if flagged:
-            out["cells"] = flagged
-        return out
-
     def dropped_sorted(self) -> list[tuple[int, str]]:
         return sorted(self.dropped)
 
@@ -133,7 +122,7 @@ class EpisodeTally:
             record["out_of_range"] = self.out_of_range_record()
         if isinstance(ref.extra, dict) and ref.extra.get("hands_excluded"):
             record["hands_excluded"] = dict(sorted(ref.extra["hands_excluded"].items()))
-        record["taxel_health"] = {h: self._health(h) for h in hands}
+        record["taxel_health"] = {h: record_entry(self.live_series.get(h, []), self.layouts[h]) for h in hands}
         record["calibration"] = {h: calibration_id(self.layouts[h].layout_id, self.normalisers[h].cfg) for h in hands}
         fits = {h: fit_record(self.normalisers[h]) for h in hands}
         if any(fits.values()):
