@@ -192,26 +192,19 @@ def _sync(card: Card, reader) -> None:
                 offset.append(h.get("offset_ns", 0) / 1e6)
     card.heading("Synchronisation")
     card.text(f"{len(skew)} episode hands with sync records: median |RGB-tactile skew| and clock offset (ms).")
-    for name, values in (("median |skew| (ms)", skew), ("clock offset (ms)", offset)):
+    lags = [lag for lag in ((ep.get("sync") or {}).get("lag") for ep in reader.episodes) if lag]
+    applied = [float(lag["lag_ms"]) for lag in lags if lag.get("applied")]
+    if lags:   # only pipelines with [sync] lag set report one (htdata/lag.py)
+        card.text(f"Tactile-video lag ([sync] lag): {len(lags)} episodes asked, {len(applied)} applied"
+                  + (f" (median {np.median(applied):.1f} ms)" if applied else "")
+                  + f", {len(lags) - len(applied)} declined.")
+    for key, name, values in (("skew", "median |skew| (ms)", skew), ("clock", "clock offset (ms)", offset),
+                              ("lag", "applied lag (ms)", applied)):
         if values:
             lo, hi = float(min(values)), float(max(values))
             hi = hi if hi > lo else lo + 1.0
             counts = np.histogram(values, bins=30, range=(lo, hi))[0].tolist()
-            card.image(f"sync_{name.split()[0]}", histogram_chart(counts, round(lo, 3), round(hi, 3), name, log=False),
-                       name)
-    lags = [(ep.get("sync") or {}).get("lag") for ep in reader.episodes]
-    lags = [lag for lag in lags if lag]
-    if lags:   # only pipelines with [sync] lag set report one (htdata/lag.py)
-        applied = [float(lag["lag_ms"]) for lag in lags if lag.get("applied")]
-        card.text(f"Tactile-video lag ([sync] lag): {len(lags)} episodes asked, {len(applied)} applied "
-                  f"(median {np.median(applied):.1f} ms), {len(lags) - len(applied)} declined." if applied else
-                  f"Tactile-video lag ([sync] lag): {len(lags)} episodes asked, none applied.")
-        if applied:
-            lo, hi = min(applied), max(applied)
-            hi = hi if hi > lo else lo + 1.0
-            counts = np.histogram(applied, bins=30, range=(lo, hi))[0].tolist()
-            card.image("sync_lag", histogram_chart(counts, round(lo, 3), round(hi, 3), "applied lag (ms)", log=False),
-                       "applied lag (ms)")
+            card.image(f"sync_{key}", histogram_chart(counts, round(lo, 3), round(hi, 3), name, log=False), name)
 
 
 def _splits(card: Card, reader) -> None:

@@ -28,11 +28,12 @@ from functools import cached_property
 
 import numpy as np
 
-from htdata.codec import decode_exr_pixels, decode_json, decode_npy
+from htdata.codec import decode_exr_pixels
 from htdata.format import HANDS, JSON_MEMBER, MAP_SHAPE, SIZE_FIELDS, raw_member, tactile_member
 from htdata.health import TaxelGrid, classify
 from htdata.layouts import CanonicalHand, Layout, parse_canonical, parse_layout
 from htdata.rasterise import Rasteriser
+from htdata.rawstream import paired_row
 
 CONTACT_THRESHOLD = 0.02      # a taxel above this is in contact (validate's contact threshold)
 HIST_BINS = 1000              # fixed bins over (0, 1]: quantiles to 0.001, mergeable by addition
@@ -143,18 +144,6 @@ class _Series:
         self.keys: list[tuple[str, int]] = []     # (sample key, global sample index): errors name the sample
 
 
-def _paired_row(members: dict, hand: str, where: str) -> np.ndarray:
-    """The raw row paired with the sample's frame (meta["raw_paired"]; a single stored row is it)."""
-    rows = decode_npy(members[raw_member(hand)], f"{where}.{raw_member(hand)}")
-    if rows.ndim == 3 and rows.shape[0] == 1:
-        return rows[0]
-    meta = decode_json(members[JSON_MEMBER], f"{where}.{JSON_MEMBER}")
-    at = (meta.get("raw_paired") or {}).get(hand)
-    if rows.ndim != 3 or at is None or not 0 <= at < rows.shape[0]:
-        raise ValueError(f"{where}: meta raw_paired names row {at!r} of raw rows shaped {rows.shape}")
-    return rows[at]
-
-
 def _read_episode(reader, pos: int, from_raw: list[str], nan_samples: list) -> dict[str, _Series]:
     """Stream the episode's members once: raw rows for `from_raw` hands, maps for the other hands."""
     ep = reader.episodes[pos]
@@ -171,7 +160,7 @@ def _read_episode(reader, pos: int, from_raw: list[str], nan_samples: list) -> d
                 continue
             where = f"{reader.root}: {key}"
             if hand in from_raw:
-                value = _paired_row(members, hand, where)
+                value = paired_row(members, hand, where)
             else:
                 value = decode_exr_pixels(data, f"{where}.{wanted[hand]}")  # half as stored: converted once
                 if value.shape != MAP_SHAPE:

@@ -61,11 +61,24 @@ def episode_stream(reader: DatasetReader, episode: str | int, hand: str) -> RawS
     t, r, v = np.asarray(times, np.int64), np.asarray(rows, np.int64), np.concatenate(values)
     order = np.lexsort((r, t))
     t, r, v = t[order], r[order], v[order]
-    first_of_row = np.ones(r.size, bool)
-    _, keep = np.unique(r, return_index=True)
-    first_of_row[:] = False
-    first_of_row[keep] = True
-    return RawStream(t_ns=t[first_of_row], rows=v[first_of_row], source_row=r[first_of_row])
+    keep = np.sort(np.unique(r, return_index=True)[1])   # each source row once, time order kept
+    return RawStream(t_ns=t[keep], rows=v[keep], source_row=r[keep])
+
+
+def paired_row(members: dict[str, bytes], hand: str, where: str) -> np.ndarray:
+    """The raw row paired with a sample's frame, from its members (raw_<hand>.npy, + json when needed).
+
+    A single stored row is the paired one (no JSON decode); otherwise
+    meta["raw_paired"][hand] names it.
+    """
+    rows = decode_npy(members[raw_member(hand)], f"{where}.{raw_member(hand)}")
+    if rows.ndim == 3 and rows.shape[0] == 1:
+        return rows[0]
+    meta = decode_json(members[JSON_MEMBER], f"{where}.{JSON_MEMBER}")
+    at = (meta.get("raw_paired") or {}).get(hand)
+    if rows.ndim != 3 or at is None or not 0 <= at < rows.shape[0]:
+        raise ValueError(f"{where}: meta raw_paired names row {at!r} of raw rows shaped {rows.shape}")
+    return rows[at]
 
 
 class RawMapRenderer:
@@ -78,7 +91,8 @@ class RawMapRenderer:
         self._rasters: dict = {}
         self._normalisers: dict = {}
 
-    def _parts(self, episode: int, hand: str):
+    def parts_for(self, episode: int, hand: str):
+        """(Normaliser with the episode's calibration, Rasteriser of its layout) for one episode hand."""
         key = (episode, hand)
         if key not in self._normalisers:
             ep = self.reader.episodes[episode]
@@ -93,10 +107,8 @@ class RawMapRenderer:
 
     def render(self, episode: int, hand: str, members: dict[str, bytes], where: str = "sample") -> np.ndarray:
         """(224,224) float32 map from `members` (json + raw_<hand>.npy) of a sample of episode position `episode`."""
-        normaliser, raster = self._parts(episode, hand)
-        meta = decode_json(members[JSON_MEMBER], where)
-        rows = decode_npy(members[raw_member(hand)], f"{where}.{raw_member(hand)}")
-        values, _ = normaliser.apply(rows[meta["raw_paired"][hand]][None])
+        normaliser, raster = self.parts_for(episode, hand)
+        values, _ = normaliser.apply(paired_row(members, hand, where)[None])
         return raster.render(values)[0]
 
     def sample_map(self, index: int, hand: str) -> np.ndarray:

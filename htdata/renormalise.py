@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from htdata.calibration import (calibration_id, episode_calibrations, episode_normaliser, fit_record)
-from htdata.codec import MEMBER_CODECS, decode_json, decode_npy
+from htdata.codec import MEMBER_CODECS
 from htdata.curate import resolve_episodes
 from htdata.format import JSON_MEMBER, SIZE_FIELDS, CodecSettings, bend_member, raw_member, tactile_member
 from htdata.health import record_entry
@@ -33,6 +33,7 @@ from htdata.lock import WriterLock
 from htdata.normalise import Normaliser
 from htdata.pipeline import PipelineConfig
 from htdata.rasterise import Rasteriser
+from htdata.rawstream import paired_row
 from htdata.reader import DatasetReader
 from htdata.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
 from htdata.snapshot import Snapshot, commit_parts, open_snapshot
@@ -133,7 +134,7 @@ class Recalibration:
                 break
             members = self.reader.sample(i, (JSON_MEMBER, tactile_member(hand), raw_member(hand)))
             if tactile_member(hand) in members:   # RGB-only samples hold no rows
-                rows.append(_paired_row(members, hand, f"{eid} frame {i - first}"))
+                rows.append(paired_row(members, hand, f"{eid} frame {i - first}"))
         return np.stack(rows)
 
     def members(self, episode_id: str, frame: int, members: dict[str, bytes]) -> dict[str, bytes]:
@@ -146,7 +147,7 @@ class Recalibration:
                 continue
             where = f"{episode_id} frame {frame} {hand} hand"
             try:
-                values, finite = normaliser.apply(_paired_row(members, hand, where)[None])
+                values, finite = normaliser.apply(paired_row(members, hand, where)[None])
             except ValueError as exc:   # e.g. clip = false and a value outside [0,1] under the new settings
                 raise ValueError(f"{where}: {exc}") from exc
             if not finite.all():
@@ -192,15 +193,6 @@ class Recalibration:
         record["notes"] = list(record.get("notes", [])) + [
             f"renormalised from stored raw rows (version {self.snap.version}): calibration {changed}"]
         return record
-
-
-def _paired_row(members: dict[str, bytes], hand: str, where: str) -> np.ndarray:
-    meta = decode_json(members[JSON_MEMBER], where)
-    rows = decode_npy(members[raw_member(hand)], f"{where} {raw_member(hand)}")
-    pos = (meta.get("raw_paired") or {}).get(hand)
-    if pos is None or not 0 <= pos < rows.shape[0]:
-        raise ValueError(f"{where}: meta raw_paired names row {pos!r} of {rows.shape[0]} stored raw rows")
-    return rows[pos]
 
 
 def renormalise(root, pipeline: PipelineConfig, patterns: list[str] | None, dry_run: bool, force: bool,

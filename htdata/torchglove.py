@@ -84,7 +84,7 @@ class GloveRateWindowDataset(_ItemDataset):
         builder = self._builder
         row = builder.reader.row(index)
         stream = self._stream(row.episode, hand)
-        normaliser, raster = builder.renderer._parts(row.episode, hand)
+        normaliser, raster = builder.renderer.parts_for(row.episode, hand)
         rows = stream.rows[pos - self.window + 1:pos + 1]
         values, _ = normaliser.apply(rows)
         out = builder.ids(row, index, hand)

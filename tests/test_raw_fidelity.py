@@ -304,7 +304,7 @@ def test_glove_rate_windows_follow_the_full_rate_stream(native_counts):
     # the last map is the paired row's, as the loader renders it; the others are rows between frames
     assert np.array_equal(item["tactile"][-1, 0].numpy(), RawMapRenderer(reader).sample_map(int(item["index"]), "right"))
     renderer = RawMapRenderer(reader)
-    normaliser, raster = renderer._parts(0, "right")
+    normaliser, raster = renderer.parts_for(0, "right")
     expect = raster.render(normaliser.apply(values[end - 3:end + 1])[0])
     assert np.array_equal(item["tactile"][:, 0].numpy(), expect)
 

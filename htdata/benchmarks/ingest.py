@@ -32,11 +32,15 @@ from htdata.pipeline import load_pipeline
 STAGES = ("decode", "resize", "normalise", "rasterise", "encode", "write", "other")
 
 
-def ingest_run(pipelines: list[tuple[str, Path]], out: Path, workers: int) -> dict:
-    """Ingest `[(pipeline name, source root)]` into a fresh `out`; throughput and stage timing."""
+def ingest_run(pipelines: list[tuple[str, Path]], out: Path, workers: int, settings: tuple[str, ...] = ()) -> dict:
+    """Ingest `[(pipeline name, source root)]` into a fresh `out`; throughput and stage timing.
+
+    `settings`: `--set`-style overrides applied to every pipeline (e.g. "tactile.keep_raw=false").
+    """
     if out.exists():
         shutil.rmtree(out)
-    sources = [Source(pipeline=load_pipeline(p), root=Path(root).resolve()) for p, root in pipelines]
+    sources = [Source(pipeline=load_pipeline(p).with_overrides(list(settings)) if settings else load_pipeline(p),
+                      root=Path(root).resolve()) for p, root in pipelines]
     t0 = time.perf_counter()
     report = ingest(sources, out, workers=workers, progress=False)
     wall = time.perf_counter() - t0

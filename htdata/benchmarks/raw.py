@@ -12,7 +12,6 @@
 
 from __future__ import annotations
 
-import shutil
 import statistics
 import time
 from pathlib import Path
@@ -24,32 +23,21 @@ from htdata.format import HANDS, SIZE_FIELDS, raw_member, tactile_member
 TARGET_RATIO = 0.9
 
 
-def _ingest(name: str, root: Path, out: Path, keep_raw: bool) -> tuple[float, int]:
-    from htdata.ingest import Source, ingest
-    from htdata.pipeline import load_pipeline
-
-    if out.exists():
-        shutil.rmtree(out)
-    pipeline = load_pipeline(name).with_overrides([f"tactile.keep_raw={'true' if keep_raw else 'false'}"])
-    t0 = time.perf_counter()
-    report = ingest([Source(pipeline=pipeline, root=Path(root).resolve())], out, workers=1, progress=False)
-    seconds = time.perf_counter() - t0
-    if report["failures"]:
-        raise RuntimeError(f"bench ingest into {out} had failures: {report['failures'][:3]}")
-    return seconds, int(report["samples"])
-
-
 def storage_row(name: str, root: Path, work: Path, reps: int) -> dict:
     """One adapter: keep_raw on vs off, alternating runs, medians."""
     from htdata.manifest import load_index
     from htdata.reader import DatasetReader
 
+    from htdata.benchmarks.ingest import ingest_run
+
     times = {True: [], False: []}
     frames = 0
     for _ in range(reps):
         for keep in (False, True):
-            seconds, frames = _ingest(name, root, work / f"raw_{name}_{keep}", keep)
-            times[keep].append(seconds)
+            run = ingest_run([(name, root)], work / f"raw_{name}_{keep}", 1,
+                             (f"tactile.keep_raw={'true' if keep else 'false'}",))
+            times[keep].append(run["wall_s"])
+            frames = run["frames"]
     with_raw = work / f"raw_{name}_True"
     rows = load_index(with_raw)
     raw_bytes = sum(int(rows[SIZE_FIELDS[raw_member(h)]].sum()) for h in HANDS)
