@@ -8,7 +8,7 @@ SEED   ?= 0
 OOD    ?= palm_push
 JOBS   ?= 2
 
-.PHONY: setup demo sample ingest split validate preview train-smoke compare test install-check bench clean
+.PHONY: setup demo sample ingest split validate preview train-smoke compare task-transfer test install-check bench clean
 
 setup: $(VENV)/.installed
 
@@ -19,10 +19,10 @@ $(VENV)/.installed: pyproject.toml setup.py
 	$(PY) -m pip install -q -e ".[test,ray]"
 	touch $@
 
-# Raw sample corpus: written once (htdata sample refuses to overwrite), reused after.
+# Raw sample corpus: written once, reused after (--reuse: a finished corpus of this seed, which
+# the smoke writes too, is kept; one cut short is written again).
 sample: setup
-	@if [ -f $(DATA)/raw/.complete ]; then echo "sample data present: $(DATA)/raw"; else \
-	  rm -rf $(DATA)/raw && $(HTDATA) sample $(DATA)/raw --seed $(SEED) --scale small && touch $(DATA)/raw/.complete; fi
+	$(HTDATA) sample $(DATA)/raw --seed $(SEED) --scale small --reuse
 
 # Re-running resumes: finished work units are skipped by checksum.
 ingest: sample
@@ -45,10 +45,15 @@ preview: validate
 train-smoke: setup
 	$(PY) -m handtouch.smoke --out runs/smoke --raw $(DATA)/raw --dataset $(DATA)/dataset
 
-# HandTouch vs the 4 encoder baselines, 3 ablations and 2 design rows, same data / split / budget.
+# HandTouch vs the 4 encoder baselines, 3 ablations and 3 design rows, same data / split / budget.
 compare: setup
 	$(PY) -m handtouch.compare --config configs/compare_smoke.toml --out runs/compare --raw $(DATA)/raw \
 	  --dataset $(DATA)/dataset --rgb-cache runs/smoke/rgb_encoder
+
+# For each task: an RGB probe trained on the other tasks, scored on it (does RGB transfer to new
+# tasks?), and the smoke's misalignment controls on each such split (~4 min).
+task-transfer: ingest
+	$(PY) -m handtouch.task_transfer --dataset $(DATA)/dataset --out runs/task_transfer --controls
 
 demo: preview train-smoke
 	@echo "demo done: $(DATA)/dataset, $(DATA)/preview.png, runs/smoke/results.md"

@@ -1,6 +1,6 @@
 """`python -m handtouch.compare --config configs/compare_smoke.toml`: the paper's comparison.
 
-Trains HandTouch, the four encoder baselines, the three ablations and the two design
+Trains HandTouch, the four encoder baselines, the three ablations and the three design
 choices of this implementation (`ROWS`) on the same split with the same config and budget
 (each row changes only its `overrides`), scores each on HT-Bench (retrieval, inpainting,
 RGB-to-tactile, prediction; plus reconstruction) next to the all-zeros and copy-last
@@ -65,8 +65,10 @@ ROWS = (
         "stages 2-3 attend to the hand token only, never to RGB"),
     Row("stage3_replay", "stage 3 + replay + VQ terms", DESIGN, ("loss.stage3_replay=1.0", "loss.stage3_vq=true"),
         "stage 3 adds t_T's reconstruction and the VQ terms to the paper's next-frame MSE"),
-    Row("one_channel", "1-channel input", DESIGN, ("model.mask_channel=false",),
-        "encoder sees the masked map only, not the mask"),
+    Row("two_channel", "2-channel input", DESIGN, ("model.mask_channel=true",),
+        "encoder also sees the hidden-pixel mask as a second channel (the paper: the masked map only)"),
+    Row("rgb_prior", "RGB prior", DESIGN, ("model.rgb_prior=true",),
+        "hidden pixels start from the frozen RGB probe's coarse contact map, not 0 (the smoke's choice)"),
 )
 ROW_KEYS = tuple(r.key for r in ROWS)
 

@@ -60,15 +60,19 @@ class ModelConfig:
     cnn_widths: list[int] = field(default_factory=lambda: [32, 64, 128])   # baseline CNN: stem, 2 stages
     resnet_widths: list[int] = field(default_factory=lambda: [64, 128, 256, 512])  # baseline ResNet-18 stages
     vqvae_widths: list[int] = field(default_factory=lambda: [32, 64, 128])  # baseline VQ-VAE: stem, 2 stages
-    # Encoder input: True = 2 channels (the map with hidden pixels zeroed + the hidden-pixel mask),
-    # False = the paper's 1 channel (the map only: a hidden pixel looks like "no contact").
-    mask_channel: bool = True
+    # Encoder input: False = the paper's 1 channel (the map only: a hidden pixel looks like "no
+    # contact"), True = 2 channels (+ the hidden-pixel mask). The paper's, because the mask lost:
+    # the smoke with 1 vs 2 channels, test, reconstruction 0.030 vs 0.042, inpainting F 0.038 vs
+    # 0.050, H 0.055 vs 0.055, prediction 0.036 vs 0.045, Hit@1 0.305 vs 0.335; `make compare`,
+    # 2 seeds, row "2-channel input" (README, "Encoder input").
+    mask_channel: bool = False
     # Ablations of the paper's comparison; both True is HandTouch.
     codebook: bool = True         # False = "w/o codebook": continuous latent, the VQ is bypassed
     vision: bool = True           # False = "w/o vision": stages 2-3 attend to the hand token, never to RGB
     # RGB prior: hidden pixels start from the frozen RGB encoder's own coarse contact map of the
     # frame (upsampled; needs a readout, e.g. TactileGridRGB) instead of 0, in stage 2 and in
-    # inpainting / RGB-to-tactile alike; the mask channel still marks them. Off = the paper's zeros.
+    # inpainting / RGB-to-tactile alike (with mask_channel the mask still marks them). Off = the
+    # paper's zeros.
     # Why: with zeros, 100 stage-2 steps never learned to read the frame (README, "RGB prior").
     rgb_prior: bool = False
     # Measured, not adopted (README, "RGB prior"): add each RGB token to the tactile token of the

@@ -1,9 +1,9 @@
 """HandTouch: tactile encoder -> (fusion | temporal prediction) -> factorised VQ -> decoder.
 
 Top-level modules (the names stages freeze / unfreeze, config.MODULE_NAMES):
-  encoder     tactile encoder (ViT, or a baseline's: config.ARCHITECTURES); input is two
-              channels, the map with masked pixels zeroed and the mask itself, or the map
-              alone with ModelConfig.mask_channel=False (the paper's single channel)
+  encoder     tactile encoder (ViT, or a baseline's: config.ARCHITECTURES); input is the map
+              with masked pixels zeroed (the paper's single channel), plus the mask itself as
+              a second channel with ModelConfig.mask_channel=True
   vq          FactorisedVQ, the shared discrete token space (bypassed without a codebook)
   decoder     -> (B,1,224,224) in [0,1]: attention blocks + conv upsampling (HandTouch), or a
               baseline's conv / linear-patch decoder (decoder.py)

@@ -1,19 +1,20 @@
 """Stage-2/3 experiments on the RGB-to-tactile track, from one finished stage-1 checkpoint.
 
     python -m handtouch.rgb2t_sweep --stage1 runs/smoke/train/vit/stage1.pt \
-        --rgb-encoder runs/smoke/rgb_encoder/KEY/aligned.pt --out runs/rgb2t_sweep/NAME \
-        --seeds 0,1 [--set key=value ...]
+        --rgb-encoder runs/smoke/rgb_encoder/KEY/aligned.pt --dataset data/dataset \
+        --out runs/rgb2t_sweep/NAME --seeds 0,1 [--set key=value ...]
 
 e.g. the RGB prior (README, "RGB prior"): `--out runs/rgb2t_sweep/prior --set model.rgb_prior=true`
 against `--out runs/rgb2t_sweep/base` (configs/smoke.toml alone keeps the paper's zeros).
 
-For each seed: the stage-1 weights are copied into OUT/seedS/stage1.pt (parameters the
-stage-1 checkpoint does not hold keep the fresh model's init), stages 2 and 3 of
-`--config` (default configs/smoke.toml) are trained with `seed=S`, and the final model's
+For each seed: the stage-1 weights are copied into OUT/seedS/stage1.pt (the frozen RGB
+encoder is --rgb-encoder's; parameters the checkpoint does not hold, or holds shaped for
+another RGB encoder outside stage 1's modules, keep the fresh model's init), stages 2 and 3 of
+`--config` (default: the shipped smoke config) are trained with `seed=S`, and the final model's
 RGB-to-tactile F-RMSE (covered pixels, per-frame mean; HT-Bench's figure) is scored on the
-smoke split's test and ood parts next to all zeros and next to the same model fed
+split's (default `smoke`) test and ood parts next to all zeros and next to the same model fed
 mis-paired RGB (shifted >= 1 s, shuffled across episodes; rgb_pretrain.partners).
-Writes OUT/summary.json and prints one line per seed and part. Stage 1 is not retrained,
+Writes OUT/summary.json (atomically) and prints one line per seed and part. Stage 1 is not retrained,
 so a sweep isolates what stages 2-3 do with the same tokeniser (~30 s per seed on 2 cores).
 """
 
@@ -21,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 from pathlib import Path
 
@@ -29,11 +29,13 @@ import numpy as np
 import torch
 
 from htdata import keys
+from htdata.fsutil import write_json_atomic
 
 from .bench.evaluate import iterate_batches, load_part, subsample
 from .bench.metrics import MapMetrics
 from .config import load_train_config
 from .rgb_encoder import to_unit_float
+from .resources import config_file
 from .rgb_pretrain import episode_fps, partners
 from .train import CHECKPOINT_FORMAT, build_model, load_model, read_checkpoint, save_checkpoint, train
 
@@ -43,9 +45,23 @@ def seed_stage1(src: Path, cfg, dst: Path) -> None:
     blob = read_checkpoint(src)
     torch.manual_seed(cfg.seed)
     model = build_model(cfg)
-    missing, unexpected = model.load_state_dict(blob["model"], strict=False)
+    # the frozen RGB encoder is --rgb-encoder's, never the checkpoint's copy
+    weights = {k: v for k, v in blob["model"].items() if not k.startswith("rgb_encoder.")}
+    own = model.state_dict()
+    unexpected = sorted(k for k in weights if k not in own)
     if unexpected:
-        raise ValueError(f"{src}: keys the configured model does not have: {unexpected}")
+        raise ValueError(f"{src}: keys the configured model does not have: {unexpected[:8]}")
+    reshaped = sorted(k for k, v in weights.items() if v.shape != own[k].shape)
+    # modules stage 1 does not train (rgb_proj, fusion, ...) only hold their init: one shaped for
+    # another RGB encoder is left to the fresh model's init, a stage-1 module must match
+    stage1 = tuple(f"{m}." for m in cfg.stage1.trainable)
+    trained = [k for k in reshaped if k.startswith(stage1)]
+    if trained:
+        raise ValueError(f"{src}: stage-1 weights shaped unlike the configured model's (was stage 1 "
+                         f"trained with another model config?): {trained[:8]}")
+    weights = {k: v for k, v in weights.items() if k not in reshaped}
+    missing, _ = model.load_state_dict(weights, strict=False)
+    missing = [k for k in missing if not k.startswith("rgb_encoder.")]
     dst.mkdir(parents=True, exist_ok=True)
     save_checkpoint(dst / "stage1.pt", {**blob, "model": model.state_dict(), "new_keys": missing,
                                         "format": CHECKPOINT_FORMAT,
@@ -87,17 +103,19 @@ def score(model, frames: dict, fps: np.ndarray, seed: int = 0) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m handtouch.rgb2t_sweep", description=__doc__.splitlines()[0])
-    ap.add_argument("--config", default="configs/smoke.toml")
-    ap.add_argument("--stage1", required=True, type=Path)
-    ap.add_argument("--rgb-encoder", required=True)
-    ap.add_argument("--dataset", default="data/dataset")
-    ap.add_argument("--split", default="smoke")
-    ap.add_argument("--out", required=True, type=Path)
-    ap.add_argument("--seeds", default="0,1")
-    ap.add_argument("--max-items", type=int, default=200)
-    ap.add_argument("--set", action="append", default=[])
+    ap = argparse.ArgumentParser(prog="python -m handtouch.rgb2t_sweep", description=__doc__.splitlines()[0],
+                                 epilog=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--config", type=Path, default=None, help="trainer config (default: the shipped smoke config)")
+    ap.add_argument("--stage1", required=True, type=Path, help="a finished stage-1 checkpoint (stage1.pt)")
+    ap.add_argument("--rgb-encoder", required=True, help="frozen RGB encoder spec (file or random:SEED)")
+    ap.add_argument("--dataset", required=True, help="committed dataset with the split")
+    ap.add_argument("--split", default="smoke", help="split with test and ood parts (default %(default)s)")
+    ap.add_argument("--out", required=True, type=Path, help="sweep folder (one seedS/ per seed, summary.json)")
+    ap.add_argument("--seeds", default="0,1", help="comma list of training seeds (default %(default)s)")
+    ap.add_argument("--max-items", type=int, default=200, help="scored items per part (default %(default)s)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override")
     args = ap.parse_args(argv)
+    args.config = args.config or config_file("smoke")
     torch.set_num_threads(1)
     fps = episode_fps(args.dataset)
     parts = {p: load_frames(args.dataset, args.split, p, args.max_items) for p in ("test", "ood")}
@@ -117,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
             for p, r in res.items():
                 print(f"seed {seed} after stage {stage} {p}: " + " ".join(f"{k} {v:.4f}" for k, v in r.items()),
                       flush=True)
-    (args.out / "summary.json").write_text(json.dumps(summary, indent=1))
+    write_json_atomic(args.out / "summary.json", summary, indent=1)
     return 0
 
 

@@ -12,10 +12,14 @@ The same training is run on deliberately mis-paired RGB (`PAIRINGS`):
   shifted   each item gets the RGB frame of its own episode nearest to >= shift_seconds
             away (either direction; items with no such frame are left out),
   shuffled  each item gets the RGB frame of a random item of another episode,
-and every probe is scored on the test part under its own pairing (F-RMSE over covered
-pixels). If RGB and tactile are paired correctly, the aligned probe beats both controls;
-a sync or pairing bug in the data (RGB shifted, or taken from another episode) makes the
-"aligned" probe one more mis-paired probe, and the margin vanishes (`control_checks`).
+and every probe is scored on the test part under its own pairing (coarse-cell MSE over
+covered cells, relative to all zeros). If RGB and tactile are paired correctly, the aligned
+probe beats the shuffled control; a pairing bug in the data (RGB from another episode, or
+RGB unrelated to touch) makes the "aligned" probe one more mis-paired probe, and the margin
+vanishes (`control_checks`). The shifted probe is reported only: in short episodes a
+>= 1 s re-pairing is learnable (REQUIRED_CONTROLS says what was measured). Whether the
+trained model reads the frame of ITS moment is checked by re-scoring it with the frame
+mis-paired at evaluation (`paired_rgb2tactile`, `model_control_checks`).
 
 Probes are cached under OUT/rgb_encoder/KEY/PAIRING.pt, KEY hashing the dataset
 version, the train items and this config: a re-run reuses them.
@@ -23,6 +27,7 @@ version, the train items and this config: a re-run reuses them.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import io
@@ -49,7 +54,14 @@ ARCH = "tactile_grid"
 
 @dataclass
 class RGBPretrainConfig:
-    steps: int = 300
+    # 600, not 300: on the 7 leave-one-task-out splits the seen test ratio went from 0.42-0.89 to
+    # 0.40-0.57, held-out tasks better than all zeros from 3 to 4, and the shuffled control's
+    # closest gap from -0.02 to 0.29 (`make task-transfer`, and the same with `--probe steps=300
+    # --probe threads=1`, the old setting). ~9 s a probe on 2 threads.
+    steps: int = 600
+    # torch threads while a probe trains: the 2-core budget (8.6 s vs 15.7 s on 1 thread at 600
+    # steps). The weights depend on it (float reduction order), so it is config and cache key.
+    threads: int = 2
     batch_size: int = 32
     lr: float = 2e-3
     weight_decay: float = 0.01
@@ -66,8 +78,8 @@ class RGBPretrainConfig:
                                                 "hidden": 128})
 
     def validate(self) -> "RGBPretrainConfig":
-        if self.steps < 1 or self.batch_size < 1 or self.max_items < 2 or self.lr <= 0:
-            raise ValueError("rgb pretrain: steps, batch_size >= 1, max_items >= 2, lr > 0 required")
+        if self.steps < 1 or self.batch_size < 1 or self.max_items < 2 or self.lr <= 0 or self.threads < 1:
+            raise ValueError("rgb pretrain: steps, batch_size, threads >= 1, max_items >= 2, lr > 0 required")
         if self.loss not in ("frame_rmse", "mse") or self.shift_pixels < 0:
             raise ValueError(f"rgb pretrain: loss must be frame_rmse or mse (got {self.loss!r}), shift_pixels >= 0")
         if self.shift_seconds <= 0:
@@ -171,11 +183,17 @@ def train_probe(items: ProbeItems, pairing: str, cfg: RGBPretrainConfig) -> Tact
     with torch.random.fork_rng(devices=[]):      # the caller's RNG stream is left as it was
         torch.manual_seed(cfg.seed)
         model = TactileGridRGB(**cfg.arch)
+    with torch_threads(cfg.threads):
+        return _fit(model, rgb, cells, weight, hand, cfg)
+
+
+def _fit(model: TactileGridRGB, rgb, cells, weight, hand, cfg: RGBPretrainConfig) -> TactileGridRGB:
+    """cfg.steps of AdamW on seeded random batches of the paired tensors, augmented."""
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     g = torch.Generator().manual_seed(cfg.seed)
     model.train()
     for step in range(cfg.steps):
-        i = torch.randint(len(keep), (cfg.batch_size,), generator=g)
+        i = torch.randint(len(hand), (cfg.batch_size,), generator=g)
         for group in opt.param_groups:
             group["lr"] = _lr(step, cfg)
         x = rgb[i]
@@ -214,6 +232,18 @@ def cache_key(dataset_root, split: str | None, part: str, cfg: RGBPretrainConfig
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
+@contextlib.contextmanager
+def torch_threads(n: int | None):
+    """torch's intra-op thread count set to n inside the block (None: unchanged), restored after."""
+    before = torch.get_num_threads()
+    if n:
+        torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
 def ensure_probes(dataset_root, split: str | None, out_dir, cfg: RGBPretrainConfig | None = None,
                   part: str = "train", pairings=PAIRINGS) -> dict[str, Path]:
     """Train (or reuse) one probe per pairing -> {pairing: path of its encoder file}."""
@@ -236,11 +266,28 @@ def ensure_probes(dataset_root, split: str | None, out_dir, cfg: RGBPretrainConf
 # to all zeros on the same items. (Full-resolution per-frame F-RMSE is dominated by the
 # within-cell detail a 14x14 readout cannot have: measured on the smoke data, aligned and
 # shifted probes were within 0.004 of each other there while their coarse MSE differed 1.3-1.5x.)
-# CONTROL_MARGIN, from run-to-run spread (seeds 0, 1, 2 of this config on the smoke data, all
-# test items): aligned probe 0.411 / 0.461 / 0.451 (range 0.050), shifted control
-# 0.566 / 0.778 / 0.611, shuffled control 0.793 / 0.797 / 0.803. The aligned probe must beat
-# each control by more than the aligned range (0.06); the closest seed cleared it by 0.09.
-CONTROL_MARGIN = 0.06
+# Which controls can fail the smoke. Measured by `make task-transfer` (each task held out in
+# turn, the others split 9:1 by episode, the controls trained on each split): the shuffled
+# control sat 0.29-0.39 above the aligned probe on all 7 splits, the shifted one -0.07..+0.16
+# (worse than aligned on 4 of 7, and on probe seed 2 of the smoke's own split). The
+# sample episodes last 1.6-3 s, so the frame >= 1 s away is a fixed function of where the
+# frame sits in its episode, and a probe learns that re-pairing about as well as the true
+# one: the shifted probe is reported, not required. The in-episode timing check that works
+# is the trained model's (MODEL_MARGIN, below).
+REQUIRED_CONTROLS = ("shuffled",)
+# CONTROL_MARGIN, from run-to-run spread (probe seeds 0, 1, 2 on the smoke's split, all test
+# items: `python -m handtouch.task_transfer --tasks palm_push --controls --seed S`): aligned
+# probe 0.403 / 0.389 / 0.494 (range 0.105), shuffled control 0.796 / 0.797 / 0.798. The
+# aligned probe must beat the shuffled one by more than the aligned range; across the 7 splits
+# above the closest gap was 0.29.
+CONTROL_MARGIN = 0.11
+# MODEL_MARGIN: the trained model's RGB-to-tactile F-RMSE with the frame mis-paired at
+# evaluation (shifted >= 1 s, shuffled) must exceed its aligned score on the same items by
+# this much. Spread of the aligned score on test: 0.0763 / 0.0777 (stages 2-3, seeds 0 / 1,
+# `python -m handtouch.rgb2t_sweep`; the smoke: 0.0760), so > 3x that range. Measured gaps,
+# shifted / shuffled: 0.040 / 0.030 and 0.047 / 0.033 (those seeds), 0.042 / 0.030 (the smoke);
+# 0.023 / 0.014 with the earlier 300-step probe and tripod_grasp held out.
+MODEL_MARGIN = 0.005
 
 
 def probe_score(path: Path, items: ProbeItems, pairing: str, shift_seconds: float = 1.0, seed: int = 0,
@@ -270,14 +317,30 @@ def control_scores(paths: dict[str, Path], parts: dict[str, ProbeItems], cfg: RG
 
 
 def control_checks(scores: dict, part: str = "test", margin: float = CONTROL_MARGIN) -> list[dict]:
-    """Pass/fail: the aligned probe's ratio + margin <= each control's, on `part`."""
+    """Pass/fail: the aligned probe's ratio + margin <= each control's, on `part`; only the
+    REQUIRED_CONTROLS can fail a run (the others are reported)."""
     out = []
     aligned = scores[part]["aligned"]["ratio"]
     for p in PAIRINGS[1:]:
         ctrl = scores[part][p]["ratio"]
         ok = aligned is not None and ctrl is not None and aligned + margin <= ctrl
         out.append({"check": f"RGB probe ({part}): aligned coarse-MSE/zeros + {margin} <= {p} control's",
-                    "value": aligned, "limit": None if ctrl is None else ctrl - margin, "ok": bool(ok)})
+                    "value": aligned, "limit": None if ctrl is None else ctrl - margin, "ok": bool(ok),
+                    "required": p in REQUIRED_CONTROLS})
+    return out
+
+
+def model_control_checks(model_scores: dict, part: str = "test", margin: float = MODEL_MARGIN) -> list[dict]:
+    """Pass/fail per mis-pairing: the trained model's aligned RGB-to-tactile F-RMSE + margin <=
+    its score with the frame mis-paired at evaluation (paired_rgb2tactile, same items). Fails when
+    the model does not read the frame, or reads it no better than a frame >= 1 s away."""
+    out = []
+    for p, got in model_scores[part].items():
+        aligned, paired = got.get("aligned_rmse"), got.get("rmse")
+        known = all(v is not None and math.isfinite(v) for v in (aligned, paired))
+        out.append({"check": f"model RGB-to-tactile ({part}): aligned F-RMSE + {margin} <= {p} frame's",
+                    "value": aligned, "limit": paired - margin if known else None,
+                    "ok": bool(known and aligned + margin <= paired), "required": True})
     return out
 
 

@@ -22,7 +22,6 @@ import datetime as _dt
 import json
 import math
 import os
-import shutil
 import time
 import traceback
 from collections.abc import Callable
@@ -117,15 +116,12 @@ def bench_sources() -> tuple[str, ...]:
 
 def ensure_corpus(cfg: BenchConfig) -> Path:
     """The deterministic sample corpus; reused when a complete one of the same scale/seed exists."""
-    from htdata.sample.corpus import CorpusConfig, write_corpus
+    from htdata.sample.corpus import CorpusConfig, corpus_complete, write_corpus
 
     root = cfg.work / f"raw_{cfg.scale}_{cfg.seed}"
-    marker = root / ".complete"
-    if not marker.is_file():
-        if root.exists():
-            shutil.rmtree(root)
-        write_corpus(CorpusConfig(out=root, seed=cfg.seed, scale=cfg.scale, progress=False))
-        marker.write_text("ok\n")
+    corpus = CorpusConfig(out=root, seed=cfg.seed, scale=cfg.scale, progress=False, overwrite=True)
+    if not corpus_complete(corpus):
+        write_corpus(corpus)
     return root
 
 

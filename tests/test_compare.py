@@ -7,6 +7,8 @@ import pytest
 from handtouch.bench.evaluate import EvalConfig, prepare
 from handtouch.compare import ABLATION, BASELINE, DESIGN, OURS, ROWS, compare, parse_args, resolve_rows
 from handtouch.config import load_train_config
+from handtouch.rgb_encoder import TactileGridRGB
+from handtouch.rgb_pretrain import save_probe
 from tests.factories import TRAIN_EPISODES, write_synthetic_dataset
 
 # Every encoder narrow enough for a few CPU steps; the baselines' widths are the config's.
@@ -44,8 +46,11 @@ def dataset_root(tmp_path_factory):
 
 @pytest.fixture
 def tiny_config(dataset_root, tmp_path):
+    # a (untrained) probe file as the frozen RGB encoder: the RGB-prior row needs its readout
+    probe = tmp_path / "probe.pt"
+    save_probe(TactileGridRGB(size=16, width=8, channels=4, grid=14, hidden=16), probe, {"pairing": "aligned"})
     path = tmp_path / "tiny.toml"
-    write_toml(path, {**TINY, "data_root": str(dataset_root)})
+    write_toml(path, {**TINY, "data_root": str(dataset_root), "rgb_encoder": str(probe)})
     return path
 
 
@@ -75,7 +80,8 @@ def test_each_row_changes_only_its_overrides(tiny_config, tmp_path):
     by_key = {row.key: cfg for row, cfg, _ in resolved}
     assert by_key["vqvae"].model.encoder == "vqvae" and by_key["vit_plain"].model.encoder == "vit_plain"
     assert not by_key["no_drop"].masking.curriculum and not by_key["no_codebook"].model.codebook
-    assert not by_key["no_vision"].model.vision and not by_key["one_channel"].model.mask_channel
+    assert not by_key["no_vision"].model.vision and by_key["two_channel"].model.mask_channel
+    assert by_key["rgb_prior"].model.rgb_prior and not by_key["handtouch"].model.rgb_prior
     assert by_key["stage3_replay"].loss.stage3_replay == 1.0 and by_key["stage3_replay"].loss.stage3_vq
     assert by_key["handtouch"].loss.stage3_replay == 0.0 and not by_key["handtouch"].loss.stage3_vq
 

@@ -403,9 +403,9 @@ def test_baselines_freeze_by_module_name(encoder, stage):
 
 
 def test_mask_channel_switch_changes_the_encoder_input():
-    two, one = tiny_model(), tiny_model(mask_channel=False)
+    one, two = tiny_model(), tiny_model(mask_channel=True)          # the paper's 1 channel is the default
     assert two.encoder.patch_embed.in_channels == 2 and one.encoder.patch_embed.in_channels == 1
-    assert tiny_model("cnn", mask_channel=False).encoder.features[0].in_channels == 1
+    assert tiny_model("cnn").encoder.features[0].in_channels == 1
     b = frame_batch(2)
     mask = torch.zeros(2, 1, 224, 224)
     mask[:, :, :112] = 1
@@ -481,9 +481,12 @@ def test_rgb_prior_fills_hidden_pixels_with_the_rgb_encoders_coarse_map():
     mask[:, :, :112] = 1
     target = b["tactile"] * cov
     shown = target * (1 - mask) + expected * mask
+    two = grid_rgb_model(rgb_prior=True, mask_channel=True)
     with torch.no_grad():
-        # the encoder sees the prior where pixels are hidden (the mask channel still marks them)
-        assert torch.allclose(model.encode(target, mask, fill), model.encoder(torch.cat([shown, mask], 1)))
+        # the encoder sees the prior where pixels are hidden (the paper's 1 channel: only that) ...
+        assert torch.allclose(model.encode(target, mask, fill), model.encoder(shown))
+        # ... and, with the mask channel, which pixels those are
+        assert torch.allclose(two.encode(target, mask, fill), two.encoder(torch.cat([shown, mask], 1)))
         assert not torch.equal(model.encode(target, mask, fill), model.encode(target, mask))
         # RGB-to-tactile now depends on the frame through the prior too, and visible pixels are kept
         other = torch.roll(b["rgb"], 1, 0)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from htdata.cli import main as htdata_main
-from htdata.sample.corpus import CorpusConfig, plan_corpus, write_corpus
+from htdata.sample.corpus import COMPLETE_MARKER, CorpusConfig, corpus_complete, plan_corpus, write_corpus
 from htdata.sample.tasks import TASKS
 
 OT_KEYS = {"camera_poses", "labels", "rgb_images_jpeg", "right_hand_landmarks", "right_palm_pos",
@@ -261,9 +261,49 @@ def test_cli_writes_selected_formats_and_summary(tmp_path, capsys):
     summary = json.loads(captured.out)
     assert summary["native"]["episodes"] == 2 and "opentouch" not in summary
     assert "htdata sample" in captured.err  # tqdm progress goes to stderr
-    assert sorted(p.name for p in out.iterdir()) == ["native"]
+    assert sorted(p.name for p in out.iterdir()) == [COMPLETE_MARKER, "native"]
     assert htdata_main(["sample", str(out), "--scale", "tiny", "--formats", "native",
                         "--overwrite", "--quiet"]) == 0
+
+
+def _stamps(root: Path) -> dict:
+    return {str(p.relative_to(root)): p.stat().st_mtime_ns for p in root.rglob("*") if p.is_file()}
+
+
+def test_reuse_keeps_a_finished_corpus_of_the_same_seed_and_rewrites_anything_else(tmp_path, capsys):
+    out = tmp_path / "raw"
+    args = ["sample", str(out), "--scale", "tiny", "--formats", "native", "--quiet", "--reuse"]
+    assert htdata_main(args) == 0                               # nothing there: written
+    cfg = CorpusConfig(out=out, scale="tiny", formats=("native",))
+    assert corpus_complete(cfg)
+    assert json.loads((out / COMPLETE_MARKER).read_text()) == {"seed": 0, "scale": "tiny", "formats": ["native"]}
+    before = _stamps(out)
+    capsys.readouterr()
+    assert htdata_main(args) == 0                               # finished, same seed: kept as is
+    assert _stamps(out) == before and "reused" in capsys.readouterr().err
+    assert not corpus_complete(CorpusConfig(out=out, scale="tiny", formats=("native",), seed=1))
+    assert htdata_main([*args, "--seed", "1"]) == 0             # another seed: written again
+    assert json.loads((out / COMPLETE_MARKER).read_text())["seed"] == 1
+    (out / COMPLETE_MARKER).write_text("ok\n")                  # an old-style marker says nothing
+    assert not corpus_complete(cfg)
+
+
+def test_a_corpus_cut_short_has_no_marker_and_is_written_again(tmp_path, monkeypatch):
+    from htdata.sample import corpus
+
+    out = tmp_path / "raw"
+    assert htdata_main(["sample", str(out), "--scale", "tiny", "--formats", "native", "--quiet"]) == 0
+
+    def crash(*a, **k):
+        raise KeyboardInterrupt("power cut")
+    monkeypatch.setitem(corpus._WRITERS, "native", crash)
+    with pytest.raises(KeyboardInterrupt):
+        write_corpus(CorpusConfig(out=out, scale="tiny", formats=("native",), overwrite=True, progress=False))
+    assert not (out / COMPLETE_MARKER).exists()               # the old marker went before the first byte
+    monkeypatch.undo()
+    assert htdata_main(["sample", str(out), "--scale", "tiny", "--formats", "native", "--quiet", "--reuse"]) == 0
+    assert corpus_complete(CorpusConfig(out=out, scale="tiny", formats=("native",)))
+    assert any((out / "native").iterdir())
 
 
 def test_cli_rejects_unknown_format(tmp_path):

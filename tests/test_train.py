@@ -303,12 +303,12 @@ def test_ablation_switches_load_from_overrides(tmp_path):
 
 def test_baseline_and_design_switches_load_and_change_the_config():
     base = load_train_config(config_file("compare_smoke"))
-    assert (base.loss.stage3_replay, base.loss.stage3_vq, base.model.mask_channel) == (0.0, False, True)
+    assert (base.loss.stage3_replay, base.loss.stage3_vq, base.model.mask_channel) == (0.0, False, False)
     smoke = load_train_config(config_file("smoke"))
     assert (smoke.loss.stage3_replay, smoke.loss.stage3_vq) == (1.0, True)    # the smoke's documented opt-in
     cfg = load_train_config(config_file("compare_smoke"), ["loss.stage3_replay=0.5", "loss.stage3_vq=true",
-                                                           "model.mask_channel=false", 'model.encoder="vqvae"'])
-    assert (cfg.loss.stage3_replay, cfg.loss.stage3_vq, cfg.model.mask_channel) == (0.5, True, False)
+                                                           "model.mask_channel=true", 'model.encoder="vqvae"'])
+    assert (cfg.loss.stage3_replay, cfg.loss.stage3_vq, cfg.model.mask_channel) == (0.5, True, True)
     assert cfg.model.decoder_kind == "conv" and cfg.model.quantised and cfg.model.num_tokens == 196
     starved = ["batch_size=1", "model.codebook_size=1024"]      # 196 tokens / 1024 codes < 2 uses per code
     plain = load_train_config(config_file("compare_smoke"), ['model.encoder="vit_plain"', *starved])

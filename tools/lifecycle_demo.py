@@ -35,9 +35,7 @@ def run(*args: str) -> str:
 def main(argv: list[str]) -> int:
     work = Path(argv[0]) if argv else Path(tempfile.mkdtemp(prefix="htdata-lifecycle-"))
     raw, ds, other, merged = work / "raw", work / "ds", work / "native_only", work / "merged"
-    if not (raw / ".complete").is_file():
-        run("sample", str(raw), "--seed", "0", "--scale", "small")
-        (raw / ".complete").write_text("ok\n")
+    run("sample", str(raw), "--seed", "0", "--scale", "small", "--reuse")
     run("ingest", "--quiet", "--workers", "2", "--pipeline", f"opentouch={raw / 'opentouch'}", str(ds))
     run("ingest", "--quiet", "--workers", "2", "--pipeline", f"touchanything={raw / 'touchanything'}", str(ds))
     run("split", str(ds), "--ood-task", "palm_push", "--name", "main")

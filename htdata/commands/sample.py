@@ -7,14 +7,16 @@ import json
 import sys
 import time
 
-from htdata.sample.corpus import FORMATS, SCALES, CorpusConfig, plan_corpus, write_corpus
+from htdata.sample.corpus import COMPLETE_MARKER, FORMATS, SCALES, CorpusConfig, corpus_complete, plan_corpus, write_corpus
 
 EPILOG = """\
 Layout written under OUT:
   opentouch/<scene>.hdf5 + annotations.csv      right hand, 16x16, inverted 0..3072, 30 fps
   touchanything/<Scene>/<task>/<traj>/ + split.json   both hands, 21x21, chest.mp4 640x480
   native/<recording>/                            100 Hz tactile, 30 Hz video, clock offset
-Same --seed -> identical tactile arrays and JPEG bytes.
+Same --seed -> identical tactile arrays and JPEG bytes. OUT/.complete (written last) names
+the seed, scale and formats of a finished corpus; --reuse keeps such a corpus and
+rewrites anything else (a corpus cut short, or one of another seed).
 """
 
 
@@ -35,6 +37,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--formats", type=_formats, default=FORMATS,
                         help=f"comma list of formats to write (default {','.join(FORMATS)})")
     parser.add_argument("--overwrite", action="store_true", help="replace existing OUT/<format> folders")
+    parser.add_argument("--reuse", action="store_true",
+                        help=f"exit 0 without writing if OUT holds a finished corpus ({COMPLETE_MARKER}) of the "
+                             "same seed, scale and formats; otherwise write it, replacing OUT/<format> folders")
     parser.add_argument("--dry-run", action="store_true", help="print the planned episodes and exit")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -49,6 +54,12 @@ def run(args: argparse.Namespace) -> int:
                 print(f"{ep.fmt}\t{ep.name}\t{ep.spec.task}\t{ep.spec.scene}\t{ep.spec.n_frames}\t"
                       f"{','.join(ep.spec.hands)}")
             return 0
+        if args.reuse:
+            if corpus_complete(cfg):
+                print(f"htdata sample: {cfg.out} holds the finished corpus (seed {cfg.seed}, scale {cfg.scale}); "
+                      "reused", file=sys.stderr)
+                return 0
+            cfg.overwrite = True
         t0 = time.perf_counter()
         summary = write_corpus(cfg)
     except (ValueError, FileExistsError) as exc:

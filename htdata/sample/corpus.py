@@ -15,6 +15,7 @@ writers in `htdata.sample.formats`, reproducing each source's quirks:
 
 from __future__ import annotations
 
+import json
 import shutil
 import sys
 from dataclasses import dataclass, field
@@ -23,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata.adapters import ADAPTERS
+from htdata.fsutil import write_json_atomic
 from htdata.layouts import load_layout
 from htdata.sample.formats import (
     NativeHand,
@@ -300,11 +302,31 @@ def _write_native(out: Path, episodes: list[PlannedEpisode], seed: int, bar) -> 
 _WRITERS = {"opentouch": _write_opentouch, "touchanything": _write_touchanything, "native": _write_native}
 
 
+# Written last by write_corpus: OUT holds a finished corpus of this seed, scale and formats.
+# A crash mid-write leaves no marker, so `htdata sample --reuse` (the Makefile, the smoke,
+# the bench) writes the corpus again instead of ingesting half of it.
+COMPLETE_MARKER = ".complete"
+
+
+def corpus_identity(cfg: CorpusConfig) -> dict:
+    return {"seed": int(cfg.seed), "scale": cfg.scale, "formats": list(cfg.formats)}
+
+
+def corpus_complete(cfg: CorpusConfig) -> bool:
+    """True when cfg.out holds a finished corpus written with cfg's seed, scale and formats."""
+    try:
+        doc = json.loads((Path(cfg.out) / COMPLETE_MARKER).read_text())
+    except (OSError, ValueError):
+        return False
+    return doc == corpus_identity(cfg.validate())
+
+
 def write_corpus(cfg: CorpusConfig) -> dict:
-    """Write the planned corpus under cfg.out; return per-format counts."""
+    """Write the planned corpus under cfg.out, then its COMPLETE_MARKER; return per-format counts."""
     from tqdm import tqdm
 
     episodes = plan_corpus(cfg)
+    (cfg.out / COMPLETE_MARKER).unlink(missing_ok=True)      # from here until the end: incomplete
     for fmt in cfg.formats:
         target = cfg.out / fmt
         if target.exists() and any(target.iterdir()):
@@ -317,4 +339,5 @@ def write_corpus(cfg: CorpusConfig) -> dict:
         for fmt in cfg.formats:
             bar.set_postfix_str(fmt)
             summary[fmt] = _WRITERS[fmt](cfg.out, [e for e in episodes if e.fmt == fmt], int(cfg.seed), bar)
+    write_json_atomic(cfg.out / COMPLETE_MARKER, corpus_identity(cfg))
     return summary
