@@ -9,7 +9,7 @@ train episodes and scored (covered-cell MSE relative to all zeros, the control's
 
   seen    on the other tasks' test episodes (htdata.split's rule: 10% of each task's
           episodes, seeded), the in-distribution level of the same probe, and
-  held    on every frame of T, which no training item came from.
+  held    on every decoded frame of T, which no training item came from.
 
 A ratio below 1 on `held` means the probe predicts T's touch better than all zeros. The
 frames are decoded once (a seeded subsample of the whole dataset) and partitioned in
