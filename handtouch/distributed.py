@@ -2,11 +2,13 @@
 
 Also owns which samples each rank sees: `StepBatchSampler` gives every rank a
 disjoint, deterministic slice of a per-epoch permutation, addressed by global
-step, so a resumed run reads exactly the batches it would have read.
+step, so a resumed run reads exactly the batches it would have read; and a
+run's CPU thread budget (`torch_threads`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -16,6 +18,18 @@ import torch.distributed as dist
 import torch.nn as nn
 from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import Sampler
+
+
+@contextlib.contextmanager
+def torch_threads(n: int | None):
+    """torch's intra-op thread count set to n inside the block (None / 0: unchanged), restored after."""
+    before = torch.get_num_threads()
+    if n:
+        torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 @dataclass(frozen=True)

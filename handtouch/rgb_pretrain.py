@@ -27,7 +27,6 @@ version, the train items and this config: a re-run reuses them.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import hashlib
 import io
@@ -45,6 +44,7 @@ from htdata import keys
 from htdata.fsutil import write_bytes_atomic
 
 from .bench.metrics import MapMetrics
+from .distributed import torch_threads
 from .rgb_encoder import TactileGridRGB, load_rgb_encoder, to_unit_float
 
 log = logging.getLogger("handtouch.rgb_pretrain")
@@ -230,18 +230,6 @@ def cache_key(dataset_root, split: str | None, part: str, cfg: RGBPretrainConfig
            "items": hashlib.sha256(np.ascontiguousarray(items).tobytes()).hexdigest(),
            "config": dataclasses.asdict(cfg), "arch": ARCH}
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:16]
-
-
-@contextlib.contextmanager
-def torch_threads(n: int | None):
-    """torch's intra-op thread count set to n inside the block (None: unchanged), restored after."""
-    before = torch.get_num_threads()
-    if n:
-        torch.set_num_threads(n)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
 
 
 def ensure_probes(dataset_root, split: str | None, out_dir, cfg: RGBPretrainConfig | None = None,

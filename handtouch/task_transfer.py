@@ -35,6 +35,7 @@ from htdata.manifest import load_episodes
 from htdata.split import assign_episodes
 
 from .bench.report import write_text_atomic
+from .config import parse_override
 from .rgb_pretrain import PAIRINGS, ProbeItems, RGBPretrainConfig, load_items, probe_score, save_probe, train_probe
 
 
@@ -131,17 +132,15 @@ def markdown(doc: dict) -> str:
 
 
 def probe_fields(ap: argparse.ArgumentParser, items: list[str]) -> dict:
-    """["steps=600", ...] -> {"steps": 600}; unknown fields are an argparse error naming the known ones."""
+    """["steps=600", ...] -> {"steps": 600}, values read as `--set` reads them (config.parse_override);
+    unknown fields are an argparse error naming the known ones."""
     known = {f.name for f in dataclasses.fields(RGBPretrainConfig)} - {"seed", "max_items"}
     out = {}
     for item in items:
-        key, sep, text = item.partition("=")
-        if not sep or key not in known:
+        path, value = parse_override(item) if "=" in item else ([], None)
+        if len(path) != 1 or path[0] not in known:
             ap.error(f"--probe {item!r}: expected FIELD=VALUE with FIELD one of {sorted(known)}")
-        try:
-            out[key] = json.loads(text)
-        except ValueError:
-            out[key] = text
+        out[path[0]] = value
     return out
 
 
@@ -160,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="frames decoded from the whole dataset (a seeded subsample; default %(default)s)")
     ap.add_argument("--probe", action="append", default=[], metavar="FIELD=VALUE",
                     help="a field of the probe's RGBPretrainConfig (default: the smoke's), e.g. steps=600; "
-                         "VALUE is read as JSON, else as text")
+                         "VALUE is read as TOML, else as text (as --set elsewhere)")
     args = ap.parse_args(argv)
     cfg = RGBPretrainConfig(seed=args.seed, max_items=args.max_items, **probe_fields(ap, args.probe)).validate()
     tasks = [t.strip() for t in args.tasks.split(",") if t.strip()]

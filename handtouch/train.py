@@ -38,7 +38,8 @@ from htdata import keys
 from htdata.fsutil import write_bytes_atomic, write_json_atomic
 
 from .config import WINDOW, TrainConfig, load_train_config, model_config_from_dict
-from .distributed import DistEnv, StepBatchSampler, barrier, init_distributed, mean_across_ranks, shutdown, wrap
+from .distributed import (DistEnv, StepBatchSampler, barrier, init_distributed, mean_across_ranks, shutdown,
+                          torch_threads, wrap)
 from .model import HandTouch, covered, masked_mse
 from .resources import config_file
 from .rgb_encoder import load_rgb_encoder
@@ -335,9 +336,11 @@ def train(cfg: TrainConfig, data: TrainData | None = None,
     Every log record goes to OUT/log.jsonl and to `on_record` (default: logging at INFO).
     """
     cfg.validate()
-    threads_before = torch.get_num_threads()
-    if cfg.threads:
-        torch.set_num_threads(cfg.threads)
+    with torch_threads(cfg.threads):      # cfg.threads is this training run's budget only
+        return _train(cfg, data, on_record)
+
+
+def _train(cfg: TrainConfig, data: TrainData | None, on_record: Callable[[dict], None] | None) -> dict:
     env = init_distributed(cfg.device)
     try:
         cfg.check_codebook_load(env.world_size)
@@ -377,7 +380,6 @@ def train(cfg: TrainConfig, data: TrainData | None = None,
         return metrics
     finally:
         shutdown(env)
-        torch.set_num_threads(threads_before)   # cfg.threads is this training run's budget only
 
 
 def _config_path(arg: str) -> Path:
