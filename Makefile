@@ -12,11 +12,12 @@ JOBS   ?= 2
 
 setup: $(VENV)/.installed
 
-# torch==2.13.0 is pinned in pyproject.toml: the CPU wheel on the machine's disk.
+# Everything: the data core plus the torch datasets, the trainer, the bench, Ray and the tests
+# (torch==2.13.0 is pinned in pyproject.toml: the CPU wheel on the machine's disk).
 $(VENV)/.installed: pyproject.toml setup.py
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e ".[test,ray]"
+	$(PY) -m pip install -q -e ".[torch,train,bench,ray,test]"
 	touch $@
 
 # Raw sample corpus: written once, reused after (--reuse: a finished corpus of this seed, which

@@ -20,6 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from .resources import config_file
+from .config import load_train_config
+from .train import train
 
 CONFIG = "smoke"
 STEPS, QUICK_STEPS = 40, 2
@@ -34,8 +36,6 @@ def _toml(value: Any) -> str:
 def stage1_run(dataset: Path, out: Path, steps: int, bf16: bool, seed: int = 0,
                batch_size: int | None = None) -> dict:
     """Train stage 1 only for `steps` steps into a fresh `out`; one row of the table."""
-    from .config import load_train_config
-    from .train import train
 
     if out.exists():
         shutil.rmtree(out)

@@ -35,7 +35,12 @@ import torch
 from handtouch.bench.evaluate import CopyLastModel, EvalConfig, ZerosModel, evaluate, prepare
 from handtouch.bench.report import COLUMNS, FULL_COLUMNS, markdown_table, write_text_atomic
 from handtouch.config import load_train_config
-from htdata.fsutil import write_json_atomic
+from htdata.store.fsutil import write_json_atomic
+from handtouch.smoke import codebook_perplexity as perplexity   # the smoke check's own measure
+from handtouch.train import load_model, train
+from handtouch.smoke import jsonable
+from handtouch import smoke
+from handtouch.rgb_pretrain import RGBPretrainConfig, ensure_probes
 
 OURS, BASELINE, ABLATION, DESIGN = "ours", "baseline", "ablation", "design choice"
 
@@ -95,7 +100,6 @@ def resolve_rows(config: Path, sets: list[str], rows: list[Row], out: Path) -> l
 
 def codebook_perplexity(model, prepared) -> float | None:
     """exp(entropy) of code usage over every token of the first part's maps; None without a codebook."""
-    from handtouch.smoke import codebook_perplexity as perplexity   # the smoke check's own measure
 
     if not model.cfg.quantised:
         return None
@@ -104,7 +108,6 @@ def codebook_perplexity(model, prepared) -> float | None:
 
 def train_and_score(cfg, prepared) -> dict:
     """Train one row (or reuse its finished checkpoints) and score it on every prepared part."""
-    from handtouch.train import load_model, train
 
     metrics = train(cfg)
     model = load_model(Path(cfg.out_dir) / f"stage{max(cfg.stages)}.pt")
@@ -141,8 +144,6 @@ def compare(config: Path, sets: list[str], prepared: dict, out: Path, rows: list
 
 
 def write_comparison(out: Path, doc: dict) -> None:
-    from handtouch.smoke import jsonable
-
     write_json_atomic(out / "compare.json", jsonable(doc))
     write_text_atomic(out / "compare.md", comparison_markdown(doc))
 
@@ -213,8 +214,6 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 
 def main(argv=None) -> int:
-    from handtouch import smoke
-    from handtouch.rgb_pretrain import RGBPretrainConfig, ensure_probes
 
     args = parse_args(argv)
     timer = smoke.PhaseTimer()

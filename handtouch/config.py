@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from htdata.format import CANVAS
+from htdata.format.table import CANVAS
+from htdata.settings import apply_settings, parse_setting
 
 # model.encoder -> (tactile decoder, quantised latent). "vit" is HandTouch; the others are the
 # paper's four encoder baselines (README "Baselines"): cnn and resnet18 swap the tactile encoder
@@ -300,27 +301,14 @@ _NESTED = {"ModelConfig": ModelConfig, "StageConfig": StageConfig, "MaskingConfi
 
 
 def parse_override(text: str) -> tuple[list[str], Any]:
-    """'model.dim=64' -> (['model', 'dim'], 64); the value is read as TOML, else as a string."""
-    if "=" not in text:
-        raise ValueError(f"--set expects key=value, got {text!r}")
-    key, raw = text.split("=", 1)
-    try:
-        value = tomllib.loads(f"v = {raw}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = raw
-    return key.strip().split("."), value
+    """'model.dim=64' -> (['model', 'dim'], 64): htdata's one `--set` parser (htdata/settings.py)."""
+    key, value = parse_setting(text)
+    return key.split("."), value
 
 
 def apply_overrides(data: dict, overrides: list[str]) -> dict:
-    for text in overrides:
-        path, value = parse_override(text)
-        node = data
-        for part in path[:-1]:
-            node = node.setdefault(part, {})
-            if not isinstance(node, dict):
-                raise ValueError(f"--set {text!r}: {part!r} is not a table")
-        node[path[-1]] = value
-    return data
+    """`data` with `--set` overrides written in (htdata/settings.py)."""
+    return apply_settings(data, list(overrides))
 
 
 def train_config_from_dict(data: dict) -> TrainConfig:

@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from htdata import keys
-from htdata.fsutil import write_json_atomic
+from htdata.read import keys
+from htdata.store.fsutil import write_json_atomic
 
 from .bench.evaluate import iterate_batches, load_part, subsample
 from .bench.metrics import MapMetrics

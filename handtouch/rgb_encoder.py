@@ -23,7 +23,7 @@ from pathlib import Path
 import torch
 import torch.nn as nn
 
-from htdata.format import CANVAS
+from htdata.format.table import CANVAS
 
 log = logging.getLogger("handtouch.rgb_encoder")
 
@@ -68,7 +68,7 @@ class TactileGridRGB(nn.Module):
         self.features = nn.Sequential(*layers)
         self.to_grid = nn.Sequential(nn.Linear(2 * c, hidden), nn.LayerNorm(hidden), nn.GELU(),
                                      nn.Linear(hidden, channels * grid * grid))
-        self.readout = nn.Conv2d(channels, 2, 1)   # per hand (htdata.keys.HAND_IDS order)
+        self.readout = nn.Conv2d(channels, 2, 1)   # per hand (htdata.read.keys.HAND_IDS order)
 
     def pooled(self, x: torch.Tensor) -> torch.Tensor:
         """(B,3,H,W) float [0,1] -> (B,3,size,size) (the input the pretraining caches)."""

@@ -40,12 +40,17 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from htdata import keys
-from htdata.fsutil import write_bytes_atomic
+from htdata.read import keys
+from htdata.store.fsutil import write_bytes_atomic
 
 from .bench.metrics import MapMetrics
 from .distributed import torch_threads
 from .rgb_encoder import TactileGridRGB, load_rgb_encoder, to_unit_float
+from htdata.read.torchdata import TactileFrameDataset
+from .bench.evaluate import iterate_batches, subsample
+from .train import lr_at
+from htdata.store.manifest import load_manifest
+from htdata.store.manifest import load_episodes
 
 log = logging.getLogger("handtouch.rgb_pretrain")
 PAIRINGS = ("aligned", "shifted", "shuffled")
@@ -109,10 +114,8 @@ def coarse_target(tactile: torch.Tensor, coverage: torch.Tensor, grid: int) -> t
 
 
 def load_items(dataset_root, split: str | None, part: str | None, cfg: RGBPretrainConfig) -> ProbeItems:
-    """Decode a seeded subsample of a part's frames (htdata.torchdata) into ProbeItems."""
-    from htdata.torchdata import TactileFrameDataset
+    """Decode a seeded subsample of a part's frames (htdata.read.torchdata) into ProbeItems."""
 
-    from .bench.evaluate import iterate_batches, subsample
 
     ds = TactileFrameDataset(str(dataset_root), split=split, part=part)
     if len(ds) < 2:
@@ -169,7 +172,6 @@ def partners(episode: np.ndarray, frame: np.ndarray, fps: np.ndarray, pairing: s
 
 
 def _lr(step: int, cfg: RGBPretrainConfig) -> float:
-    from .train import lr_at
     return lr_at(step, cfg.steps, cfg.lr, cfg.warmup_steps)
 
 
@@ -222,8 +224,6 @@ def save_probe(model: TactileGridRGB, path: Path, meta: dict) -> None:
 
 def cache_key(dataset_root, split: str | None, part: str, cfg: RGBPretrainConfig) -> str:
     """Dataset version (its manifest) + the train items + this config -> 16 hex digits."""
-    from htdata.manifest import load_manifest
-    from htdata.torchdata import TactileFrameDataset
 
     items = TactileFrameDataset(str(dataset_root), split=split, part=part).items
     doc = {"manifest": load_manifest(dataset_root), "split": split, "part": part,
@@ -334,7 +334,6 @@ def model_control_checks(model_scores: dict, part: str = "test", margin: float =
 
 def episode_fps(dataset_root) -> np.ndarray:
     """fps of every episode, by position in episodes.jsonl (the items' `episode` key)."""
-    from htdata.manifest import load_episodes
     return np.array([float(ep.get("fps") or 0.0) for ep in load_episodes(dataset_root)])
 
 

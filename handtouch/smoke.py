@@ -57,14 +57,18 @@ from handtouch.config import ENCODERS as MODEL_ENCODERS
 from handtouch.resources import config_file
 from handtouch.rgb_pretrain import (PAIRINGS, RGBPretrainConfig, control_checks, control_scores, ensure_probes,
                                     episode_fps, load_items, model_control_checks, paired_rgb2tactile)
-from htdata import keys
-from htdata.adapters import ADAPTERS
-from htdata.format import MANIFEST_FILE
+from htdata.read import keys
+from htdata.sample.corpus import FORMATS as SAMPLE_FORMATS
+from htdata.format.table import MANIFEST_FILE
+from htdata.resources import PIPELINES_DIR
+from htdata.store.manifest import load_manifest
+from handtouch.config import load_train_config
+from handtouch.train import load_model, train
 
 # HandTouch first, then the baseline. ResNet-18 left the default when the 600-step RGB probes
 # pushed the run from nothing to 319 s (train 67 s + eval 18 s of it); `make compare` has it.
 ENCODERS = ("vit", "cnn")
-RAW_FORMATS = tuple(ADAPTERS)            # one sample corpus folder and pipeline per source adapter
+RAW_FORMATS = SAMPLE_FORMATS            # every source format the sample corpus writes (an adapter without sample data is skipped)
 SPLIT_NAME = "smoke"
 RECON_RATIO = 0.7
 # 64 codes in the smoke config; a collapsed codebook scores ~1. Healthy runs use 15-30.
@@ -89,7 +93,6 @@ def ensure_dataset(raw: Path, dataset: Path, workers: int) -> None:
     if (dataset / MANIFEST_FILE).is_file():
         print(f"smoke: dataset present at {dataset}", flush=True)
         return
-    from htdata.resources import PIPELINES_DIR
 
     pipes = []
     for f in RAW_FORMATS:
@@ -98,8 +101,6 @@ def ensure_dataset(raw: Path, dataset: Path, workers: int) -> None:
 
 
 def make_split(dataset: Path, ood_task: str, seed: int) -> None:
-    from htdata.manifest import load_manifest
-
     tasks = load_manifest(dataset).get("tasks", [])
     if ood_task not in tasks:
         raise SystemExit(f"smoke: ood task {ood_task!r} is not in {dataset} (tasks: {tasks})")
@@ -115,8 +116,6 @@ def train_encoder(config: Path, encoder: str, dataset: Path, out_dir: Path, extr
 
     -> (final model, stage-1 model, train metrics); both models in eval mode.
     """
-    from handtouch.config import load_train_config
-    from handtouch.train import load_model, train
 
     overrides = [f"model.encoder={toml_str(encoder)}", f"data_root={toml_str(dataset)}",
                  f"out_dir={toml_str(out_dir)}", f"split={toml_str(SPLIT_NAME)}",
@@ -275,7 +274,6 @@ class PhaseTimer:
 def main(argv=None) -> int:
     args = parse_args(argv)
     torch.manual_seed(args.seed)
-    from handtouch.config import load_train_config
 
     # Evaluation runs under the training thread budget too: with 2 threads next to any other
     # busy process, preparing the SSIM reference went 21 s -> 92 s (threads waiting on each other).

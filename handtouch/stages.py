@@ -24,7 +24,7 @@ from typing import ClassVar
 import torch
 import torch.nn as nn
 
-from htdata import keys
+from htdata.read import keys
 
 from .config import MODULE_NAMES, WINDOW, LossConfig, MaskingConfig, StageConfig, TrainConfig
 from .masking import sample_masks

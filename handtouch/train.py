@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import io
 import json
 import logging
 import math
@@ -34,9 +33,10 @@ import torch
 import torch.nn as nn
 from torch.utils.data import DataLoader, Dataset
 
-from htdata import keys
-from htdata.fsutil import write_bytes_atomic, write_json_atomic
+from htdata.read import keys
+from htdata.store.fsutil import write_json_atomic
 
+from .checkpoint import CHECKPOINT_FORMAT, read_checkpoint, rng_state, save_checkpoint, set_rng_state  # noqa: F401
 from .config import WINDOW, TrainConfig, load_train_config, model_config_from_dict
 from .distributed import (DistEnv, StepBatchSampler, barrier, init_distributed, mean_across_ranks, shutdown,
                           torch_threads, wrap)
@@ -44,9 +44,9 @@ from .model import HandTouch, covered, masked_mse
 from .resources import config_file
 from .rgb_encoder import load_rgb_encoder
 from .stages import FRAMES, WINDOWS, Stage, StageLoss, StepInfo, build_stages
+from htdata.read.torchdata import TactileFrameDataset, TactileWindowDataset
 
 log = logging.getLogger("handtouch.train")
-CHECKPOINT_FORMAT = 1
 
 
 @dataclass
@@ -64,8 +64,7 @@ class TrainData:
 
 
 def load_data(cfg: TrainConfig) -> TrainData:
-    """The committed dataset at cfg.data_root through htdata.torchdata."""
-    from htdata.torchdata import TactileFrameDataset, TactileWindowDataset
+    """The committed dataset at cfg.data_root through htdata.read.torchdata."""
 
     split = cfg.split or None
     train_part = cfg.train_part if split else None
@@ -78,39 +77,6 @@ def load_data(cfg: TrainConfig) -> TrainData:
     else:
         eval_frames, source = frames, "training data (no split configured: not held out)"
     return TrainData(frames, windows, eval_frames, source)
-
-
-# ---- checkpoints ---------------------------------------------------------------------
-def _rng_state() -> dict:
-    name, keys, pos, has_gauss, cached = np.random.get_state()
-    return {"torch": torch.get_rng_state(), "numpy": [name, torch.from_numpy(keys.copy()), pos, has_gauss, cached],
-            "python": random.getstate()}
-
-
-def _set_rng_state(state: dict) -> None:
-    torch.set_rng_state(state["torch"])
-    name, keys, pos, has_gauss, cached = state["numpy"]
-    np.random.set_state((name, keys.numpy(), pos, has_gauss, cached))
-    random.setstate(state["python"])
-
-
-def _to_tuple(obj):
-    return tuple(_to_tuple(x) for x in obj) if isinstance(obj, list) else obj
-
-
-def save_checkpoint(path: Path, payload: dict) -> None:
-    """Atomic: a crash leaves the old checkpoint or the new one, never half of one."""
-    buf = io.BytesIO()
-    torch.save(payload, buf)
-    write_bytes_atomic(path, buf.getbuffer())
-
-
-def read_checkpoint(path: Path) -> dict:
-    blob = torch.load(path, map_location="cpu", weights_only=True)
-    if blob.get("format") != CHECKPOINT_FORMAT:
-        raise ValueError(f"{path}: not a HandTouch checkpoint (format {blob.get('format')!r})")
-    blob["rng"]["python"] = _to_tuple(blob["rng"]["python"])
-    return blob
 
 
 def build_model(cfg: TrainConfig) -> HandTouch:
@@ -243,7 +209,7 @@ def run_stage(stage: Stage, model: HandTouch, cfg: TrainConfig, data: TrainData,
     state = read_checkpoint(ckpt_path) if ckpt_path.is_file() else None
     if state is not None and state["done"]:
         model.load_state_dict(state["model"])
-        _set_rng_state(state["rng"])   # later stages start from the same RNG as an uninterrupted run
+        set_rng_state(state["rng"])   # later stages start from the same RNG as an uninterrupted run
         logger.write({"event": "stage_skipped", "stage": n, "reason": f"{ckpt_path} is finished"})
         return state["summary"]
 
@@ -259,13 +225,13 @@ def run_stage(stage: Stage, model: HandTouch, cfg: TrainConfig, data: TrainData,
         logger.write({"event": "stage_resumed", "stage": n, "step": start})
     loader = _stage_loader(stage, cfg, data, env, start)
     if state is not None:
-        _set_rng_state(state["rng"])
+        set_rng_state(state["rng"])
 
     def checkpoint(step: int, done: bool = False, summary: dict | None = None) -> None:
         if env.is_main:
             save_checkpoint(ckpt_path, {
                 "format": CHECKPOINT_FORMAT, "stage": n, "step": step, "done": done,
-                "model": model.state_dict(), "optimizer": opt.state_dict(), "rng": _rng_state(),
+                "model": model.state_dict(), "optimizer": opt.state_dict(), "rng": rng_state(),
                 "model_config": dataclasses.asdict(cfg.model),
                 "rgb_encoder": {"spec": model.rgb_encoder.info.spec, "sha256": model.rgb_encoder.info.sha256},
                 "summary": summary or {}})

@@ -1,8 +1,43 @@
 """htdata: full-hand tactile + egocentric RGB dataset toolkit.
 
-Data path: adapters (read a source) -> sync (pair clocks) -> normalise (glove
-units to [0,1]) -> rasterise (taxels to the canonical 224x224 map) -> codec
-(EXR/JPEG) -> shards + index -> reader / torchdata -> handtouch trainer.
+The tree follows the data path (docs/DESIGN.md):
+
+    source/    read a recording (adapters), pair its clocks (sync, lag), RGB preprocessing
+    glove/     layouts, normalisation, calibration, rasterisation, taxel health
+    format/    the on-disk format: member table, codecs, tar shards
+    ingest/    recordings -> a committed version (plan, units, commit)
+    store/     versions, manifests, parts, snapshots, the writer lock, remote storage
+    read/      DatasetReader and the torch datasets
+    inspect/   stats, health maps, idle spans, previews, the dataset card
+    curate/    split, rm/trim, merge, gc, renormalise: new versions from old
+    validate/  `htdata validate`
+    sample/    the synthetic sample corpus
+    benchmarks/, commands/, cli.py: `htdata bench` and the command line
+
+The front door:
+
+    import htdata
+    ds = htdata.open("data/dataset")           # DatasetReader of the current version
+    ds = htdata.open("data/dataset", version=3)
+
+Imports inside functions: `open` imports the reader when it is called, so that
+`import htdata` (which every command line run does first) stays cheap.
 """
 
+from htdata import _moved
+
 __version__ = "0.1.0"
+
+_moved.install()
+
+
+def open(path, version=None):  # noqa: A001 (the front door's name, like LeRobot's one class)
+    """Open a committed dataset (local path or fsspec URL) at `version` (the current one when None).
+
+    Returns `htdata.read.reader.DatasetReader`; the torch datasets are
+    `htdata.read.torchdata.TactileFrameDataset(path, ...)` and friends.
+    """
+    # Lazy: `import htdata` must stay cheap (the CLI imports it before parsing arguments).
+    from htdata.read.reader import DatasetReader
+
+    return DatasetReader(path, version=version)

@@ -3,6 +3,10 @@
 Each command module exposes `configure_parser(parser)` and `run(args) -> int`.
 Keeping the table here (and the options in each module) avoids one giant
 argparse block while `htdata --help` still lists everything.
+
+Imports inside functions: a command's module (and so its dependencies: torch,
+cv2, h5py ...) is imported only when that command runs; `--version` reads
+htdata's version the same way.
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ class HtdataError(Exception):
 
 class LayoutNotFound(HtdataError, FileNotFoundError):
     """A glove layout id or file that is on no search path; the message is one line
-    naming where it looked and the layouts that exist (htdata.layouts.resolve_layout)."""
+    naming where it looked and the layouts that exist (htdata.glove.layouts.resolve_layout)."""
 
 
 class EpisodeError(HtdataError):

@@ -3,7 +3,7 @@
 A pipeline says how one source format becomes canonical samples: which
 adapter reads it (and its params), which glove layout each hand uses, how
 glove units are normalised (per layout), the sync tolerance and clock lag
-(`[sync] lag`: htdata/lag.py), RGB and tactile encoding, and the shard
+(`[sync] lag`: htdata/source/lag.py), RGB and tactile encoding, and the shard
 size. Files are checked three times: against
 `schemas/pipeline.schema.json` (unknown keys are errors, named with the file),
 for non-finite numbers (TOML allows `nan`/`inf`, JSON Schema's "number"
@@ -40,14 +40,19 @@ Example (pipelines/opentouch.toml):
 from __future__ import annotations
 
 import dataclasses
-import datetime
 import math
 import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from htdata.normalise import NormaliseConfig
+from htdata.glove.normalise import NormaliseConfig
+from htdata.settings import apply_settings, parse_setting  # noqa: F401  (parse_setting: an old name of this module)
 from htdata.resources import PIPELINES_DIR, validate_json
+from htdata.source.adapters import ADAPTERS
+from htdata.source.adapters.base import check_adapter_params as check
+from htdata.source.lag import LAG_MODES
+from htdata.glove.codecrule import CodecChoice
+from htdata.format.table import CodecSettings
 
 
 
@@ -61,7 +66,7 @@ class AdapterConfig:
 class SyncConfig:
     max_skew_ms: float = 20.0
     policy: str = "nearest"
-    # Tactile-video lag (htdata/lag.py): "none" (clocks as recorded), "estimate" (per episode from the
+    # Tactile-video lag (htdata/source/lag.py): "none" (clocks as recorded), "estimate" (per episode from the
     # content, applied when confidence >= min_confidence, searched within +-max_lag_ms), or a number of
     # ms (tactile - RGB clock, subtracted from every tactile timestamp).
     lag: str | float = "none"
@@ -73,8 +78,6 @@ class SyncConfig:
         return int(round(self.max_skew_ms * 1e6))
 
     def validate(self, where: str) -> "SyncConfig":
-        from htdata.lag import LAG_MODES
-
         if isinstance(self.lag, bool) or not (self.lag in LAG_MODES if isinstance(self.lag, str)
                                               else isinstance(self.lag, (int, float)) and math.isfinite(self.lag)):
             raise ValueError(f"{where}: sync.lag must be one of {LAG_MODES} or a finite number of ms, got {self.lag!r}")
@@ -115,14 +118,14 @@ class TactileConfig:
 
 @dataclass
 class CodecConfig:
-    """[codec]: tactile = "auto" (default: the EXR pixel type the rule in htdata/codecrule.py picks for the
+    """[codec]: tactile = "auto" (default: the EXR pixel type the rule in htdata/glove/codecrule.py picks for the
     dataset's gloves) or an explicit "exr_half" / "exr_float"; the compression is [tactile] compression.
 
     `choice` is not written by hand: the ingest fills it in when it resolves the setting for a run
     (`PipelineConfig.with_codec_choice`), so workers and the manifest see one resolved codec.
     """
     tactile: str = "auto"
-    choice: dict | None = None       # htdata.codecrule.CodecChoice.info()
+    choice: dict | None = None       # htdata.glove.codecrule.CodecChoice.info()
 
     def to_dict(self) -> dict:
         return {"tactile": self.tactile, **({"choice": dict(self.choice)} if self.choice else {})}
@@ -170,8 +173,6 @@ def non_finite_numbers(data, path: str = "") -> list[str]:
 
 def check_adapter_params(adapter: str, params: dict, where: str) -> None:
     """`params` against what the adapter declares (`PARAMS`): unknown keys and wrong types are errors."""
-    from htdata.adapters import ADAPTERS
-    from htdata.adapters.base import check_adapter_params as check
 
     if adapter not in ADAPTERS:
         raise ValueError(f"{where}: unknown adapter {adapter!r}; known: {sorted(ADAPTERS)}")
@@ -218,12 +219,11 @@ class PipelineConfig:
         return self
 
     def codec_choice(self):
-        """The resolved tactile codec (htdata.codecrule.CodecChoice); the ingest resolves it first."""
-        from htdata.codecrule import CodecChoice
+        """The resolved tactile codec (htdata.glove.codecrule.CodecChoice); the ingest resolves it first."""
 
         if self.codec.choice is None:
             raise ValueError(f"{self.path or self.name}: [codec] tactile = {self.codec.tactile!r} is not resolved "
-                             f"for a dataset yet (htdata.codecrule.resolve_sources / with_codec_choice)")
+                             f"for a dataset yet (htdata.glove.codecrule.resolve_sources / with_codec_choice)")
         return CodecChoice.from_info(self.codec.choice)
 
     def with_codec_choice(self, choice) -> "PipelineConfig":
@@ -238,8 +238,7 @@ class PipelineConfig:
         return cfg
 
     def codec_settings(self):
-        """What the encoders need (htdata.format.CodecSettings), from the resolved codec."""
-        from htdata.format import CodecSettings
+        """What the encoders need (htdata.format.table.CodecSettings), from the resolved codec."""
 
         return CodecSettings(tactile_compression=self.tactile.compression, rgb_quality=self.rgb.quality,
                              tactile_pixel_type=self.codec_choice().pixel_type)
@@ -310,37 +309,12 @@ class PipelineConfig:
 
 
     def with_overrides(self, settings: list[str]) -> "PipelineConfig":
-        """A copy with `dotted.key=value` settings applied (values parsed as TOML, else taken as text), validated."""
-        data = self.to_dict()
-        for item in settings:
-            key, value = parse_setting(item)
-            node = data
-            parts = key.split(".")
-            for part in parts[:-1]:
-                child = node.setdefault(part, {})
-                if not isinstance(child, dict):
-                    raise ValueError(f"--set {item}: {part!r} is a value, not a table")
-                node = child
-            node[parts[-1]] = value
+        """A copy with `dotted.key=value` settings applied (htdata/settings.py: values read as TOML, else text), validated."""
+        data = apply_settings(self.to_dict(), settings)
         where = f"{self.path or self.name} (with --set {' '.join(settings)})"
         cfg = PipelineConfig.from_dict(data, where=where)
         cfg.path = self.path
         return cfg
-
-
-def parse_setting(item: str) -> tuple[str, object]:
-    """"a.b.c=value" -> ("a.b.c", value): TOML literal when it parses (true, 20, 0.5, ["right"]), else the text."""
-    key, sep, text = item.partition("=")
-    key = key.strip()
-    if not sep or not key or any(not p for p in key.split(".")):
-        raise ValueError(f"--set {item!r}: expected dotted.key=value (e.g. adapter.params.annotations=labels.csv)")
-    try:
-        value = tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = text
-    if isinstance(value, (datetime.date, datetime.time)):   # TOML dates/times: no setting takes one
-        value = text
-    return key, value
 
 
 def resolve_pipeline_path(name_or_path: str | Path) -> Path:

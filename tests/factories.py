@@ -12,7 +12,7 @@ regenerates exactly the bytes that were written (tests compare against it).
 Everything goes through the real writer APIs (codec, ShardWriter,
 commit_dataset). Layout ids default to "test_full" with full-canvas
 coverage; pass `coverages={layout_id: (224,224) uint8}` for real ones (e.g.
-from htdata.layouts + Rasteriser) and `canonical=CanonicalArtifact(...)`.
+from htdata.glove.layouts + Rasteriser) and `canonical=CanonicalArtifact(...)`.
 
 Also here: the episode tables the dataset tests share (`episode_table`,
 MIXED_HANDS_EPISODES, PREVIEW_EPISODES, SPLIT_EPISODES, TRAIN_EPISODES) and
@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import zlib
 from pathlib import Path
 
@@ -32,15 +33,17 @@ import cv2
 import h5py
 import numpy as np
 
-from htdata.codec import DEFAULT_CODEC_INFO, encode_rgb, encode_tactile
-from htdata.format import CANVAS, MANIFEST_FILE
-from htdata.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, commit_dataset
+from htdata.format.codec import DEFAULT_CODEC_INFO, encode_rgb, encode_tactile
+from htdata.format.table import CANVAS, MANIFEST_FILE
+from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, write_layout_files
+from htdata.store.parts import part_from_unit
+from htdata.store.snapshot import commit_parts, current_snapshot
 from htdata.resources import PIPELINES_DIR
 from htdata.sample.formats import (NativeHand, NativeRecording, OpenTouchClip, TouchAnythingEpisode,
                                    write_native_recording, write_opentouch_annotations,
                                    write_opentouch_scene, write_touchanything_episode)
-from htdata.shardio import ShardWriter, sample_key
-from htdata.versions import version_manifest_file
+from htdata.format.shardio import ShardWriter, sample_key
+from htdata.store.versions import version_manifest_file
 
 DEFAULT_LAYOUT = "test_full"
 FRAME_NS = 33_333_333
@@ -190,7 +193,7 @@ def rewrite_manifest(root, manifest: dict) -> None:
 def commit_split(root, name: str, parts: dict[str, list[str]]) -> int:
     """Commit a new version whose split NAME places episodes as given (a hand-made split, for
     reader / torch tests that need particular parts). Returns the new version number."""
-    from htdata.snapshot import commit_parts, open_snapshot
+    from htdata.store.snapshot import commit_parts, open_snapshot
 
     snap = open_snapshot(root)
     data = (json.dumps({"name": name, "parts": {p: {"episodes": ids} for p, ids in parts.items()}}) + "\n").encode()
@@ -283,7 +286,7 @@ def make_opentouch(root: Path, bad: bool = False) -> Path:
 
 
 def make_touchanything(root: Path, truncated: bool = False) -> Path:
-    from htdata.layouts import load_layout
+    from htdata.glove.layouts import load_layout
 
     for n, (scene, task, traj) in enumerate([("Home", "plug_usb", "20260320_135743_682"),
                                              ("Office", "open_drawer", "20260321_101010_001")]):
@@ -334,3 +337,21 @@ def ingest_cli(*args, workers: int = 0) -> int:
 def temp_leftovers(out: Path) -> list[str]:
     return sorted(str(p.relative_to(out)) for p in out.rglob("*")
                   if p.name.endswith(".tmp") or p.name.startswith("spool-"))
+
+
+def commit_dataset(root: str | os.PathLike, units: list[UnitResult], layouts: list[LayoutArtifact],
+                   canonical: CanonicalArtifact, codec: dict, sources: list[dict],
+                   created: str | None = None, htdata_version: str | None = None,
+                   command: str = "commit") -> dict:
+    """Commit `units` as a new dataset version at `root` (the first, on a fresh directory). Returns its manifest.
+
+    Shards must already sit in ROOT/shards (ShardWriter put them there); their
+    sizes are checked against the records. The version holds exactly these
+    units; writers that keep a parent's episodes (ingest's append, rm, trim)
+    build their parts and call snapshot.commit_parts themselves.
+    """
+    layout_entries, canonical_entry = write_layout_files(root, layouts, canonical)
+    fields = {"sources": list(sources), "layouts": layout_entries, "canonical": canonical_entry, "codec": codec}
+    parts = [part_from_unit(u) for u in sorted(units, key=lambda u: u.unit)]
+    return commit_parts(root, parts, fields, current_snapshot(root), command, created=created,
+                        htdata_version=htdata_version, splits=lambda eps, sha: {})

@@ -19,11 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.codec import DEFAULT_CODEC_INFO, encode_exr, encode_rgb, encode_tactile
-from htdata.layouts import load_canonical, load_layout
-from htdata.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, commit_dataset
-from htdata.rasterise import Rasteriser
-from htdata.shardio import ShardWriter, sample_key
+from htdata.format.codec import DEFAULT_CODEC_INFO, encode_exr, encode_rgb, encode_tactile
+from htdata.glove.layouts import load_canonical, load_layout
+from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, UnitResult
+from htdata.glove.rasterise import Rasteriser
+from htdata.format.shardio import ShardWriter, sample_key
+from tests.factories import commit_dataset
 
 RIGHT = "opentouch_right_16x16"
 LEFT = "touchanything_left_21x21"

@@ -8,7 +8,7 @@ from __future__ import annotations
 import av
 import numpy as np
 
-from htdata.adapters.video import configure_decoder_threads, iter_video_rgb
+from htdata.source.adapters.video import configure_decoder_threads, iter_video_rgb
 from htdata.sample.formats import write_h264
 
 

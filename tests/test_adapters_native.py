@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from htdata.adapters import ADAPTERS, get_adapter
+from htdata.source.adapters import ADAPTERS, get_adapter
 from htdata.errors import EpisodeError
 from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
 
@@ -181,7 +181,7 @@ def test_discover_all_keeps_good_recordings_beside_bad_and_duplicate_ones(tmp_pa
 
 
 def test_discover_all_names_the_file_of_an_unexpected_error(tmp_path, adapter, monkeypatch):
-    from htdata.adapters.native import NativeAdapter
+    from htdata.source.adapters.native import NativeAdapter
 
     write_native_recording(tmp_path / "r1", recording(3))
     write_native_recording(tmp_path / "r2", recording(3))

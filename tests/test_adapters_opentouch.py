@@ -8,7 +8,7 @@ import h5py
 import numpy as np
 import pytest
 
-from htdata.adapters import get_adapter
+from htdata.source.adapters import get_adapter
 from htdata.errors import EpisodeError
 from htdata.sample.formats import OpenTouchClip, write_opentouch_annotations, write_opentouch_scene
 

@@ -8,8 +8,8 @@ import zipfile
 import numpy as np
 import pytest
 
-from htdata.adapters import get_adapter
-from htdata.adapters.npzrows import NpzRowError, NpzRows
+from htdata.source.adapters import get_adapter
+from htdata.source.adapters.npzrows import NpzRowError, NpzRows
 from htdata.errors import EpisodeError
 from htdata.sample.formats import TouchAnythingEpisode, write_touchanything_episode, write_touchanything_split
 

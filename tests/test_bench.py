@@ -15,14 +15,14 @@ import textwrap
 
 import pytest
 
-from htdata.bench import BUILTIN_SECTIONS, BenchConfig, discover_sections, finite_json
+from htdata.benchmarks.suite import BUILTIN_SECTIONS, BenchConfig, discover_sections, finite_json
 from htdata.benchmarks.report import HEADINGS, render_report
 from htdata.cli import main as cli_main
 
 SECTIONS = ("machine",) + BUILTIN_SECTIONS
 PLUGIN_MODULE = "htdata_bench_probe_plugin"
 PLUGIN_CODE = """
-    from htdata.manifest import load_manifest
+    from htdata.store.manifest import load_manifest
 
     def probe(ctx):
         (ctx.work / "probe.txt").write_text("scratch")

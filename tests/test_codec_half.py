@@ -9,7 +9,7 @@ import numpy as np
 import OpenEXR
 import pytest
 
-from htdata.codec import encode_exr, encode_tactile, to_half
+from htdata.format.codec import encode_exr, encode_tactile, to_half
 
 
 def numpy_half_bits(x: np.ndarray) -> np.ndarray:

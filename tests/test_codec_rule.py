@@ -1,4 +1,4 @@
-"""The tactile codec rule (htdata/codecrule.py): smallest EXR codec keeping every glove's levels.
+"""The tactile codec rule (htdata/glove/codecrule.py): smallest EXR codec keeping every glove's levels.
 
 The rule runs twice in the code: the ingest resolves `[codec] tactile = "auto"`
 with analytic max errors, the bench picks from errors and sizes measured on
@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 
 from htdata.benchmarks.codecs import codec_rows
-from htdata.codec import decode_tactile, encode_tactile
-from htdata.codecrule import (ANALYTIC_MAX_ERROR, SIZE_ORDER, CodecChoice, GloveStep, codec_block, glove_step,
+from htdata.format.codec import decode_tactile, encode_tactile
+from htdata.glove.codecrule import (ANALYTIC_MAX_ERROR, SIZE_ORDER, CodecChoice, GloveStep, codec_block, glove_step,
                               pick_codec, resolve_codec)
-from htdata.format import CodecSettings, decode_sample, encode_sample
-from htdata.layouts import load_layout
-from htdata.normalise import NormaliseConfig
+from htdata.format.table import CodecSettings, decode_sample, encode_sample
+from htdata.glove.layouts import load_layout
+from htdata.glove.normalise import NormaliseConfig
 from htdata.pipeline import PipelineConfig, load_pipeline
-from htdata.rasterise import Rasteriser
+from htdata.glove.rasterise import Rasteriser
 
 OT, TA_L, TA_R = "opentouch_right_16x16", "touchanything_left_21x21", "touchanything_right_21x21"
 LEVELS = {OT: 3072, TA_L: 255, TA_R: 255}     # source levels over [0, 1] after normalisation

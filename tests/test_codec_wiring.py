@@ -4,8 +4,8 @@ import json
 
 import numpy as np
 
-from htdata.codec import decode_exr_pixels
-from htdata.reader import DatasetReader
+from htdata.format.codec import decode_exr_pixels
+from htdata.read.reader import DatasetReader
 from htdata.validate import validate_dataset
 from tests.factories import PIPELINES_DIR, ingest_cli, make_native, make_touchanything
 

@@ -55,7 +55,7 @@ def _part(episodes=4, frames=12, static=False, per_frame_ids=False):
     for e in range(episodes):
         for f in range(2, frames):
             group = [items[(e, g)] for g in (f - 2, f - 1, f)]
-            # like htdata.torchdata.TactileWindowDataset: per-frame tensors stacked,
+            # like htdata.read.torchdata.TactileWindowDataset: per-frame tensors stacked,
             # coverage / regions / hand / ids given once
             w = dict(group[-1])
             for k in ("tactile", "rgb", "frame"):

@@ -5,8 +5,8 @@ from __future__ import annotations
 import cv2
 import pytest
 
-from htdata import executors
-from htdata.executors import InlineExecutor, ProcessExecutor, limit_threads, threads_per_worker
+from htdata.ingest import executors
+from htdata.ingest.executors import InlineExecutor, ProcessExecutor, limit_threads, threads_per_worker
 
 
 def test_threads_per_worker_splits_cores():

@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from htdata.codec import decode_tactile, encode_tactile
-from htdata.format import MAP_SHAPE
+from htdata.format.codec import decode_tactile, encode_tactile
+from htdata.format.table import MAP_SHAPE
 
 oiio = pytest.importorskip("OpenImageIO")
 

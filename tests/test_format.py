@@ -1,9 +1,9 @@
-"""The on-disk format table (htdata/format.py): one row per member, exact round trips."""
+"""The on-disk format table (htdata/format/table.py): one row per member, exact round trips."""
 
 import numpy as np
 import pytest
 
-from htdata.format import (HANDS, INDEX_DTYPE, MEMBER_ORDER, MEMBERS, SIZE_FIELDS, CodecSettings, LEGACY_INDEX_DTYPE,
+from htdata.format.table import (HANDS, INDEX_DTYPE, MEMBER_ORDER, MEMBERS, SIZE_FIELDS, CodecSettings, LEGACY_INDEX_DTYPE,
                            bend_member, raw_member,
                            decode_sample, encode_sample, tactile_member)
 
@@ -78,3 +78,29 @@ def test_decode_errors_name_the_member():
         decode_sample({"depth.png": b"x"}, "ep__000003")
     with pytest.raises(ValueError, match=r"ep__000004\.json"):
         decode_sample({"json": b"{not json"}, "ep__000004")
+
+
+def test_every_readable_format_version_has_its_index_dtype_and_loads_as_the_current_one():
+    import io
+
+    from htdata.format.table import INDEX_DTYPES, READABLE_FORMAT_VERSIONS, index_dtype
+    from htdata.store.manifest import IndexDtypeError, parse_index
+
+    assert set(INDEX_DTYPES) == set(READABLE_FORMAT_VERSIONS) and INDEX_DTYPE == index_dtype(max(INDEX_DTYPES))
+    for version, dtype in INDEX_DTYPES.items():
+        # a version's columns are the head plus the members it had, in member order
+        assert dtype.names[4:] == tuple(m.column for m in MEMBERS if m.since <= version)
+        rows = np.zeros(3, dtype=dtype)
+        rows["frame"] = [0, 1, 2]
+        rows["size_json"] = [10, 11, 12]
+        buf = io.BytesIO()
+        np.save(buf, rows)
+        loaded = parse_index(buf.getvalue(), f"v{version} index")
+        assert loaded.dtype == INDEX_DTYPE
+        assert list(loaded["frame"]) == [0, 1, 2] and list(loaded["size_json"]) == [10, 11, 12]
+        for name in set(INDEX_DTYPE.names) - set(dtype.names):
+            assert not loaded[name].any()      # members the version did not have: absent
+    buf = io.BytesIO()
+    np.save(buf, np.zeros(2, dtype=[("shard", "<u4"), ("offset", "<u8")]))
+    with pytest.raises(IndexDtypeError, match="index dtype"):
+        parse_index(buf.getvalue(), "odd index")

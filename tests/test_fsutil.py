@@ -5,7 +5,7 @@ import stat
 
 import pytest
 
-from htdata.fsutil import FILE_MODE, atomic_open, write_bytes_atomic
+from htdata.store.fsutil import FILE_MODE, atomic_open, write_bytes_atomic
 
 
 def test_atomic_write_replaces_whole_and_gets_the_usual_mode(tmp_path):

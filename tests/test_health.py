@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from htdata import health
-from htdata.layouts import load_layout
+from htdata.glove import health
+from htdata.glove.layouts import load_layout
 from tests.tactile_factories import LEFT, RIGHT, clean_series, live_cells
 
 T = 120
@@ -93,7 +93,7 @@ def _faulty_dataset(root):
 
 
 def test_validate_warns_from_the_stats_cache_or_deep(tmp_path):
-    from htdata import stats
+    from htdata.inspect import stats
     from htdata.validate import validate_dataset
     root = _faulty_dataset(tmp_path / "ds")
     report = validate_dataset(root)

@@ -7,9 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from htdata import idle, stats
+from htdata.curate import idle
+from htdata.inspect import stats
 from htdata.cli import main as cli_main
-from htdata.reader import DatasetReader
+from htdata.read.reader import DatasetReader
 from tests.tactile_factories import LEFT, RIGHT, write_taxel_dataset
 
 N = 40

@@ -23,7 +23,7 @@ from tests.factories import (COLOURS, ingest_cli, make_native, make_opentouch, m
 
 
 def read_all(out: Path) -> dict[str, dict[str, bytes]]:
-    from htdata.reader import DatasetReader
+    from htdata.read.reader import DatasetReader
 
     reader = DatasetReader(out)
     samples = {}
@@ -72,9 +72,9 @@ def test_parse_sources_forms(tmp_path):
 def test_opentouch_ingest_reads_back(tmp_path):
     import webdataset as wds
 
-    from htdata.layouts import load_layout
-    from htdata.rasterise import Rasteriser
-    from htdata.reader import DatasetReader
+    from htdata.glove.layouts import load_layout
+    from htdata.glove.rasterise import Rasteriser
+    from htdata.read.reader import DatasetReader
 
     raw = make_opentouch(tmp_path / "raw")
     out = tmp_path / "ds"
@@ -111,7 +111,7 @@ def test_opentouch_ingest_reads_back(tmp_path):
 
 
 def test_touchanything_ingest_both_hands_and_bend(tmp_path):
-    from htdata.reader import DatasetReader
+    from htdata.read.reader import DatasetReader
 
     raw = make_touchanything(tmp_path / "raw")
     out = tmp_path / "ds"
@@ -129,7 +129,7 @@ def test_touchanything_ingest_both_hands_and_bend(tmp_path):
 
 
 def test_native_100hz_glove_30hz_video(tmp_path):
-    from htdata.reader import DatasetReader
+    from htdata.read.reader import DatasetReader
 
     raw = make_native(tmp_path / "raw")
     out = tmp_path / "ds"
@@ -144,7 +144,7 @@ def test_native_100hz_glove_30hz_video(tmp_path):
 # --------------------------------------------------------------------------- failures
 
 def test_bad_episodes_are_reported_and_the_rest_ingested(tmp_path, capsys):
-    from htdata.reader import DatasetReader
+    from htdata.read.reader import DatasetReader
 
     ot = make_opentouch(tmp_path / "ot", bad=True)
     nat = make_native(tmp_path / "nat", wrong_grid=True)
@@ -180,7 +180,7 @@ def truncate_half(path: Path) -> None:
 
 
 def test_unreadable_files_at_discovery_are_failures_and_the_rest_ingested(tmp_path, capsys):
-    from htdata.reader import DatasetReader
+    from htdata.read.reader import DatasetReader
 
     ot = make_opentouch(tmp_path / "ot")
     write_opentouch_scene(ot / "broken_scene.hdf5", [ot_clip("demo_01", 6, COLOURS[3])])
@@ -234,7 +234,7 @@ def test_source_wide_discovery_error_aborts(tmp_path, capsys):
 
 
 def test_nonfinite_frames_are_dropped_and_counted(tmp_path):
-    from htdata.reader import DatasetReader
+    from htdata.read.reader import DatasetReader
 
     p = np.random.default_rng(0).uniform(1000, 3072, size=(10, 16, 16)).astype(np.float32)
     p[[2, 7], 5, 9] = np.nan       # (5,9) is a live taxel (index finger, middle phalanx)
@@ -253,7 +253,7 @@ def test_nonfinite_frames_are_dropped_and_counted(tmp_path):
     assert [m["source_frame"] for m in metas] == list(range(10))
     assert [i for i, m in enumerate(metas) if m.get("rgb_only")] == [2, 7]
     assert all("tactile_right.exr" not in reader.sample(i) for i in (2, 7))
-    from htdata.torchdata import TactileFrameDataset
+    from htdata.read.torchdata import TactileFrameDataset
     assert sorted(int(x[0]) for x in TactileFrameDataset(out).items) == [0, 1, 3, 4, 5, 6, 8, 9]
     report = json.loads((out / "reports" / "ingest.json").read_text())
     assert report["dropped_frames"] == [{"episode_id": ep["episode_id"], "rgb_index": i,
@@ -444,7 +444,7 @@ def test_report_has_stage_timing(tmp_path):
 def test_benchmark_maps_are_the_maps_ingest_stores(tmp_path):
     """The benchmarks read episodes through the ingest's own generator: same frames, same maps."""
     from htdata.benchmarks.sources import discover, episode_maps
-    from htdata.reader import DatasetReader
+    from htdata.read.reader import DatasetReader
 
     raw = make_touchanything(tmp_path / "raw")
     out = tmp_path / "ds"

@@ -13,9 +13,9 @@ import numpy as np
 import psutil
 import pytest
 
-from htdata.reader import DatasetReader
+from htdata.read.reader import DatasetReader
 from htdata.sample.formats import write_opentouch_annotations, write_opentouch_scene
-from htdata.versions import list_versions
+from htdata.store.versions import list_versions
 from tests.factories import (COLOURS, ingest_cli, make_native, make_opentouch, make_touchanything, ot_clip,
                              small_pipeline, temp_leftovers)
 
@@ -131,7 +131,7 @@ def test_second_writer_is_refused_with_the_holder_named(tmp_path, capsys):
     raw = make_native(tmp_path / "raw")
     out = tmp_path / "ds"
     out.mkdir()
-    code = ("import sys,time; from htdata.lock import WriterLock; "
+    code = ("import sys,time; from htdata.store.lock import WriterLock; "
             "WriterLock(sys.argv[1],'htdata ingest (other run)').acquire(); print('held', flush=True); time.sleep(60)")
     holder = subprocess.Popen([sys.executable, "-c", code, str(out)], stdout=subprocess.PIPE, text=True)
     try:
@@ -146,7 +146,7 @@ def test_second_writer_is_refused_with_the_holder_named(tmp_path, capsys):
 
 
 def test_split_after_append_keeps_parts_and_assigns_new_episodes(ingested, tmp_path):
-    from htdata.split import write_split
+    from htdata.curate.split import write_split
 
     raw, pipe, out = ingested
     first = write_split(out, ["wipe"], name="main", seed=0)

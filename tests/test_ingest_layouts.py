@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from htdata.layouts import LAYOUTS_ENV, parse_layout
+from htdata.glove.layouts import LAYOUTS_ENV, parse_layout
 from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
 from tests.factories import COLOURS, PERIOD, ingest_cli, small_pipeline
 
@@ -71,7 +71,7 @@ def write_recordings(root: Path, layout_names: dict[str, str], layout_files: dic
 
 
 def check_dataset(out: Path) -> None:
-    from htdata.reader import DatasetReader
+    from htdata.read.reader import DatasetReader
 
     reader = DatasetReader(out)
     assert len(reader) == 12 and {e["episode_id"] for e in reader.episodes} == {"nat-session_0", "nat-session_1"}

@@ -68,7 +68,7 @@ def test_unpacked_wheel_resolves_its_own_data_from_another_directory(wheel, tmp_
     elsewhere.mkdir()
     env = {k: v for k, v in os.environ.items() if k != "HTDATA_ROOT"}
     env["PYTHONPATH"] = str(site)
-    code = ("import htdata.resources as r, handtouch.resources as h; from htdata.layouts import list_layouts; "
+    code = ("import htdata.resources as r, handtouch.resources as h; from htdata.glove.layouts import list_layouts; "
             "print(r.SCHEMAS_DIR); print(r.PIPELINES_DIR); print(h.config_file('smoke')); print(list_layouts())")
     out = _run([sys.executable, "-c", code], cwd=elsewhere, env=env).splitlines()
     schemas, pipelines, smoke, layouts = out

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from htdata.adapters import get_adapter
-from htdata.adapters.opentouch import detect_id_column, load_annotations, sniff_delimiter
-from htdata.manifest import load_episodes, load_manifest
+from htdata.source.adapters import get_adapter
+from htdata.source.adapters.opentouch import detect_id_column, load_annotations, sniff_delimiter
+from htdata.store.manifest import load_episodes, load_manifest
 from htdata.sample.formats import write_opentouch_scene
 from tests.factories import COLOURS, ingest_cli, ot_clip
 
@@ -73,7 +73,7 @@ def test_missing_table_is_an_error_printing_the_fix(tmp_path, capsys):
 
 def test_allow_unlabelled_ingests_with_warning_and_note(tmp_path, caplog):
     raw, out = scene(tmp_path / "raw"), tmp_path / "ds"
-    with caplog.at_level(logging.WARNING, logger="htdata.adapters.opentouch"):
+    with caplog.at_level(logging.WARNING, logger="htdata.source.adapters.opentouch"):
         assert ingest_cli("--pipeline", "opentouch", "--set", "adapter.params.allow_unlabelled=true", raw, out) == 0
     assert set(tasks_of(out).values()) == {"unlabelled"}
     assert any("not found" in r.getMessage() and "unlabelled" in r.getMessage() for r in caplog.records)

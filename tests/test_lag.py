@@ -1,4 +1,4 @@
-"""Tactile-video lag from the content (htdata/lag.py, pipeline `[sync] lag`).
+"""Tactile-video lag from the content (htdata/source/lag.py, pipeline `[sync] lag`).
 
 Recordings are sample-world episodes written as native recordings whose
 glove clock runs a known lag off the video while recording.json claims the
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from htdata.benchmarks.lag import planned_episode, write_shifted_native
-from htdata.lag import THUMB, LagDecision, episode_lag, estimate_episode_lag, estimate_lag
-from htdata.manifest import load_episodes
+from htdata.source.lag import THUMB, LagDecision, episode_lag, estimate_episode_lag, estimate_lag
+from htdata.store.manifest import load_episodes
 from tests.factories import ingest_cli
 
 FRAME_MS = 1000 / 30
@@ -128,7 +128,7 @@ def _ingest(tmp_path, raw, *settings):
 
 
 def test_ingest_with_estimate_records_and_applies_it(tmp_path):
-    from htdata.reader import DatasetReader
+    from htdata.read.reader import DatasetReader
 
     write_shifted_native(tmp_path / "raw" / "rec", "pinch_pick", 3, 90, -200.0, image=IMAGE)
     out, record, report = _ingest(tmp_path, tmp_path / "raw", 'sync.lag="estimate"')
@@ -192,7 +192,7 @@ def test_pipeline_lag_defaults_keep_the_settings_document():
 
 
 def test_look_alikes_match_brute_force_within_the_time_window():
-    from htdata.lag import NEIGHBOURS, SEARCH_S, look_alikes
+    from htdata.source.lag import NEIGHBOURS, SEARCH_S, look_alikes
 
     rng = np.random.default_rng(1)
     t = np.arange(500) * 0.5                                   # 250 s, longer than the search window

@@ -9,8 +9,8 @@ import sys
 import pytest
 
 from htdata.faults import ENV
-from htdata.reader import DatasetReader
-from htdata.versions import list_versions
+from htdata.read.reader import DatasetReader
+from htdata.store.versions import list_versions
 from tests.factories import write_synthetic_dataset
 
 EPISODES = [
@@ -98,7 +98,7 @@ def test_killed_merge_reruns_to_the_clean_result(tmp_path):
 
 def test_second_writer_is_refused_while_first_holds_the_lock(tmp_path):
     ds = versioned(tmp_path / "ds")
-    code = ("import sys,time; from htdata.lock import WriterLock; "
+    code = ("import sys,time; from htdata.store.lock import WriterLock; "
             "WriterLock(sys.argv[1],'htdata ingest (test)').acquire(); print('held', flush=True); time.sleep(60)")
     holder = subprocess.Popen([sys.executable, "-c", code, str(ds)], stdout=subprocess.PIPE, text=True)
     try:

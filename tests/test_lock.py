@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from htdata.lock import LOCK_FILE, DatasetLocked, WriterLock
+from htdata.store.lock import LOCK_FILE, DatasetLocked, WriterLock
 
 
 def write_lock(root, **holder):
@@ -31,7 +31,7 @@ def test_lock_is_exclusive_and_released(tmp_path):
 
 
 def test_live_holder_in_another_process_is_refused(tmp_path):
-    code = ("import sys,time; from htdata.lock import WriterLock; "
+    code = ("import sys,time; from htdata.store.lock import WriterLock; "
             "l=WriterLock(sys.argv[1],'sleeper').acquire(); print('held', flush=True); time.sleep(60)")
     proc = subprocess.Popen([sys.executable, "-c", code, str(tmp_path)], stdout=subprocess.PIPE, text=True)
     try:

@@ -3,7 +3,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from htdata.normalise import NormaliseConfig, Normaliser
+from htdata.glove.normalise import NormaliseConfig, Normaliser
 
 
 def layout(h=4, w=4, dead=((0, 0),)):

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from htdata.layouts import load_layout
-from htdata.manifest import load_episodes
+from htdata.glove.layouts import load_layout
+from htdata.store.manifest import load_episodes
 from htdata.sample.formats import (NativeHand, NativeRecording, TouchAnythingEpisode, write_native_recording,
                                    write_opentouch_annotations, write_opentouch_scene, write_touchanything_episode)
 from tests.factories import COLOURS, PERIOD, ingest_cli, ot_clip

@@ -124,7 +124,7 @@ def test_adapter_params_checked_against_declared(tmp_path, adapter, params, matc
 
 
 def test_every_adapter_declares_its_params():
-    from htdata.adapters import ADAPTERS
+    from htdata.source.adapters import ADAPTERS
 
     for name, cls in ADAPTERS.items():
         assert isinstance(cls.PARAMS, tuple), name
@@ -171,7 +171,7 @@ def test_set_values_parse_as_toml_but_dates_stay_text():
 
 
 def test_a_partial_normalise_table_keeps_the_layout_units():
-    from htdata.layouts import load_layout
+    from htdata.glove.layouts import load_layout
     from htdata.pipeline import load_pipeline
 
     cfg = load_pipeline("native").with_overrides(["normalise.opentouch_right_16x16.noise_floor=0.01"])

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from htdata import preview as pv
+from htdata.inspect import preview as pv
 from htdata.cli import main as cli_main
 from tests.factories import PREVIEW_EPISODES as EPISODES, write_synthetic_dataset
 
@@ -59,7 +59,7 @@ def test_absent_hand_is_a_grey_panel_and_tactile_is_drawn(ds):
     assert (right == pv.OUTLINE).all(axis=2).any()        # region outlines
     assert np.all(right[5, 5] == (110, 110, 110)) or np.all(right[5, 5] < 160)  # uncovered: shaded
     # the RGB panel is the decoded frame (BGR on the sheet)
-    from htdata.reader import DatasetReader
+    from htdata.read.reader import DatasetReader
     with DatasetReader(ds) as r:
         rgb = r.decoded(r.locate("ep_r", 0))["rgb"]
     assert np.array_equal(_panel(sheet, 0, 0)[40:], cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)[40:])

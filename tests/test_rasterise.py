@@ -9,9 +9,9 @@ import pytest
 import scipy.sparse as sp
 
 from htdata.benchmarks.raster import raster_benchmark
-from htdata.format import CANVAS
-from htdata.layouts import GROUPS, load_canonical, load_layout
-from htdata.rasterise import BILINEAR_ROUNDTRIP_BOUND, MODES, Rasteriser
+from htdata.format.table import CANVAS
+from htdata.glove.layouts import GROUPS, load_canonical, load_layout
+from htdata.glove.rasterise import BILINEAR_ROUNDTRIP_BOUND, MODES, Rasteriser
 
 SHIPPED = ["opentouch_right_16x16", "touchanything_left_21x21", "touchanything_right_21x21"]
 CASES = [(lid, m) for lid in SHIPPED for m in MODES]

@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from htdata.calibration import calibration_id, episode_normaliser
+from htdata.glove.calibration import calibration_id, episode_normaliser
 from htdata.cli import main as cli
-from htdata.format import INDEX_FILE, LEGACY_INDEX_DTYPE, MANIFEST_FILE, raw_member, tactile_member
-from htdata.layouts import load_layout
-from htdata.manifest import load_episodes, load_index, load_manifest
-from htdata.normalise import NormaliseConfig, Normaliser
-from htdata.reader import DatasetReader
+from htdata.format.table import INDEX_FILE, LEGACY_INDEX_DTYPE, MANIFEST_FILE, raw_member, tactile_member
+from htdata.glove.layouts import load_layout
+from htdata.store.manifest import load_episodes, load_index, load_manifest
+from htdata.glove.normalise import NormaliseConfig, Normaliser
+from htdata.read.reader import DatasetReader
 from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
 from tests.factories import COLOURS, PERIOD, ingest_cli, make_opentouch, small_pipeline
 
@@ -91,7 +91,7 @@ def test_paired_row_is_the_one_the_map_was_made_from(native_counts):
     episode = load_episodes(out)[0]
     layout = load_layout(out / manifest["layouts"][LAYOUT]["file"])
     normaliser = episode_normaliser(manifest, episode, "right", layout)
-    from htdata.rasterise import Rasteriser
+    from htdata.glove.rasterise import Rasteriser
     raster = Rasteriser(layout)
     for i in range(len(reader)):
         s = reader.decoded(i)
@@ -232,7 +232,7 @@ def test_a_format_2_index_is_read_as_the_current_dtype(native_counts):
 
 
 def test_episode_stream_is_the_recording_full_rate(native_counts):
-    from htdata.rawstream import episode_stream
+    from htdata.read.rawstream import episode_stream
 
     out, values, ts = native_counts
     stream = episode_stream(DatasetReader(out), 0, "right")
@@ -246,7 +246,7 @@ def test_episode_stream_is_the_recording_full_rate(native_counts):
 def test_loader_maps_from_raw_rows_match_the_stored_maps(native_counts):
     import torch
 
-    from htdata.torchdata import TactileFrameDataset, TactileStream
+    from htdata.read.torchdata import TactileFrameDataset, TactileStream
 
     out, _, _ = native_counts
     raw, stored = TactileFrameDataset(out), TactileFrameDataset(out, map_source="stored")
@@ -288,8 +288,8 @@ def test_episode_record_carries_taxel_health(tmp_path):
 
 
 def test_glove_rate_windows_follow_the_full_rate_stream(native_counts):
-    from htdata.rawstream import RawMapRenderer
-    from htdata.torchglove import GloveRateWindowDataset
+    from htdata.read.rawstream import RawMapRenderer
+    from htdata.read.torchglove import GloveRateWindowDataset
 
     out, values, ts = native_counts
     windows = GloveRateWindowDataset(out, window=4)
@@ -340,3 +340,23 @@ def test_renormalise_recomputes_taxel_health_and_names_the_frame_on_bad_settings
     assert "nat-rec_stuck frame 0 right hand" in err and "clip=false" in err
     assert load_manifest(out)["version"] == 2                      # nothing written
     assert cli(["validate", str(out)]) == 0 and not list((out / "shards").glob("*.tmp"))
+
+
+def test_validate_checks_the_maps_the_loaders_serve(native_counts):
+    """Loaders render maps from raw rows (the default); validate fails when those differ from the stored maps."""
+    from htdata.read.rawstream import serves_maps_from_raw
+    from htdata.validate import validate_dataset
+    from tests.factories import rewrite_manifest
+
+    root = native_counts[0]
+    manifest = load_manifest(root)
+    assert serves_maps_from_raw(manifest)
+    ok = validate_dataset(root, deep=True)
+    assert ok["ok"] and ok["checks"]["content"]["checked"]["served_maps"] > 0
+    for cal in manifest["calibrations"].values():     # a calibration record that no longer fits the maps
+        cal["max_value"] = float(cal["max_value"]) * 2
+    rewrite_manifest(root, manifest)
+    bad = validate_dataset(root, deep=True)
+    content = bad["checks"]["content"]
+    assert not bad["ok"] and content["failure_counts"].get("served_map", 0) > 0
+    assert "calibration record and the stored maps disagree" in content["failures"][0]["message"]

@@ -15,14 +15,14 @@ from pathlib import Path
 import numpy as np
 
 from tests.factories import (COLOURS, PERIOD, ingest_cli, small_pipeline, temp_leftovers)
-from htdata.format import MANIFEST_FILE
+from htdata.format.table import MANIFEST_FILE
 from htdata.sample.formats import (OpenTouchClip, TouchAnythingEpisode, write_opentouch_annotations,
                                    write_opentouch_scene, write_touchanything_episode)
 
 
 def make_mixed_sources(root: Path) -> tuple[Path, Path]:
     """Four OpenTouch clips in two scenes + one two-handed TouchAnything episode."""
-    from htdata.layouts import load_layout
+    from htdata.glove.layouts import load_layout
 
     ot = root / "ot"
     rng = np.random.default_rng(7)
@@ -55,7 +55,7 @@ def make_mixed_sources(root: Path) -> tuple[Path, Path]:
 
 def dataset_contents(out: Path) -> tuple[dict, list]:
     """{key: {suffix: bytes}} over every sample, and the manifest's (shard name, sha256) list."""
-    from htdata.reader import DatasetReader
+    from htdata.read.reader import DatasetReader
 
     reader = DatasetReader(out)
     samples = {}

@@ -5,9 +5,9 @@ import pickle
 import numpy as np
 import pytest
 
-from htdata.format import INDEX_FILE, MANIFEST_FILE
-from htdata.reader import DatasetReader
-from htdata.versions import VERSIONS_DIR, version_dir
+from htdata.format.table import INDEX_FILE, MANIFEST_FILE
+from htdata.read.reader import DatasetReader
+from htdata.store.versions import VERSIONS_DIR, version_dir
 from tests.factories import (
     commit_split,
     MIXED_HANDS_EPISODES,
@@ -183,7 +183,7 @@ def test_file_url(dataset):
 def test_storage_helpers_local_and_memory(dataset):
     import fsspec
 
-    from htdata import storage
+    from htdata.store import storage
 
     assert storage.exists(storage.join(dataset, MANIFEST_FILE))
     assert VERSIONS_DIR in storage.listdir(dataset)
@@ -209,7 +209,7 @@ def _copy(dataset, tmp_path):
 
 
 def test_row_matches_index_fields(dataset):
-    from htdata.format import SIZE_FIELDS
+    from htdata.format.table import SIZE_FIELDS
 
     r = DatasetReader(dataset)
     for i in (0, 5, 9, -1):
@@ -223,7 +223,7 @@ def test_row_matches_index_fields(dataset):
 
 
 def test_member_layout_offsets_and_early_stop():
-    from htdata.reader import member_layout
+    from htdata.read.reader import member_layout
 
     sizes = (10, 600, 0, 512, 3, 0)   # json, rgb, (no left), right, bend_left, (no bend_right)
     layout, end = member_layout(sizes)
@@ -238,7 +238,7 @@ def test_member_layout_offsets_and_early_stop():
 def test_header_check_fast_path_fallback_and_mismatch():
     import tarfile
 
-    from htdata.shardio import header_matches, member_header
+    from htdata.format.shardio import header_matches, member_header
 
     name = "ep_a__000001.json"
     ours = member_header(name, 1234)
@@ -269,7 +269,7 @@ def test_header_check_fast_path_fallback_and_mismatch():
 def test_decode_npy_matches_np_load_on_miss_and_hit(arr):
     import io
 
-    from htdata.codec import decode_npy
+    from htdata.format.codec import decode_npy
 
     buf = io.BytesIO()
     np.save(buf, arr)
@@ -286,7 +286,7 @@ def test_decode_npy_matches_np_load_on_miss_and_hit(arr):
 def test_decode_npy_errors_name_the_member():
     import io
 
-    from htdata.codec import decode_npy
+    from htdata.format.codec import decode_npy
 
     buf = io.BytesIO()
     np.save(buf, np.arange(5, dtype=np.float32))
@@ -364,3 +364,31 @@ def test_corrupt_size_field_and_undecodable_member_name_the_sample(dataset, tmp_
         r.sample(i)
     with pytest.raises(ValueError, match=f"{key}.rgb.jpg: not a decodable JPEG"):
         r.decoded(i, suffixes=("rgb.jpg",))
+
+
+def test_front_door_opens_a_version_and_its_torch_datasets(tmp_path):
+    import htdata
+
+    root = write_synthetic_dataset(tmp_path / "ds", EPISODES)
+    ds = htdata.open(root)
+    assert isinstance(ds, DatasetReader) and ds.version == 1 and len(ds) == len(DatasetReader(root))
+    assert htdata.open(root, version=1).manifest == ds.manifest
+    frames = ds.torch.frames()
+    assert len(frames) > 0 and frames._builder.reader.version == ds.version
+    assert ds.torch.windows(window=2)[0]["tactile"].shape[0] == 2
+
+
+def test_old_module_names_still_import_and_warn():
+    import importlib
+    import sys
+    import warnings
+
+    import htdata.read.reader as new
+    sys.modules.pop("htdata.reader", None)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        old = importlib.import_module("htdata.reader")
+    assert old is new and new.__spec__.name == "htdata.read.reader"
+    assert any(issubclass(w.category, DeprecationWarning) and "htdata.read.reader" in str(w.message) for w in caught)
+    from htdata.format import SHARDS_DIR
+    assert SHARDS_DIR == "shards"

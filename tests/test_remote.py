@@ -6,9 +6,9 @@ import fsspec
 import numpy as np
 import pytest
 
-from htdata import remote
+from htdata.store import remote
 from htdata.cli import main as cli_main
-from htdata.reader import DatasetReader
+from htdata.read.reader import DatasetReader
 from tests.factories import commit_split, MIXED_HANDS_ONE_LAYOUT_EPISODES as EPISODES, write_synthetic_dataset
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,7 @@ def test_publish_round_trip_is_byte_equal(dataset):
 def test_publish_keeps_the_versions_and_their_splits(dataset, tmp_path):
     import shutil
 
-    from htdata.split import make_split
+    from htdata.curate.split import make_split
 
     copy = Path(shutil.copytree(dataset, tmp_path / "copy"))
     make_split(copy, ["pour"], name="rule")                # version 3, beside the fixture's split of version 2

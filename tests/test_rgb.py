@@ -2,7 +2,7 @@ import cv2
 import numpy as np
 import pytest
 
-from htdata.rgb import centre_square, to_rgb, to_square_224
+from htdata.source.rgb import centre_square, to_rgb, to_square_224
 
 
 @pytest.mark.parametrize("h,w", [(480, 640), (640, 480), (1, 1), (223, 225), (7, 3), (1080, 1920), (224, 224)])

@@ -13,7 +13,7 @@ from handtouch.rgb_encoder import TactileGridRGB
 from handtouch.rgb_pretrain import save_probe
 from handtouch.train import read_checkpoint, train
 from tests.factories import TRAIN_EPISODES, write_synthetic_dataset
-from tests.test_compare import TINY, write_toml
+from tests.train_factories import TINY, write_toml
 
 PROBE_ARCH = {"size": 16, "width": 8, "channels": 4, "grid": 14, "hidden": 16}
 
@@ -23,7 +23,7 @@ def trained(tmp_path_factory):
     """A dataset with split `s` (test + ood), a tiny config, its stage-1 checkpoint and a probe file."""
     tmp = tmp_path_factory.mktemp("sweep")
     root = write_synthetic_dataset(tmp / "ds", TRAIN_EPISODES, seed=3, fps=4.0)
-    from htdata.split import make_split
+    from htdata.curate.split import make_split
     make_split(root, ood_tasks=["grab"], test_ratio=0.5, seed=0, name="s")
     config = tmp / "tiny.toml"
     write_toml(config, {**TINY, "data_root": str(root), "stage1": {**TINY["stage1"], "steps": 2}})

@@ -42,7 +42,7 @@ def _video_frames(path: Path) -> list[np.ndarray]:
 # ---- plan -------------------------------------------------------------------------
 
 def test_formats_are_registered_adapters_with_a_writer_and_plans():
-    from htdata.adapters import ADAPTERS
+    from htdata.source.adapters import ADAPTERS
     from htdata.sample import corpus
 
     assert corpus.FORMATS == ("opentouch", "touchanything", "native")

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 import pytest
 
-from htdata.layouts import load_canonical, load_layout
+from htdata.glove.layouts import load_canonical, load_layout
 from htdata.sample.glove import contact_grid, contact_grids, place_intensity
 from htdata.sample.render import camera_view, draw_hand
 from htdata.sample.tasks import PLACE_NAMES, TASKS
@@ -223,14 +222,13 @@ def test_scene_changes_the_background():
     assert np.abs(a[:30].astype(int) - b[:30].astype(int)).mean() > 10  # wall region
 
 
-def test_render_is_cheap():
+def test_render_frames_are_repeatable_with_a_warm_background_cache():
+    # (Speed is a benchmark's business, not a test's: no wall-clock assertion here.)
     world = World(EpisodeSpec("tripod_grasp", "Retail", seed=1, n_frames=60, hands=("left", "right")))
-    list(world.render_frames(None, (640, 480)))  # warm the background cache
-    t0 = time.perf_counter()
-    frames = list(world.render_frames(None, (640, 480)))
-    per_frame = (time.perf_counter() - t0) / len(frames)
-    assert frames[0].shape == (480, 640, 3)
-    assert per_frame < 0.015  # ~2 ms measured; generous for a shared 2-core box
+    first = list(world.render_frames(None, (640, 480)))   # fills the background cache
+    again = list(world.render_frames(None, (640, 480)))
+    assert len(first) == len(again) == 60 and first[0].shape == (480, 640, 3)
+    assert all(np.array_equal(a, b) for a, b in zip(first, again))
 
 
 @pytest.mark.parametrize("kwargs,match", [

@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from htdata.benchmarks.index import index_load_benchmark
-from htdata.format import EPISODES_FILE, INDEX_DTYPE, INDEX_FILE, MANIFEST_FILE
-from htdata.manifest import UnitResult, build_index, load_episodes, load_index, load_manifest
+from htdata.format.table import EPISODES_FILE, INDEX_DTYPE, INDEX_FILE, MANIFEST_FILE
+from htdata.store.manifest import UnitResult, load_episodes, load_index, load_manifest
+from htdata.store.parts import assemble, part_from_unit
 from htdata.resources import validate_json
-from htdata.shardio import ShardWriter, member_offsets, parse_key, sample_key
-from htdata.versions import version_dir, version_manifest_file
+from htdata.format.shardio import ShardWriter, member_offsets, parse_key, sample_key
+from htdata.store.versions import version_dir, version_manifest_file
 from tests.factories import write_synthetic_dataset
 
 EPISODES = [
@@ -178,21 +179,21 @@ def test_commit_writes_consistent_index_and_manifest(tmp_path):
     assert (root / "layouts" / "regions.png").is_file()
 
 
-def test_build_index_rejects_inconsistent_units(tmp_path):
+def test_assemble_rejects_inconsistent_units(tmp_path):
     w = write_unit(tmp_path, n=3, per_shard=2)
     ep = {"episode_id": "ep", "task": "t", "scene": "s", "hands": ["right"], "layouts": {"right": "x"}}
-    built = build_index([UnitResult(0, w.shards, w.samples, [ep])])
+
+    def build(*units):
+        return assemble([part_from_unit(u) for u in units])
+
+    built = build(UnitResult(0, w.shards, w.samples, [ep]))
     assert list(built.rows["frame"]) == [0, 1, 2] and built.episodes[0]["num_frames"] == 3
     with pytest.raises(ValueError, match="num_frames"):
-        build_index([UnitResult(0, w.shards, w.samples, [{**ep, "num_frames": 4}])])
+        build(UnitResult(0, w.shards, w.samples, [{**ep, "num_frames": 4}]))
     with pytest.raises(ValueError, match="no episode record"):
-        build_index([UnitResult(0, w.shards, w.samples, [])])
+        build(UnitResult(0, w.shards, w.samples, []))
     with pytest.raises(ValueError, match="expected frame 0"):
-        build_index([UnitResult(0, w.shards, w.samples[1:], [ep])])
-    with pytest.raises(ValueError, match="duplicate work unit"):
-        build_index([UnitResult(0, w.shards, w.samples, [ep]), UnitResult(0, [], [], [])])
-    with pytest.raises(ValueError, match="appears twice"):
-        build_index([UnitResult(0, w.shards, w.samples, [ep]), UnitResult(1, [], [], [ep])])
+        build(UnitResult(0, w.shards, w.samples[1:], [ep]))
 
 
 def test_missing_manifest_means_not_committed(tmp_path):
@@ -211,7 +212,7 @@ def test_index_load_benchmark_small(tmp_path):
 def test_long_episode_ids_round_trip_and_webdataset_reads_them(tmp_path):
     import webdataset as wds
 
-    from htdata.reader import DatasetReader
+    from htdata.read.reader import DatasetReader
 
     long_id = "ot-" + "very_long_scene_name_" * 7 + "demo_1"           # 153 characters
     root = write_synthetic_dataset(tmp_path / "ds", [

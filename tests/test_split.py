@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from htdata import split as sp
+from htdata.curate import split as sp
 from htdata.cli import main as cli_main
 from htdata.resources import validate_json
 

@@ -8,11 +8,11 @@ import cv2
 import numpy as np
 import pytest
 
-from htdata import stats
+from htdata.inspect import stats
 from htdata.cli import main as cli_main
-from htdata.episodestats import HIST_BINS, quantile, value_histogram
-from htdata.layouts import load_layout
-from htdata.reader import DatasetReader
+from htdata.inspect.episodestats import HIST_BINS, quantile, value_histogram
+from htdata.glove.layouts import load_layout
+from htdata.read.reader import DatasetReader
 from tests.tactile_factories import LEFT, RIGHT, clean_series, write_taxel_dataset
 
 N = 40
@@ -74,7 +74,7 @@ def test_numbers_of_a_known_episode(known, tmp_path):
 
 def test_merged_sums_equal_one_pass_over_all_frames(known, tmp_path):
     s = stats.dataset_stats(known, cache_dir=tmp_path / "c")
-    from htdata.rasterise import Rasteriser
+    from htdata.glove.rasterise import Rasteriser
     layout = load_layout(RIGHT)
     r = Rasteriser(layout)
     with DatasetReader(known) as reader:
@@ -216,8 +216,8 @@ def raw_ds(tmp_path_factory):
 
 
 def _paired_raw_rows(root) -> np.ndarray:
-    """The raw row paired with every sample, read back independently of htdata.episodestats."""
-    from htdata.codec import decode_json, decode_npy
+    """The raw row paired with every sample, read back independently of htdata.inspect.episodestats."""
+    from htdata.format.codec import decode_json, decode_npy
 
     out = []
     with DatasetReader(root) as r:
@@ -254,7 +254,7 @@ def test_cli_prints_raw_quantiles_only_where_raw_rows_exist(raw_ds, known, capsy
 
 
 def test_raw_path_and_map_path_agree_to_the_map_codec_error(raw_ds, tmp_path, monkeypatch):
-    from htdata import episodestats
+    from htdata.inspect import episodestats
 
     with DatasetReader(raw_ds) as r:
         gloves = episodestats.dataset_gloves(r)
@@ -287,7 +287,7 @@ def test_episode_stats_keep_the_callers_order_and_count_cached_entries(known, tm
 
 
 def test_map_finiteness_by_bits_matches_numpy_on_every_half_pattern():
-    from htdata.episodestats import all_finite
+    from htdata.inspect.episodestats import all_finite
 
     halves = np.arange(65536, dtype=np.uint32).astype(np.uint16).view(np.float16)
     assert [all_finite(halves[i:i + 1]) for i in range(0, 65536, 1)] == np.isfinite(halves).tolist()

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from htdata.sync import clean_timestamps, nearest, pair
+from htdata.source.sync import clean_timestamps, nearest, pair
 
 MS = 1_000_000
 
@@ -124,7 +124,7 @@ def test_nearest_ties_go_to_earlier():
 
 
 def test_lag_decision_shifts_tactile_onto_the_rgb_clock():
-    from htdata.lag import LagDecision
+    from htdata.source.lag import LagDecision
 
     t_rgb = np.arange(60, dtype=np.int64) * 33_333_333
     t_tac = np.arange(0, 2_000 * MS, 10 * MS, dtype=np.int64) + 150 * MS   # glove stamps 150 ms late

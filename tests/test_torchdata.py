@@ -4,7 +4,7 @@ import pytest
 import torch
 from torch.utils.data import DataLoader
 
-from htdata.torchdata import (
+from htdata.read.torchdata import (
     TactileFrameDataset,
     TactileStream,
     TactileWindowDataset,
@@ -140,7 +140,7 @@ def test_shuffled_indices():
 
 
 def test_stream_splits_shards_across_ddp_ranks(dataset, monkeypatch):
-    import htdata.torchdata as td
+    import htdata.read.torchdata as td
 
     stream = TactileStream(dataset)
     n_shards = len(stream.reader.manifest["shards"])
@@ -210,7 +210,7 @@ def test_stream_items_equal_frame_items_and_do_not_alias(dataset):
 
 
 def test_put_rgb_matches_transpose():
-    from htdata.torchdata import _ItemBuilder
+    from htdata.read.torchdata import _ItemBuilder
 
     rgb = np.random.default_rng(0).integers(0, 256, (224, 224, 3), dtype=np.uint8)
     builder = _ItemBuilder.__new__(_ItemBuilder)
@@ -226,7 +226,7 @@ def test_put_rgb_matches_transpose():
 def test_corrupt_tactile_member_error_names_the_sample(dataset, tmp_path):
     import shutil
 
-    from htdata.reader import DatasetReader, member_layout
+    from htdata.read.reader import DatasetReader, member_layout
 
     copy = tmp_path / "copy"
     shutil.copytree(dataset, copy)
@@ -268,7 +268,7 @@ def test_loader_bench_rows_decode_what_each_access_decodes(dataset):
 
 
 def test_datasets_read_an_older_version(tmp_path):
-    from htdata.curate import remove_episodes
+    from htdata.curate.edit import remove_episodes
 
     root = write_synthetic_dataset(tmp_path / "ds", MIXED_HANDS_EPISODES, seed=SEED, coverages=coverages())
     remove_episodes(root, ["ep_b"], dry_run=False, command="rm")

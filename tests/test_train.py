@@ -25,7 +25,7 @@ TINY_MODEL = {"encoder": "vit", "patch": 32, "dim": 32, "depth": 1, "heads": 2, 
 @pytest.fixture(scope="module")
 def dataset_root(tmp_path_factory):
     root = write_synthetic_dataset(tmp_path_factory.mktemp("ds") / "ds", EPISODES, seed=3)
-    from htdata.split import make_split
+    from htdata.curate.split import make_split
     make_split(root, ood_tasks=["grab"], test_ratio=0.5, seed=0, name="s")
     return root
 

@@ -13,13 +13,13 @@ import pytest
 
 from htdata.benchmarks.validation import validate_benchmark
 from htdata.cli import main as cli_main
-from htdata.codec import encode_exr
-from htdata.format import EPISODES_FILE, FORMAT_VERSION, INDEX_FILE, MANIFEST_FILE, SHARDS_DIR, SIZE_FIELDS
-from htdata.manifest import load_episodes, load_index
-from htdata.shardio import BLOCK, member_header, padded
-from htdata.split import make_split, split_path
+from htdata.format.codec import encode_exr
+from htdata.format.table import EPISODES_FILE, FORMAT_VERSION, INDEX_FILE, MANIFEST_FILE, SHARDS_DIR, SIZE_FIELDS
+from htdata.store.manifest import load_episodes, load_index
+from htdata.format.shardio import BLOCK, member_header, padded
+from htdata.curate.split import make_split, split_path
 from htdata.validate import group_rows, validate_dataset
-from htdata.versions import VERSIONS_DIR
+from htdata.store.versions import VERSIONS_DIR
 from tests.factories import FRAME_NS, SPLIT_EPISODES as EPISODES, rewrite_manifest, write_synthetic_dataset
 
 @pytest.fixture(scope="module")

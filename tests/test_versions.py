@@ -5,12 +5,12 @@ import json
 import numpy as np
 import pytest
 
-from htdata.curate import NoSuchEpisode, parse_frames, remove_episodes, resolve_episodes, trim_episode
-from htdata.format import MANIFEST_FILE
-from htdata.parts import assemble
-from htdata.reader import DatasetReader
-from htdata.snapshot import commit_parts, open_snapshot
-from htdata.versions import diff_episodes, list_versions, version_manifest_file
+from htdata.curate.edit import NoSuchEpisode, parse_frames, remove_episodes, resolve_episodes, trim_episode
+from htdata.format.table import MANIFEST_FILE
+from htdata.store.parts import assemble
+from htdata.read.reader import DatasetReader
+from htdata.store.snapshot import commit_parts, open_snapshot
+from htdata.store.versions import diff_episodes, list_versions, version_manifest_file
 from tests.factories import write_synthetic_dataset
 
 EPISODES = [
@@ -139,7 +139,7 @@ def test_trim_renumbers_frames_and_keeps_source_time(tmp_path):
 
 
 def test_splits_carry_over_removed_episodes_leave_their_part(tmp_path):
-    from htdata.split import make_split
+    from htdata.curate.split import make_split
 
     root = versioned(tmp_path / "ds")
     make_split(root, ["pour"], name="main", seed=0)        # version 2
@@ -154,7 +154,7 @@ def test_splits_carry_over_removed_episodes_leave_their_part(tmp_path):
 
 
 def test_gc_keeps_current_and_frees_unlisted_shards(tmp_path):
-    from htdata.gc import collect
+    from htdata.curate.gc import collect
 
     root = versioned(tmp_path / "ds")
     remove_episodes(root, ["ep_0"], dry_run=False, command="rm")       # re-packs unit 0 -> unit 3
@@ -174,7 +174,7 @@ def test_gc_keeps_current_and_frees_unlisted_shards(tmp_path):
 
 
 def test_merge_links_shards_dedupes_identical_and_refuses_conflicts(tmp_path):
-    from htdata.merge import MergeConflict, merge
+    from htdata.curate.merge import MergeConflict, merge
 
     a = versioned(tmp_path / "a", EPISODES[:3])
     b = versioned(tmp_path / "b", EPISODES[2:])           # ep_2 in both, identical content
@@ -217,7 +217,7 @@ def test_log_and_diff_commands(tmp_path, capsys):
 
 
 def test_every_version_validates_and_a_damaged_version_file_is_named(tmp_path):
-    from htdata.split import write_split
+    from htdata.curate.split import write_split
     from htdata.validate import validate_dataset
 
     root = versioned(tmp_path / "ds")
@@ -242,7 +242,7 @@ def test_every_version_validates_and_a_damaged_version_file_is_named(tmp_path):
 
 
 def test_split_update_keeps_parts_and_reports_changes(tmp_path):
-    from htdata.split import SplitError, write_split
+    from htdata.curate.split import SplitError, write_split
 
     root = versioned(tmp_path / "ds")
     first = write_split(root, ["pour"], name="main", seed=0)
@@ -260,7 +260,7 @@ def test_split_update_keeps_parts_and_reports_changes(tmp_path):
 
 
 def test_split_again_with_nothing_new_makes_no_version(tmp_path):
-    from htdata.split import write_split
+    from htdata.curate.split import write_split
 
     root = versioned(tmp_path / "ds")
     first = write_split(root, ["pour"], name="main", seed=0)
@@ -282,8 +282,8 @@ def test_a_write_built_on_a_stale_parent_is_refused(tmp_path):
 
 
 def test_gc_also_drops_stats_cache_entries_no_kept_version_uses(tmp_path):
-    from htdata.gc import collect
-    from htdata.stats import STATS_DIR, episode_key, episode_stats
+    from htdata.curate.gc import collect
+    from htdata.inspect.stats import STATS_DIR, episode_key, episode_stats
     from tests.tactile_factories import clean_series, write_taxel_dataset
 
     glove = "opentouch_right_16x16"

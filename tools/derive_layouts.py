@@ -23,7 +23,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from htdata.layouts import parse_layout  # noqa: E402
+from htdata.glove.layouts import parse_layout  # noqa: E402
 
 DEFAULT_REFERENCE = Path("/work/shared/reference")
 OUT_DIR = ROOT / "schemas" / "layouts"

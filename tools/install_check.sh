@@ -4,6 +4,8 @@
 # installs the wheel into a fresh venv under a temp dir, then, from a directory
 # outside the checkout and with HTDATA_ROOT unset, runs
 #   htdata layouts -> sample (tiny) -> ingest (shipped pipelines by name) -> split -> validate --deep
+# with the data core alone (no extras: torch must not come in), and checks that the torch datasets
+# then name the extra to install.
 # and checks that schemas/pipelines/configs resolve inside the installed package and
 # that the entry point of HandTouch's bench section is registered.
 # KEEP=1 keeps the temp dir; PYTHON picks the interpreter (default python3).
@@ -27,9 +29,11 @@ step "build sdist + wheel (the wheel is built from the sdist)"
 logged build "$BIN/python" -m build --outdir "$TMP/dist" "$ROOT"
 WHEEL="$(ls "$TMP"/dist/*.whl)"
 
-step "pip install $(basename "$WHEEL")"
-# torch stays pinned (pyproject: torch==2.13.0, the CPU wheel on this machine's disk).
+step "pip install $(basename "$WHEEL") (the data core: no extras, so no torch)"
 logged pip-install "$BIN/python" -m pip install "$WHEEL"
+if "$BIN/python" -c "import torch" 2>/dev/null; then
+  echo "install-check: FAILED: the data core pulled in torch (it belongs to the [torch]/[train]/[bench] extras)"; exit 1
+fi
 
 mkdir "$TMP/work"
 cd "$TMP/work"          # outside the checkout: nothing may be read from $ROOT
@@ -49,7 +53,7 @@ assert root not in package.parents, f"htdata imported from the checkout: {packag
 for path in (resources.SCHEMAS_DIR, resources.LAYOUTS_DIR, resources.PIPELINES_DIR, config_file("smoke")):
     assert package.parent in Path(path).resolve().parents, f"{path} is not inside the installed package"
     print("  ", path)
-from htdata.bench import discover_sections
+from htdata.benchmarks.suite import discover_sections
 sections = discover_sections()
 assert "training" in sections, f"HandTouch's bench section is not registered: {sorted(sections)}"
 print("   bench sections:", ", ".join(f"{n} = {ep.value}" for n, ep in sections.items()))
@@ -72,5 +76,11 @@ step "htdata split"
 
 step "htdata validate --deep"
 logged validate "$BIN/htdata" validate dataset --split main --deep
+
+step "the torch datasets without torch name the extra to install"
+if "$BIN/python" -c "import htdata.read.torchdata" 2>"$TMP/torch.err"; then
+  echo "install-check: FAILED: htdata.read.torchdata imported without torch"; exit 1
+fi
+grep -q "htdata\[torch\]" "$TMP/torch.err" || { cat "$TMP/torch.err"; echo "install-check: FAILED: no hint"; exit 1; }
 
 step "ok"

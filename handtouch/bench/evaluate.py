@@ -19,10 +19,10 @@ metrics.py). Retrieval carries its chance levels (retrieval.py).
 Items: at most `max_items` frames (and windows) per part, drawn without
 replacement by a seeded RNG, sorted, so every model sees the same items.
 
-Data: a dataset root (str/Path: parts are loaded with htdata.torchdata), or
+Data: a dataset root (str/Path: parts are loaded with htdata.read.torchdata), or
 in-memory `EvalPart`s (a Mapping part -> EvalPart, or one EvalPart scored as
 part "all"). An `EvalPart` holds Dataset-like objects (len + getitem -> dict
-of tensors, DESIGN.md "Reader / torch").
+of tensors, docs/FORMAT.md "Reader / torch").
 
 Several models: `prepare(...)` decodes each part once and fixes the
 model-independent parts (items, inpainting masks, the retrieval SSIM
@@ -47,10 +47,10 @@ from handtouch.api import TactileModel
 from handtouch.bench.metrics import TrackMetrics
 from handtouch.bench.retrieval import RetrievalConfig, RetrievalReference, retrieval_reference, score_retrieval
 from handtouch.config import WINDOW
-from htdata import keys
+from htdata.read import keys
+from htdata.read.torchdata import TactileFrameDataset, TactileWindowDataset
 
 NUM_PARTS = 6          # part ids 1..6 (thumb, index, middle, ring, little, palm)
-TRACKS = ("retrieval", "reconstruction", "inpaint", "rgb2tactile", "prediction")
 
 
 @dataclass
@@ -77,8 +77,7 @@ class EvalPart:
 
 
 def load_part(dataset_root: str | Path, split_name: str | None, part: str) -> EvalPart:
-    """Open a committed dataset's part through htdata.torchdata (split None = whole dataset)."""
-    from htdata.torchdata import TactileFrameDataset, TactileWindowDataset
+    """Open a committed dataset's part through htdata.read.torchdata (split None = whole dataset)."""
 
     root = str(dataset_root)
     return EvalPart(frames=TactileFrameDataset(root, split=split_name, part=part),

@@ -21,6 +21,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from handtouch.bench.verdicts import cell, verdict_table
+
 Column = tuple[str, str, "str | None", str]     # (header, track, region, key)
 
 # Map-metric columns in the paper's order; "{}" is the scope, "covered" or "full".
@@ -63,16 +65,6 @@ RETRIEVAL_COLUMNS: tuple[Column, ...] = (
 PANEL_COLUMNS = ("RGB", "GT", "inpaint", "rgb2tactile", "prediction", "|pred-GT|")
 
 
-def cell(metrics: dict, track: str, region: str | None, key: str):
-    """The value of one table cell (None when the track was not scored)."""
-    node = metrics.get(track)
-    if node is None:
-        return None
-    if region is not None:
-        node = node.get(region)
-        if node is None:
-            return None
-    return node.get(key)
 
 
 def _fmt(v) -> str:
@@ -121,7 +113,6 @@ def control_markdown(control: dict) -> str:
 def results_markdown(results: dict[str, dict[str, dict]], meta: dict | None = None) -> str:
     """The results.md document: verdicts (and the run's checks / misalignment control when
     meta has them), covered-pixel table, whole-canvas table, retrieval chance table."""
-    from handtouch.bench.verdicts import verdict_table
 
     meta = meta or {}
     head = ["# HT-Bench results\n",

@@ -19,7 +19,17 @@ from __future__ import annotations
 
 import math
 
-from handtouch.bench.report import cell
+def cell(metrics: dict, track: str, region: str | None, key: str):
+    """The value of one table cell (None when the track was not scored)."""
+    node = metrics.get(track)
+    if node is None:
+        return None
+    if region is not None:
+        node = node.get(region)
+        if node is None:
+            return None
+    return node.get(key)
+
 
 ZEROS, COPY_LAST = "zeros-ref", "copy-last-ref"
 REFERENCES = (ZEROS, COPY_LAST)

@@ -17,13 +17,15 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+from htdata.ingest import Source, ingest
+from htdata.pipeline import load_pipeline
+
 FRAMES = 8           # per recording: small, so the datasets build fast and the append is dominated by overheads
 PERIOD_NS = 33_333_333
 
 
 def write_recordings(root: Path, names: list[str]) -> None:
-    from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
-
     t = np.arange(FRAMES, dtype=np.int64) * PERIOD_NS
     for k, name in enumerate(names):
         values = np.full((FRAMES, 16, 16), 1536.0 + k % 7, np.float32)
@@ -40,8 +42,6 @@ def file_state(root: Path) -> dict[str, tuple[int, int]]:
 
 def append_row(work: Path, n: int) -> dict:
     """Ingest n recordings, then time the ingest of one more; bytes of new or changed files."""
-    from htdata.ingest import Source, ingest
-    from htdata.pipeline import load_pipeline
 
     base = work / f"append_{n}"
     if base.exists():

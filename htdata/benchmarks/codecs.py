@@ -3,7 +3,7 @@
 Maps are the sample corpus rasterised exactly as the ingest does (every
 glove layout the corpus uses), so sizes reflect real sparsity. A codec whose max error stays below
 half a source step keeps every source level recoverable by rounding; the
-default is the smallest EXR codec doing so for every glove (htdata/codecrule.py),
+default is the smallest EXR codec doing so for every glove (htdata/glove/codecrule.py),
 computed from the measured table, not written by hand.
 """
 
@@ -16,10 +16,11 @@ from typing import Callable
 import numpy as np
 
 from htdata.benchmarks.sources import discover, episode_maps
-from htdata.codec import check_tactile_values, decode_exr, decode_png16, encode_exr, encode_png16
-from htdata.codecrule import RULE, GloveStep, glove_step, pick_codec, resolve_codec
-from htdata.format import MAP_SHAPE
-from htdata.layouts import Layout, load_layout
+from htdata.format.codec import check_tactile_values, decode_exr, decode_png16, encode_exr, encode_png16
+from htdata.glove.codecrule import RULE, GloveStep, glove_step, pick_codec, resolve_codec
+from htdata.format.table import MAP_SHAPE
+from htdata.glove.layouts import Layout, load_layout
+from htdata.pipeline import TactileConfig
 
 # Candidates of the codec rule (EXR: what the dataset member can store) and, for comparison, other formats.
 def _exr_codec(compression: str, pixel_type) -> tuple[Callable, Callable]:
@@ -111,7 +112,6 @@ def codec_rows(maps_by_layout: dict[str, np.ndarray], compression: str | None = 
     codec's error is its max over ALL maps (a glove's few maps may miss the
     values where float16 rounds most); the margin rows show each glove's own.
     """
-    from htdata.pipeline import TactileConfig
 
     compression = compression or TactileConfig().compression      # the pipelines' default
     all_maps = np.concatenate(list(maps_by_layout.values()))

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.format import INDEX_DTYPE
+from htdata.format.table import INDEX_DTYPE
 
 
 def synthetic_index(n_rows: int, path: str | os.PathLike, samples_per_shard: int = 1000,

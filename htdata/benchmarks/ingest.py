@@ -25,9 +25,13 @@ from pathlib import Path
 import numpy as np
 
 from htdata.benchmarks.sources import bare_bound, discover
-from htdata.manifest import load_manifest
+from htdata.store.manifest import load_manifest
 from htdata.ingest import Source, ingest
 from htdata.pipeline import load_pipeline
+from htdata.glove.layouts import load_layout
+from htdata.sample.corpus import NATIVE_IMAGE, NATIVE_TACTILE_HZ, OPENTOUCH_LAYOUT, VIDEO_FPS, native_raw
+from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+from htdata.sample.world import EpisodeSpec, World
 
 STAGES = ("decode", "resize", "normalise", "rasterise", "encode", "write", "other")
 
@@ -95,10 +99,6 @@ def adapter_rows(corpus: Path, work: Path, adapters: tuple[str, ...], workers: t
 
 def write_long_native(folder: Path, n_frames: int, seed: int = 0) -> None:
     """One native recording (right hand, OpenTouch-style glove, mp4) of `n_frames` video frames."""
-    from htdata.layouts import load_layout
-    from htdata.sample.corpus import NATIVE_IMAGE, NATIVE_TACTILE_HZ, OPENTOUCH_LAYOUT, VIDEO_FPS, native_raw
-    from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
-    from htdata.sample.world import EpisodeSpec, World
 
     spec = EpisodeSpec("power_grasp", "lab_bench", seed, n_frames, VIDEO_FPS, ("right",)).validate()
     world = World(spec)

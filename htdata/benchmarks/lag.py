@@ -1,4 +1,4 @@
-"""The tactile-video lag estimator (htdata/lag.py): error against known lags, cost per episode minute.
+"""The tactile-video lag estimator (htdata/source/lag.py): error against known lags, cost per episode minute.
 
 Episodes of the sample world (htdata.sample.world: every task, its contact
 visible in the RGB) are written as native recordings whose glove clock runs
@@ -19,6 +19,17 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from htdata.benchmarks.tables import fmt as _fmt, table
+from htdata.glove.layouts import load_layout
+from htdata.sample.corpus import native_raw
+from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+from htdata.sample.world import EpisodeSpec, World
+from htdata.benchmarks.sources import discover
+from htdata.source.lag import _contact_series, _rgb_series, estimate_lag
+from htdata.glove.normalise import Normaliser
+from htdata.source.lag import estimate_episode_lag
+from htdata.sample.tasks import TASKS
 
 SHIFTS_MS = (-200.0, -50.0, 0.0, 100.0)
 FPS = 30.0
@@ -41,10 +52,6 @@ def write_shifted_native(folder: Path, task: str, seed: int, n_frames: int, lag_
     """
     from itertools import chain
 
-    from htdata.layouts import load_layout
-    from htdata.sample.corpus import native_raw
-    from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
-    from htdata.sample.world import EpisodeSpec, World
 
     worlds = [World(EpisodeSpec(task, "lab_bench", int(seed) + r, int(n_frames), FPS, tuple(hands)).validate())
               for r in range(repeats)]
@@ -74,7 +81,6 @@ def write_shifted_native(folder: Path, task: str, seed: int, n_frames: int, lag_
 
 def planned_episode(folder: Path, pipeline: str = "native"):
     """(pipeline config, adapter, planned ref) of the one recording under `folder`."""
-    from htdata.benchmarks.sources import discover
 
     cfg, adapter, refs = discover(pipeline, folder)
     if len(refs) != 1:
@@ -84,9 +90,6 @@ def planned_episode(folder: Path, pipeline: str = "native"):
 
 def _core_ms(cfg, adapter, ref) -> float:
     """Wall ms of `estimate_lag` alone, on inputs read beforehand (untimed)."""
-    from htdata.lag import _contact_series, _rgb_series, estimate_lag
-    from htdata.layouts import load_layout
-    from htdata.normalise import Normaliser
 
     with adapter.open(ref, cfg.adapter.params) as streams:
         tactile = {}
@@ -101,7 +104,6 @@ def _core_ms(cfg, adapter, ref) -> float:
 
 def measure(folder: Path, true_lag_ms: float, n_frames: int) -> dict:
     """One recording: the estimate (as an ingest with lag = "estimate" makes it), its error and cost."""
-    from htdata.lag import estimate_episode_lag
 
     cfg, adapter, ref = planned_episode(folder)
     cfg = cfg.with_overrides(['sync.lag="estimate"'])
@@ -128,7 +130,6 @@ def _summary(rows: list[dict], frame_ms: float) -> dict:
 
 def lag_rows(work: Path, quick: bool = False, seed: int = 0) -> dict:
     """Every task x SHIFTS_MS (one or two hands), untouched gloves, and one long episode for the cost."""
-    from htdata.sample.tasks import TASKS
 
     base = Path(work) / "lag"
     if base.exists():
@@ -165,7 +166,6 @@ def lag_rows(work: Path, quick: bool = False, seed: int = 0) -> dict:
 
 def lag_markdown(d: dict) -> list[str]:
     """REPORT.md lines of the section (htdata/benchmarks/report.py renders them under its heading)."""
-    from htdata.benchmarks.report import _fmt, table
 
     lines = [f"Sample-world native recordings ({d['episode_frames']} frames at 30 fps, glove 100 Hz) whose glove "
              f"clock runs a known lag off the video; `[sync] lag = \"estimate\"` as an ingest runs it. Error = "

@@ -23,7 +23,6 @@ no bend) printed above the table.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from functools import partial
@@ -32,11 +31,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from htdata.codec import decode_npy, decode_rgb, decode_tactile
-from htdata.format import HANDS
-from htdata.reader import DatasetReader
+from htdata.format.table import HANDS, JSON_MEMBER, RGB_MEMBER, decode_member, tactile_member
+from htdata.read.reader import DatasetReader
+from htdata.read.torchdata import TactileFrameDataset, TactileStream, TactileWindowDataset
 
-IMAGES = ("rgb.jpg", "tactile_left.exr", "tactile_right.exr")
+IMAGES = (RGB_MEMBER, *(tactile_member(h) for h in HANDS))   # what a frame item reads
 
 
 def _rate(n: int, seconds: float) -> float:
@@ -44,18 +43,9 @@ def _rate(n: int, seconds: float) -> float:
 
 
 def decode_members(members: dict[str, bytes]) -> None:
-    """Bare decode of every member given, with the functions the loaders use."""
+    """Bare decode of every member given, through the member table as the loaders decode."""
     for suffix, data in members.items():
-        if suffix == "json":
-            json.loads(data)
-        elif suffix == "rgb.jpg":
-            decode_rgb(data)
-        elif suffix.endswith(".exr"):
-            decode_tactile(data)
-        elif suffix.endswith(".npy"):
-            decode_npy(data)
-        else:
-            raise ValueError(f"bench: unknown member suffix {suffix!r}")
+        decode_member(suffix, data, "bench sample")
 
 
 def _seconds(fn: Callable[[], object]) -> float:
@@ -124,7 +114,7 @@ def loader_rows(root: Path, n_random: int, n_windows: int, seed: int = 0, passes
     rng = np.random.default_rng(seed)
     idx = [int(i) for i in rng.integers(0, n, size=min(n_random, n))]
     full = {i: reader.sample(i) for i in idx}
-    bound = decode_bound([_pick(full[i], ("json",) + IMAGES) for i in idx], passes)
+    bound = decode_bound([_pick(full[i], (JSON_MEMBER,) + IMAGES) for i in idx], passes)
     by_shard = [[m for _, m in reader.iter_samples([s])] for s in range(len(reader.manifest["shards"]))]
     rows = _reader_rows(root, reader, rng, idx, full, by_shard, n_windows, passes, block)
     rows += _torch_rows(root, reader, rng, by_shard, n_random, n_windows, passes, block)
@@ -171,7 +161,6 @@ def _reader_rows(root: Path, reader: DatasetReader, rng: np.random.Generator, id
 def _torch_rows(root: Path, reader: DatasetReader, rng: np.random.Generator, by_shard: list[list[dict]],
                 n_random: int, n_windows: int, passes: int, block: int) -> list[dict]:
     """Torch datasets: random frame items, window items, one worker's stream."""
-    from htdata.torchdata import TactileFrameDataset, TactileStream, TactileWindowDataset
 
     rows = []
     frames = TactileFrameDataset(root)
@@ -179,7 +168,7 @@ def _torch_rows(root: Path, reader: DatasetReader, rng: np.random.Generator, by_
 
     def frame_members(i):
         index, hand_id = frames.items[i].tolist()
-        return _pick(reader.sample(index), ("rgb.jpg", f"tactile_{HANDS[hand_id]}.exr"))
+        return _pick(reader.sample(index), (RGB_MEMBER, tactile_member(HANDS[hand_id])))
 
     def frame_items(chunk):
         return lambda: sum(1 for i in chunk if frames[i] is not None)
@@ -192,7 +181,7 @@ def _torch_rows(root: Path, reader: DatasetReader, rng: np.random.Generator, by_
 
     def window_members(i):
         end, hand_id = windows.items[i].tolist()
-        suffixes = ("rgb.jpg", f"tactile_{HANDS[hand_id]}.exr")
+        suffixes = (RGB_MEMBER, tactile_member(HANDS[hand_id]))
         return [_pick(reader.sample(j), suffixes) for j in range(end - 2, end + 1)]
 
     def window_items(chunk):
@@ -209,7 +198,7 @@ def _torch_rows(root: Path, reader: DatasetReader, rng: np.random.Generator, by_
         return lambda: len({int(item["index"]) for item in stream.iter_shards([shard])})
 
     def with_tactile(members):
-        return [_pick(m, IMAGES) for m in members if "tactile_left.exr" in m or "tactile_right.exr" in m]
+        return [_pick(m, IMAGES) for m in members if any(tactile_member(h) in m for h in HANDS)]
 
     row = measure_access("TactileStream (one worker)", [
         Block(stream_samples(s), with_tactile(by_shard[s]), 0) for s in range(len(by_shard))], passes)

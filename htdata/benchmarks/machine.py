@@ -24,7 +24,10 @@ def machine_info() -> dict:
     import cv2
     import numpy as np
     import psutil
-    import torch
+    try:
+        import torch
+    except ModuleNotFoundError:      # a data-only install (no [bench] extra)
+        torch = None
 
     load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
     return {
@@ -35,8 +38,8 @@ def machine_info() -> dict:
         "loadavg_1m": float(load[0]),
         "python": sys.version.split()[0],
         "platform": platform.platform(),
-        "torch": torch.__version__,
-        "torch_threads": torch.get_num_threads(),
+        "torch": torch.__version__ if torch else "not installed",
+        "torch_threads": torch.get_num_threads() if torch else None,
         "numpy": np.__version__,
         "opencv": cv2.__version__,
         "blas_env": {k: os.environ.get(k, "unset") for k in BLAS_ENV},

@@ -6,8 +6,9 @@ import time
 
 import numpy as np
 
-from htdata.layouts import list_layouts, load_layout
-from htdata.rasterise import MODES, Rasteriser
+from htdata.glove.layouts import list_layouts, load_layout
+from htdata.glove.rasterise import MODES, Rasteriser
+from htdata.pipeline import TactileConfig
 
 
 def raster_benchmark(layout_id: str, mode: str, frames: int = 256, seed: int = 0) -> dict:
@@ -49,7 +50,6 @@ def raster_default(rows: list[dict]) -> tuple[str | None, str]:
 
 def raster_rows(frames: int, layouts: list[str] | None = None) -> dict:
     """One row per (shipped layout, raster mode), the mode CRITERION picks, and the pipeline default."""
-    from htdata.pipeline import TactileConfig
 
     rows = [raster_benchmark(layout_id, mode, frames=frames)
             for layout_id in layouts or list_layouts() for mode in MODES]

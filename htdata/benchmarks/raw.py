@@ -6,7 +6,7 @@
   members add, and glove rows stored per sample (a 100 Hz glove beside
   30 Hz video stores ~3; nothing of the recording is left out).
 - Loader: the map of each sample from its stored EXR vs rendered from its
-  paired raw row (htdata.rawstream.RawMapRenderer, nearest mode): frames/s
+  paired raw row (htdata.read.rawstream.RawMapRenderer, nearest mode): frames/s
   of both, and the largest difference (the map codec's rounding).
 """
 
@@ -18,17 +18,20 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.format import HANDS, SIZE_FIELDS, raw_member, tactile_member
+from htdata.benchmarks.tables import table
+from htdata.format.table import HANDS, SIZE_FIELDS, raw_member, tactile_member
+from htdata.store.manifest import load_index
+from htdata.read.reader import DatasetReader
+from htdata.benchmarks.ingest import ingest_run
+from htdata.format.codec import decode_tactile
+from htdata.read.rawstream import RawMapRenderer
 
 TARGET_RATIO = 0.9
 
 
 def storage_row(name: str, root: Path, work: Path, reps: int) -> dict:
     """One adapter: keep_raw on vs off, alternating runs, medians."""
-    from htdata.manifest import load_index
-    from htdata.reader import DatasetReader
 
-    from htdata.benchmarks.ingest import ingest_run
 
     times = {True: [], False: []}
     frames = 0
@@ -56,9 +59,6 @@ def storage_row(name: str, root: Path, work: Path, reps: int) -> dict:
 
 def map_path_row(dataset: Path, limit: int) -> dict:
     """Stored EXR decode vs rendering from raw rows, over the same hand samples."""
-    from htdata.codec import decode_tactile
-    from htdata.rawstream import RawMapRenderer
-    from htdata.reader import DatasetReader
 
     reader = DatasetReader(dataset)
     renderer = RawMapRenderer(reader)
@@ -85,7 +85,6 @@ def raw_rows(corpus: Path, work: Path, adapters: tuple[str, ...], dataset: Path,
 
 
 def raw_markdown(d: dict) -> list[str]:
-    from htdata.benchmarks.report import table
 
     lines = table(d["storage"], [("adapter", "adapter"), ("samples", "samples"),
                                  ("frames_per_s_without_raw", "frames/s, maps only"),

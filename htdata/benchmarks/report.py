@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+from htdata.benchmarks.lag import lag_markdown
+from htdata.benchmarks.raw import raw_markdown
+from htdata.benchmarks.tables import fmt as _fmt, table
+
 HEADINGS = {
     "machine": "## Machine",
     "codecs": "## Tactile codecs (real sample maps)",
@@ -20,29 +24,6 @@ HEADINGS = {
 TARGET_OVERHEAD_PCT = 30.0
 TARGET_SCALING = 1.8
 TARGET_RSS_FLAT = 1.25      # peak RSS of the longest episode / the shortest
-
-
-def _fmt(v, digits: int = 3) -> str:
-    if v is None:
-        return "exact"
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    if isinstance(v, float):
-        if v == 0:
-            return "0"
-        if abs(v) >= 1000:
-            return f"{v:,.0f}"
-        if abs(v) < 1e-3:
-            return f"{v:.2e}"
-        return f"{v:.{digits}g}"
-    return str(v)
-
-
-def table(rows: list[dict], columns: list[tuple[str, str]]) -> list[str]:
-    out = ["| " + " | ".join(h for _, h in columns) + " |", "|" + "---|" * len(columns)]
-    for r in rows:
-        out.append("| " + " | ".join(_fmt(r.get(k)) for k, _ in columns) + " |")
-    return out + [""]
 
 
 def _machine(m: dict) -> list[str]:
@@ -212,21 +193,9 @@ def _stats(d: dict) -> list[str]:
                     "Warm = every episode cached; incremental = one more episode than the cold run.", ""]
 
 
-def _lag_markdown(d: dict) -> list[str]:
-    from htdata.benchmarks.lag import lag_markdown   # the section's own module renders its table
-
-    return lag_markdown(d)
-
-
-def _raw_markdown(d: dict) -> list[str]:
-    from htdata.benchmarks.raw import raw_markdown   # the section's own module renders its tables
-
-    return raw_markdown(d)
-
-
 RENDERERS = {"machine": _machine, "codecs": _codecs, "rgb": _rgb, "raster": _raster, "ingest": _ingest,
              "rss": _rss, "loader": _loader, "index": _index, "validate": _validate,
-             "append": _append, "stats": _stats, "lag": _lag_markdown, "raw": _raw_markdown}
+             "append": _append, "stats": _stats, "lag": lag_markdown, "raw": raw_markdown}
 
 
 def _discovered(name: str, results: dict) -> list[str]:

@@ -10,12 +10,13 @@ import cv2
 import numpy as np
 
 from htdata.benchmarks.timing import best_ms
+from htdata.pipeline import RgbConfig
 
 # The criteria the section's defaults are computed by (stated in REPORT.md next to the tables).
 PSNR_TARGET_DB = 40.0
 QUALITY_CRITERION = f"the smallest JPEG quality whose mean PSNR is at least {PSNR_TARGET_DB:g} dB"
 RESIZE_CRITERION = "the lowest mean error against the reference among the pipeline's [rgb] interpolation options"
-# [rgb] interpolation -> the method row measuring it (htdata.rgb resizes with cv2)
+# [rgb] interpolation -> the method row measuring it (htdata.source.rgb resizes with cv2)
 PIPELINE_RESIZE = {"area": "cv2_area", "linear": "cv2_linear", "cubic": "cv2_cubic", "nearest": "cv2_nearest"}
 
 
@@ -107,7 +108,6 @@ def rgb_defaults(quality: list[dict], resize: list[dict]) -> dict:
 
 def rgb_section(frames: list[np.ndarray], size: int = 224) -> dict:
     """Both RGB tables plus the defaults the criteria compute from them, beside the pipeline's defaults."""
-    from htdata.pipeline import RgbConfig
 
     if not frames:
         raise ValueError("rgb benchmark needs at least one source frame")

@@ -17,14 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.adapters import get_adapter
-from htdata.codec import encode_rgb, encode_tactile
-from htdata.codecrule import resolve_sources
+from htdata.source.adapters import get_adapter
+from htdata.format.codec import encode_rgb, encode_tactile
+from htdata.glove.codecrule import resolve_sources
 from htdata.ingest import Source
 from htdata.ingest.episode import EpisodeTally, episode_frames
 from htdata.ingest.plan import resolve_layouts
 from htdata.pipeline import PipelineConfig, load_pipeline
-from htdata.rgb import to_square_224
+from htdata.source.rgb import to_square_224
 
 
 @dataclass

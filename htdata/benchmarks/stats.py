@@ -14,9 +14,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from htdata.format import HANDS, tactile_member
-from htdata.reader import DatasetReader
-from htdata.stats import stats_benchmark
+from htdata.format.table import HANDS, tactile_member
+from htdata.read.reader import DatasetReader
+from htdata.inspect.stats import stats_benchmark
 
 
 def tactile_decode_rate(root: Path) -> dict:

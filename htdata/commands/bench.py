@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from htdata.bench import BenchConfig, run_bench
+from htdata.benchmarks.suite import BenchConfig, run_bench
 
 EPILOG = """\
 examples:

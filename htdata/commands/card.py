@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from htdata import card
+from htdata.inspect import card
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:

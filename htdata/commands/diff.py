@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from htdata.versions import diff_versions
+from htdata.store.history import diff_versions
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:

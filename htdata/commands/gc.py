@@ -6,8 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from htdata import gc
-from htdata.lock import DatasetLocked
+from htdata.curate import gc
+from htdata.store.lock import DatasetLocked
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:

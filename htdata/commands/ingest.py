@@ -27,10 +27,11 @@ import argparse
 import os
 import sys
 
-from htdata.executors import UnitFailed
+from htdata.ingest.executors import UnitFailed
 from htdata.ingest import ingest, parse_sources
-from htdata.layouts import LAYOUTS_ENV
-from htdata.lock import DatasetLocked
+from htdata.glove.layouts import LAYOUTS_ENV
+from htdata.settings import aim_settings
+from htdata.store.lock import DatasetLocked
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -90,18 +91,7 @@ def run(args: argparse.Namespace) -> int:
 
 def apply_settings(sources, settings: list[str]) -> None:
     """Apply `--set [PIPELINE:]key=value` overrides to the sources' pipelines (in place, validated)."""
-    names = {s.pipeline.name for s in sources}
-    aimed: dict[str | None, list[str]] = {}
-    for item in settings:
-        key = item.partition("=")[0]
-        target, sep, _ = key.partition(":")
-        if sep:
-            if target not in names:
-                raise ValueError(f"--set {item}: no pipeline named {target!r} (pipelines: {sorted(names)})")
-            aimed.setdefault(target, []).append(item[len(target) + 1:])
-        else:
-            aimed.setdefault(None, []).append(item)
+    mine = aim_settings(settings, sorted({s.pipeline.name for s in sources}))
     for source in sources:
-        mine = aimed.get(None, []) + aimed.get(source.pipeline.name, [])
-        if mine:
-            source.pipeline = source.pipeline.with_overrides(mine)
+        if mine[source.pipeline.name]:
+            source.pipeline = source.pipeline.with_overrides(mine[source.pipeline.name])

@@ -6,7 +6,7 @@
     htdata layouts render opentouch_right_16x16 out.png
 
 Layout ids are searched in --layouts DIR (repeatable), then $HTDATA_LAYOUTS,
-then the shipped schemas/layouts/ (htdata.layouts.layout_dirs).
+then the shipped schemas/layouts/ (htdata.glove.layouts.layout_dirs).
 """
 
 from __future__ import annotations
@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.format import CANVAS
-from htdata.layouts import LAYOUTS_ENV, Layout, list_layouts, load_canonical, load_layout
-from htdata.rasterise import Rasteriser
+from htdata.format.table import CANVAS
+from htdata.glove.layouts import LAYOUTS_ENV, Layout, list_layouts, load_canonical, load_layout
+from htdata.glove.rasterise import Rasteriser
 
 # BGR colours per part id (0 = background), for `htdata layouts render`.
 _PART_BGR = np.array([[0, 0, 0], [60, 60, 230], [60, 200, 60], [230, 140, 40], [200, 60, 200],

@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from htdata.versions import log_entries
+from htdata.store.history import log_entries
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from htdata import preview
+from htdata.inspect import preview
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:

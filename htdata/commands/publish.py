@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from htdata.remote import publish_dataset
+from htdata.store.remote import publish_dataset
 
 EPILOG = """\
 examples:

@@ -15,9 +15,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from htdata import renormalise
-from htdata.curate import NoSuchEpisode
-from htdata.lock import DatasetLocked
+from htdata.curate import renormalise
+from htdata.curate.edit import NoSuchEpisode
+from htdata.store.lock import DatasetLocked
 from htdata.pipeline import load_pipeline
 
 

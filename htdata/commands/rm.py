@@ -6,12 +6,12 @@ import argparse
 import sys
 from pathlib import Path
 
-from htdata import curate
-from htdata.lock import DatasetLocked
+from htdata.curate import edit as curate_edit
+from htdata.store.lock import DatasetLocked
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = curate.__doc__
+    parser.epilog = curate_edit.__doc__
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("dataset", type=Path, help="committed dataset directory")
     parser.add_argument("episodes", nargs="+", metavar="EPISODE",
@@ -22,15 +22,15 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     command = "htdata rm " + " ".join(args.episodes)
     try:
-        edit, manifest = curate.remove_episodes(args.dataset, args.episodes, args.dry_run, command)
-    except (curate.NoSuchEpisode, DatasetLocked, FileNotFoundError, ValueError) as exc:
+        edit, manifest = curate_edit.remove_episodes(args.dataset, args.episodes, args.dry_run, command)
+    except (curate_edit.NoSuchEpisode, DatasetLocked, FileNotFoundError, ValueError) as exc:
         print(f"htdata rm: error: {exc}", file=sys.stderr)
         return 2
     report(edit, manifest, args.dry_run)
     return 0
 
 
-def report(edit: curate.Edit, manifest: dict | None, dry_run: bool) -> None:
+def report(edit: curate_edit.Edit, manifest: dict | None, dry_run: bool) -> None:
     for line in edit.lines(dry_run):
         print(line)
     if manifest is not None:

@@ -7,8 +7,8 @@ import json
 import sys
 from pathlib import Path
 
-from htdata import stats
-from htdata.health import CLASSES
+from htdata.inspect import stats
+from htdata.glove.health import CLASSES
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:

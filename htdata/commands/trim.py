@@ -1,7 +1,7 @@
 """`htdata trim DATASET EPISODE --frames A:B [--dry-run]`: keep frames A..B-1 of one episode, as a new version.
 
 `htdata trim DATASET --idle [--min-contact X] [--keep-margin S] [--dry-run]`: drop every episode's idle head
-and tail (no contact on any hand) in one new version (htdata/idle.py).
+and tail (no contact on any hand) in one new version (htdata/curate/idle.py).
 """
 
 from __future__ import annotations
@@ -10,13 +10,14 @@ import argparse
 import sys
 from pathlib import Path
 
-from htdata import curate
+from htdata.curate import edit as curate_edit
 from htdata.commands.rm import report
-from htdata.lock import DatasetLocked
+from htdata.store.lock import DatasetLocked
+from htdata.curate import idle
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = curate.__doc__
+    parser.epilog = curate_edit.__doc__
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("dataset", type=Path, help="committed dataset directory")
     parser.add_argument("episode", nargs="?", default=None, help="episode id (not with --idle)")
@@ -25,7 +26,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                              "kept frames are renumbered from 0, each sample keeps its source time")
     parser.add_argument("--dry-run", action="store_true", help="print what would change, write nothing")
     parser.add_argument("--idle", action="store_true",
-                        help="trim every episode's head and tail without contact on any hand (htdata/idle.py)")
+                        help="trim every episode's head and tail without contact on any hand (htdata/curate/idle.py)")
     parser.add_argument("--min-contact", type=float, default=None, metavar="X",
                         help="with --idle: a frame is in contact when a taxel reads above X (default 0.02)")
     parser.add_argument("--keep-margin", type=float, default=None, metavar="S",
@@ -41,8 +42,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     command = f"htdata trim {args.episode} --frames {args.frames}"
     try:
-        edit, manifest = curate.trim_episode(args.dataset, args.episode, args.frames, args.dry_run, command)
-    except (curate.NoSuchEpisode, DatasetLocked, FileNotFoundError, ValueError) as exc:
+        edit, manifest = curate_edit.trim_episode(args.dataset, args.episode, args.frames, args.dry_run, command)
+    except (curate_edit.NoSuchEpisode, DatasetLocked, FileNotFoundError, ValueError) as exc:
         print(f"htdata trim: error: {exc}", file=sys.stderr)
         return 2
     report(edit, manifest, args.dry_run)
@@ -50,8 +51,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def run_idle(args: argparse.Namespace) -> int:
-    from htdata import idle
-
     if args.episode is not None or args.frames is not None:
         print("htdata trim: error: --idle trims every episode: give no EPISODE and no --frames", file=sys.stderr)
         return 2

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from htdata import validate
-from htdata.format import VALIDATE_REPORT
+from htdata.format.table import VALIDATE_REPORT
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:

@@ -24,9 +24,10 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from htdata.parts import Part
-from htdata.repack import KeptEpisode, repack_unit, samples_per_shard_of
-from htdata.snapshot import Snapshot
+from htdata.store.parts import Part
+from htdata.curate.repack import KeptEpisode, repack_unit, samples_per_shard_of
+from htdata.store.snapshot import Snapshot
+from htdata.read.reader import DatasetReader
 
 # Episode-record fields that come from discovery labels, not from the samples.
 LABEL_FIELDS = ("task", "scene", "source_ref", "source_split")
@@ -121,7 +122,6 @@ def parent_parts(plan: AppendPlan, ingested: set[str], first_unit: int) -> tuple
             parts.append(Part(unit=part.unit, shards=part.shards, rows=part.rows, episodes=records))
         elif kept:
             if reader is None:
-                from htdata.reader import DatasetReader
                 reader = DatasetReader(plan.parent.root, version=plan.parent.version)
             parts.append(repack_unit(reader, [KeptEpisode(e, range(int(e["num_frames"]))) for e in kept], unit,
                                      samples_per_shard_of(part)))

@@ -12,13 +12,16 @@ import hashlib
 import json
 from pathlib import Path
 
-from htdata.codec import DEFAULT_CODEC_INFO
-from htdata.codecrule import codec_block
+from htdata.format.codec import DEFAULT_CODEC_INFO
+from htdata.glove.codecrule import codec_block
 from htdata.ingest.unit import decode_coverage
-from htdata.layouts import load_canonical
-from htdata.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, write_layout_files
+from htdata.glove.layouts import load_canonical
+from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, write_layout_files
 from htdata.pipeline import PipelineConfig
-from htdata.shardio import SampleRecord, ShardRecord
+from htdata.format.shardio import SampleRecord, ShardRecord
+from htdata.ingest.append import parent_parts
+from htdata.store.parts import part_from_unit
+from htdata.store.snapshot import commit_parts
 
 
 def codec_info(cfg: PipelineConfig) -> dict:
@@ -93,9 +96,6 @@ def merged_sources(parent, sources: list) -> list[dict]:
 
 def commit(out: Path, sources: list, records: list[dict], plan, command: str) -> dict:
     """Write the new version: the parent's parts (minus replaced episodes) then this run's units."""
-    from htdata.ingest.append import parent_parts
-    from htdata.parts import part_from_unit
-    from htdata.snapshot import commit_parts
 
     canon = load_canonical()
     canonical = CanonicalArtifact(document=canon.to_dict(), region_map=canon.region_map, part_map=canon.part_map)

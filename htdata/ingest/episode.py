@@ -11,7 +11,7 @@ tactile become RGB-only samples, and a glove-only recording (no video)
 becomes tactile-only samples on its first hand's clock. Raw values outside the layout's range
 [0, max_value] are counted per hand and handled by the pipeline's
 `[normalise] out_of_range` policy (clip / drop_frame / fail). It encodes
-and writes nothing: the ingest unit encodes each frame with `htdata.format.encode_sample`, the
+and writes nothing: the ingest unit encodes each frame with `htdata.format.table.encode_sample`, the
 benchmarks (htdata/benchmarks/sources.py) keep the maps. What the episode
 record needs (sync report, dropped frames, contact stats, notes, fps) is
 accumulated in the caller's `EpisodeTally`, complete once the generator is
@@ -34,23 +34,23 @@ from typing import Iterator
 import numpy as np
 
 from htdata.errors import EpisodeError
-from htdata.format import HANDS
+from htdata.format.table import HANDS
 from htdata.ingest.fullrate import FrameQueue, RawRows, RowPlan
 from htdata.ingest.tally import EpisodeTally
 from htdata.ingest.timing import StageClock
-from htdata.layouts import Layout, load_layout
-from htdata.normalise import Normaliser
+from htdata.glove.layouts import Layout, load_layout
+from htdata.glove.normalise import Normaliser
 from htdata.pipeline import PipelineConfig
-from htdata.rasterise import Rasteriser
-from htdata.rgb import to_square_224
-from htdata.shardio import sample_key
-from htdata.lag import episode_lag
-from htdata.sync import SyncResult, pair
+from htdata.glove.rasterise import Rasteriser
+from htdata.source.rgb import to_square_224
+from htdata.format.shardio import sample_key
+from htdata.source.lag import episode_lag
+from htdata.source.sync import SyncResult, pair
 
 
 @dataclass
 class Frame:
-    """What one kept frame's sample needs, decoded (see htdata.format for the sample dict)."""
+    """What one kept frame's sample needs, decoded (see htdata.format.table for the sample dict)."""
     key: str                       # sample key (episode id + frame index)
     source_frame: int              # RGB frame index in the source
     meta: dict                     # the sample's JSON member

@@ -25,11 +25,11 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from htdata.adapters import get_adapter
+from htdata.source.adapters import get_adapter
 from htdata.errors import EpisodeError
-from htdata.fsutil import sha256_file
-from htdata.format import HANDS
-from htdata.layouts import load_layout
+from htdata.store.fsutil import sha256_file
+from htdata.format.table import HANDS
+from htdata.glove.layouts import load_layout
 from htdata.pipeline import PipelineConfig, load_pipeline
 
 

@@ -15,10 +15,10 @@ import sys
 import time
 from pathlib import Path
 
-from htdata.codecrule import resolve_sources
-from htdata.executors import make_executor
-from htdata.format import INGEST_REPORT
-from htdata.fsutil import write_bytes_atomic
+from htdata.glove.codecrule import resolve_sources
+from htdata.ingest.executors import make_executor
+from htdata.format.table import INGEST_REPORT
+from htdata.store.fsutil import write_bytes_atomic
 from htdata.ingest.append import kept_unavailable, plan_append
 from htdata.ingest.commit import check_compatible, commit
 from htdata.ingest.plan import (Source, UnitTask, check_settings_agree, check_unique_ids, discover_sources,
@@ -27,8 +27,8 @@ from htdata.ingest.timing import timing_summary
 from htdata.ingest.unit import run_unit
 from htdata.ingest.workdir import (check_output, clear_unit_files, dumps, load_valid_record, prepare_output,
                                    remove_strays)
-from htdata.lock import WriterLock
-from htdata.snapshot import current_snapshot
+from htdata.store.lock import WriterLock
+from htdata.store.snapshot import current_snapshot
 
 
 class EpisodeProgress:

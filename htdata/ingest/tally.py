@@ -4,7 +4,7 @@
 the sync report, frames dropped from pairing and RGB-only samples kept,
 contact sums, out-of-range counts, notes, fps, the normalisers (the
 episode's calibration) and each hand's live-taxel series, classified once
-at the end for the record's `taxel_health` (htdata.health; the exact
+at the end for the record's `taxel_health` (htdata.glove.health; the exact
 normalised values, before the map codec). `record()` builds the episode record once the
 generator is exhausted.
 """
@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from htdata.calibration import calibration_id, fit_record
-from htdata.health import record_entry
-from htdata.layouts import Layout
-from htdata.sync import SyncResult
+from htdata.glove.calibration import calibration_id, fit_record
+from htdata.glove.health import record_entry
+from htdata.glove.layouts import Layout
+from htdata.source.sync import SyncResult
 
 
 class EpisodeTally:

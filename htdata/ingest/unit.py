@@ -1,7 +1,7 @@
 """One work unit (in a worker process, a Ray task or inline): its episodes -> shards + a done record.
 
 For each episode, `episode_frames` yields the kept frames; each is encoded
-with `htdata.format.encode_sample` (codec settings from the pipeline) and
+with `htdata.format.table.encode_sample` (codec settings from the pipeline) and
 spooled to a temp file. Only a fully successful episode is replayed into
 the unit's shards, so a bad episode never leaves half its frames behind.
 
@@ -31,18 +31,18 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.adapters import get_adapter
-from htdata.calibration import episode_calibrations
+from htdata.source.adapters import get_adapter
+from htdata.glove.calibration import episode_calibrations
 from htdata.errors import EpisodeError
-from htdata.executors import parent_alive, report_progress
-from htdata.format import MAP_SHAPE, SHARDS_DIR, CodecSettings, encode_sample
-from htdata.fsutil import write_bytes_atomic
+from htdata.ingest.executors import parent_alive, report_progress
+from htdata.format.table import MAP_SHAPE, SHARDS_DIR, CodecSettings, encode_sample
+from htdata.store.fsutil import write_bytes_atomic
 from htdata.ingest.episode import EpisodeTally, episode_frames, frame_errors, rasteriser_for
 from htdata.ingest.timing import StageClock
 from htdata.ingest.workdir import clear_unit_files, dumps, spool_path, unit_record_path
-from htdata.layouts import Layout
+from htdata.glove.layouts import Layout
 from htdata.pipeline import PipelineConfig
-from htdata.shardio import ShardWriter
+from htdata.format.shardio import ShardWriter
 
 
 class Spool:

@@ -15,9 +15,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from htdata.format import MANIFEST_FILE, SHARDS_DIR, WORK_DIR
-from htdata.fsutil import sha256_file
-from htdata.lock import LOCK_FILE
+from htdata.format.table import MANIFEST_FILE, SHARDS_DIR, WORK_DIR
+from htdata.store.fsutil import sha256_file
+from htdata.store.lock import LOCK_FILE
 
 # Keys a unit record must hold to be reused (records of older versions lack some: their units re-run).
 RECORD_KEYS = ("unit", "fingerprint", "shards", "samples", "episodes", "failures", "dropped", "layouts")

@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.adapters import ADAPTERS
-from htdata.fsutil import write_json_atomic
-from htdata.layouts import load_layout
+from htdata.source.adapters import ADAPTERS
+from htdata.store.fsutil import write_json_atomic
+from htdata.glove.layouts import load_layout
 from htdata.sample.formats import (
     NativeHand,
     NativeRecording,

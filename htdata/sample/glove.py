@@ -2,19 +2,15 @@
 
 Active layout blocks get a Gaussian blob scaled by the task's place intensity
 and the grip force; bend cells carry their finger's closure. A layout's
-blocks may be `htdata.layouts.Block` objects or plain dicts.
+blocks may be `htdata.glove.layouts.Block` objects or plain dicts.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
+from htdata.sample.state import HandState
 from htdata.sample.tasks import FINGERS, GROUPS, PLACE_NAMES, stable_hash
-
-if TYPE_CHECKING:   # world.py imports this module
-    from htdata.sample.world import HandState
 
 
 def _block(block) -> tuple[str, str, tuple[int, int], tuple[int, int]]:

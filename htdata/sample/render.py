@@ -9,16 +9,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
 from htdata.sample.hand import PALM_H, PALM_W, finger_points
+from htdata.sample.state import HandState
 from htdata.sample.tasks import SCENE_STYLES, scene_style, stable_hash
-
-if TYPE_CHECKING:   # world.py imports this module
-    from htdata.sample.world import HandState
 
 
 @dataclass(frozen=True)

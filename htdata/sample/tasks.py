@@ -15,7 +15,7 @@ from typing import Any
 
 FINGERS = ("thumb", "index", "middle", "ring", "little")
 GROUPS = FINGERS + ("palm",)
-# Canonical place names (docs/DESIGN.md, "Canonical hand frame").
+# Canonical place names (docs/LAYOUTS.md, "The canonical hand").
 PLACE_NAMES: tuple[str, ...] = (
     "thumb.distal", "thumb.proximal",
     *(f"{f}.{p}" for f in FINGERS[1:] for p in ("distal", "middle", "proximal")),

@@ -13,8 +13,12 @@ module each:
   for all samples).
 - content (`content.py`): decodes every sample (`--deep`) or a seeded sample
   (`--sample-frac`, plus the first frame of every episode): RGB (224,224,3)
-  uint8; tactile EXR half (224,224), finite, in [0,1], zero outside the
+  uint8; tactile EXR (224,224; half or float, as the codec records), finite, in [0,1], zero outside the
   layout's coverage; bend vectors 1-D finite.
+- served maps (`served.py`, part of content): for the decoded samples, each
+  map as the torch datasets serve it (rendered from the raw rows under the
+  recorded calibration, their default) equals the stored map within the
+  stored pixel type's rounding: one truth for what a map is.
 - time (`timestamps.py`): RGB timestamps strictly increasing per episode;
   tactile timestamps never decrease (a repeated tactile timestamp means one
   glove frame was paired with two RGB frames, which nearest-neighbour sync

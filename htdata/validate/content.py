@@ -11,48 +11,22 @@ accumulator (htdata/validate/sensors.py).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from htdata.codec import decode_exr_pixels, decode_json, decode_npy, decode_png_u8, decode_rgb
-from htdata.format import CANVAS, HANDS, JSON_MEMBER, MAP_SHAPE, RGB_MEMBER, bend_member, raw_member, tactile_member
+# Maps are checked as stored (half or float pixels, before conversion): decode_exr_pixels; every other
+# member decodes through the member table like every reader.
+from htdata.format.codec import decode_exr_pixels, decode_png_u8
+from htdata.format.table import (CANVAS, HANDS, JSON_MEMBER, MAP_SHAPE, RGB_MEMBER, bend_member, decode_member,
+                                 raw_member, tactile_member)
+from htdata.validate.geometry import CoverageGeometry, coverage_geometries, coverage_geometry  # noqa: F401
 from htdata.validate.report import Check, Recorder
 from htdata.validate.sensors import accumulate, hand_key
 
 RGB_SHAPE = (CANVAS, CANVAS, 3)
-# manifest codec.tactile.pixel_type -> stored pixel type of the tactile maps (htdata/codecrule.py)
+# manifest codec.tactile.pixel_type -> stored pixel type of the tactile maps (htdata/glove/codecrule.py)
 TACTILE_PIXELS = {"half": np.dtype(np.float16), "float": np.dtype(np.float32)}
-
-
-@dataclass
-class CoverageGeometry:
-    """Per-layout lookups computed once per shard, so each map costs a few vector ops."""
-    mask: np.ndarray        # (224,224) bool covered pixels
-    idx: np.ndarray         # flat indices of covered pixels
-    labels: np.ndarray      # region id of each covered pixel (0 = outside every region)
-    counts: np.ndarray      # covered pixels per region id
-    n_covered: int
-
-
-def coverage_geometry(coverage: np.ndarray, region_map: np.ndarray | None) -> CoverageGeometry:
-    mask = np.asarray(coverage, bool)
-    idx = np.flatnonzero(mask.ravel())
-    regions = np.zeros(mask.shape, np.uint8) if region_map is None else region_map
-    labels = regions.ravel()[idx].astype(np.intp)
-    counts = np.bincount(labels, minlength=int(regions.max()) + 1)
-    return CoverageGeometry(mask, idx, labels, counts, int(idx.size))
-
-
-def coverage_geometries(coverage: dict[str, np.ndarray], region_map: np.ndarray | None
-                        ) -> dict[str, CoverageGeometry]:
-    """hand_key -> geometry; hands sharing one coverage array (one layout) share one geometry."""
-    by_array: dict[int, CoverageGeometry] = {}
-    for cov in coverage.values():
-        if id(cov) not in by_array:
-            by_array[id(cov)] = coverage_geometry(cov, region_map)
-    return {k: by_array[id(cov)] for k, cov in coverage.items()}
 
 
 def layout_maps(root: Path, manifest: dict, check: Check) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
@@ -97,7 +71,7 @@ def check_content(geometry: dict[str, CoverageGeometry], rec: Recorder, key: str
     for hand in HANDS:
         member = bend_member(hand)
         if member in members:
-            _check_bend(rec, f"{key}.{member}", where, hand, members[member])
+            _check_bend(rec, key, member, where, hand, members[member])
         if raw_member(hand) in members:
             _check_raw(rec, key, where, hand, members)
 
@@ -105,7 +79,7 @@ def check_content(geometry: dict[str, CoverageGeometry], rec: Recorder, key: str
 def _tactile_only(members: dict[str, bytes]) -> bool:
     """True for a glove-only recording's sample (its JSON says so): no RGB member is expected."""
     try:
-        return bool(decode_json(members[JSON_MEMBER], "json").get("tactile_only")) if JSON_MEMBER in members else False
+        return bool(decode_member(JSON_MEMBER, members[JSON_MEMBER], "sample").get("tactile_only")) if JSON_MEMBER in members else False
     except ValueError:
         return False
 
@@ -115,7 +89,7 @@ def _check_rgb(rec: Recorder, key: str, where: dict, members: dict[str, bytes]) 
         rec.fail("rgb_missing", f"{key}: no {RGB_MEMBER} member", **where)
         return
     try:
-        rgb = decode_rgb(members[RGB_MEMBER], where=f"{key}.{RGB_MEMBER}")
+        rgb = decode_member(RGB_MEMBER, members[RGB_MEMBER], key)
     except ValueError as exc:
         rec.fail("rgb_decode", str(exc), **where)
         return
@@ -165,9 +139,10 @@ def _check_tactile(geometry: dict[str, CoverageGeometry], rec: Recorder, key: st
     accumulate(sensor, where["episode"], hand, where["frame"], covered, geo, hi)
 
 
-def _check_bend(rec: Recorder, name: str, where: dict, hand: str, data: bytes) -> None:
+def _check_bend(rec: Recorder, key: str, member: str, where: dict, hand: str, data: bytes) -> None:
+    name = f"{key}.{member}"
     try:
-        bend = decode_npy(data, name)
+        bend = decode_member(member, data, key)
     except ValueError as exc:
         rec.fail("bend_decode", str(exc), **where, hand=hand)
         return
@@ -180,8 +155,8 @@ def _check_raw(rec: Recorder, key: str, where: dict, hand: str, members: dict[st
     """Raw rows: a numeric (R,H,W) array; the JSON member names each row and the paired one."""
     name = f"{key}.{raw_member(hand)}"
     try:
-        rows = decode_npy(members[raw_member(hand)], name)
-        meta = decode_json(members[JSON_MEMBER], f"{key}.{JSON_MEMBER}") if JSON_MEMBER in members else {}
+        rows = decode_member(raw_member(hand), members[raw_member(hand)], key)
+        meta = decode_member(JSON_MEMBER, members[JSON_MEMBER], key) if JSON_MEMBER in members else {}
     except ValueError as exc:
         rec.fail("raw_decode", str(exc), **where, hand=hand)
         return

@@ -8,7 +8,7 @@ otherwise), a saturated fraction above SATURATED_WARN_FRACTION, and hands
 whose every decoded map is all zero. The accumulator also collects the
 contact-area and pressure histograms of the report's stats.
 `check_taxel_health` warns about episode hands with many faulty taxels
-(htdata/health.py), from the stats cache or, with --deep, computed.
+(htdata/glove/health.py), from the stats cache or, with --deep, computed.
 
 Accumulator: {hand_key(episode, hand): {"frames", "region_means", "max",
 "saturated", "covered"}, "_contact_area": [fractions], "_pressure_hist": counts}.
@@ -16,13 +16,13 @@ Accumulator: {hand_key(episode, hand): {"frames", "region_means", "max",
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
-if TYPE_CHECKING:
-    from htdata.validate.content import CoverageGeometry
-    from htdata.validate.report import Check
+from htdata.glove.health import WARN_SHARE, flagged_share
+from htdata.read.reader import DatasetReader
+from htdata.inspect.stats import cached_episode_stats, episode_stats
+from htdata.validate.geometry import CoverageGeometry
+from htdata.validate.report import Check
 
 CONTACT_THRESHOLD = 0.02      # a pixel above this counts towards contact area
 SATURATION_LEVEL = 0.999      # half precision: 1.0 is exact, 0.999 leaves round-off room
@@ -109,9 +109,6 @@ def check_taxel_health(root, version: int | None, check: Check, compute: bool = 
     `compute` (validate --deep) episodes without an entry are computed here
     (nothing is written). Otherwise they are counted as skipped.
     """
-    from htdata.health import WARN_SHARE, flagged_share
-    from htdata.reader import DatasetReader
-    from htdata.stats import cached_episode_stats, episode_stats
 
     with DatasetReader(root, version=version) as reader:
         cached = cached_episode_stats(reader)

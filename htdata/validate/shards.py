@@ -16,10 +16,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from htdata.format import HANDS, JSON_MEMBER, SHARDS_DIR, tactile_member
-from htdata.fsutil import sha256_file
-from htdata.shardio import sample_key
-from htdata.validate.content import check_content, coverage_geometries
+from htdata.format.table import HANDS, JSON_MEMBER, SHARDS_DIR, tactile_member
+from htdata.store.fsutil import sha256_file
+from htdata.format.shardio import sample_key
+from htdata.validate.content import check_content
+from htdata.validate.geometry import coverage_geometries
 from htdata.validate.report import Recorder
 from htdata.validate.sensors import hand_key
 from htdata.validate.splits import frame_digest

@@ -13,10 +13,10 @@ import hashlib
 import json
 from collections import defaultdict
 
-from htdata.format import HANDS, MANIFEST_FILE, RGB_MEMBER, tactile_member
+from htdata.format.table import HANDS, MANIFEST_FILE, RGB_MEMBER, tactile_member
 from htdata.resources import validate_json
-from htdata.shardio import sample_key
-from htdata.split import PARTS, list_splits, split_path
+from htdata.format.shardio import sample_key
+from htdata.store.splitfiles import PARTS, list_splits, split_path
 from htdata.validate.report import Check
 from htdata.validate.structure import Loaded
 

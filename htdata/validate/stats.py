@@ -6,7 +6,7 @@ from collections import Counter
 
 import numpy as np
 
-from htdata.format import HANDS, SIZE_FIELDS, tactile_member
+from htdata.format.table import HANDS, SIZE_FIELDS, tactile_member
 from htdata.validate.sensors import CONTACT_THRESHOLD, HIST_BINS
 from htdata.validate.structure import Loaded
 

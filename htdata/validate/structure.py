@@ -19,14 +19,15 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.codec import decode_json
-from htdata.format import (HANDS, INDEX_DTYPE, JSON_MEMBER, RGB_MEMBER, MANIFEST_FILE, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
+from htdata.format.codec import decode_json
+from htdata.format.table import (HANDS, INDEX_DTYPE, JSON_MEMBER, RGB_MEMBER, MANIFEST_FILE, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
                            tactile_member)
-from htdata.manifest import IndexDtypeError, load_manifest, parse_episodes, parse_index, parse_manifest
+from htdata.store.manifest import IndexDtypeError, load_manifest, parse_episodes, parse_index, parse_manifest
 from htdata.resources import validate_json
-from htdata.shardio import BLOCK, member_offsets, parse_header, sample_key
+from htdata.format.shardio import BLOCK, member_offsets, parse_header, sample_key
 from htdata.validate.report import Check, Recorder
-from htdata.versions import list_versions, manifest_path, version_manifest_file
+from htdata.store.versions import list_versions, manifest_path, version_manifest_file
+from htdata.resources import load_schema
 
 
 @dataclass
@@ -349,7 +350,6 @@ def _sample_validator():
     """One compiled validator per process: building it per sample costs ~1 ms each."""
     import jsonschema
 
-    from htdata.resources import load_schema
 
     return jsonschema.Draft202012Validator(load_schema("sample"))
 

@@ -14,7 +14,7 @@ shape of the data:
 
 Frames are taken from iterables and written one at a time, so long
 episodes stream to disk. One module per source (`opentouch`,
-`touchanything`, `native`, mirroring htdata/adapters/), shared encoding in
+`touchanything`, `native`, mirroring htdata/source/adapters/), shared encoding in
 `media`; the names below are the writers' public API.
 """
 

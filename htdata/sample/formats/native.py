@@ -10,6 +10,7 @@ from typing import Iterable
 import numpy as np
 
 from htdata.sample.formats.media import check_rgb_frame, write_h264
+from htdata.resources import validate_json
 
 
 NATIVE_FORMAT = "htdata-native"
@@ -63,7 +64,6 @@ def write_native_recording(folder: Path, rec: NativeRecording) -> None:
     """Write a native recording folder: recording.json, video, per-hand tactile npz."""
     import cv2
 
-    from htdata.resources import validate_json
 
     rec.validate()
     folder = Path(folder)

@@ -1,0 +1,30 @@
+"""Curation: every command that makes a new version out of an existing one.
+
+    split.py          `htdata split`: hold out tasks, split the rest by episode
+    splitrule.py      the split rule: which part each episode goes to
+    splitversions.py  commit a split as a new version
+    edit.py           `htdata rm` / `htdata trim`: plan, then re-pack the touched units
+    idle.py           `htdata trim --idle`: the idle head and tail of each episode
+    repack.py         copy samples of committed shards into new shards, byte for byte
+    merge.py          `htdata merge`: several datasets into one
+    gc.py             `htdata gc`: delete what no kept version lists
+    renormalise.py    `htdata renormalise`: new normalisation from the stored raw rows
+
+May import: the store, reading, inspection (the stats cache), the glove model, the format,
+htdata.pipeline and the base modules. Never ingest, validate, the benchmarks or the commands.
+
+Imports inside functions: `__getattr__` hands on the names of the old one-module
+`htdata.curate` (now edit.py) for one release, importing edit.py only when asked.
+"""
+
+
+def __getattr__(name: str):
+    # `htdata.curate` was one module (now edit.py): its names stay reachable for one release.
+    import importlib
+    import warnings
+
+    edit = importlib.import_module("htdata.curate.edit")
+    if not hasattr(edit, name):
+        raise AttributeError(f"module 'htdata.curate' has no attribute {name!r}")
+    warnings.warn(f"htdata.curate.{name} moved to htdata.curate.edit.{name}", DeprecationWarning, stacklevel=2)
+    return getattr(edit, name)

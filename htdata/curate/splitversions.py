@@ -1,0 +1,89 @@
+"""`htdata split` on a versioned dataset: commit split NAME as a new version, the other splits carried.
+
+(Carrying splits to a child version is the store's: htdata/store/splitfiles.py.) An episode's part never changes because other episodes came or went: the new
+version's split NAME keeps every surviving episode in the part it had,
+removed episodes leave their part, and counts/ratios are recomputed. New
+episodes (an append) are in no part until `htdata split` assigns them by
+the split's rule; `htdata validate --split` reports them as unassigned.
+A carried split (format_version 2) records the episode file it describes
+(`episodes_sha256`, instead of v1's manifest_sha256: a version's manifest
+lists its splits' hashes, so a split cannot hold its manifest's hash) and
+"carried": the version it came from, the episodes that left, the unassigned.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from htdata.curate.splitrule import SplitError, build_split
+from htdata.resources import validate_json
+from htdata.store.lock import WriterLock
+from htdata.store.snapshot import commit_parts, open_snapshot
+from htdata.store.splitfiles import PARTS, assignment_of, carried_splits, count_parts, parent_split_docs
+
+
+@dataclass
+class SplitResult:
+    """What `htdata split` wrote: the document, where, and how each part changed against the parent."""
+    doc: dict
+    path: Path
+    version: int | None
+    gained: dict[str, list[str]] = field(default_factory=dict)
+    lost: dict[str, list[str]] = field(default_factory=dict)
+
+
+def keep_parts(previous: dict, fresh: dict, episodes: list[dict]) -> dict:
+    """`fresh` (the rule applied to every episode) with every episode `previous` placed kept in its part.
+
+    Only episodes new to the split take the rule's part, so no episode moves
+    because others were appended. The rule's corrections that would move an
+    old episode are dropped; the previous corrections of surviving episodes stay.
+    """
+    old = assignment_of(previous)
+    ids = {e["episode_id"] for e in episodes}
+    assignment = {**assignment_of(fresh), **{e: p for e, p in old.items() if e in ids}}
+    parts, tasks, ratios = count_parts(assignment, episodes)
+    corrections = [c for c in previous["corrections"] if c["episode_id"] in ids]
+    corrections += [c for c in fresh["corrections"] if c["episode_id"] not in old]
+    return {**fresh, "parts": parts, "tasks": tasks, "ratios": ratios, "corrections": corrections}
+
+
+def write_versioned_split(root, config, command: str) -> SplitResult:
+    """Split a versioned dataset: a new version whose split NAME is (re)computed, the rest carried.
+
+    An existing split NAME with the same params is UPDATED: its episodes keep
+    their parts, new episodes are assigned by the rule. Other params need
+    --force (config.force) and recompute it; the old one stays in its version.
+    """
+    root = Path(root)
+    name = config.resolved_name()
+    with WriterLock(root, command):
+        snap = open_snapshot(root)
+        previous = parent_split_docs(snap).get(name)
+        doc = build_split(snap.episodes, config, episodes_sha256=snap.manifest["episodes_sha256"])
+        if previous is not None and previous["params"] != doc["params"]:
+            if not config.force:
+                raise SplitError(f"split {name!r} exists with other params {previous['params']}; pass --force "
+                                 f"to recompute it (version {snap.version} keeps the old one) or choose another --name")
+        elif previous is not None:
+            doc = keep_parts(previous, doc, snap.episodes)
+            if (assignment_of(doc) == assignment_of(previous) and not previous.get("carried")
+                    and previous.get("episodes_sha256") == doc["episodes_sha256"]):
+                # nothing to change: no new version (re-running `htdata split` is idempotent)
+                return SplitResult(doc=previous, path=root / snap.manifest["splits"][name]["file"],
+                                   version=snap.version, gained={p: [] for p in PARTS},
+                                   lost={p: [] for p in PARTS})
+        validate_json(doc, "split", where=f"split {name!r}")
+        data = (json.dumps(doc, indent=2) + "\n").encode()
+
+        def splits(episodes, sha):
+            return {**carried_splits(snap, episodes, sha), name: data}
+
+        manifest = commit_parts(root, snap.parts(), {}, snap, command, splits=splits)
+    old, new = assignment_of(previous) if previous else {}, assignment_of(doc)
+    gained = {p: sorted(e for e, q in new.items() if q == p and old.get(e) != p) for p in PARTS}
+    lost = {p: sorted(e for e, q in old.items() if q == p and new.get(e) != p) for p in PARTS}
+    return SplitResult(doc=doc, path=root / manifest["splits"][name]["file"], version=manifest["version"],
+                       gained=gained, lost=lost)

@@ -1,0 +1,25 @@
+"""The on-disk format: what a writer and a reader must agree on.
+
+    canvas.py     the canvas side and the hand names
+    table.py      file names of a dataset, canvas, hands, the member table and the index dtype
+    codec.py      member codecs (EXR float maps, JPEG RGB, npy raw rows, PNG masks, JSON)
+    shardio.py    tar shards: sample keys, the shard writer and member-range reads
+
+May import: htdata's base modules only. Everything else builds on it.
+
+`from htdata.format import NAME` keeps working for the names of the format table
+(table.py) for one release; new code imports `htdata.format.table`.
+
+Imports inside functions: `__getattr__` imports table.py when an old name is
+asked for, so importing htdata.format.codec does not import the table (which
+imports the codecs).
+"""
+
+
+def __getattr__(name: str):
+    # Lazy, so that importing htdata.format.codec does not import the table (which imports codec).
+    from htdata.format import table
+    try:
+        return getattr(table, name)
+    except AttributeError:
+        raise AttributeError(f"module 'htdata.format' has no attribute {name!r}") from None

@@ -1,0 +1,11 @@
+"""The glove model: what a glove's taxels mean and where they land on the canonical hand.
+
+    layouts.py      glove layouts (schemas/layouts/*.json): blocks of raw cells -> canvas places
+    normalise.py    glove units -> [0,1] (baselines, noise floor, full scale)
+    calibration.py  the per-episode calibration a normalisation used, stored with the data
+    rasterise.py    taxels -> the 224x224 map, its coverage and regions (and back)
+    health.py       per-taxel health (dead, stuck, noisy ...) of one episode
+    codecrule.py    which tactile codec a dataset's gloves need (quantisation step vs codec error)
+
+May import: htdata's base modules and htdata.format. Nothing about sources, storage or commands.
+"""

@@ -1,0 +1,12 @@
+"""Inspection: read-only views of a committed dataset.
+
+    episodestats.py  per-episode statistics from the raw rows and maps
+    stats.py         `htdata stats`: the cached per-episode statistics, summaries by task / source
+    healthmap.py     the taxel-health PNG
+    outline.py       region outlines drawn over every map picture
+    preview.py       `htdata preview`: a contact sheet of frames
+    card.py          `htdata card`: the dataset card (HTML)
+
+May import: reading, the store, the glove model, the format and the base modules.
+Never curation, ingest or the commands.
+"""

@@ -1,0 +1,10 @@
+"""Reading sources: the first step of the data path.
+
+    adapters/   one adapter per raw recording format (OpenTouch HDF5, TouchAnything folders, native)
+    sync.py     pair the tactile and RGB clocks (nearest neighbour within a tolerance)
+    lag.py      estimate a constant clock lag between the streams
+    rgb.py      RGB frames: channel order, square crop, resize to the canvas
+
+May import: htdata's base modules (errors, faults, resources), htdata.format and htdata.glove.
+Never the store, reading, curation or the commands above it.
+"""

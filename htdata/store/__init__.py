@@ -1,0 +1,16 @@
+"""The store: a dataset's files on disk, its versions and their lifecycle primitives.
+
+    fsutil.py    atomic writes, checksums
+    storage.py   local paths and fsspec URLs behind one small API (readers)
+    lock.py      the one-writer lock
+    versions.py  version files: names, paths, write a version, change records
+    manifest.py  load / parse dataset.json, episodes.jsonl, index.npy; layout files of a version
+    parts.py     a version as parts (one per work unit) and their assembly into one index
+    splitfiles.py split documents of a version: read, count, carry to a child version
+    snapshot.py  open a version as a snapshot; commit parts as a new version
+    history.py   log and diff of versions
+    remote.py    publish a committed dataset to a URL; cache a remote index
+
+May import: htdata's base modules, htdata.format and htdata.glove (calibration records).
+Never ingest, reading, curation, inspection or the commands.
+"""
