@@ -27,6 +27,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
                     "new maps from the stored raw glove rows under a new calibration, as a new version"),
     "merge": ("htdata.commands.merge", "merge two datasets into a new one without re-encoding"),
     "gc": ("htdata.commands.gc", "delete old versions and shards no kept version lists; --dry-run"),
+    "repair": ("htdata.commands.repair", "rewrite dataset.json from the newest version file; --dry-run"),
     "preview": ("htdata.commands.preview", "render a contact sheet: RGB beside left/right tactile maps"),
     "layouts": ("htdata.commands.layouts", "list, check and render hand layouts (register a glove)"),
     "publish": ("htdata.commands.publish", "upload a dataset to an fsspec URL (s3://, gs://, memory://), manifest last"),

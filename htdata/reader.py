@@ -24,12 +24,14 @@ import json
 import os
 from collections import OrderedDict
 from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import NamedTuple
 
 import numpy as np
 
 from htdata import storage
 from htdata.codec import decode_png_u8
+from htdata.gcrecord import collected_error
 from htdata.format import INDEX_DTYPE, LAYOUTS_DIR, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS, SPLITS_DIR, decode_sample
 from htdata.manifest import load_episodes, load_index, load_manifest
 from htdata.shardio import BLOCK, describe_header, header_matches, padded, sample_key
@@ -69,7 +71,8 @@ class DatasetReader:
         self.root = os.fspath(root)
         self.manifest = load_manifest(self.root, validate=validate_manifest, version=version)
         self.version: int | None = self.manifest.get("version")
-        self.episodes: list[dict] = load_episodes(self.root, self.manifest)
+        with self._collected_guard():
+            self.episodes: list[dict] = load_episodes(self.root, self.manifest)
         if len(self.episodes) != self.manifest["counts"]["episodes"]:
             raise ValueError(f"{self.root}: episodes.jsonl has {len(self.episodes)} records, "
                              f"manifest counts {self.manifest['counts']['episodes']}")
@@ -81,6 +84,17 @@ class DatasetReader:
         self._handles: OrderedDict[int, object] = OrderedDict()
         self._pid = os.getpid()
         self._maps: dict[str, np.ndarray] = {}
+
+    @contextmanager
+    def _collected_guard(self, where: str | None = None):
+        """A file of this version that is gone because `htdata gc` collected the version: VersionCollected."""
+        try:
+            yield
+        except FileNotFoundError as exc:
+            gone = collected_error(self.root, getattr(self, "version", None), where or exc.filename)
+            if gone is None:
+                raise
+            raise gone from None
 
     # -- pickling / fork safety -------------------------------------------
     def __getstate__(self):
@@ -120,7 +134,8 @@ class DatasetReader:
                 from htdata.remote import load_cached_index
                 rows = load_cached_index(self.root, self.manifest)
             else:
-                rows = load_index(self.root, mmap=True, manifest=self.manifest)
+                with self._collected_guard():
+                    rows = load_index(self.root, mmap=True, manifest=self.manifest)
             if len(rows) != self._n:
                 raise ValueError(f"{self.root}: index has {len(rows)} rows, manifest counts {self._n}")
             self._index = rows
@@ -173,7 +188,8 @@ class DatasetReader:
         self._check_pid()
         handle = self._handles.get(shard)
         if handle is None:
-            handle = storage.open_binary(self._shard_path(shard))
+            with self._collected_guard(self._shard_path(shard)):
+                handle = storage.open_binary(self._shard_path(shard))
             self._handles[shard] = handle
             if len(self._handles) > MAX_OPEN_SHARDS:
                 _, oldest = self._handles.popitem(last=False)

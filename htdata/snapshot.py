@@ -68,8 +68,14 @@ def open_snapshot(root: str | os.PathLike, version: int | None = None) -> Snapsh
 
 
 def current_snapshot(root: str | os.PathLike) -> Snapshot | None:
-    """The current version, or None when `root` holds no committed dataset."""
-    if not storage.exists(storage.join(root, MANIFEST_FILE)):
+    """The current version, or None when `root` holds no committed dataset.
+
+    A folder with committed version files is a dataset even when dataset.json
+    is missing or damaged (the pointer is a cache of the newest version file).
+    """
+    from htdata.versions import current_version
+
+    if current_version(root) is None and not storage.exists(storage.join(root, MANIFEST_FILE)):
         return None
     return open_snapshot(root)
 

@@ -46,6 +46,7 @@ from htdata.manifest import parse_episodes, parse_manifest
 from htdata.resources import validate_json
 from htdata.splitversions import PARTS, count_parts
 from htdata.versions import split_file
+from htdata.versions import manifest_path as current_manifest_path
 
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9_-]+$")
 RULE = (
@@ -191,9 +192,8 @@ def build_split(episodes: list[dict], config: SplitConfig, manifest_sha256: str 
 
 
 def _current_manifest(dataset) -> dict | None:
-    path = Path(dataset) / MANIFEST_FILE
     try:
-        return json.loads(path.read_bytes())
+        return json.loads(Path(current_manifest_path(dataset, None)).read_bytes())
     except (OSError, ValueError):
         return None
 
@@ -228,7 +228,10 @@ def read_dataset_episodes(dataset: Path) -> tuple[bytes, list[dict]]:
     manifest_sha256; the episodes are read from the file the manifest names.
     """
     dataset = Path(dataset)
-    manifest_path = dataset / MANIFEST_FILE
+    try:   # the newest version file: dataset.json is only its cache (htdata/versions.py)
+        manifest_path = Path(current_manifest_path(dataset, None))
+    except ValueError as exc:
+        raise SplitError(str(exc)) from None
     if not manifest_path.is_file():
         raise SplitError(f"{dataset}: no {MANIFEST_FILE} (not a committed htdata dataset)")
     manifest_bytes = manifest_path.read_bytes()

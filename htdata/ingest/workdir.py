@@ -18,6 +18,7 @@ from pathlib import Path
 from htdata.format import MANIFEST_FILE, SHARDS_DIR, WORK_DIR
 from htdata.fsutil import sha256_file
 from htdata.lock import LOCK_FILE
+from htdata.versions import list_versions
 
 # Keys a unit record must hold to be reused (records of older versions lack some: their units re-run).
 RECORD_KEYS = ("unit", "fingerprint", "shards", "samples", "episodes", "failures", "dropped", "layouts")
@@ -70,7 +71,8 @@ def check_output(out: Path) -> None:
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out}: exists and is not a directory")
     content = [p for p in out.iterdir() if p.name != LOCK_FILE] if out.is_dir() else []
-    if content and not (out / MANIFEST_FILE).is_file() and not (out / WORK_DIR).is_dir():
+    if content and not (out / MANIFEST_FILE).is_file() and not (out / WORK_DIR).is_dir() \
+            and not list_versions(out):     # committed version files make it a dataset, pointer or not
         raise ValueError(f"{out}: directory is not empty and is not an htdata dataset; "
                          f"refusing to write into it (choose an empty or new directory)")
 
