@@ -159,6 +159,10 @@ def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, disc
     kept = kept_unavailable(parent, discovered, [s.root for s in sources])
     notes = [f"source unavailable: {e} kept from version {parent.version}" for e in kept]
     notes += [f"re-ingest failed: {e} kept from version {parent.version}" for e in failed_replacements]
+    raw_dropped = {ep["episode_id"]: ep["raw_rows_dropped"] for r in ordered for ep in r["episodes"]
+                   if ep.get("raw_rows_dropped")}
+    notes += [f"{e}: {n} {h} glove rows far from every video frame dropped (no sample stores them)"
+              for e, d in sorted(raw_dropped.items()) for h, n in sorted(d.items())]
     return {
         "pipelines": [s.pipeline.name for s in sources],
         "parent_version": parent.version if parent else None,
@@ -182,6 +186,7 @@ def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, disc
                          if ep.get("out_of_range")},
         "hands_excluded": {ep["episode_id"]: ep["hands_excluded"] for r in ordered for ep in r["episodes"]
                            if ep.get("hands_excluded")},
+        "raw_rows_dropped": raw_dropped,
         "timing": timing_summary(ran, time.perf_counter() - t_start),
     }
 
