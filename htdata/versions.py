@@ -1,4 +1,4 @@
-"""Dataset versions: immutable snapshots over immutable shards, one atomic pointer to the current one.
+"""Dataset versions: immutable snapshots over immutable shards; the newest version file is the current one.
 
 The Iceberg / Delta Lake idea at the size of a folder. Shards are immutable
 and content-hashed (sha256 in every manifest). A version is a manifest (the
@@ -13,12 +13,16 @@ episodes.jsonl, index.npy and split files, all under `versions/`:
 
 A write puts the version's files in place first, then links
 `versions/vN.json` into place (fails if it exists: no version is ever
-overwritten), and last swaps `dataset.json` with one atomic rename. A crash
-at any point leaves the previous version current and readable; a half
-written `versions/vN/` without its `vN.json` belongs to no version and is
-cleared by the next write. Old versions stay readable
-(`DatasetReader(root, version=N)`) until `htdata gc` removes them, an
-explicit, dry-runnable act. Why no library: Iceberg / Delta need a table
+overwritten): that link is the commit. Last it swaps `dataset.json` with one
+atomic rename; dataset.json is a CACHE of the newest version file, so a
+missing, truncated, stale or hand-edited dataset.json loses nothing: the
+current version is the newest vN.json (`current_version`), writers build on
+it, and `htdata repair` rewrites the cache. A crash at any point leaves the
+previous version (or, after the link, the new one) current and readable; a
+half written `versions/vN/` without its `vN.json` belongs to no version and
+is cleared by the next write. Writers never delete a version file. Old
+versions stay readable (`DatasetReader(root, version=N)`) until `htdata gc`
+removes them, an explicit, dry-runnable act with a retention window. Why no library: Iceberg / Delta need a table
 engine and a catalog for what is here a few JSON files and a rename; zarr's
 `.partial` idea is the same temp + rename each writer here already uses.
 
