@@ -20,6 +20,7 @@ reader drops handles and the index map; they reopen on first use.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from collections import OrderedDict
@@ -31,10 +32,15 @@ import numpy as np
 
 from htdata import storage
 from htdata.codec import decode_png_u8
+from htdata.errors import HtdataError
 from htdata.gcrecord import collected_error
 from htdata.format import INDEX_DTYPE, LAYOUTS_DIR, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS, SPLITS_DIR, decode_sample
 from htdata.manifest import load_episodes, load_index, load_manifest
 from htdata.shardio import BLOCK, describe_header, header_matches, padded, sample_key
+
+class SplitRejected(HtdataError, ValueError):
+    """A split whose file no longer matches its version's manifest, or whose parts overlap."""
+
 
 MAX_OPEN_SHARDS = 128   # an LRU of open shard files; one-episode units make many small shards
 _SIZE_POS = tuple(INDEX_DTYPE.names.index(SIZE_FIELDS[s]) for s in MEMBER_ORDER)
@@ -325,9 +331,23 @@ class DatasetReader:
             path = storage.join(self.root, f"{SPLITS_DIR}/{name}.json")
         if not storage.exists(path):
             raise FileNotFoundError(f"{path}: no split named {name!r} (run `htdata split`)")
-        doc = json.loads(storage.read_text(path))
+        data = storage.read_bytes(path)
+        # what `htdata validate` checks that would silently skew a training run, checked once here too
+        if "version" in self.manifest and hashlib.sha256(data).hexdigest() != entry["sha256"]:
+            raise SplitRejected(f"{path}: sha256 differs from version {self.version}'s manifest (edited after "
+                                f"it was committed?); re-make it with `htdata split --name {name}`")
+        try:
+            doc = json.loads(data)
+        except ValueError as exc:
+            raise SplitRejected(f"{path}: not valid JSON ({exc})") from None
         if not isinstance(doc.get("parts"), dict):
             raise ValueError(f"{path}: split has no 'parts' object")
+        seen: dict[str, str] = {}
+        for part, body in sorted(doc["parts"].items()):
+            for eid in body.get("episodes", []) if isinstance(body, dict) else []:
+                if seen.setdefault(eid, part) != part:
+                    raise SplitRejected(f"{path}: episode {eid!r} is in both {seen[eid]} and {part}: the parts "
+                                        f"overlap (train/test leakage); re-make it with `htdata split --name {name}`")
         return doc
 
     def episode_positions(self, split: str | None = None, part: str | None = None) -> list[int]:
