@@ -8,6 +8,7 @@ argparse block while `htdata --help` still lists everything.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import sys
 
@@ -66,7 +67,18 @@ def main(argv: list[str] | None = None) -> int:
                                   formatter_class=argparse.RawDescriptionHelpFormatter)
     module.configure_parser(sub)
     args = sub.parse_args(argv[1:])
-    return int(module.run(args) or 0)
+    try:
+        return int(module.run(args) or 0)
+    except OSError as exc:
+        if exc.errno not in _NO_SPACE:
+            raise
+        # every writer writes temp + rename and commits last: a failed write leaves the current version as it was
+        print(f"htdata {name}: error: {exc.strerror} writing {exc.filename or 'a file'}; nothing was committed "
+              f"(the current version is unchanged): free space and run the command again", file=sys.stderr)
+        return 2
+
+
+_NO_SPACE = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
 
 
 if __name__ == "__main__":
