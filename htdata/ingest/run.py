@@ -95,6 +95,7 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         prepare_output(out)
         parent = current_snapshot(out)
         refs, plan_failures = discover_sources(sources, tuple(layout_dirs))
+        check_found_something(sources, refs, plan_failures)
         check_unique_ids(refs)
         # the codec rule needs the run's gloves: resolved after discovery, before anything is fingerprinted
         sources = resolve_sources(sources, refs, parent.manifest["codec"]["tactile"] if parent else None)
@@ -125,6 +126,16 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
     report["timing"]["total_s"] = time.perf_counter() - t_start
     write_bytes_atomic(out / INGEST_REPORT, dumps(report))
     return report
+
+
+def check_found_something(sources, refs: list[list], failures: list[dict]) -> None:
+    """A source folder in which the adapter found no recording at all (not even a bad one) is an error:
+    a wrong path or pipeline, not "nothing changed"."""
+    for source, found in zip(sources, refs):
+        root = str(source.root).rstrip("/") + "/"
+        if not found and not any(str(f.get("file") or f.get("source_ref") or "").startswith(root) for f in failures):
+            raise ValueError(f"{source.root}: no recording found for pipeline {source.pipeline.name!r} (adapter "
+                             f"{source.pipeline.adapter.name!r}); check the folder and the pipeline")
 
 
 def run_units(tasks: list[UnitTask], out: Path, workers: int, executor: str, address: str | None,
@@ -161,6 +172,12 @@ def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, disc
     notes += [f"re-ingest failed: {e} kept from version {parent.version}" for e in failed_replacements]
     raw_dropped = {ep["episode_id"]: ep["raw_rows_dropped"] for r in ordered for ep in r["episodes"]
                    if ep.get("raw_rows_dropped")}
+    # what the console must say, not only the report: hands left out, raw values outside the layout range
+    notes += [f"{ep['episode_id']}: {hand} hand not ingested: {why}" for r in ordered for ep in r["episodes"]
+              for hand, why in sorted(ep.get("hands_excluded", {}).items())]
+    notes += [f"{ep['episode_id']}: {hand} hand: {c['frames']} frames hold raw values outside the layout range "
+              f"({c['below']} below, {c['above']} above; pipeline [normalise] out_of_range decides)"
+              for r in ordered for ep in r["episodes"] for hand, c in sorted(ep.get("out_of_range", {}).items())]
     notes += [f"{e}: {n} {h} glove rows far from every video frame dropped (no sample stores them)"
               for e, d in sorted(raw_dropped.items()) for h, n in sorted(d.items())]
     return {
