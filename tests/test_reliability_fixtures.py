@@ -41,7 +41,8 @@ def test_spawn_kills_the_process_group_of_a_failing_test(tmp_path):
                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert res.returncode == 1 and "fails on purpose" in res.stdout, res.stdout + res.stderr
     pid = int((tmp_path / "pid").read_text())
-    left = [p for p in psutil.process_iter(["pid"]) if _session(p.pid) == pid]   # only the inner test's session
+    left = [p for p in psutil.process_iter(["pid", "status"])   # only the inner test's session; a killed
+            if _session(p.pid) == pid and p.info["status"] != psutil.STATUS_ZOMBIE]   # one awaiting reaping is dead
     for p in left:                 # never leak from this test either
         p.kill()
     assert not psutil.pid_exists(pid) or psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
