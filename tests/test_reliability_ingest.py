@@ -5,6 +5,7 @@ whose fingerprint left the labels out: labels edited in between were lost
 ("relabelled 0"; only a second re-run fixed them).
 """
 
+import json
 import os
 import subprocess
 import sys
@@ -61,3 +62,48 @@ def test_glove_rows_long_after_the_video_are_dropped_with_a_count_not_piled_into
     assert record["raw_rows_dropped"] == {"right": beyond}
     report = json.loads((out / "reports" / "ingest.json").read_text())
     assert any(f"{beyond} right glove rows" in n for n in report["notes"])
+
+
+def _sums(raw, files):
+    import hashlib
+
+    lines = [f"{hashlib.sha256((raw / f).read_bytes()).hexdigest()}  {f}" for f in files]
+    (raw / "SHA256SUMS").write_text("\n".join(lines) + "\n")
+
+
+def test_every_record_keeps_its_source_files_sha256(tmp_path):
+    import hashlib
+
+    raw = make_opentouch(tmp_path / "raw")
+    assert ingest_cli("--pipeline", small_pipeline(tmp_path, "opentouch"), raw, tmp_path / "ds") == 0
+    want = hashlib.sha256((raw / "home_kitchen_p1.hdf5").read_bytes()).hexdigest()
+    assert {e["episode_id"]: e["source_sha256"] for e in DatasetReader(tmp_path / "ds").episodes} == {
+        e: {"home_kitchen_p1.hdf5": want} for e in ("ot-home_kitchen_p1-demo_01", "ot-home_kitchen_p1-demo_02",
+                                                   "ot-home_kitchen_p1-demo_003")}
+
+
+def test_a_copy_that_differs_from_sha256sums_is_refused_with_verify_sources(tmp_path, capsys):
+    raw = make_opentouch(tmp_path / "raw")
+    _sums(raw, ["home_kitchen_p1.hdf5"])
+    data = bytearray((raw / "home_kitchen_p1.hdf5").read_bytes())
+    data[-100] ^= 0x01                                   # one flipped bit a decoder may never notice
+    (raw / "home_kitchen_p1.hdf5").write_bytes(bytes(data))
+    pipe = small_pipeline(tmp_path, "opentouch")
+    assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "strict") == 2   # nothing left
+    err = capsys.readouterr().err
+    assert "no episode could be ingested (3 failures)" in err
+    report = json.loads((tmp_path / "strict" / "reports" / "ingest.json").read_text())
+    assert {f["stage"] for f in report["failures"]} == {"verify"}
+    assert "differs from" in report["failures"][0]["error"] and "SHA256SUMS:1" in report["failures"][0]["error"]
+    assert ingest_cli("--pipeline", pipe, raw, tmp_path / "lenient") == 0                      # warned
+    err = capsys.readouterr().err
+    assert err.count("home_kitchen_p1.hdf5: sha256") == 1 and "ingested anyway" in err
+
+
+def test_verify_sources_passes_matching_files_and_refuses_unlisted_ones(tmp_path):
+    raw = make_opentouch(tmp_path / "raw")
+    pipe = small_pipeline(tmp_path, "opentouch")
+    assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "none") == 2      # no list at all
+    _sums(raw, ["home_kitchen_p1.hdf5"])
+    assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "ok") == 0
+    assert len(DatasetReader(tmp_path / "ok").episodes) == 3

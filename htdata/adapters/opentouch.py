@@ -256,6 +256,7 @@ class OpenTouchAdapter(FileDiscovery):
                 episode_id=episode_id, source=SOURCE, source_ref=f"{path}::data/{demo_id}", task=task, scene=scene,
                 hands=hands, layouts={h: layouts[h] for h in hands}, est_frames=n_frames,
                 fingerprint=fingerprint, extra={"task_source": task_source, "demo_id": demo_id},
+                source_files=(str(path),),
             ))
         return refs
 

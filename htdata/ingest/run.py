@@ -23,6 +23,7 @@ from htdata.ingest.append import kept_unavailable, plan_append
 from htdata.ingest.commit import check_compatible, commit
 from htdata.ingest.plan import (Source, UnitTask, check_settings_agree, check_unique_ids, discover_sources,
                                 plan_units)
+from htdata.ingest.sourcesums import check_sources
 from htdata.ingest.timing import timing_summary
 from htdata.ingest.unit import run_unit
 from htdata.ingest.workdir import (check_output, clear_unit_files, dumps, load_valid_record, prepare_output,
@@ -82,11 +83,13 @@ class EpisodeProgress:
 
 def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "process",
            address: str | None = None, retries: int = 1, progress: bool = True,
-           layout_dirs: tuple = (), command: str = "htdata ingest") -> dict:
+           layout_dirs: tuple = (), command: str = "htdata ingest", verify_sources: bool = False) -> dict:
     """Ingest (or resume, or append to) the dataset at `out`; returns the report (also reports/ingest.json).
 
     Holds the dataset's writer lock throughout. `layout_dirs` are searched for
-    layout ids before $HTDATA_LAYOUTS and the shipped layouts (`--layouts DIR`).
+    layout ids before $HTDATA_LAYOUTS and the shipped layouts (`--layouts DIR`). Source files of the
+    episodes to ingest are hashed and checked against checksum lists (`verify_sources`: refuse a mismatch
+    or an unlisted file; htdata/ingest/sourcesums.py).
     """
     t_start = time.perf_counter()
     check_settings_agree(sources)
@@ -105,12 +108,17 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         settings = {id(s): s.pipeline.to_dict() for s in sources}
         plan = plan_append(parent, [r for r, _ in pairs], [settings[id(s)] for _, s in pairs])
         source_of = {r.episode_id: s for r, s in pairs}
+        checked = check_sources(plan.todo, {r.episode_id: source_of[r.episode_id].root for r in plan.todo},
+                                verify_sources)
+        plan.todo = checked.refs
+        plan_failures = plan_failures + checked.failures
         first_unit = parent.next_unit() if parent else 0
         tasks = plan_units([(r, source_of[r.episode_id]) for r in plan.todo], out, first_unit)
         remove_strays(out, tasks, first_unit)
         records, ran = run_units(tasks, out, workers, executor, address, retries, progress)
         report = build_report(sources, tasks, records, ran, plan_failures, plan, parent,
                               discovered={r.episode_id for rs in refs for r in rs}, t_start=t_start)
+        report["notes"] += checked.notes
         if lock.note:
             report["notes"].append(lock.note)
         write_bytes_atomic(out / INGEST_REPORT, dumps(report))   # explains a run that commits nothing too
