@@ -83,14 +83,30 @@ def prepare_output(out: Path) -> None:
     (out / SHARDS_DIR).mkdir(parents=True, exist_ok=True)
 
 
+def committed_shards(out: Path) -> set[str]:
+    """Every shard name some committed version file lists (what no cleanup may ever delete)."""
+    from htdata.manifest import load_manifest
+
+    names: set[str] = set()
+    for v in list_versions(out):
+        names |= {s["name"] for s in load_manifest(out, validate=False, version=v)["shards"]}
+    return names
+
+
 def remove_strays(out: Path, tasks: list, first_unit: int) -> None:
-    """Temp files, spools, and uncommitted shards/records (units >= first_unit) outside the plan."""
+    """Temp files, spools, and uncommitted shards/records (units >= first_unit) outside the plan.
+
+    Units >= first_unit (the current version's next_unit) belong to no committed version; a shard a
+    version file lists is never deleted here all the same (checked against every version file).
+    """
     planned = {t.unit for t in tasks}
     for p in list(out.rglob(".*.tmp")) + list((out / WORK_DIR).glob("spool-*.bin")):
-        p.unlink()
+        if not p.name.startswith(LOCK_FILE):   # a lock temp file belongs to a writer trying the lock now
+            p.unlink(missing_ok=True)
+    keep = committed_shards(out)
     for p in (out / SHARDS_DIR).glob("shard-*.tar"):
         unit = int(p.name.split("-")[1])
-        if unit >= first_unit and unit not in planned:
+        if unit >= first_unit and unit not in planned and p.name not in keep:
             p.unlink()
     for p in (out / WORK_DIR).glob("unit-*.json"):
         if int(p.stem.split("-")[1]) not in planned:
