@@ -107,3 +107,24 @@ def test_verify_sources_passes_matching_files_and_refuses_unlisted_ones(tmp_path
     _sums(raw, ["home_kitchen_p1.hdf5"])
     assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "ok") == 0
     assert len(DatasetReader(tmp_path / "ok").episodes) == 3
+
+
+def test_timestamps_are_read_in_bounded_blocks_not_via_whole_length_index_arrays(tmp_path):
+    import tracemalloc
+
+    import numpy as np
+
+    from htdata.adapters.npzrows import NpzRows
+
+    ts = np.arange(1_000_000, dtype=np.int64) * 10_000_000          # 8 MB of timestamps, compresses well
+    np.savez_compressed(tmp_path / "t.npz", timestamps_ns=ts)
+    rows = NpzRows(tmp_path / "t.npz", "timestamps_ns")
+    tracemalloc.start()
+    try:
+        got = rows.read_all()
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+        rows.close()
+    assert np.array_equal(got, ts)
+    assert peak < ts.nbytes + 6 * 2**20, peak     # the array + ~1 MB blocks; before #18: ~4x the array
