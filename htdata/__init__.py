@@ -34,10 +34,10 @@ _moved.install()
 def open(path, version=None):  # noqa: A001 (the front door's name, like LeRobot's one class)
     """Open a committed dataset (local path or fsspec URL) at `version` (the current one when None).
 
-    Returns `htdata.read.reader.DatasetReader`; the torch datasets are
-    `htdata.read.torchdata.TactileFrameDataset(path, ...)` and friends.
+    Returns `htdata.read.torchviews.Dataset`: a `DatasetReader` whose `.torch`
+    builds the torch datasets of the same version (`ds.torch.frames(split="main", part="train")`).
     """
     # Lazy: `import htdata` must stay cheap (the CLI imports it before parsing arguments).
-    from htdata.read.reader import DatasetReader
+    from htdata.read.torchviews import Dataset
 
-    return DatasetReader(path, version=version)
+    return Dataset(path, version=version)

@@ -12,6 +12,7 @@ htdata's version the same way.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import sys
 
@@ -31,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
                     "new maps from the stored raw glove rows under a new calibration, as a new version"),
     "merge": ("htdata.commands.merge", "merge two datasets into a new one without re-encoding"),
     "gc": ("htdata.commands.gc", "delete old versions and shards no kept version lists; --dry-run"),
+    "repair": ("htdata.commands.repair", "rewrite dataset.json from the newest version file; --dry-run"),
     "preview": ("htdata.commands.preview", "render a contact sheet: RGB beside left/right tactile maps"),
     "layouts": ("htdata.commands.layouts", "list, check and render hand layouts (register a glove)"),
     "publish": ("htdata.commands.publish", "upload a dataset to an fsspec URL (s3://, gs://, memory://), manifest last"),
@@ -69,7 +71,18 @@ def main(argv: list[str] | None = None) -> int:
                                   formatter_class=argparse.RawDescriptionHelpFormatter)
     module.configure_parser(sub)
     args = sub.parse_args(argv[1:])
-    return int(module.run(args) or 0)
+    try:
+        return int(module.run(args) or 0)
+    except OSError as exc:
+        if exc.errno not in _NO_SPACE:
+            raise
+        # every writer writes temp + rename and commits last: a failed write leaves the current version as it was
+        print(f"htdata {name}: error: {exc.strerror} writing {exc.filename or 'a file'}; nothing was committed "
+              f"(the current version is unchanged): free space and run the command again", file=sys.stderr)
+        return 2
+
+
+_NO_SPACE = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
 
 
 if __name__ == "__main__":

@@ -162,14 +162,16 @@ def test_split_after_append_keeps_parts_and_assigns_new_episodes(ingested, tmp_p
         assert set(ids["episodes"]) <= set(again.doc["parts"][part]["episodes"])
 
 
-def test_pool_workers_die_when_the_main_process_is_killed(tmp_path):
+def test_pool_workers_die_when_the_main_process_is_killed(tmp_path, spawn):
     raw = make_opentouch(tmp_path / "raw")
     out = tmp_path / "ds"
     cmd = [sys.executable, "-m", "htdata.cli", "ingest", "--workers", "2", "--quiet", "--pipeline",
            str(small_pipeline(tmp_path, "opentouch")), str(raw), str(out)]
-    proc = subprocess.Popen(cmd, env={**os.environ, "HTDATA_TEST_FAULT_UNIT": "0", "HTDATA_TEST_FAULT": "hang"},
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.time() + 90
+    # own process group, killed by the fixture whatever happens below (a failed assert must not leave a
+    # hung ingest behind); the bounds are generous: they only end a test that is already broken
+    proc = spawn(cmd, env={**os.environ, "HTDATA_TEST_FAULT_UNIT": "0", "HTDATA_TEST_FAULT": "hang"},
+                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 600
     while not list((out / "shards").glob("*shard-000000-*")):
         assert proc.poll() is None and time.time() < deadline, "ingest ended before it could be killed"
         time.sleep(0.05)
@@ -178,7 +180,7 @@ def test_pool_workers_die_when_the_main_process_is_killed(tmp_path):
     assert workers
     os.kill(proc.pid, signal.SIGKILL)          # the main process alone, not its group
     proc.wait(timeout=30)
-    gone, alive = psutil.wait_procs(workers, timeout=20)
+    gone, alive = psutil.wait_procs(workers, timeout=120)   # returns as soon as they are gone (PDEATHSIG)
     assert not alive, [p.cmdline() for p in alive]
     assert not (out / "dataset.json").exists()
     assert ingest_cli("--pipeline", small_pipeline(tmp_path, "opentouch"), raw, out) == 0

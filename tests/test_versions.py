@@ -159,15 +159,15 @@ def test_gc_keeps_current_and_frees_unlisted_shards(tmp_path):
     root = versioned(tmp_path / "ds")
     remove_episodes(root, ["ep_0"], dry_run=False, command="rm")       # re-packs unit 0 -> unit 3
     v2_shards = {s["name"] for s in open_snapshot(root).manifest["shards"]}
-    plan = collect(root, keep_versions=1, dry_run=True, command="gc")
+    plan = collect(root, keep_versions=1, dry_run=True, command="gc", retention_s=0, force=True)
     assert plan.dropped_versions == [1] and {n for n, _ in plan.dropped_shards} == {"shard-000000-000.tar",
                                                                                      "shard-000000-001.tar"}
     assert list_versions(root) == [1, 2]                                # dry run: nothing deleted
-    plan = collect(root, keep_versions=1, dry_run=False, command="gc")
+    plan = collect(root, keep_versions=1, dry_run=False, command="gc", retention_s=0, force=True)
     assert plan.bytes_freed > 0 and list_versions(root) == [2]
     assert {p.name for p in (root / "shards").glob("*.tar")} == v2_shards
     assert len(all_samples(root)) == 25 - 3
-    with pytest.raises(FileNotFoundError, match="no version 1"):
+    with pytest.raises(FileNotFoundError, match="version 1 was removed by `gc`"):
         DatasetReader(root, version=1)
     with pytest.raises(ValueError, match="keep-versions must be >= 1"):
         collect(root, keep_versions=0, dry_run=True, command="gc")
@@ -296,7 +296,7 @@ def test_gc_also_drops_stats_cache_entries_no_kept_version_uses(tmp_path):
     remove_episodes(root, ["ep_0"], dry_run=False, command="rm")
     with DatasetReader(root) as reader:
         current = {f"{episode_key(reader, p)}.json" for p in range(len(reader.episodes))}
-    assert collect(root, keep_versions=2, dry_run=True, command="gc").dropped_stats == []   # version 1 uses it
-    plan = collect(root, keep_versions=1, dry_run=False, command="gc")
+    assert collect(root, keep_versions=2, dry_run=True, command="gc", retention_s=0, force=True).dropped_stats == []   # version 1 uses it
+    plan = collect(root, keep_versions=1, dry_run=False, command="gc", retention_s=0, force=True)
     assert len(plan.dropped_stats) == 1 and any("stats cache entries" in line for line in plan.lines())
     assert {p.name for p in (root / STATS_DIR).iterdir()} == current

@@ -1,4 +1,5 @@
-"""`htdata gc DATASET [--keep-versions K] [--dry-run]`: delete old versions and unlisted shards."""
+"""`htdata gc DATASET [--keep-versions K] [--retention 7d [--force]] [--dry-run]`: delete old versions and
+unlisted shards, never inside the retention window."""
 
 from __future__ import annotations
 
@@ -11,17 +12,28 @@ from htdata.store.lock import DatasetLocked
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = gc.__doc__
+    parser.epilog = (gc.__doc__ + "\nexamples:\n  htdata gc data/ds --dry-run                 # what would go, what the "
+                     "7-day window keeps\n  htdata gc data/ds --keep-versions 3\n"
+                     "  htdata gc data/ds --retention 0 --force     # no job reads an old version\n")
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("dataset", type=Path, help="committed dataset directory")
     parser.add_argument("--keep-versions", type=int, default=1, metavar="K",
-                        help="newest versions kept (default 1: only the current one)")
-    parser.add_argument("--dry-run", action="store_true", help="list what would be deleted, delete nothing")
+                        help="newest versions kept whatever their age (default 1: only the current one)")
+    parser.add_argument("--retention", default=gc.format_duration(gc.DEFAULT_RETENTION_S), metavar="DURATION",
+                        help="delete a version only once it has been superseded this long, a shard only once "
+                             "unreferenced this long (default 7d; units s, m, h, d; below 1h needs --force)")
+    parser.add_argument("--force", action="store_true",
+                        help="allow a retention below 1h: readers of a collected version then fail "
+                             "(VersionCollected)")
+    parser.add_argument("--dry-run", action="store_true",
+                        help="list what would be deleted and what the retention window keeps; delete nothing")
 
 
 def run(args: argparse.Namespace) -> int:
+    command = f"htdata gc --keep-versions {args.keep_versions} --retention {args.retention}"
     try:
-        plan = gc.collect(args.dataset, args.keep_versions, args.dry_run, f"htdata gc --keep-versions {args.keep_versions}")
+        retention = gc.parse_duration(args.retention)
+        plan = gc.collect(args.dataset, args.keep_versions, args.dry_run, command, retention, args.force)
     except (DatasetLocked, FileNotFoundError, ValueError) as exc:
         print(f"htdata gc: error: {exc}", file=sys.stderr)
         return 2

@@ -54,6 +54,11 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
     parser.add_argument("--retries", type=int, default=1, help="retries of a unit that raised (default 1)")
     parser.add_argument("--allow-failures", action="store_true", help="exit 0 even if some episodes failed")
+    parser.add_argument("--verify-sources", action="store_true",
+                        help="refuse (fail the episode of) a source file whose sha256 differs from a checksum "
+                             "list beside the recordings (SHA256SUMS or *.sha256, sha256sum format) or that no "
+                             "list covers; without it a mismatch is a warning note. Every episode record keeps "
+                             "its source files' sha256 either way")
     parser.add_argument("--quiet", action="store_true",
                         help="hide the progress bar (stderr: episodes done, frames/s)")
 
@@ -64,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         apply_settings(sources, args.settings)
         report = ingest(sources, out, workers=args.workers, executor=args.executor, address=args.address,
                         retries=args.retries, progress=not args.quiet, layout_dirs=tuple(args.layouts),
-                        command="htdata ingest " + " ".join(sys.argv[2:]))
+                        command="htdata ingest " + " ".join(sys.argv[2:]), verify_sources=args.verify_sources)
     except (ValueError, FileNotFoundError, DatasetLocked) as e:   # LayoutNotFound is a FileNotFoundError: one line, no traceback
         print(f"htdata ingest: error: {e}", file=sys.stderr)
         return 2

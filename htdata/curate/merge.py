@@ -9,32 +9,41 @@ another codec, a layout id whose document differs, an episode id present in
 both with different content. The same episode with the same content (record
 and every sample's bytes) is kept once, from A, and reported. OUT starts at
 version 1 with no splits (a merged dataset needs its own `htdata split`).
-A merge killed before its commit leaves OUT without dataset.json; running
-the same merge again clears those leftovers and starts over.
+The merge takes OUT's writer lock FIRST and only then looks at OUT, so two
+merges started together into one OUT cannot both decide it is theirs: the
+second is refused (locked, or OUT already holds a dataset) and deletes
+nothing. Holding the lock in an empty OUT, the merge writes the marker
+`OUT/.merge.json` (A, B and their versions) before anything else and removes
+it after its commit. A merge killed in between leaves that marker: running
+the same merge again resumes (shards already placed and sha256-verified are
+kept, temp files and re-packed units are redone; a version already committed
+is just finished). Leftovers without the marker, or a marker naming another
+merge, are never touched: the command refuses, naming them.
 """
 
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from htdata.faults import crash_point
-from htdata.format.table import LAYOUTS_DIR, MANIFEST_FILE, SHARDS_DIR
-from htdata.store.fsutil import sha256_file
+from htdata.format.table import MANIFEST_FILE, SHARDS_DIR
+from htdata.store.fsutil import sha256_file, write_bytes_atomic
 from htdata.store.lock import LOCK_FILE, WriterLock
 from htdata.store.parts import Part
 from htdata.read.reader import DatasetReader
 from htdata.curate.repack import KeptEpisode, repack_unit, samples_per_shard_of
 from htdata.format.shardio import shard_name
 from htdata.store.snapshot import Snapshot, commit_parts, open_snapshot
-from htdata.store.versions import content_view
+from htdata.store.manifest import load_manifest
+from htdata.store.versions import content_view, list_versions, version_manifest_file
 
 
-# What a merge killed before its commit leaves in OUT (no dataset.json yet): a re-run clears it.
-LEFT_BY_INTERRUPTED_MERGE = {SHARDS_DIR, LAYOUTS_DIR, "versions", LOCK_FILE}
+MERGE_MARKER = ".merge.json"   # written by a merge into an empty OUT, removed after its commit
 
 
 class MergeConflict(ValueError):
@@ -48,6 +57,7 @@ class MergeReport:
     deduplicated: list[str] = field(default_factory=list)
     linked: int = 0
     copied: int = 0
+    resumed: int = 0       # shards an interrupted run of the same merge had placed (sha256-verified)
     manifest: dict | None = None
 
     def lines(self) -> list[str]:
@@ -56,6 +66,8 @@ class MergeReport:
             out.append(f"{len(self.deduplicated)} episodes in both with identical content, kept once: "
                        f"{', '.join(self.deduplicated[:5])}{' ...' if len(self.deduplicated) > 5 else ''}")
         out.append(f"shards: {self.linked} hard-linked, {self.copied} copied, all sha256-verified")
+        if self.resumed:
+            out.append(f"resumed an interrupted merge: {self.resumed} shards it had placed kept (sha256-verified)")
         return out
 
 
@@ -100,9 +112,14 @@ def duplicates(a: Snapshot, b: Snapshot) -> list[str]:
     return same
 
 
-def place_shard(src: Path, dst: Path, sha256: str, report: MergeReport) -> None:
+def place_shard(src: Path, dst: Path, sha256: str, report: MergeReport, resuming: bool = False) -> None:
     if dst.exists():
-        raise MergeConflict(f"{dst} already exists")
+        if resuming and sha256_file(dst) == sha256:   # placed by the interrupted run of this merge
+            report.resumed += 1
+            return
+        if not resuming:
+            raise MergeConflict(f"{dst} already exists")
+        dst.unlink()
     try:
         os.link(src, dst)
         report.linked += 1
@@ -120,24 +137,57 @@ def _renamed(part: Part, unit: int) -> Part:
     return Part(unit=unit, shards=shards, rows=part.rows, episodes=part.episodes)
 
 
+def _intent(a: Snapshot, b: Snapshot) -> dict:
+    return {"a": str(Path(a.root).resolve()), "a_version": a.version,
+            "b": str(Path(b.root).resolve()), "b_version": b.version}
+
+
+def _claim(out: Path, intent: dict) -> bool:
+    """Under OUT's lock: True when resuming an interrupted run of this merge, False for a fresh OUT
+    (the marker is then written); MergeConflict for anything else, with nothing touched."""
+    marker = out / MERGE_MARKER
+    if marker.is_file():
+        try:
+            found = json.loads(marker.read_text())
+        except ValueError:
+            found = None
+        if found != intent:
+            what = f"of {found.get('a')} and {found.get('b')}" if isinstance(found, dict) else "(unreadable marker)"
+            raise MergeConflict(f"{out}: holds an interrupted merge {what}; run that merge again to finish it, "
+                                f"or choose a new directory")
+        return True
+    if [p.name for p in out.iterdir() if p.name != LOCK_FILE]:
+        raise MergeConflict(f"{out}: not empty; merge writes a new dataset (choose a new directory)")
+    write_bytes_atomic(marker, (json.dumps(intent) + "\n").encode())
+    return False
+
+
 def merge(a_root, b_root, out_root, command: str) -> MergeReport:
     a, b = open_snapshot(a_root), open_snapshot(b_root)
     check_compatible(a, b)
     out = Path(out_root)
-    leftovers = {p.name for p in out.iterdir()} if out.is_dir() else set()
-    if leftovers - LEFT_BY_INTERRUPTED_MERGE or (out / MANIFEST_FILE).exists() or (out.exists() and not out.is_dir()):
-        raise MergeConflict(f"{out}: not empty; merge writes a new dataset (choose a new directory)")
+    if out.exists() and not out.is_dir():
+        raise MergeConflict(f"{out}: exists and is not a directory; merge writes a new dataset")
     dup = set(duplicates(a, b))
     report = MergeReport(episodes_a=len(a.episodes), episodes_b=len(b.episodes) - len(dup), deduplicated=sorted(dup))
     out.mkdir(parents=True, exist_ok=True)
-    with WriterLock(out, command):
-        for name in LEFT_BY_INTERRUPTED_MERGE - {LOCK_FILE}:   # an interrupted merge's files: start over
-            shutil.rmtree(out / name, ignore_errors=True)
-        (out / SHARDS_DIR).mkdir()
+    with WriterLock(out, command):      # the lock first: only its holder may decide what OUT's files are
+        resuming = _claim(out, _intent(a, b))
+        if resuming and list_versions(out):   # killed after its version file: the merge is committed
+            head = out / version_manifest_file(list_versions(out)[-1])
+            write_bytes_atomic(out / MANIFEST_FILE, head.read_bytes())
+            (out / MERGE_MARKER).unlink()
+            report.manifest = load_manifest(out)
+            return report
+        for tmp in out.rglob(".*.tmp"):       # this merge's own temp files (the marker says OUT is ours)
+            if not tmp.name.startswith(LOCK_FILE):   # a lock temp file belongs to a writer trying the lock now
+                tmp.unlink(missing_ok=True)
+        (out / SHARDS_DIR).mkdir(exist_ok=True)
         parts = []
         for part in a.parts():
             for s in part.shards:
-                place_shard(a.root / SHARDS_DIR / s["name"], out / SHARDS_DIR / s["name"], s["sha256"], report)
+                place_shard(a.root / SHARDS_DIR / s["name"], out / SHARDS_DIR / s["name"], s["sha256"], report,
+                            resuming)
             parts.append(part)
         unit = a.next_unit()
         reader_b = DatasetReader(b.root, version=b.version)
@@ -146,13 +196,15 @@ def merge(a_root, b_root, out_root, command: str) -> MergeReport:
             if not kept:
                 continue
             if len(kept) < len(part.episodes):   # re-pack B's unit without the duplicate, into OUT
+                for old in (out / SHARDS_DIR).glob(f"shard-{unit:06d}-*.tar"):   # an interrupted run's: redo
+                    old.unlink()
                 parts.append(repack_unit(reader_b, [KeptEpisode(e, range(int(e["num_frames"]))) for e in kept],
                                          unit, samples_per_shard_of(part), out_root=out))
             else:
                 renamed = _renamed(part, unit)
                 for old, new in zip(part.shards, renamed.shards):
                     place_shard(b.root / SHARDS_DIR / old["name"], out / SHARDS_DIR / new["name"], old["sha256"],
-                                report)
+                                report, resuming)
                 parts.append(renamed)
             unit += 1
         crash_point("merge_shards_placed")
@@ -164,6 +216,8 @@ def merge(a_root, b_root, out_root, command: str) -> MergeReport:
                   # content ids: the same calibration in A and B is one entry (revisions renumbered)
                   "calibrations": {**b.manifest.get("calibrations", {}), **a.manifest.get("calibrations", {})}}
         report.manifest = commit_parts(out, parts, fields, None, command, splits=lambda eps, sha: {}, next_unit=unit)
+        crash_point("merge_committed")
+        (out / MERGE_MARKER).unlink()
     return report
 
 

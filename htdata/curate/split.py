@@ -43,6 +43,7 @@ from htdata.curate.splitversions import SplitResult, write_versioned_split
 from htdata.format.table import EPISODES_FILE, MANIFEST_FILE
 from htdata.store.fsutil import write_json_atomic
 from htdata.store.manifest import parse_episodes, parse_manifest
+from htdata.store.versions import manifest_path as current_manifest_path
 from htdata.store.splitfiles import PARTS, count_parts, list_splits, split_path  # noqa: F401
 
 
@@ -54,7 +55,10 @@ def read_dataset_episodes(dataset: Path) -> tuple[bytes, list[dict]]:
     manifest_sha256; the episodes are read from the file the manifest names.
     """
     dataset = Path(dataset)
-    manifest_path = dataset / MANIFEST_FILE
+    try:   # the newest version file: dataset.json is only its cache (htdata/store/versions.py)
+        manifest_path = Path(current_manifest_path(dataset, None))
+    except ValueError as exc:
+        raise SplitError(str(exc)) from None
     if not manifest_path.is_file():
         raise SplitError(f"{dataset}: no {MANIFEST_FILE} (not a committed htdata dataset)")
     manifest_bytes = manifest_path.read_bytes()

@@ -5,7 +5,13 @@ video): pairing keeps one row per RGB frame. So nothing is lost, each sample
 stores in its `raw_<hand>.npy` member the row paired with its frame plus
 every UNPAIRED row whose time falls at or after the frame's RGB time and
 before the next sample's (rows before the first sample go to the first,
-rows after the last to the last). Rows of frames the ingest drops
+rows after the last to the last), but only within a bounded span of the
+sample's frame time (`raw_span_ns`: 1 s, or 2 frame intervals for a camera
+slower than 2 fps): a glove that ran on for minutes after (or before) the
+video, or through a long video gap, would otherwise put every one of those
+rows into one sample (1e6 rows: a 1 GB sample, 3.5 GB of RAM). Rows outside
+the span are dropped and counted: the episode record's "raw_rows_dropped"
+and a note in the ingest report and on stderr. Rows of frames the ingest drops
 (non-finite or out-of-range values) are unpaired rows too and land in the
 previous kept sample (the next one when none precedes). Duplicate-timestamp
 rows, which sync cannot pair, are stored the same way. Within a sample the
@@ -32,21 +38,45 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
+MIN_RAW_SPAN_NS = 1_000_000_000   # a sample stores unpaired rows at most this far from its frame time ...
+RAW_SPAN_INTERVALS = 2             # ... or this many frame intervals, when that is longer (slow cameras)
+
+
+def raw_span_ns(t_frames: np.ndarray) -> int:
+    """How far from its frame time a sample stores unpaired rows (see the module docstring)."""
+    d = np.diff(np.unique(np.asarray(t_frames, dtype=np.int64)))
+    return max(MIN_RAW_SPAN_NS, RAW_SPAN_INTERVALS * int(np.median(d)) if d.size else 0)
+
+
 @dataclass
 class RowPlan:
     """One hand's unpaired rows, grouped by the synchronised frame (slot) that stores them."""
     timestamps: np.ndarray   # (M,) int64 all rows as recorded
     rows: np.ndarray         # unpaired source rows, sorted by (slot, time, row)
     slots: np.ndarray        # their slot (position in the synchronised frames), same order
+    dropped: int = 0         # unpaired rows farther than raw_span_ns from every sample: stored nowhere
+    span_ns: int = MIN_RAW_SPAN_NS
 
     @classmethod
     def build(cls, timestamps, paired_rows: np.ndarray, t_frames: np.ndarray) -> "RowPlan":
         ts = np.asarray(timestamps, dtype=np.int64)
+        t_frames = np.asarray(t_frames, dtype=np.int64)
         unpaired = np.setdiff1d(np.arange(ts.size, dtype=np.int64), np.asarray(paired_rows, dtype=np.int64))
         t = ts[unpaired]
         slot = np.clip(np.searchsorted(t_frames, t, side="right") - 1, 0, max(t_frames.size - 1, 0))
+        span = raw_span_ns(t_frames)
+        if t_frames.size:   # bounded: no sample holds the rows of minutes of glove without video
+            near = np.abs(t - t_frames[slot]) < span
+            nxt = np.minimum(slot + 1, t_frames.size - 1)     # in a video gap: the end near the next frame
+            to_next = ~near & (nxt > slot) & (t_frames[nxt] - t < span)
+            slot = np.where(to_next, nxt, slot)
+            near |= to_next
+            dropped = int(unpaired.size - np.count_nonzero(near))
+            unpaired, t, slot = unpaired[near], t[near], slot[near]
+        else:
+            dropped = 0
         order = np.lexsort((unpaired, t, slot))
-        return cls(timestamps=ts, rows=unpaired[order], slots=slot[order])
+        return cls(timestamps=ts, rows=unpaired[order], slots=slot[order], dropped=dropped, span_ns=span)
 
     def rows_for(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
         """(rows, slots) of the unpaired rows stored by slots [start, stop)."""

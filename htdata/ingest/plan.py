@@ -31,6 +31,7 @@ from htdata.store.fsutil import sha256_file
 from htdata.format.table import HANDS
 from htdata.glove.layouts import load_layout
 from htdata.pipeline import PipelineConfig, load_pipeline
+from htdata.ingest.append import labels_of
 
 
 @dataclass
@@ -54,9 +55,14 @@ class UnitTask:
         return sum(int(r.est_frames) for r in self.episodes)
 
     def fingerprint(self) -> str:
-        """Changes when the pipeline, the episode list, any source file or any layout file changes."""
+        """Changes when the pipeline, the episode list, any source file, any layout file or any label changes.
+
+        The labels (task, scene, source split) are in: a unit finished before a crash and resumed after
+        the annotation table was edited must not commit the labels it was run with.
+        """
+
         ident = {"pipeline": self.pipeline,
-                 "episodes": [[r.episode_id, r.source_ref, r.fingerprint] for r in self.episodes]}
+                 "episodes": [[r.episode_id, r.source_ref, r.fingerprint, labels_of(r)] for r in self.episodes]}
         return hashlib.sha1(json.dumps(ident, sort_keys=True).encode()).hexdigest()
 
     def __repr__(self) -> str:

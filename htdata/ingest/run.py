@@ -23,6 +23,7 @@ from htdata.ingest.append import kept_unavailable, plan_append
 from htdata.ingest.commit import check_compatible, commit
 from htdata.ingest.plan import (Source, UnitTask, check_settings_agree, check_unique_ids, discover_sources,
                                 plan_units)
+from htdata.ingest.sourcesums import check_sources
 from htdata.ingest.timing import timing_summary
 from htdata.ingest.unit import run_unit
 from htdata.ingest.workdir import (check_output, clear_unit_files, dumps, load_valid_record, prepare_output,
@@ -82,11 +83,13 @@ class EpisodeProgress:
 
 def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "process",
            address: str | None = None, retries: int = 1, progress: bool = True,
-           layout_dirs: tuple = (), command: str = "htdata ingest") -> dict:
+           layout_dirs: tuple = (), command: str = "htdata ingest", verify_sources: bool = False) -> dict:
     """Ingest (or resume, or append to) the dataset at `out`; returns the report (also reports/ingest.json).
 
     Holds the dataset's writer lock throughout. `layout_dirs` are searched for
-    layout ids before $HTDATA_LAYOUTS and the shipped layouts (`--layouts DIR`).
+    layout ids before $HTDATA_LAYOUTS and the shipped layouts (`--layouts DIR`). Source files of the
+    episodes to ingest are hashed and checked against checksum lists (`verify_sources`: refuse a mismatch
+    or an unlisted file; htdata/ingest/sourcesums.py).
     """
     t_start = time.perf_counter()
     check_settings_agree(sources)
@@ -95,6 +98,7 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         prepare_output(out)
         parent = current_snapshot(out)
         refs, plan_failures = discover_sources(sources, tuple(layout_dirs))
+        check_found_something(sources, refs, plan_failures)
         check_unique_ids(refs)
         # the codec rule needs the run's gloves: resolved after discovery, before anything is fingerprinted
         sources = resolve_sources(sources, refs, parent.manifest["codec"]["tactile"] if parent else None)
@@ -104,12 +108,17 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         settings = {id(s): s.pipeline.to_dict() for s in sources}
         plan = plan_append(parent, [r for r, _ in pairs], [settings[id(s)] for _, s in pairs])
         source_of = {r.episode_id: s for r, s in pairs}
+        checked = check_sources(plan.todo, {r.episode_id: source_of[r.episode_id].root for r in plan.todo},
+                                verify_sources)
+        plan.todo = checked.refs
+        plan_failures = plan_failures + checked.failures
         first_unit = parent.next_unit() if parent else 0
         tasks = plan_units([(r, source_of[r.episode_id]) for r in plan.todo], out, first_unit)
         remove_strays(out, tasks, first_unit)
         records, ran = run_units(tasks, out, workers, executor, address, retries, progress)
         report = build_report(sources, tasks, records, ran, plan_failures, plan, parent,
                               discovered={r.episode_id for rs in refs for r in rs}, t_start=t_start)
+        report["notes"] += checked.notes
         if lock.note:
             report["notes"].append(lock.note)
         write_bytes_atomic(out / INGEST_REPORT, dumps(report))   # explains a run that commits nothing too
@@ -125,6 +134,16 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
     report["timing"]["total_s"] = time.perf_counter() - t_start
     write_bytes_atomic(out / INGEST_REPORT, dumps(report))
     return report
+
+
+def check_found_something(sources, refs: list[list], failures: list[dict]) -> None:
+    """A source folder in which the adapter found no recording at all (not even a bad one) is an error:
+    a wrong path or pipeline, not "nothing changed"."""
+    for source, found in zip(sources, refs):
+        root = str(source.root).rstrip("/") + "/"
+        if not found and not any(str(f.get("file") or f.get("source_ref") or "").startswith(root) for f in failures):
+            raise ValueError(f"{source.root}: no recording found for pipeline {source.pipeline.name!r} (adapter "
+                             f"{source.pipeline.adapter.name!r}); check the folder and the pipeline")
 
 
 def run_units(tasks: list[UnitTask], out: Path, workers: int, executor: str, address: str | None,
@@ -159,6 +178,16 @@ def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, disc
     kept = kept_unavailable(parent, discovered, [s.root for s in sources])
     notes = [f"source unavailable: {e} kept from version {parent.version}" for e in kept]
     notes += [f"re-ingest failed: {e} kept from version {parent.version}" for e in failed_replacements]
+    raw_dropped = {ep["episode_id"]: ep["raw_rows_dropped"] for r in ordered for ep in r["episodes"]
+                   if ep.get("raw_rows_dropped")}
+    # what the console must say, not only the report: hands left out, raw values outside the layout range
+    notes += [f"{ep['episode_id']}: {hand} hand not ingested: {why}" for r in ordered for ep in r["episodes"]
+              for hand, why in sorted(ep.get("hands_excluded", {}).items())]
+    notes += [f"{ep['episode_id']}: {hand} hand: {c['frames']} frames hold raw values outside the layout range "
+              f"({c['below']} below, {c['above']} above; pipeline [normalise] out_of_range decides)"
+              for r in ordered for ep in r["episodes"] for hand, c in sorted(ep.get("out_of_range", {}).items())]
+    notes += [f"{e}: {n} {h} glove rows far from every video frame dropped (no sample stores them)"
+              for e, d in sorted(raw_dropped.items()) for h, n in sorted(d.items())]
     return {
         "pipelines": [s.pipeline.name for s in sources],
         "parent_version": parent.version if parent else None,
@@ -182,6 +211,7 @@ def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, disc
                          if ep.get("out_of_range")},
         "hands_excluded": {ep["episode_id"]: ep["hands_excluded"] for r in ordered for ep in r["episodes"]
                            if ep.get("hands_excluded")},
+        "raw_rows_dropped": raw_dropped,
         "timing": timing_summary(ran, time.perf_counter() - t_start),
     }
 

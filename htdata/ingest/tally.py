@@ -42,6 +42,8 @@ class EpisodeTally:
         self.live_series: dict[str, list[np.ndarray]] = {}   # hand -> (T, L) chunks for taxel health
         self.paired = 0                # frames with tactile (tally.frames also counts RGB-only ones)
         self.rgb_only: dict[str, int] = {}   # reason -> RGB-only samples kept (htdata.ingest.fullrate)
+        self.raw_rows_dropped: dict[str, int] = {}   # hand -> unpaired rows beyond every sample's raw span
+        self.raw_span_ms: dict[str, float] = {}
 
     def start(self, ref, hands: list[str], layouts: dict[str, Layout], oor_policy=None) -> None:
         self.ref, self.hands, self.layouts = ref, hands, layouts
@@ -84,6 +86,9 @@ class EpisodeTally:
     def finish(self, streams) -> None:
         ref = self.ref
         self.notes = list(streams.notes) + list(self.sync.report.get("warnings", [])) + self._out_of_range_notes()
+        for h, n in sorted(self.raw_rows_dropped.items()):
+            self.notes.append(f"{h} hand: {n} glove rows more than {self.raw_span_ms[h]:g} ms from every video "
+                              f"frame (after the last, before the first, or in a gap) dropped: no sample stores them")
         self.fps = _fps(streams.rgb_timestamps_ns)
         self.has_video = streams.has_video
         if self.fps is None:
@@ -115,11 +120,15 @@ class EpisodeTally:
             record["tactile_only"] = True     # a glove-only recording: no RGB member in any sample
         if self.rgb_only:   # RGB frames kept without tactile (dropped from pairing), by reason
             record["rgb_only_frames"] = dict(sorted(self.rgb_only.items()))
+        if isinstance(ref.extra, dict) and ref.extra.get("source_sha256"):   # htdata.ingest.sourcesums
+            record["source_sha256"] = ref.extra["source_sha256"]
         if isinstance(ref.extra, dict) and ref.extra.get("source_split"):
             record["source_split"] = str(ref.extra["source_split"])
         # Added only when there is something to say: a clean episode's record keeps its exact bytes.
         if self.out_of_range_record():
             record["out_of_range"] = self.out_of_range_record()
+        if self.raw_rows_dropped:
+            record["raw_rows_dropped"] = dict(sorted(self.raw_rows_dropped.items()))
         if isinstance(ref.extra, dict) and ref.extra.get("hands_excluded"):
             record["hands_excluded"] = dict(sorted(ref.extra["hands_excluded"].items()))
         record["taxel_health"] = {h: record_entry(self.live_series.get(h, []), self.layouts[h]) for h in hands}

@@ -18,6 +18,8 @@ from pathlib import Path
 from htdata.format.table import MANIFEST_FILE, SHARDS_DIR, WORK_DIR
 from htdata.store.fsutil import sha256_file
 from htdata.store.lock import LOCK_FILE
+from htdata.store.versions import list_versions
+from htdata.store.manifest import load_manifest
 
 # Keys a unit record must hold to be reused (records of older versions lack some: their units re-run).
 RECORD_KEYS = ("unit", "fingerprint", "shards", "samples", "episodes", "failures", "dropped", "layouts")
@@ -70,7 +72,8 @@ def check_output(out: Path) -> None:
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out}: exists and is not a directory")
     content = [p for p in out.iterdir() if p.name != LOCK_FILE] if out.is_dir() else []
-    if content and not (out / MANIFEST_FILE).is_file() and not (out / WORK_DIR).is_dir():
+    if content and not (out / MANIFEST_FILE).is_file() and not (out / WORK_DIR).is_dir() \
+            and not list_versions(out):     # committed version files make it a dataset, pointer or not
         raise ValueError(f"{out}: directory is not empty and is not an htdata dataset; "
                          f"refusing to write into it (choose an empty or new directory)")
 
@@ -81,14 +84,29 @@ def prepare_output(out: Path) -> None:
     (out / SHARDS_DIR).mkdir(parents=True, exist_ok=True)
 
 
+def committed_shards(out: Path) -> set[str]:
+    """Every shard name some committed version file lists (what no cleanup may ever delete)."""
+
+    names: set[str] = set()
+    for v in list_versions(out):
+        names |= {s["name"] for s in load_manifest(out, validate=False, version=v)["shards"]}
+    return names
+
+
 def remove_strays(out: Path, tasks: list, first_unit: int) -> None:
-    """Temp files, spools, and uncommitted shards/records (units >= first_unit) outside the plan."""
+    """Temp files, spools, and uncommitted shards/records (units >= first_unit) outside the plan.
+
+    Units >= first_unit (the current version's next_unit) belong to no committed version; a shard a
+    version file lists is never deleted here all the same (checked against every version file).
+    """
     planned = {t.unit for t in tasks}
     for p in list(out.rglob(".*.tmp")) + list((out / WORK_DIR).glob("spool-*.bin")):
-        p.unlink()
+        if not p.name.startswith(LOCK_FILE):   # a lock temp file belongs to a writer trying the lock now
+            p.unlink(missing_ok=True)
+    keep = committed_shards(out)
     for p in (out / SHARDS_DIR).glob("shard-*.tar"):
         unit = int(p.name.split("-")[1])
-        if unit >= first_unit and unit not in planned:
+        if unit >= first_unit and unit not in planned and p.name not in keep:
             p.unlink()
     for p in (out / WORK_DIR).glob("unit-*.json"):
         if int(p.stem.split("-")[1]) not in planned:

@@ -5,6 +5,7 @@
     torchdata.py   torch datasets of frames and windows (maps stored or rendered from raw rows)
     torchglove.py  torch dataset of raw glove rows at the glove's own rate
     keys.py        the keys of the items the torch datasets yield
+    torchviews.py  `Dataset` (what htdata.open returns): a reader whose `.torch` builds the torch datasets
 
 May import: the store, the format, the glove model and the base modules. torch only in
 torchdata/torchglove (an optional extra).

@@ -20,21 +20,28 @@ reader drops handles and the index map; they reopen on first use.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from collections import OrderedDict
 from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import NamedTuple
 
 import numpy as np
 
+from htdata.errors import HtdataError
 from htdata.store import storage
 from htdata.format.codec import decode_png_u8
 from htdata.format.table import INDEX_DTYPE, LAYOUTS_DIR, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS, SPLITS_DIR, decode_sample
 from htdata.store.manifest import load_episodes, load_index, load_manifest
 from htdata.format.shardio import BLOCK, describe_header, header_matches, padded, sample_key
 from htdata.store.remote import load_cached_index
-from htdata.read.torchviews import TorchDatasets
+from htdata.store.gcrecord import collected_error
+
+class SplitRejected(HtdataError, ValueError):
+    """A split whose file no longer matches its version's manifest, or whose parts overlap."""
+
 
 MAX_OPEN_SHARDS = 128   # an LRU of open shard files; one-episode units make many small shards
 _SIZE_POS = tuple(INDEX_DTYPE.names.index(SIZE_FIELDS[s]) for s in MEMBER_ORDER)
@@ -71,7 +78,8 @@ class DatasetReader:
         self.root = os.fspath(root)
         self.manifest = load_manifest(self.root, validate=validate_manifest, version=version)
         self.version: int | None = self.manifest.get("version")
-        self.episodes: list[dict] = load_episodes(self.root, self.manifest)
+        with self._collected_guard():
+            self.episodes: list[dict] = load_episodes(self.root, self.manifest)
         if len(self.episodes) != self.manifest["counts"]["episodes"]:
             raise ValueError(f"{self.root}: episodes.jsonl has {len(self.episodes)} records, "
                              f"manifest counts {self.manifest['counts']['episodes']}")
@@ -83,6 +91,17 @@ class DatasetReader:
         self._handles: OrderedDict[int, object] = OrderedDict()
         self._pid = os.getpid()
         self._maps: dict[str, np.ndarray] = {}
+
+    @contextmanager
+    def _collected_guard(self, where: str | None = None):
+        """A file of this version that is gone because `htdata gc` collected the version: VersionCollected."""
+        try:
+            yield
+        except FileNotFoundError as exc:
+            gone = collected_error(self.root, getattr(self, "version", None), where or exc.filename)
+            if gone is None:
+                raise
+            raise gone from None
 
     # -- pickling / fork safety -------------------------------------------
     def __getstate__(self):
@@ -121,7 +140,8 @@ class DatasetReader:
                 # Remote: one download into the local cache (keyed by sha256), then mmap.
                 rows = load_cached_index(self.root, self.manifest)
             else:
-                rows = load_index(self.root, mmap=True, manifest=self.manifest)
+                with self._collected_guard():
+                    rows = load_index(self.root, mmap=True, manifest=self.manifest)
             if len(rows) != self._n:
                 raise ValueError(f"{self.root}: index has {len(rows)} rows, manifest counts {self._n}")
             self._index = rows
@@ -174,7 +194,8 @@ class DatasetReader:
         self._check_pid()
         handle = self._handles.get(shard)
         if handle is None:
-            handle = storage.open_binary(self._shard_path(shard))
+            with self._collected_guard(self._shard_path(shard)):
+                handle = storage.open_binary(self._shard_path(shard))
             self._handles[shard] = handle
             if len(self._handles) > MAX_OPEN_SHARDS:
                 _, oldest = self._handles.popitem(last=False)
@@ -293,11 +314,6 @@ class DatasetReader:
         return self._png(self.manifest["canonical"]["regions"])
 
     # -- splits ------------------------------------------------------------
-    @property
-    def torch(self) -> TorchDatasets:
-        """The torch datasets of this version: `reader.torch.frames(split=..., part=...)` (needs htdata[torch])."""
-        return TorchDatasets(self.root, self.version)
-
     def split(self, name: str) -> dict:
         """Split NAME of this version: {"parts": {part: {"episodes": [...]}, ...}, ...}.
 
@@ -315,9 +331,23 @@ class DatasetReader:
             path = storage.join(self.root, f"{SPLITS_DIR}/{name}.json")
         if not storage.exists(path):
             raise FileNotFoundError(f"{path}: no split named {name!r} (run `htdata split`)")
-        doc = json.loads(storage.read_text(path))
+        data = storage.read_bytes(path)
+        # what `htdata validate` checks that would silently skew a training run, checked once here too
+        if "version" in self.manifest and hashlib.sha256(data).hexdigest() != entry["sha256"]:
+            raise SplitRejected(f"{path}: sha256 differs from version {self.version}'s manifest (edited after "
+                                f"it was committed?); re-make it with `htdata split --name {name}`")
+        try:
+            doc = json.loads(data)
+        except ValueError as exc:
+            raise SplitRejected(f"{path}: not valid JSON ({exc})") from None
         if not isinstance(doc.get("parts"), dict):
             raise ValueError(f"{path}: split has no 'parts' object")
+        seen: dict[str, str] = {}
+        for part, body in sorted(doc["parts"].items()):
+            for eid in body.get("episodes", []) if isinstance(body, dict) else []:
+                if seen.setdefault(eid, part) != part:
+                    raise SplitRejected(f"{path}: episode {eid!r} is in both {seen[eid]} and {part}: the parts "
+                                        f"overlap (train/test leakage); re-make it with `htdata split --name {name}`")
         return doc
 
     def episode_positions(self, split: str | None = None, part: str | None = None) -> list[int]:

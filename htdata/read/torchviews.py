@@ -1,4 +1,4 @@
-"""`reader.torch`: the torch datasets of one opened version, one attribute away from `htdata.open`.
+"""`htdata.open(...)` -> `Dataset`: a DatasetReader with its torch datasets one attribute away.
 
     ds = htdata.open("data/dataset")
     train = ds.torch.frames(split="main", part="train")      # TactileFrameDataset
@@ -12,6 +12,20 @@ so the torch datasets are imported when one is asked for, never when a reader op
 """
 
 from __future__ import annotations
+
+from htdata.read.reader import DatasetReader
+
+
+class Dataset(DatasetReader):
+    """What `htdata.open` returns: the reader of one version, plus `.torch` (its torch datasets).
+
+    (The plain DatasetReader does not know the torch datasets: they are built on it.)
+    """
+
+    @property
+    def torch(self) -> "TorchDatasets":
+        """The torch datasets of this version: `ds.torch.frames(split=..., part=...)` (needs htdata[torch])."""
+        return TorchDatasets(self.root, self.version)
 
 
 class TorchDatasets:

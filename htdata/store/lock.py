@@ -94,11 +94,11 @@ class WriterLock:
         A lock file is therefore never seen half written by another writer.
         """
         tmp = self.path.with_name(f"{LOCK_FILE}.{os.getpid()}.tmp")
-        with open(tmp, "wb") as f:
-            f.write(self._record())
-            f.flush()
-            os.fsync(f.fileno())
-        try:
+        try:   # the temp file goes whatever happens (a full disk fails the write: no .lock.<pid>.tmp left)
+            with open(tmp, "wb") as f:
+                f.write(self._record())
+                f.flush()
+                os.fsync(f.fileno())
             os.link(tmp, self.path)
             return True
         except FileExistsError:
@@ -139,6 +139,9 @@ class WriterLock:
 
     def acquire(self) -> "WriterLock":
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        if self.path.is_dir() or (self.path.exists() and not self.path.is_file()):
+            raise DatasetLocked(f"{self.path}: is a directory (or another non-file), not a writer lock; no writer "
+                                f"can take the dataset until it is removed (rmdir it if nothing of yours is in it)")
         for _ in range(200):   # bounded: racing writers may release / take over between our steps
             if self._try_create():
                 self._held = True

@@ -25,11 +25,12 @@ import numpy as np
 from htdata.store import storage
 from htdata.format.codec import encode_png_u8
 from htdata.format.table import (CANONICAL_FILE, EPISODES_FILE, FORMAT, INDEX_DTYPE, INDEX_FILE, LAYOUTS_DIR,
-                           INDEX_DTYPES, PARTS_FILE, READABLE_FORMAT_VERSIONS, REGIONS_FILE)
+                           INDEX_DTYPES, MANIFEST_FILE, PARTS_FILE, READABLE_FORMAT_VERSIONS, REGIONS_FILE)
 from htdata.store.fsutil import write_bytes_atomic
 from htdata.resources import validate_json
 from htdata.format.shardio import SampleRecord, ShardRecord
 from htdata.store.versions import manifest_path
+from htdata.store.versions import DatasetStateError
 
 @dataclass
 class UnitResult:
@@ -110,7 +111,11 @@ def load_manifest(root: str | os.PathLike, validate: bool = True, version: int |
     path = manifest_path(root, version)
     if not storage.exists(path):
         raise FileNotFoundError(f"{path}: no manifest: not a committed htdata dataset")
-    return parse_manifest(storage.read_text(path), path, validate)
+    try:
+        return parse_manifest(storage.read_text(path), path, validate)
+    except json.JSONDecodeError as exc:   # a damaged file: name it and the way out
+        raise DatasetStateError(f"{path}: not valid JSON ({exc}); if {MANIFEST_FILE} is intact and names this "
+                                f"version, `htdata repair {root}` restores it") from None
 
 
 def parse_manifest(data: str | bytes, where: str, validate: bool = True) -> dict:

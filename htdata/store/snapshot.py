@@ -31,6 +31,7 @@ from htdata.store.parts import Part, assemble, parts_of_version, unit_of_shard
 from htdata.resources import validate_json
 from htdata.store.splitfiles import carried_splits
 from htdata.store.versions import change_record, diff_episodes, now_utc, summarise, write_version
+from htdata.store.versions import current_version
 
 SplitMaker = Callable[[list[dict], str], dict[str, bytes]]
 # Manifest fields a new version inherits from its parent unless the writer sets them.
@@ -69,8 +70,13 @@ def open_snapshot(root: str | os.PathLike, version: int | None = None) -> Snapsh
 
 
 def current_snapshot(root: str | os.PathLike) -> Snapshot | None:
-    """The current version, or None when `root` holds no committed dataset."""
-    if not storage.exists(storage.join(root, MANIFEST_FILE)):
+    """The current version, or None when `root` holds no committed dataset.
+
+    A folder with committed version files is a dataset even when dataset.json
+    is missing or damaged (the pointer is a cache of the newest version file).
+    """
+
+    if current_version(root) is None and not storage.exists(storage.join(root, MANIFEST_FILE)):
         return None
     return open_snapshot(root)
 

@@ -13,9 +13,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from htdata.format.table import MANIFEST_FILE, SPLITS_DIR
+from htdata.format.table import SPLITS_DIR
 from htdata.store import storage
-from htdata.store.versions import split_file
+from htdata.store.versions import manifest_path, split_file
 
 
 PARTS = ("train", "test", "ood")
@@ -91,9 +91,8 @@ def carried_splits(snap, episodes: list[dict], episodes_sha256: str) -> dict[str
 
 
 def _current_manifest(dataset) -> dict | None:
-    path = Path(dataset) / MANIFEST_FILE
     try:
-        return json.loads(path.read_bytes())
+        return json.loads(Path(manifest_path(dataset, None)).read_bytes())
     except (OSError, ValueError):
         return None
 

@@ -1,4 +1,4 @@
-"""Dataset versions: immutable snapshots over immutable shards, one atomic pointer to the current one.
+"""Dataset versions: immutable snapshots over immutable shards; the newest version file is the current one.
 
 The Iceberg / Delta Lake idea at the size of a folder. Shards are immutable
 and content-hashed (sha256 in every manifest). A version is a manifest (the
@@ -13,12 +13,16 @@ episodes.jsonl, index.npy and split files, all under `versions/`:
 
 A write puts the version's files in place first, then links
 `versions/vN.json` into place (fails if it exists: no version is ever
-overwritten), and last swaps `dataset.json` with one atomic rename. A crash
-at any point leaves the previous version current and readable; a half
-written `versions/vN/` without its `vN.json` belongs to no version and is
-cleared by the next write. Old versions stay readable
-(`DatasetReader(root, version=N)`) until `htdata gc` removes them, an
-explicit, dry-runnable act. Why no library: Iceberg / Delta need a table
+overwritten): that link is the commit. Last it swaps `dataset.json` with one
+atomic rename; dataset.json is a CACHE of the newest version file, so a
+missing, truncated, stale or hand-edited dataset.json loses nothing: the
+current version is the newest vN.json (`current_version`), writers build on
+it, and `htdata repair` rewrites the cache. A crash at any point leaves the
+previous version (or, after the link, the new one) current and readable; a
+half written `versions/vN/` without its `vN.json` belongs to no version and
+is cleared by the next write. Writers never delete a version file. Old
+versions stay readable (`DatasetReader(root, version=N)`) until `htdata gc`
+removes them, an explicit, dry-runnable act with a retention window. Why no library: Iceberg / Delta need a table
 engine and a catalog for what is here a few JSON files and a rename; zarr's
 `.partial` idea is the same temp + rename each writer here already uses.
 
@@ -38,10 +42,12 @@ import shutil
 import socket
 from pathlib import Path
 
+from htdata.errors import HtdataError
 from htdata.store import storage
 from htdata.faults import crash_point
 from htdata.format.table import EPISODES_FILE, INDEX_FILE, MANIFEST_FILE, SPLITS_DIR
 from htdata.store.fsutil import write_bytes_atomic
+from htdata.store.gcrecord import collected_error
 
 VERSIONS_DIR = "versions"
 _VERSION_RE = re.compile(r"^v(\d{6,})\.json$")
@@ -68,12 +74,22 @@ def split_file(n: int | None, name: str) -> str:
     return f"{SPLITS_DIR}/{name}.json" if n is None else f"{version_dir(n)}/{SPLITS_DIR}/{name}.json"
 
 
-def list_versions(root: str | os.PathLike) -> list[int]:
-    """Committed version numbers, ascending: those with a manifest, up to the current one.
+class DatasetStateError(HtdataError, ValueError):
+    """The version files and the pointer disagree in a way no reader can resolve alone; the message
+    names the file and the fix (usually `htdata repair DATASET`)."""
 
-    A version file numbered after the current version belongs to a writer
-    killed before it swapped the pointer: it was never committed.
+
+def list_versions(root: str | os.PathLike) -> list[int]:
+    """Committed version numbers, ascending.
+
+    Local datasets: every versions/vN.json. A version file is linked into
+    place complete, after its files (write_version), so its presence IS the
+    commit; dataset.json is a cache of the newest one. Remote (published)
+    datasets: those up to the version dataset.json names, since `htdata
+    publish` uploads dataset.json last.
     """
+    if storage.local_path(root) is not None:
+        return _version_files(root)
     pointer = storage.join(root, MANIFEST_FILE)
     if not storage.exists(pointer):
         return []
@@ -94,13 +110,51 @@ def _version_files(root: str | os.PathLike) -> list[int]:
     return sorted(int(m.group(1)) for m in map(_VERSION_RE.match, names) if m)
 
 
+def pointer_version(root: str | os.PathLike) -> tuple[int | None, str | None]:
+    """(version dataset.json names, None) or (None, why it names none: missing / unreadable)."""
+    path = storage.join(root, MANIFEST_FILE)
+    if not storage.exists(path):
+        return None, "missing"
+    try:
+        doc = json.loads(storage.read_text(path))
+        version = doc.get("version") if isinstance(doc, dict) else None
+    except (OSError, ValueError) as exc:
+        return None, f"unreadable ({exc})"
+    return (int(version), None) if isinstance(version, int) else (None, "names no version")
+
+
+def current_version(root: str | os.PathLike) -> int | None:
+    """The current version: the newest version file (local), None for an unversioned or empty folder.
+
+    Refuses (DatasetStateError, naming the file and `htdata repair`) when
+    dataset.json names a version whose file is gone: reading the next older
+    one instead would silently roll the dataset back.
+    """
+    have = list_versions(root)
+    if storage.local_path(root) is None:
+        return have[-1] if have else None
+    named, _ = pointer_version(root)
+    if named is not None and named not in have and (not have or named > have[-1]):
+        raise DatasetStateError(
+            f"{storage.join(root, version_manifest_file(named))}: missing, but {MANIFEST_FILE} names version "
+            f"{named} as current; run `htdata repair {root}` to restore it from {MANIFEST_FILE}")
+    return have[-1] if have else None
+
+
 def manifest_path(root: str | os.PathLike, version: int | None) -> str:
-    """The manifest to open: dataset.json for the current version, versions/vN.json for version N."""
+    """The manifest to open: the newest versions/vN.json for the current version (dataset.json when the
+    dataset has no versions, or is remote), versions/vN.json for version N."""
     if version is None:
-        return storage.join(root, MANIFEST_FILE)
+        if storage.local_path(root) is None:
+            return storage.join(root, MANIFEST_FILE)
+        n = current_version(root)
+        return storage.join(root, MANIFEST_FILE if n is None else version_manifest_file(n))
     path = storage.join(root, version_manifest_file(int(version)))
     have = list_versions(root)
     if int(version) not in have:
+        gone = collected_error(root, int(version))
+        if gone is not None:
+            raise gone
         raise FileNotFoundError(f"{root}: no version {version} (versions: "
                                 f"{', '.join(map(str, have)) if have else 'none: dataset has no version history'})")
     return path
@@ -167,18 +221,19 @@ def _link_exclusive(path: Path, data: bytes) -> None:
 
 
 def clear_orphans(root: Path, current: int | None) -> None:
-    """Remove versions numbered after the current one: a writer died before swapping the pointer.
+    """Remove `versions/vN/` folders numbered after the current version that have no vN.json.
 
-    Such a version was never current, so nothing can have read it as the
-    dataset; the next write takes its number. The caller holds the writer lock.
+    Such a folder is a write killed before it linked its version file: no
+    version lists it, nothing ever read it. Version files are never removed
+    here (a present vN.json is a committed version). The caller holds the
+    writer lock.
     """
     n = (current or 0) + 1
-    for m in _version_files(root):
-        if m >= n:
-            (root / version_manifest_file(m)).unlink()
+    committed = set(_version_files(root))
     vdir = root / VERSIONS_DIR
     for d in (vdir.iterdir() if vdir.is_dir() else []):
-        if d.is_dir() and re.fullmatch(r"v\d{6,}", d.name) and int(d.name[1:]) >= n:
+        if d.is_dir() and re.fullmatch(r"v\d{6,}", d.name) and int(d.name[1:]) >= n \
+                and int(d.name[1:]) not in committed:
             shutil.rmtree(d)
 
 
@@ -191,9 +246,8 @@ def write_version(root: str | os.PathLike, manifest: dict, episodes_bytes: bytes
     then swaps dataset.json. The caller holds the writer lock.
     """
     root = Path(root)
-    pointer = root / MANIFEST_FILE
-    current = json.loads(pointer.read_text()).get("version") if pointer.is_file() else None
-    if pointer.is_file() and current != manifest.get("parent"):
+    current = current_version(root)
+    if current != manifest.get("parent"):
         # a write must build on the current version: anything else would drop what came after its parent
         raise RuntimeError(f"{root}: the current version is {current}, this write was built on "
                            f"{manifest.get('parent')}; nothing was written (run the command again)")

@@ -64,6 +64,9 @@ def _load_manifest(root: Path, check: Check, version: int | None) -> tuple[dict,
     except FileNotFoundError as exc:      # no such version: names the ones there are
         check.fail("manifest_missing", str(exc), file=str(root))
         return None
+    except ValueError as exc:             # dataset.json names a version whose file is gone: names the fix
+        check.fail("manifest_missing", str(exc), file=MANIFEST_FILE)
+        return None
     rel = str(mpath.relative_to(root)) if mpath.is_relative_to(root) else str(mpath)
     if not mpath.is_file():
         check.fail("manifest_missing", f"{mpath}: no {MANIFEST_FILE} (not a committed dataset)",
@@ -75,11 +78,13 @@ def _load_manifest(root: Path, check: Check, version: int | None) -> tuple[dict,
     except ValueError as exc:             # also a truncated version file (JSONDecodeError is a ValueError)
         check.fail("manifest_schema", f"{rel}: {exc}", file=rel)
         return None
-    if version is None and "version" in manifest:   # the pointer must be a copy of the version it names
-        vfile = root / version_manifest_file(manifest["version"])
-        if not vfile.is_file() or vfile.read_bytes() != manifest_bytes:
-            check.fail("manifest_pointer", f"{MANIFEST_FILE} differs from {version_manifest_file(manifest['version'])}, "
-                       f"the version it names (edited by hand?)", file=MANIFEST_FILE)
+    if version is None and "version" in manifest:   # the pointer must be a copy of the newest version file
+        pointer = root / MANIFEST_FILE
+        if not pointer.is_file() or pointer.read_bytes() != manifest_bytes:
+            check.fail("manifest_pointer", f"{MANIFEST_FILE} is missing or differs from "
+                       f"{version_manifest_file(manifest['version'])}, the newest version (edited by hand, or a "
+                       f"write killed before it updated the pointer); `htdata repair {root}` rewrites it",
+                       file=MANIFEST_FILE)
     check.checked["manifest"] += 1
     return manifest, manifest_bytes
 

@@ -47,6 +47,8 @@ class EpisodeRef:
     # hand -> absolute path of the layout JSON, set once by ingest planning (htdata.ingest.plan):
     # the pipeline's [layouts] override applied, `layouts` then holds the layout ids.
     layout_files: dict[str, str] = field(default_factory=dict)
+    # every source file the episode reads (absolute paths): what ingest checksums (htdata.ingest.sourcesums)
+    source_files: tuple[str, ...] = ()
 
 
 class EpisodeStreams(abc.ABC):

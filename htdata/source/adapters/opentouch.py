@@ -142,10 +142,16 @@ def load_annotations(path: Path, task_field: str, id_column: str | None = None) 
             raise ValueError(f"{path}: annotation table has no column {col!r} (columns: {fields}); "
                              f"name the right one with {fix}")
     tasks: dict[str, str] = {}
-    for row in rows:
+    line_of: dict[str, int] = {}
+    for lineno, row in enumerate(rows, 2):   # line 1 is the header
         key = (row.get(id_column) or "").strip()
         if key:
-            tasks[key] = (row.get(task_field) or "").strip()
+            task = (row.get(task_field) or "").strip()
+            if key in tasks and tasks[key] != task:   # which one is right only the table's author knows
+                raise ValueError(f"{path}: id {key!r} is labelled twice with different tasks: line "
+                                 f"{line_of[key]} says {tasks[key]!r}, line {lineno} says {task!r}; keep one row")
+            tasks[key] = task
+            line_of.setdefault(key, lineno)
     return tasks
 
 
@@ -251,6 +257,7 @@ class OpenTouchAdapter(FileDiscovery):
                 episode_id=episode_id, source=SOURCE, source_ref=f"{path}::data/{demo_id}", task=task, scene=scene,
                 hands=hands, layouts={h: layouts[h] for h in hands}, est_frames=n_frames,
                 fingerprint=fingerprint, extra={"task_source": task_source, "demo_id": demo_id},
+                source_files=(str(path),),
             ))
         return refs
 

@@ -128,7 +128,7 @@ class TouchAnythingAdapter(FileDiscovery):
         return [EpisodeRef(
             episode_id=episode_id, source=SOURCE, source_ref=str(folder), task=task, scene=scene,
             hands=hands, layouts={h: context.layouts[h] for h in hands}, est_frames=n_frames,
-            fingerprint=fingerprint_files(root, files), extra=extra,
+            fingerprint=fingerprint_files(root, files), extra=extra, source_files=tuple(sorted(map(str, files))),
         )]
 
     @staticmethod

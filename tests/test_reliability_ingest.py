@@ -1,0 +1,130 @@
+"""Ingest killed mid-run, then its inputs edited: the resume honours the inputs as they are now.
+
+Before issue 18 a unit finished before the kill was resumed from its record
+whose fingerprint left the labels out: labels edited in between were lost
+("relabelled 0"; only a second re-run fixed them).
+"""
+
+import json
+import os
+import subprocess
+import sys
+
+from htdata.read.reader import DatasetReader
+from tests.factories import ingest_cli, make_opentouch, small_pipeline
+
+
+def test_labels_edited_between_a_crash_and_its_resume_are_honoured(tmp_path):
+    raw = make_opentouch(tmp_path / "raw")
+    pipe = small_pipeline(tmp_path, "opentouch")
+    out = tmp_path / "ds"
+    # units run largest first: demo_003 (unit 0), demo_01 (unit 1), then demo_02 (unit 2) dies
+    env = {**os.environ, "HTDATA_TEST_FAULT_UNIT": "2", "HTDATA_TEST_FAULT": "crash"}
+    killed = subprocess.run([sys.executable, "-m", "htdata.cli", "ingest", "--workers", "0", "--quiet",
+                             "--pipeline", str(pipe), str(raw), str(out)], env=env, capture_output=True, text=True)
+    assert killed.returncode == 137, killed.stderr
+    assert len(list((out / ".work").glob("unit-*.json"))) == 2          # two units finished before the kill
+    csv = raw / "annotations.csv"
+    csv.write_text(csv.read_text().replace(",pour", ",sip").replace(",wipe", ",scrub"))
+    assert ingest_cli("--pipeline", pipe, raw, out) == 0
+    tasks = {e["episode_id"]: e["task"] for e in DatasetReader(out).episodes}
+    assert tasks == {"ot-home_kitchen_p1-demo_01": "sip", "ot-home_kitchen_p1-demo_02": "cut",
+                     "ot-home_kitchen_p1-demo_003": "scrub"}
+
+
+def test_glove_rows_long_after_the_video_are_dropped_with_a_count_not_piled_into_one_sample(tmp_path):
+    import json
+
+    import numpy as np
+
+    from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+    from tests.factories import COLOURS, FRAME_NS
+
+    t_video = np.arange(9, dtype=np.int64) * FRAME_NS                  # a 0.3 s video ...
+    t_glove = np.arange(0, 200 * 10**9, 10_000_000, dtype=np.int64)     # ... beside 200 s of 100 Hz glove
+    values = np.full((t_glove.size, 16, 16), 1536.0, np.float32)
+    write_native_recording(tmp_path / "raw" / "rec", NativeRecording(
+        task="grasp_cup", scene="lab", video_storage="jpeg", video_timestamps_ns=t_video,
+        video_frames=[np.full((40, 40, 3), COLOURS[0], np.uint8)] * 9,
+        hands={"right": NativeHand("opentouch_right_16x16", values, t_glove)}))
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", small_pipeline(tmp_path, "native"), tmp_path / "raw", out) == 0
+    reader = DatasetReader(out)
+    stored = set()
+    for i in range(len(reader)):
+        meta = json.loads(reader.sample(i)["json"])
+        rows, times = meta["raw_row"]["right"], meta["raw_t_ns"]["right"]
+        assert max(times) - min(times) <= 2 * 10**9, i                  # a bounded span per sample
+        stored |= set(rows)
+    beyond = int(np.count_nonzero(t_glove >= t_video[-1] + 10**9))      # more than 1 s after the last frame
+    assert len(stored) == t_glove.size - beyond                          # everything else is kept
+    record = reader.episodes[0]
+    assert record["raw_rows_dropped"] == {"right": beyond}
+    report = json.loads((out / "reports" / "ingest.json").read_text())
+    assert any(f"{beyond} right glove rows" in n for n in report["notes"])
+
+
+def _sums(raw, files):
+    import hashlib
+
+    lines = [f"{hashlib.sha256((raw / f).read_bytes()).hexdigest()}  {f}" for f in files]
+    (raw / "SHA256SUMS").write_text("\n".join(lines) + "\n")
+
+
+def test_every_record_keeps_its_source_files_sha256(tmp_path):
+    import hashlib
+
+    raw = make_opentouch(tmp_path / "raw")
+    assert ingest_cli("--pipeline", small_pipeline(tmp_path, "opentouch"), raw, tmp_path / "ds") == 0
+    want = hashlib.sha256((raw / "home_kitchen_p1.hdf5").read_bytes()).hexdigest()
+    assert {e["episode_id"]: e["source_sha256"] for e in DatasetReader(tmp_path / "ds").episodes} == {
+        e: {"home_kitchen_p1.hdf5": want} for e in ("ot-home_kitchen_p1-demo_01", "ot-home_kitchen_p1-demo_02",
+                                                   "ot-home_kitchen_p1-demo_003")}
+
+
+def test_a_copy_that_differs_from_sha256sums_is_refused_with_verify_sources(tmp_path, capsys):
+    raw = make_opentouch(tmp_path / "raw")
+    _sums(raw, ["home_kitchen_p1.hdf5"])
+    data = bytearray((raw / "home_kitchen_p1.hdf5").read_bytes())
+    data[-100] ^= 0x01                                   # one flipped bit a decoder may never notice
+    (raw / "home_kitchen_p1.hdf5").write_bytes(bytes(data))
+    pipe = small_pipeline(tmp_path, "opentouch")
+    assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "strict") == 2   # nothing left
+    err = capsys.readouterr().err
+    assert "no episode could be ingested (3 failures)" in err
+    report = json.loads((tmp_path / "strict" / "reports" / "ingest.json").read_text())
+    assert {f["stage"] for f in report["failures"]} == {"verify"}
+    assert "differs from" in report["failures"][0]["error"] and "SHA256SUMS:1" in report["failures"][0]["error"]
+    assert ingest_cli("--pipeline", pipe, raw, tmp_path / "lenient") == 0                      # warned
+    err = capsys.readouterr().err
+    assert err.count("home_kitchen_p1.hdf5: sha256") == 1 and "ingested anyway" in err
+
+
+def test_verify_sources_passes_matching_files_and_refuses_unlisted_ones(tmp_path):
+    raw = make_opentouch(tmp_path / "raw")
+    pipe = small_pipeline(tmp_path, "opentouch")
+    assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "none") == 2      # no list at all
+    _sums(raw, ["home_kitchen_p1.hdf5"])
+    assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "ok") == 0
+    assert len(DatasetReader(tmp_path / "ok").episodes) == 3
+
+
+def test_timestamps_are_read_in_bounded_blocks_not_via_whole_length_index_arrays(tmp_path):
+    import tracemalloc
+
+    import numpy as np
+
+    from htdata.source.adapters.npzrows import NpzRows
+
+    ts = np.arange(1_000_000, dtype=np.int64) * 10_000_000          # 8 MB of timestamps, compresses well
+    np.savez_compressed(tmp_path / "t.npz", timestamps_ns=ts)
+    rows = NpzRows(tmp_path / "t.npz", "timestamps_ns")
+    tracemalloc.start()
+    try:
+        got = rows.read_all()
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+        rows.close()
+    assert np.array_equal(got, ts)
+    assert peak < ts.nbytes + 6 * 2**20, peak     # the array + ~1 MB blocks; before #18: ~4x the array
