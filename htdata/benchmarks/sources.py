@@ -1,7 +1,7 @@
 """Real frames for the benchmarks: episodes of the sample corpus read through the adapters.
 
 `episode_maps` consumes the ingest's own episode generator
-(`htdata.ingest.episode.episode_frames`: sync -> normalise -> non-finite drop
+(`htdata.ingest.episode.EpisodeStream`: sync -> normalise -> non-finite drop
 -> rasterise) without RGB, encoding or writing, so codec numbers are
 measured on the maps a dataset really stores and cannot drift from what
 ingest does; `bare_bound` times only the unavoidable work of an ingest
@@ -21,7 +21,7 @@ from htdata.source.adapters import get_adapter
 from htdata.format.codec import encode_rgb, encode_tactile
 from htdata.glove.codecrule import resolve_sources
 from htdata.ingest import Source
-from htdata.ingest.episode import EpisodeTally, episode_frames
+from htdata.ingest.episode import EpisodeStream
 from htdata.ingest.plan import resolve_layouts
 from htdata.pipeline import PipelineConfig, load_pipeline
 from htdata.source.rgb import to_square_224
@@ -48,8 +48,9 @@ def discover(pipeline: str, root: Path) -> tuple[PipelineConfig, object, list]:
 
 def episode_maps(cfg: PipelineConfig, adapter, ref) -> EpisodeMaps:
     """Synchronised, normalised, rasterised maps of one planned episode (frames with NaN taxels dropped)."""
-    tally = EpisodeTally()
-    frames = list(episode_frames(ref, cfg, adapter, tally, with_rgb=False))
+    stream = EpisodeStream(ref, cfg, adapter, with_rgb=False)
+    frames = list(stream)
+    tally = stream.finished_tally()
     hands = tally.hands
     return EpisodeMaps(ref.episode_id, {h: tally.layouts[h].layout_id for h in hands},
                        np.array([f.source_frame for f in frames], dtype=np.int64),

@@ -3,7 +3,8 @@ htdata/commands/ingest.py).
 
     plan.py     sources, discovery, layouts resolved once per episode, one work unit per episode
     append.py   against the current version: reuse / relabel / re-ingest / keep; the parent's parts
-    episode.py  `episode_frames`: one episode as a stream of canonical frames (shared with the benchmarks)
+    chunk.py    one chunk of glove rows: read, check, normalise, out-of-range policy, raw rows per frame
+    episode.py  `EpisodeStream`: one episode as a stream of canonical frames, then its tally (shared with the benchmarks)
     unit.py     one work unit: encode (format.encode_sample) + spool + shards + done record; error policy
     workdir.py  the output directory while ingesting: unit records, leftovers, resume
     commit.py   compatibility with the parent; parent parts + unit records -> a new version

@@ -1,7 +1,8 @@
 """Committing an ingest as a new version: the parent's kept parts + this run's units.
 
-Layouts come from the unit records (document + coverage, see unit.layout_entry),
-so nothing is re-resolved or re-rasterised here; the codec block comes from
+Layouts come from the unit records (the document each unit used, see
+unit.layout_entry), so nothing is re-resolved here; each layout's coverage is
+made from its document under the run's raster mode, as the units made it; the codec block comes from
 the pipelines' shared settings (plan.check_settings_agree made them equal,
 `check_compatible` made them equal to the parent's).
 """
@@ -14,8 +15,8 @@ from pathlib import Path
 
 from htdata.format.codec import DEFAULT_CODEC_INFO
 from htdata.glove.codecrule import codec_block
-from htdata.ingest.unit import decode_coverage
-from htdata.glove.layouts import load_canonical
+from htdata.glove.layouts import load_canonical, parse_layout
+from htdata.ingest.episode import rasteriser_for
 from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, write_layout_files
 from htdata.pipeline import PipelineConfig
 from htdata.format.shardio import SampleRecord, ShardRecord
@@ -42,21 +43,22 @@ def unit_result(record: dict) -> UnitResult:
                       episodes=record["episodes"])
 
 
-def layout_artifacts(records: list[dict]) -> list[LayoutArtifact]:
+def layout_artifacts(records: list[dict], raster_mode: str, canonical) -> list[LayoutArtifact]:
     """One artefact per layout id the ingested episodes use, sorted by id, from the unit records."""
     used = sorted({lid for r in records for ep in r["episodes"] for lid in ep["layouts"].values()})
     found: dict[str, dict] = {}
     for r in records:
         for lid, entry in r["layouts"].items():
             first = found.setdefault(lid, entry)
-            if first["document"] != entry["document"] or first["coverage"] != entry["coverage"]:
+            if first["document"] != entry["document"]:
                 raise ValueError(f"layout {lid!r} differs between work units {found_unit(records, lid)} "
                                  f"(a layout file changed during the ingest?); re-run the ingest")
     missing = [lid for lid in used if lid not in found]
     if missing:
         raise ValueError(f"layouts {missing} are used by episodes but no unit record carries them")
-    return [LayoutArtifact(layout_id=lid, document=found[lid]["document"], coverage=decode_coverage(found[lid]["coverage"]))
-            for lid in used]
+    return [LayoutArtifact(layout_id=lid, document=found[lid]["document"], coverage=rasteriser_for(
+        parse_layout(found[lid]["document"], f"layout {lid!r} of the unit records", canonical), raster_mode).coverage)
+        for lid in used]
 
 
 def found_unit(records: list[dict], layout_id: str) -> list[int]:
@@ -99,7 +101,8 @@ def commit(out: Path, sources: list, records: list[dict], plan, command: str) ->
 
     canon = load_canonical()
     canonical = CanonicalArtifact(document=canon.to_dict(), region_map=canon.region_map, part_map=canon.part_map)
-    layout_entries, canonical_entry = write_layout_files(out, layout_artifacts(records), canonical)
+    artifacts = layout_artifacts(records, sources[0].pipeline.tactile.raster_mode, canon)
+    layout_entries, canonical_entry = write_layout_files(out, artifacts, canonical)
     ingested = {ep["episode_id"] for r in records for ep in r["episodes"]}
     first_free = max([plan.parent.next_unit() if plan.parent else 0] + [r["unit"] + 1 for r in records])
     kept, next_unit = parent_parts(plan, ingested, first_free)

@@ -1,5 +1,8 @@
 """One episode as a stream of canonical frames: the data path every consumer shares.
 
+`EpisodeStream(ref, cfg, adapter)` is the face: iterate it once for the
+frames, then `finished_tally()` is what reading them found (the episode
+record's contents), refused until every frame was read. Underneath,
 `episode_frames(ref, cfg, adapter, tally)` opens the episode, pairs the
 clocks (sync.py), reads tactile rows `chunk_frames` at a time, checks their
 shape against the planned layout, normalises, drops frames with non-finite
@@ -14,8 +17,8 @@ becomes tactile-only samples on its first hand's clock. Raw values outside the l
 and writes nothing: the ingest unit encodes each frame with `htdata.format.table.encode_sample`, the
 benchmarks (htdata/benchmarks/sources.py) keep the maps. What the episode
 record needs (sync report, dropped frames, contact stats, notes, fps) is
-accumulated in the caller's `EpisodeTally`, complete once the generator is
-exhausted. Memory stays flat in episode length, except for the live-taxel
+accumulated in an `EpisodeTally`, complete once the generator is exhausted
+(EpisodeStream holds it and says so). Memory stays flat in episode length, except for the live-taxel
 series the tally keeps for the record's taxel health (4 bytes per live taxel
 and frame: ~0.7 KB a frame for a 169-taxel glove, ~25 MB for an hour at 30 fps).
 
@@ -35,6 +38,7 @@ import numpy as np
 
 from htdata.errors import EpisodeError
 from htdata.format.table import HANDS
+from htdata.ingest.chunk import frame_raw_rows, read_chunk
 from htdata.ingest.fullrate import FrameQueue, RawRows, RowPlan
 from htdata.ingest.tally import EpisodeTally
 from htdata.ingest.timing import StageClock
@@ -160,80 +164,6 @@ def _pair_clocks(ref, cfg: PipelineConfig, streams, hands: list[str], adapter) -
     return sync
 
 
-def _read_chunk(ref, streams, tally: EpisodeTally, normalisers: dict, start: int, stop: int,
-                clock: StageClock, plans: dict) -> tuple[dict[str, np.ndarray], np.ndarray, dict]:
-    """Normalised values of every hand for sync rows [start, stop), the mask of frames kept, and the raw rows.
-
-    Raw rows (when `plans` has the hand: keep_raw) = {hand: (paired (n,H,W), extra rows, their slots,
-    their values)}, read in ONE call with the paired rows so streamed sources never rewind.
-    """
-    sync = tally.sync
-    rgb_idx = sync.rgb_index[start:stop]
-    ok = np.ones(stop - start, dtype=bool)
-    values, raws = {}, {}
-    for h in tally.hands:
-        layout = tally.layouts[h]
-        paired = sync.tactile_index[h][start:stop]
-        extra, slots = plans[h].rows_for(start, stop) if h in plans else (np.zeros(0, np.int64), None)
-        uniq, inverse = np.unique(np.concatenate([paired, extra]), return_inverse=True)  # increasing rows
-        with clock.stage("decode"):
-            rows = np.asarray(streams.read_tactile(h, uniq))
-        if rows.ndim != 3 or rows.shape[1:] != tuple(layout.grid) or rows.shape[0] != uniq.size:
-            raise EpisodeError(ref, int(rgb_idx[0]), f"{h} tactile rows have shape {rows.shape}, expected "
-                               f"({uniq.size}, {layout.grid[0]}, {layout.grid[1]}) for layout {layout.layout_id}")
-        inverse = inverse.reshape(-1)
-        raw = rows[inverse[:paired.size]]
-        if h in plans:
-            ts = plans[h].timestamps   # as recorded (a lag the sync applied is in the sync report)
-            raws[h] = (raw, ts[paired], extra, slots, rows[inverse[paired.size:]], ts[extra])
-        with clock.stage("normalise"):
-            if start == 0:
-                normalisers[h].fit_baseline(raw)
-            v, finite = normalisers[h].apply(raw)
-            below, above = normalisers[h].out_of_range(raw)
-        for j in np.flatnonzero(ok & ~finite):
-            tally.dropped.append((int(rgb_idx[j]), f"nonfinite_tactile:{h}"))
-        ok &= finite
-        ok &= _out_of_range_policy(ref, tally, h, normalisers[h], raw, below, above, rgb_idx, ok)
-        values[h] = v
-    return values, ok, raws
-
-
-def _frame_raw_rows(sync, raws: dict, start: int, j: int) -> dict[str, RawRows]:
-    """The raw rows synchronised frame `start + j` brings: its paired row and the unpaired rows of its slot."""
-    k = start + j
-    out = {}
-    for h, (paired, paired_times, extra, slots, extra_values, extra_times) in raws.items():
-        rr = RawRows(paired_row=int(sync.tactile_index[h][k]))
-        rr.add(rr.paired_row, int(paired_times[j]), paired[j])
-        a, b = np.searchsorted(slots, [k, k + 1], side="left")
-        for row, t, value in zip(extra[a:b], extra_times[a:b], extra_values[a:b]):
-            rr.add(int(row), int(t), value)
-        out[h] = rr
-    return out
-
-
-def _out_of_range_policy(ref, tally: EpisodeTally, hand: str, normaliser, raw, below, above, rgb_idx,
-                         ok: np.ndarray) -> np.ndarray:
-    """Count a chunk's out-of-range raw values and apply the policy; returns the mask of frames that stay."""
-    bad = tally.add_out_of_range(hand, below, above)
-    tally.raw_max[hand] = float(normaliser.cfg.max_value)
-    policy = tally.oor_policy.policy if tally.oor_policy is not None else "clip"
-    if not bad.any() or policy == "clip":
-        return np.ones_like(ok)
-    if policy == "fail":
-        j = int(np.flatnonzero(bad)[0])
-        live = raw[j][normaliser.live_mask]
-        with np.errstate(invalid="ignore"):
-            worst = float(live[(live < 0) | (live > np.float32(normaliser.cfg.max_value))][0])
-        raise EpisodeError(ref, int(rgb_idx[j]), f"{hand} hand raw value {worst:g} outside [0, "
-                           f"{normaliser.cfg.max_value:g}] (layout {normaliser.layout_id}; {int(below[j])} taxels "
-                           f"below, {int(above[j])} above); pipeline [normalise] out_of_range = \"fail\"")
-    for j in np.flatnonzero(ok & bad):   # drop_frame
-        tally.dropped.append((int(rgb_idx[j]), f"out_of_range:{hand}"))
-    return ~bad
-
-
 def _render_kept(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict, tally: EpisodeTally):
     """Maps (and bend vectors) of a chunk's kept frames; their contact goes into the tally."""
     maps, bends = {}, {}
@@ -344,7 +274,7 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
             stop = min(total, start + chunk)
             rgb_idx = sync.rgb_index[start:stop]
             with frame_errors(ref, int(rgb_idx[0])):
-                values, ok, raws = _read_chunk(ref, streams, tally, normalisers, start, stop, clock, plans)
+                values, ok, raws = read_chunk(ref, streams, tally, normalisers, start, stop, clock, plans)
                 if fetcher is not None and not cfg.rgb.keep_unpaired:
                     for j in np.flatnonzero(~ok):
                         fetcher.discard(rgb_idx[j])
@@ -355,7 +285,7 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
                 k, i = start + j, int(rgb_idx[j])
                 for frame in emit.before((int(sync.t_rgb_ns[k]), i)):
                     yield from queue.push(frame, paired=False)
-                rows = _frame_raw_rows(sync, raws, start, j)
+                rows = frame_raw_rows(sync, raws, start, j)
                 if not ok[j]:   # its rows are unpaired now: stored by the previous paired frame (or the next)
                     queue.unpaired_rows(rows)
                     if cfg.rgb.keep_unpaired and fetcher is not None:
@@ -382,3 +312,33 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
             raise EpisodeError(ref, None, f"no frame left: all {total} synchronised frames had {why} "
                                f"tactile values")
         tally.finish(streams)
+
+
+class EpisodeStream:
+    """One episode as a stream of `Frame`s (iterate once) and its `EpisodeTally`, complete after.
+
+        stream = EpisodeStream(ref, cfg, adapter, clock)
+        for frame in stream:
+            ...
+        record = stream.finished_tally().record()
+    """
+
+    def __init__(self, ref, cfg: PipelineConfig, adapter, clock: StageClock | None = None, with_rgb: bool = True):
+        self.ref, self.cfg, self.adapter, self.clock, self.with_rgb = ref, cfg, adapter, clock, with_rgb
+        self._tally = EpisodeTally()
+        self._state = "new"        # -> "reading" -> "done"
+
+    def __iter__(self) -> Iterator[Frame]:
+        if self._state != "new":
+            raise RuntimeError(f"episode {self.ref.episode_id}: an EpisodeStream is read once")
+        self._state = "reading"
+        yield from episode_frames(self.ref, self.cfg, self.adapter, self._tally, self.clock, self.with_rgb)
+        self._state = "done"
+
+    def finished_tally(self) -> EpisodeTally:
+        """What reading the frames found; only once every frame was read (a partial tally would mislead)."""
+        if self._state != "done":
+            raise RuntimeError(f"episode {self.ref.episode_id}: the tally is complete only once every frame "
+                               f"was read (stream {self._state})")
+        return self._tally
+

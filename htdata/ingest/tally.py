@@ -20,7 +20,7 @@ from htdata.source.sync import SyncResult
 
 
 class EpisodeTally:
-    """What `episode_frames` learns about an episode while yielding it; read `record()` once exhausted."""
+    """What reading an episode's frames learns about it (`EpisodeStream.finished_tally()`); `record()` is its record."""
 
     def __init__(self):
         self.ref = None

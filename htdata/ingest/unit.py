@@ -1,6 +1,6 @@
 """One work unit (in a worker process, a Ray task or inline): its episodes -> shards + a done record.
 
-For each episode, `episode_frames` yields the kept frames; each is encoded
+For each episode, `EpisodeStream` yields the kept frames; each is encoded
 with `htdata.format.table.encode_sample` (codec settings from the pipeline) and
 spooled to a temp file. Only a fully successful episode is replayed into
 the unit's shards, so a bad episode never leaves half its frames behind.
@@ -10,9 +10,10 @@ an episode raises to `on_episode_error`, which turns it into a report
 failure naming file, episode and frame; the unit goes on with its next
 episode. A failure never crosses an episode boundary.
 
-The done record also carries every layout the unit's episodes used, with
-its coverage map (`layout_entry`): the commit copies them into the dataset
-without reloading layouts or rebuilding rasterisers.
+The done record also carries the document of every layout the unit's
+episodes used (`layout_entry`): the commit writes them into the dataset,
+with each coverage map made from its document, so a layout file edited
+during the run cannot slip in.
 
 Test hooks (fault injection, used by tests/test_ingest.py):
 HTDATA_TEST_FAULT_UNIT=U and HTDATA_TEST_FAULT=crash|hang make unit U
@@ -22,22 +23,20 @@ shard writer (a temp shard exists, no unit record yet).
 
 from __future__ import annotations
 
-import base64
 import dataclasses
 import os
 import pickle
 import time
 from pathlib import Path
 
-import numpy as np
 
 from htdata.source.adapters import get_adapter
 from htdata.glove.calibration import episode_calibrations
 from htdata.errors import EpisodeError
 from htdata.ingest.executors import parent_alive, report_progress
-from htdata.format.table import MAP_SHAPE, SHARDS_DIR, CodecSettings, encode_sample
+from htdata.format.table import SHARDS_DIR, CodecSettings, encode_sample
 from htdata.store.fsutil import write_bytes_atomic
-from htdata.ingest.episode import EpisodeTally, episode_frames, frame_errors, rasteriser_for
+from htdata.ingest.episode import EpisodeStream, EpisodeTally, frame_errors
 from htdata.ingest.timing import StageClock
 from htdata.ingest.workdir import clear_unit_files, dumps, spool_path, unit_record_path
 from htdata.glove.layouts import Layout
@@ -82,15 +81,15 @@ def codec_settings(cfg: PipelineConfig) -> CodecSettings:
 def spool_episode(ref, cfg: PipelineConfig, adapter, spool: Spool, clock: StageClock) -> EpisodeTally:
     """Encode and spool every kept frame of one episode; raise on any failure."""
     settings = codec_settings(cfg)
-    tally = EpisodeTally()
+    stream = EpisodeStream(ref, cfg, adapter, clock)
     spool.start()
-    for frame in episode_frames(ref, cfg, adapter, tally, clock):
+    for frame in stream:
         with frame_errors(ref, frame.source_frame):
             with clock.stage("encode"):
                 members = encode_sample(frame.sample(), settings, where=frame.key)
             with clock.stage("write"):
                 spool.add(frame.key, members)
-    return tally
+    return stream.finished_tally()
 
 
 def on_episode_error(ref, exc: BaseException) -> dict:
@@ -103,19 +102,9 @@ def on_episode_error(ref, exc: BaseException) -> dict:
             "file": file, "frame": frame, "error": msg}
 
 
-def encode_coverage(coverage: np.ndarray) -> str:
-    """(224,224) 0/1 uint8 -> text for a JSON unit record (bit-packed, base64)."""
-    return base64.b64encode(np.packbits(np.asarray(coverage, np.uint8).reshape(-1) > 0).tobytes()).decode("ascii")
-
-
-def decode_coverage(text: str) -> np.ndarray:
-    bits = np.unpackbits(np.frombuffer(base64.b64decode(text), np.uint8))
-    return bits[:MAP_SHAPE[0] * MAP_SHAPE[1]].reshape(MAP_SHAPE).astype(np.uint8)
-
-
-def layout_entry(layout: Layout, raster_mode: str) -> dict:
-    """What the commit needs of a layout: its document and its coverage in this raster mode."""
-    return {"document": layout.to_dict(), "coverage": encode_coverage(rasteriser_for(layout, raster_mode).coverage)}
+def layout_entry(layout: Layout) -> dict:
+    """What the commit needs of a layout: the document this unit used (its coverage is made from it)."""
+    return {"document": layout.to_dict()}
 
 
 def _fault_hook(unit: int) -> None:
@@ -157,7 +146,7 @@ def run_unit(task) -> dict:
                             for i, r in tally.dropped_sorted()]
                 for layout in tally.layouts.values():
                     if layout.layout_id not in layouts:
-                        layouts[layout.layout_id] = layout_entry(layout, cfg.tactile.raster_mode)
+                        layouts[layout.layout_id] = layout_entry(layout)
                 calibrations.update(episode_calibrations(cfg, tally.layouts))
                 report_progress({"unit": task.unit, "episode_id": ref.episode_id, "frames": tally.frames})
                 _fault_hook(task.unit)
