@@ -134,9 +134,22 @@ def load_canonical() -> CanonicalHand:
 # --------------------------------------------------------------------------- glove layouts
 
 
+ROTATIONS = (0, 90, 180, 270)
+
+
 @dataclass(frozen=True)
 class Block:
-    """A rectangle of the raw grid (inclusive ranges) drawn onto one place or group."""
+    """A rectangle of the raw grid (inclusive ranges) drawn onto one place or group.
+
+    Orientation: the block's raw cells (row-major, as stored) become the
+    array drawn into the place's rectangle (top row first) by, in this order,
+    1. `transpose`: raw rows become columns,
+    2. `rotate`: 0/90/180/270 degrees clockwise as seen on the canvas,
+    3. `flip_x` (mirror left-right) and `flip_y` (mirror top-bottom), in
+       canvas axes.
+    The defaults (no transpose, rotate 0, no flips) draw raw row 0 at the
+    top and raw column 0 at the left.
+    """
 
     name: str
     place: str
@@ -144,22 +157,70 @@ class Block:
     cols: tuple[int, int]
     flip_x: bool = False
     flip_y: bool = False
+    rotate: int = 0
+    transpose: bool = False
 
     @property
     def shape(self) -> tuple[int, int]:
+        """(rows, cols) of the block in the raw grid."""
         return (self.rows[1] - self.rows[0] + 1, self.cols[1] - self.cols[0] + 1)
 
-    def cell_rows(self, display_rows: np.ndarray) -> np.ndarray:
-        """Raw row of a row counted from the top of the canvas rectangle."""
-        return self.rows[1] - display_rows if self.flip_y else self.rows[0] + display_rows
+    @property
+    def display_shape(self) -> tuple[int, int]:
+        """(rows, cols) of the block as drawn on the canvas (after transpose and rotation)."""
+        h, w = self.shape
+        return (w, h) if self.transpose != (self.rotate in (90, 270)) else (h, w)
 
-    def cell_cols(self, display_cols: np.ndarray) -> np.ndarray:
-        """Raw column of a column counted from the left of the canvas rectangle."""
-        return self.cols[1] - display_cols if self.flip_x else self.cols[0] + display_cols
+    def raw_cell(self, display_rows: np.ndarray, display_cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Raw (row, col) of the cell drawn at (row, col) counted from the top-left of the place."""
+        dh, dw = self.display_shape
+        r = np.asarray(display_rows)
+        c = np.asarray(display_cols)
+        # Undo the steps in reverse order: flips, rotation, transpose.
+        if self.flip_y:
+            r = dh - 1 - r
+        if self.flip_x:
+            c = dw - 1 - c
+        ah, aw = (dw, dh) if self.rotate in (90, 270) else (dh, dw)   # shape before the rotation
+        if self.rotate == 90:      # R[i, j] = A[ah-1-j, i]
+            r, c = ah - 1 - c, r
+        elif self.rotate == 180:   # R[i, j] = A[ah-1-i, aw-1-j]
+            r, c = ah - 1 - r, aw - 1 - c
+        elif self.rotate == 270:   # R[i, j] = A[j, aw-1-i]
+            r, c = c, aw - 1 - r
+        if self.transpose:
+            r, c = c, r
+        return self.rows[0] + r, self.cols[0] + c
+
+    def display_cell(self, raw_rows: np.ndarray, raw_cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Inverse of `raw_cell`: where on the place (row, col from its top-left) a raw cell is drawn."""
+        dh, dw = self.display_shape
+        r = np.asarray(raw_rows) - self.rows[0]
+        c = np.asarray(raw_cols) - self.cols[0]
+        if self.transpose:
+            r, c = c, r
+        ah, aw = (dw, dh) if self.rotate in (90, 270) else (dh, dw)
+        if self.rotate == 90:
+            r, c = c, ah - 1 - r
+        elif self.rotate == 180:
+            r, c = ah - 1 - r, aw - 1 - c
+        elif self.rotate == 270:
+            r, c = aw - 1 - c, r
+        if self.flip_y:
+            r = dh - 1 - r
+        if self.flip_x:
+            c = dw - 1 - c
+        return r, c
 
     def to_dict(self) -> dict:
-        return {"name": self.name, "place": self.place, "rows": list(self.rows),
-                "cols": list(self.cols), "flip_x": self.flip_x, "flip_y": self.flip_y}
+        d = {"name": self.name, "place": self.place, "rows": list(self.rows),
+             "cols": list(self.cols), "flip_x": self.flip_x, "flip_y": self.flip_y}
+        # Only when set: layouts without orientation keep their exact documents (and dataset bytes).
+        if self.rotate:
+            d["rotate"] = self.rotate
+        if self.transpose:
+            d["transpose"] = True
+        return d
 
 
 @dataclass(frozen=True)
@@ -212,7 +273,8 @@ def parse_layout(doc: dict, where: str = "<layout>", canonical: CanonicalHand | 
     targets: dict[str, str] = {}
     for i, spec in enumerate(doc["blocks"]):
         b = Block(name=spec["name"], place=spec["place"], rows=tuple(spec["rows"]), cols=tuple(spec["cols"]),
-                  flip_x=bool(spec.get("flip_x", False)), flip_y=bool(spec.get("flip_y", False)))
+                  flip_x=bool(spec.get("flip_x", False)), flip_y=bool(spec.get("flip_y", False)),
+                  rotate=int(spec.get("rotate", 0)), transpose=bool(spec.get("transpose", False)))
         tag = f"{where}: block {b.name!r}"
         if any(x.name == b.name for x in blocks):
             raise ValueError(f"{tag}: duplicate block name")
@@ -223,8 +285,10 @@ def parse_layout(doc: dict, where: str = "<layout>", canonical: CanonicalHand | 
         if b.rows[1] >= grid[0] or b.cols[1] >= grid[1]:
             raise ValueError(f"{tag}: rows {list(b.rows)} cols {list(b.cols)} lie outside the {grid[0]}x{grid[1]} grid")
         x0, y0, x1, y1 = canon.target_rect(b.place)
-        if b.shape[0] > y1 - y0 or b.shape[1] > x1 - x0:
-            raise ValueError(f"{tag}: {b.shape[0]}x{b.shape[1]} cells do not fit the {y1 - y0}x{x1 - x0} px of {b.place!r}")
+        dh, dw = b.display_shape
+        if dh > y1 - y0 or dw > x1 - x0:
+            turned = " (as drawn, after transpose/rotate)" if b.display_shape != b.shape else ""
+            raise ValueError(f"{tag}: {dh}x{dw} cells{turned} do not fit the {y1 - y0}x{x1 - x0} px of {b.place!r}")
         region = owner[b.rows[0]:b.rows[1] + 1, b.cols[0]:b.cols[1] + 1]
         if (region >= 0).any():
             other = blocks[int(region[region >= 0][0])].name

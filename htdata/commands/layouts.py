@@ -26,8 +26,25 @@ _PART_BGR = np.array([[0, 0, 0], [60, 60, 230], [60, 200, 60], [230, 140, 40], [
                       [40, 200, 230], [150, 150, 150]], np.uint8)
 
 
+def orientation_grids(layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(1,H,W) grids marking each block's orientation: raw-column ramp, first raw row, first cell."""
+    ramp = np.zeros((1, *layout.grid), np.float32)
+    first_row = np.zeros_like(ramp)
+    first_cell = np.zeros_like(ramp)
+    for b in layout.blocks:
+        n = b.shape[1]
+        ramp[0, b.rows[0]:b.rows[1] + 1, b.cols[0]:b.cols[1] + 1] = 0.35 + 0.65 * np.arange(n) / max(n - 1, 1)
+        first_row[0, b.rows[0], b.cols[0]:b.cols[1] + 1] = 1.0
+        first_cell[0, b.rows[0], b.cols[0]] = 1.0
+    return ramp, first_row, first_cell
+
+
 def render_layout_png(layout: Layout, out: Path, scale: int = 2) -> None:
-    """Two panels: the canonical regions coloured by part, and this glove's coverage."""
+    """Two panels: the canonical regions coloured by part, and this glove's coverage and block orientation.
+
+    Coverage panel: covered pixels grow brighter along each block's raw columns; the block's first raw
+    row is red and its first cell (rows[0], cols[0]) yellow, so transpose/rotate/flips can be checked.
+    """
     import cv2
 
     canon = load_canonical()
@@ -37,11 +54,18 @@ def render_layout_png(layout: Layout, out: Path, scale: int = 2) -> None:
     cov = np.zeros_like(regions)
     inside = canon.region_map > 0
     cov[inside] = regions[inside] * 0.25
-    cov[r.coverage == 1] = 255
+    ramp, first_row, first_cell = (r.render(g)[0] for g in orientation_grids(layout))
+    covered = r.coverage == 1
+    cov[covered] = (255 * ramp[covered])[:, None]
+    cov[covered & (first_row > 0)] = (40, 40, 230)      # BGR red
+    cov[covered & (first_cell > 0)] = (0, 230, 255)     # BGR yellow
     img = np.concatenate([regions, np.full((CANVAS, 4, 3), 255, np.float32), cov], axis=1).astype(np.uint8)
     img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
     text = f"{layout.layout_id}  coverage {r.coverage_fraction:.3f}"
     cv2.putText(img, text, (6, img.shape[0] - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
+    legend = "red: first raw row  yellow: first cell  brighter: higher raw column"
+    cv2.putText(img, legend, (img.shape[1] // 2 + 6, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.36, (255, 255, 255), 1,
+                cv2.LINE_AA)
     out.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(out), img):
         raise OSError(f"could not write {out}")
