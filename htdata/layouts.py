@@ -238,16 +238,34 @@ class Layout:
     source: str = ""
     notes: str = ""
     path: str = ""
+    # (U,2) cells outside every block declared deliberately unused (no sensor, cross-talk lines)
+    unused_cells: np.ndarray = field(default_factory=lambda: _frozen(np.zeros((0, 2), np.int64)))
 
     @property
     def num_live(self) -> int:
         return int(self.live_mask.sum())
+
+    @property
+    def unmapped_mask(self) -> np.ndarray:
+        """(H,W) bool: cells outside every block that are neither bend nor declared unused.
+
+        The ingest watches these: one whose values move is a sensor the layout forgot (htdata.activity).
+        """
+        inside = np.zeros(self.grid, bool)
+        for b in self.blocks:
+            inside[b.rows[0]:b.rows[1] + 1, b.cols[0]:b.cols[1] + 1] = True
+        out = ~inside
+        for cells in (self.bend_cells, self.unused_cells):
+            out[cells[:, 0], cells[:, 1]] = False
+        return out
 
     def to_dict(self) -> dict:
         d = {"layout_id": self.layout_id, "hand": self.hand, "grid": list(self.grid),
              "value": dict(self.value), "blocks": [b.to_dict() for b in self.blocks],
              "dead_cells": self.dead_cells.tolist(), "bend_cells": self.bend_cells.tolist(),
              "source": self.source}
+        if len(self.unused_cells):
+            d["unused_cells"] = self.unused_cells.tolist()
         if self.notes:
             d["notes"] = self.notes
         return d
@@ -315,10 +333,19 @@ def parse_layout(doc: dict, where: str = "<layout>", canonical: CanonicalHand | 
     for i, b in enumerate(blocks):
         if not live[owner == i].any():
             raise ValueError(f"{where}: block {b.name!r} has no live cell")
+    unused = _cells(doc.get("unused_cells", []), grid, "unused_cells", where)
+    if len(unused) and (owner[unused[:, 0], unused[:, 1]] >= 0).any():
+        c = unused[owner[unused[:, 0], unused[:, 1]] >= 0][0]
+        raise ValueError(f"{where}: unused cell {c.tolist()} lies inside block {blocks[int(owner[c[0], c[1]])].name!r} "
+                         f"(a sensorless cell inside a block is a dead_cell)")
+    if len(unused) and len(bend):
+        both = {tuple(c) for c in unused.tolist()} & {tuple(c) for c in bend.tolist()}
+        if both:
+            raise ValueError(f"{where}: cell {list(sorted(both)[0])} is both a bend cell and an unused cell")
     return Layout(layout_id=doc["layout_id"], hand=doc["hand"], grid=grid, value=dict(doc["value"]),
                   blocks=tuple(blocks), dead_cells=_frozen(dead), bend_cells=_frozen(bend),
                   live_mask=_frozen(live), source=doc.get("source", ""), notes=doc.get("notes", ""),
-                  path=where)
+                  path=where, unused_cells=_frozen(unused))
 
 
 def layout_dirs(extra: tuple[str | Path, ...] | list = ()) -> list[Path]:

@@ -182,6 +182,9 @@ def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, disc
                          if ep.get("out_of_range")},
         "hands_excluded": {ep["episode_id"]: ep["hands_excluded"] for r in ordered for ep in r["episodes"]
                            if ep.get("hands_excluded")},
+        # cells outside every block whose raw values move (htdata/activity.py), per episode and hand
+        "unmapped_moving": {ep["episode_id"]: {h: {**e, "layout": ep["layouts"][h]} for h, e in ep["unmapped_moving"].items()}
+                            for r in ordered for ep in r["episodes"] if ep.get("unmapped_moving")},
         "timing": timing_summary(ran, time.perf_counter() - t_start),
     }
 
