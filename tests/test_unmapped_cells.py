@@ -39,10 +39,14 @@ def draft_layout(layout_id: str = "knit_right_16x16", unused: list | None = None
     return doc
 
 
-def knit_counts(frames: int = 240, seed: int = 0) -> np.ndarray:
-    """(T,16,16) integer raw counts: every cell rests with noise; index tip, palm and thumb get presses."""
+def knit_counts(frames: int = 240, seed: int = 0, rest_shift: float = 0.0) -> np.ndarray:
+    """(T,16,16) integer raw counts: every cell rests with noise; index tip, palm and thumb get presses.
+
+    The per-taxel offsets belong to the glove (same for every seed); `rest_shift` moves the whole rest
+    level, as a glove's rest level differs between recordings.
+    """
+    offsets = np.random.default_rng(1234).uniform(-25, 25, GRID) + rest_shift
     rng = np.random.default_rng(seed)
-    offsets = rng.uniform(-25, 25, GRID)
     raw = REST + offsets + rng.normal(0, NOISE, (frames, *GRID))
     t = np.arange(frames)
     press = np.clip(np.sin(2 * np.pi * t / 80.0), 0, None)            # presses, then rests
@@ -161,3 +165,78 @@ def test_unused_cells_silence_the_finding(tmp_path, capsys):
     assert rc == 0
     assert "unmapped_moving" not in record and report["unmapped_moving"] == {}
     assert "outside every block" not in err
+
+
+# --------------------------------------------------------------------------- htdata layouts check --against / suggest
+
+
+def _recordings(tmp_path: Path) -> tuple[Path, list[Path]]:
+    gloves = tmp_path / "gloves"
+    gloves.mkdir()
+    layout = gloves / "knit_right_16x16.json"
+    layout.write_text(json.dumps(draft_layout()))
+    recs = [write_glove_only(tmp_path / "raw" / "rec_a", "knit_right_16x16", knit_counts(seed=1)),
+            write_glove_only(tmp_path / "raw" / "rec_b", "knit_right_16x16", knit_counts(seed=2, rest_shift=60))]
+    return layout, recs
+
+
+def test_check_against_lists_the_unmapped_moving_cells_with_their_activity(tmp_path, capsys):
+    from htdata.cli import main
+
+    layout, recs = _recordings(tmp_path)
+    assert main(["layouts", "check", str(layout), "--against", *map(str, recs)]) == 1
+    out = capsys.readouterr().out
+    rows = [line.split() for line in out.splitlines() if line.lstrip().startswith("[")]
+    listed = {(int(r[0].strip("[,")), int(r[1].strip("],"))) for r in rows}
+    assert listed == set(THUMB) and len(rows) == 2 * len(THUMB)        # per recording, each with its range
+    assert all(float(r[2]) > 100 for r in rows)
+    assert "FINDING: 24 distinct cell(s)" in out
+    # the same layout with the thumb strip declared unused: nothing to find, exit 0
+    layout.write_text(json.dumps(draft_layout(unused=[list(c) for c in THUMB])))
+    assert main(["layouts", "check", str(layout), "--against", *map(str, recs)]) == 0
+    assert "no cell outside the blocks moves" in capsys.readouterr().out
+
+
+def test_check_against_a_recording_of_another_grid_is_one_line(tmp_path, capsys):
+    from htdata.cli import main
+
+    layout, _ = _recordings(tmp_path)
+    npy = tmp_path / "rows.npy"
+    np.save(npy, np.zeros((10, 8, 8), np.float32))
+    assert main(["layouts", "check", str(layout), "--against", str(npy)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "rows.npy" in err and "8x8" in err and "16x16" in err
+
+
+def test_suggest_writes_a_loadable_layout_covering_exactly_the_live_cells(tmp_path, capsys):
+    from htdata.cli import main
+    from htdata.layouts import load_layout
+
+    _, recs = _recordings(tmp_path)
+    out = tmp_path / "My Knit Glove.json"
+    assert main(["layouts", "suggest", *map(str, recs), str(out)]) == 0
+    printed = capsys.readouterr().out
+    lay = load_layout(out)
+    assert lay.layout_id == "my_knit_glove" and lay.hand == "right" and lay.grid == GRID
+    assert lay.value == {"convention": "direct", "max": lay.value["max"], "step": 1}
+    live = {tuple(c) for c in np.argwhere(lay.live_mask).tolist()}
+    want = set(THUMB) | {(r, c) for r in range(4) for c in range(4)} | {(r, c) for r in range(8, 16) for c in range(16)}
+    assert live == want                         # the rest shift of rec_b (60 counts) is not movement
+    assert len({b.place for b in lay.blocks}) == len(lay.blocks) == 3
+    assert "168 moving cell(s)" in printed and "placeholder" in printed
+    assert main(["layouts", "suggest", *map(str, recs), str(out)]) == 1      # refuses to overwrite
+    assert "exists" in capsys.readouterr().err
+    # the suggested layout passes its own check
+    assert main(["layouts", "check", str(out), "--against", *map(str, recs)]) == 0
+
+
+def test_suggest_from_npy_needs_a_hand_and_something_that_moves(tmp_path, capsys):
+    from htdata.cli import main
+
+    npy = tmp_path / "quiet.npy"
+    np.save(npy, 550 + np.random.default_rng(0).normal(0, 3, (300, 8, 8)).astype(np.float32))
+    assert main(["layouts", "suggest", str(npy), str(tmp_path / "x.json")]) == 1
+    assert "--hand" in capsys.readouterr().err
+    assert main(["layouts", "suggest", str(npy), str(tmp_path / "x.json"), "--hand", "left"]) == 1
+    assert "no cell moves" in capsys.readouterr().err
+    assert not (tmp_path / "x.json").exists()
