@@ -18,6 +18,7 @@ recording's folder). Parsed layouts are cached per (file, mtime, size).
 
 from __future__ import annotations
 
+import difflib
 import json
 import os
 from dataclasses import dataclass, field
@@ -384,9 +385,16 @@ def resolve_layout(name: str | Path, dirs: tuple | list = (), base: str | Path |
         p = d / f"{name}.json"
         if p.is_file() and p.name != CANONICAL_FILE:
             return p
-    raise LayoutNotFound(f"layout {str(name)!r} not found (looked in {', '.join(str(d) for d in searched)}; "
-                         f"available layouts: {list_layouts(dirs)}); add its JSON to one of those folders, "
-                         f"pass --layouts DIR or set {LAYOUTS_ENV}")
+    known = list_layouts(dirs)
+    raise LayoutNotFound(f"layout {str(name)!r} not found{nearest_hint(str(name), known)} (looked in "
+                         f"{', '.join(str(d) for d in searched)}; available layouts: {known}); add its JSON to one "
+                         f"of those folders, pass --layouts DIR or set {LAYOUTS_ENV}")
+
+
+def nearest_hint(name: str, known) -> str:
+    """"; did you mean 'x'?" for the closest of `known` (difflib), or "" when none is close."""
+    near = difflib.get_close_matches(name, sorted(known), n=1, cutoff=0.6)
+    return f"; did you mean {near[0]!r}?" if near else ""
 
 
 @lru_cache(maxsize=128)

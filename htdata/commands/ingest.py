@@ -31,9 +31,10 @@ import argparse
 import os
 import sys
 
+from htdata.activity import unmapped_warning
 from htdata.executors import UnitFailed
 from htdata.ingest import ingest, parse_sources
-from htdata.activity import unmapped_warning
+from htdata.ingest.run import failure_line
 from htdata.layouts import LAYOUTS_ENV
 from htdata.lock import DatasetLocked
 
@@ -77,9 +78,7 @@ def run(args: argparse.Namespace) -> int:
         return 3
     n_fail = len(report["failures"])
     for f in report["failures"]:
-        episode = f" [{f['episode_id']}]" if f["episode_id"] is not None else ""
-        frame = f" frame {f['frame']}" if f["frame"] is not None else ""
-        print(f"FAILED {f['file']}{episode}{frame}: {f['error']}", file=sys.stderr)
+        print(f"FAILED {failure_line(f)}", file=sys.stderr)
     for note in report["notes"]:
         print(f"note: {note}", file=sys.stderr)
     for episode_id, hands in report.get("unmapped_moving", {}).items():

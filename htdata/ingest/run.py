@@ -114,7 +114,9 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
             report["notes"].append(lock.note)
         write_bytes_atomic(out / INGEST_REPORT, dumps(report))   # explains a run that commits nothing too
         if parent is None and report["episodes_ingested"] == 0:
-            raise ValueError(f"no episode could be ingested ({len(report['failures'])} failures); "
+            shown = "; ".join(failure_line(f) for f in report["failures"][:3])
+            more = f"; ... {len(report['failures']) - 3} more" if len(report["failures"]) > 3 else ""
+            raise ValueError(f"no episode could be ingested ({len(report['failures'])} failures: {shown}{more}); "
                              f"see {out / INGEST_REPORT}")
         if report["episodes_ingested"] or plan.relabelled:
             manifest = commit(out, sources, records, plan, command)
@@ -150,6 +152,13 @@ def run_units(tasks: list[UnitTask], out: Path, workers: int, executor: str, add
     finally:
         bar.close()
     return [records[t.unit] for t in tasks], [records[t.unit] for t in todo]
+
+
+def failure_line(f: dict) -> str:
+    """"FILE [episode] frame N: error" for a report failure (stderr)."""
+    episode = f" [{f['episode_id']}]" if f["episode_id"] is not None else ""
+    frame = f" frame {f['frame']}" if f["frame"] is not None else ""
+    return f"{f['file']}{episode}{frame}: {f['error']}"
 
 
 def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, discovered, t_start) -> dict:
