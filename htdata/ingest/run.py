@@ -116,8 +116,8 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         if parent is None and report["episodes_ingested"] == 0:
             shown = "; ".join(failure_line(f) for f in report["failures"][:3])
             more = f"; ... {len(report['failures']) - 3} more" if len(report["failures"]) > 3 else ""
-            raise ValueError(f"no episode could be ingested ({len(report['failures'])} failures: {shown}{more}); "
-                             f"see {out / INGEST_REPORT}")
+            raise ValueError(f"no episode could be ingested ({len(report['failures'])} failures); see "
+                             f"{out / INGEST_REPORT}: {shown}{more}")
         if report["episodes_ingested"] or plan.relabelled:
             manifest = commit(out, sources, records, plan, command)
             report["version"] = manifest["version"]
