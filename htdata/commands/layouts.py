@@ -168,12 +168,20 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     sub.add_parser("list", help="list the layouts on the search path (default)")
     p = sub.add_parser("check", help="validate a layout and print its coverage; with --against, list the cells "
                                      "outside every block that move in recordings")
+    p.epilog = ("example: htdata layouts check my_glove.json --against /raw/rec_01 /raw/rec_02\n"
+                "A cell moves when its raw range in a recording > max(12 x the glove's noise, 4 x value.step) "
+                "(htdata/activity.py); cells in unused_cells or bend_cells are never listed.")
+    p.formatter_class = argparse.RawDescriptionHelpFormatter
     p.add_argument("file", metavar="LAYOUT", help="path to a layout JSON (or a layout id)")
     p.add_argument("--against", nargs="+", default=[], metavar="RECORDING",
                    help="recordings to measure (source folders or .npy raw rows); exit 1 when an unmapped cell moves")
     p.add_argument("--pipeline", default="native",
                    help="pipeline whose adapter reads the recordings (default: native)")
     p = sub.add_parser("suggest", help="write a starting layout whose blocks cover the cells that move in recordings")
+    p.epilog = ("example: htdata layouts suggest /raw/rec_01 /raw/rec_02 my_glove_right.json --hand right\n"
+                "Blocks = boxes around the cells that move in any recording; places are PLACEHOLDERS by size: "
+                "edit them, then render and check the layout (docs/LAYOUTS.md).")
+    p.formatter_class = argparse.RawDescriptionHelpFormatter
     p.add_argument("paths", nargs="+", metavar="RECORDING... OUT.json",
                    help="recordings (source folders or .npy raw rows), then the layout JSON to write")
     p.add_argument("--hand", choices=("left", "right"),
