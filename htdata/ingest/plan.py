@@ -179,9 +179,14 @@ def resolve_layouts(ref, cfg: PipelineConfig, dirs: tuple = ()):
     return dataclasses.replace(ref, layouts=ids, layout_files=files, fingerprint=fingerprint)
 
 
-def check_names_in_use(source: Source, found: list, planned: list, failed: list[dict]) -> None:
+def check_names_in_use(source: Source, found: list, planned: list, failed: list[dict], dirs: tuple = ()) -> None:
     """The pipeline's [layouts] / [normalise.*] ids are used by the source's recordings (PipelineConfig.
-    check_layout_names); skipped when nothing was planned (the failures say why)."""
+    check_layout_names); skipped when nothing was planned (the failures say why).
+
+    A hand a recording has but could not use (`hands_excluded`, e.g. an all-NaN TouchAnything grid) still
+    counts: the glove is there, so its [layouts] entry and the [normalise] table of a layout for that hand
+    are not typos.
+    """
     if not planned:
         return
     why = ""
@@ -189,8 +194,16 @@ def check_names_in_use(source: Source, found: list, planned: list, failed: list[
         f = failed[0]
         why = (f" ({len(failed)} recording(s) of this source could not be planned and are not counted, e.g. "
                f"{f['file']}: {f['error']})")
-    source.pipeline.check_layout_names({lid for r in planned for lid in r.layouts.values()},
-                                       {h for r in found for h in r.hands}, f"source {source.root}", why)
+    used = {lid for r in planned for lid in r.layouts.values()}
+    excluded = {h for r in found if isinstance(r.extra, dict) for h in r.extra.get("hands_excluded", {})}
+    for lid in set(source.pipeline.normalise) - used if excluded else ():
+        try:
+            if load_layout(lid, dirs).hand in excluded:
+                used.add(lid)
+        except (FileNotFoundError, ValueError):
+            pass
+    source.pipeline.check_layout_names(used, {h for r in found for h in r.hands} | excluded,
+                                       f"source {source.root}", why)
 
 
 def check_layout_ids_unique(refs: list) -> None:
@@ -236,7 +249,7 @@ def discover_sources(sources: list[Source], layout_dirs: tuple = ()) -> tuple[li
                 err = e if isinstance(e, EpisodeError) else EpisodeError(ref, None, str(e))
                 failed.append(failure_entry("plan", name, err, ref.source_ref))
         failures += failed
-        check_names_in_use(s, found, planned, failed)
+        check_names_in_use(s, found, planned, failed, layout_dirs)
         refs.append(planned)
     check_layout_ids_unique([r for rs in refs for r in rs])
     return refs, failures
