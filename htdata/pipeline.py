@@ -45,6 +45,7 @@ import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from htdata.glove.layouts import nearest_hint
 from htdata.glove.normalise import NormaliseConfig
 from htdata.settings import apply_settings, parse_setting  # noqa: F401  (parse_setting: an old name of this module)
 from htdata.resources import PIPELINES_DIR, validate_json
@@ -202,7 +203,11 @@ class PipelineConfig:
     codec: CodecConfig = field(default_factory=CodecConfig)
     shards: ShardsConfig = field(default_factory=ShardsConfig)
     description: str = ""
+    # layout ids this pipeline configures ([normalise.<id>] / [layouts]) for sources whose recordings may not
+    # use them, on purpose; any other id no recording of the source uses is an error (check_layout_names)
+    shared_layouts: list[str] = field(default_factory=list)
     path: str = ""   # where it was loaded from (not part of the config's identity)
+    settings: tuple[str, ...] = ()   # the --set items applied (with_overrides), to name them in errors
 
     def validate(self) -> "PipelineConfig":
         where = self.path or f"pipeline {self.name!r}"
@@ -214,9 +219,44 @@ class PipelineConfig:
         for layout_id, cfg in self.normalise.items():
             cfg.validate(f"{where}: normalise.{layout_id}")
         self.out_of_range.validate(where)
+        named = set(self.normalise) | {Path(v).stem if v.endswith(".json") else v for v in self.layouts.values()}
+        for lid in self.shared_layouts:
+            if lid not in named:
+                raise ValueError(f"{where}: shared_layouts lists {lid!r}, which no [normalise.<layout>] table or "
+                                 f"[layouts] entry of this pipeline names{nearest_hint(lid, named)}")
         self.sync.validate(where)
         check_adapter_params(self.adapter.name, self.adapter.params, where)
         return self
+
+    def check_layout_names(self, used_ids: set[str], used_hands: set[str] | None, scope: str,
+                           why: str = "") -> None:
+        """Refuse layout ids this pipeline names that no recording of `scope` uses.
+
+        A `[normalise.<id>]` table (from the file or `--set normalise.<id>.*`) whose id no recording uses,
+        or a `[layouts]` entry for a hand no recording has (`used_hands`; None skips that check), is an
+        error naming the ids in use and the nearest one: a typo would otherwise leave the glove on its
+        layout's defaults without a word. Ids in `shared_layouts` are exempt. `why` is appended (e.g. the
+        recordings that could not be planned).
+        """
+        shared = set(self.shared_layouts)
+        problems = []
+        if used_hands is not None:
+            for hand, name in sorted(self.layouts.items()):
+                lid = Path(name).stem if name.endswith(".json") else name
+                if hand not in used_hands and lid not in shared:
+                    problems.append(f"[layouts] {hand} = {name!r}: no recording of {scope} has a {hand} hand "
+                                    f"(hands in use: {', '.join(sorted(used_hands)) or 'none'})")
+        in_use = ", ".join(sorted(used_ids)) or "none"
+        for lid in sorted(self.normalise):
+            if lid in used_ids or lid in shared:
+                continue
+            given = [s for s in self.settings if s.partition("=")[0].startswith(f"normalise.{lid}.")]
+            how = f"--set {given[0]}" if given else f"[normalise.{lid}]"
+            problems.append(f"{how} names layout {lid!r}, which no recording of {scope} uses (layouts in use: "
+                            f"{in_use}{nearest_hint(lid, used_ids)})")
+        if problems:
+            raise ValueError(f"{self.path or self.name}: {'; '.join(problems)}. Fix the id, or list it in the "
+                             f"pipeline's shared_layouts = [...] when it is meant for other sources{why}")
 
     def codec_choice(self):
         """The resolved tactile codec (htdata.glove.codecrule.CodecChoice); the ingest resolves it first."""
@@ -269,6 +309,8 @@ class PipelineConfig:
         }
         if self.description:
             d["description"] = self.description
+        if self.shared_layouts:    # only when set: other pipelines keep their to_dict() (and fingerprints)
+            d["shared_layouts"] = list(self.shared_layouts)
         return d
 
     @classmethod
@@ -293,6 +335,7 @@ class PipelineConfig:
             codec=CodecConfig(**data.get("codec", {})),
             shards=ShardsConfig(**data.get("shards", {})),
             description=data.get("description", ""),
+            shared_layouts=list(data.get("shared_layouts", [])),
             path=where,
         )
         # TOML integers for float fields are fine; normalise them so to_dict() is stable.
@@ -314,6 +357,7 @@ class PipelineConfig:
         where = f"{self.path or self.name} (with --set {' '.join(settings)})"
         cfg = PipelineConfig.from_dict(data, where=where)
         cfg.path = self.path
+        cfg.settings = tuple(self.settings) + tuple(settings)
         return cfg
 
 

@@ -1,5 +1,10 @@
 """Dev-time: derive the shipped glove layouts from the source releases' facts.
 
+For a glove of your own, use `htdata layouts suggest RECORDING... OUT.json`
+(a starting layout from the cells that move in recordings, written in the
+same JSON style); this tool only holds the facts of the three shipped
+layouts, read from the releases' reference files.
+
 Reads the reference files (OpenTouch taxel regions, TouchAnything NaN masks,
 bend-sensor positions and derived regions), cross-checks them against the
 facts stated in SOURCE_FORMATS.md, and writes
@@ -14,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
 from pathlib import Path
 
@@ -24,6 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from htdata.glove.layouts import parse_layout  # noqa: E402
+from htdata.glove.layoutsuggest import layout_json_text  # noqa: E402
 
 DEFAULT_REFERENCE = Path("/work/shared/reference")
 OUT_DIR = ROOT / "schemas" / "layouts"
@@ -52,14 +57,9 @@ TOUCHANYTHING_LEFT_BLOCKS = [
 
 
 def dump_json(doc: dict, path: Path) -> None:
-    """Indented JSON with short number lists kept on one line (readable diffs)."""
-    s = json.dumps(doc, indent=2)
-    s = re.sub(r"\[\s+([-\d.,\s]+?)\s+\]",
-               lambda m: "[" + ", ".join(x.strip() for x in m.group(1).split(",")) + "]", s)
-    # Cell lists: one [r, c] pair per entry, several per line.
-    s = re.sub(r"\[\s+(\[\d+, \d+\](?:,\s+\[\d+, \d+\])*)\s+\]",
-               lambda m: "[" + ", ".join(re.findall(r"\[\d+, \d+\]", m.group(1))) + "]", s)
-    path.write_text(s + "\n")
+    """The shipped layout files' JSON style (htdata.glove.layoutsuggest.layout_json_text, shared with
+    `htdata layouts suggest`)."""
+    path.write_text(layout_json_text(doc))
 
 
 def opentouch_layout(ref: Path) -> dict:
@@ -83,7 +83,7 @@ def opentouch_layout(ref: Path) -> dict:
         "layout_id": "opentouch_right_16x16",
         "hand": "right",
         "grid": [16, 16],
-        "value": {"convention": "inverted", "max": 3072},
+        "value": {"convention": "inverted", "max": 3072, "step": 1},
         "blocks": blocks,
         "dead_cells": [list(c) for c in dead],
         "bend_cells": [],
@@ -121,7 +121,7 @@ def touchanything_left_layout(ref: Path) -> dict:
         "layout_id": "touchanything_left_21x21",
         "hand": "left",
         "grid": [21, 21],
-        "value": {"convention": "direct", "max": 1.0},
+        "value": {"convention": "direct", "max": 1.0, "step": 1 / 255},
         "blocks": blocks,
         "dead_cells": [list(c) for c in dead],
         "bend_cells": [list(c) for c in bend],

@@ -18,7 +18,11 @@ failed (unless --allow-failures), 2 for a usage/plan error, 3 when a work
 unit kept failing. `--set [PIPELINE:]dotted.key=value` overrides a pipeline
 setting without copying its file (value parsed as TOML, else text; checked
 like the file; with several pipelines, prefix the pipeline name to aim at
-one); the dataset's manifest records the effective settings.
+one); the dataset's manifest records the effective settings. Cells outside
+every block of a layout whose raw values move (range above 12 x the glove's
+frame-to-frame noise: htdata/glove/activity.py) are listed per episode and hand on
+stderr, in the episode record (`unmapped_moving`) and in the report: add
+them to a block or list them in the layout's `unused_cells`.
 """
 
 from __future__ import annotations
@@ -29,6 +33,8 @@ import sys
 
 from htdata.ingest.executors import UnitFailed
 from htdata.ingest import ingest, parse_sources
+from htdata.ingest.run import failure_line
+from htdata.glove.activity import unmapped_warning
 from htdata.glove.layouts import LAYOUTS_ENV
 from htdata.settings import aim_settings
 from htdata.store.lock import DatasetLocked
@@ -78,11 +84,12 @@ def run(args: argparse.Namespace) -> int:
         return 3
     n_fail = len(report["failures"])
     for f in report["failures"]:
-        episode = f" [{f['episode_id']}]" if f["episode_id"] is not None else ""
-        frame = f" frame {f['frame']}" if f["frame"] is not None else ""
-        print(f"FAILED {f['file']}{episode}{frame}: {f['error']}", file=sys.stderr)
+        print(f"FAILED {failure_line(f)}", file=sys.stderr)
     for note in report["notes"]:
         print(f"note: {note}", file=sys.stderr)
+    for episode_id, hands in report.get("unmapped_moving", {}).items():
+        for hand, entry in hands.items():
+            print(unmapped_warning(f"episode {episode_id}", hand, entry["layout"], entry), file=sys.stderr)
     print(f"ingested {report['episodes_ingested']}/{report['episodes_planned']} episodes, "
           f"{report['samples']} samples ({sum(report['rgb_only_samples'].values())} RGB-only), "
           f"{len(report['dropped_frames'])} frames unpaired, {n_fail} failures "

@@ -3,10 +3,21 @@
     htdata layouts                          # every layout on the search path
     htdata layouts --layouts DIR            # ... including the layouts in DIR
     htdata layouts check my_glove.json      # validate a file, print its coverage
+    htdata layouts check my_glove.json --against /raw/rec_01 /raw/rec_02
+                                            # ... and list live cells it leaves out
+    htdata layouts suggest /raw/rec_01 my_glove_right.json --hand right
+                                            # a starting layout from what moves
     htdata layouts render opentouch_right_16x16 out.png
 
 Layout ids are searched in --layouts DIR (repeatable), then $HTDATA_LAYOUTS,
 then the shipped schemas/layouts/ (htdata.glove.layouts.layout_dirs).
+
+A RECORDING is a source folder read with --pipeline's adapter (default
+native: a recording folder, or a folder of them) or a .npy of raw rows
+(T,H,W). A cell MOVES when its raw range over a recording exceeds
+max(12 x the glove's frame-to-frame noise, 4 x value.step)
+(htdata/glove/activity.py). `check --against` exits 1 when a cell outside every
+block (and not in unused_cells / bend_cells) moves.
 """
 
 from __future__ import annotations
@@ -18,16 +29,37 @@ from pathlib import Path
 import numpy as np
 
 from htdata.format.table import CANVAS
+from htdata.glove.activity import unmapped_moving
 from htdata.glove.layouts import LAYOUTS_ENV, Layout, list_layouts, load_canonical, load_layout
+from htdata.glove.layoutsuggest import layout_id_from_name, layout_json_text, suggest_layout
 from htdata.glove.rasterise import Rasteriser
+from htdata.ingest.recordingscan import scan_recordings
+from htdata.store.fsutil import write_bytes_atomic
 
 # BGR colours per part id (0 = background), for `htdata layouts render`.
 _PART_BGR = np.array([[0, 0, 0], [60, 60, 230], [60, 200, 60], [230, 140, 40], [200, 60, 200],
                       [40, 200, 230], [150, 150, 150]], np.uint8)
 
 
+def orientation_grids(layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(1,H,W) grids marking each block's orientation: raw-column ramp, first raw row, first cell."""
+    ramp = np.zeros((1, *layout.grid), np.float32)
+    first_row = np.zeros_like(ramp)
+    first_cell = np.zeros_like(ramp)
+    for b in layout.blocks:
+        n = b.shape[1]
+        ramp[0, b.rows[0]:b.rows[1] + 1, b.cols[0]:b.cols[1] + 1] = 0.35 + 0.65 * np.arange(n) / max(n - 1, 1)
+        first_row[0, b.rows[0], b.cols[0]:b.cols[1] + 1] = 1.0
+        first_cell[0, b.rows[0], b.cols[0]] = 1.0
+    return ramp, first_row, first_cell
+
+
 def render_layout_png(layout: Layout, out: Path, scale: int = 2) -> None:
-    """Two panels: the canonical regions coloured by part, and this glove's coverage."""
+    """Two panels: the canonical regions coloured by part, and this glove's coverage and block orientation.
+
+    Coverage panel: covered pixels grow brighter along each block's raw columns; the block's first raw
+    row is red and its first cell (rows[0], cols[0]) yellow, so transpose/rotate/flips can be checked.
+    """
     import cv2
 
     canon = load_canonical()
@@ -37,11 +69,18 @@ def render_layout_png(layout: Layout, out: Path, scale: int = 2) -> None:
     cov = np.zeros_like(regions)
     inside = canon.region_map > 0
     cov[inside] = regions[inside] * 0.25
-    cov[r.coverage == 1] = 255
+    ramp, first_row, first_cell = (r.render(g)[0] for g in orientation_grids(layout))
+    covered = r.coverage == 1
+    cov[covered] = (255 * ramp[covered])[:, None]
+    cov[covered & (first_row > 0)] = (40, 40, 230)      # BGR red
+    cov[covered & (first_cell > 0)] = (0, 230, 255)     # BGR yellow
     img = np.concatenate([regions, np.full((CANVAS, 4, 3), 255, np.float32), cov], axis=1).astype(np.uint8)
     img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
     text = f"{layout.layout_id}  coverage {r.coverage_fraction:.3f}"
     cv2.putText(img, text, (6, img.shape[0] - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
+    legend = "red: first raw row  yellow: first cell  brighter: higher raw column"
+    cv2.putText(img, legend, (img.shape[1] // 2 + 6, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.36, (255, 255, 255), 1,
+                cv2.LINE_AA)
     out.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(out), img):
         raise OSError(f"could not write {out}")
@@ -55,15 +94,104 @@ def describe(layout: Layout) -> dict:
             "coverage": r.coverage_fraction}
 
 
+def check_against(layout: Layout, recordings: list[str], pipeline: str) -> int:
+    """Print each recording hand's unmapped moving cells with their activity; 1 when any moves."""
+    scanned = scan_recordings(recordings, pipeline, layout.hand, layout.path)
+    if not scanned:
+        raise ValueError(f"no {layout.hand}-hand rows in {', '.join(recordings)} (layout {layout.layout_id} is "
+                         f"for the {layout.hand} hand)")
+    findings: set[tuple[int, int]] = set()
+    for s in scanned:
+        if s.activity.grid != tuple(layout.grid):
+            raise ValueError(f"{s.recording} [{s.episode_id}]: {s.hand} rows are {s.activity.grid[0]}x"
+                             f"{s.activity.grid[1]}, layout {layout.layout_id} is {layout.grid[0]}x{layout.grid[1]}")
+        found = unmapped_moving(s.activity, layout)
+        head = (f"{s.recording} [{s.episode_id}] {s.hand} hand: {found.frames} frames, noise {found.noise:.4g}, "
+                f"moving = range > {found.threshold:.4g}")
+        if not len(found):
+            print(f"{head}: no cell outside the blocks moves")
+            continue
+        findings.update(map(tuple, found.cells.tolist()))
+        print(f"{head}: {len(found)} cell(s) outside every block move:")
+        print(f"    {'cell':>9s} {'range':>9s} {'min':>9s} {'max':>9s} {'noise':>8s}")
+        for (r, c), v in zip(found.cells.tolist(), found.ranges):
+            print(f"    {f'[{r}, {c}]':>9s} {v:9.4g} {s.activity.lo[r, c]:9.4g} {s.activity.hi[r, c]:9.4g} "
+                  f"{s.activity.cell_noise[r, c]:8.3g}")
+    if findings:
+        print(f"FINDING: {len(findings)} distinct cell(s) outside every block move in {len(scanned)} recording "
+              f"hand(s) and are not drawn: add them to a block, or list them in unused_cells of "
+              f"{layout.path or layout.layout_id}")
+        return 1
+    return 0
+
+
+def suggest(args: argparse.Namespace) -> int:
+    """`htdata layouts suggest RECORDING... OUT.json`."""
+    if len(args.paths) < 2:
+        raise ValueError("suggest needs at least one RECORDING and the OUT.json to write")
+    *recordings, out = args.paths
+    out = Path(out)
+    if out.suffix != ".json":
+        raise ValueError(f"OUT must be a .json file, got {out}")
+    if out.exists() and not args.force:
+        raise ValueError(f"{out} exists (use --force to overwrite it)")
+    scanned = scan_recordings(recordings, args.pipeline, args.hand)
+    hands = sorted({s.hand for s in scanned})
+    if not scanned:
+        raise ValueError(f"no {args.hand or ''} tactile rows in {', '.join(recordings)}".replace("  ", " "))
+    if len(hands) > 1:
+        raise ValueError(f"the recordings hold both hands ({', '.join(hands)}): choose one with --hand")
+    layout_id = args.layout_id or layout_id_from_name(out.stem)
+    doc, summary = suggest_layout([s.activity for s in scanned], hands[0], layout_id,
+                                  all(s.integral for s in scanned), recordings, args.max_value)
+    write_bytes_atomic(out, layout_json_text(doc).encode())
+    print(f"{summary['moving']} moving cell(s) in {summary['recordings']} recording hand(s), {summary['frames']} "
+          f"frames (median noise {summary['noise']:.4g}, moving = range > {summary['threshold']:.4g}); "
+          f"{len(doc['blocks'])} block(s), "
+          f"{summary['inside_blocks_not_moving']} cell(s) inside them did not move:")
+    for b in doc["blocks"]:
+        turn = f", rotate {b['rotate']}" if b.get("rotate") else ""
+        print(f"    {b['name']:10s} rows {b['rows'][0]}-{b['rows'][1]} cols {b['cols'][0]}-{b['cols'][1]} "
+              f"-> {b['place']} (placeholder{turn})")
+    print(f"wrote {out}: a STARTING POINT. Set each block's place and orientation, then "
+          f"`htdata layouts render {out} out.png` and `htdata layouts check {out} --against "
+          f"{' '.join(recordings)}`")
+    return 0
+
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = __doc__.split("\n\n")[1]
+    parser.epilog = "\n\n".join(__doc__.split("\n\n")[1:])
     parser.add_argument("--layouts", action="append", default=[], metavar="DIR",
                         help=f"also search DIR for layout ids (repeatable; before ${LAYOUTS_ENV} and the "
                              "shipped layouts)")
     sub = parser.add_subparsers(dest="action", metavar="ACTION")
     sub.add_parser("list", help="list the layouts on the search path (default)")
-    p = sub.add_parser("check", help="validate a layout JSON file and print its coverage")
-    p.add_argument("file", help="path to a layout JSON")
+    p = sub.add_parser("check", help="validate a layout and print its coverage; with --against, list the cells "
+                                     "outside every block that move in recordings")
+    p.epilog = ("example: htdata layouts check my_glove.json --against /raw/rec_01 /raw/rec_02\n"
+                "A cell moves when its raw range in a recording > max(12 x the glove's noise, 4 x value.step) "
+                "(htdata/glove/activity.py); cells in unused_cells or bend_cells are never listed.")
+    p.formatter_class = argparse.RawDescriptionHelpFormatter
+    p.add_argument("file", metavar="LAYOUT", help="path to a layout JSON (or a layout id)")
+    p.add_argument("--against", nargs="+", default=[], metavar="RECORDING",
+                   help="recordings to measure (source folders or .npy raw rows); exit 1 when an unmapped cell moves")
+    p.add_argument("--pipeline", default="native",
+                   help="pipeline whose adapter reads the recordings (default: native)")
+    p = sub.add_parser("suggest", help="write a starting layout whose blocks cover the cells that move in recordings")
+    p.epilog = ("example: htdata layouts suggest /raw/rec_01 /raw/rec_02 my_glove_right.json --hand right\n"
+                "Blocks = boxes around the cells that move in any recording; places are PLACEHOLDERS by size: "
+                "edit them, then render and check the layout (docs/LAYOUTS.md).")
+    p.formatter_class = argparse.RawDescriptionHelpFormatter
+    p.add_argument("paths", nargs="+", metavar="RECORDING... OUT.json",
+                   help="recordings (source folders or .npy raw rows), then the layout JSON to write")
+    p.add_argument("--hand", choices=("left", "right"),
+                   help="which hand (required when a recording holds both, or for .npy rows)")
+    p.add_argument("--pipeline", default="native",
+                   help="pipeline whose adapter reads the recordings (default: native)")
+    p.add_argument("--layout-id", help="layout id to write (default: from OUT's file name)")
+    p.add_argument("--max", type=float, dest="max_value",
+                   help="full-scale raw value for value.max (default: the largest value seen)")
+    p.add_argument("--force", action="store_true", help="overwrite OUT.json")
     p = sub.add_parser("render", help="draw the region map + coverage of a layout as a PNG")
     p.add_argument("layout", help="layout id or path to a layout JSON")
     p.add_argument("out", help="output .png path")
@@ -85,8 +213,14 @@ def run(args: argparse.Namespace) -> int:
             _print_rows(rows)
             print("coverage = fraction of the canonical hand's pixels this glove has a sensor under")
         elif action == "check":
-            _print_rows([describe(load_layout(Path(args.file)))])
+            layout = load_layout(Path(args.file) if args.file.endswith(".json") or Path(args.file).exists()
+                                 else args.file, dirs)
+            _print_rows([describe(layout)])
             print(f"OK: {args.file}")
+            if args.against:
+                return check_against(layout, args.against, args.pipeline)
+        elif action == "suggest":
+            return suggest(args)
         elif action == "render":
             render_layout_png(load_layout(args.layout, dirs), Path(args.out))
             print(f"wrote {args.out}")

@@ -67,6 +67,10 @@ def plan_renormalise(snap: Snapshot, pipeline: PipelineConfig, patterns: list[st
     """Which episode hands get a new calibration; refuses episodes stored without raw rows (naming them)."""
     layouts = dataset_layouts(snap)
     chosen = set(resolve_episodes(snap.episode_ids(), patterns) if patterns else snap.episode_ids())
+    # A [normalise.<id>] (or --set normalise.<id>.*) no chosen episode uses would change nothing: a typo.
+    scope = f"dataset {snap.root} version {snap.version}" + (f" (episodes {', '.join(patterns)})" if patterns else "")
+    pipeline.check_layout_names({lid for ep in snap.episodes if ep["episode_id"] in chosen
+                                 for lid in ep["layouts"].values()}, None, scope)
     plan = RenormalisePlan(parent=snap.version)
     no_raw = []
     for pos, ep in enumerate(snap.episodes):

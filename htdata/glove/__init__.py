@@ -1,6 +1,9 @@
 """The glove model: what a glove's taxels mean and where they land on the canonical hand.
 
+    canonical.py    the canonical hand: places, regions, parts of the 224x224 frame
     layouts.py      glove layouts (schemas/layouts/*.json): blocks of raw cells -> canvas places
+    activity.py     which raw cells move (noise from second differences): live cells a layout leaves out
+    layoutsuggest.py a starting layout from the cells that move in recordings (`htdata layouts suggest`)
     normalise.py    glove units -> [0,1] (baselines, noise floor, full scale)
     calibration.py  the per-episode calibration a normalisation used, stored with the data
     rasterise.py    taxels -> the 224x224 map, its coverage and regions (and back)

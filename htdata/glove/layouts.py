@@ -18,6 +18,7 @@ recording's folder). Parsed layouts are cached per (file, mtime, size).
 
 from __future__ import annotations
 
+import difflib
 import json
 import os
 from dataclasses import dataclass, field
@@ -27,116 +28,33 @@ from pathlib import Path
 import numpy as np
 
 from htdata.errors import LayoutNotFound
-from htdata.format.table import CANONICAL_FILE, CANVAS
+from htdata.format.table import CANONICAL_FILE
+from htdata.glove.canonical import (GROUPS, PART_NAMES, CanonicalHand, Rect, frozen,  # noqa: F401 (names of
+                                    load_canonical, parse_canonical)  # this module too)
 from htdata.resources import LAYOUTS_DIR, validate_json
 
 LAYOUTS_ENV = "HTDATA_LAYOUTS"
-PART_NAMES: dict[int, str] = {1: "thumb", 2: "index", 3: "middle", 4: "ring", 5: "little", 6: "palm"}
-GROUPS: tuple[str, ...] = ("thumb", "index", "middle", "ring", "little", "palm")
-
-Rect = tuple[int, int, int, int]
-
-
-def _frozen(a: np.ndarray) -> np.ndarray:
-    a.setflags(write=False)
-    return a
-
-
-# --------------------------------------------------------------------------- canonical
-
-
-@dataclass(frozen=True)
-class CanonicalHand:
-    """The 224x224 template: places, their region ids and the label maps."""
-
-    places: dict[str, Rect]
-    region_ids: dict[str, int]
-    region_map: np.ndarray  # (224,224) uint8 region id, 0 = outside
-    part_map: np.ndarray  # (224,224) uint8 part id, 0 = outside
-    part_names: dict[int, str]
-    part_of_region: dict[int, int]  # region id -> part id
-    groups: dict[str, Rect]  # group name -> bounding box of its places
-    source: dict = field(repr=False, default_factory=dict)
-
-    def target_rect(self, target: str) -> Rect:
-        """Rectangle a block is resampled over: a place's rect or a group's bbox."""
-        if target in self.places:
-            return self.places[target]
-        if target in self.groups:
-            return self.groups[target]
-        raise KeyError(target)
-
-    def target_mask(self, target: str) -> np.ndarray:
-        """Pixels a block targeting `target` may draw on (only inside places)."""
-        if target in self.places:
-            return self.region_map == self.region_ids[target]
-        if target in self.groups:
-            return self.part_map == GROUPS.index(target) + 1
-        raise KeyError(target)
-
-    def to_dict(self) -> dict:
-        return json.loads(json.dumps(self.source))
-
-
-def _bbox(rects: list[Rect]) -> Rect:
-    a = np.array(rects)
-    return (int(a[:, 0].min()), int(a[:, 1].min()), int(a[:, 2].max()), int(a[:, 3].max()))
-
-
-def _rects_overlap(a: Rect, b: Rect) -> bool:
-    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
-
-
-def parse_canonical(doc: dict, where: str = CANONICAL_FILE) -> CanonicalHand:
-    """Validate a canonical template document and build its label maps."""
-    validate_json(doc, "canonical_hand", where)
-    places: dict[str, Rect] = {}
-    region_ids: dict[str, int] = {}
-    for name, spec in doc["places"].items():
-        x0, y0, x1, y1 = (int(v) for v in spec["rect"])
-        if not (0 <= x0 < x1 <= CANVAS and 0 <= y0 < y1 <= CANVAS):
-            raise ValueError(f"{where}: place {name!r}: rect {spec['rect']} is empty or outside the canvas")
-        places[name] = (x0, y0, x1, y1)
-        region_ids[name] = int(spec["region_id"])
-    if sorted(region_ids.values()) != list(range(1, len(places) + 1)):
-        raise ValueError(f"{where}: region ids must be exactly 1..{len(places)}, got {sorted(region_ids.values())}")
-    names = list(places)
-    for i, a in enumerate(names):
-        for b in names[i + 1:]:
-            if _rects_overlap(places[a], places[b]):
-                raise ValueError(f"{where}: places {a!r} and {b!r} overlap")
-    groups = {g: _bbox([r for n, r in places.items() if n.split(".")[0] == g]) for g in GROUPS}
-    for g, box in groups.items():
-        for n, r in places.items():
-            if n.split(".")[0] != g and _rects_overlap(box, r):
-                raise ValueError(f"{where}: bounding box of group {g!r} {box} overlaps place {n!r}")
-
-    region_map = np.zeros((CANVAS, CANVAS), np.uint8)
-    part_map = np.zeros((CANVAS, CANVAS), np.uint8)
-    part_of_region: dict[int, int] = {}
-    for name, (x0, y0, x1, y1) in places.items():
-        part = GROUPS.index(name.split(".")[0]) + 1
-        region_map[y0:y1, x0:x1] = region_ids[name]
-        part_map[y0:y1, x0:x1] = part
-        part_of_region[region_ids[name]] = part
-    return CanonicalHand(places=places, region_ids=region_ids, region_map=_frozen(region_map),
-                         part_map=_frozen(part_map), part_names=dict(PART_NAMES),
-                         part_of_region=part_of_region, groups=groups, source=doc)
-
-
-@lru_cache(maxsize=1)
-def load_canonical() -> CanonicalHand:
-    """The shipped template (`schemas/layouts/canonical_hand.json`), cached."""
-    path = LAYOUTS_DIR / CANONICAL_FILE
-    return parse_canonical(json.loads(path.read_text()), str(path))
 
 
 # --------------------------------------------------------------------------- glove layouts
 
 
+ROTATIONS = (0, 90, 180, 270)
+
+
 @dataclass(frozen=True)
 class Block:
-    """A rectangle of the raw grid (inclusive ranges) drawn onto one place or group."""
+    """A rectangle of the raw grid (inclusive ranges) drawn onto one place or group.
+
+    Orientation: the block's raw cells (row-major, as stored) become the
+    array drawn into the place's rectangle (top row first) by, in this order,
+    1. `transpose`: raw rows become columns,
+    2. `rotate`: 0/90/180/270 degrees clockwise as seen on the canvas,
+    3. `flip_x` (mirror left-right) and `flip_y` (mirror top-bottom), in
+       canvas axes.
+    The defaults (no transpose, rotate 0, no flips) draw raw row 0 at the
+    top and raw column 0 at the left.
+    """
 
     name: str
     place: str
@@ -144,22 +62,70 @@ class Block:
     cols: tuple[int, int]
     flip_x: bool = False
     flip_y: bool = False
+    rotate: int = 0
+    transpose: bool = False
 
     @property
     def shape(self) -> tuple[int, int]:
+        """(rows, cols) of the block in the raw grid."""
         return (self.rows[1] - self.rows[0] + 1, self.cols[1] - self.cols[0] + 1)
 
-    def cell_rows(self, display_rows: np.ndarray) -> np.ndarray:
-        """Raw row of a row counted from the top of the canvas rectangle."""
-        return self.rows[1] - display_rows if self.flip_y else self.rows[0] + display_rows
+    @property
+    def display_shape(self) -> tuple[int, int]:
+        """(rows, cols) of the block as drawn on the canvas (after transpose and rotation)."""
+        h, w = self.shape
+        return (w, h) if self.transpose != (self.rotate in (90, 270)) else (h, w)
 
-    def cell_cols(self, display_cols: np.ndarray) -> np.ndarray:
-        """Raw column of a column counted from the left of the canvas rectangle."""
-        return self.cols[1] - display_cols if self.flip_x else self.cols[0] + display_cols
+    def raw_cell(self, display_rows: np.ndarray, display_cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Raw (row, col) of the cell drawn at (row, col) counted from the top-left of the place."""
+        dh, dw = self.display_shape
+        r = np.asarray(display_rows)
+        c = np.asarray(display_cols)
+        # Undo the steps in reverse order: flips, rotation, transpose.
+        if self.flip_y:
+            r = dh - 1 - r
+        if self.flip_x:
+            c = dw - 1 - c
+        ah, aw = (dw, dh) if self.rotate in (90, 270) else (dh, dw)   # shape before the rotation
+        if self.rotate == 90:      # R[i, j] = A[ah-1-j, i]
+            r, c = ah - 1 - c, r
+        elif self.rotate == 180:   # R[i, j] = A[ah-1-i, aw-1-j]
+            r, c = ah - 1 - r, aw - 1 - c
+        elif self.rotate == 270:   # R[i, j] = A[j, aw-1-i]
+            r, c = c, aw - 1 - r
+        if self.transpose:
+            r, c = c, r
+        return self.rows[0] + r, self.cols[0] + c
+
+    def display_cell(self, raw_rows: np.ndarray, raw_cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Inverse of `raw_cell`: where on the place (row, col from its top-left) a raw cell is drawn."""
+        dh, dw = self.display_shape
+        r = np.asarray(raw_rows) - self.rows[0]
+        c = np.asarray(raw_cols) - self.cols[0]
+        if self.transpose:
+            r, c = c, r
+        ah, aw = (dw, dh) if self.rotate in (90, 270) else (dh, dw)
+        if self.rotate == 90:
+            r, c = c, ah - 1 - r
+        elif self.rotate == 180:
+            r, c = ah - 1 - r, aw - 1 - c
+        elif self.rotate == 270:
+            r, c = aw - 1 - c, r
+        if self.flip_y:
+            r = dh - 1 - r
+        if self.flip_x:
+            c = dw - 1 - c
+        return r, c
 
     def to_dict(self) -> dict:
-        return {"name": self.name, "place": self.place, "rows": list(self.rows),
-                "cols": list(self.cols), "flip_x": self.flip_x, "flip_y": self.flip_y}
+        d = {"name": self.name, "place": self.place, "rows": list(self.rows),
+             "cols": list(self.cols), "flip_x": self.flip_x, "flip_y": self.flip_y}
+        # Only when set: layouts without orientation keep their exact documents (and dataset bytes).
+        if self.rotate:
+            d["rotate"] = self.rotate
+        if self.transpose:
+            d["transpose"] = True
+        return d
 
 
 @dataclass(frozen=True)
@@ -177,16 +143,34 @@ class Layout:
     source: str = ""
     notes: str = ""
     path: str = ""
+    # (U,2) cells outside every block declared deliberately unused (no sensor, cross-talk lines)
+    unused_cells: np.ndarray = field(default_factory=lambda: frozen(np.zeros((0, 2), np.int64)))
 
     @property
     def num_live(self) -> int:
         return int(self.live_mask.sum())
+
+    @property
+    def unmapped_mask(self) -> np.ndarray:
+        """(H,W) bool: cells outside every block that are neither bend nor declared unused.
+
+        The ingest watches these: one whose values move is a sensor the layout forgot (htdata.glove.activity).
+        """
+        inside = np.zeros(self.grid, bool)
+        for b in self.blocks:
+            inside[b.rows[0]:b.rows[1] + 1, b.cols[0]:b.cols[1] + 1] = True
+        out = ~inside
+        for cells in (self.bend_cells, self.unused_cells):
+            out[cells[:, 0], cells[:, 1]] = False
+        return out
 
     def to_dict(self) -> dict:
         d = {"layout_id": self.layout_id, "hand": self.hand, "grid": list(self.grid),
              "value": dict(self.value), "blocks": [b.to_dict() for b in self.blocks],
              "dead_cells": self.dead_cells.tolist(), "bend_cells": self.bend_cells.tolist(),
              "source": self.source}
+        if len(self.unused_cells):
+            d["unused_cells"] = self.unused_cells.tolist()
         if self.notes:
             d["notes"] = self.notes
         return d
@@ -212,7 +196,8 @@ def parse_layout(doc: dict, where: str = "<layout>", canonical: CanonicalHand | 
     targets: dict[str, str] = {}
     for i, spec in enumerate(doc["blocks"]):
         b = Block(name=spec["name"], place=spec["place"], rows=tuple(spec["rows"]), cols=tuple(spec["cols"]),
-                  flip_x=bool(spec.get("flip_x", False)), flip_y=bool(spec.get("flip_y", False)))
+                  flip_x=bool(spec.get("flip_x", False)), flip_y=bool(spec.get("flip_y", False)),
+                  rotate=int(spec.get("rotate", 0)), transpose=bool(spec.get("transpose", False)))
         tag = f"{where}: block {b.name!r}"
         if any(x.name == b.name for x in blocks):
             raise ValueError(f"{tag}: duplicate block name")
@@ -223,8 +208,10 @@ def parse_layout(doc: dict, where: str = "<layout>", canonical: CanonicalHand | 
         if b.rows[1] >= grid[0] or b.cols[1] >= grid[1]:
             raise ValueError(f"{tag}: rows {list(b.rows)} cols {list(b.cols)} lie outside the {grid[0]}x{grid[1]} grid")
         x0, y0, x1, y1 = canon.target_rect(b.place)
-        if b.shape[0] > y1 - y0 or b.shape[1] > x1 - x0:
-            raise ValueError(f"{tag}: {b.shape[0]}x{b.shape[1]} cells do not fit the {y1 - y0}x{x1 - x0} px of {b.place!r}")
+        dh, dw = b.display_shape
+        if dh > y1 - y0 or dw > x1 - x0:
+            turned = " (as drawn, after transpose/rotate)" if b.display_shape != b.shape else ""
+            raise ValueError(f"{tag}: {dh}x{dw} cells{turned} do not fit the {y1 - y0}x{x1 - x0} px of {b.place!r}")
         region = owner[b.rows[0]:b.rows[1] + 1, b.cols[0]:b.cols[1] + 1]
         if (region >= 0).any():
             other = blocks[int(region[region >= 0][0])].name
@@ -251,10 +238,19 @@ def parse_layout(doc: dict, where: str = "<layout>", canonical: CanonicalHand | 
     for i, b in enumerate(blocks):
         if not live[owner == i].any():
             raise ValueError(f"{where}: block {b.name!r} has no live cell")
+    unused = _cells(doc.get("unused_cells", []), grid, "unused_cells", where)
+    if len(unused) and (owner[unused[:, 0], unused[:, 1]] >= 0).any():
+        c = unused[owner[unused[:, 0], unused[:, 1]] >= 0][0]
+        raise ValueError(f"{where}: unused cell {c.tolist()} lies inside block {blocks[int(owner[c[0], c[1]])].name!r} "
+                         f"(a sensorless cell inside a block is a dead_cell)")
+    if len(unused) and len(bend):
+        both = {tuple(c) for c in unused.tolist()} & {tuple(c) for c in bend.tolist()}
+        if both:
+            raise ValueError(f"{where}: cell {list(sorted(both)[0])} is both a bend cell and an unused cell")
     return Layout(layout_id=doc["layout_id"], hand=doc["hand"], grid=grid, value=dict(doc["value"]),
-                  blocks=tuple(blocks), dead_cells=_frozen(dead), bend_cells=_frozen(bend),
-                  live_mask=_frozen(live), source=doc.get("source", ""), notes=doc.get("notes", ""),
-                  path=where)
+                  blocks=tuple(blocks), dead_cells=frozen(dead), bend_cells=frozen(bend),
+                  live_mask=frozen(live), source=doc.get("source", ""), notes=doc.get("notes", ""),
+                  path=where, unused_cells=frozen(unused))
 
 
 def layout_dirs(extra: tuple[str | Path, ...] | list = ()) -> list[Path]:
@@ -293,9 +289,16 @@ def resolve_layout(name: str | Path, dirs: tuple | list = (), base: str | Path |
         p = d / f"{name}.json"
         if p.is_file() and p.name != CANONICAL_FILE:
             return p
-    raise LayoutNotFound(f"layout {str(name)!r} not found (looked in {', '.join(str(d) for d in searched)}; "
-                         f"available layouts: {list_layouts(dirs)}); add its JSON to one of those folders, "
-                         f"pass --layouts DIR or set {LAYOUTS_ENV}")
+    known = list_layouts(dirs)
+    raise LayoutNotFound(f"layout {str(name)!r} not found{nearest_hint(str(name), known)} (looked in "
+                         f"{', '.join(str(d) for d in searched)}; available layouts: {known}); add its JSON to one "
+                         f"of those folders, pass --layouts DIR or set {LAYOUTS_ENV}")
+
+
+def nearest_hint(name: str, known) -> str:
+    """"; did you mean 'x'?" for the closest of `known` (difflib), or "" when none is close."""
+    near = difflib.get_close_matches(name, sorted(known), n=1, cutoff=0.6)
+    return f"; did you mean {near[0]!r}?" if near else ""
 
 
 @lru_cache(maxsize=128)

@@ -71,11 +71,10 @@ class _BlockGeometry:
 def _block_geometry(block: Block, canon: CanonicalHand, layout: Layout) -> tuple[_BlockGeometry, tuple]:
     x0, y0, x1, y1 = canon.target_rect(block.place)
     ys, xs = np.nonzero(canon.target_mask(block.place))
-    h, w = block.shape
-    W = layout.grid[1]
+    h, w = block.display_shape
     ny, ay, by = _axis_neighbours(ys - y0, y1 - y0, h)
     nx, ax, bx = _axis_neighbours(xs - x0, x1 - x0, w)
-    nearest = block.cell_rows(ny) * W + block.cell_cols(nx)
+    nearest = _flat_cell(block, ny, nx, layout)
     covered = layout.live_mask.reshape(-1)[nearest]
     geom = _BlockGeometry(pix=ys * CANVAS + xs, nearest_cell=nearest, covered=covered)
     return geom, (ay, by, ax, bx)
@@ -89,11 +88,10 @@ def _render_triplets(block: Block, canon: CanonicalHand, layout: Layout, mode: s
         t = _Triplets(geom.nearest_cell[keep], pix, np.ones(len(pix)))
         return t, geom
     live = layout.live_mask.reshape(-1)
-    W = layout.grid[1]
     cells, weights = [], []
     for (ry, wy) in (ay, by):
         for (rx, wx) in (ax, bx):
-            c = block.cell_rows(ry[keep]) * W + block.cell_cols(rx[keep])
+            c = _flat_cell(block, ry[keep], rx[keep], layout)
             cells.append(c)
             weights.append(wy[keep] * wx[keep] * live[c])  # dead neighbours get no weight
     cells_a = np.stack(cells)  # (4, n)
@@ -124,11 +122,9 @@ def _sample_triplets(block: Block, canon: CanonicalHand, layout: Layout, geom: _
         return footprint
     # Bilinear value at each taxel centre, over covered pixels of this block only.
     x0, y0, x1, y1 = canon.target_rect(block.place)
-    h, w = block.shape
-    W = layout.grid[1]
-    r_raw, c_raw = np.divmod(block_live, W)
-    dr = (r_raw - block.rows[0]) if not block.flip_y else (block.rows[1] - r_raw)
-    dc = (c_raw - block.cols[0]) if not block.flip_x else (block.cols[1] - c_raw)
+    h, w = block.display_shape
+    r_raw, c_raw = np.divmod(block_live, layout.grid[1])
+    dr, dc = block.display_cell(r_raw, c_raw)
     in_block = np.zeros(NPIX, bool)
     in_block[pix] = True
     in_block &= covered_canvas
@@ -168,6 +164,12 @@ def _closest_footprint_pixels(footprint: _Triplets, cells: np.ndarray, cy: np.nd
     keep = d2 <= best[slot] + 1e-9
     n = np.bincount(slot[keep], minlength=len(cells))
     return _Triplets(rows[keep], pix[keep], 1.0 / n[slot[keep]])
+
+
+def _flat_cell(block: Block, display_rows: np.ndarray, display_cols: np.ndarray, layout: Layout) -> np.ndarray:
+    """Flat grid index of the raw cell drawn at each (row, col) of the block's display array."""
+    r, c = block.raw_cell(display_rows, display_cols)
+    return r * layout.grid[1] + c
 
 
 def _block_cells(block: Block, grid: tuple[int, int]) -> np.ndarray:

@@ -10,6 +10,8 @@ htdata/commands/ingest.py).
     commit.py   compatibility with the parent; parent parts + unit records -> a new version
     run.py      `ingest()`: lock -> plan -> executor (executors.py) -> report -> commit
     timing.py   per-stage wall time (report["timing"])
+    sourcesums.py  source files' sha256; SHA256SUMS lists beside the recordings; --verify-sources
+    recordingscan.py  raw recordings read for cell activity (`htdata layouts check --against` / `suggest`)
 
 Python use:
 

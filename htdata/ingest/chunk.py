@@ -58,6 +58,7 @@ def read_chunk(ref, streams, tally: EpisodeTally, normalisers: dict, start: int,
                                f"({uniq.size}, {layout.grid[0]}, {layout.grid[1]}) for layout {layout.layout_id}")
         inverse = inverse.reshape(-1)
         raw = rows[inverse[:paired.size]]
+        tally.add_raw(h, raw)
         if h in plans:
             ts = plans[h].timestamps   # as recorded (a lag the sync applied is in the sync report)
             raws[h] = ChunkRawRows(paired=raw, paired_times=ts[paired], extra=extra, slots=slots,

@@ -168,7 +168,14 @@ def resolve_layouts(ref, cfg: PipelineConfig, dirs: tuple = ()):
         if h in cfg.layouts:
             layout = load_layout(cfg.layouts[h], dirs, pipeline_layout_base(cfg))
         elif h in ref.layouts:
-            layout = load_layout(ref.layouts[h], dirs)
+            named_in = ref.extra.get("layouts_from") if isinstance(ref.extra, dict) else None
+            try:
+                layout = load_layout(ref.layouts[h], dirs)
+            except (FileNotFoundError, ValueError) as e:
+                if not named_in:
+                    raise
+                # the file that names the layout, so the user knows where the (mis-spelt) id comes from
+                raise EpisodeError(ref, None, f"{h} hand: {e}", file=named_in) from None
         else:
             raise EpisodeError(ref, None, f"no layout for the {h} hand (neither the source nor the pipeline's "
                                f"[layouts] names one)")
@@ -176,6 +183,33 @@ def resolve_layouts(ref, cfg: PipelineConfig, dirs: tuple = ()):
         digests[h] = sha256_file(Path(layout.path))
     fingerprint = hashlib.sha1(json.dumps([ref.fingerprint, digests], sort_keys=True).encode()).hexdigest()
     return dataclasses.replace(ref, layouts=ids, layout_files=files, fingerprint=fingerprint)
+
+
+def check_names_in_use(source: Source, found: list, planned: list, failed: list[dict], dirs: tuple = ()) -> None:
+    """The pipeline's [layouts] / [normalise.*] ids are used by the source's recordings (PipelineConfig.
+    check_layout_names); skipped when nothing was planned (the failures say why).
+
+    A hand a recording has but could not use (`hands_excluded`, e.g. an all-NaN TouchAnything grid) still
+    counts: the glove is there, so its [layouts] entry and the [normalise] table of a layout for that hand
+    are not typos.
+    """
+    if not planned:
+        return
+    why = ""
+    if failed:
+        f = failed[0]
+        why = (f" ({len(failed)} recording(s) of this source could not be planned and are not counted, e.g. "
+               f"{f['file']}: {f['error']})")
+    used = {lid for r in planned for lid in r.layouts.values()}
+    excluded = {h for r in found if isinstance(r.extra, dict) for h in r.extra.get("hands_excluded", {})}
+    for lid in set(source.pipeline.normalise) - used if excluded else ():
+        try:
+            if load_layout(lid, dirs).hand in excluded:
+                used.add(lid)
+        except (FileNotFoundError, ValueError):
+            pass
+    source.pipeline.check_layout_names(used, {h for r in found for h in r.hands} | excluded,
+                                       f"source {source.root}", why)
 
 
 def check_layout_ids_unique(refs: list) -> None:
@@ -213,13 +247,15 @@ def discover_sources(sources: list[Source], layout_dirs: tuple = ()) -> tuple[li
         except Exception as e:
             raise ValueError(f"{s.root}: discovery with adapter {name!r} failed: {e}") from e
         failures += [failure_entry("discovery", name, e) for e in bad]
-        planned = []
+        planned, failed = [], []
         for ref in found:
             try:
                 planned.append(resolve_layouts(ref, s.pipeline, layout_dirs))
             except (FileNotFoundError, ValueError, EpisodeError) as e:
                 err = e if isinstance(e, EpisodeError) else EpisodeError(ref, None, str(e))
-                failures.append(failure_entry("plan", name, err, ref.source_ref))
+                failed.append(failure_entry("plan", name, err, ref.source_ref))
+        failures += failed
+        check_names_in_use(s, found, planned, failed, layout_dirs)
         refs.append(planned)
     check_layout_ids_unique([r for rs in refs for r in rs])
     return refs, failures

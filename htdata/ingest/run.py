@@ -123,8 +123,10 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
             report["notes"].append(lock.note)
         write_bytes_atomic(out / INGEST_REPORT, dumps(report))   # explains a run that commits nothing too
         if parent is None and report["episodes_ingested"] == 0:
-            raise ValueError(f"no episode could be ingested ({len(report['failures'])} failures); "
-                             f"see {out / INGEST_REPORT}")
+            shown = "; ".join(failure_line(f) for f in report["failures"][:3])
+            more = f"; ... {len(report['failures']) - 3} more" if len(report["failures"]) > 3 else ""
+            raise ValueError(f"no episode could be ingested ({len(report['failures'])} failures); see "
+                             f"{out / INGEST_REPORT}: {shown}{more}")
         if report["episodes_ingested"] or plan.relabelled:
             manifest = commit(out, sources, records, plan, command)
             report["version"] = manifest["version"]
@@ -171,6 +173,13 @@ def run_units(tasks: list[UnitTask], out: Path, workers: int, executor: str, add
     return [records[t.unit] for t in tasks], [records[t.unit] for t in todo]
 
 
+def failure_line(f: dict) -> str:
+    """"FILE [episode] frame N: error" for a report failure (stderr)."""
+    episode = f" [{f['episode_id']}]" if f["episode_id"] is not None else ""
+    frame = f" frame {f['frame']}" if f["frame"] is not None else ""
+    return f"{f['file']}{episode}{frame}: {f['error']}"
+
+
 def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, discovered, t_start) -> dict:
     """reports/ingest.json: counts, failures, what was kept/reused/replaced, sync reports, timing."""
     failures = plan_failures + [f for r in ordered for f in r["failures"]]
@@ -212,6 +221,9 @@ def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, disc
         "hands_excluded": {ep["episode_id"]: ep["hands_excluded"] for r in ordered for ep in r["episodes"]
                            if ep.get("hands_excluded")},
         "raw_rows_dropped": raw_dropped,
+        # cells outside every block whose raw values move (htdata/glove/activity.py), per episode and hand
+        "unmapped_moving": {ep["episode_id"]: {h: {**e, "layout": ep["layouts"][h]} for h, e in ep["unmapped_moving"].items()}
+                            for r in ordered for ep in r["episodes"] if ep.get("unmapped_moving")},
         "timing": timing_summary(ran, time.perf_counter() - t_start),
     }
 

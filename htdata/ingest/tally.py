@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from htdata.glove.activity import CellActivity, unmapped_moving
 from htdata.glove.calibration import calibration_id, fit_record
 from htdata.glove.health import record_entry
 from htdata.glove.layouts import Layout
@@ -44,6 +45,7 @@ class EpisodeTally:
         self.rgb_only: dict[str, int] = {}   # reason -> RGB-only samples kept (htdata.ingest.fullrate)
         self.raw_rows_dropped: dict[str, int] = {}   # hand -> unpaired rows beyond every sample's raw span
         self.raw_span_ms: dict[str, float] = {}
+        self.activity: dict[str, CellActivity] = {}   # hand -> raw activity of every cell (htdata.glove.activity)
 
     def start(self, ref, hands: list[str], layouts: dict[str, Layout], oor_policy=None) -> None:
         self.ref, self.hands, self.layouts = ref, hands, layouts
@@ -51,6 +53,21 @@ class EpisodeTally:
         self.contact_max = {h: 0.0 for h in hands}
         self.out_of_range = {h: [0, 0, 0] for h in hands}
         self.oor_policy = oor_policy
+        self.activity = {h: CellActivity(layouts[h].grid) for h in hands}
+
+    def add_raw(self, hand: str, raw: np.ndarray) -> None:
+        """The paired raw rows of one chunk, in time order: activity of every cell (unmapped moving cells)."""
+        self.activity[hand].add(raw)
+
+    def unmapped_moving_record(self) -> dict:
+        """{hand: MovingCells.record()} for hands with cells outside every block that move ({} when none)."""
+        out = {}
+        for h in self.hands:
+            if h in self.activity:
+                found = unmapped_moving(self.activity[h], self.layouts[h])
+                if len(found):
+                    out[h] = found.record()
+        return out
 
     def add_out_of_range(self, hand: str, below: np.ndarray, above: np.ndarray) -> np.ndarray:
         """Count one chunk's out-of-range taxels; returns the per-frame mask of frames holding any."""
@@ -129,6 +146,8 @@ class EpisodeTally:
             record["out_of_range"] = self.out_of_range_record()
         if self.raw_rows_dropped:
             record["raw_rows_dropped"] = dict(sorted(self.raw_rows_dropped.items()))
+        if self.unmapped_moving_record():   # live cells the layout leaves out (htdata.glove.activity)
+            record["unmapped_moving"] = self.unmapped_moving_record()
         if isinstance(ref.extra, dict) and ref.extra.get("hands_excluded"):
             record["hands_excluded"] = dict(sorted(ref.extra["hands_excluded"].items()))
         record["taxel_health"] = {h: record_entry(self.live_series.get(h, []), self.layouts[h]) for h in hands}

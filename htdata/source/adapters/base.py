@@ -235,14 +235,21 @@ def fingerprint_files(root: Path, files: Iterable[Path]) -> str:
     return h.hexdigest()
 
 
+ANY_GRID = "*"   # a ref.layout_files value: read the hand's rows whatever their grid (check_tactile_shape)
+
+
 def check_tactile_shape(ref: EpisodeRef, hand: str, shape: tuple[int, ...], file: Path | str) -> None:
     """Raise EpisodeError unless `shape` is (M, H, W) with (H, W) = the hand's layout grid.
 
     The layout is the one planning resolved (`ref.layout_files`, pipeline
     override applied), else the adapter's own `ref.layouts` entry; parsed
     layouts are cached per file version by `htdata.glove.layouts.load_layout`.
+    A `layout_files` entry ANY_GRID skips the check: the caller reads rows no
+    layout describes yet (`htdata layouts suggest`).
     """
 
+    if ref.layout_files.get(hand) == ANY_GRID:
+        return
     layout_id = ref.layout_files.get(hand) or ref.layouts[hand]
     try:
         grid = tuple(load_layout(layout_id).grid)

@@ -128,7 +128,7 @@ class NativeAdapter(FileDiscovery):
             episode_id=episode_id, source=SOURCE, source_ref=str(folder), task=doc["task"], scene=doc["scene"],
             hands=hands, layouts=layouts, est_frames=est_frames,
             fingerprint=fingerprint_files(root, files), source_files=tuple(sorted(map(str, files))),
-            extra={"operator": doc.get("operator", ""), "clock_offset_ns":
+            extra={"operator": doc.get("operator", ""), "layouts_from": str(rec_path), "clock_offset_ns":
                    {h: int(doc["hands"][h].get("clock_offset_ns", 0)) for h in hands}},
         )]
 

@@ -1,0 +1,150 @@
+"""A starting layout from recordings: blocks around the cells that move (`htdata layouts suggest`).
+
+The cells whose raw values move in any recording (htdata.glove.activity's rule,
+each recording against its own noise over the whole grid) are grouped into 4-connected components; each component's
+bounding box becomes a block (boxes that overlap are merged until none do).
+Blocks are given DISTINCT PLACEHOLDER places, largest block first: the
+`palm` group when it fits, then the largest free place it fits (rotated by
+90 when it only fits that way). The places and orientations are guesses by
+size, not anatomy: the user presses taxels, looks at `htdata layouts render`,
+and edits each block's `place` and `rotate` / `flip_x` / `flip_y`
+(docs/LAYOUTS.md). Cells inside a box that never moved stay live (they may
+simply not have been pressed); every written layout parses.
+
+`layout_json_text` is the compact JSON style of the shipped layout files
+(one line per short list), shared with tools/derive_layouts.py.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+
+from htdata.glove.activity import CellActivity, moving_cells
+from htdata.glove.layouts import load_canonical, parse_layout
+
+
+def layout_json_text(doc: dict) -> str:
+    """Indented JSON with short number lists kept on one line (readable diffs)."""
+    s = json.dumps(doc, indent=2)
+    s = re.sub(r"\[\s+([-\d.,\s]+?)\s+\]",
+               lambda m: "[" + ", ".join(x.strip() for x in m.group(1).split(",")) + "]", s)
+    # Cell lists: one [r, c] pair per entry, several per line.
+    s = re.sub(r"\[\s+(\[\d+, \d+\](?:,\s+\[\d+, \d+\])*)\s+\]",
+               lambda m: "[" + ", ".join(re.findall(r"\[\d+, \d+\]", m.group(1))) + "]", s)
+    return s + "\n"
+
+
+def layout_id_from_name(name: str) -> str:
+    """A valid layout id from a file name ("My Glove-R.json" -> "my_glove_r")."""
+    s = re.sub(r"[^a-z0-9_]+", "_", name.lower()).strip("_")
+    return s if s and s[0].isalnum() else f"glove_{s}".strip("_")
+
+
+def cell_boxes(mask: np.ndarray) -> list[tuple[int, int, int, int]]:
+    """Inclusive (r0, r1, c0, c1) boxes around the 4-connected components of `mask`, merged until disjoint."""
+    from scipy import ndimage
+
+    labels, n = ndimage.label(mask)
+    boxes = [(s[0].start, s[0].stop - 1, s[1].start, s[1].stop - 1) for s in ndimage.find_objects(labels)]
+    merged = True
+    while merged:
+        merged = False
+        for i in range(len(boxes)):
+            for j in range(i + 1, len(boxes)):
+                a, b = boxes[i], boxes[j]
+                if a[0] <= b[1] and b[0] <= a[1] and a[2] <= b[3] and b[2] <= a[3]:
+                    boxes[i] = (min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3]))
+                    del boxes[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    return sorted(boxes)
+
+
+def _assign_places(boxes: list[tuple[int, int, int, int]]) -> list[tuple[str, int]]:
+    """(place, rotate) per box: distinct targets, largest box first, each where it fits."""
+    canon = load_canonical()
+
+    def size(t: str) -> tuple[int, int]:
+        x0, y0, x1, y1 = canon.target_rect(t)
+        return y1 - y0, x1 - x0
+
+    places = sorted(canon.places, key=lambda p: -size(p)[0] * size(p)[1])
+    taken: set[str] = set()
+    out: dict[int, tuple[str, int]] = {}
+    for i in sorted(range(len(boxes)), key=lambda i: -(boxes[i][1] - boxes[i][0] + 1) * (boxes[i][3] - boxes[i][2] + 1)):
+        h, w = boxes[i][1] - boxes[i][0] + 1, boxes[i][3] - boxes[i][2] + 1
+        free = (["palm"] if not any(t.startswith("palm") for t in taken) else []) + \
+               [p for p in places if p not in taken and not ("palm" in taken and p.startswith("palm."))]
+        for target in free:
+            ph, pw = size(target)
+            if h <= ph and w <= pw:
+                out[i] = (target, 0)
+                break
+            if w <= ph and h <= pw:
+                out[i] = (target, 90)
+                break
+        else:
+            raise ValueError(f"a block of {h}x{w} moving cells (rows {boxes[i][0]}-{boxes[i][1]}, cols "
+                             f"{boxes[i][2]}-{boxes[i][3]}) fits no free place of the canonical hand; "
+                             f"write that part of the layout by hand")
+        taken.add(out[i][0])
+    return [out[i] for i in range(len(boxes))]
+
+
+def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, integral: bool, sources: list[str],
+                   max_value: float | None = None) -> tuple[dict, dict]:
+    """(layout document, summary) for the cells that move in any of `activities` (one per recording hand).
+
+    Each recording is judged on its own (its own noise, its own range): a glove's rest level may differ
+    between recordings, and pooling them would make that difference look like movement.
+    """
+    grid = activities[0].grid
+    if any(a.grid != grid for a in activities):
+        raise ValueError(f"recordings have different grids: {sorted({a.grid for a in activities})}")
+    step = 1.0 if integral else None
+    mask = np.zeros(grid, bool)
+    noises, thresholds = [], []
+    for a in activities:
+        found = moving_cells(a, np.ones(grid, bool), a.noise(), step)
+        mask[found.cells[:, 0], found.cells[:, 1]] = True
+        noises.append(found.noise)
+        thresholds.append(found.threshold)
+    noise, threshold = float(np.median(noises)), float(np.median(thresholds))
+    frames = sum(a.frames for a in activities)
+    moving = int(mask.sum())
+    if not moving:
+        raise ValueError(f"no cell moves in {', '.join(sources)} (noise {noise:.4g}, threshold "
+                         f"{threshold:.4g} raw units over {frames} frames): press the glove while recording")
+    boxes = cell_boxes(mask)
+    targets = _assign_places(boxes)
+    top = float(max_value) if max_value is not None else max(float(a.hi[a.count > 0].max()) for a in activities)
+    value = {"convention": "direct", "max": int(top) if integral and top == int(top) else top}
+    if integral:
+        value["step"] = 1
+    blocks = []
+    for k, ((r0, r1, c0, c1), (place, rot)) in enumerate(zip(boxes, targets), start=1):
+        b = {"name": f"block_{k}", "place": place, "rows": [int(r0), int(r1)], "cols": [int(c0), int(c1)],
+             "flip_x": False, "flip_y": False}
+        if rot:
+            b["rotate"] = rot
+        blocks.append(b)
+    doc = {"layout_id": layout_id, "hand": hand, "grid": list(grid), "value": value, "blocks": blocks,
+           "dead_cells": [], "bend_cells": [],
+           "source": f"htdata layouts suggest from {', '.join(sources)} ({frames} frames)",
+           "notes": (f"STARTING POINT, edit it: {moving} moving cells (range in a recording > max(12 x its noise, "
+                     f"4 steps); median noise {noise:.4g}, threshold {threshold:.4g} raw units) grouped into {len(blocks)} block(s). Places were "
+                     f"assigned by size, not anatomy: set each block's place and orientation (rotate, flip_x, "
+                     f"flip_y; docs/LAYOUTS.md), split blocks that span several places, mark sensorless cells "
+                     f"inside blocks as dead_cells and non-pressure cells as bend_cells, and set value.max to "
+                     f"the glove's full-scale raw value (here: the largest value seen, {top:g}).")}
+    parse_layout(doc, f"suggested layout {layout_id}")   # always a loadable starting point
+    summary = {"moving": moving, "noise": noise, "threshold": threshold, "frames": frames,
+               "recordings": len(activities),
+               "inside_blocks_not_moving": int(sum((r1 - r0 + 1) * (c1 - c0 + 1) for r0, r1, c0, c1 in boxes)
+                                               - moving)}
+    return doc, summary
