@@ -30,6 +30,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "preview": ("htdata.commands.preview", "render a contact sheet: RGB beside left/right tactile maps"),
     "layouts": ("htdata.commands.layouts", "list, check and render hand layouts (register a glove)"),
     "publish": ("htdata.commands.publish", "upload a dataset to an fsspec URL (s3://, gs://, memory://), manifest last"),
+    "export": ("htdata.commands.export", "write a dataset version in another format: `export lerobot` (LeRobot v3.0)"),
     "bench": ("htdata.commands.bench", "run the benchmarks and write bench/results.json + report"),
 }
 

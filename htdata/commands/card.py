@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from htdata.versions_arg import version_arg
 from htdata import card
 
 
@@ -13,7 +14,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.epilog = card.__doc__
     parser.add_argument("dataset", help="committed dataset directory")
     parser.add_argument("out", type=Path, metavar="OUT.html", help="card to write (OUT.md and OUT_files/ beside it)")
-    parser.add_argument("--version", type=int, default=None, metavar="N", help="version (default: current)")
+    parser.add_argument("--version", type=version_arg, default=None, metavar="N", help="version (default: current)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from htdata.versions_arg import version_arg
 from htdata.versions import diff_versions
 
 
@@ -14,8 +15,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.epilog = ("'changed' = same episode id, different record (re-ingested from changed inputs, "
                      "trimmed, relabelled); where an episode sits (shards, first sample) is ignored.")
     parser.add_argument("dataset", type=Path, help="committed dataset directory")
-    parser.add_argument("a", type=int, help="older version (htdata log lists them)")
-    parser.add_argument("b", type=int, help="newer version")
+    parser.add_argument("a", type=version_arg, help="older version (htdata log lists them)")
+    parser.add_argument("b", type=version_arg, help="newer version")
     parser.add_argument("--json", action="store_true", help="print the diff as JSON")
 
 

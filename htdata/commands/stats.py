@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from htdata.versions_arg import version_arg
 from htdata import stats
 from htdata.health import CLASSES
 
@@ -14,7 +15,7 @@ from htdata.health import CLASSES
 def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.epilog = stats.__doc__
     parser.add_argument("dataset", help="committed dataset directory (or URL)")
-    parser.add_argument("--version", type=int, default=None, metavar="N", help="version (default: current)")
+    parser.add_argument("--version", type=version_arg, default=None, metavar="N", help="version (default: current)")
     parser.add_argument("--by", choices=stats.GROUPINGS, default=None,
                         help="break the glove numbers down per task / scene / source, or merge per layout / hand")
     parser.add_argument("--json", action="store_true", help="print the full JSON (per-taxel mean/std included)")

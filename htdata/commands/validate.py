@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from htdata.versions_arg import version_arg
 from htdata import validate
 from htdata.format import VALIDATE_REPORT
 
@@ -14,7 +15,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.epilog = validate.__doc__
     parser.add_argument("dataset", type=Path, help="committed dataset directory")
     parser.add_argument("--split", default=None, metavar="NAME", help="also check split NAME of that version")
-    parser.add_argument("--version", type=int, default=None, metavar="N",
+    parser.add_argument("--version", type=version_arg, default=None, metavar="N",
                         help="validate version N (htdata log lists them; default: the current version)")
     parser.add_argument("--deep", action="store_true", help="decode every sample (default: a seeded sample)")
     parser.add_argument("--sample-frac", type=float, default=0.05,
