@@ -13,7 +13,10 @@ Layout written (LeRobot's v3.0 format, codebase_version "v3.0"):
 
 One LeRobot episode per htdata episode. Frame features:
   observation.images.egocentric       video, the stored 224x224 RGB frame
-  observation.tactile.<hand>.raw      float32, the glove's own (rows, cols) grid: the raw row paired with the frame
+  observation.tactile.<hand>.raw      float32 (rows*cols,): the raw row paired with the frame, the glove's grid
+                                      flattened row-major (info.grid = [rows, cols]; names "r<row>c<col>")
+                                      (non-finite cells, i.e. no taxel there, as 0; a hand recorded with two grid
+                                      shapes gets one feature per shape, ...raw_<rows>x<cols>)
   observation.tactile.<hand>.map      video (--maps only), the canonical 224x224 map, value x 255 as grey
   observation.present                 bool per source (egocentric, tactile.<hand>...): is the value real?
 LeRobot needs every feature in every frame, so a frame missing a source is filled and flagged
@@ -296,7 +299,12 @@ def features(plan: _Plan) -> dict:
         feats[key] = {"dtype": "video", "shape": [CANVAS, CANVAS, 3], "names": ["height", "width", "channels"],
                       "info": dict(video_info)}
     for slot in plan.slots:
-        feats[slot.key] = {"dtype": "float32", "shape": list(slot.grid), "names": ["rows", "cols"]}
+        rows, cols = slot.grid
+        # flat (rows*cols,), row-major, the grid in "info": LeRobot's tooling and policies take state
+        # features as 1-D vectors (lerobot-doctor 0.2.0 crashes on a 2-D one); reshape(rows, cols) restores it
+        feats[slot.key] = {"dtype": "float32", "shape": [rows * cols],
+                           "names": [f"r{r}c{c}" for r in range(rows) for c in range(cols)],
+                           "info": {"grid": [rows, cols], "order": "row-major", "units": "raw glove units"}}
     feats[PRESENT_KEY] = {"dtype": "bool", "shape": [1 + len(plan.slots)],
                           "names": ["egocentric", *[slot.name for slot in plan.slots]]}
     for name, dtype in (("timestamp", "float32"), ("frame_index", "int64"), ("episode_index", "int64"),
@@ -365,7 +373,7 @@ def export_lerobot(cfg: LeRobotExportConfig, progress: Progress | None = None,
 def _write(reader, plan: _Plan, cfg: LeRobotExportConfig, work: Path, pa, pq, progress, on_total) -> dict:
     feats = features(plan)
     schema = pa.schema(
-        [pa.field(slot.key, pa.list_(pa.list_(pa.float32()))) for slot in plan.slots]
+        [pa.field(slot.key, pa.list_(pa.float32())) for slot in plan.slots]
         + [pa.field(PRESENT_KEY, pa.list_(pa.bool_())), pa.field("timestamp", pa.float32()),
            pa.field("frame_index", pa.int64()), pa.field("episode_index", pa.int64()),
            pa.field("index", pa.int64()), pa.field("task_index", pa.int64())])
@@ -416,7 +424,9 @@ def _write(reader, plan: _Plan, cfg: LeRobotExportConfig, work: Path, pa, pq, pr
                         if row.shape != plan.slots[k].grid:
                             raise ValueError(f"{where}: {hand} raw row shaped {row.shape}, "
                                              f"expected {plan.slots[k].grid} (its layout's grid)")
-                        raw[k][f] = row
+                        # NaN / Inf mark cells without a taxel in some sources: 0 (LeRobot stats and
+                        # normalisation would turn one NaN into NaN everywhere); finite values stay exact
+                        raw[k][f] = np.where(np.isfinite(row), row, 0.0)
                         present[f, 1 + k] = True
                 for hand in plan.hands:
                     if cfg.maps:
@@ -440,8 +450,9 @@ def _write(reader, plan: _Plan, cfg: LeRobotExportConfig, work: Path, pa, pq, pr
             for k, slot in enumerate(plan.slots):
                 cols[slot.key] = cols[slot.key][present[:, 1 + k]]      # stats of real rows only
             for key, values in cols.items():
-                stats[key].add_episode(values if values.ndim > 1 else values[:, None])
-            table = pa.table({slot.key: pa.array(raw[k].tolist(), schema.field(slot.key).type)
+                if len(values):
+                    stats[key].add_episode(values.reshape(len(values), -1))
+            table = pa.table({slot.key: pa.array(raw[k].reshape(n, -1).tolist(), schema.field(slot.key).type)
                               for k, slot in enumerate(plan.slots)} | {
                 PRESENT_KEY: pa.array(present.tolist(), pa.list_(pa.bool_())),
                 "timestamp": pa.array(cols["timestamp"], pa.float32()),

@@ -13,7 +13,10 @@ What is written (LeRobot v3.0: meta/info.json, meta/stats.json, meta/tasks.parqu
 meta/episodes/, data/chunk-*/file-*.parquet, videos/<key>/chunk-*/file-*.mp4):
   one LeRobot episode per htdata episode, its task in meta/tasks.parquet;
   observation.images.egocentric     H.264 video of the 224x224 RGB frames
-  observation.tactile.<hand>.raw    float32 (rows, cols): the glove row paired with the frame, as recorded
+  observation.tactile.<hand>.raw    float32 (rows*cols,): the glove row paired with the frame, as recorded,
+                                    row-major (the feature's info.grid gives [rows, cols] to reshape it);
+                                    NaN/Inf cells (no taxel there) as 0; a hand recorded with two grid shapes
+                                    gets one feature per shape: ...raw_<rows>x<cols>
   observation.tactile.<hand>.map    with --maps: the canonical 224x224 map as grey video (value x 255)
   observation.present               bool per source (egocentric, tactile.<hand>): is this frame's value real?
   meta/htdata/                      glove layouts, coverage and region masks, split assignment, episode ids
