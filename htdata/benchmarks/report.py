@@ -16,6 +16,7 @@ HEADINGS = {
     "stats": "## htdata stats vs tactile-only decode",
     "lag": "## Tactile-video lag estimator (known lags)",
     "raw": "## Raw glove rows: storage cost and maps from raw rows",
+    "export": "## htdata export lerobot: speed and size vs htdata's shards",
 }
 TARGET_OVERHEAD_PCT = 30.0
 TARGET_SCALING = 1.8
@@ -224,9 +225,16 @@ def _raw_markdown(d: dict) -> list[str]:
     return raw_markdown(d)
 
 
+def _export_markdown(d: dict) -> list[str]:
+    from htdata.benchmarks.export import export_markdown   # the section's own module renders its table
+
+    return export_markdown(d)
+
+
 RENDERERS = {"machine": _machine, "codecs": _codecs, "rgb": _rgb, "raster": _raster, "ingest": _ingest,
              "rss": _rss, "loader": _loader, "index": _index, "validate": _validate,
-             "append": _append, "stats": _stats, "lag": _lag_markdown, "raw": _raw_markdown}
+             "append": _append, "stats": _stats, "lag": _lag_markdown, "raw": _raw_markdown,
+             "export": _export_markdown}
 
 
 def _discovered(name: str, results: dict) -> list[str]:
