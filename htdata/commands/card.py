@@ -10,8 +10,21 @@ from htdata.versions_arg import version_arg
 from htdata import card
 
 
+EPILOG = """\
+One self-contained HTML page (plus a Markdown twin OUT.md with its images in OUT_files/) that
+opens offline: what the dataset holds (frames per task and scene, sources, sample format, how
+to load it), how often each hand region is touched, value histograms, taxel health, clock sync
+and lag, split sizes and preview strips of a few episodes. Defaults: the current version; the
+title is the dataset folder's name unless --title is given.
+
+Examples:
+  htdata card data/dataset card.html
+  htdata card data/dataset card.html --title "Kitchen tasks v1" --description "46 episodes, two gloves" --license CC-BY-4.0
+"""
+
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = card.__doc__
+    parser.epilog = EPILOG
     parser.add_argument("dataset", help="committed dataset directory")
     parser.add_argument("out", type=Path, metavar="OUT.html", help="card to write (OUT.md and OUT_files/ beside it)")
     parser.add_argument("--version", type=version_arg, default=None, metavar="N", help="version (default: current)")

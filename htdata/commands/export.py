@@ -46,7 +46,10 @@ Open it with LeRobot (pip install lerobot), or check it with lerobot-doctor:
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = __doc__
+    parser.epilog = ("Targets: lerobot (LeRobot v3.0). `htdata export lerobot --help` says what is written.\n\n"
+                     "Examples:\n  htdata export lerobot data/dataset data/lerobot\n"
+                     "  htdata export lerobot data/dataset data/lerobot_test --split main --part test")
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
     sub = parser.add_subparsers(dest="target", metavar="TARGET", required=True)
     p = sub.add_parser("lerobot", help="LeRobot v3.0 (parquet + mp4)", epilog=EPILOG,
                        description="Export one version of DATASET as a LeRobot v3.0 dataset in OUT.",

@@ -56,7 +56,7 @@ def describe(layout: Layout) -> dict:
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = __doc__.split("\n\n")[1]
+    parser.epilog = "Examples:\n" + __doc__.split("\n\n")[1]
     parser.add_argument("--layouts", action="append", default=[], metavar="DIR",
                         help=f"also search DIR for layout ids (repeatable; before ${LAYOUTS_ENV} and the "
                              "shipped layouts)")

@@ -17,6 +17,10 @@ Layout written under OUT:
 Same --seed -> identical tactile arrays and JPEG bytes. OUT/.complete (written last) names
 the seed, scale and formats of a finished corpus; --reuse keeps such a corpus and
 rewrites anything else (a corpus cut short, or one of another seed).
+
+Examples:
+  htdata sample data/raw --scale small
+  htdata sample data/raw --seed 1 --reuse
 """
 
 
