@@ -27,12 +27,18 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.epilog = EPILOG
     parser.add_argument("dataset", help="committed dataset directory")
     parser.add_argument("out", type=Path, metavar="OUT.html", help="card to write (OUT.md and OUT_files/ beside it)")
+    parser.add_argument("--title", default=None, help="dataset name on the card (default: the folder's name)")
+    parser.add_argument("--description", default=None,
+                        help="a sentence or two on what was recorded (default: the manifest's, else a summary)")
+    parser.add_argument("--license", default=None, metavar="SPDX",
+                        help="licence of the data, e.g. CC-BY-4.0 (default: the manifest's, else 'not stated')")
     parser.add_argument("--version", type=version_arg, default=None, metavar="N", help="version (default: current)")
 
 
 def run(args: argparse.Namespace) -> int:
     try:
-        page, md = card.write_card(args.dataset, args.out, version=args.version)
+        page, md = card.write_card(args.dataset, args.out, version=args.version, title=args.title,
+                                   description=args.description, license=args.license)
     except (ValueError, FileNotFoundError, KeyError, OSError) as exc:
         print(f"htdata card: error: {exc}", file=sys.stderr)
         return 2

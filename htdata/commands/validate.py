@@ -16,8 +16,9 @@ Checks, each a section of the report with every failure named by shard / sample 
   structure  manifest, episode records and sample JSON against the schemas; every shard present
              with its sha256 and size; sample counts; frames 0..n-1 in order per episode
   content    decodes every sample (--deep) or a seeded 5% plus each episode's first frame:
-             RGB 224x224x3; tactile maps float EXR 224x224 (half in older datasets), finite,
-             in [0,1], zero where the glove has no sensor
+             RGB 224x224x3; tactile maps 224x224 EXR of the dataset's pixel type (float, or half
+             when every glove's resolution allows it), finite, in [0,1], zero where the glove
+             has no sensor
   time       RGB timestamps increasing; RGB-glove skew within the sync tolerance; gaps and
              fps deviations are warnings
   sensors    (warnings) regions that never change, saturated values, all-zero hands
