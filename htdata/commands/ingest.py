@@ -65,7 +65,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                         help="worker processes (default: CPUs); 0 = run units in this process (debugging)")
     parser.add_argument("--executor", choices=("process", "ray"), default="process",
-                        help="process: local pool, the progress bar advances per finished episode; "
+                        help="process (default): local pool, the progress bar advances per finished episode; "
                              "ray: one Ray task per work unit, the bar advances per finished unit")
     parser.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
     parser.add_argument("--retries", type=int, default=1, help="retries of a unit that raised (default 1)")
