@@ -1,0 +1,1 @@
+"""HandTouch: a thin vision-tactile trainer that proves htdata shards train end to end."""

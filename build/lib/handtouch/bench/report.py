@@ -1,0 +1,223 @@
+"""HT-Bench report: results JSON, markdown tables, a predictions PNG.
+
+results.md opens with the verdicts against the reference predictors (verdicts.py) and, when
+the run's meta has them, its checks and misalignment control; then three tables, one row
+per model per part:
+- the paper's column order with F-/H- metrics over sensor-covered pixels
+  (`COLUMNS`; regions f_covered / h_covered);
+- the same map metrics over the whole canvas / hidden part (`FULL_COLUMNS`;
+  f_full / h_full), the figures comparable with the paper's "full tactile map";
+- retrieval next to its chance levels (`RETRIEVAL_COLUMNS`).
+RMSE / cIoU cells are per-frame means (pooled values are in the JSON).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+Column = tuple[str, str, "str | None", str]     # (header, track, region, key)
+
+# Map-metric columns in the paper's order; "{}" is the scope, "covered" or "full".
+_MAP_COLUMNS: tuple[Column, ...] = (
+    ("Inpaint F-RMSE", "inpaint", "f_{}", "rmse"),
+    ("F-cIoU", "inpaint", "f_{}", "ciou"),
+    ("H-RMSE", "inpaint", "h_{}", "rmse"),
+    ("H-cIoU", "inpaint", "h_{}", "ciou"),
+    ("RGB2T F-RMSE", "rgb2tactile", "f_{}", "rmse"),
+    ("F-cIoU", "rgb2tactile", "f_{}", "ciou"),
+    ("Pred F-RMSE", "prediction", "f_{}", "rmse"),
+    ("F-cIoU", "prediction", "f_{}", "ciou"),
+)
+
+
+def map_columns(scope: str) -> tuple[Column, ...]:
+    """The map-metric columns over one scope: "covered" or "full"."""
+    if scope not in ("covered", "full"):
+        raise ValueError(f"scope must be 'covered' or 'full', got {scope!r}")
+    return tuple((h, t, r.format(scope), k) for h, t, r, k in _MAP_COLUMNS)
+
+
+# The paper's table: retrieval, then map metrics over covered pixels.
+COLUMNS: tuple[Column, ...] = (
+    ("Retrieval Hit@1", "retrieval", None, "hit_at_1"),
+    ("Retrieval R@5", "retrieval", None, "recall_at_5"),
+    *map_columns("covered"),
+)
+FULL_COLUMNS: tuple[Column, ...] = map_columns("full")
+RETRIEVAL_COLUMNS: tuple[Column, ...] = (
+    ("Hit@1", "retrieval", None, "hit_at_1"),
+    ("Hit@1 constant", "retrieval", None, "constant_hit_at_1"),
+    ("Hit@1 shuffled", "retrieval", None, "shuffled_hit_at_1"),
+    ("Hit@1 theory", "retrieval", None, "chance_hit_at_1"),
+    ("R@5", "retrieval", None, "recall_at_5"),
+    ("R@5 constant", "retrieval", None, "constant_recall_at_5"),
+    ("R@5 shuffled", "retrieval", None, "shuffled_recall_at_5"),
+    ("R@5 theory", "retrieval", None, "chance_recall_at_5"),
+)
+PANEL_COLUMNS = ("RGB", "GT", "inpaint", "rgb2tactile", "prediction", "|pred-GT|")
+
+
+def cell(metrics: dict, track: str, region: str | None, key: str):
+    """The value of one table cell (None when the track was not scored)."""
+    node = metrics.get(track)
+    if node is None:
+        return None
+    if region is not None:
+        node = node.get(region)
+        if node is None:
+            return None
+    return node.get(key)
+
+
+def _fmt(v) -> str:
+    return "–" if v is None else f"{v:.3f}"
+
+
+def markdown_table(results: dict[str, dict[str, dict]], columns: tuple[Column, ...] = COLUMNS) -> str:
+    """results: {model name: {part: tracks}} -> markdown table, rows 'model (part)'."""
+    header = "| Model | " + " | ".join(h for h, *_ in columns) + " |"
+    rule = "|---|" + "---:|" * len(columns)
+    rows = [header, rule]
+    for model, parts in results.items():
+        for part, metrics in parts.items():
+            vals = [_fmt(cell(metrics, t, r, k)) for _, t, r, k in columns]
+            rows.append(f"| {model} ({part}) | " + " | ".join(vals) + " |")
+    return "\n".join(rows) + "\n"
+
+
+def _fmt_any(v) -> str:
+    return f"{v:.4f}" if isinstance(v, float) else ("–" if v is None else str(v))
+
+
+def checks_markdown(checks: list[dict]) -> str:
+    """The run's pass/fail checks (meta["checks"]): check, value, limit, verdict."""
+    rows = ["| Check | Value | Limit | Verdict |", "|---|---:|---:|---|"]
+    rows += [f"| {c['check']} | {_fmt_any(c['value'])} | {_fmt_any(c['limit'])} | "
+             f"{'ok' if c['ok'] else ('FAILED' if c.get('required', True) else 'not yet (not required)')} |"
+             for c in checks]
+    return "\n".join(rows) + "\n"
+
+
+def control_markdown(control: dict) -> str:
+    """Misalignment control (meta["misalignment_control"]): the RGB probes' coarse-map MSE
+    relative to all zeros per pairing, and the trained model's RGB-to-tactile F-RMSE with the
+    frame mis-paired at evaluation time."""
+    rows = ["| Part | Pairing | Probe coarse MSE / zeros | Probe items | Model RGB2T F-RMSE | "
+            "same items, aligned |", "|---|---|---:|---:|---:|---:|"]
+    for part, pairings in control.get("probe", {}).items():
+        for pairing, score in pairings.items():
+            model = control.get("model", {}).get(part, {}).get(pairing, {})
+            rows.append(f"| {part} | {pairing} | {_fmt_any(score.get('ratio'))} | {score.get('items')} | "
+                        f"{_fmt_any(model.get('rmse'))} | {_fmt_any(model.get('aligned_rmse'))} |")
+    return "\n".join(rows) + "\n"
+
+
+def results_markdown(results: dict[str, dict[str, dict]], meta: dict | None = None) -> str:
+    """The results.md document: verdicts (and the run's checks / misalignment control when
+    meta has them), covered-pixel table, whole-canvas table, retrieval chance table."""
+    from handtouch.bench.verdicts import verdict_table
+
+    meta = meta or {}
+    head = ["# HT-Bench results\n",
+            "RMSE / cIoU: per-frame means; cIoU clamps predictions to [0,1]. Definitions: README, "
+            "\"HT-Bench metrics: definitions\".\n",
+            "## Verdicts against the references\n",
+            "Each trained model against the reference predictors on the same items (covered pixels; "
+            "handtouch/bench/verdicts.py): ok = better than the reference, not yet = measured, not better.\n",
+            verdict_table(results)]
+    if meta.get("checks"):
+        head += ["## Checks of this run\n", checks_markdown(meta["checks"])]
+    if meta.get("misalignment_control"):
+        head += ["## Misalignment control\n",
+                 "RGB probes (handtouch/rgb_pretrain.py) trained and scored with RGB aligned, shifted by >= "
+                 "1 s within the episode, and taken from another episode; the model column re-runs the "
+                 "trained model's RGB-to-tactile track with the frame mis-paired at evaluation time.\n",
+                 control_markdown(meta["misalignment_control"])]
+    return "\n".join([
+        *head,
+        "## Covered pixels (f_covered, h_covered)\n",
+        "F- over the glove's sensor-covered pixels, H- over the covered pixels of the hidden part.\n",
+        markdown_table(results, COLUMNS),
+        "## Whole canvas (f_full, h_full)\n",
+        "F- over all 224x224 canvas pixels, H- over every pixel of the hidden part (the paper's "
+        "\"full tactile map\" convention; uncovered pixels have target 0).\n",
+        markdown_table(results, FULL_COLUMNS),
+        "## Retrieval and its chance levels\n",
+        "1-vs-20, tie-aware (SSIM ties are equally right; embedding ties broken at random, in expectation). "
+        "constant: a constant embedding (per-query chance given SSIM ties); shuffled: the model's "
+        "embeddings permuted across items; theory: 1/C and 5/C, chance without ties.\n",
+        markdown_table(results, RETRIEVAL_COLUMNS),
+    ])
+
+
+def write_text_atomic(path: str | Path, text: str) -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    with os.fdopen(fd, "w") as f:
+        f.write(text)
+    os.chmod(tmp, 0o644)          # mkstemp creates 0600; results are meant to be shared
+    os.replace(tmp, path)
+
+
+def write_results(out_dir: str | Path, results: dict[str, dict[str, dict]], meta: dict | None = None) -> dict:
+    """Write results.json ({"meta", "results"}) and results.md; returns the JSON document."""
+    doc = {"meta": meta or {}, "results": results}
+    write_text_atomic(Path(out_dir) / "results.json", json.dumps(doc, indent=2, sort_keys=True) + "\n")
+    write_text_atomic(Path(out_dir) / "results.md", results_markdown(results, meta))
+    return doc
+
+
+def _colour(tactile: np.ndarray, coverage: np.ndarray | None = None) -> np.ndarray:
+    """(H,W) values in [0,1] -> BGR uint8 (inferno); uncovered pixels dimmed grey."""
+    u8 = (np.clip(np.nan_to_num(tactile), 0.0, 1.0) * 255).round().astype(np.uint8)
+    img = cv2.applyColorMap(u8, cv2.COLORMAP_INFERNO)
+    if coverage is not None:
+        img[coverage < 0.5] = (img[coverage < 0.5] // 3 + 40)
+    return img
+
+
+def render_predictions(examples: dict[str, np.ndarray], path: str | Path, title: str = "") -> np.ndarray:
+    """Rows: frames; columns: RGB, GT, inpaint (hidden part outlined), rgb2tactile, prediction, |pred-GT|.
+
+    `examples` as returned by evaluate.collect_examples. Writes a PNG, returns the BGR image.
+    """
+    n = len(examples["gt"])
+    if n == 0:
+        raise ValueError("render_predictions: no example frames")
+    size = examples["gt"].shape[-1]
+    label_h = 18
+    rows = []
+    for i in range(n):
+        cov = examples["coverage"][i]
+        inp = _colour(examples["inpaint"][i], cov)
+        edges = cv2.morphologyEx(examples["mask"][i].astype(np.uint8), cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8))
+        inp[edges > 0] = (255, 255, 0)
+        panels = [
+            cv2.cvtColor(examples["rgb"][i], cv2.COLOR_RGB2BGR),
+            _colour(examples["gt"][i], cov),
+            inp,
+            _colour(examples["rgb2tactile"][i], cov),
+            _colour(examples["prediction"][i], cov),
+            _colour(np.abs(examples["prediction"][i] - examples["gt"][i]), cov),
+        ]
+        rows.append(np.concatenate([cv2.resize(p, (size, size), interpolation=cv2.INTER_AREA) for p in panels], 1))
+    grid = np.concatenate(rows, 0)
+    header = np.zeros((label_h * (2 if title else 1), grid.shape[1], 3), np.uint8)
+    for j, name in enumerate(PANEL_COLUMNS):
+        cv2.putText(header, name, (j * size + 4, header.shape[0] - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
+                    (255, 255, 255), 1, cv2.LINE_AA)
+    if title:
+        cv2.putText(header, title, (4, 13), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (200, 200, 200), 1, cv2.LINE_AA)
+    img = np.concatenate([header, grid], 0)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(path), img):
+        raise OSError(f"could not write {path}")
+    return img

@@ -1,0 +1,28 @@
+"""Source adapters: one per raw recording format (docs/DESIGN.md "Adapters").
+
+`ADAPTERS` maps the adapter name used in pipeline TOML files to its class;
+`get_adapter(name)` returns a fresh instance.
+"""
+
+from __future__ import annotations
+
+from htdata.adapters.base import Adapter, EpisodeRef, EpisodeStreams
+from htdata.adapters.native import NativeAdapter
+from htdata.adapters.opentouch import OpenTouchAdapter
+from htdata.adapters.touchanything import TouchAnythingAdapter
+
+ADAPTERS: dict[str, type] = {
+    "opentouch": OpenTouchAdapter,
+    "touchanything": TouchAnythingAdapter,
+    "native": NativeAdapter,
+}
+
+
+def get_adapter(name: str) -> Adapter:
+    try:
+        return ADAPTERS[name]()
+    except KeyError:
+        raise ValueError(f"unknown adapter {name!r}; known: {sorted(ADAPTERS)}") from None
+
+
+__all__ = ["ADAPTERS", "Adapter", "EpisodeRef", "EpisodeStreams", "get_adapter"]

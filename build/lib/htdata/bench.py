@@ -1,0 +1,321 @@
+"""Every benchmark side by side, one run, one report (`htdata bench`, `make bench`).
+
+`run_bench(cfg)` writes OUT/results.json (every number) and OUT/REPORT.md
+(tables, chosen defaults with their reasons, targets met or missed). Scratch
+data (sample corpus, datasets, synthetic long episodes, index files) goes to
+OUT/.work, reused across runs only for the deterministic sample corpus.
+
+Built-in sections live in htdata/benchmarks/ (one module per area). Other
+packages add sections through the entry point group "htdata.bench_sections":
+each entry point loads a callable `section(ctx) -> dict` that receives a
+`SectionContext` (an ingested sample dataset, a scratch folder, quick, seed)
+and returns JSON-able results; an optional "markdown" string is rendered
+verbatim in REPORT.md under a heading with the section's name. Discovered
+sections run after the built-in ones, so htdata never imports their code
+(HandTouch's training benchmark is one). A section that fails, built-in or
+discovered, is recorded under "errors" and the others still run.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from importlib import metadata
+from pathlib import Path
+
+from htdata.fsutil import write_bytes_atomic
+
+SECTION_GROUP = "htdata.bench_sections"
+BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate", "append", "stats",
+                    "lag", "raw", "export")
+# Top-level keys of results.json that are not sections: no section may take these names.
+RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds")
+
+
+@dataclass
+class BenchConfig:
+    out: Path
+    quick: bool = False
+    seed: int = 0
+    scale: str = "small"                   # sample corpus scale
+    codec_maps_per_glove: int = 96         # per glove layout
+    rgb_frames: int = 12
+    raster_frames: int = 256
+    ingest_workers: tuple[int, ...] = (1, 2)
+    rss_lengths: tuple[int, ...] = (150, 600, 2400)
+    loader_random: int = 400
+    loader_windows: int = 100
+    index_rows: tuple[int, ...] = (1_000_000, 10_000_000)
+    validate_workers: tuple[int, ...] = (1, 2)
+    append_sizes: tuple[int, ...] = (20, 200)    # episodes before the one appended (an order of magnitude apart)
+    sections: tuple[str, ...] | None = None   # None: every built-in and discovered section
+
+    @classmethod
+    def quick_config(cls, out: Path, seed: int = 0) -> "BenchConfig":
+        return cls(out=out, quick=True, seed=seed, scale="tiny", codec_maps_per_glove=8, rgb_frames=2,
+                   raster_frames=8, rss_lengths=(20, 40), loader_random=20, loader_windows=5,
+                   index_rows=(10_000,), append_sizes=(2, 20))
+
+    def validate(self) -> "BenchConfig":
+        self.out = Path(self.out)
+        if self.scale not in ("tiny", "small"):
+            raise ValueError(f"scale must be tiny or small, got {self.scale!r}")
+        positive = {"codec_maps_per_glove": self.codec_maps_per_glove, "rgb_frames": self.rgb_frames,
+                    "raster_frames": self.raster_frames, "loader_random": self.loader_random,
+                    "loader_windows": self.loader_windows}
+        bad = {k: v for k, v in positive.items() if not isinstance(v, int) or v < 1}
+        if bad:
+            raise ValueError(f"bench sizes must be integers >= 1, got {bad}")
+        if not self.ingest_workers or min(self.ingest_workers) < 1:
+            raise ValueError(f"ingest_workers must be >= 1, got {self.ingest_workers}")
+        if len(self.rss_lengths) < 2 or list(self.rss_lengths) != sorted(set(self.rss_lengths)) or self.rss_lengths[0] < 2:
+            raise ValueError(f"rss_lengths must be >= 2 increasing lengths >= 2 frames, got {self.rss_lengths}")
+        if len(self.append_sizes) < 2 or min(self.append_sizes) < 1:
+            raise ValueError(f"append_sizes must be >= 2 dataset sizes >= 1, got {self.append_sizes}")
+        if not self.index_rows or min(self.index_rows) < 1:
+            raise ValueError(f"index_rows must be positive, got {self.index_rows}")
+        if self.sections is not None:
+            known = BUILTIN_SECTIONS + tuple(discover_sections())
+            unknown = [s for s in self.sections if s not in known]
+            if unknown or not self.sections:
+                raise ValueError(f"unknown section(s) {unknown or list(self.sections)}; known: {list(known)}")
+        return self
+
+    @property
+    def work(self) -> Path:
+        return self.out / ".work"
+
+
+@dataclass(frozen=True)
+class SectionContext:
+    """What a discovered section gets: `section(ctx) -> dict`."""
+
+    dataset: Path      # every sample source ingested into one committed dataset
+    work: Path         # scratch folder of this section (exists, kept between runs)
+    quick: bool        # tiny sizes: a smoke run
+    seed: int
+
+
+def discover_sections() -> dict[str, metadata.EntryPoint]:
+    """Installed sections of the entry point group, by name (not loaded yet)."""
+    return {ep.name: ep for ep in sorted(metadata.entry_points(group=SECTION_GROUP), key=lambda e: e.name)}
+
+
+def bench_sources() -> tuple[str, ...]:
+    """Sources benchmarked: the sample corpus formats, named like their adapter and shipped pipeline."""
+    from htdata.sample.corpus import FORMATS
+
+    return FORMATS
+
+
+def ensure_corpus(cfg: BenchConfig) -> Path:
+    """The deterministic sample corpus; reused when a complete one of the same scale/seed exists."""
+    from htdata.sample.corpus import CorpusConfig, corpus_complete, write_corpus
+
+    root = cfg.work / f"raw_{cfg.scale}_{cfg.seed}"
+    corpus = CorpusConfig(out=root, seed=cfg.seed, scale=cfg.scale, progress=False, overwrite=True)
+    if not corpus_complete(corpus):
+        write_corpus(corpus)
+    return root
+
+
+def finite_json(obj):
+    """Plain JSON types; non-finite floats become None (results.json stays strict JSON)."""
+    import numpy as np
+
+    if isinstance(obj, dict):
+        return {str(k): finite_json(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [finite_json(v) for v in obj]
+    if isinstance(obj, Path):
+        return str(obj)
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    return obj
+
+
+class Sections:
+    """Runs the benchmark sections in order, sharing the corpus and datasets they need."""
+
+    def __init__(self, cfg: BenchConfig, log: Callable[[str], None]):
+        self.cfg, self.log = cfg, log
+        self._corpus: Path | None = None
+        self._dataset: Path | None = None
+
+    @property
+    def corpus(self) -> Path:
+        if self._corpus is None:
+            self.log(f"sample corpus ({self.cfg.scale})")
+            self._corpus = ensure_corpus(self.cfg)
+        return self._corpus
+
+    @property
+    def dataset(self) -> Path:
+        """Every source in one dataset, ingested with the most workers (loader, validate, plugins)."""
+        if self._dataset is None:
+            from htdata.benchmarks.ingest import ingest_run
+
+            out = self.cfg.work / "dataset_all"
+            self.log("ingest: all sources into one dataset")
+            self.combined_run = ingest_run([(s, self.corpus / s) for s in bench_sources()], out,
+                                           max(self.cfg.ingest_workers))
+            self._dataset = out
+        return self._dataset
+
+    def codecs(self) -> dict:
+        from htdata.benchmarks.codecs import codec_rows, real_maps
+
+        return codec_rows(real_maps(self.corpus, bench_sources(), self.cfg.codec_maps_per_glove))
+
+    def rgb(self) -> dict:
+        from htdata.benchmarks.rgb import rgb_section
+        from htdata.benchmarks.sources import discover, source_rgb_frames
+
+        frames = []
+        sources = bench_sources()
+        for name in sources:     # every camera resolution of the corpus
+            pcfg, adapter, refs = discover(name, self.corpus / name)
+            frames += source_rgb_frames(adapter, pcfg, refs[0], max(1, self.cfg.rgb_frames // len(sources)))
+        by_size: dict[tuple, list] = {}
+        for f in frames:
+            by_size.setdefault(f.shape, []).append(f)
+        # resize_rows needs one source size per table: the largest camera frames (most aliasing).
+        largest = max(by_size, key=lambda s: s[0] * s[1])
+        section = rgb_section(by_size[largest])
+        section["source_sizes_available"] = [f"{s[1]}x{s[0]}" for s in by_size]
+        return section
+
+    def raster(self) -> dict:
+        from htdata.benchmarks.raster import raster_rows
+
+        return raster_rows(self.cfg.raster_frames)
+
+    def ingest(self) -> dict:
+        from htdata.benchmarks.ingest import adapter_rows
+
+        result = adapter_rows(self.corpus, self.cfg.work, bench_sources(), self.cfg.ingest_workers)
+        self.dataset   # noqa: B018 (build the combined dataset now so its run is reported here)
+        result["runs"].append(self.combined_run)
+        return result
+
+    def rss(self) -> list:
+        from htdata.benchmarks.ingest import peak_rss_rows
+
+        return peak_rss_rows(self.cfg.work, self.cfg.rss_lengths)
+
+    def loader(self) -> dict:
+        from htdata.benchmarks.loader import loader_rows
+
+        return loader_rows(self.dataset, self.cfg.loader_random, self.cfg.loader_windows, self.cfg.seed)
+
+    def index(self) -> list:
+        from htdata.benchmarks.index import index_rows
+
+        tmp = self.cfg.work / "index"
+        tmp.mkdir(parents=True, exist_ok=True)
+        return index_rows(self.cfg.index_rows, tmp)
+
+    def validate(self) -> list:
+        from htdata.benchmarks.validation import validate_rows
+
+        return validate_rows(self.dataset, self.cfg.validate_workers)
+
+    def append(self) -> dict:
+        from htdata.benchmarks.append import append_rows
+
+        return append_rows(self.cfg.work, self.cfg.append_sizes)
+
+    def stats(self) -> dict:
+        from htdata.benchmarks.stats import stats_rows
+
+        return stats_rows(self.dataset)
+
+    def lag(self) -> dict:
+        from htdata.benchmarks.lag import lag_rows
+
+        return lag_rows(self.cfg.work, self.cfg.quick, self.cfg.seed)
+
+    def raw(self) -> dict:
+        from htdata.benchmarks.raw import raw_rows
+
+        return raw_rows(self.corpus, self.cfg.work, bench_sources(), self.dataset, self.cfg.quick)
+
+    def export(self) -> dict:
+        from htdata.benchmarks.export import export_rows
+
+        return export_rows(self.dataset, self.cfg.work)
+
+    def discovered(self, name: str, entry_point: metadata.EntryPoint) -> dict:
+        """Load and run one discovered section; its result must be a JSON-able dict."""
+        section = entry_point.load()
+        work = self.cfg.work / "sections" / name
+        work.mkdir(parents=True, exist_ok=True)
+        result = section(SectionContext(dataset=self.dataset, work=work, quick=self.cfg.quick, seed=self.cfg.seed))
+        if not isinstance(result, dict):
+            raise TypeError(f"{entry_point.value} returned {type(result).__name__}, expected a dict")
+        if not isinstance(result.get("markdown", ""), str):
+            raise TypeError(f"{entry_point.value}: 'markdown' must be a string")
+        try:
+            json.dumps(finite_json(result), allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"{entry_point.value} returned results that are not JSON-able: {exc}") from None
+        return result
+
+
+def run_bench(cfg: BenchConfig, command: str = "htdata bench",
+              log: Callable[[str], None] | None = None) -> dict:
+    """Run the sections; write OUT/results.json and OUT/REPORT.md; return the results.
+
+    `log(message)` receives progress lines (section starts, failures with traceback).
+    """
+    from htdata.benchmarks.machine import machine_info
+    from htdata.benchmarks.report import render_report
+
+    cfg.validate()
+    cfg.work.mkdir(parents=True, exist_ok=True)
+    log = log or (lambda message: None)
+    plugins = discover_sections()
+    wanted = cfg.sections or BUILTIN_SECTIONS + tuple(plugins)
+    t_start = time.perf_counter()
+    results: dict = {"command": command, "quick": cfg.quick,
+                     "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                     "config": {k: v for k, v in asdict(cfg).items() if k != "out"},
+                     "machine": machine_info(), "timings_s": {}, "errors": {}, "plugins": {}}
+    for name, ep in list(plugins.items()):
+        if name in BUILTIN_SECTIONS + RESERVED_KEYS:   # never displaces a built-in section or a key
+            results["errors"][f"{name} ({ep.value})"] = (f"ValueError: entry point named {name!r}, which a "
+                                                         "built-in section or a results.json key already uses")
+            del plugins[name]
+        elif name in wanted:
+            results["plugins"][name] = ep.value
+    sections = Sections(cfg, log)
+    # Built-in sections first, then discovered ones (in name order).
+    for name in [s for s in BUILTIN_SECTIONS if s in wanted] + [s for s in plugins if s in wanted]:
+        log(name)
+        t0 = time.perf_counter()
+        try:
+            if name in plugins:
+                results[name] = sections.discovered(name, plugins[name])
+            else:
+                results[name] = getattr(sections, name)()
+        except Exception as exc:   # one broken section must not hide the others' numbers
+            results["errors"][name] = f"{type(exc).__name__}: {exc}"
+            log(f"{name} FAILED: {exc}\n{traceback.format_exc()}")
+        results["timings_s"][name] = time.perf_counter() - t0
+    results["machine"]["loadavg_1m_end"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    results["seconds"] = time.perf_counter() - t_start
+    results = finite_json(results)
+    write_bytes_atomic(cfg.out / "results.json", (json.dumps(results, indent=2, allow_nan=False) + "\n").encode())
+    write_bytes_atomic(cfg.out / "REPORT.md", render_report(results).encode())
+    log(f"wrote {cfg.out / 'results.json'} and {cfg.out / 'REPORT.md'}")
+    return results

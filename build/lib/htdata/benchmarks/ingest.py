@@ -1,0 +1,170 @@
+"""Ingest throughput per adapter, against the bare decode+resize+encode bound; memory vs length.
+
+- `ingest_run`: one `htdata ingest` (in this process, process-pool workers)
+  of one source; frames/s per worker and report["timing"] stage seconds.
+- `bare_bound` (sources.py) on the same episodes gives the ceiling: the
+  ratio ours/bound and the overhead % say what sync, normalise, rasterise,
+  spool and shard writing cost on top of the work no ingest can avoid.
+- `peak_rss_rows`: a synthetic long native episode at several lengths, each
+  ingested inline (`--workers 0`) in a fresh subprocess reporting its own
+  peak RSS, so peak memory vs episode length is exact, not sampled. The
+  peak is VmHWM of /proc/self/status: ru_maxrss is NOT the child's own
+  peak on Linux, it keeps the high-water mark of the process it was forked
+  from (the bench process, ~400-600 MiB after the ingest section) across
+  fork + exec, which is what the report used to show.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from htdata.benchmarks.sources import bare_bound, discover
+from htdata.manifest import load_manifest
+from htdata.ingest import Source, ingest
+from htdata.pipeline import load_pipeline
+
+STAGES = ("decode", "resize", "normalise", "rasterise", "encode", "write", "other")
+
+
+def ingest_run(pipelines: list[tuple[str, Path]], out: Path, workers: int, settings: tuple[str, ...] = ()) -> dict:
+    """Ingest `[(pipeline name, source root)]` into a fresh `out`; throughput and stage timing.
+
+    `settings`: `--set`-style overrides applied to every pipeline (e.g. "tactile.keep_raw=false").
+    """
+    if out.exists():
+        shutil.rmtree(out)
+    sources = [Source(pipeline=load_pipeline(p).with_overrides(list(settings)) if settings else load_pipeline(p),
+                      root=Path(root).resolve()) for p, root in pipelines]
+    t0 = time.perf_counter()
+    report = ingest(sources, out, workers=workers, progress=False)
+    wall = time.perf_counter() - t0
+    if report["failures"]:
+        raise RuntimeError(f"bench ingest into {out} had failures: {report['failures'][:3]}")
+    units = load_manifest(out)["shards"]
+    timing = report.get("timing") or {}
+    frames = int(report["samples"])
+    seconds = float(timing.get("total_s", report["seconds"]))
+    row = {"pipelines": "+".join(p for p, _ in pipelines), "workers": workers, "frames": frames,
+           "units": int(report["units"]), "shards": len(units), "wall_s": wall, "ingest_s": seconds,
+           "frames_per_s": frames / seconds, "frames_per_s_per_worker": frames / seconds / max(workers, 1)}
+    if timing:
+        row["worker_s"] = float(timing.get("worker_s", 0.0))
+        row["stages_s"] = {s: float(timing.get(f"{s}_s", 0.0)) for s in STAGES}
+    return row
+
+
+def adapter_rows(corpus: Path, work: Path, adapters: tuple[str, ...], workers: tuple[int, ...] = (1, 2)) -> dict:
+    """Per adapter: ingest at each worker count, the bare bound on the same episodes, ratios."""
+    rows, bounds = [], {}
+    for name in adapters:
+        root = corpus / name
+        for w in workers:
+            rows.append(ingest_run([(name, root)], work / f"ingest_{name}_w{w}", w))
+        cfg, adapter, refs = discover(name, root)
+        bounds[name] = bare_bound(cfg, adapter, refs)
+    summary = []
+    for name in adapters:
+        by_w = {r["workers"]: r for r in rows if r["pipelines"] == name}
+        one = by_w[min(by_w)]
+        bound = bounds[name]
+        # Per-frame time of one worker: in-worker seconds when the ingest reports them.
+        per_frame = (one.get("worker_s") or one["ingest_s"] * one["workers"]) / one["frames"]
+        bound_per_frame = bound["total_s"] / max(bound["frames"], 1)
+        entry = {"adapter": name, "frames": one["frames"], "units": one["units"],
+                 "frames_per_s_1w": one["frames_per_s"],
+                 "in_worker_frames_per_s": 1.0 / per_frame,
+                 "bound_frames_per_s": bound["frames_per_s"],
+                 "ratio_to_bound": bound_per_frame / per_frame,
+                 "overhead_pct": 100.0 * (1.0 - bound_per_frame / per_frame)}
+        if len(by_w) > 1:
+            top = by_w[max(by_w)]
+            entry["workers_max"] = top["workers"]
+            entry["frames_per_s_max"] = top["frames_per_s"]
+            entry["scaling"] = top["frames_per_s"] / one["frames_per_s"]
+        summary.append(entry)
+    return {"runs": rows, "bound": bounds, "summary": summary}
+
+
+# -- peak memory vs episode length ------------------------------------------
+
+def write_long_native(folder: Path, n_frames: int, seed: int = 0) -> None:
+    """One native recording (right hand, OpenTouch-style glove, mp4) of `n_frames` video frames."""
+    from htdata.layouts import load_layout
+    from htdata.sample.corpus import NATIVE_IMAGE, NATIVE_TACTILE_HZ, OPENTOUCH_LAYOUT, VIDEO_FPS, native_raw
+    from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+    from htdata.sample.world import EpisodeSpec, World
+
+    spec = EpisodeSpec("power_grasp", "lab_bench", seed, n_frames, VIDEO_FPS, ("right",)).validate()
+    world = World(spec)
+    layout = load_layout(OPENTOUCH_LAYOUT)
+    rng = np.random.default_rng(seed)
+    tactile_times = spec.frame_times(NATIVE_TACTILE_HZ)
+    contact = world.contact_grids(layout, "right", tactile_times, fill=0.0)
+    video_start, glove_start = 10**9, 5 * 10**11
+    hand = NativeHand(OPENTOUCH_LAYOUT, native_raw(contact, layout, rng),
+                      glove_start + np.round(tactile_times * 1e9).astype(np.int64),
+                      clock_offset_ns=video_start - glove_start)
+    video_times = spec.frame_times()
+    write_native_recording(folder, NativeRecording(
+        task=spec.task, scene=spec.scene, video_frames=world.render_frames(video_times, NATIVE_IMAGE),
+        video_timestamps_ns=video_start + np.round(video_times * 1e9).astype(np.int64),
+        hands={"right": hand}, operator="bench", notes=f"htdata bench: {n_frames}-frame episode"))
+
+
+_RSS_CHILD = """
+import resource, sys
+from htdata.benchmarks.ingest import own_peak_rss_kb
+from htdata.cli import main
+rc = main(sys.argv[1:])
+print("MAXRSS_KB", own_peak_rss_kb(), rc)
+"""
+
+
+def own_peak_rss_kb(status: str | None = None) -> int:
+    """Peak RSS (KiB) of this process image: VmHWM, which exec resets; ru_maxrss where /proc is missing."""
+    if status is None:
+        try:
+            status = Path("/proc/self/status").read_text()
+        except OSError:
+            import resource
+
+            return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+    for line in status.splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1])
+    raise ValueError("no VmHWM line in /proc/self/status")
+
+
+def peak_rss_ingest(src: Path, out: Path, pipeline: str = "native") -> dict:
+    """Inline ingest in a fresh interpreter; its own peak RSS (VmHWM, KiB)."""
+    if out.exists():
+        shutil.rmtree(out)
+    args = ["ingest", "--quiet", "--workers", "0", "--pipeline", f"{pipeline}={src}", str(out)]
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-c", _RSS_CHILD, *args], capture_output=True, text=True)
+    seconds = time.perf_counter() - t0
+    line = [ln for ln in proc.stdout.splitlines() if ln.startswith("MAXRSS_KB")]
+    if proc.returncode != 0 or not line or line[0].split()[2] != "0":
+        raise RuntimeError(f"ingest of {src} for the RSS benchmark failed: {proc.stderr[-2000:]}")
+    return {"peak_rss_mb": int(line[0].split()[1]) / 1024.0, "seconds": seconds}
+
+
+def peak_rss_rows(work: Path, lengths: tuple[int, ...]) -> list[dict]:
+    rows = []
+    for n in lengths:
+        src = work / f"long_native_{n}"
+        if src.exists():
+            shutil.rmtree(src)
+        write_long_native(src / f"rec_long_{n:05d}", n)
+        rows.append({"frames": n, **peak_rss_ingest(src, work / f"long_native_{n}_ds")})
+        shutil.rmtree(work / f"long_native_{n}_ds")
+    base = rows[0]["peak_rss_mb"]
+    for r in rows:
+        r["rss_vs_shortest"] = r["peak_rss_mb"] / base
+    return rows

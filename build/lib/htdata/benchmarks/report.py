@@ -1,0 +1,265 @@
+"""results.json -> REPORT.md: one markdown table per benchmark, targets checked in words."""
+
+from __future__ import annotations
+
+HEADINGS = {
+    "machine": "## Machine",
+    "codecs": "## Tactile codecs (real sample maps)",
+    "rgb": "## RGB: JPEG quality and resize method",
+    "raster": "## Rasterisation mode x layout",
+    "ingest": "## Ingest throughput per adapter",
+    "rss": "## Ingest peak memory vs episode length",
+    "loader": "## Loader access patterns",
+    "index": "## Index load at scale",
+    "validate": "## validate --deep",
+    "append": "## Append one episode to N and 10N episodes",
+    "stats": "## htdata stats vs tactile-only decode",
+    "lag": "## Tactile-video lag estimator (known lags)",
+    "raw": "## Raw glove rows: storage cost and maps from raw rows",
+    "export": "## htdata export lerobot: speed and size vs htdata's shards",
+}
+TARGET_OVERHEAD_PCT = 30.0
+TARGET_SCALING = 1.8
+TARGET_RSS_FLAT = 1.25      # peak RSS of the longest episode / the shortest
+
+
+def _fmt(v, digits: int = 3) -> str:
+    if v is None:
+        return "exact"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, float):
+        if v == 0:
+            return "0"
+        if abs(v) >= 1000:
+            return f"{v:,.0f}"
+        if abs(v) < 1e-3:
+            return f"{v:.2e}"
+        return f"{v:.{digits}g}"
+    return str(v)
+
+
+def table(rows: list[dict], columns: list[tuple[str, str]]) -> list[str]:
+    out = ["| " + " | ".join(h for _, h in columns) + " |", "|" + "---|" * len(columns)]
+    for r in rows:
+        out.append("| " + " | ".join(_fmt(r.get(k)) for k, _ in columns) + " |")
+    return out + [""]
+
+
+def _machine(m: dict) -> list[str]:
+    blas = ", ".join(f"{k}={v}" for k, v in m["blas_env"].items())
+    return [f"- CPU: {m['cpu_model']} ({m['cpu_count']} logical, {m['cpu_affinity']} usable); "
+            f"RAM {m['ram_gb']:.1f} GiB; load average at start {m['loadavg_1m']:.2f}, at end {m.get('loadavg_1m_end', float('nan')):.2f}",
+            f"- Python {m['python']}, torch {m['torch']} ({m['torch_threads']} threads), numpy {m['numpy']}, "
+            f"OpenCV {m['opencv']}; {m['platform']}",
+            f"- BLAS env: {blas}", ""]
+
+
+def _codecs(c: dict) -> list[str]:
+    layouts = sorted({m["layout"] for m in c["margins"]})
+    lines = [f"{c['maps']} maps ({c['zero_fraction'] * 100:.0f}% zero pixels), rasterised from "
+             f"{', '.join(layouts)}.", ""]
+    lines += table(c["rows"], [("codec", "codec"), ("bytes_per_frame", "bytes/frame"), ("encode_ms", "encode ms"),
+                               ("decode_ms", "decode ms"), ("max_error", "max error"), ("rmse", "RMSE")])
+    lines += ["Stored error on each glove's own maps vs its source quantisation step (step / max error > 1: "
+              "below one step; levels recoverable = max error < step/2 on these maps; the default below "
+              "takes each codec's max error over all maps):", ""]
+    lines += table(c["margins"], [("layout", "glove layout"), ("codec", "codec"), ("step", "step"),
+                                  ("step_from", "step from"), ("max_error", "max error"),
+                                  ("step_over_max_error", "step / max error"),
+                                  ("levels_recoverable", "levels recoverable")])
+    lines += [f"**Default: {c['default']}** (computed from the tables above) — {c['reason']}.", ""]
+    return lines
+
+
+def _rgb(r: dict) -> list[str]:
+    lines = [f"{r['frames']} source frames ({r['source_size']}), centre square, resized to 224.", ""]
+    lines += table(r["jpeg"], [("quality", "JPEG quality"), ("bytes_per_frame", "bytes/frame"), ("psnr_db", "PSNR dB"),
+                               ("encode_ms", "encode ms"), ("decode_ms", "decode ms")])
+    lines += ["Resize vs a reference (Lanczos to 4x the target, then 4x4 box average); errors in [0,1] units:", ""]
+    lines += table(r["resize"], [("method", "method"), ("ms_per_frame", "ms/frame"),
+                                 ("mean_abs_error", "mean abs error"), ("max_abs_error", "max abs error")])
+    lines += [f"**Defaults: JPEG q{r['default_quality']}, {r['default_resize']}** (computed from the tables "
+              f"above) — {r['reason']}.", ""]
+    return lines
+
+
+def _raster(d: dict) -> list[str]:
+    return table(d["rows"], [("layout_id", "layout"), ("mode", "mode"), ("ms_per_frame", "ms/frame"),
+                             ("max_roundtrip_error", "max round-trip error"), ("rmse", "RMSE"),
+                             ("coverage", "coverage")]) + [
+        f"**Default: {d['default']}** (computed from the table above by: {d['criterion']}) — {d['reason']}.", ""]
+
+
+def _ingest(g: dict) -> list[str]:
+    lines = table(g["summary"], [("adapter", "adapter"), ("frames", "frames"), ("units", "units"),
+                                 ("frames_per_s_1w", "frames/s 1 worker"),
+                                 ("in_worker_frames_per_s", "in-worker frames/s"),
+                                 ("bound_frames_per_s", "bare bound frames/s"),
+                                 ("ratio_to_bound", "ours / bound"), ("overhead_pct", "overhead %"),
+                                 ("frames_per_s_max", "frames/s 2 workers"), ("scaling", "2w / 1w")])
+    staged = [r for r in g["runs"] if "stages_s" in r]
+    if staged:
+        cols = [("pipelines", "run"), ("workers", "workers"), ("ingest_s", "total s"), ("worker_s", "in-worker s")]
+        rows = []
+        for r in staged:
+            row = dict(r)
+            for s, v in r["stages_s"].items():
+                row[s] = v
+            rows.append(row)
+        cols += [(s, f"{s} s") for s in staged[0]["stages_s"]]
+        lines += ["Stage breakdown (seconds summed over workers, from reports/ingest.json timing):", ""]
+        lines += table(rows, cols)
+    else:
+        lines += ["Stage breakdown: the ingest report carried no `timing` section in this run.", ""]
+    lines += ["Bare bound per adapter (same kept frames and hands: open streams + source decode + tactile read, "
+              "the pipeline's resize, JPEG + EXR encode at the pipeline's settings; no sync, normalise, "
+              "rasterise or write):", ""]
+    lines += table([{"adapter": k, **v} for k, v in g["bound"].items()],
+                   [("adapter", "adapter"), ("frames", "frames"), ("decode_s", "decode s"), ("resize_s", "resize s"),
+                    ("jpeg_s", "jpeg s"), ("exr_s", "exr s"), ("frames_per_s", "frames/s")])
+    lines += _targets_ingest(g)
+    return lines
+
+
+def _dominant(g: dict, adapter: str) -> str:
+    runs = [r for r in g["runs"] if r["pipelines"] == adapter and "stages_s" in r]
+    if not runs:
+        return "no stage timing reported"
+    stages = runs[0]["stages_s"]
+    total = sum(stages.values()) or 1.0
+    top = sorted(stages.items(), key=lambda kv: -kv[1])[:2]
+    return ", ".join(f"{k} {100 * v / total:.0f}%" for k, v in top)
+
+
+def _contention(g: dict, adapter: str) -> str:
+    """How much slower each worker got with more workers: >1 means they shared cores with others."""
+    runs = {r["workers"]: r for r in g["runs"] if r["pipelines"] == adapter and r.get("worker_s")}
+    if len(runs) < 2:
+        return "no in-worker timing to compare."
+    lo, hi = runs[min(runs)], runs[max(runs)]
+    factor = (hi["worker_s"] / hi["frames"]) / (lo["worker_s"] / lo["frames"])
+    return (f"in-worker time per frame was {factor:.2f}x at {hi['workers']} workers vs {lo['workers']} "
+            f"(1.0 = each worker had a core of its own; see the load average under Machine).")
+
+
+def _targets_ingest(g: dict) -> list[str]:
+    lines = []
+    for s in g["summary"]:
+        ok = s["overhead_pct"] < TARGET_OVERHEAD_PCT
+        lines.append(f"- {s['adapter']}: overhead {s['overhead_pct']:.0f}% (target < {TARGET_OVERHEAD_PCT:.0f}%): "
+                     f"{'met' if ok else 'MISSED'}; largest stages: {_dominant(g, s['adapter'])}.")
+        if "scaling" in s:
+            ok = s["scaling"] >= TARGET_SCALING
+            why = "" if ok else (f" {s['units']} work unit(s) over {s['workers_max']} workers bound it at "
+                                 f"{s['units'] / -(-s['units'] // s['workers_max']):.2f}x if units were equal; "
+                                 f"{_contention(g, s['adapter'])}")
+            lines.append(f"- {s['adapter']}: 1 -> {s['workers_max']} workers scaling {s['scaling']:.2f}x "
+                         f"(target >= {TARGET_SCALING}x): {'met' if ok else 'MISSED'}.{why}")
+    return lines + [""]
+
+
+def _rss(rows: list[dict]) -> list[str]:
+    lines = table(rows, [("frames", "episode frames"), ("peak_rss_mb", "peak RSS MiB"), ("seconds", "seconds"),
+                         ("rss_vs_shortest", "vs shortest")])
+    worst = max(r["rss_vs_shortest"] for r in rows)
+    lines += [f"Flat-memory target (longest / shortest <= {TARGET_RSS_FLAT}): "
+              f"{'met' if worst <= TARGET_RSS_FLAT else 'MISSED'} ({worst:.2f}x over "
+              f"{rows[0]['frames']}..{rows[-1]['frames']} frames).", ""]
+    return lines
+
+
+def _loader(d: dict) -> list[str]:
+    lines = [f"Each row's bound decodes, from bytes already in memory, exactly the members that row's "
+             f"path decodes (reader: every member; torch items: JPEG + the item hand's EXR), timed "
+             f"alternately with it. {d['samples_in_dataset']} samples in the dataset.", ""]
+    return lines + table(d["rows"], [("access", "access"), ("items", "items"), ("samples_decoded", "frames decoded"),
+                                     ("samples_per_s", "frames/s"), ("bound_samples_per_s", "bound frames/s"),
+                                     ("ratio_to_bound", "ours / bound")])
+
+
+def _index(rows: list[dict]) -> list[str]:
+    return table(rows, [("rows", "rows"), ("file_bytes", "file bytes"), ("mmap_load_ms", "mmap open ms"),
+                        ("mmap_rss_delta_mb", "mmap RSS MiB"), ("full_load_ms", "full load ms"),
+                        ("full_rss_delta_mb", "full RSS MiB")])
+
+
+def _validate(rows: list[dict]) -> list[str]:
+    return table(rows, [("workers", "workers"), ("frames", "frames"), ("seconds", "seconds"),
+                        ("frames_per_s", "frames/s"), ("scaling", "vs 1 worker"), ("ok", "dataset ok")])
+
+
+def _append(d: dict) -> list[str]:
+    lines = table(d["rows"], [("episodes_before", "episodes before"), ("frames_before", "frames before"),
+                              ("seconds", "append s"), ("units_run", "units run"), ("bytes_written", "bytes written"),
+                              ("bytes_shards", "of which shards"), ("bytes_index_and_episodes", "index + episodes"),
+                              ("files_written", "files written")])
+    return lines + ["", f"10x the dataset: {_fmt(d['time_ratio_large_over_small'])}x the append time, "
+                    f"{_fmt(d['bytes_ratio_large_over_small'])}x the bytes written (target: O(episode) + O(index): "
+                    f"only index + episode records grow with N).", ""]
+
+
+def _stats(d: dict) -> list[str]:
+    rows = [{"run": "tactile-only decode (loader, streamed)", **d["tactile_decode"],
+             "episodes_computed": "-", "from_raw": "-"}]
+    rows += [{"run": f"stats {name}", **r} for name, r in d["runs"].items()]
+    for row in rows[1:]:
+        if row.get("hand_frames"):
+            row["from_raw"] = f"{100 * row.get('hand_frames_from_raw', 0) / row['hand_frames']:.0f}%"
+    lines = table(rows, [("run", "run"), ("frames", "frames"), ("seconds", "seconds"), ("frames_per_s", "frames/s"),
+                         ("episodes_computed", "episodes computed"), ("from_raw", "hand frames from raw rows")])
+    ok = "met" if d["cold_over_decode"] >= 1 else "not met"
+    return lines + ["", f"Cold stats / tactile decode = {_fmt(d['cold_over_decode'])} (target >= 1: {ok}). "
+                    "Warm = every episode cached; incremental = one more episode than the cold run.", ""]
+
+
+def _lag_markdown(d: dict) -> list[str]:
+    from htdata.benchmarks.lag import lag_markdown   # the section's own module renders its table
+
+    return lag_markdown(d)
+
+
+def _raw_markdown(d: dict) -> list[str]:
+    from htdata.benchmarks.raw import raw_markdown   # the section's own module renders its tables
+
+    return raw_markdown(d)
+
+
+def _export_markdown(d: dict) -> list[str]:
+    from htdata.benchmarks.export import export_markdown   # the section's own module renders its table
+
+    return export_markdown(d)
+
+
+RENDERERS = {"machine": _machine, "codecs": _codecs, "rgb": _rgb, "raster": _raster, "ingest": _ingest,
+             "rss": _rss, "loader": _loader, "index": _index, "validate": _validate,
+             "append": _append, "stats": _stats, "lag": _lag_markdown, "raw": _raw_markdown,
+             "export": _export_markdown}
+
+
+def _discovered(name: str, results: dict) -> list[str]:
+    """A section found through the entry point group: its own markdown, verbatim."""
+    lines = [f"## {name}", "", f"From `{results['plugins'][name]}` (entry point group htdata.bench_sections).", ""]
+    if name not in results:
+        return lines + [f"Not measured: {results.get('errors', {}).get(name, 'section skipped')}", ""]
+    markdown = results[name].get("markdown")
+    if not markdown:
+        return lines + [f"No markdown returned; the numbers are in results.json under `{name}`.", ""]
+    return lines + [markdown.rstrip(), ""]
+
+
+def render_report(results: dict) -> str:
+    lines = ["# htdata bench", "",
+             f"`{results['command']}` ({'quick' if results['quick'] else 'full'} run, "
+             f"{results['seconds']:.0f} s in total, {results['created']}). All sections ran side by side in "
+             "this one run on a shared machine: compare ratios within a table, not absolute numbers across runs.", ""]
+    for key, heading in HEADINGS.items():
+        lines.append(heading)
+        lines.append("")
+        if key in results:
+            lines += RENDERERS[key](results[key])
+        else:
+            lines += [f"Not measured: {results.get('errors', {}).get(key, 'section skipped')}", ""]
+    for name in results.get("plugins", {}):
+        lines += _discovered(name, results)
+    return "\n".join(lines).rstrip() + "\n"

@@ -1,0 +1,109 @@
+"""Calibrations: how raw glove values became the stored [0,1] maps, recorded exactly.
+
+A calibration is a glove layout's `NormaliseConfig` (convention, max,
+baseline, clip, scale, noise floor) plus where it came from. Its id is a
+content hash, so the same settings in two ingests are one calibration and a
+recalibrated glove is a new one. The manifest lists the calibrations its
+episodes use (`"calibrations": {id: entry}`; `revision` counts, per layout,
+the distinct calibrations the dataset has had, 1 for the first). Each
+episode record names its calibration per hand and, when the calibration
+fits per-episode arrays (a baseline, a noise floor from the rest window),
+carries them as base64 little-endian float32 (`calibration_fit`), so
+`episode_normaliser` rebuilds the exact normaliser the ingest used and the
+stored raw rows (members raw_<hand>.npy) reproduce the stored maps without
+the sources (htdata.renormalise).
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import json
+
+import numpy as np
+
+from htdata.normalise import NormaliseConfig, Normaliser
+
+
+def calibration_id(layout_id: str, cfg: NormaliseConfig) -> str:
+    """Content id of (layout, settings): 12 hex digits of a sha256."""
+    text = json.dumps({"layout": layout_id, **cfg.to_dict()}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def calibration_entry(layout_id: str, cfg: NormaliseConfig, origin: str) -> dict:
+    """The manifest entry of one calibration (revision filled in by `merge_calibrations`)."""
+    return {"layout": layout_id, **cfg.to_dict(), "from": origin,
+            "fitted_per_episode": bool(cfg.fits)}
+
+
+def episode_calibrations(pipeline, layouts: dict) -> dict[str, dict]:
+    """{id: manifest entry} of the calibrations a pipeline applies to these layouts (hand -> Layout)."""
+    out = {}
+    for layout in layouts.values():
+        cfg = pipeline.normalise_for(layout)
+        origin = (f"pipeline {pipeline.name!r} [normalise.{layout.layout_id}]"
+                  if layout.layout_id in pipeline.normalise else f"layout {layout.layout_id!r} value block")
+        out[calibration_id(layout.layout_id, cfg)] = calibration_entry(layout.layout_id, cfg, origin)
+    return out
+
+
+def config_of(entry: dict) -> NormaliseConfig:
+    """A manifest calibration entry -> its NormaliseConfig (validated)."""
+    fields = NormaliseConfig.__dataclass_fields__
+    return NormaliseConfig(**{k: v for k, v in entry.items() if k in fields}).validate()
+
+
+def encode_array(arr: np.ndarray) -> str:
+    return base64.b64encode(np.ascontiguousarray(arr, dtype="<f4").tobytes()).decode("ascii")
+
+
+def decode_array(text: str, shape: tuple[int, int], where: str) -> np.ndarray:
+    data = base64.b64decode(text.encode("ascii"), validate=True)
+    if len(data) != 4 * shape[0] * shape[1]:
+        raise ValueError(f"{where}: {len(data)} bytes, expected {shape[0]}x{shape[1]} float32")
+    return np.frombuffer(data, dtype="<f4").reshape(shape).astype(np.float32)
+
+
+def fit_record(normaliser: Normaliser) -> dict:
+    """An episode hand's fitted arrays for the episode record ({} when the calibration fits nothing)."""
+    return {name: encode_array(arr) for name, arr in normaliser.fitted().items()}
+
+
+def episode_normaliser(manifest: dict, episode: dict, hand: str, layout) -> Normaliser:
+    """The normaliser the ingest used for `hand` of `episode` (settings from the manifest, fitted arrays restored).
+
+    Raises ValueError naming the episode when the dataset predates
+    calibrations (format < 3) or the record names an unknown calibration.
+    """
+    where = f"episode {episode.get('episode_id')!r} {hand} hand"
+    cal_id = (episode.get("calibration") or {}).get(hand)
+    if cal_id is None:
+        raise ValueError(f"{where}: no calibration recorded (datasets of format < 3 have none: re-ingest them)")
+    entry = manifest.get("calibrations", {}).get(cal_id)
+    if entry is None:
+        raise ValueError(f"{where}: calibration {cal_id} is not in the manifest's calibrations")
+    normaliser = Normaliser(config_of(entry), layout)
+    fit = (episode.get("calibration_fit") or {}).get(hand, {})
+    grid = normaliser.grid
+    normaliser.restore({k: decode_array(v, grid, f"{where} calibration_fit.{k}") for k, v in fit.items()})
+    return normaliser
+
+
+def merge_calibrations(parent: dict, new: dict, used: set[str]) -> dict:
+    """The calibrations of a new version: parent's and new entries that `used` ids name, revisions numbered.
+
+    A new id gets revision = 1 + the highest revision the parent listed for
+    its layout (so revisions count recalibrations over the dataset's life).
+    """
+    merged = {k: v for k, v in parent.items() if k in used}
+    for cal_id, entry in sorted(new.items()):
+        if cal_id not in used:
+            continue
+        if cal_id in parent:
+            merged[cal_id] = parent[cal_id]
+            continue
+        seen = [e.get("revision", 1) for e in list(parent.values()) + list(merged.values())
+                if e["layout"] == entry["layout"]]
+        merged[cal_id] = {**entry, "revision": max(seen, default=0) + 1}
+    return dict(sorted(merged.items()))

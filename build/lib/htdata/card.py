@@ -1,0 +1,336 @@
+"""`htdata card DATASET OUT.html`: a self-contained dataset card (HTML + a Markdown twin), plots drawn with cv2.
+
+The card opens with what a dataset card has (name, description, licence, sources, the sample
+format, how to load it), then holds the `htdata stats` numbers of one version and these plots:
+frames per task and per scene, the contact frequency of each canonical
+region per glove (drawn on the canonical hand), the value histogram per
+glove, the taxel health map, the sync skew, clock-offset and lag distributions
+(episode records' "sync"), the split sizes, and preview strips of a few
+episodes. Every image is a PNG embedded as a data: URI and there is no
+script, stylesheet or font from elsewhere, so the page opens offline. The
+Markdown twin (OUT.md) has the same tables and links the same PNGs written
+to OUT_files/.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from htdata.format import CANVAS, HANDS
+from htdata.stats import dataset_stats
+
+BG = (255, 255, 255)            # BGR, white plots for a white page
+INK = (40, 40, 40)
+BAR = (180, 119, 31)
+FONT = cv2.FONT_HERSHEY_SIMPLEX
+PREVIEW_EPISODES = 2
+PREVIEW_FRAMES = 3
+
+
+def bar_chart(labels: list[str], values: list[float], title: str, unit: str = "", width: int = 560) -> np.ndarray:
+    """Horizontal bars, one row per label, value written at the end of each bar."""
+    row, left, top = 20, 170, 30
+    img = np.full((top + row * max(len(labels), 1) + 10, width, 3), BG, np.uint8)
+    cv2.putText(img, title, (8, 18), FONT, 0.5, INK, 1, cv2.LINE_AA)
+    top_value = max([float(v) for v in values] + [1e-12])
+    for i, (label, value) in enumerate(zip(labels, values)):
+        y = top + i * row
+        cv2.putText(img, str(label)[:24], (8, y + 13), FONT, 0.4, INK, 1, cv2.LINE_AA)
+        w = int(round((width - left - 90) * float(value) / top_value))
+        cv2.rectangle(img, (left, y + 2), (left + max(w, 1), y + row - 4), BAR, cv2.FILLED)
+        cv2.putText(img, f"{value:g}{unit}", (left + w + 6, y + 13), FONT, 0.4, INK, 1, cv2.LINE_AA)
+    if not labels:
+        cv2.putText(img, "(none)", (left, top + 13), FONT, 0.4, INK, 1, cv2.LINE_AA)
+    return img
+
+
+def histogram_chart(counts: list[int], lo: float, hi: float, title: str, log: bool = True,
+                    width: int = 560, height: int = 170) -> np.ndarray:
+    """Vertical bars over [lo, hi] (log10(1 + count) heights when `log`), axis ends labelled."""
+    img = np.full((height, width, 3), BG, np.uint8)
+    cv2.putText(img, title, (8, 18), FONT, 0.5, INK, 1, cv2.LINE_AA)
+    c = np.asarray(counts, np.float64)
+    h = np.log10(1 + c) if log else c
+    base, plot_h, x0, x1 = height - 24, height - 54, 40, width - 12
+    if h.size and h.max() > 0:
+        bw = (x1 - x0) / h.size
+        for i, v in enumerate(h / h.max()):
+            cv2.rectangle(img, (int(x0 + i * bw), base - int(v * plot_h)), (int(x0 + (i + 1) * bw) - 1, base),
+                          BAR, cv2.FILLED)
+    cv2.line(img, (x0, base), (x1, base), INK, 1)
+    for x, text in ((x0, f"{lo:g}"), (x1 - 30, f"{hi:g}")):
+        cv2.putText(img, text, (x, base + 16), FONT, 0.4, INK, 1, cv2.LINE_AA)
+    cv2.putText(img, "log count" if log else "count", (x1 - 80, 34), FONT, 0.35, INK, 1, cv2.LINE_AA)
+    return img
+
+
+def region_heatmap(glove: dict, region_map: np.ndarray, region_ids: dict[str, int], title: str) -> np.ndarray:
+    """Canonical hand, each place filled by its contact frequency (inferno, 0..the highest one), with a value bar."""
+    from htdata.preview import draw_colour_bar, region_outline
+    img = np.full((CANVAS + 28 + 62, CANVAS + 16, 3), (32, 32, 32), np.uint8)
+    values = np.zeros(region_map.shape, np.float32)
+    known = np.zeros(region_map.shape, bool)
+    for name, r in glove["regions"].items():
+        if name in region_ids and r["contact_frequency"] is not None:
+            mask = region_map == region_ids[name]
+            values[mask] = r["contact_frequency"]
+            known |= mask
+    vmax = max(float(values.max()), 0.01)
+    panel = cv2.applyColorMap(np.round(np.clip(values / vmax, 0, 1) * 255).astype(np.uint8), cv2.COLORMAP_INFERNO)
+    panel[~known] = (90, 90, 90)
+    panel[region_map == 0] = (32, 32, 32)
+    panel[region_outline(region_map)] = (255, 255, 255)
+    img[28:28 + CANVAS, 8:8 + CANVAS] = panel
+    cv2.putText(img, title[:32], (8, 18), FONT, 0.45, (235, 235, 235), 1, cv2.LINE_AA)
+    draw_colour_bar(img, 8, 28 + CANVAS + 6, CANVAS, vmax, "contact frequency (share of frames)")
+    return img
+
+
+@dataclass
+class Card:
+    """The card's parts before they are written: sections of (kind, payload)."""
+    title: str
+    sections: list = field(default_factory=list)
+    images: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def heading(self, text: str) -> None:
+        self.sections.append(("h2", text))
+
+    def text(self, text: str) -> None:
+        self.sections.append(("p", text))
+
+    def table(self, header: list[str], rows: list[list]) -> None:
+        self.sections.append(("table", (header, rows)))
+
+    def image(self, name: str, img: np.ndarray, alt: str) -> None:
+        self.images[name] = img
+        self.sections.append(("img", (name, alt)))
+
+
+def _png(img: np.ndarray) -> bytes:
+    ok, buf = cv2.imencode(".png", img)
+    if not ok:
+        raise OSError("cv2 could not encode a card image as PNG")
+    return buf.tobytes()
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return "-"
+    return f"{v:.3f}" if isinstance(v, float) else str(v)
+
+
+LICENSE_UNSET = "not stated (set it with htdata card --license, e.g. CC-BY-4.0)"
+def sample_format(codec: dict) -> list[list[str]]:
+    """The member table, from the dataset's own codec record (the EXR pixel type is chosen per dataset)."""
+    tactile, rgb = codec.get("tactile", {}), codec.get("rgb", {})
+    return [
+        ["rgb.jpg", f"224x224x3 uint8 JPEG, quality {rgb.get('quality', '?')}", "egocentric camera frame"],
+        ["tactile_<hand>.exr", f"224x224 {tactile.get('pixel_type', 'half')} EXR ({tactile.get('compression', '?')}) "
+         "in [0,1]", "pressure on the canonical hand, 0 where the glove has no sensor"],
+        ["raw_<hand>.npy", "the glove's own grid, its source dtype", "the glove rows exactly as recorded"],
+        ["json", "per-sample metadata", "episode, frame, timestamps, sync offsets, hands present"],
+    ]
+
+
+def _about(card: Card, s: dict, reader, title: str | None, description: str | None,
+           license: str | None) -> None:
+    """What a dataset card opens with: name, description, licence, sources, sample format, how to load."""
+    manifest = reader.manifest
+    card.text(description or manifest.get("description") or
+              f"Full-hand tactile glove recordings paired with egocentric RGB video: {s['episodes']} episodes, "
+              f"{s['frames']} frames, {len(s['tasks'])} tasks.")
+    card.table(["field", "value"], [["licence", license or manifest.get("license") or LICENSE_UNSET],
+                                    ["version", s["version"]], ["episodes", s["episodes"]], ["frames", s["frames"]],
+                                    ["created", manifest.get("created", "-")]])
+    card.heading("Sources")
+    per_source: dict[str, int] = {}
+    for ep in reader.episodes:
+        per_source[ep.get("source", "?")] = per_source.get(ep.get("source", "?"), 0) + 1
+    card.table(["source", "adapter", "gloves (hand: layout)", "episodes"],
+               [[src.get("name", "?"), (src.get("adapter") or {}).get("name", "-"),
+                 ", ".join(f"{h}: {lid}" for h, lid in sorted((src.get("layouts") or {}).items())) or "-",
+                 per_source.get(src.get("name"), 0)] for src in manifest.get("sources", [])])
+    card.heading("Sample format")
+    card.text("One sample per frame; a frame without a glove row (RGB-only) or without video (tactile-only) "
+              "simply lacks that member.")
+    card.table(["member", "format", "what"], sample_format(manifest.get("codec", {})))
+    card.heading("How to load")
+    card.text("pip install htdata, then in Python: import htdata; ds = htdata.open(\"PATH\"); "
+              "sample = ds.decoded(0). For LeRobot: htdata export lerobot PATH OUT.")
+
+
+def build_card(root, version: int | None = None, title: str | None = None, description: str | None = None,
+               license: str | None = None) -> Card:
+    """Numbers and plots of one version (stats computed or read from the stats cache)."""
+    from htdata.layouts import parse_canonical
+    from htdata.reader import DatasetReader
+    from htdata.stats import write_health_map
+
+    s = dataset_stats(root, version=version)
+    card = Card(title=f"{title or Path(str(root)).name}: version {s['version']}")
+    with DatasetReader(root, version=version) as reader:
+        _about(card, s, reader, title, description, license)
+        card.heading("What the numbers mean")
+        card.text(f"Values: {s['values']}; contact = any taxel above {s['contact_threshold']}.")
+        _counts(card, s)
+        _gloves(card, s, reader, parse_canonical)
+        card.heading("Taxel health")
+        card.text("Fault classes per taxel (htdata/health.py); a taxel gets the class it was given most often.")
+        if s["gloves"]:
+            import tempfile
+            with tempfile.TemporaryDirectory() as tmp:
+                png = write_health_map(root, Path(tmp) / "health.png", version=version)
+                card.image("health", cv2.imread(str(png)), "taxel health map")
+        _sync(card, reader)
+        _splits(card, reader)
+        _previews(card, root, reader)
+    return card
+
+
+def _counts(card: Card, s: dict) -> None:
+    card.heading("Tasks and scenes")
+    for field_name, table in (("task", s["tasks"]), ("scene", s["scenes"])):
+        card.table([field_name, "episodes", "frames", "duration (s)", "left hand eps", "right hand eps"],
+                   [[k, r["episodes"], r["frames"], r["duration_s"], r["hands"]["left"], r["hands"]["right"]]
+                    for k, r in table.items()])
+        card.image(f"frames_per_{field_name}", bar_chart(list(table), [r["frames"] for r in table.values()],
+                                                         f"frames per {field_name}"), f"frames per {field_name}")
+
+
+def _gloves(card: Card, s: dict, reader, parse_canonical) -> None:
+    import json
+    from htdata import storage
+    card.heading("Gloves")
+    card.table(["layout", "hand", "episodes", "frames", "contact", "p1", "p50", "p99", "max", "faulty taxels"],
+               [[g["layout"], g["hand"], g["episodes"], g["frames"], _fmt(g["contact_fraction"]),
+                 *(_fmt(g["quantiles"][k]) for k in ("p1", "p50", "p99", "max")),
+                 sum(g["health"]["counts"].values())] for g in s["gloves"]])
+    canon_file = reader.manifest["canonical"]["file"]
+    canonical = parse_canonical(json.loads(storage.read_text(storage.join(reader.root, canon_file))), canon_file)
+    for g in s["gloves"]:
+        tag = f"{g['hand']}_{g['layout']}"
+        card.image(f"regions_{tag}", region_heatmap(g, canonical.region_map, canonical.region_ids,
+                                                    f"{g['hand']}: {g['layout']}"),
+                   f"contact frequency per region, {g['hand']} {g['layout']}")
+        h = g["value_histogram"]
+        card.image(f"values_{tag}", histogram_chart(h["counts"], 0.0, 1.0,
+                                                    f"{g['hand']} {g['layout']}: values > 0 ({h['zeros']} exact zeros)"),
+                   f"value histogram, {g['hand']} {g['layout']}")
+
+
+def _sync(card: Card, reader) -> None:
+    skew, offset = [], []
+    for ep in reader.episodes:
+        for hand in HANDS:
+            h = (ep.get("sync") or {}).get("hands", {}).get(hand)
+            if h:
+                skew.append(h.get("median_abs_skew_ns", 0) / 1e6)
+                offset.append(h.get("offset_ns", 0) / 1e6)
+    card.heading("Synchronisation")
+    card.text(f"{len(skew)} episode hands with sync records: median |RGB-tactile skew| and clock offset (ms).")
+    lags = [lag for lag in ((ep.get("sync") or {}).get("lag") for ep in reader.episodes) if lag]
+    applied = [float(lag["lag_ms"]) for lag in lags if lag.get("applied")]
+    if lags:   # only pipelines with [sync] lag set report one (htdata/lag.py)
+        card.text(f"Tactile-video lag ([sync] lag): {len(lags)} episodes asked, {len(applied)} applied"
+                  + (f" (median {np.median(applied):.1f} ms)" if applied else "")
+                  + f", {len(lags) - len(applied)} declined.")
+    for key, name, values in (("skew", "median |skew| (ms)", skew), ("clock", "clock offset (ms)", offset),
+                              ("lag", "applied lag (ms)", applied)):
+        if values:
+            lo, hi = float(min(values)), float(max(values))
+            hi = hi if hi > lo else lo + 1.0
+            counts = np.histogram(values, bins=30, range=(lo, hi))[0].tolist()
+            card.image(f"sync_{key}", histogram_chart(counts, round(lo, 3), round(hi, 3), name, log=False), name)
+
+
+def _splits(card: Card, reader) -> None:
+    card.heading("Splits")
+    names = sorted(reader.manifest.get("splits", {}))
+    if not names:
+        card.text("No split in this version (htdata split).")
+    for name in names:
+        parts = reader.split(name)["parts"]
+        rows = []
+        for part, doc in sorted(parts.items()):
+            pos = reader.episode_positions(name, part)
+            rows.append([part, len(pos), sum(reader.episode_range(p)[1] for p in pos)])
+        card.table([f"split {name}: part", "episodes", "frames"], rows)
+
+
+def _previews(card: Card, root, reader) -> None:
+    from htdata.preview import render_contact_sheet
+    card.heading("Previews")
+    by_contact = sorted(reader.episodes, key=lambda e: -max((e.get("stats") or {}).get("mean_contact", {0: 0}).values()
+                                                          or [0]))
+    for ep in by_contact[:PREVIEW_EPISODES]:
+        sheet = render_contact_sheet(root, episode=ep["episode_id"], frames=PREVIEW_FRAMES, contrast="quantile")
+        card.image(f"preview_{len(card.images)}", cv2.resize(sheet, None, fx=0.6, fy=0.6, interpolation=cv2.INTER_AREA),
+                   f"preview of {ep['episode_id']}")
+
+
+def render_html(card: Card) -> str:
+    e = html.escape
+    out = ["<!doctype html>", '<html lang="en"><head><meta charset="utf-8">', f"<title>{e(card.title)}</title>",
+           "<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}"
+           "table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:2px 8px;"
+           "text-align:right}th{background:#eee}img{display:block;margin:.5em 0;max-width:100%}</style>",
+           "</head><body>", f"<h1>{e(card.title)}</h1>"]
+    for kind, payload in card.sections:
+        if kind in ("h2", "p"):
+            out.append(f"<{kind}>{e(payload)}</{kind}>")
+        elif kind == "table":
+            header, rows = payload
+            out.append("<table><tr>" + "".join(f"<th>{e(str(h))}</th>" for h in header) + "</tr>")
+            out += ["<tr>" + "".join(f"<td>{e(str(v))}</td>" for v in row) + "</tr>" for row in rows]
+            out.append("</table>")
+        else:
+            name, alt = payload
+            data = base64.b64encode(_png(card.images[name])).decode("ascii")
+            out.append(f'<img alt="{e(alt)}" src="data:image/png;base64,{data}">')
+    out.append("</body></html>")
+    return "\n".join(out) + "\n"
+
+
+def render_markdown(card: Card, files_dir: str) -> str:
+    out = [f"# {card.title}", ""]
+    for kind, payload in card.sections:
+        if kind == "h2":
+            out += [f"## {payload}", ""]
+        elif kind == "p":
+            out += [payload, ""]
+        elif kind == "table":
+            header, rows = payload
+            out.append("| " + " | ".join(str(h) for h in header) + " |")
+            out.append("|" + "---|" * len(header))
+            out += ["| " + " | ".join(str(v) for v in row) + " |" for row in rows]
+            out.append("")
+        else:
+            name, alt = payload
+            out += [f"![{alt}]({files_dir}/{name}.png)", ""]
+    return "\n".join(out)
+
+
+def write_card(root, out, version: int | None = None, title: str | None = None, description: str | None = None,
+               license: str | None = None) -> tuple[Path, Path]:
+    """Write OUT.html (self-contained), OUT.md and OUT_files/*.png; returns (html, md) paths."""
+    from htdata.fsutil import write_bytes_atomic
+    out = Path(out)
+    if out.suffix.lower() != ".html":
+        raise ValueError(f"{out}: the card is written as HTML; give a .html path")
+    card = build_card(root, version, title=title, description=description, license=license)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    files = out.with_name(out.stem + "_files")
+    files.mkdir(exist_ok=True)
+    for name, img in card.images.items():
+        write_bytes_atomic(files / f"{name}.png", _png(img))
+    md = out.with_suffix(".md")
+    write_bytes_atomic(md, render_markdown(card, files.name).encode("utf-8"))
+    write_bytes_atomic(out, render_html(card).encode("utf-8"))
+    return out, md

@@ -1,0 +1,101 @@
+"""`htdata` command line: one subcommand per module, imported lazily.
+
+Each command module exposes `configure_parser(parser)` and `run(args) -> int`.
+Keeping the table here (and the options in each module) avoids one giant
+argparse block while `htdata --help` still lists everything.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# name -> (module, one-line help). Order is the order of the data path.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "sample": ("htdata.commands.sample", "generate a small raw corpus in all three source formats"),
+    "ingest": ("htdata.commands.ingest", "read raw recordings and write a validated, sharded dataset"),
+    "split": ("htdata.commands.split", "task-level OOD hold-out + 9:1 episode split (or --list-tasks)"),
+    "validate": ("htdata.commands.validate", "prove a dataset is sound (structure, content, time, splits)"),
+    "stats": ("htdata.commands.stats", "frames, contact, value quantiles, regions and taxel health; --health OUT.png"),
+    "card": ("htdata.commands.card", "a self-contained HTML dataset card (+ Markdown) with stats and plots"),
+    "log": ("htdata.commands.log", "list the versions of a dataset (every write makes one)"),
+    "diff": ("htdata.commands.diff", "episodes added / removed / changed between two versions"),
+    "rm": ("htdata.commands.rm", "remove episodes (ids or globs) as a new version; --dry-run"),
+    "trim": ("htdata.commands.trim", "keep frames A:B of an episode as a new version; --dry-run"),
+    "renormalise": ("htdata.commands.renormalise",
+                    "new maps from the stored raw glove rows under a new calibration, as a new version"),
+    "merge": ("htdata.commands.merge", "merge two datasets into a new one without re-encoding"),
+    "gc": ("htdata.commands.gc", "delete old versions and shards no kept version lists; --dry-run"),
+    "preview": ("htdata.commands.preview", "render a contact sheet: RGB beside left/right tactile maps"),
+    "pipelines": ("htdata.commands.pipelines", "list the shipped ingest pipelines, or print one to copy and edit"),
+    "layouts": ("htdata.commands.layouts", "list, check and render hand layouts (register a glove)"),
+    "publish": ("htdata.commands.publish", "upload a dataset to an fsspec URL (s3://, gs://, memory://), manifest last"),
+    "export": ("htdata.commands.export", "write a dataset version in another format: `export lerobot` (LeRobot v3.0)"),
+    "bench": ("htdata.commands.bench", "run the benchmarks and write bench/results.json + report"),
+}
+
+
+# `htdata --help` lists the commands by what they are for.
+GROUPS: dict[str, tuple[str, ...]] = {
+    "build": ("sample", "ingest", "renormalise", "pipelines", "layouts"),
+    "curate": ("split", "rm", "trim", "merge", "gc"),
+    "inspect": ("log", "diff", "stats", "validate", "preview", "card"),
+    "share": ("publish", "export"),
+    "measure": ("bench",),
+}
+EXAMPLES = """\
+examples:
+  htdata sample data/raw --scale small                      # a small raw corpus to try things on
+  htdata ingest --pipeline opentouch data/raw/opentouch data/dataset
+  htdata split data/dataset --ood-task palm_push --name main
+  htdata stats data/dataset --brief
+  htdata export lerobot data/dataset data/lerobot
+
+Run `htdata COMMAND --help` for a command's options, defaults and examples."""
+
+
+def grouped_commands() -> str:
+    lines = []
+    for group, names in GROUPS.items():
+        lines.append(f"{group}:")
+        lines += [f"  {name:<12} {COMMANDS[name][1]}" for name in names]
+    return "\n".join(lines)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="htdata", usage="htdata [--version] COMMAND ...",
+        description="Build, curate, inspect and share full-hand tactile + egocentric RGB datasets.\n\n"
+        + grouped_commands(),
+        epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    from htdata import __version__
+
+    parser.add_argument("--version", action="version", version=f"htdata {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", help=argparse.SUPPRESS)
+    for name, (module, help_text) in COMMANDS.items():
+        p = sub.add_parser(name, description=help_text)
+        p.set_defaults(_module=module)
+        # Options are added lazily only for the chosen command (fast --help).
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    if not argv or argv[0] not in COMMANDS:
+        args = parser.parse_args(argv)  # prints help / errors for unknown commands
+        parser.print_help()
+        return 0 if not argv else 2
+    name = argv[0]
+    module = importlib.import_module(COMMANDS[name][0])
+    sub = argparse.ArgumentParser(prog=f"htdata {name}", description=COMMANDS[name][1] + ".",
+                                  formatter_class=argparse.RawDescriptionHelpFormatter)
+    module.configure_parser(sub)
+    args = sub.parse_args(argv[1:])
+    return int(module.run(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,273 @@
+"""Tactile map and RGB frame codecs, and the tactile value rule.
+
+Stored format (DESIGN.md "Value rule"): tactile maps are float32 in [0,1],
+written as single-channel ("Y") OpenEXR, ZIP by default, with HALF or FLOAT
+pixels: the pipeline's `[codec] tactile = "auto"` picks the pixel type by the
+rule in htdata/codecrule.py (smallest codec keeping every glove's levels).
+FLOAT is exact; HALF is NOT lossless (max error 2**-12, below). The decoder
+reads either. RGB frames are JPEG (lossy). Everything works in memory
+(BytesIO), so tar members need no temp files.
+
+float16 facts that matter for [0,1] maps (checked in tests/test_codec.py):
+- 0.0 and 1.0 are exact; spacing just below 1.0 is 2**-11, so the round-trip
+  error on [0,1] is at most 2**-12 ~= 2.44e-4 (round to nearest).
+- The smallest positive subnormal is 2**-24 ~= 5.96e-8; anything below half
+  of it flushes to 0. Relative precision near zero is kept (unlike fixed point).
+- The largest finite half is 65504; the value rule rejects anything > 1+1e-3
+  long before that, so overflow to Inf cannot happen on stored maps.
+
+`MEMBER_CODECS` maps each codec kind named in the member table
+(htdata/format.py) to its (encoder, decoder); alternatives measured by the
+benchmark live in htdata/benchmarks/codecs.py.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import struct
+
+import cv2
+import numpy as np
+import OpenEXR
+
+from htdata.format import CANVAS, MAP_SHAPE
+# Resampling round-off tolerated (and clipped) outside [0,1]; see the value rule.
+ROUND_OFF = 1e-3
+EXR_CHANNEL = "Y"
+
+_EXR_COMPRESSIONS = {
+    "zip": OpenEXR.ZIP_COMPRESSION,
+    "zips": OpenEXR.ZIPS_COMPRESSION,
+    "piz": OpenEXR.PIZ_COMPRESSION,
+    "htj2k256": OpenEXR.HTJ2K256_COMPRESSION,
+    "dwab": OpenEXR.DWAB_COMPRESSION,
+    "none": OpenEXR.NO_COMPRESSION,
+}
+
+
+def check_tactile_values(tactile_map: np.ndarray, where: str) -> np.ndarray:
+    """Apply the value rule; return a float32 (224,224) map inside [0,1].
+
+    NaN/Inf or values beyond the round-off band raise ValueError naming `where`
+    (a sample key or file/episode/frame), so bad input is traceable.
+    """
+    arr = np.asarray(tactile_map)
+    if arr.shape != MAP_SHAPE:
+        raise ValueError(f"{where}: tactile map has shape {arr.shape}, expected {MAP_SHAPE}")
+    if not np.issubdtype(arr.dtype, np.floating):
+        raise ValueError(f"{where}: tactile map has dtype {arr.dtype}, expected float32")
+    arr = arr.astype(np.float32, copy=False)
+    finite = np.isfinite(arr)
+    if not finite.all():
+        bad = np.argwhere(~finite)[0]
+        raise ValueError(
+            f"{where}: tactile map has {int((~finite).sum())} non-finite value(s), "
+            f"first at row {bad[0]}, col {bad[1]} ({arr[bad[0], bad[1]]})"
+        )
+    lo, hi = float(arr.min()), float(arr.max())
+    if lo < -ROUND_OFF or hi > 1.0 + ROUND_OFF:
+        raise ValueError(
+            f"{where}: tactile values must lie in [0,1] (round-off of {ROUND_OFF} tolerated); "
+            f"got min {lo:.6g}, max {hi:.6g}"
+        )
+    if lo < 0.0 or hi > 1.0:
+        arr = np.clip(arr, 0.0, 1.0)
+    return arr
+
+
+def to_half(values: np.ndarray) -> np.ndarray:
+    """float -> contiguous float16, bit-identical to numpy's `astype(np.float16)`.
+
+    numpy converts element by element (~0.4 ms per 224x224 map here, a third
+    of the EXR encode); cv2 uses the CPU's F16C instructions (~0.05 ms). Both
+    round to nearest even, keep subnormals, -0.0, NaN, and overflow to +-Inf
+    (checked exhaustively over [0,1] and on random float32 bit patterns;
+    tests/test_codec_half.py keeps the edge cases). cv2 takes 2-D float32
+    only; anything else goes through numpy.
+    """
+    arr = np.asarray(values)
+    if arr.dtype == np.float32 and arr.ndim == 2 and arr.size:
+        return cv2.multiply(np.ascontiguousarray(arr), 1.0, dtype=cv2.CV_16F)
+    return np.ascontiguousarray(arr, dtype=np.float16)
+
+
+def encode_exr(tactile_map: np.ndarray, compression: str = "zip", pixel_type=np.float16) -> bytes:
+    """Raw EXR writer (no value rule): one channel "Y" of `pixel_type`."""
+    if compression not in _EXR_COMPRESSIONS:
+        raise ValueError(f"unknown EXR compression {compression!r}; known: {sorted(_EXR_COMPRESSIONS)}")
+    header = {"compression": _EXR_COMPRESSIONS[compression], "type": OpenEXR.scanlineimage}
+    if np.dtype(pixel_type) == np.float16:
+        pixels = to_half(tactile_map)
+    else:
+        pixels = np.ascontiguousarray(tactile_map, dtype=pixel_type)
+    buf = io.BytesIO()
+    OpenEXR.File(header, {EXR_CHANNEL: pixels}).write(buf)
+    return buf.getvalue()
+
+
+def decode_exr_pixels(data: bytes, where: str = "EXR") -> np.ndarray:
+    """Channel "Y" of an in-memory EXR in its stored pixel type (float16 or float32 for dataset maps).
+
+    OpenEXR's own exceptions name no file: they are re-raised as ValueError naming `where`.
+    """
+    try:
+        channels = OpenEXR.File(io.BytesIO(data)).channels()
+    except Exception as exc:
+        raise ValueError(f"{where}: undecodable EXR ({len(data)} bytes): {exc}") from exc
+    if EXR_CHANNEL not in channels:
+        raise ValueError(f"{where}: EXR has no channel {EXR_CHANNEL!r} (channels: {sorted(channels)})")
+    return np.asarray(channels[EXR_CHANNEL].pixels)
+
+
+def decode_exr(data: bytes, where: str = "EXR") -> np.ndarray:
+    """Read channel "Y" of an in-memory EXR as float32."""
+    return decode_exr_pixels(data, where).astype(np.float32, copy=False)
+
+
+EXR_PIXEL_TYPES = {"half": np.float16, "float": np.float32}
+
+
+def encode_tactile(tactile_map: np.ndarray, compression: str = "zip", where: str = "tactile map",
+                   pixel_type: str = "half") -> bytes:
+    """Value rule + EXR of `pixel_type` ("half" or "float"), channel "Y" (the dataset format)."""
+    if pixel_type not in EXR_PIXEL_TYPES:
+        raise ValueError(f"{where}: unknown EXR pixel type {pixel_type!r}; known: {sorted(EXR_PIXEL_TYPES)}")
+    return encode_exr(check_tactile_values(tactile_map, where), compression, EXR_PIXEL_TYPES[pixel_type])
+
+
+def decode_tactile(data: bytes, where: str = "tactile map") -> np.ndarray:
+    """EXR bytes -> float32 (224,224) map; any decode failure is a ValueError naming `where`."""
+    arr = decode_exr(data, where)
+    if arr.shape != MAP_SHAPE:
+        raise ValueError(f"{where}: decoded tactile map has shape {arr.shape}, expected {MAP_SHAPE}")
+    return arr
+
+
+def encode_png16(tactile_map: np.ndarray) -> bytes:
+    """16-bit fixed point PNG of a [0,1] map (bench alternative)."""
+    arr = check_tactile_values(tactile_map, "png16")
+    ok, buf = cv2.imencode(".png", np.round(arr * 65535.0).astype(np.uint16))
+    if not ok:
+        raise ValueError("cv2 failed to encode a 16-bit PNG")
+    return buf.tobytes()
+
+
+def decode_png16(data: bytes) -> np.ndarray:
+    # IMREAD_UNCHANGED: without it cv2 returns uint8.
+    arr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if arr is None or arr.dtype != np.uint16:
+        raise ValueError("not a 16-bit PNG")
+    return arr.astype(np.float32) / 65535.0
+
+
+# The manifest's "codec" section before the codec rule's choice is filled in (htdata.codecrule
+# CodecChoice.manifest_info replaces the tactile pixel type, codec name and reason).
+DEFAULT_CODEC_INFO = {
+    "tactile": {"format": "exr", "channel": EXR_CHANNEL, "pixel_type": "half", "compression": "zip",
+                "shape": list(MAP_SHAPE), "range": [0.0, 1.0]},
+    "rgb": {"format": "jpeg", "quality": 95, "shape": [CANVAS, CANVAS, 3], "channel_order": "RGB"},
+}
+
+
+def encode_rgb(rgb: np.ndarray, quality: int = 95, where: str = "rgb frame") -> bytes:
+    """(224,224,3) uint8 RGB -> JPEG bytes. cv2 expects BGR, so convert first."""
+    arr = np.asarray(rgb)
+    if arr.shape != (CANVAS, CANVAS, 3) or arr.dtype != np.uint8:
+        raise ValueError(f"{where}: expected (224,224,3) uint8 RGB, got {arr.shape} {arr.dtype}")
+    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(arr, cv2.COLOR_RGB2BGR),
+                           [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    if not ok:
+        raise ValueError(f"{where}: JPEG encoding failed")
+    return buf.tobytes()
+
+
+def decode_rgb(data: bytes, where: str = "rgb frame") -> np.ndarray:
+    """JPEG bytes -> (H,W,3) uint8 RGB."""
+    bgr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise ValueError(f"{where}: not a decodable JPEG ({len(data)} bytes)")
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+def encode_png_u8(image: np.ndarray, where: str) -> bytes:
+    """(224,224) uint8 label/coverage map -> PNG bytes (lossless)."""
+    arr = np.asarray(image)
+    if arr.shape != MAP_SHAPE or arr.dtype != np.uint8:
+        raise ValueError(f"{where}: expected a (224,224) uint8 map, got {arr.shape} {arr.dtype}")
+    ok, buf = cv2.imencode(".png", arr)
+    if not ok:
+        raise ValueError(f"{where}: PNG encoding failed")
+    return buf.tobytes()
+
+
+def decode_png_u8(data: bytes, where: str) -> np.ndarray:
+    arr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if arr is None or arr.dtype != np.uint8 or arr.ndim != 2:
+        raise ValueError(f"{where}: not a single-channel 8-bit PNG")
+    return arr
+
+
+def encode_npy(array: np.ndarray) -> bytes:
+    """np.save bytes (no pickle): dtype and shape travel with the data."""
+    buf = io.BytesIO()
+    np.save(buf, np.asarray(array), allow_pickle=False)
+    return buf.getvalue()
+
+
+# npy header bytes -> (dtype, shape, fortran_order, data offset). Members of one dataset
+# share a handful of headers, so np.load's header parsing (ast.literal_eval) runs once per shape.
+_NPY_HEADERS: dict[bytes, tuple[np.dtype, tuple, bool, int]] = {}
+_NPY_HEADER_CACHE_MAX = 256
+
+
+def decode_npy(data: bytes, where: str = "npy") -> np.ndarray:
+    """.npy bytes -> array (a writable copy), exactly what np.load would return."""
+    if data[:6] != b"\x93NUMPY" or len(data) < 10:
+        raise ValueError(f"{where}: not an .npy member ({len(data)} bytes)")
+    if data[6] == 1:
+        start = 10 + struct.unpack_from("<H", data, 8)[0]
+    elif len(data) >= 12:
+        start = 12 + struct.unpack_from("<I", data, 8)[0]
+    else:
+        raise ValueError(f"{where}: truncated .npy header")
+    header = data[:start]
+    meta = _NPY_HEADERS.get(header)
+    if meta is None:
+        try:
+            arr = np.load(io.BytesIO(data), allow_pickle=False)
+        except Exception as exc:
+            raise ValueError(f"{where}: unreadable .npy member: {exc}") from exc
+        fortran = arr.ndim > 1 and arr.flags.f_contiguous and not arr.flags.c_contiguous
+        if len(_NPY_HEADERS) < _NPY_HEADER_CACHE_MAX:
+            _NPY_HEADERS[header] = (arr.dtype, arr.shape, fortran, start)
+        return arr
+    dtype, shape, fortran, start = meta
+    count = int(np.prod(shape, dtype=np.int64))
+    if len(data) - start != count * dtype.itemsize:
+        raise ValueError(f"{where}: .npy member holds {len(data) - start} data bytes, "
+                         f"header says {count * dtype.itemsize}")
+    return np.frombuffer(data, dtype, count, start).reshape(shape, order="F" if fortran else "C").copy()
+
+
+def encode_json(obj) -> bytes:
+    """Compact, key-sorted JSON: equal dicts give equal bytes (deterministic shards)."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":")).encode()
+
+
+def decode_json(data: bytes, where: str = "json") -> dict:
+    try:
+        return json.loads(data)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{where}: invalid JSON member: {exc}") from exc
+
+
+# Codec kind (htdata/format.py MEMBERS) -> (encode(value, settings, where), decode(data, where));
+# `settings` is a format.CodecSettings.
+MEMBER_CODECS = {
+    "json": (lambda obj, settings, where: encode_json(obj), decode_json),
+    "jpeg": (lambda rgb, settings, where: encode_rgb(rgb, settings.rgb_quality, where), decode_rgb),
+    "exr": (lambda m, settings, where: encode_tactile(m, settings.tactile_compression, where,
+                                                      settings.tactile_pixel_type), decode_tactile),
+    "npy": (lambda arr, settings, where: encode_npy(arr), decode_npy),
+}

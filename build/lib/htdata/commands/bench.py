@@ -1,0 +1,53 @@
+"""`htdata bench`: run every benchmark side by side; write OUT/results.json and OUT/REPORT.md."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from htdata.bench import BenchConfig, run_bench
+
+EPILOG = """\
+Sections found through the entry point group htdata.bench_sections (e.g. HandTouch's
+"training") run after the built-in ones. A failed section exits 1; the others still report.
+
+Examples:
+  htdata bench --out bench            # full: ~6-10 min on 2 cores (make bench)
+  htdata bench --quick --out /tmp/b   # tiny sizes (tests)
+  htdata bench --only codecs,export   # some sections (installed plugin sections by name too)
+"""
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = EPILOG
+    parser.add_argument("--out", type=Path, default=Path("bench"), help="output folder (default: bench)")
+    parser.add_argument("--quick", action="store_true", help="tiny sizes: a smoke run of every section (< 1 min)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the sample corpus and of random access")
+    parser.add_argument("--only", default=None, metavar="A,B",
+                        help="comma-separated sections to run (default: all, discovered ones included)")
+    parser.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def run(args: argparse.Namespace) -> int:
+    cfg = BenchConfig.quick_config(args.out, args.seed) if args.quick else BenchConfig(out=args.out, seed=args.seed)
+    if args.only is not None:
+        cfg.sections = tuple(s.strip() for s in args.only.split(",") if s.strip())
+    t_start = time.perf_counter()
+
+    def log(message: str) -> None:
+        print(f"[bench {time.perf_counter() - t_start:6.1f}s] {message}", file=sys.stderr, flush=True)
+
+    command = "htdata bench " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["bench"] else "htdata bench"
+    try:
+        results = run_bench(cfg, command=command, log=None if args.quiet else log)
+    except ValueError as exc:
+        print(f"htdata bench: error: {exc}", file=sys.stderr)
+        return 2
+    if results["errors"]:
+        for name, msg in results["errors"].items():
+            print(f"htdata bench: section {name} failed: {msg}", file=sys.stderr)
+        return 1
+    print(f"htdata bench: {cfg.out / 'REPORT.md'} ({results['seconds']:.0f} s)", file=sys.stderr)
+    return 0

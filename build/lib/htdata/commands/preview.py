@@ -1,0 +1,47 @@
+"""`htdata preview DATASET OUT.png`: a contact sheet of one episode (RGB | left | right tactile)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from htdata import preview
+
+
+EPILOG = """\
+A contact sheet of one episode: rows over time (N frames evenly spaced, first and last
+included), columns RGB | left tactile | right tactile. Tactile maps are colour-mapped (black =
+0, pale yellow = 1) with the hand's region outlines; grey hatching = where the glove has no
+sensor; a grey panel = a hand the episode does not have; magenta = a non-finite value (damage).
+--contrast quantile stretches the colours to the dataset's 99th percentile so faint contact shows.
+Defaults: the two-handed episode with the most contact, 6 frames, fixed contrast.
+
+Examples:
+  htdata preview data/dataset preview.png
+  htdata preview data/dataset ep.png --episode ot-home_kitchen_p1-demo_19 --frames 10 --contrast quantile
+"""
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = EPILOG
+    parser.add_argument("dataset", type=Path, help="committed dataset directory")
+    parser.add_argument("out", type=Path, metavar="OUT.png", help="contact sheet to write")
+    parser.add_argument("--episode", default=None, metavar="ID",
+                        help="episode id (default: the two-handed episode with the most contact)")
+    parser.add_argument("--frames", type=int, default=6, metavar="N",
+                        help="rows: N frames evenly spaced over the episode (default 6)")
+    parser.add_argument("--contrast", choices=preview.CONTRASTS, default="fixed",
+                        help="fixed: colour scale 0..1 (default); quantile: 0..p99 of the dataset's positive "
+                             "taxel values, so faint contact shows (uses `htdata stats`, cached)")
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        out = preview.write_preview(args.dataset, args.out, episode=args.episode, frames=args.frames,
+                                     contrast=args.contrast)
+    except (ValueError, FileNotFoundError, OSError) as exc:
+        print(f"htdata preview: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {out}")
+    return 0

@@ -1,0 +1,75 @@
+"""`htdata sample OUT`: write the synthetic raw corpus in the source formats (htdata/sample/corpus.py)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+from htdata.sample.corpus import COMPLETE_MARKER, FORMATS, SCALES, CorpusConfig, corpus_complete, plan_corpus, write_corpus
+
+EPILOG = """\
+Layout written under OUT:
+  opentouch/<scene>.hdf5 + annotations.csv      right hand, 16x16, inverted 0..3072, 30 fps
+  touchanything/<Scene>/<task>/<traj>/ + split.json   both hands, 21x21, chest.mp4 640x480
+  native/<recording>/                            100 Hz tactile, 30 Hz video, clock offset
+Same --seed -> identical tactile arrays and JPEG bytes. OUT/.complete (written last) names
+the seed, scale and formats of a finished corpus; --reuse keeps such a corpus and
+rewrites anything else (a corpus cut short, or one of another seed).
+
+Examples:
+  htdata sample data/raw --scale small
+  htdata sample data/raw --seed 1 --reuse
+"""
+
+
+def _formats(text: str) -> tuple[str, ...]:
+    items = tuple(s.strip() for s in text.split(",") if s.strip())
+    bad = [s for s in items if s not in FORMATS]
+    if bad or not items:
+        raise argparse.ArgumentTypeError(f"formats must be a comma list of {','.join(FORMATS)}, got {text!r}")
+    return items
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = EPILOG
+    parser.add_argument("out", help="output folder (created if missing)")
+    parser.add_argument("--seed", type=int, default=0, help="corpus seed (default 0)")
+    parser.add_argument("--scale", choices=SCALES, default="small",
+                        help="small: ~50 episodes, every task >= 3 episodes (default); tiny: a few episodes for tests")
+    parser.add_argument("--formats", type=_formats, default=FORMATS,
+                        help=f"comma list of formats to write (default {','.join(FORMATS)})")
+    parser.add_argument("--overwrite", action="store_true", help="replace existing OUT/<format> folders")
+    parser.add_argument("--reuse", action="store_true",
+                        help=f"exit 0 without writing if OUT holds a finished corpus ({COMPLETE_MARKER}) of the "
+                             "same seed, scale and formats; otherwise write it, replacing OUT/<format> folders")
+    parser.add_argument("--dry-run", action="store_true", help="print the planned episodes and exit")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    cfg = CorpusConfig(out=args.out, seed=args.seed, scale=args.scale, formats=tuple(args.formats),
+                       overwrite=args.overwrite, progress=not args.quiet)
+    try:
+        cfg.validate()
+        if args.dry_run:
+            for ep in plan_corpus(cfg):
+                print(f"{ep.fmt}\t{ep.name}\t{ep.spec.task}\t{ep.spec.scene}\t{ep.spec.n_frames}\t"
+                      f"{','.join(ep.spec.hands)}")
+            return 0
+        if args.reuse:
+            if corpus_complete(cfg):
+                print(f"htdata sample: {cfg.out} holds the finished corpus (seed {cfg.seed}, scale {cfg.scale}); "
+                      "reused", file=sys.stderr)
+                return 0
+            cfg.overwrite = True
+        t0 = time.perf_counter()
+        summary = write_corpus(cfg)
+    except (ValueError, FileExistsError) as exc:
+        print(f"htdata sample: error: {exc}", file=sys.stderr)
+        return 2
+    summary["seconds"] = round(time.perf_counter() - t0, 2)
+    summary["out"] = str(cfg.out)
+    print(json.dumps(summary, indent=1))
+    return 0

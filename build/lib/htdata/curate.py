@@ -1,0 +1,155 @@
+"""`htdata rm` / `htdata trim`: remove episodes or frames as a new version, never in place.
+
+Both plan first (`plan_edit`: which episodes go, which frames stay, which
+work units must be re-packed, which shards the new version stops listing)
+and only then write; `--dry-run` prints the plan and writes nothing. A work
+unit none of whose episodes is touched is reused as is; a unit all of whose
+episodes are removed is dropped from the new version's list (its shards
+stay on disk for the versions that list them, until `htdata gc`); any other
+touched unit is re-packed into a new unit (htdata/repack.py). Splits carry
+over: a removed episode leaves its part, the rest keep theirs.
+
+An id or glob that matches no episode is an error listing near matches:
+never "removed 0" with exit 0, never a removal of something else.
+"""
+
+from __future__ import annotations
+
+import difflib
+import fnmatch
+from dataclasses import dataclass, field
+
+from htdata.lock import WriterLock
+from htdata.parts import Part
+from htdata.reader import DatasetReader
+from htdata.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
+from htdata.snapshot import Snapshot, commit_parts, open_snapshot
+
+
+class NoSuchEpisode(ValueError):
+    """An episode id or pattern matched nothing."""
+
+
+def resolve_episodes(ids: list[str], patterns: list[str]) -> list[str]:
+    """Episode ids named by exact ids or shell globs (*, ?, [..]), in dataset order."""
+    chosen: set[str] = set()
+    known = set(ids)
+    for pattern in patterns:
+        if any(c in pattern for c in "*?["):
+            hits = fnmatch.filter(ids, pattern)
+        else:
+            hits = [pattern] if pattern in known else []
+        if not hits:
+            near = difflib.get_close_matches(pattern, ids, n=5, cutoff=0.6)
+            hint = f"; did you mean: {', '.join(near)}" if near else ""
+            raise NoSuchEpisode(f"no episode matches {pattern!r} ({len(ids)} episodes){hint}")
+        chosen.update(hits)
+    return [e for e in ids if e in chosen]
+
+
+def parse_frames(spec: str, n: int, episode: str) -> range:
+    """'A:B' (Python slice, A or B may be empty) -> the frames KEPT of an n-frame episode."""
+    try:
+        a, b = spec.split(":")
+        start, stop = int(a) if a.strip() else 0, int(b) if b.strip() else n
+    except ValueError:
+        raise ValueError(f"--frames must be A:B (frames kept, B exclusive), got {spec!r}") from None
+    if not 0 <= start < stop <= n:
+        raise ValueError(f"episode {episode!r} has frames 0..{n - 1}: --frames {spec} must keep a non-empty "
+                         f"range inside 0:{n} (to remove the whole episode use htdata rm)")
+    return range(start, stop)
+
+
+@dataclass
+class Edit:
+    """What an rm/trim changes, against parent version `parent`."""
+    parent: int | None
+    removed: list[str] = field(default_factory=list)
+    trimmed: dict[str, range] = field(default_factory=dict)
+    repacked_units: list[int] = field(default_factory=list)
+    dropped_shards: list[str] = field(default_factory=list)
+    frames_removed: int = 0
+
+    def lines(self, dry_run: bool = False) -> list[str]:
+        would = "would " if dry_run else ""
+        out = [f"{would}remove episode {e}" for e in self.removed]
+        out += [f"{would}trim episode {e}: keep frames {r.start}:{r.stop}" for e, r in self.trimmed.items()]
+        out += [f"{would}re-pack work unit {u} (its other samples are copied into new shards)"
+                for u in self.repacked_units]
+        out += [f"{would}stop listing shard {s}" for s in self.dropped_shards]
+        out.append(f"{self.frames_removed} frames {'would be ' if dry_run else ''}removed")
+        return out
+
+
+def plan_edit(snap: Snapshot, remove: list[str], trim: dict[str, range]) -> tuple[Edit, list]:
+    """(Edit, [(part, kept episodes or None if untouched)]) for removing/trimming episodes."""
+    edit = Edit(parent=snap.version, removed=list(remove), trimmed=dict(trim))
+    plan = []
+    for part in snap.parts():
+        touched = [e for e in part.episode_ids if e in remove or e in trim]
+        if not touched:
+            plan.append((part, None))
+            continue
+        kept = []
+        for rec in part.episodes:
+            eid, n = rec["episode_id"], int(rec["num_frames"])
+            if eid in remove:
+                edit.frames_removed += n
+            elif eid in trim:
+                kept.append(KeptEpisode(record=_trimmed_record(rec, trim[eid], snap.version), frames=trim[eid]))
+                edit.frames_removed += n - len(trim[eid])
+            else:
+                kept.append(KeptEpisode(record=rec, frames=range(n)))
+        if kept:
+            edit.repacked_units.append(part.unit)
+        edit.dropped_shards += [s["name"] for s in part.shards]
+        plan.append((part, kept))
+    return edit, plan
+
+
+def _trimmed_record(rec: dict, frames: range, version: int | None) -> dict:
+    rec = dict(rec)
+    n = int(rec["num_frames"])
+    stats = dict(rec.get("stats", {}))
+    stats["frames_kept"] = len(frames)
+    rec["stats"] = stats
+    rec["trimmed"] = {"start": frames.start, "stop": frames.stop, "of": n}
+    rec["notes"] = list(rec.get("notes", [])) + [
+        f"trimmed to frames {frames.start}..{frames.stop - 1} of {n} (from version {version}); "
+        f"frames renumbered from 0, source_frame / t_rgb_ns in each sample keep the original time; "
+        f"contact stats describe the untrimmed episode"]
+    return rec
+
+
+def apply_edit(snap: Snapshot, plan: list, command: str) -> dict:
+    """Write the planned version (re-packing touched units into new ones); returns its manifest."""
+    parts: list[Part] = []
+    reader = DatasetReader(snap.root, version=snap.version) if any(k for _, k in plan) else None
+    unit = snap.next_unit()
+    clear_uncommitted(snap.root, unit)
+    for part, kept in plan:
+        if kept is None:
+            parts.append(part)
+        elif kept:
+            parts.append(repack_unit(reader, kept, unit, samples_per_shard_of(part)))
+            unit += 1
+    return commit_parts(snap.root, parts, {}, snap, command, next_unit=unit)
+
+
+def remove_episodes(root, patterns: list[str], dry_run: bool, command: str) -> tuple[Edit, dict | None]:
+    with WriterLock(root, command):
+        snap = open_snapshot(root)
+        edit, plan = plan_edit(snap, resolve_episodes(snap.episode_ids(), patterns), {})
+        return edit, None if dry_run else apply_edit(snap, plan, command)
+
+
+def trim_episode(root, episode: str, frames: str, dry_run: bool, command: str) -> tuple[Edit, dict | None]:
+    with WriterLock(root, command):
+        snap = open_snapshot(root)
+        ids = resolve_episodes(snap.episode_ids(), [episode])
+        if len(ids) != 1:
+            raise ValueError(f"trim takes one episode; {episode!r} matches {len(ids)}: {', '.join(ids[:5])}")
+        eid = ids[0]
+        n = next(int(e["num_frames"]) for e in snap.episodes if e["episode_id"] == eid)
+        edit, plan = plan_edit(snap, [], {eid: parse_frames(frames, n, eid)})
+        return edit, None if dry_run else apply_edit(snap, plan, command)

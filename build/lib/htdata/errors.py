@@ -1,0 +1,75 @@
+"""Exceptions shared by the whole toolkit.
+
+`EpisodeError` is what a bad recording raises: it names the file, the
+episode and (when known) the frame, so a failure report points straight at
+the offending input, e.g.
+``home_kitchen_p3.hdf5 [ot-home_kitchen_p3-demo_07] frame 12: JPEG does not decode``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class HtdataError(Exception):
+    """Base class of every error htdata raises on purpose."""
+
+
+class LayoutNotFound(HtdataError, FileNotFoundError):
+    """A glove layout id or file that is on no search path; the message is one line
+    naming where it looked and the layouts that exist (htdata.layouts.resolve_layout)."""
+
+
+class EpisodeError(HtdataError):
+    """A recording (or one frame of it) cannot be read.
+
+    Call as ``EpisodeError(ref, frame, message)`` where `ref` is an
+    `EpisodeRef` (file and episode id are taken from it), or pass
+    ``file=`` / ``episode_id=`` explicitly (e.g. during discovery, before
+    a ref exists). Explicit keywords win over what `ref` provides.
+    """
+
+    def __init__(
+        self,
+        ref=None,
+        frame: int | None = None,
+        message: str = "",
+        *,
+        file: str | Path | None = None,
+        episode_id: str | None = None,
+    ):
+        if ref is not None:
+            if episode_id is None:
+                episode_id = getattr(ref, "episode_id", None)
+            if file is None:
+                source_ref = getattr(ref, "source_ref", None)
+                if source_ref:
+                    file = str(source_ref).split("::", 1)[0]
+        self.file = str(file) if file is not None else None
+        self.episode_id = episode_id
+        self.frame = None if frame is None else int(frame)
+        self.message = message
+        super().__init__(self._render())
+
+    def _render(self) -> str:
+        head = self.file if self.file is not None else "<unknown file>"
+        if self.episode_id is not None:
+            head += f" [{self.episode_id}]"
+        if self.frame is not None:
+            head += f" frame {self.frame}"
+        return f"{head}: {self.message}"
+
+    def at_frame(self, frame: int | None) -> "EpisodeError":
+        """This error, naming `frame` when it did not name one yet (the frame being processed)."""
+        if self.frame is not None or frame is None:
+            return self
+        return EpisodeError(None, frame, self.message, file=self.file, episode_id=self.episode_id)
+
+    def __reduce__(self):
+        # Keep the fields across process-pool pickling (Exception's default
+        # reduce would replay only the rendered message as `ref`).
+        return (_rebuild_episode_error, (self.file, self.episode_id, self.frame, self.message))
+
+
+def _rebuild_episode_error(file, episode_id, frame, message) -> EpisodeError:
+    return EpisodeError(None, frame, message, file=file, episode_id=episode_id)

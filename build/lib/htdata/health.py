@@ -1,0 +1,246 @@
+"""Taxel health: classify every live taxel of one episode hand from its sampled value series.
+
+Input is the (T, L) series of a glove's L live taxels over an episode's T
+frames (normalised values: the stored raw rows under the episode's
+calibration, or the stored maps sampled at the taxel centres on datasets
+without raw rows; htdata/episodestats.py), plus the layout geometry (`TaxelGrid`). Each
+taxel gets at most one class, checked in this order:
+
+- saturated: at the top of the scale (>= SATURATION_LEVEL) in more than
+  SATURATED_SHARE of the frames;
+- stuck: constant (p99 - p1 < NOISE_RANGE) at a level >= STUCK_LEVEL, away
+  from the no-load value 0;
+- dead: constant near 0 while the taxel was EXERCISED: in at least
+  EXERCISED_FRAMES frames, at least DEAD_NEIGHBOURS of its same-block raw
+  neighbours read >= PRESSED_LEVEL, two of them on opposite sides of it (a
+  taxel just outside a sharp-edged press is not). A quiet taxel whose neighbourhood was
+  never pressed is "unexercised", not dead: an idle finger is not a fault;
+- noisy: its high-frequency level (75th percentile of the absolute second
+  difference over time: smooth pressing and a few taps stay low, noise in
+  most frames does not) above NOISY_MIN_HF and more than NOISY_RATIO times
+  the median of its neighbours';
+- cross-talk: in at least CROSSTALK_MIN_FRAMES frames (and in more than
+  CROSSTALK_SHARE of the frames it reads contact) it reads contact with no
+  contact on the raw rows (for a row line) or columns (for a column line)
+  on either side of it (live taxels on both sides, at least
+  CROSSTALK_SIDE_TAXELS), while CROSSTALK_LINE_MATES other taxels of the
+  same raw row / column do the same: a line lighting up without pressure
+  around it is the ghosting of a resistive matrix. A ghost line running
+  through real contact cannot be told from it and is not flagged.
+
+Episodes shorter than MIN_FRAMES are not assessed (every taxel of a
+one-frame episode is "constant"). Thresholds are module constants so a
+report can quote them; `HEALTH_VERSION` changes when any of them does (it
+is part of the stats cache key).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from htdata.layouts import Layout
+
+HEALTH_VERSION = 1
+CLASSES = ("saturated", "stuck", "dead", "noisy", "crosstalk")
+MIN_FRAMES = 30
+CONTACT_LEVEL = 0.02          # a taxel reads contact above this (validate's contact threshold)
+NOISE_RANGE = 0.01            # p99 - p1 below this: no variation beyond noise
+STUCK_LEVEL = 0.05            # a constant taxel at or above this is stuck, below it is dead / idle
+SATURATION_LEVEL = 0.999      # half precision stores 1.0 exactly; 0.999 leaves round-off room
+SATURATED_SHARE = 0.5
+PRESSED_LEVEL = 0.1           # a neighbour "pressed" for the dead test
+DEAD_NEIGHBOURS = 3           # (or all neighbours, if fewer)
+EXERCISED_FRAMES = 3
+NOISY_RATIO = 4.0
+NOISY_MIN_HF = 0.05
+CROSSTALK_MIN_FRAMES = 5
+CROSSTALK_SHARE = 0.5
+CROSSTALK_LINE_MATES = 2
+CROSSTALK_SIDE_TAXELS = 3     # live taxels beside the line needed to call a reading isolated
+# `htdata validate` warns when the flagged share of an episode hand's live taxels passes this.
+WARN_SHARE = 0.05
+
+
+@dataclass(frozen=True)
+class TaxelGrid:
+    """Where a layout's live taxels sit in its raw grid, and which are neighbours."""
+    grid: tuple[int, int]
+    cells: np.ndarray        # (L, 2) raw (row, col) of each live taxel, row-major order
+    block: np.ndarray        # (L,) block index of each live taxel
+    neighbours: list         # per taxel: indices of live 8-neighbours in the same block
+
+    @classmethod
+    def of(cls, layout: Layout) -> "TaxelGrid":
+        H, W = layout.grid
+        owner = np.full((H, W), -1, np.int64)
+        for i, b in enumerate(layout.blocks):
+            owner[b.rows[0]:b.rows[1] + 1, b.cols[0]:b.cols[1] + 1] = i
+        cells = np.argwhere(layout.live_mask)
+        pos = np.full((H, W), -1, np.int64)
+        pos[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
+        neighbours = []
+        for r, c in cells:
+            near = []
+            for dr in (-1, 0, 1):
+                for dc in (-1, 0, 1):
+                    rr, cc = r + dr, c + dc
+                    if (dr or dc) and 0 <= rr < H and 0 <= cc < W and pos[rr, cc] >= 0 \
+                            and owner[rr, cc] == owner[r, c]:
+                        near.append(int(pos[rr, cc]))
+            neighbours.append(np.asarray(near, np.int64))
+        return cls(grid=(H, W), cells=cells, block=owner[cells[:, 0], cells[:, 1]], neighbours=neighbours)
+
+
+def classify(series: np.ndarray, taxels: TaxelGrid) -> dict:
+    """(T, L) series -> {"assessed", "frames", "live", "counts" {class: n}, "cells" {class: [[r, c], ...]},
+    "unexercised"} (cells in raw grid coordinates)."""
+    x = np.asarray(series, np.float32)
+    T, L = x.shape
+    out = {"assessed": T >= MIN_FRAMES, "frames": int(T), "live": int(L),
+           "counts": {c: 0 for c in CLASSES}, "cells": {c: [] for c in CLASSES}, "unexercised": 0}
+    if not out["assessed"] or L == 0:
+        return out
+    label = np.full(L, -1, np.int64)
+    p1, p50, p99 = np.percentile(x, [1, 50, 99], axis=0)
+    flat = (p99 - p1) < NOISE_RANGE
+    saturated = (x >= SATURATION_LEVEL).mean(axis=0) > SATURATED_SHARE
+    stuck = flat & (p50 >= STUCK_LEVEL) & (p50 < SATURATION_LEVEL)
+    crosstalk = _crosstalk(x, taxels)
+    exercised = _exercised(x, taxels, ignore=crosstalk)     # a ghost line presses nothing
+    quiet = flat & (p50 < STUCK_LEVEL)
+    out["unexercised"] = int((quiet & ~exercised).sum())
+    # 75th percentile of |second difference|: smooth pressing and a few steps (taps) stay low, noise does not
+    hf = np.percentile(np.abs(np.diff(x, n=2, axis=0)), 75, axis=0)
+    near_hf = _neighbour_median(hf, taxels)
+    noisy = (hf > NOISY_MIN_HF) & (hf > NOISY_RATIO * near_hf)
+    for k, mask in enumerate((saturated, stuck, quiet & exercised, noisy, crosstalk)):
+        label[(label < 0) & mask] = k
+    for k, name in enumerate(CLASSES):
+        hit = np.flatnonzero(label == k)
+        out["counts"][name] = int(hit.size)
+        out["cells"][name] = taxels.cells[hit].tolist()
+    return out
+
+
+def _neighbour_median(values: np.ndarray, taxels: TaxelGrid) -> np.ndarray:
+    """(L,) median of each taxel's neighbours' values (inf for a taxel without neighbours)."""
+    width = max((len(n) for n in taxels.neighbours), default=0)
+    table = np.full((len(values), max(width, 1)), np.nan)
+    for i, near in enumerate(taxels.neighbours):
+        table[i, :len(near)] = values[near]
+    lonely = np.isnan(table).all(axis=1)
+    table[lonely] = np.inf
+    return np.nanmedian(table, axis=1)
+
+
+def _neighbour_tables(taxels: TaxelGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(near (L,8) neighbour index or -1, opposite pairs (L,4,2) index or -1, neighbour counts (L,)).
+
+    Kept on the (frozen) TaxelGrid after the first call: a glove's tables serve all its episodes.
+    """
+    cached = taxels.__dict__.get("_tables")
+    if cached is not None:
+        return cached
+    L = len(taxels.neighbours)
+    near = np.full((L, 8), -1, np.int64)
+    pairs = np.full((L, 4, 2), -1, np.int64)
+    counts = np.zeros(L, np.int64)
+    for i, nb in enumerate(taxels.neighbours):
+        near[i, :len(nb)] = nb
+        counts[i] = len(nb)
+        at = {tuple(o): int(k) for k, o in zip(nb, (taxels.cells[nb] - taxels.cells[i]).tolist())}
+        for p, o in enumerate(((-1, -1), (-1, 0), (-1, 1), (0, -1))):     # one of each opposite pair
+            a, b = at.get(o), at.get((-o[0], -o[1]))
+            if a is not None and b is not None:
+                pairs[i, p] = (a, b)
+    object.__setattr__(taxels, "_tables", (near, pairs, counts))
+    return near, pairs, counts
+
+
+def _exercised(x: np.ndarray, taxels: TaxelGrid, ignore: np.ndarray) -> np.ndarray:
+    """(L,) bool: enough neighbours (not in `ignore`) were pressed in enough frames to expect a reading.
+
+    Per frame and taxel: at least min(DEAD_NEIGHBOURS, its neighbour count) neighbours pressed, two of
+    them on opposite sides; vectorised over frames and taxels through padded neighbour tables.
+    """
+    near, pairs, counts = _neighbour_tables(taxels)
+    pressed = (x >= PRESSED_LEVEL) & ~ignore
+    padded = np.concatenate([pressed, np.zeros((len(x), 1), bool)], axis=1)   # index -1 = never pressed
+    n_pressed = padded[:, near].sum(axis=2)                                    # (T, L)
+    around = (padded[:, pairs[:, :, 0]] & padded[:, pairs[:, :, 1]]).any(axis=2)
+    enough = n_pressed >= np.minimum(DEAD_NEIGHBOURS, counts)
+    return (counts > 0) & ((around & enough).sum(axis=0) >= EXERCISED_FRAMES)
+
+
+def _crosstalk(x: np.ndarray, taxels: TaxelGrid) -> np.ndarray:
+    """(L,) bool: the taxel lights up with its raw row / column mates and nothing around the line."""
+    H, W = taxels.grid
+    T = x.shape[0]
+    grid = np.zeros((T, H + 2, W + 2), bool)       # one cell of padding: no wrap-around
+    r, c = taxels.cells[:, 0] + 1, taxels.cells[:, 1] + 1
+    grid[:, r, c] = x > CONTACT_LEVEL
+    live = np.zeros((H + 2, W + 2), bool)
+    live[r, c] = True
+    found = np.zeros(len(r), bool)
+    for axis in (0, 1):                            # 0: row lines (look above/below), 1: column lines
+        side = np.zeros_like(grid)
+        sides_live = []
+        for d in (-1, 1):
+            n_live = np.zeros(live.shape, np.int64)
+            for e in (-1, 0, 1):
+                shift = (d, e) if axis == 0 else (e, d)
+                side |= np.roll(grid, shift, axis=(1, 2))
+                n_live += np.roll(live, shift, axis=(0, 1))
+            sides_live.append(n_live)
+        # quiet sides only mean "no contact nearby" where BOTH sides have live taxels to be quiet
+        watched = (np.minimum(*sides_live) >= 1) & (sides_live[0] + sides_live[1] >= CROSSTALK_SIDE_TAXELS)
+        isolated = grid & ~side & watched
+        mates = isolated.sum(axis=2 if axis == 0 else 1, keepdims=True) - isolated
+        ghost = isolated & (mates >= CROSSTALK_LINE_MATES)
+        n_ghost = ghost[:, r, c].sum(axis=0)
+        n_active = grid[:, r, c].sum(axis=0)
+        found |= (n_ghost >= CROSSTALK_MIN_FRAMES) & (n_ghost > CROSSTALK_SHARE * np.maximum(n_active, 1))
+    return found
+
+
+def record_entry(chunks: list[np.ndarray], layout: Layout) -> dict:
+    """An episode hand's `taxel_health` in its episode record, from its (T_i, L) live-value chunks.
+
+    The ingest (htdata.ingest.tally) and `htdata renormalise` write it:
+    version, assessed, live, counts per class, unexercised, and the raw-grid
+    cells of each flagged class.
+    """
+    series = np.concatenate(chunks) if chunks else np.zeros((0, int(layout.live_mask.sum())), np.float32)
+    result = classify(series, TaxelGrid.of(layout))
+    out = {"version": HEALTH_VERSION, "assessed": result["assessed"], "live": result["live"],
+           "counts": result["counts"], "unexercised": result["unexercised"]}
+    flagged = {c: cells for c, cells in result["cells"].items() if cells}
+    if flagged:
+        out["cells"] = flagged
+    return out
+
+
+def merge_counts(into: dict, health: dict) -> None:
+    """Add one episode hand's classification to a running summary (counts, taxels assessed)."""
+    into.setdefault("episodes_assessed", 0)
+    into.setdefault("episodes_not_assessed", 0)
+    into.setdefault("taxels_assessed", 0)
+    into.setdefault("unexercised", 0)
+    counts = into.setdefault("counts", {c: 0 for c in CLASSES})
+    if not health.get("assessed"):
+        into["episodes_not_assessed"] += 1
+        return
+    into["episodes_assessed"] += 1
+    into["taxels_assessed"] += int(health["live"])
+    into["unexercised"] += int(health.get("unexercised", 0))
+    for c in CLASSES:
+        counts[c] += int(health["counts"].get(c, 0))
+
+
+def flagged_share(health: dict) -> float:
+    """Share of an episode hand's live taxels with any fault class (0 when not assessed)."""
+    if not health.get("assessed") or not health.get("live"):
+        return 0.0
+    return sum(health["counts"].values()) / health["live"]

@@ -1,0 +1,109 @@
+"""`htdata trim DATASET --idle`: drop the head and tail of each episode where no hand touches anything.
+
+A frame is in contact when any taxel of any hand reads above `min_contact`
+(normalised value, sampled at the taxel centres of the stored maps: the
+per-frame maxima of the stats cache, htdata/stats.py, so a dataset whose
+stats are cached is planned without reading a shard). Each episode keeps
+its frames from the first contact minus `keep_margin_s` to the last contact
+plus `keep_margin_s` (frames = round(seconds x the episode's fps)). Idle
+stretches in the middle stay: a trim keeps one contiguous range. An episode
+with no contact at all is left as it is and listed ("remove it with htdata
+rm" if it should go): trimming it to nothing is not a trim. A frame whose
+map could not be read (NaN) counts as contact, so it is never dropped
+silently. All trims go into ONE new version through curate's
+plan_edit / apply_edit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from htdata import curate
+from htdata.episodestats import CONTACT_THRESHOLD
+from htdata.lock import WriterLock
+from htdata.reader import DatasetReader
+from htdata.snapshot import open_snapshot
+from htdata.stats import default_cache_dir, episode_stats
+
+
+@dataclass
+class IdleConfig:
+    min_contact: float = CONTACT_THRESHOLD
+    keep_margin_s: float = 0.5
+
+    def validate(self) -> None:
+        if not 0.0 <= self.min_contact < 1.0:
+            raise ValueError(f"--min-contact must be in [0, 1), got {self.min_contact}")
+        if self.keep_margin_s < 0:
+            raise ValueError(f"--keep-margin must be >= 0 seconds, got {self.keep_margin_s}")
+
+
+@dataclass
+class IdleCut:
+    """What --idle does to one episode: keep `keep` of `frames` (None: untouched, see `reason`)."""
+    episode: str
+    frames: int
+    keep: range | None
+    reason: str = ""
+
+    @property
+    def dropped(self) -> int:
+        return 0 if self.keep is None else self.frames - len(self.keep)
+
+    def line(self, dry_run: bool) -> str:
+        if self.keep is None:
+            return f"episode {self.episode}: {self.reason}"
+        head, tail = self.keep.start, self.frames - self.keep.stop
+        would = "would drop" if dry_run else "dropped"
+        return (f"episode {self.episode}: {would} {head} head + {tail} tail idle frames, keep "
+                f"{self.keep.start}:{self.keep.stop} of {self.frames}")
+
+
+def contact_frames(stats: dict, min_contact: float) -> np.ndarray:
+    """(frames,) bool: any hand above `min_contact`; frames with no readable map count as contact."""
+    n = int(stats["frames"])
+    readable = np.zeros(n, bool)
+    contact = np.zeros(n, bool)
+    for h in stats["hands"].values():
+        idx = np.asarray(h["frame_index"], np.int64)
+        readable[idx] = True
+        contact[idx] |= np.asarray(h["frame_max"], np.float64) > min_contact
+    return contact | ~readable
+
+
+def plan_cut(record: dict, stats: dict, cfg: IdleConfig) -> IdleCut:
+    n = int(stats["frames"])
+    eid = record["episode_id"]
+    hit = np.flatnonzero(contact_frames(stats, cfg.min_contact))
+    if hit.size == 0:
+        return IdleCut(eid, n, None, f"no contact above {cfg.min_contact} in any of its {n} frames: left as "
+                                     f"it is (remove it with htdata rm if it should go)")
+    margin = int(round(cfg.keep_margin_s * float(record.get("fps") or 0.0)))
+    keep = range(max(0, int(hit[0]) - margin), min(n, int(hit[-1]) + 1 + margin))
+    if len(keep) == n:
+        return IdleCut(eid, n, None, "no idle head or tail beyond the margin")
+    return IdleCut(eid, n, keep)
+
+
+def plan_idle(reader: DatasetReader, cfg: IdleConfig, cache_dir="default") -> list[IdleCut]:
+    """One IdleCut per episode of the reader's version (stats computed for uncached episodes)."""
+    cfg.validate()
+    cache = default_cache_dir(reader.root) if cache_dir == "default" else cache_dir
+    per_episode, _ = episode_stats(reader, cache_dir=cache)
+    return [plan_cut(rec, st, cfg) for rec, st in zip(reader.episodes, per_episode)]
+
+
+def trim_idle(root, cfg: IdleConfig, dry_run: bool, command: str, cache_dir="default"
+              ) -> tuple[list[IdleCut], curate.Edit | None, dict | None]:
+    """(cuts, edit or None when nothing is idle, manifest of the new version or None)."""
+    with WriterLock(root, command):
+        snap = open_snapshot(root)
+        with DatasetReader(root, version=snap.version) as reader:
+            cuts = plan_idle(reader, cfg, cache_dir)
+        trims = {c.episode: c.keep for c in cuts if c.keep is not None}
+        if not trims:
+            return cuts, None, None
+        edit, plan = curate.plan_edit(snap, [], trims)
+        return cuts, edit, None if dry_run else curate.apply_edit(snap, plan, command)

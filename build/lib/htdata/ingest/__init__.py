@@ -1,0 +1,23 @@
+"""Ingest: raw recordings -> a committed, sharded dataset (the `htdata ingest` command is
+htdata/commands/ingest.py).
+
+    plan.py     sources, discovery, layouts resolved once per episode, one work unit per episode
+    append.py   against the current version: reuse / relabel / re-ingest / keep; the parent's parts
+    episode.py  `episode_frames`: one episode as a stream of canonical frames (shared with the benchmarks)
+    unit.py     one work unit: encode (format.encode_sample) + spool + shards + done record; error policy
+    workdir.py  the output directory while ingesting: unit records, leftovers, resume
+    commit.py   compatibility with the parent; parent parts + unit records -> a new version
+    run.py      `ingest()`: lock -> plan -> executor (executors.py) -> report -> commit
+    timing.py   per-stage wall time (report["timing"])
+
+Python use:
+
+    from htdata.ingest import Source, ingest
+    from htdata.pipeline import load_pipeline
+    report = ingest([Source(load_pipeline("opentouch"), Path("/raw/ot"))], Path("OUT"), workers=2)
+"""
+
+from htdata.ingest.plan import Source, UnitTask, parse_sources
+from htdata.ingest.run import EpisodeProgress, ingest
+
+__all__ = ["EpisodeProgress", "Source", "UnitTask", "ingest", "parse_sources"]

@@ -1,0 +1,110 @@
+"""Committing an ingest as a new version: the parent's kept parts + this run's units.
+
+Layouts come from the unit records (document + coverage, see unit.layout_entry),
+so nothing is re-resolved or re-rasterised here; the codec block comes from
+the pipelines' shared settings (plan.check_settings_agree made them equal,
+`check_compatible` made them equal to the parent's).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+from htdata.codec import DEFAULT_CODEC_INFO
+from htdata.codecrule import codec_block
+from htdata.ingest.unit import decode_coverage
+from htdata.layouts import load_canonical
+from htdata.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, write_layout_files
+from htdata.pipeline import PipelineConfig
+from htdata.shardio import SampleRecord, ShardRecord
+
+
+def codec_info(cfg: PipelineConfig) -> dict:
+    """The manifest's "codec" block for a pipeline's settings."""
+    codec = json.loads(json.dumps(DEFAULT_CODEC_INFO))
+    codec["tactile"]["compression"] = cfg.tactile.compression
+    codec["tactile"]["raster_mode"] = cfg.tactile.raster_mode
+    codec["rgb"]["quality"] = cfg.rgb.quality
+    codec["rgb"]["crop"] = cfg.rgb.crop
+    codec["rgb"]["interpolation"] = cfg.rgb.interpolation
+    return codec_block(codec, cfg.codec_choice())
+
+
+def unit_result(record: dict) -> UnitResult:
+    return UnitResult(unit=record["unit"],
+                      shards=[ShardRecord(**s) for s in record["shards"]],
+                      samples=[SampleRecord(**s) for s in record["samples"]],
+                      episodes=record["episodes"])
+
+
+def layout_artifacts(records: list[dict]) -> list[LayoutArtifact]:
+    """One artefact per layout id the ingested episodes use, sorted by id, from the unit records."""
+    used = sorted({lid for r in records for ep in r["episodes"] for lid in ep["layouts"].values()})
+    found: dict[str, dict] = {}
+    for r in records:
+        for lid, entry in r["layouts"].items():
+            first = found.setdefault(lid, entry)
+            if first["document"] != entry["document"] or first["coverage"] != entry["coverage"]:
+                raise ValueError(f"layout {lid!r} differs between work units {found_unit(records, lid)} "
+                                 f"(a layout file changed during the ingest?); re-run the ingest")
+    missing = [lid for lid in used if lid not in found]
+    if missing:
+        raise ValueError(f"layouts {missing} are used by episodes but no unit record carries them")
+    return [LayoutArtifact(layout_id=lid, document=found[lid]["document"], coverage=decode_coverage(found[lid]["coverage"]))
+            for lid in used]
+
+
+def found_unit(records: list[dict], layout_id: str) -> list[int]:
+    return [r["unit"] for r in records if layout_id in r["layouts"]]
+
+
+def check_compatible(parent, sources: list) -> None:
+    """Refuse settings a dataset records once (canonical template, codec, raster mode, RGB) that differ
+    from the parent version's, naming the setting."""
+    if parent is None:
+        return
+    theirs = parent.manifest["codec"]
+    ours = codec_info(sources[0].pipeline)
+    for section in ("tactile", "rgb"):
+        for key in sorted(set(theirs.get(section, {})) | set(ours[section])):
+            a, b = theirs.get(section, {}).get(key), ours[section].get(key)
+            if a != b:
+                raise ValueError(f"{parent.root}: the dataset was written with {section}.{key} = {a!r}, pipeline "
+                                 f"{sources[0].pipeline.name!r} asks for {b!r}; a dataset has one codec: use the "
+                                 f"dataset's setting or ingest into a new dataset (htdata merge cannot mix them either)")
+    canon = load_canonical()
+    doc = (json.dumps(canon.to_dict(), indent=2, sort_keys=True) + "\n").encode()
+    if hashlib.sha256(doc).hexdigest() != parent.manifest["canonical"]["sha256"]:
+        raise ValueError(f"{parent.root}: the dataset was written with another canonical hand template "
+                         f"(sha256 {parent.manifest['canonical']['sha256'][:12]}); its maps are not comparable "
+                         f"with this htdata's: ingest into a new dataset")
+
+
+def merged_sources(parent, sources: list) -> list[dict]:
+    """The parent's source entries plus this run's (a pipeline + root already listed is replaced)."""
+    new = [{**s.pipeline.to_dict(), "source_root": str(s.root)} for s in sources]
+    keys = {(d["name"], d["source_root"]) for d in new}
+    old = [d for d in (parent.manifest["sources"] if parent else [])
+           if (d.get("name"), d.get("source_root")) not in keys]
+    return old + new
+
+
+def commit(out: Path, sources: list, records: list[dict], plan, command: str) -> dict:
+    """Write the new version: the parent's parts (minus replaced episodes) then this run's units."""
+    from htdata.ingest.append import parent_parts
+    from htdata.parts import part_from_unit
+    from htdata.snapshot import commit_parts
+
+    canon = load_canonical()
+    canonical = CanonicalArtifact(document=canon.to_dict(), region_map=canon.region_map, part_map=canon.part_map)
+    layout_entries, canonical_entry = write_layout_files(out, layout_artifacts(records), canonical)
+    ingested = {ep["episode_id"] for r in records for ep in r["episodes"]}
+    first_free = max([plan.parent.next_unit() if plan.parent else 0] + [r["unit"] + 1 for r in records])
+    kept, next_unit = parent_parts(plan, ingested, first_free)
+    parts = kept + [part_from_unit(unit_result(r)) for r in records if r["episodes"]]
+    fields = {"sources": merged_sources(plan.parent, sources), "layouts": layout_entries,
+              "canonical": canonical_entry, "codec": codec_info(sources[0].pipeline),
+              "calibrations": {k: v for r in records for k, v in r.get("calibrations", {}).items()}}
+    return commit_parts(out, parts, fields, plan.parent, command, next_unit=next_unit)

@@ -1,0 +1,382 @@
+"""One episode as a stream of canonical frames: the data path every consumer shares.
+
+`episode_frames(ref, cfg, adapter, tally)` opens the episode, pairs the
+clocks (sync.py), reads tactile rows `chunk_frames` at a time, checks their
+shape against the planned layout, normalises, drops frames with non-finite
+live taxels, rasterises and yields one `Frame` per kept frame (meta, RGB,
+maps, bend vectors, the raw glove rows each sample stores), in time order.
+Every recorded frame stays (htdata/ingest/fullrate.py): unpaired glove rows
+ride in the raw members of the samples around them, RGB frames without
+tactile become RGB-only samples, and a glove-only recording (no video)
+becomes tactile-only samples on its first hand's clock. Raw values outside the layout's range
+[0, max_value] are counted per hand and handled by the pipeline's
+`[normalise] out_of_range` policy (clip / drop_frame / fail). It encodes
+and writes nothing: the ingest unit encodes each frame with `htdata.format.encode_sample`, the
+benchmarks (htdata/benchmarks/sources.py) keep the maps. What the episode
+record needs (sync report, dropped frames, contact stats, notes, fps) is
+accumulated in the caller's `EpisodeTally`, complete once the generator is
+exhausted. Memory stays flat in episode length, except for the live-taxel
+series the tally keeps for the record's taxel health (4 bytes per live taxel
+and frame: ~0.7 KB a frame for a 169-taxel glove, ~25 MB for an hour at 30 fps).
+
+Error policy: everything raised while a frame is being processed leaves the
+generator as an `EpisodeError` naming file, episode and that frame
+(`frame_errors`); the caller decides what a failed episode means (the
+ingest unit records it and goes on with the next episode).
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Iterator
+
+import numpy as np
+
+from htdata.errors import EpisodeError
+from htdata.format import HANDS
+from htdata.ingest.fullrate import FrameQueue, RawRows, RowPlan
+from htdata.ingest.tally import EpisodeTally
+from htdata.ingest.timing import StageClock
+from htdata.layouts import Layout, load_layout
+from htdata.normalise import Normaliser
+from htdata.pipeline import PipelineConfig
+from htdata.rasterise import Rasteriser
+from htdata.rgb import to_square_224
+from htdata.shardio import sample_key
+from htdata.lag import episode_lag
+from htdata.sync import SyncResult, pair
+
+
+@dataclass
+class Frame:
+    """What one kept frame's sample needs, decoded (see htdata.format for the sample dict)."""
+    key: str                       # sample key (episode id + frame index)
+    source_frame: int              # RGB frame index in the source
+    meta: dict                     # the sample's JSON member
+    rgb: np.ndarray | None         # (size,size,3) uint8 RGB; None when RGB was not asked for
+    maps: dict[str, np.ndarray]    # hand -> (224,224) float32 in [0,1]
+    bends: dict[str, np.ndarray] = field(default_factory=dict)   # hand -> (K,) float32
+    # hand -> rows gathered while the frame waits (htdata.ingest.fullrate); arrays once `finish_raw` ran
+    raw: dict = field(default_factory=dict)
+
+    def finish_raw(self, grids: dict[str, tuple[int, int]]) -> "Frame":
+        """Turn the gathered raw rows into (R,H,W) arrays in time order and name them in meta."""
+        if self.raw and isinstance(next(iter(self.raw.values())), RawRows):
+            arrays, t_ns, rows, paired = {}, {}, {}, {}
+            for h, rr in self.raw.items():
+                arrays[h], info = rr.finish(grids[h], None)
+                t_ns[h], rows[h], paired[h] = info["t_ns"], info["row"], info["paired"]
+            self.raw = arrays
+            self.meta.update({"raw_t_ns": t_ns, "raw_row": rows, "raw_paired": paired})
+        return self
+
+    def sample(self) -> dict:
+        return {"meta": self.meta, "rgb": self.rgb, "tactile": self.maps, "bend": self.bends, "raw": self.raw}
+
+
+@contextmanager
+def frame_errors(ref, frame: int | None):
+    """Whatever is raised inside names this episode and `frame` (an EpisodeError keeps its own frame)."""
+    try:
+        yield
+    except EpisodeError as exc:
+        named = exc.at_frame(frame)
+        if named is exc:
+            raise
+        raise named from exc
+    except Exception as exc:
+        raise EpisodeError(ref, frame, f"{type(exc).__name__}: {exc}") from exc
+
+
+_RASTERS: dict[tuple[int, str], tuple[Layout, Rasteriser]] = {}
+
+
+def rasteriser_for(layout: Layout, mode: str) -> Rasteriser:
+    """One Rasteriser per (layout, mode) per process; layouts are cached per file version by load_layout."""
+    key = (id(layout), mode)
+    if key not in _RASTERS:   # the layout is kept in the value, so its id is never reused
+        _RASTERS[key] = (layout, Rasteriser(layout, mode=mode))
+    return _RASTERS[key][1]
+
+
+def planned_layouts(ref, hands: list[str]) -> dict[str, Layout]:
+    """The layouts planning resolved for this episode (`ref.layout_files`, see htdata.ingest.plan)."""
+    missing = [h for h in hands if h not in ref.layout_files]
+    if missing:
+        raise ValueError(f"episode {ref.episode_id}: no resolved layout for hand(s) {missing}; "
+                         f"plan the episode first (htdata.ingest.plan.resolve_layouts)")
+    return {h: load_layout(ref.layout_files[h]) for h in hands}
+
+
+class RgbFetcher:
+    """Hand out RGB frames by index while reading the video once, in file order.
+
+    Frames wanted later (only when timestamps were out of file order) wait as
+    resized arrays; unwanted frames are skipped without resizing.
+    """
+
+    def __init__(self, ref, frames, wanted: np.ndarray, resize, clock: StageClock):
+        self.ref = ref
+        self.frames = iter(frames)
+        self.wanted = set(int(i) for i in wanted)
+        self.resize = resize
+        self.clock = clock
+        self.pending: dict[int, np.ndarray] = {}
+
+    def get(self, index: int) -> np.ndarray:
+        index = int(index)
+        while index not in self.pending:
+            try:
+                with self.clock.stage("decode"):
+                    i, frame = next(self.frames)
+            except StopIteration:
+                raise EpisodeError(self.ref, index, "RGB stream ended before this frame") from None
+            i = int(i)
+            if i in self.wanted:
+                with self.clock.stage("resize"):
+                    self.pending[i] = self.resize(frame, i)
+        self.wanted.discard(index)
+        return self.pending.pop(index)
+
+    def discard(self, index: int) -> None:
+        self.wanted.discard(int(index))
+        self.pending.pop(int(index), None)
+
+
+def _pair_clocks(ref, cfg: PipelineConfig, streams, hands: list[str], adapter) -> SyncResult:
+    missing = [h for h in hands if h not in streams.tactile_timestamps_ns]
+    if missing:
+        raise EpisodeError(ref, None, f"no tactile stream for hand(s) {missing}")
+    lag = episode_lag(ref, cfg, adapter, hands)   # [sync] lag: None for "none"; estimates open a 2nd stream
+    try:
+        sync = pair(streams.rgb_timestamps_ns, {h: streams.tactile_timestamps_ns[h] for h in hands},
+                    cfg.sync.max_skew_ns, cfg.sync.policy, lag=lag)
+    except ValueError as e:
+        raise EpisodeError(ref, None, f"sync: {e}") from e
+    if sync.rgb_index.size == 0:
+        raise EpisodeError(ref, None, f"no RGB frame has tactile data within {cfg.sync.max_skew_ms} ms "
+                           f"({sync.report['drop_reasons']})")
+    return sync
+
+
+def _read_chunk(ref, streams, tally: EpisodeTally, normalisers: dict, start: int, stop: int,
+                clock: StageClock, plans: dict) -> tuple[dict[str, np.ndarray], np.ndarray, dict]:
+    """Normalised values of every hand for sync rows [start, stop), the mask of frames kept, and the raw rows.
+
+    Raw rows (when `plans` has the hand: keep_raw) = {hand: (paired (n,H,W), extra rows, their slots,
+    their values)}, read in ONE call with the paired rows so streamed sources never rewind.
+    """
+    sync = tally.sync
+    rgb_idx = sync.rgb_index[start:stop]
+    ok = np.ones(stop - start, dtype=bool)
+    values, raws = {}, {}
+    for h in tally.hands:
+        layout = tally.layouts[h]
+        paired = sync.tactile_index[h][start:stop]
+        extra, slots = plans[h].rows_for(start, stop) if h in plans else (np.zeros(0, np.int64), None)
+        uniq, inverse = np.unique(np.concatenate([paired, extra]), return_inverse=True)  # increasing rows
+        with clock.stage("decode"):
+            rows = np.asarray(streams.read_tactile(h, uniq))
+        if rows.ndim != 3 or rows.shape[1:] != tuple(layout.grid) or rows.shape[0] != uniq.size:
+            raise EpisodeError(ref, int(rgb_idx[0]), f"{h} tactile rows have shape {rows.shape}, expected "
+                               f"({uniq.size}, {layout.grid[0]}, {layout.grid[1]}) for layout {layout.layout_id}")
+        inverse = inverse.reshape(-1)
+        raw = rows[inverse[:paired.size]]
+        if h in plans:
+            ts = plans[h].timestamps   # as recorded (a lag the sync applied is in the sync report)
+            raws[h] = (raw, ts[paired], extra, slots, rows[inverse[paired.size:]], ts[extra])
+        with clock.stage("normalise"):
+            if start == 0:
+                normalisers[h].fit_baseline(raw)
+            v, finite = normalisers[h].apply(raw)
+            below, above = normalisers[h].out_of_range(raw)
+        for j in np.flatnonzero(ok & ~finite):
+            tally.dropped.append((int(rgb_idx[j]), f"nonfinite_tactile:{h}"))
+        ok &= finite
+        ok &= _out_of_range_policy(ref, tally, h, normalisers[h], raw, below, above, rgb_idx, ok)
+        values[h] = v
+    return values, ok, raws
+
+
+def _frame_raw_rows(sync, raws: dict, start: int, j: int) -> dict[str, RawRows]:
+    """The raw rows synchronised frame `start + j` brings: its paired row and the unpaired rows of its slot."""
+    k = start + j
+    out = {}
+    for h, (paired, paired_times, extra, slots, extra_values, extra_times) in raws.items():
+        rr = RawRows(paired_row=int(sync.tactile_index[h][k]))
+        rr.add(rr.paired_row, int(paired_times[j]), paired[j])
+        a, b = np.searchsorted(slots, [k, k + 1], side="left")
+        for row, t, value in zip(extra[a:b], extra_times[a:b], extra_values[a:b]):
+            rr.add(int(row), int(t), value)
+        out[h] = rr
+    return out
+
+
+def _out_of_range_policy(ref, tally: EpisodeTally, hand: str, normaliser, raw, below, above, rgb_idx,
+                         ok: np.ndarray) -> np.ndarray:
+    """Count a chunk's out-of-range raw values and apply the policy; returns the mask of frames that stay."""
+    bad = tally.add_out_of_range(hand, below, above)
+    tally.raw_max[hand] = float(normaliser.cfg.max_value)
+    policy = tally.oor_policy.policy if tally.oor_policy is not None else "clip"
+    if not bad.any() or policy == "clip":
+        return np.ones_like(ok)
+    if policy == "fail":
+        j = int(np.flatnonzero(bad)[0])
+        live = raw[j][normaliser.live_mask]
+        with np.errstate(invalid="ignore"):
+            worst = float(live[(live < 0) | (live > np.float32(normaliser.cfg.max_value))][0])
+        raise EpisodeError(ref, int(rgb_idx[j]), f"{hand} hand raw value {worst:g} outside [0, "
+                           f"{normaliser.cfg.max_value:g}] (layout {normaliser.layout_id}; {int(below[j])} taxels "
+                           f"below, {int(above[j])} above); pipeline [normalise] out_of_range = \"fail\"")
+    for j in np.flatnonzero(ok & bad):   # drop_frame
+        tally.dropped.append((int(rgb_idx[j]), f"out_of_range:{hand}"))
+    return ~bad
+
+
+def _render_kept(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict, tally: EpisodeTally):
+    """Maps (and bend vectors) of a chunk's kept frames; their contact goes into the tally."""
+    maps, bends = {}, {}
+    for h in tally.hands if keep.size else ():
+        v = values[h][keep]
+        maps[h] = rasters[h].render(v)
+        tally.add_contact(h, v[:, tally.layouts[h].live_mask])
+        if keep_bend[h]:
+            bends[h] = rasters[h].bend_vector(v)
+    return maps, bends
+
+
+def _rgb_source(ref, cfg: PipelineConfig, streams, sync, clock: StageClock, with_rgb: bool):
+    """(RgbFetcher or None, unpaired RGB frames to keep): none of either for a glove-only recording."""
+    if not (with_rgb and streams.has_video):
+        return None, []
+    rgb_cfg = cfg.rgb
+    unpaired = _unpaired_rgb(streams, sync) if rgb_cfg.keep_unpaired else []
+
+    def resize(frame, i):
+        return to_square_224(frame, rgb_cfg.size, rgb_cfg.crop, rgb_cfg.interpolation,
+                             where=f"{ref.source_ref} [{ref.episode_id}] frame {i}")
+
+    wanted = np.concatenate([sync.rgb_index, np.asarray([i for _, i, _ in unpaired], dtype=np.int64)])
+    return RgbFetcher(ref, streams.iter_rgb(), wanted, resize, clock), unpaired
+
+
+def _unpaired_rgb(streams, sync) -> list[tuple[int, int, str]]:
+    """(t_rgb_ns, rgb index, reason) of the RGB frames the pairing dropped, in time order."""
+    ts = np.asarray(streams.rgb_timestamps_ns, dtype=np.int64)
+    # a frame stamped like another has no time of its own (sync kept the first): it stays dropped, counted
+    return sorted((int(ts[i]), int(i), reason) for i, reason in sync.dropped if reason != "duplicate_timestamp")
+
+
+class _RgbOnlyFrames:
+    """RGB frames without tactile, handed out in time order between the paired frames (htdata.ingest.fullrate)."""
+
+    def __init__(self, ref, tally: EpisodeTally, fetcher, unpaired: list[tuple[int, int, str]]):
+        self.ref, self.tally, self.fetcher = ref, tally, fetcher
+        self.unpaired = unpaired
+        self.next = 0
+
+    def before(self, when: tuple[int, int] | None) -> Iterator["Frame"]:
+        """Frames of the sync-dropped RGB frames before (t, index) `when` (all the rest when None)."""
+        while self.next < len(self.unpaired) and (when is None or self.unpaired[self.next][:2] < when):
+            t, i, reason = self.unpaired[self.next]
+            self.next += 1
+            yield self.frame(t, i, reason)
+
+    def frame(self, t_rgb: int, i: int, reason: str) -> "Frame":
+        ref, tally = self.ref, self.tally
+        with frame_errors(ref, i):
+            rgb = self.fetcher.get(i)
+        key = sample_key(ref.episode_id, tally.frames)
+        meta = {"key": key, "episode_id": ref.episode_id, "frame_index": tally.frames, "source_frame": i,
+                "t_rgb_ns": t_rgb, "t_tactile_ns": {}, "sync_offset_ns": {},
+                "hands": {h: False for h in HANDS}, "rgb_only": reason}
+        tally.frames += 1
+        tally.rgb_only[reason] = tally.rgb_only.get(reason, 0) + 1
+        return Frame(key=key, source_frame=i, meta=meta, rgb=rgb, maps={}, bends={}, raw={})
+
+
+def _frame_meta(ref, sync, k: int, rgb_index: int, frame_index: int, hands: list[str]) -> dict:
+    """The sample's JSON member for synchronised frame `k` (raw_* fields are added by Frame.finish_raw)."""
+    key = sample_key(ref.episode_id, frame_index)
+    return {"key": key, "episode_id": ref.episode_id, "frame_index": frame_index,
+            "source_frame": rgb_index, "t_rgb_ns": int(sync.t_rgb_ns[k]),
+            "t_tactile_ns": {h: int(sync.t_tactile_ns[h][k]) for h in hands},
+            "sync_offset_ns": {h: int(sync.skew_ns[h][k]) for h in hands},
+            "hands": {h: h in hands for h in HANDS}}
+
+
+def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock: StageClock | None = None,
+                   with_rgb: bool = True) -> Iterator[Frame]:
+    """Yield the frames of one planned episode in time order (see the module docstring); raise EpisodeError.
+
+    `ref` must come from planning (layouts resolved). `with_rgb=False` skips
+    the RGB decode (Frame.rgb is None, no RGB-only frames): the benchmarks
+    that only need maps. Per chunk: the tactile rows (paired and unpaired)
+    are read, normalised and rasterised first, then the chunk's RGB frames
+    are fetched in order; `FrameQueue` releases each paired frame once no
+    later dropped frame can add raw rows to it. An episode without a single
+    paired frame fails (its RGB-only frames were only spooled).
+    """
+    clock = clock or StageClock()
+    hands = [h for h in HANDS if h in ref.hands]
+    tally.start(ref, hands, planned_layouts(ref, hands), cfg.out_of_range)
+    layouts = tally.layouts
+    with clock.stage("decode"):
+        opened = adapter.open(ref, cfg.adapter.params)
+    with opened as streams:
+        sync = tally.sync = _pair_clocks(ref, cfg, streams, hands, adapter)
+        tally.dropped = list(sync.dropped)
+        normalisers = tally.normalisers = {h: Normaliser(cfg.normalise_for(layouts[h]), layouts[h]) for h in hands}
+        rasters = {h: rasteriser_for(layouts[h], cfg.tactile.raster_mode) for h in hands}
+        keep_bend = {h: cfg.tactile.keep_bend and len(layouts[h].bend_cells) > 0 for h in hands}
+        fetcher, unpaired = _rgb_source(ref, cfg, streams, sync, clock, with_rgb)
+        plans = ({h: RowPlan.build(streams.tactile_timestamps_ns[h], sync.tactile_index[h], sync.t_rgb_ns)
+                  for h in hands} if cfg.tactile.keep_raw else {})
+        grids = {h: tuple(layouts[h].grid) for h in hands}
+        queue = FrameQueue(lambda f: f.finish_raw(grids))
+        emit = _RgbOnlyFrames(ref, tally, fetcher, unpaired)
+        total = int(sync.rgb_index.size)
+        chunk = cfg.tactile.chunk_frames
+        for start in range(0, total, chunk):
+            stop = min(total, start + chunk)
+            rgb_idx = sync.rgb_index[start:stop]
+            with frame_errors(ref, int(rgb_idx[0])):
+                values, ok, raws = _read_chunk(ref, streams, tally, normalisers, start, stop, clock, plans)
+                if fetcher is not None and not cfg.rgb.keep_unpaired:
+                    for j in np.flatnonzero(~ok):
+                        fetcher.discard(rgb_idx[j])
+                with clock.stage("rasterise"):
+                    maps, bends = _render_kept(values, np.flatnonzero(ok), rasters, keep_bend, tally)
+            n = 0
+            for j in range(stop - start):
+                k, i = start + j, int(rgb_idx[j])
+                for frame in emit.before((int(sync.t_rgb_ns[k]), i)):
+                    yield from queue.push(frame, paired=False)
+                rows = _frame_raw_rows(sync, raws, start, j)
+                if not ok[j]:   # its rows are unpaired now: stored by the previous paired frame (or the next)
+                    queue.unpaired_rows(rows)
+                    if cfg.rgb.keep_unpaired and fetcher is not None:
+                        reason = next(r for x, r in reversed(tally.dropped) if x == i)
+                        yield from queue.push(emit.frame(int(sync.t_rgb_ns[k]), i, reason), paired=False)
+                    continue
+                with frame_errors(ref, i):
+                    rgb = fetcher.get(i) if fetcher is not None else None  # timed inside as decode + resize
+                meta = _frame_meta(ref, sync, k, i, tally.frames, hands)
+                if not streams.has_video:
+                    meta["tactile_only"] = True
+                tally.frames += 1
+                tally.paired += 1
+                yield from queue.push(Frame(key=meta["key"], source_frame=i, meta=meta, rgb=rgb,
+                                            maps={h: maps[h][n] for h in hands},
+                                            bends={h: b[n] for h, b in bends.items()}, raw=rows), paired=True)
+                n += 1
+        for frame in emit.before(None):
+            yield from queue.push(frame, paired=False)
+        yield from queue.close()
+        if tally.paired == 0:
+            why = ("non-finite or out-of-range (out_of_range = \"drop_frame\")"
+                   if any(r.startswith("out_of_range:") for _, r in tally.dropped) else "non-finite")
+            raise EpisodeError(ref, None, f"no frame left: all {total} synchronised frames had {why} "
+                               f"tactile values")
+        tally.finish(streams)

@@ -1,0 +1,123 @@
+"""Keep every recorded frame: which sample stores which raw glove row, and RGB frames without tactile.
+
+A glove often runs faster than the camera (a 100 Hz glove beside 30 Hz
+video): pairing keeps one row per RGB frame. So nothing is lost, each sample
+stores in its `raw_<hand>.npy` member the row paired with its frame plus
+every UNPAIRED row whose time falls at or after the frame's RGB time and
+before the next sample's (rows before the first sample go to the first,
+rows after the last to the last). Rows of frames the ingest drops
+(non-finite or out-of-range values) are unpaired rows too and land in the
+previous kept sample (the next one when none precedes). Duplicate-timestamp
+rows, which sync cannot pair, are stored the same way. Within a sample the
+rows are in time order (then source order); meta names their timestamps
+("raw_t_ns"), source row numbers ("raw_row") and the paired row's position
+("raw_paired"), so the full-rate stream is the union over the episode's
+samples, deduplicated by source row (a row paired with two frames is stored
+twice). Rows keep the source dtype, bit for bit.
+
+RGB frames the pairing could not use (no tactile row within the skew, or
+tactile values the ingest dropped) are kept as RGB-only samples when
+`[rgb] keep_unpaired` (default): no tactile member, meta "hands" all false
+and "rgb_only" naming the reason; they hold no raw rows. A frame whose
+timestamp duplicates an earlier frame's has no time of its own: it stays
+dropped (counted as "duplicate_timestamp"). `FrameQueue` puts both kinds
+out in time order while holding the last paired frame open for the rows of
+frames dropped after it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class RowPlan:
+    """One hand's unpaired rows, grouped by the synchronised frame (slot) that stores them."""
+    timestamps: np.ndarray   # (M,) int64 all rows as recorded
+    rows: np.ndarray         # unpaired source rows, sorted by (slot, time, row)
+    slots: np.ndarray        # their slot (position in the synchronised frames), same order
+
+    @classmethod
+    def build(cls, timestamps, paired_rows: np.ndarray, t_frames: np.ndarray) -> "RowPlan":
+        ts = np.asarray(timestamps, dtype=np.int64)
+        unpaired = np.setdiff1d(np.arange(ts.size, dtype=np.int64), np.asarray(paired_rows, dtype=np.int64))
+        t = ts[unpaired]
+        slot = np.clip(np.searchsorted(t_frames, t, side="right") - 1, 0, max(t_frames.size - 1, 0))
+        order = np.lexsort((unpaired, t, slot))
+        return cls(timestamps=ts, rows=unpaired[order], slots=slot[order])
+
+    def rows_for(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, slots) of the unpaired rows stored by slots [start, stop)."""
+        a, b = np.searchsorted(self.slots, [start, stop], side="left")
+        return self.rows[a:b], self.slots[a:b]
+
+
+@dataclass
+class RawRows:
+    """Raw rows gathered for one sample and hand: source row numbers, timestamps, values."""
+    rows: list[int] = field(default_factory=list)
+    times: list[int] = field(default_factory=list)
+    values: list[np.ndarray] = field(default_factory=list)
+    paired_row: int | None = None
+
+    def add(self, row: int, t: int, value: np.ndarray) -> None:
+        self.rows.append(int(row))
+        self.times.append(int(t))
+        self.values.append(value)
+
+    def extend(self, other: "RawRows") -> None:
+        self.rows += other.rows
+        self.times += other.times
+        self.values += other.values
+
+    def finish(self, grid: tuple[int, int], dtype) -> tuple[np.ndarray, dict]:
+        """(array (R,H,W) in time order, meta {"t_ns", "row", "paired"}); paired = position of the paired row."""
+        order = sorted(range(len(self.rows)), key=lambda i: (self.times[i], self.rows[i]))
+        arr = (np.stack([self.values[i] for i in order]) if order
+               else np.zeros((0, *grid), dtype=dtype))
+        rows = [self.rows[i] for i in order]
+        meta = {"t_ns": [self.times[i] for i in order], "row": rows}
+        if self.paired_row is not None:
+            meta["paired"] = rows.index(self.paired_row)
+        return np.ascontiguousarray(arr), meta
+
+
+class FrameQueue:
+    """Frames out in time order; the last paired frame stays open for the rows of frames dropped after it.
+
+    Frames are pushed in time order (`push`); `unpaired_rows` hands over the
+    raw rows of a synchronised frame that was dropped. `push` and `close`
+    return the frames ready to be written, each paired one finished
+    (`finish(frame)`: its rows turned into arrays) when nothing can join it.
+    """
+
+    def __init__(self, finish):
+        self.finish = finish
+        self.held: list = []            # [last paired frame, rgb-only frames after it ...]
+        self.lead: dict[str, RawRows] = {}   # rows before any paired frame: go to the first
+
+    def unpaired_rows(self, rows: dict[str, RawRows]) -> None:
+        target = self.held[0].raw if self.held else self.lead
+        for hand, rr in rows.items():
+            rr.paired_row = None
+            target.setdefault(hand, RawRows()).extend(rr)
+
+    def push(self, frame, paired: bool) -> list:
+        if not paired:
+            if self.held:
+                self.held.append(frame)
+                return []
+            return [frame]
+        for hand, rr in self.lead.items():
+            frame.raw[hand].extend(rr)
+        self.lead = {}
+        out = self.close()
+        self.held = [frame]
+        return out
+
+    def close(self) -> list:
+        out = [self.finish(self.held[0]), *self.held[1:]] if self.held else []
+        self.held = []
+        return out

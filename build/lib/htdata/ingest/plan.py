@@ -1,0 +1,219 @@
+"""Planning an ingest: sources, discovery, layouts resolved once, work units.
+
+Every pipeline's adapter discovers its episodes (sorted by id). Each
+episode's glove layouts are then resolved ONCE here (`resolve_layouts`):
+the pipeline's `[layouts]` override applied, ids looked up on the layout
+search path (`--layouts DIR`, $HTDATA_LAYOUTS, the shipped layouts) and
+paths taken relative to the pipeline file; the ref that goes to the
+workers carries the layout ids and files, and its fingerprint covers the
+layout files' bytes (an edited layout re-runs its units on resume).
+
+A work unit is ONE episode (a long one spans several shards): units are
+keyed by episode, so appending or changing an episode never moves another
+(htdata/ingest/append.py decides which episodes need a unit at all). Units
+are numbered from the parent version's `next_unit`, in pipeline order then
+sorted episode id: fixed by the parent and the discovered episodes, never
+by --workers, so a run resumed with another worker count finds the same
+units and a shard name is never reused across versions.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from htdata.adapters import get_adapter
+from htdata.errors import EpisodeError
+from htdata.fsutil import sha256_file
+from htdata.format import HANDS
+from htdata.layouts import load_layout
+from htdata.pipeline import PipelineConfig, load_pipeline
+
+
+@dataclass
+class Source:
+    pipeline: PipelineConfig
+    root: Path
+
+
+@dataclass
+class UnitTask:
+    """One work unit: picklable, small (episode refs only)."""
+    unit: int
+    out: str
+    pipeline: dict          # PipelineConfig.to_dict()
+    pipeline_path: str
+    root: str
+    episodes: list          # list[EpisodeRef], planned (layouts resolved)
+
+    @property
+    def est_frames(self) -> int:
+        return sum(int(r.est_frames) for r in self.episodes)
+
+    def fingerprint(self) -> str:
+        """Changes when the pipeline, the episode list, any source file or any layout file changes."""
+        ident = {"pipeline": self.pipeline,
+                 "episodes": [[r.episode_id, r.source_ref, r.fingerprint] for r in self.episodes]}
+        return hashlib.sha1(json.dumps(ident, sort_keys=True).encode()).hexdigest()
+
+    def __repr__(self) -> str:
+        return f"unit {self.unit:06d} ({len(self.episodes)} episodes)"
+
+
+# Settings every pipeline of one dataset must share: the manifest records one codec and raster mode.
+SHARED_SETTINGS = {
+    "tactile.compression": lambda c: c.tactile.compression,
+    "codec.tactile": lambda c: c.codec.tactile,
+    "tactile.raster_mode": lambda c: c.tactile.raster_mode,
+    "rgb.quality": lambda c: c.rgb.quality,
+    "rgb.crop": lambda c: c.rgb.crop,
+    "rgb.interpolation": lambda c: c.rgb.interpolation,
+    "rgb.size": lambda c: c.rgb.size,
+}
+
+
+def check_unique_ids(refs_per_source: list[list]) -> None:
+    """An episode id names one episode across all sources of a run."""
+    seen: dict[str, str] = {}
+    for refs in refs_per_source:
+        for r in refs:
+            if r.episode_id in seen:
+                raise ValueError(f"episode id {r.episode_id!r} found twice: {seen[r.episode_id]} and {r.source_ref}")
+            seen[r.episode_id] = r.source_ref
+
+
+def plan_units(todo: list[tuple], out: Path, first_unit: int) -> list[UnitTask]:
+    """One unit per (ref, Source) to ingest, in the order given, numbered from `first_unit`."""
+    return [UnitTask(unit=first_unit + k, out=str(out), pipeline=src.pipeline.to_dict(),
+                     pipeline_path=src.pipeline.path, root=str(src.root), episodes=[ref])
+            for k, (ref, src) in enumerate(todo)]
+
+
+# --------------------------------------------------------------------------- sources and settings
+
+def parse_sources(pipelines: list[str], paths: list[str]) -> tuple[list[Source], Path]:
+    """Accept `--pipeline P=SRC ... OUT` or `--pipeline P [--pipeline Q] SRC [SRC2] OUT`."""
+    if not pipelines:
+        raise ValueError("at least one --pipeline is required")
+    if not paths:
+        raise ValueError("missing OUT (the dataset directory)")
+    out = Path(paths[-1])
+    srcs = paths[:-1]
+    with_root = [p for p in pipelines if "=" in p]
+    if with_root and len(with_root) != len(pipelines):
+        raise ValueError("either give every --pipeline as PIPELINE=SRC or none")
+    if with_root:
+        if srcs:
+            raise ValueError(f"with --pipeline PIPELINE=SRC give only OUT as positional, got {paths}")
+        pairs = [p.split("=", 1) for p in pipelines]
+    else:
+        if len(srcs) != len(pipelines):
+            raise ValueError(f"{len(pipelines)} pipeline(s) need {len(pipelines)} SRC folder(s) before OUT, "
+                             f"got {len(srcs)}: {srcs}")
+        pairs = list(zip(pipelines, srcs))
+    sources = []
+    for pipe, root in pairs:
+        root_path = Path(root)
+        if not root_path.exists():
+            raise ValueError(f"source {root} (for pipeline {pipe}) does not exist")
+        sources.append(Source(pipeline=load_pipeline(pipe), root=root_path.resolve()))
+    names = [s.pipeline.name for s in sources]
+    if len(set(names)) != len(names):
+        raise ValueError(f"pipeline names must be distinct, got {names}")
+    return sources, out.resolve()
+
+
+def check_settings_agree(sources: list[Source]) -> None:
+    """Refuse pipelines whose codec or raster settings differ (one dataset records one of each)."""
+    first = sources[0].pipeline
+    for s in sources[1:]:
+        for name, get in SHARED_SETTINGS.items():
+            a, b = get(first), get(s.pipeline)
+            if a != b:
+                raise ValueError(f"pipelines {first.name!r} ({first.path}) and {s.pipeline.name!r} ({s.pipeline.path}) "
+                                 f"disagree on {name}: {a!r} vs {b!r}; a dataset has one codec and raster "
+                                 f"setting: make them equal or ingest into separate datasets")
+
+
+# --------------------------------------------------------------------------- layouts, resolved once
+
+def pipeline_layout_base(cfg: PipelineConfig) -> Path | None:
+    """Folder relative layout paths in the pipeline's [layouts] are taken from (the pipeline file's)."""
+    p = Path(cfg.path) if cfg.path else None
+    return p.parent if p is not None and p.suffix == ".toml" else None
+
+
+def check_pipeline_layouts(cfg: PipelineConfig, dirs: tuple = ()) -> None:
+    """Every [layouts] override of the pipeline resolves (LayoutNotFound / ValueError otherwise)."""
+    for hand, name in cfg.layouts.items():
+        try:
+            load_layout(name, dirs, pipeline_layout_base(cfg))
+        except (FileNotFoundError, ValueError) as e:
+            raise type(e)(f"{cfg.path or cfg.name}: [layouts] {hand}: {e}") from None
+
+
+def resolve_layouts(ref, cfg: PipelineConfig, dirs: tuple = ()):
+    """`ref` with its layouts resolved: ids in `layouts`, files in `layout_files`, fingerprint over their bytes."""
+    ids, files, digests = {}, {}, {}
+    for h in (h for h in HANDS if h in ref.hands):
+        if h in cfg.layouts:
+            layout = load_layout(cfg.layouts[h], dirs, pipeline_layout_base(cfg))
+        elif h in ref.layouts:
+            layout = load_layout(ref.layouts[h], dirs)
+        else:
+            raise EpisodeError(ref, None, f"no layout for the {h} hand (neither the source nor the pipeline's "
+                               f"[layouts] names one)")
+        ids[h], files[h] = layout.layout_id, layout.path
+        digests[h] = sha256_file(Path(layout.path))
+    fingerprint = hashlib.sha1(json.dumps([ref.fingerprint, digests], sort_keys=True).encode()).hexdigest()
+    return dataclasses.replace(ref, layouts=ids, layout_files=files, fingerprint=fingerprint)
+
+
+def check_layout_ids_unique(refs: list) -> None:
+    """One layout id = one file: a dataset's layouts/ holds one document per id."""
+    seen: dict[str, str] = {}
+    for r in refs:
+        for h, lid in r.layouts.items():
+            path = r.layout_files[h]
+            other = seen.setdefault(lid, path)
+            if other != path and sha256_file(Path(other)) != sha256_file(Path(path)):
+                raise ValueError(f"layout id {lid!r} names two different files: {other} and {path} "
+                                 f"(episode {r.episode_id}); give one of them another layout_id")
+
+
+def failure_entry(stage: str, source: str, exc: EpisodeError, source_ref: str | None = None) -> dict:
+    """A report failure for an episode or file that never reached a unit (episode_id may be None)."""
+    return {"stage": stage, "episode_id": exc.episode_id, "source": source, "source_ref": source_ref or exc.file,
+            "file": exc.file, "frame": exc.frame, "error": exc.message}
+
+
+def discover_sources(sources: list[Source], layout_dirs: tuple = ()) -> tuple[list[list], list[dict]]:
+    """Every source's planned episode refs, and one failure entry per file/episode that cannot be planned.
+
+    A bad file (discovery) or an episode whose layout does not resolve
+    (stage "plan") is a failure like a bad episode; only a source-wide
+    problem (bad adapter params, unreadable annotation/split file, a
+    pipeline [layouts] override that does not resolve) aborts (ValueError).
+    """
+    refs, failures = [], []
+    for s in sources:
+        check_pipeline_layouts(s.pipeline, layout_dirs)
+        name = s.pipeline.adapter.name
+        try:
+            found, bad = get_adapter(name).discover_all(s.root, s.pipeline.adapter.params)
+        except Exception as e:
+            raise ValueError(f"{s.root}: discovery with adapter {name!r} failed: {e}") from e
+        failures += [failure_entry("discovery", name, e) for e in bad]
+        planned = []
+        for ref in found:
+            try:
+                planned.append(resolve_layouts(ref, s.pipeline, layout_dirs))
+            except (FileNotFoundError, ValueError, EpisodeError) as e:
+                err = e if isinstance(e, EpisodeError) else EpisodeError(ref, None, str(e))
+                failures.append(failure_entry("plan", name, err, ref.source_ref))
+        refs.append(planned)
+    check_layout_ids_unique([r for rs in refs for r in rs])
+    return refs, failures

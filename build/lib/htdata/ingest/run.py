@@ -1,0 +1,194 @@
+"""Running an ingest: plan -> units (process pool, Ray or inline) -> report -> commit.
+
+Failures (any exception inside an episode, every source file discovery
+could not read, every episode whose layout does not resolve) are reported
+with file/episode/frame in DATASET/reports/ingest.json, with every dropped
+frame, every sync report, out-of-range raw value counts and hands not
+ingested per episode, and a per-stage timing breakdown of the units run.
+Progress goes to `progress` (a tqdm bar on stderr when enabled): it advances
+per finished episode (per finished unit with Ray).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from htdata.codecrule import resolve_sources
+from htdata.executors import make_executor
+from htdata.format import INGEST_REPORT
+from htdata.fsutil import write_bytes_atomic
+from htdata.ingest.append import kept_unavailable, plan_append
+from htdata.ingest.commit import check_compatible, commit
+from htdata.ingest.plan import (Source, UnitTask, check_settings_agree, check_unique_ids, discover_sources,
+                                plan_units)
+from htdata.ingest.timing import timing_summary
+from htdata.ingest.unit import run_unit
+from htdata.ingest.workdir import (check_output, clear_unit_files, dumps, load_valid_record, prepare_output,
+                                   remove_strays)
+from htdata.lock import WriterLock
+from htdata.snapshot import current_snapshot
+
+
+class EpisodeProgress:
+    """tqdm bar on stderr over episodes, with frames/s.
+
+    Advanced by per-episode events from the workers (process pool, inline);
+    when a unit's result arrives the bar is reconciled to the unit's true
+    episode and frame counts, which covers executors that send no events
+    (Ray), events that arrive late, and events repeated by a retried unit.
+    """
+
+    def __init__(self, tasks: list[UnitTask], done_units: set[int], enabled: bool):
+        from tqdm import tqdm
+
+        self.limits = {t.unit: len(t.episodes) for t in tasks}
+        self.bar = tqdm(total=sum(self.limits.values()), unit="ep", file=sys.stderr, disable=not enabled,
+                        desc="ingest")
+        self.done = sum(self.limits[u] for u in done_units)   # episodes counted (a disabled bar keeps n = 0)
+        self.bar.update(self.done)
+        self.finished = set(done_units)
+        self.episodes: dict[int, int] = {}
+        self.unit_frames: dict[int, int] = {}
+        self.frames = 0
+        self.t0 = time.perf_counter()
+
+    def _advance(self, episodes: int, frames: int) -> None:
+        self.frames += frames
+        if episodes:
+            self.done += episodes
+            self.bar.update(episodes)
+        self.bar.set_postfix(frames_per_s=f"{self.frames / max(time.perf_counter() - self.t0, 1e-9):.1f}",
+                             refresh=False)
+
+    def event(self, event: dict) -> None:
+        unit = int(event["unit"])
+        if unit in self.finished or self.episodes.get(unit, 0) >= self.limits.get(unit, 0):
+            return
+        self.episodes[unit] = self.episodes.get(unit, 0) + 1
+        self.unit_frames[unit] = self.unit_frames.get(unit, 0) + int(event.get("frames", 0))
+        self._advance(1, int(event.get("frames", 0)))
+
+    def unit_done(self, task: UnitTask, record: dict) -> None:
+        self.finished.add(task.unit)
+        episodes = self.limits[task.unit] - self.episodes.pop(task.unit, 0)
+        frames = len(record["samples"]) - self.unit_frames.pop(task.unit, 0)
+        self._advance(episodes, frames)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "process",
+           address: str | None = None, retries: int = 1, progress: bool = True,
+           layout_dirs: tuple = (), command: str = "htdata ingest") -> dict:
+    """Ingest (or resume, or append to) the dataset at `out`; returns the report (also reports/ingest.json).
+
+    Holds the dataset's writer lock throughout. `layout_dirs` are searched for
+    layout ids before $HTDATA_LAYOUTS and the shipped layouts (`--layouts DIR`).
+    """
+    t_start = time.perf_counter()
+    check_settings_agree(sources)
+    check_output(out)
+    with WriterLock(out, command) as lock:
+        prepare_output(out)
+        parent = current_snapshot(out)
+        refs, plan_failures = discover_sources(sources, tuple(layout_dirs))
+        check_unique_ids(refs)
+        # the codec rule needs the run's gloves: resolved after discovery, before anything is fingerprinted
+        sources = resolve_sources(sources, refs, parent.manifest["codec"]["tactile"] if parent else None)
+        check_compatible(parent, sources)
+        # pipeline (CLI) order, then episode id: the order units are numbered in
+        pairs = [(r, s) for s, rs in zip(sources, refs) for r in sorted(rs, key=lambda r: r.episode_id)]
+        settings = {id(s): s.pipeline.to_dict() for s in sources}
+        plan = plan_append(parent, [r for r, _ in pairs], [settings[id(s)] for _, s in pairs])
+        source_of = {r.episode_id: s for r, s in pairs}
+        first_unit = parent.next_unit() if parent else 0
+        tasks = plan_units([(r, source_of[r.episode_id]) for r in plan.todo], out, first_unit)
+        remove_strays(out, tasks, first_unit)
+        records, ran = run_units(tasks, out, workers, executor, address, retries, progress)
+        report = build_report(sources, tasks, records, ran, plan_failures, plan, parent,
+                              discovered={r.episode_id for rs in refs for r in rs}, t_start=t_start)
+        if lock.note:
+            report["notes"].append(lock.note)
+        write_bytes_atomic(out / INGEST_REPORT, dumps(report))   # explains a run that commits nothing too
+        if parent is None and report["episodes_ingested"] == 0:
+            raise ValueError(f"no episode could be ingested ({len(report['failures'])} failures); "
+                             f"see {out / INGEST_REPORT}")
+        if report["episodes_ingested"] or plan.relabelled:
+            manifest = commit(out, sources, records, plan, command)
+            report["version"] = manifest["version"]
+        else:
+            report["version"] = parent.version
+            report["notes"].append(f"nothing changed: version {parent.version} stays current")
+    report["timing"]["total_s"] = time.perf_counter() - t_start
+    write_bytes_atomic(out / INGEST_REPORT, dumps(report))
+    return report
+
+
+def run_units(tasks: list[UnitTask], out: Path, workers: int, executor: str, address: str | None,
+              retries: int, progress: bool) -> tuple[list[dict], list[dict]]:
+    """Resume finished units, run the rest (largest first); returns (records in unit order, records run now)."""
+    records, todo = {}, []
+    for t in tasks:
+        rec = load_valid_record(t)
+        if rec is None:
+            clear_unit_files(out, t.unit)
+            todo.append(t)
+        else:
+            records[t.unit] = rec
+    # Largest first: a long unit started last would leave the other workers idle at the end.
+    todo.sort(key=lambda t: -t.est_frames)
+    bar = EpisodeProgress(tasks, set(records), progress)
+    try:
+        if todo:
+            runner = make_executor(executor, workers, address, retries)
+            for task, rec in runner.map_units(run_unit, todo, on_progress=bar.event):
+                records[task.unit] = rec
+                bar.unit_done(task, rec)
+    finally:
+        bar.close()
+    return [records[t.unit] for t in tasks], [records[t.unit] for t in todo]
+
+
+def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, discovered, t_start) -> dict:
+    """reports/ingest.json: counts, failures, what was kept/reused/replaced, sync reports, timing."""
+    failures = plan_failures + [f for r in ordered for f in r["failures"]]
+    failed_replacements = sorted({f["episode_id"] for f in failures} & plan.replaced)
+    kept = kept_unavailable(parent, discovered, [s.root for s in sources])
+    notes = [f"source unavailable: {e} kept from version {parent.version}" for e in kept]
+    notes += [f"re-ingest failed: {e} kept from version {parent.version}" for e in failed_replacements]
+    return {
+        "pipelines": [s.pipeline.name for s in sources],
+        "parent_version": parent.version if parent else None,
+        "units": len(tasks), "units_run": len(ran), "units_resumed": len(tasks) - len(ran),
+        "episodes_planned": len(tasks),
+        "episodes_ingested": sum(len(r["episodes"]) for r in ordered),
+        "samples": sum(len(r["samples"]) for r in ordered),
+        # samples without tactile (RGB frames the pairing could not use), by reason; tactile-only episodes
+        "rgb_only_samples": _counts(ep.get("rgb_only_frames", {}) for r in ordered for ep in r["episodes"]),
+        "tactile_only_episodes": sorted(ep["episode_id"] for r in ordered for ep in r["episodes"]
+                                        if ep.get("tactile_only")),
+        "episodes_unchanged": len(plan.reused), "episodes_relabelled": sorted(plan.relabelled),
+        "episodes_replaced": sorted(plan.replaced - set(failed_replacements)),
+        "episodes_kept_unavailable": kept, "notes": notes,
+        "seconds": time.perf_counter() - t_start,
+        "failures": failures,
+        "dropped_frames": [d for r in ordered for d in r["dropped"]],
+        "sync": {ep["episode_id"]: ep["sync"] for r in ordered for ep in r["episodes"]},
+        # raw values outside the layout range and hands not ingested, per episode (only episodes that have any)
+        "out_of_range": {ep["episode_id"]: ep["out_of_range"] for r in ordered for ep in r["episodes"]
+                         if ep.get("out_of_range")},
+        "hands_excluded": {ep["episode_id"]: ep["hands_excluded"] for r in ordered for ep in r["episodes"]
+                           if ep.get("hands_excluded")},
+        "timing": timing_summary(ran, time.perf_counter() - t_start),
+    }
+
+
+def _counts(dicts) -> dict[str, int]:
+    total: dict[str, int] = {}
+    for d in dicts:
+        for k, v in d.items():
+            total[k] = total.get(k, 0) + int(v)
+    return dict(sorted(total.items()))

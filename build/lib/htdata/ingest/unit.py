@@ -1,0 +1,179 @@
+"""One work unit (in a worker process, a Ray task or inline): its episodes -> shards + a done record.
+
+For each episode, `episode_frames` yields the kept frames; each is encoded
+with `htdata.format.encode_sample` (codec settings from the pipeline) and
+spooled to a temp file. Only a fully successful episode is replayed into
+the unit's shards, so a bad episode never leaves half its frames behind.
+
+Error policy (webdataset's `handler=` idea): `run_unit` hands any exception
+an episode raises to `on_episode_error`, which turns it into a report
+failure naming file, episode and frame; the unit goes on with its next
+episode. A failure never crosses an episode boundary.
+
+The done record also carries every layout the unit's episodes used, with
+its coverage map (`layout_entry`): the commit copies them into the dataset
+without reloading layouts or rebuilding rasterisers.
+
+Test hooks (fault injection, used by tests/test_ingest.py):
+HTDATA_TEST_FAULT_UNIT=U and HTDATA_TEST_FAULT=crash|hang make unit U
+`os._exit(137)` or sleep forever right after its first episode reached the
+shard writer (a temp shard exists, no unit record yet).
+"""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import os
+import pickle
+import time
+from pathlib import Path
+
+import numpy as np
+
+from htdata.adapters import get_adapter
+from htdata.calibration import episode_calibrations
+from htdata.errors import EpisodeError
+from htdata.executors import parent_alive, report_progress
+from htdata.format import MAP_SHAPE, SHARDS_DIR, CodecSettings, encode_sample
+from htdata.fsutil import write_bytes_atomic
+from htdata.ingest.episode import EpisodeTally, episode_frames, frame_errors, rasteriser_for
+from htdata.ingest.timing import StageClock
+from htdata.ingest.workdir import clear_unit_files, dumps, spool_path, unit_record_path
+from htdata.layouts import Layout
+from htdata.pipeline import PipelineConfig
+from htdata.shardio import ShardWriter
+
+
+class Spool:
+    """Encoded samples of the current episode on disk (flat memory), replayed on success."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.f = None
+        self.count = 0
+
+    def start(self) -> None:
+        self.close()
+        self.f = open(self.path, "w+b")
+        self.count = 0
+
+    def add(self, key: str, members: dict[str, bytes]) -> None:
+        pickle.dump((key, members), self.f, protocol=pickle.HIGHEST_PROTOCOL)
+        self.count += 1
+
+    def replay(self):
+        self.f.flush()
+        self.f.seek(0)
+        for _ in range(self.count):
+            yield pickle.load(self.f)
+
+    def close(self) -> None:
+        if self.f is not None:
+            self.f.close()
+            self.f = None
+        self.path.unlink(missing_ok=True)
+
+
+def codec_settings(cfg: PipelineConfig) -> CodecSettings:
+    return cfg.codec_settings()
+
+
+def spool_episode(ref, cfg: PipelineConfig, adapter, spool: Spool, clock: StageClock) -> EpisodeTally:
+    """Encode and spool every kept frame of one episode; raise on any failure."""
+    settings = codec_settings(cfg)
+    tally = EpisodeTally()
+    spool.start()
+    for frame in episode_frames(ref, cfg, adapter, tally, clock):
+        with frame_errors(ref, frame.source_frame):
+            with clock.stage("encode"):
+                members = encode_sample(frame.sample(), settings, where=frame.key)
+            with clock.stage("write"):
+                spool.add(frame.key, members)
+    return tally
+
+
+def on_episode_error(ref, exc: BaseException) -> dict:
+    """The error handler: a failed episode becomes one report failure (file, episode, frame, message)."""
+    if isinstance(exc, EpisodeError):
+        file, frame, msg = exc.file, exc.frame, exc.message
+    else:
+        file, frame, msg = str(ref.source_ref).split("::", 1)[0], None, f"{type(exc).__name__}: {exc}"
+    return {"stage": "ingest", "episode_id": ref.episode_id, "source": ref.source, "source_ref": ref.source_ref,
+            "file": file, "frame": frame, "error": msg}
+
+
+def encode_coverage(coverage: np.ndarray) -> str:
+    """(224,224) 0/1 uint8 -> text for a JSON unit record (bit-packed, base64)."""
+    return base64.b64encode(np.packbits(np.asarray(coverage, np.uint8).reshape(-1) > 0).tobytes()).decode("ascii")
+
+
+def decode_coverage(text: str) -> np.ndarray:
+    bits = np.unpackbits(np.frombuffer(base64.b64decode(text), np.uint8))
+    return bits[:MAP_SHAPE[0] * MAP_SHAPE[1]].reshape(MAP_SHAPE).astype(np.uint8)
+
+
+def layout_entry(layout: Layout, raster_mode: str) -> dict:
+    """What the commit needs of a layout: its document and its coverage in this raster mode."""
+    return {"document": layout.to_dict(), "coverage": encode_coverage(rasteriser_for(layout, raster_mode).coverage)}
+
+
+def _fault_hook(unit: int) -> None:
+    if os.environ.get("HTDATA_TEST_FAULT_UNIT") != str(unit):
+        return
+    mode = os.environ.get("HTDATA_TEST_FAULT", "crash")
+    if mode == "hang":
+        while True:
+            time.sleep(3600)
+    os._exit(137)
+
+
+def run_unit(task) -> dict:
+    """Ingest one unit (a plan.UnitTask); write its shards and its done record; return the (small) record."""
+    out = Path(task.out)
+    clear_unit_files(out, task.unit)  # idempotent: a retried unit starts clean
+    cfg = PipelineConfig.from_dict(task.pipeline, where=task.pipeline_path or task.pipeline["name"])
+    adapter = get_adapter(cfg.adapter.name)
+    spool = Spool(spool_path(out, task.unit))
+    episodes, failures, dropped, layouts, calibrations = [], [], [], {}, {}
+    clock = StageClock()
+    t0 = time.perf_counter()
+    try:
+        with ShardWriter(out / SHARDS_DIR, task.unit, cfg.shards.samples_per_shard) as writer:
+            for ref in task.episodes:
+                if not parent_alive():   # the ingest that asked for this unit is gone: stop, commit nothing
+                    os._exit(1)
+                try:
+                    tally = spool_episode(ref, cfg, adapter, spool, clock)
+                except Exception as exc:  # the error policy: a failure stays inside its episode
+                    failures.append(on_episode_error(ref, exc))
+                    report_progress({"unit": task.unit, "episode_id": ref.episode_id, "frames": 0})
+                    continue
+                with clock.stage("write"):
+                    for key, members in spool.replay():
+                        writer.add_sample(key, members)
+                episodes.append(tally.record())
+                dropped += [{"episode_id": ref.episode_id, "rgb_index": i, "reason": r}
+                            for i, r in tally.dropped_sorted()]
+                for layout in tally.layouts.values():
+                    if layout.layout_id not in layouts:
+                        layouts[layout.layout_id] = layout_entry(layout, cfg.tactile.raster_mode)
+                calibrations.update(episode_calibrations(cfg, tally.layouts))
+                report_progress({"unit": task.unit, "episode_id": ref.episode_id, "frames": tally.frames})
+                _fault_hook(task.unit)
+            with clock.stage("write"):
+                shards = writer.close()
+            samples = writer.samples
+    finally:
+        spool.close()
+    record = {
+        "unit": task.unit, "fingerprint": task.fingerprint(),
+        "episode_ids": [r.episode_id for r in task.episodes],
+        "shards": [dataclasses.asdict(s) for s in shards],
+        "samples": [dataclasses.asdict(s) for s in samples],
+        "episodes": episodes, "failures": failures, "dropped": dropped, "layouts": layouts,
+        "calibrations": calibrations,
+        "seconds": time.perf_counter() - t0, "timing": clock.as_record(),
+    }
+    write_bytes_atomic(unit_record_path(out, task.unit), dumps(record))
+    return record

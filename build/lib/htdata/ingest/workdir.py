@@ -1,0 +1,95 @@
+"""The output directory while an ingest runs: ownership check, unit records, leftovers.
+
+Crash safety and resume: a finished unit writes DATASET/.work/unit-UUUUUU.json
+atomically (its records, its fingerprint = pipeline + episode ids + input
+fingerprints, its shards' sha256). A re-run skips units whose record,
+fingerprint and shards (sha256) all match, removes temp files and rewrites
+every other unit from scratch. Units of a run are numbered from the current
+version's `next_unit`: shards of committed versions are never touched, and
+the current version stays current (and readable) until the new one is
+committed, so a crashed or failed run damages nothing.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from htdata.format import MANIFEST_FILE, SHARDS_DIR, WORK_DIR
+from htdata.fsutil import sha256_file
+from htdata.lock import LOCK_FILE
+
+# Keys a unit record must hold to be reused (records of older versions lack some: their units re-run).
+RECORD_KEYS = ("unit", "fingerprint", "shards", "samples", "episodes", "failures", "dropped", "layouts")
+
+
+def dumps(obj) -> bytes:
+    return (json.dumps(obj, indent=1, sort_keys=True) + "\n").encode()
+
+
+def unit_record_path(out: Path, unit: int) -> Path:
+    return out / WORK_DIR / f"unit-{unit:06d}.json"
+
+
+def spool_path(out: Path, unit: int) -> Path:
+    return out / WORK_DIR / f"spool-{unit:06d}.bin"
+
+
+def clear_unit_files(out: Path, unit: int) -> None:
+    """Remove everything a (crashed or stale) run of this unit left behind."""
+    unit_record_path(out, unit).unlink(missing_ok=True)
+    for p in (out / SHARDS_DIR).glob(f"shard-{unit:06d}-*.tar"):
+        p.unlink()
+    for p in (out / SHARDS_DIR).glob(f".shard-{unit:06d}-*.tar.tmp"):
+        p.unlink()
+    spool_path(out, unit).unlink(missing_ok=True)
+
+
+def load_valid_record(task) -> dict | None:
+    """The unit's done record if it matches the task (a UnitTask) and its shards are intact, else None."""
+    out = Path(task.out)
+    path = unit_record_path(out, task.unit)
+    if not path.is_file():
+        return None
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+    if not all(k in record for k in RECORD_KEYS) or record["fingerprint"] != task.fingerprint():
+        return None
+    for s in record["shards"]:
+        p = out / SHARDS_DIR / s["name"]
+        if not p.is_file() or p.stat().st_size != s["bytes"] or sha256_file(p) != s["sha256"]:
+            return None
+    return record
+
+
+def check_output(out: Path) -> None:
+    """Refuse a non-empty directory that is neither an htdata dataset nor an interrupted first ingest
+    (a writer's lock file alone does not count: the lock then names that writer)."""
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{out}: exists and is not a directory")
+    content = [p for p in out.iterdir() if p.name != LOCK_FILE] if out.is_dir() else []
+    if content and not (out / MANIFEST_FILE).is_file() and not (out / WORK_DIR).is_dir():
+        raise ValueError(f"{out}: directory is not empty and is not an htdata dataset; "
+                         f"refusing to write into it (choose an empty or new directory)")
+
+
+def prepare_output(out: Path) -> None:
+    """The work and shard folders (the caller checked the directory and holds its lock)."""
+    (out / WORK_DIR).mkdir(parents=True, exist_ok=True)
+    (out / SHARDS_DIR).mkdir(parents=True, exist_ok=True)
+
+
+def remove_strays(out: Path, tasks: list, first_unit: int) -> None:
+    """Temp files, spools, and uncommitted shards/records (units >= first_unit) outside the plan."""
+    planned = {t.unit for t in tasks}
+    for p in list(out.rglob(".*.tmp")) + list((out / WORK_DIR).glob("spool-*.bin")):
+        p.unlink()
+    for p in (out / SHARDS_DIR).glob("shard-*.tar"):
+        unit = int(p.name.split("-")[1])
+        if unit >= first_unit and unit not in planned:
+            p.unlink()
+    for p in (out / WORK_DIR).glob("unit-*.json"):
+        if int(p.stem.split("-")[1]) not in planned:
+            p.unlink()

@@ -1,0 +1,170 @@
+"""One writer per dataset: a lock file naming its holder (host, pid, start time, command).
+
+Every command that writes a dataset (ingest, split, rm, trim, merge, gc)
+holds `DATASET/.lock` while it works. The file is written complete to a
+temp file and linked into place (link fails if the lock exists), so two
+writers can never both get it and nobody ever reads a half-written lock. A second writer is
+refused with a message naming the holder. A lock whose holder is dead (same
+host, pid no longer running, or running but started after the lock was
+taken, i.e. the pid was reused) is stale: it is taken over, and the
+takeover is reported to the caller (`WriterLock.note`). Locks held from
+another host are never broken automatically: only that host can tell
+whether its holder lives (remove the file by hand once you know).
+
+Readers take no lock: a version, once committed, never changes.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import socket
+import sys
+import time
+from pathlib import Path
+
+LOCK_FILE = ".lock"
+TAKEOVER_STALE_S = 30.0   # a takeover mutex older than this was left by a writer killed inside it
+
+
+class DatasetLocked(RuntimeError):
+    """Another live writer holds the dataset."""
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def _process_start(pid: int) -> float | None:
+    """Start time (seconds since boot, Linux) of `pid`, or None if unknown."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return int(fields[19]) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:   # exists, owned by someone else
+        return True
+    return True
+
+
+def holder_alive(holder: dict) -> bool | None:
+    """True/False for a holder on this host; None when it cannot be known (another host)."""
+    if holder.get("host") != socket.gethostname():
+        return None
+    pid = int(holder.get("pid", -1))
+    if pid <= 0 or not pid_alive(pid):
+        return False
+    started = holder.get("pid_start")
+    now_start = _process_start(pid)
+    if started is not None and now_start is not None and abs(now_start - float(started)) > 1.0:
+        return False          # the pid was reused by a later process
+    return True
+
+
+def describe(holder: dict) -> str:
+    return (f"pid {holder.get('pid')} on {holder.get('host')} since {holder.get('started')} "
+            f"({holder.get('command') or 'unknown command'})")
+
+
+class WriterLock:
+    """`with WriterLock(root, command): ...`; raises DatasetLocked when a live writer holds it."""
+
+    def __init__(self, root: str | os.PathLike, command: str | None = None):
+        self.path = Path(root) / LOCK_FILE
+        self.command = command if command is not None else " ".join(sys.argv)
+        self.note: str | None = None
+        self._held = False
+
+    def _record(self) -> bytes:
+        pid = os.getpid()
+        return (json.dumps({"host": socket.gethostname(), "pid": pid, "pid_start": _process_start(pid),
+                            "started": _now(), "command": self.command}) + "\n").encode()
+
+    def _try_create(self) -> bool:
+        """Create the lock with its content complete: written to a temp file, then linked (fails if taken).
+
+        A lock file is therefore never seen half written by another writer.
+        """
+        tmp = self.path.with_name(f"{LOCK_FILE}.{os.getpid()}.tmp")
+        with open(tmp, "wb") as f:
+            f.write(self._record())
+            f.flush()
+            os.fsync(f.fileno())
+        try:
+            os.link(tmp, self.path)
+            return True
+        except FileExistsError:
+            return False
+        finally:
+            tmp.unlink(missing_ok=True)
+
+    def _take_over(self, stale: dict) -> None:
+        """Remove the lock if it still holds `stale`, under a short mutex so two writers cannot both
+        take it over (one could otherwise remove the other's fresh lock)."""
+        mutex = self.path.with_name(f"{LOCK_FILE}.takeover")
+        try:
+            fd = os.open(mutex, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            try:
+                if time.time() - mutex.stat().st_mtime > TAKEOVER_STALE_S:   # its writer died inside
+                    mutex.unlink(missing_ok=True)
+            except FileNotFoundError:
+                pass
+            time.sleep(0.01)
+            return
+        try:
+            if self.read_holder() == stale:
+                self.path.unlink(missing_ok=True)
+                self.note = (f"took over a stale lock of a writer that is no longer running: "
+                             f"{describe(stale) if stale else 'unreadable lock file'}")
+        finally:
+            os.close(fd)
+            mutex.unlink(missing_ok=True)
+
+    def read_holder(self) -> dict | None:
+        try:
+            return json.loads(self.path.read_text())
+        except FileNotFoundError:
+            return None
+        except (OSError, json.JSONDecodeError):
+            return {}   # half-written by a writer killed mid-write: no live holder wrote it fully
+
+    def acquire(self) -> "WriterLock":
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        for _ in range(200):   # bounded: racing writers may release / take over between our steps
+            if self._try_create():
+                self._held = True
+                return self
+            holder = self.read_holder()
+            if holder is None:
+                continue          # released meanwhile: try again
+            alive = holder_alive(holder) if holder else False
+            if alive is None:
+                raise DatasetLocked(f"{self.path.parent}: held by another host's writer, {describe(holder)}; "
+                                    f"if that writer is gone, remove {self.path} by hand")
+            if alive:
+                raise DatasetLocked(f"{self.path.parent}: another writer holds the dataset: {describe(holder)}")
+            self._take_over(holder)
+        raise DatasetLocked(f"{self.path.parent}: could not take the writer lock (contended); try again")
+
+    def release(self) -> None:
+        if not self._held:
+            return
+        holder = self.read_holder()
+        if holder and holder.get("pid") == os.getpid() and holder.get("host") == socket.gethostname():
+            self.path.unlink(missing_ok=True)
+        self._held = False
+
+    def __enter__(self) -> "WriterLock":
+        return self.acquire()
+
+    def __exit__(self, *exc) -> None:
+        self.release()

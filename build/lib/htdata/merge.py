@@ -1,0 +1,182 @@
+"""`htdata merge A B OUT`: one dataset from two, without re-encoding.
+
+A's shards keep their names; B's work units are renumbered after A's, so
+B's shards get new names (a shard's bytes do not contain its name, so its
+sha256 stays). Shards are hard-linked when A, B and OUT share a file system,
+copied otherwise, and every one is verified against its recorded sha256.
+Refused with a message naming what differs: another canonical template,
+another codec, a layout id whose document differs, an episode id present in
+both with different content. The same episode with the same content (record
+and every sample's bytes) is kept once, from A, and reported. OUT starts at
+version 1 with no splits (a merged dataset needs its own `htdata split`).
+A merge killed before its commit leaves OUT without dataset.json; running
+the same merge again clears those leftovers and starts over.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from htdata.faults import crash_point
+from htdata.format import LAYOUTS_DIR, MANIFEST_FILE, SHARDS_DIR
+from htdata.fsutil import sha256_file
+from htdata.lock import LOCK_FILE, WriterLock
+from htdata.parts import Part
+from htdata.reader import DatasetReader
+from htdata.repack import KeptEpisode, repack_unit, samples_per_shard_of
+from htdata.shardio import shard_name
+from htdata.snapshot import Snapshot, commit_parts, open_snapshot
+from htdata.versions import content_view
+
+
+# What a merge killed before its commit leaves in OUT (no dataset.json yet): a re-run clears it.
+LEFT_BY_INTERRUPTED_MERGE = {SHARDS_DIR, LAYOUTS_DIR, "versions", LOCK_FILE}
+
+
+class MergeConflict(ValueError):
+    """The two datasets cannot be merged as they are."""
+
+
+@dataclass
+class MergeReport:
+    episodes_a: int = 0
+    episodes_b: int = 0
+    deduplicated: list[str] = field(default_factory=list)
+    linked: int = 0
+    copied: int = 0
+    manifest: dict | None = None
+
+    def lines(self) -> list[str]:
+        out = [f"{self.episodes_a} episodes from A, {self.episodes_b} from B"]
+        if self.deduplicated:
+            out.append(f"{len(self.deduplicated)} episodes in both with identical content, kept once: "
+                       f"{', '.join(self.deduplicated[:5])}{' ...' if len(self.deduplicated) > 5 else ''}")
+        out.append(f"shards: {self.linked} hard-linked, {self.copied} copied, all sha256-verified")
+        return out
+
+
+def check_compatible(a: Snapshot, b: Snapshot) -> None:
+    ma, mb = a.manifest, b.manifest
+    if ma["canonical"]["sha256"] != mb["canonical"]["sha256"]:
+        raise MergeConflict(f"different canonical hand templates (sha256 {ma['canonical']['sha256'][:12]} in "
+                            f"{a.root} vs {mb['canonical']['sha256'][:12]} in {b.root})")
+    # the settings must agree; codec.choice only says how each dataset arrived at them (reason texts differ)
+    keys = sorted({f"{k}.{s}" for k in ("tactile", "rgb") for s in set(ma["codec"].get(k, {}))
+                   | set(mb["codec"].get(k, {})) if ma["codec"].get(k, {}).get(s) != mb["codec"].get(k, {}).get(s)})
+    if keys:
+        raise MergeConflict(f"different codec settings: {', '.join(keys)}")
+    for lid in set(ma["layouts"]) & set(mb["layouts"]):
+        if ma["layouts"][lid]["sha256"] != mb["layouts"][lid]["sha256"]:
+            raise MergeConflict(f"layout {lid!r} differs between {a.root} and {b.root} (same id, other document)")
+
+
+def episode_digest(reader: DatasetReader, episode_id: str) -> str:
+    """sha256 over every member of every sample of an episode (exact content identity)."""
+    h = hashlib.sha256()
+    first, n = reader.episode_range(episode_id)
+    for i in range(first, first + n):
+        for suffix, data in reader.sample(i).items():
+            h.update(suffix.encode() + b"\0" + len(data).to_bytes(8, "little") + data)
+    return h.hexdigest()
+
+
+def duplicates(a: Snapshot, b: Snapshot) -> list[str]:
+    """Episode ids in both with identical content; raises MergeConflict on one whose content differs."""
+    rec_a = {e["episode_id"]: e for e in a.episodes}
+    same = []
+    ra, rb = DatasetReader(a.root, version=a.version), DatasetReader(b.root, version=b.version)
+    for ep in b.episodes:
+        eid = ep["episode_id"]
+        if eid not in rec_a:
+            continue
+        if content_view(rec_a[eid]) != content_view(ep) or episode_digest(ra, eid) != episode_digest(rb, eid):
+            raise MergeConflict(f"episode {eid!r} is in both datasets with different content "
+                                f"(remove it from one with htdata rm, or rename it)")
+        same.append(eid)
+    return same
+
+
+def place_shard(src: Path, dst: Path, sha256: str, report: MergeReport) -> None:
+    if dst.exists():
+        raise MergeConflict(f"{dst} already exists")
+    try:
+        os.link(src, dst)
+        report.linked += 1
+    except OSError:      # another file system (or no hard links): copy
+        shutil.copyfile(src, dst)
+        report.copied += 1
+    if sha256_file(dst) != sha256:
+        dst.unlink()
+        raise MergeConflict(f"{src}: sha256 does not match its manifest entry; the source shard is damaged "
+                            f"(run htdata validate on it)")
+
+
+def _renamed(part: Part, unit: int) -> Part:
+    shards = [{**s, "name": shard_name(unit, k)} for k, s in enumerate(part.shards)]
+    return Part(unit=unit, shards=shards, rows=part.rows, episodes=part.episodes)
+
+
+def merge(a_root, b_root, out_root, command: str) -> MergeReport:
+    a, b = open_snapshot(a_root), open_snapshot(b_root)
+    check_compatible(a, b)
+    out = Path(out_root)
+    leftovers = {p.name for p in out.iterdir()} if out.is_dir() else set()
+    if leftovers - LEFT_BY_INTERRUPTED_MERGE or (out / MANIFEST_FILE).exists() or (out.exists() and not out.is_dir()):
+        raise MergeConflict(f"{out}: not empty; merge writes a new dataset (choose a new directory)")
+    dup = set(duplicates(a, b))
+    report = MergeReport(episodes_a=len(a.episodes), episodes_b=len(b.episodes) - len(dup), deduplicated=sorted(dup))
+    out.mkdir(parents=True, exist_ok=True)
+    with WriterLock(out, command):
+        for name in LEFT_BY_INTERRUPTED_MERGE - {LOCK_FILE}:   # an interrupted merge's files: start over
+            shutil.rmtree(out / name, ignore_errors=True)
+        (out / SHARDS_DIR).mkdir()
+        parts = []
+        for part in a.parts():
+            for s in part.shards:
+                place_shard(a.root / SHARDS_DIR / s["name"], out / SHARDS_DIR / s["name"], s["sha256"], report)
+            parts.append(part)
+        unit = a.next_unit()
+        reader_b = DatasetReader(b.root, version=b.version)
+        for part in b.parts():
+            kept = [e for e in part.episodes if e["episode_id"] not in dup]
+            if not kept:
+                continue
+            if len(kept) < len(part.episodes):   # re-pack B's unit without the duplicate, into OUT
+                parts.append(repack_unit(reader_b, [KeptEpisode(e, range(int(e["num_frames"]))) for e in kept],
+                                         unit, samples_per_shard_of(part), out_root=out))
+            else:
+                renamed = _renamed(part, unit)
+                for old, new in zip(part.shards, renamed.shards):
+                    place_shard(b.root / SHARDS_DIR / old["name"], out / SHARDS_DIR / new["name"], old["sha256"],
+                                report)
+                parts.append(renamed)
+            unit += 1
+        crash_point("merge_shards_placed")
+        copy_layout_files(a, out)
+        copy_layout_files(b, out)
+        fields = {"sources": a.manifest["sources"] + b.manifest["sources"],
+                  "layouts": {**b.manifest["layouts"], **a.manifest["layouts"]},
+                  "canonical": a.manifest["canonical"], "codec": a.manifest["codec"],
+                  # content ids: the same calibration in A and B is one entry (revisions renumbered)
+                  "calibrations": {**b.manifest.get("calibrations", {}), **a.manifest.get("calibrations", {})}}
+        report.manifest = commit_parts(out, parts, fields, None, command, splits=lambda eps, sha: {}, next_unit=unit)
+    return report
+
+
+def copy_layout_files(snap: Snapshot, out: Path) -> None:
+    """The layout, coverage and canonical files `snap`'s manifest names, copied under the same paths."""
+    m = snap.manifest
+    paths = [p for entry in m["layouts"].values() for p in (entry["file"], entry["coverage"])]
+    paths += [m["canonical"][k] for k in ("file", "regions", "parts") if k in m["canonical"]]
+    for rel in paths:
+        src, dst = snap.root / rel, out / rel
+        if dst.exists():
+            if dst.read_bytes() != src.read_bytes():
+                raise MergeConflict(f"{rel} differs between the two datasets")
+            continue
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(src, dst)

@@ -1,0 +1,118 @@
+"""Read the raw glove rows a format-3 dataset stores: the full-rate stream, and maps rendered from raw.
+
+- `episode_stream(reader, episode, hand)`: every glove row the recording
+  held, in time order, deduplicated by source row (a row paired with two
+  frames is stored twice), with timestamps and source row numbers; what a
+  100 Hz glove recorded between 30 Hz frames is all there.
+- `RawMapRenderer`: the (224,224) map of a sample rendered from its paired
+  raw row under the episode's recorded calibration (htdata.calibration) and
+  the dataset's raster mode, instead of decoding the stored EXR. In nearest
+  mode this is a gather of exact float32 values; the stored map holds the
+  same values rounded by the map codec (half float: <= 2.4e-4). `make bench`
+  compares the two paths (frames/s and max difference).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from htdata.calibration import episode_normaliser
+from htdata.codec import decode_json, decode_npy
+from htdata.format import JSON_MEMBER, raw_member
+from htdata.layouts import load_layout
+from htdata.rasterise import Rasteriser
+from htdata.reader import DatasetReader
+
+
+@dataclass
+class RawStream:
+    """One hand's glove rows of one episode, full rate: (M,) times, (M,H,W) rows in the source dtype, (M,) rows."""
+    t_ns: np.ndarray
+    rows: np.ndarray
+    source_row: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t_ns.size)
+
+
+def episode_stream(reader: DatasetReader, episode: str | int, hand: str) -> RawStream:
+    """Every stored raw row of `hand` in `episode`, in time order, each source row once.
+
+    Raises ValueError naming the episode when its samples hold no raw rows
+    (datasets of format < 3, or ingested with keep_raw = false).
+    """
+    first, n = reader.episode_range(episode)
+    eid = reader.episodes[reader.episode_position(episode)]["episode_id"]
+    times, rows, values = [], [], []
+    for i in range(first, first + n):
+        members = reader.sample(i, (JSON_MEMBER, raw_member(hand)))
+        if raw_member(hand) not in members:
+            continue   # an RGB-only sample holds no rows
+        meta = decode_json(members[JSON_MEMBER], f"{eid} frame {i - first}")
+        arr = decode_npy(members[raw_member(hand)], f"{eid} frame {i - first} {raw_member(hand)}")
+        times += meta["raw_t_ns"][hand]
+        rows += meta["raw_row"][hand]
+        values.append(arr)
+    if not values:
+        raise ValueError(f"episode {eid!r}: no raw {hand} rows stored (format < 3, or keep_raw = false)")
+    t, r, v = np.asarray(times, np.int64), np.asarray(rows, np.int64), np.concatenate(values)
+    order = np.lexsort((r, t))
+    t, r, v = t[order], r[order], v[order]
+    keep = np.sort(np.unique(r, return_index=True)[1])   # each source row once, time order kept
+    return RawStream(t_ns=t[keep], rows=v[keep], source_row=r[keep])
+
+
+def paired_row(members: dict[str, bytes], hand: str, where: str) -> np.ndarray:
+    """The raw row paired with a sample's frame, from its members (raw_<hand>.npy, + json when needed).
+
+    A single stored row is the paired one (no JSON decode); otherwise
+    meta["raw_paired"][hand] names it.
+    """
+    rows = decode_npy(members[raw_member(hand)], f"{where}.{raw_member(hand)}")
+    if rows.ndim == 3 and rows.shape[0] == 1:
+        return rows[0]
+    meta = decode_json(members[JSON_MEMBER], f"{where}.{JSON_MEMBER}")
+    at = (meta.get("raw_paired") or {}).get(hand)
+    if rows.ndim != 3 or at is None or not 0 <= at < rows.shape[0]:
+        raise ValueError(f"{where}: meta raw_paired names row {at!r} of raw rows shaped {rows.shape}")
+    return rows[at]
+
+
+class RawMapRenderer:
+    """Maps from the paired raw rows (see the module docstring); one normaliser per episode hand, cached."""
+
+    def __init__(self, reader: DatasetReader):
+        self.reader = reader
+        self.mode = reader.manifest["codec"]["tactile"].get("raster_mode", "nearest")
+        self._layouts: dict = {}
+        self._rasters: dict = {}
+        self._normalisers: dict = {}
+
+    def parts_for(self, episode: int, hand: str):
+        """(Normaliser with the episode's calibration, Rasteriser of its layout) for one episode hand."""
+        key = (episode, hand)
+        if key not in self._normalisers:
+            ep = self.reader.episodes[episode]
+            lid = ep["layouts"][hand]
+            if lid not in self._layouts:
+                entry = self.reader.manifest["layouts"][lid]
+                self._layouts[lid] = load_layout(Path(self.reader.root) / entry["file"])
+                self._rasters[lid] = Rasteriser(self._layouts[lid], mode=self.mode)
+            self._normalisers[key] = (episode_normaliser(self.reader.manifest, ep, hand, self._layouts[lid]),
+                                      self._rasters[lid])
+        return self._normalisers[key]
+
+    def render(self, episode: int, hand: str, members: dict[str, bytes], where: str = "sample") -> np.ndarray:
+        """(224,224) float32 map from `members` (json + raw_<hand>.npy) of a sample of episode position `episode`."""
+        normaliser, raster = self.parts_for(episode, hand)
+        values, _ = normaliser.apply(paired_row(members, hand, where)[None])
+        return raster.render(values)[0]
+
+    def sample_map(self, index: int, hand: str) -> np.ndarray:
+        row, key, members = self.reader.read_sample(index, (JSON_MEMBER, raw_member(hand)))
+        if raw_member(hand) not in members:
+            raise KeyError(f"{self.reader.root}: {key} has no raw {hand} rows")
+        return self.render(row.episode, hand, members, f"{self.reader.root}: {key}")

@@ -1,0 +1,224 @@
+"""`htdata renormalise`: new maps from the stored raw glove rows under a new calibration, as a new version.
+
+A glove recalibrated after its recordings were archived needs no sources:
+every format-3 sample stores its raw rows exactly (raw_<hand>.npy) and the
+row paired with its frame. For each episode hand whose calibration the
+pipeline changes (its `[normalise.<layout>]`, or the layout's value block),
+the paired rows are normalised under the new settings, rasterised in the
+dataset's raster mode and re-encoded with the dataset's codec; JSON, RGB and
+raw members are copied byte for byte. A calibration that fits per-episode
+arrays (baseline, noise floor) is fitted on the episode's first stored
+frames, as the ingest does (`chunk_frames` paired rows; frames the ingest
+dropped are not stored, so an episode that lost frames at its very start may
+fit slightly differently than a fresh ingest would). An unchanged
+calibration is skipped, unless `force`: then the recorded fitted arrays are
+restored and the maps come out byte for byte as stored (the test of the
+whole path). Work units holding a changed episode are re-packed into new
+units (htdata/repack.py); everything else is reused; `dry_run` plans only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from htdata.calibration import (calibration_id, episode_calibrations, episode_normaliser, fit_record)
+from htdata.codec import MEMBER_CODECS
+from htdata.curate import resolve_episodes
+from htdata.format import JSON_MEMBER, SIZE_FIELDS, CodecSettings, bend_member, raw_member, tactile_member
+from htdata.health import record_entry
+from htdata.layouts import Layout, load_layout
+from htdata.lock import WriterLock
+from htdata.normalise import Normaliser
+from htdata.pipeline import PipelineConfig
+from htdata.rasterise import Rasteriser
+from htdata.rawstream import paired_row
+from htdata.reader import DatasetReader
+from htdata.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
+from htdata.snapshot import Snapshot, commit_parts, open_snapshot
+
+
+@dataclass
+class RenormalisePlan:
+    """What a renormalise changes against version `parent`: episode -> hand -> (old id, new id)."""
+    parent: int | None
+    changes: dict[str, dict[str, tuple[str | None, str]]] = field(default_factory=dict)
+    unchanged: int = 0
+    repacked_units: list[int] = field(default_factory=list)
+    calibrations: dict[str, dict] = field(default_factory=dict)   # new id -> manifest entry
+
+    def lines(self, dry_run: bool = False) -> list[str]:
+        would = "would " if dry_run else ""
+        out = [f"{would}renormalise {eid} {hand}: calibration {old or '(none)'} -> {new}"
+               for eid, hands in self.changes.items() for hand, (old, new) in hands.items()]
+        out += [f"{would}re-pack work unit {u}" for u in self.repacked_units]
+        out.append(f"{len(self.changes)} episode(s) {would}renormalised, {self.unchanged} unchanged")
+        return out
+
+
+def dataset_layouts(snap: Snapshot) -> dict[str, Layout]:
+    """The glove layouts a version lists, loaded from the dataset's own layout files."""
+    return {lid: load_layout(snap.root / entry["file"]) for lid, entry in snap.manifest["layouts"].items()}
+
+
+def plan_renormalise(snap: Snapshot, pipeline: PipelineConfig, patterns: list[str] | None = None,
+                     force: bool = False) -> RenormalisePlan:
+    """Which episode hands get a new calibration; refuses episodes stored without raw rows (naming them)."""
+    layouts = dataset_layouts(snap)
+    chosen = set(resolve_episodes(snap.episode_ids(), patterns) if patterns else snap.episode_ids())
+    plan = RenormalisePlan(parent=snap.version)
+    no_raw = []
+    for pos, ep in enumerate(snap.episodes):
+        eid = ep["episode_id"]
+        hands = {}
+        for hand in ep["hands"] if eid in chosen else ():
+            layout = layouts[ep["layouts"][hand]]
+            new = calibration_id(layout.layout_id, pipeline.normalise_for(layout))
+            old = (ep.get("calibration") or {}).get(hand)
+            if new != old or force:
+                hands[hand] = (old, new)
+                plan.calibrations.update(episode_calibrations(pipeline, {hand: layout}))
+        if not hands:
+            plan.unchanged += 1
+            continue
+        rows = snap.index[snap.index["episode"] == pos]
+        mapped = {h: rows[SIZE_FIELDS[tactile_member(h)]] > 0 for h in hands}   # RGB-only samples have no map
+        if any(not np.all(rows[SIZE_FIELDS[raw_member(h)]][mapped[h]] > 0) for h in hands):
+            no_raw.append(eid)
+        plan.changes[eid] = hands
+    if no_raw:
+        raise ValueError(f"{len(no_raw)} episode(s) have no stored raw glove rows (format < 3, or ingested with "
+                         f"[tactile] keep_raw = false), so they cannot be renormalised without their sources: "
+                         f"{', '.join(no_raw[:5])}{' ...' if len(no_raw) > 5 else ''}; re-ingest them instead")
+    for part in snap.parts():
+        if any(e in plan.changes for e in part.episode_ids):
+            plan.repacked_units.append(part.unit)
+    return plan
+
+
+class Recalibration:
+    """The SampleRewrite of a renormalise: new maps (and bend vectors) for the changed episode hands."""
+
+    def __init__(self, reader: DatasetReader, snap: Snapshot, pipeline: PipelineConfig, plan: RenormalisePlan):
+        self.reader, self.snap, self.pipeline, self.plan = reader, snap, pipeline, plan
+        self.layouts = dataset_layouts(snap)
+        codec = snap.manifest["codec"]["tactile"]
+        self.raster_mode = codec.get("raster_mode", "nearest")
+        self.settings = CodecSettings(tactile_compression=codec.get("compression", "zip"),
+                                      tactile_pixel_type=codec.get("pixel_type", "half"))   # the dataset's maps
+        self.records = {ep["episode_id"]: ep for ep in snap.episodes}
+        # episode -> hand -> (normaliser, rasteriser, [contact sum, max], live-value rows for taxel health)
+        self.state: dict[str, dict] = {}
+
+    def _start(self, eid: str) -> dict:
+        ep = self.records[eid]
+        state = {}
+        for hand, (_, new) in self.plan.changes[eid].items():
+            layout = self.layouts[ep["layouts"][hand]]
+            if new == (ep.get("calibration") or {}).get(hand):   # forced: restore what the ingest fitted
+                normaliser = episode_normaliser(self.snap.manifest, ep, hand, layout)
+            else:
+                normaliser = Normaliser(self.pipeline.normalise_for(layout), layout)
+                normaliser.fit_baseline(self._first_rows(eid, hand))
+            state[hand] = (normaliser, Rasteriser(layout, mode=self.raster_mode), [0.0, 0.0], [])
+        self.state = {eid: state}    # one episode at a time: repack walks episodes in order
+        return state
+
+    def _first_rows(self, eid: str, hand: str) -> np.ndarray:
+        """The paired raw rows of the episode's first `chunk_frames` frames (what the ingest fitted on)."""
+        first, n = self.reader.episode_range(eid)
+        rows = []
+        for i in range(first, first + n):
+            if len(rows) == self.pipeline.tactile.chunk_frames:
+                break
+            members = self.reader.sample(i, (JSON_MEMBER, tactile_member(hand), raw_member(hand)))
+            if tactile_member(hand) in members:   # RGB-only samples hold no rows
+                rows.append(paired_row(members, hand, f"{eid} frame {i - first}"))
+        return np.stack(rows)
+
+    def members(self, episode_id: str, frame: int, members: dict[str, bytes]) -> dict[str, bytes]:
+        if episode_id not in self.plan.changes:
+            return members
+        state = self.state.get(episode_id) or self._start(episode_id)
+        out = dict(members)
+        for hand, (normaliser, raster, contact, series) in state.items():
+            if tactile_member(hand) not in members:   # an RGB-only sample: nothing to renormalise
+                continue
+            where = f"{episode_id} frame {frame} {hand} hand"
+            try:
+                values, finite = normaliser.apply(paired_row(members, hand, where)[None])
+            except ValueError as exc:   # e.g. clip = false and a value outside [0,1] under the new settings
+                raise ValueError(f"{where}: {exc}") from exc
+            if not finite.all():
+                raise ValueError(f"{where}: stored raw row has non-finite live taxels")
+            live = values[0][normaliser.live_mask]
+            series.append(live[None])
+            contact[0] += float(live.sum(dtype=np.float64))
+            contact[1] = max(contact[1], float(live.max(initial=0.0)))
+            out[tactile_member(hand)] = MEMBER_CODECS["exr"][0](raster.render(values)[0], self.settings,
+                                                                f"{where} map")
+            if bend_member(hand) in members:
+                out[bend_member(hand)] = MEMBER_CODECS["npy"][0](raster.bend_vector(values)[0], self.settings,
+                                                                 f"{where} bend")
+        return out
+
+    def record(self, record: dict) -> dict:
+        eid = record["episode_id"]
+        if eid not in self.plan.changes:
+            return record
+        state = self.state.pop(eid, None) or self._start(eid)
+        record = dict(record)
+        n = int(record["num_frames"])
+        stats = dict(record.get("stats", {}))
+        mean, peak = dict(stats.get("mean_contact", {})), dict(stats.get("max_contact", {}))
+        calibration, fits = dict(record.get("calibration", {})), dict(record.get("calibration_fit", {}))
+        paired = int(stats.get("frames_kept", n))   # frames with maps (RGB-only samples have none)
+        health = dict(record.get("taxel_health", {}))
+        for hand, (normaliser, _, (total, top), series) in state.items():
+            health[hand] = record_entry(series, self.layouts[record["layouts"][hand]])
+            mean[hand] = total / (paired * int(normaliser.live_mask.sum()))
+            peak[hand] = top
+            calibration[hand] = self.plan.changes[eid][hand][1]
+            fits.pop(hand, None)
+            if fit_record(normaliser):
+                fits[hand] = fit_record(normaliser)
+        record["stats"] = {**stats, "mean_contact": mean, "max_contact": peak}
+        record["taxel_health"] = health
+        record["calibration"] = calibration
+        record.pop("calibration_fit", None)
+        if fits:
+            record["calibration_fit"] = fits
+        changed = ", ".join(f"{h} {old or '(none)'} -> {new}" for h, (old, new) in self.plan.changes[eid].items())
+        record["notes"] = list(record.get("notes", [])) + [
+            f"renormalised from stored raw rows (version {self.snap.version}): calibration {changed}"]
+        return record
+
+
+def renormalise(root, pipeline: PipelineConfig, patterns: list[str] | None, dry_run: bool, force: bool,
+                command: str) -> tuple[RenormalisePlan, dict | None]:
+    """Plan (and unless `dry_run`, write) a version whose maps follow `pipeline`'s calibrations."""
+    with WriterLock(root, command):
+        snap = open_snapshot(root)
+        plan = plan_renormalise(snap, pipeline, patterns, force)
+        if dry_run or not plan.changes:
+            return plan, None
+        reader = DatasetReader(snap.root, version=snap.version)
+        rewrite = Recalibration(reader, snap, pipeline, plan)
+        first = unit = snap.next_unit()
+        clear_uncommitted(snap.root, unit)
+        parts = []
+        try:
+            for part in snap.parts():
+                if part.unit not in plan.repacked_units:
+                    parts.append(part)
+                    continue
+                kept = [KeptEpisode(record=rec, frames=range(int(rec["num_frames"]))) for rec in part.episodes]
+                parts.append(repack_unit(reader, kept, unit, samples_per_shard_of(part), rewrite=rewrite))
+                unit += 1
+        except ValueError:   # bad settings for some frame: leave no shard of this attempt behind
+            clear_uncommitted(snap.root, first)
+            raise
+        manifest = commit_parts(snap.root, parts, {"calibrations": plan.calibrations}, snap, command,
+                                next_unit=unit)
+        return plan, manifest

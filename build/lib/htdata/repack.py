@@ -1,0 +1,93 @@
+"""Copy samples of committed shards into new shards, byte for byte (no re-encoding).
+
+rm, trim and merge never rewrite a shard: the work units they touch are
+re-packed into NEW units (fresh unit numbers, so fresh shard names) holding
+only the samples kept, and the parent's shards stay as they are for the
+versions that list them. A sample's members are copied as stored; only a
+trimmed episode's json member is rewritten, because its key and frame index
+are renumbered so frames stay 0..n-1, and `htdata renormalise` passes a
+`rewrite` that re-encodes the maps of the episodes it recalibrates.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+from htdata.codec import encode_json
+from htdata.format import JSON_MEMBER, SHARDS_DIR
+from htdata.manifest import UnitResult
+from htdata.faults import crash_point
+from htdata.parts import SHARD_NAME_RE, Part, part_from_unit, unit_of_shard
+from htdata.reader import DatasetReader
+from htdata.shardio import ShardWriter, sample_key
+
+
+@dataclass
+class KeptEpisode:
+    """One episode to copy: its record (without computed fields) and the frames kept, in order."""
+    record: dict
+    frames: range           # source frame numbers within the episode; renumbered from 0 when not 0..n-1
+
+
+class SampleRewrite(Protocol):
+    """Changes some episodes' members while re-packing (htdata.renormalise.Recalibration)."""
+
+    def members(self, episode_id: str, frame: int, members: dict[str, bytes]) -> dict[str, bytes]: ...
+
+    def record(self, record: dict) -> dict: ...
+
+
+def clear_uncommitted(root: Path, next_unit: int) -> list[str]:
+    """Delete shard files of units >= next_unit: an interrupted write left them, no version lists them.
+
+    New units of this write then take the same numbers a run that never
+    crashed would, so a re-run gives the same dataset. The caller holds the
+    writer lock (no other writer can be making them right now).
+    """
+    gone = []
+    for p in sorted((Path(root) / SHARDS_DIR).glob("*shard-*.tar*")):
+        name = p.name.lstrip(".").removesuffix(".tmp")
+        if SHARD_NAME_RE.match(name) and unit_of_shard(name) >= next_unit:
+            p.unlink()
+            gone.append(p.name)
+    return gone
+
+
+def repack_unit(reader: DatasetReader, kept: list[KeptEpisode], unit: int, samples_per_shard: int,
+                out_root: Path | None = None, rewrite: SampleRewrite | None = None) -> Part:
+    """Write `kept` episodes' samples (read through `reader`) into unit `unit`'s shards.
+
+    The shards go to the reader's dataset, or to `out_root`'s (merge writes B's samples into OUT).
+    `rewrite`, when given, sees every sample's members and every episode record on the way.
+    """
+    out_dir = Path(out_root if out_root is not None else reader.root) / SHARDS_DIR
+    records = []
+    with ShardWriter(out_dir, unit=unit, samples_per_shard=samples_per_shard) as writer:
+        for ep in kept:
+            eid = ep.record["episode_id"]
+            first, n = reader.episode_range(eid)
+            renumber = ep.frames != range(0, n)
+            for new_frame, frame in enumerate(ep.frames):
+                if not 0 <= frame < n:
+                    raise ValueError(f"episode {eid!r}: frame {frame} outside 0..{n - 1}")
+                members = reader.sample(first + frame)
+                key = sample_key(eid, new_frame)
+                if renumber:
+                    meta = json.loads(members[JSON_MEMBER])
+                    meta.update({"key": key, "frame_index": new_frame})
+                    members = {**members, JSON_MEMBER: encode_json(meta)}
+                if rewrite is not None:
+                    members = rewrite.members(eid, frame, members)
+                writer.add_sample(key, members)
+                crash_point("repack_sample_written")
+            record = {**ep.record, "num_frames": len(ep.frames)}
+            records.append(rewrite.record(record) if rewrite is not None else record)
+    return part_from_unit(UnitResult(unit=unit, shards=writer.shards, samples=writer.samples, episodes=records))
+
+
+def samples_per_shard_of(part: Part) -> int:
+    """Shard size to re-pack a part with: its largest shard's sample count (at least 1)."""
+    return max([1] + [int(s["samples"]) for s in part.shards])

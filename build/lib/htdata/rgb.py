@@ -1,0 +1,63 @@
+"""RGB preprocessing: source channel order -> RGB, crop to square, resize to 224.
+
+The default is a centre crop to the largest square followed by cv2 INTER_AREA
+(the anti-aliased choice for downsampling; cv2 falls back to bilinear when
+upsampling, e.g. a 1x1 frame). crop="none" squashes the whole frame instead.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+CROPS = ("center", "none")
+INTERPOLATIONS = {
+    "area": cv2.INTER_AREA,
+    "linear": cv2.INTER_LINEAR,
+    "cubic": cv2.INTER_CUBIC,   # uint8 output saturates, so overshoot cannot wrap
+    "nearest": cv2.INTER_NEAREST,
+}
+CHANNEL_ORDERS = ("rgb", "bgr")
+
+
+def _check_frame(frame, where: str) -> np.ndarray:
+    arr = np.asarray(frame)
+    if arr.dtype != np.uint8 or arr.ndim != 3 or arr.shape[2] != 3 or arr.shape[0] < 1 or arr.shape[1] < 1:
+        raise ValueError(f"{where}: expected an HxWx3 uint8 frame, got shape {arr.shape} dtype {arr.dtype}")
+    return arr
+
+
+def to_rgb(frame, channel_order: str = "rgb", where: str = "rgb frame") -> np.ndarray:
+    """Reorder channels so the result is RGB (some sources store B and R swapped)."""
+    arr = _check_frame(frame, where)
+    if channel_order == "rgb":
+        return arr
+    if channel_order == "bgr":
+        return arr[:, :, ::-1]
+    raise ValueError(f"{where}: channel_order must be one of {CHANNEL_ORDERS}, got {channel_order!r}")
+
+
+def centre_square(frame: np.ndarray) -> np.ndarray:
+    """Largest centred square (view, no copy); odd margins put the extra pixel right/bottom."""
+    h, w = frame.shape[:2]
+    side = min(h, w)
+    y0, x0 = (h - side) // 2, (w - side) // 2
+    return frame[y0:y0 + side, x0:x0 + side]
+
+
+def to_square_224(frame, size: int = 224, crop: str = "center", interpolation: str = "area",
+                  where: str = "rgb frame") -> np.ndarray:
+    """HxWx3 uint8 -> (size,size,3) uint8, contiguous."""
+    arr = _check_frame(frame, where)
+    if crop not in CROPS:
+        raise ValueError(f"{where}: crop must be one of {CROPS}, got {crop!r}")
+    if interpolation not in INTERPOLATIONS:
+        raise ValueError(f"{where}: interpolation must be one of {sorted(INTERPOLATIONS)}, got {interpolation!r}")
+    if not isinstance(size, int) or size < 1:
+        raise ValueError(f"{where}: size must be a positive integer, got {size!r}")
+    if crop == "center":
+        arr = centre_square(arr)
+    if arr.shape[:2] == (size, size):
+        return np.ascontiguousarray(arr)
+    out = cv2.resize(np.ascontiguousarray(arr), (size, size), interpolation=INTERPOLATIONS[interpolation])
+    return out

@@ -1,0 +1,11 @@
+"""Synthetic raw corpus in the three source formats (`htdata sample`, htdata/commands/sample.py).
+
+- `tasks`: task profiles, canonical place names, scene styles, stable hashes;
+- `world`: one episode's hidden state (hand trajectory, grip force, closure) over time;
+- `hand`: hand geometry (joint positions, where the hand meets the object);
+- `glove`: paints a glove layout's contact grids from a hand state;
+- `render`: draws the egocentric RGB frames (backdrop, object, hands);
+- `formats`: writers of each source layout (OpenTouch-style HDF5,
+  TouchAnything-style folders, htdata-native folders);
+- `corpus`: plans the episodes of a corpus and writes them through `formats`.
+"""

@@ -1,0 +1,149 @@
+"""Open a version of a dataset as a Snapshot, and commit a new version from parts.
+
+Every command that writes a dataset (ingest, rm, trim, merge, split) does the
+same three things: open the current version (the parent), build the new
+version's parts (reusing the parent's untouched ones), and `commit_parts`.
+`commit_parts` checks that every shard it lists is on disk with its recorded
+size, validates the episode records, computes the change against the
+parent, and hands the files to `versions.write_version`, which makes the
+version current with one atomic rename. The caller holds the writer lock.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from htdata import storage
+from htdata.format import (EPISODES_FILE, FORMAT, FORMAT_VERSION, HANDS, MANIFEST_FILE, SHARDS_DIR, SIZE_FIELDS,
+                           tactile_member)
+from htdata.calibration import merge_calibrations
+from htdata.manifest import load_episodes, load_index, load_manifest
+from htdata.parts import Part, assemble, parts_of_version, unit_of_shard
+from htdata.resources import validate_json
+from htdata.splitversions import carried_splits
+from htdata.versions import change_record, diff_episodes, now_utc, summarise, write_version
+
+SplitMaker = Callable[[list[dict], str], dict[str, bytes]]
+# Manifest fields a new version inherits from its parent unless the writer sets them.
+CARRIED_FIELDS = ("sources", "layouts", "canonical", "codec")
+
+
+@dataclass
+class Snapshot:
+    """One committed version: its manifest, episode records and index (mmap)."""
+    root: Path
+    manifest: dict
+    episodes: list[dict]
+    index: np.ndarray
+
+    @property
+    def version(self) -> int | None:
+        return self.manifest.get("version")
+
+    def parts(self) -> list[Part]:
+        return parts_of_version(self.manifest, self.episodes, self.index)
+
+    def episode_ids(self) -> list[str]:
+        return [e["episode_id"] for e in self.episodes]
+
+    def next_unit(self) -> int:
+        """First work-unit number no version of this dataset has used (shard names stay unique)."""
+        used = [unit_of_shard(s["name"]) for s in self.manifest["shards"]]
+        return max([int(self.manifest.get("next_unit", 0))] + [u + 1 for u in used])
+
+
+def open_snapshot(root: str | os.PathLike, version: int | None = None) -> Snapshot:
+    """The current version (or `version`) of the committed dataset at `root`."""
+    manifest = load_manifest(root, version=version)
+    return Snapshot(root=Path(root), manifest=manifest, episodes=load_episodes(root, manifest),
+                    index=load_index(root, mmap=True, manifest=manifest))
+
+
+def current_snapshot(root: str | os.PathLike) -> Snapshot | None:
+    """The current version, or None when `root` holds no committed dataset."""
+    if not storage.exists(storage.join(root, MANIFEST_FILE)):
+        return None
+    return open_snapshot(root)
+
+
+def _frames_per_hand(rows: np.ndarray) -> dict[str, int]:
+    return {hand: int(np.count_nonzero(rows[SIZE_FIELDS[tactile_member(hand)]])) for hand in HANDS}
+
+
+def _check_shards_on_disk(root: Path, shards: list[dict]) -> None:
+    for entry in shards:
+        path = root / SHARDS_DIR / entry["name"]
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: shard listed by a work unit is missing")
+        if path.stat().st_size != entry["bytes"]:
+            raise ValueError(f"{path}: size {path.stat().st_size} != recorded {entry['bytes']}")
+
+
+def commit_parts(root: str | os.PathLike, parts: list[Part], fields: dict, parent: Snapshot | None,
+                 command: str, splits: SplitMaker | None = None, next_unit: int | None = None,
+                 created: str | None = None, htdata_version: str | None = None) -> dict:
+    """Write a new version made of `parts`; returns its manifest.
+
+    `fields` holds sources / layouts / canonical / codec (missing ones come
+    from the parent) and "calibrations" (new ones; the parent's are kept for
+    the episodes that still name them, htdata.calibration.merge_calibrations). `splits(episodes, episodes_sha256)` returns the new
+    version's split files (name -> bytes); by default the parent's splits are
+    carried over (htdata.splitversions.py). `next_unit` = first unit number
+    free after this version.
+    """
+    root = Path(root)
+    built = assemble(parts)
+    _check_shards_on_disk(root, built.shards)
+    layouts = {**(parent.manifest["layouts"] if parent else {}), **fields.get("layouts", {})}
+    for ep in built.episodes:
+        validate_json(ep, "episode", where=f"{EPISODES_FILE}: episode {ep.get('episode_id')!r}")
+        for hand, layout_id in ep["layouts"].items():
+            if layout_id not in layouts:
+                raise ValueError(f"episode {ep['episode_id']!r}: layout {layout_id!r} ({hand}) not provided to commit")
+    used_layouts = {lid for ep in built.episodes for lid in ep["layouts"].values()}
+    episodes_bytes = "".join(json.dumps(ep, sort_keys=True) + "\n" for ep in built.episodes).encode()
+    buf = io.BytesIO()
+    np.save(buf, built.rows, allow_pickle=False)
+    index_bytes = buf.getvalue()
+    from htdata import __version__
+
+    carried = {k: fields[k] if k in fields else (parent.manifest[k] if parent else None) for k in CARRIED_FIELDS}
+    carried["layouts"] = {k: v for k, v in layouts.items() if k in used_layouts}
+    used_calibrations = {cid for ep in built.episodes for cid in ep.get("calibration", {}).values()}
+    calibrations = merge_calibrations(parent.manifest.get("calibrations", {}) if parent else {},
+                                      fields.get("calibrations", {}), used_calibrations)
+    unknown = used_calibrations - set(calibrations)
+    if unknown:
+        raise ValueError(f"calibration(s) {sorted(unknown)} named by episode records but not provided to commit")
+    diff = diff_episodes(parent.episodes if parent else [], built.episodes)
+    time = created or now_utc()
+    manifest = {
+        "format": FORMAT, "format_version": FORMAT_VERSION, "created": time,
+        "htdata_version": htdata_version or __version__, **carried, "calibrations": calibrations,
+        "tasks": sorted({ep["task"] for ep in built.episodes}),
+        "scenes": sorted({ep["scene"] for ep in built.episodes}),
+        "counts": {"episodes": len(built.episodes), "samples": int(len(built.rows)),
+                   "shards": len(built.shards), "frames_per_hand": _frames_per_hand(built.rows)},
+        "shards": built.shards,
+        "episodes_sha256": hashlib.sha256(episodes_bytes).hexdigest(),
+        "index_sha256": hashlib.sha256(index_bytes).hexdigest(),
+        "parent": parent.version if parent else None,
+        "next_unit": max([next_unit or 0, parent.next_unit() if parent else 0]
+                         + [unit_of_shard(s["name"]) + 1 for s in built.shards]),
+        "change": change_record(command, summarise(diff), time),
+    }
+    # file names are filled by write_version; validate the rest with placeholders
+    validate_json({**manifest, "version": (manifest["parent"] or 0) + 1, "splits": {},
+                   "episodes_file": EPISODES_FILE, "index_file": "index.npy"}, "manifest", where=str(root / MANIFEST_FILE))
+    if splits is None:
+        splits = (lambda eps, sha: carried_splits(parent, eps, sha)) if parent else (lambda eps, sha: {})
+    split_files = splits(built.episodes, manifest["episodes_sha256"])
+    return write_version(root, manifest, episodes_bytes, index_bytes, split_files)

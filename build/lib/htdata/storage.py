@@ -1,0 +1,76 @@
+"""Open, test and list files under a local path or an fsspec URL.
+
+Readers accept "/data/ds", "file:///data/ds", "memory://ds", "s3://bucket/ds".
+Local paths use the builtin `open` (fastest seek+read); anything with a
+protocol goes through fsspec. Dataset writers are local-only; `htdata publish`
+(htdata/remote.py) uploads a committed dataset with `url_to_fs`.
+"""
+
+from __future__ import annotations
+
+import os
+import posixpath
+from pathlib import Path
+from typing import IO
+
+
+def is_url(location: str | os.PathLike) -> bool:
+    """True when `location` has a protocol other than plain local files."""
+    text = os.fspath(location)
+    return "://" in text and not text.startswith("file://")
+
+
+def _local(location: str | os.PathLike) -> str:
+    text = os.fspath(location)
+    return text.removeprefix("file://")
+
+
+def join(root: str | os.PathLike, *parts: str) -> str:
+    """Join path parts with "/" for URLs and os.path for local paths."""
+    if is_url(root):
+        return posixpath.join(os.fspath(root).rstrip("/"), *parts)
+    return os.path.join(_local(root), *parts)
+
+
+def url_to_fs(location: str):
+    """(fsspec filesystem, path inside it) for a URL."""
+    import fsspec
+
+    return fsspec.core.url_to_fs(location)
+
+
+def open_binary(location: str | os.PathLike) -> IO[bytes]:
+    """Open a file for binary reading (seekable)."""
+    if not is_url(location):
+        return open(_local(location), "rb")
+    fs, path = url_to_fs(os.fspath(location))
+    return fs.open(path, "rb")
+
+
+def read_bytes(location: str | os.PathLike) -> bytes:
+    with open_binary(location) as f:
+        return f.read()
+
+
+def read_text(location: str | os.PathLike) -> str:
+    return read_bytes(location).decode("utf-8")
+
+
+def exists(location: str | os.PathLike) -> bool:
+    if not is_url(location):
+        return os.path.exists(_local(location))
+    fs, path = url_to_fs(os.fspath(location))
+    return fs.exists(path)
+
+
+def listdir(location: str | os.PathLike) -> list[str]:
+    """Sorted base names of the entries of a directory."""
+    if not is_url(location):
+        return sorted(os.listdir(_local(location)))
+    fs, path = url_to_fs(os.fspath(location))
+    return sorted(posixpath.basename(p.rstrip("/")) for p in fs.ls(path, detail=False))
+
+
+def local_path(location: str | os.PathLike) -> Path | None:
+    """The local Path for a local location, None for a remote URL."""
+    return None if is_url(location) else Path(_local(location))

@@ -1,0 +1,94 @@
+"""Windows at the glove's own rate: the last `window` glove rows up to each paired frame, as maps.
+
+`TactileWindowDataset` stacks consecutive SAMPLES (the camera's rate). A
+100 Hz glove beside a 30 Hz camera records ~3 rows per sample, all stored
+exactly in format 3 (htdata/ingest/fullrate.py); for frame prediction at
+the glove's rate, `GloveRateWindowDataset` gives, for each sample with
+the hand's paired row, the `window` distinct glove rows ending at that row
+in the episode's full-rate stream (htdata.rawstream.episode_stream),
+rendered through the episode's recorded calibration and the dataset's
+raster mode. Item: tactile (window,1,224,224) f32, t_ns (window,) int64
+(recorded glove timestamps), coverage, regions, hand, task, scene, episode,
+frame and index of the paired sample. Samples whose paired row has fewer
+than `window - 1` rows before it in the episode are not items (no padding).
+Building the item list reads every selected sample's JSON member once;
+each worker keeps the streams of the two episodes it read last.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import numpy as np
+import torch
+
+from htdata import keys
+from htdata.codec import decode_json
+from htdata.format import HANDS, JSON_MEMBER, SIZE_FIELDS, raw_member
+from htdata.keys import HAND_IDS
+from htdata.rawstream import RawStream, episode_stream
+from htdata.torchdata import HAND_NAMES, _check_hands, _ItemBuilder, _ItemDataset
+
+KEEP_STREAMS = 2
+
+
+class GloveRateWindowDataset(_ItemDataset):
+    """See the module docstring."""
+
+    def __init__(self, root, window: int = 4, split: str | None = None, part: str | None = None,
+                 hands=HANDS, version: int | None = None):
+        if window < 1:
+            raise ValueError(f"window must be >= 1, got {window}")
+        self.window = window
+        self.hands = _check_hands(hands)
+        self._builder = _ItemBuilder(root, rgb_float=False, version=version, map_source="raw")
+        reader = self._builder.reader
+        items = []   # (sample index, hand id, position of the paired row in the episode stream)
+        for pos in reader.episode_positions(split, part):
+            first, n = reader.episode_range(pos)
+            for hand in self.hands:
+                if hand not in reader.episodes[pos]["hands"]:
+                    continue
+                items += [(i, HAND_IDS[hand], p) for i, p in self._paired_positions(first, n, hand)
+                          if p >= window - 1]
+        self.items = np.asarray(items, np.int64).reshape(-1, 3)
+        self._streams: OrderedDict[tuple[int, str], RawStream] = OrderedDict()
+
+    def _paired_positions(self, first: int, n: int, hand: str) -> list[tuple[int, int]]:
+        """(sample, position of its paired row among the episode's distinct rows in time order)."""
+        reader = self._builder.reader
+        rows, paired = [], []
+        for i in range(first, first + n):
+            if reader.index[i][SIZE_FIELDS[raw_member(hand)]] == 0:
+                continue
+            meta = decode_json(reader.sample(i, (JSON_MEMBER,))[JSON_MEMBER], f"{reader.key(i)}.json")
+            rows += zip(meta["raw_t_ns"][hand], meta["raw_row"][hand])
+            if hand in (meta.get("raw_paired") or {}):
+                k = meta["raw_paired"][hand]
+                paired.append((i, (meta["raw_t_ns"][hand][k], meta["raw_row"][hand][k])))
+        order = {row: p for p, row in enumerate(sorted(set(rows)))}
+        return [(i, order[row]) for i, row in paired]
+
+    def _stream(self, episode: int, hand: str) -> RawStream:
+        key = (episode, hand)
+        if key not in self._streams:
+            self._streams[key] = episode_stream(self._builder.reader, episode, hand)
+            while len(self._streams) > KEEP_STREAMS:
+                self._streams.popitem(last=False)
+        self._streams.move_to_end(key)
+        return self._streams[key]
+
+    def __getitem__(self, i: int) -> dict:
+        index, hand_id, pos = self.items[i].tolist()
+        hand = HAND_NAMES[hand_id]
+        builder = self._builder
+        row = builder.reader.row(index)
+        stream = self._stream(row.episode, hand)
+        normaliser, raster = builder.renderer.parts_for(row.episode, hand)
+        rows = stream.rows[pos - self.window + 1:pos + 1]
+        values, _ = normaliser.apply(rows)
+        out = builder.ids(row, index, hand)
+        del out[keys.HAS_RGB]
+        out[keys.TACTILE] = torch.from_numpy(raster.render(values)[:, None])
+        out[keys.T_NS] = torch.from_numpy(stream.t_ns[pos - self.window + 1:pos + 1].copy())
+        return out

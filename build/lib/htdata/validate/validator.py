@@ -1,0 +1,98 @@
+"""`validate_dataset`: run every check on a committed dataset and return the report."""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+from htdata.validate.content import decode_mask, layout_maps
+from htdata.validate.report import CHECKS, Check
+from htdata.validate.sensors import check_sensors, check_taxel_health, merge_sensor
+from htdata.validate.shards import run_jobs, shard_jobs
+from htdata.validate.splits import check_splits
+from htdata.validate.stats import dataset_stats
+from htdata.validate.structure import Loaded, check_index, check_shard_files, load_dataset
+from htdata.validate.timestamps import check_time, empty_timestamps, merge_timestamps
+
+
+@dataclass
+class ValidateConfig:
+    split: str | None = None
+    deep: bool = False
+    sample_frac: float = 0.05
+    seed: int = 0
+    workers: int | None = None   # None: all cores for --deep, 1 otherwise
+    max_listed: int = 1000       # failures listed per check (all are counted)
+
+    def validate(self) -> None:
+        if not (0.0 < self.sample_frac <= 1.0):
+            raise ValueError(f"--sample-frac must be in (0, 1], got {self.sample_frac}")
+        if self.workers is not None and self.workers < 1:
+            raise ValueError(f"--workers must be >= 1, got {self.workers}")
+        if self.max_listed < 1:
+            raise ValueError(f"max_listed must be >= 1, got {self.max_listed}")
+
+    def resolved_workers(self, n_shards: int) -> int:
+        wanted = self.workers if self.workers is not None else (os.cpu_count() or 1) if self.deep else 1
+        return max(1, min(wanted, max(n_shards, 1)))
+
+
+def validate_dataset(path, split: str | None = None, deep: bool = False, sample_frac: float = 0.05,
+                     seed: int = 0, workers: int | None = None, max_listed: int = 1000,
+                     version: int | None = None) -> dict:
+    """Run every check on a committed dataset's current version (or `version`); returns the report.
+
+    report["ok"] is the verdict.
+    """
+    cfg = ValidateConfig(split=split, deep=deep, sample_frac=sample_frac, seed=seed, workers=workers,
+                         max_listed=max_listed)
+    cfg.validate()
+    root = Path(path)
+    t0 = time.perf_counter()
+    checks = {name: Check(name, cfg.max_listed) for name in CHECKS}
+    report = {"dataset": str(root), "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+              "params": {"split": split, "deep": deep, "sample_frac": sample_frac, "seed": seed,
+                         "version": version}}
+    ds = load_dataset(root, checks["structure"], version)
+    stats: dict = {}
+    if ds is not None and check_index(ds, checks["structure"]):
+        stats = _check_dataset(ds, cfg, checks, report["params"])
+    else:
+        for name in CHECKS[1:]:
+            checks[name].skipped.append("structure could not be read")
+    if split is None:
+        checks["splits"].skipped.append("no --split given")
+    report["checks"] = {name: c.to_dict() for name, c in checks.items()}
+    report["stats"] = stats
+    report["ok"] = all(c.ok for c in checks.values())
+    report["elapsed_s"] = round(time.perf_counter() - t0, 3)
+    report["samples"] = int(len(ds.index)) if ds is not None else 0
+    return report
+
+
+def _check_dataset(ds: Loaded, cfg: ValidateConfig, checks: dict[str, Check], params: dict) -> dict:
+    """Everything after a usable index: shards in workers, then time, sensors, splits. Returns the stats."""
+    check_shard_files(ds, checks["structure"])
+    coverage, region_map = layout_maps(ds.root, ds.manifest, checks["content"])
+    decode = decode_mask(ds.index["frame"], cfg.deep, cfg.sample_frac, cfg.seed)
+    jobs = shard_jobs(ds, decode, coverage, region_map, content_hash=cfg.split is not None)
+    n_workers = cfg.resolved_workers(len(jobs))
+    params["workers"] = n_workers
+    ts = empty_timestamps(len(ds.index))
+    sensor: dict = {}
+    hashes: dict[int, str] = {}
+    for res in run_jobs(jobs, n_workers):
+        checks["structure"].merge(res["structure"])
+        checks["content"].merge(res["content"])
+        merge_timestamps(ts, res["timestamps"], res["timestamps"]["row"])
+        hashes.update(dict(res["hashes"]))
+        merge_sensor(sensor, res["sensor"])
+    check_time(ds, ts, checks["time"])
+    check_sensors(sensor, checks["sensors"])
+    check_taxel_health(ds.root, ds.manifest.get("version"), checks["sensors"], compute=cfg.deep)
+    if cfg.split is not None:
+        check_splits(ds, cfg.split, hashes, checks["splits"])
+    return dataset_stats(ds, sensor)

@@ -1,0 +1,249 @@
+"""Dataset versions: immutable snapshots over immutable shards, one atomic pointer to the current one.
+
+The Iceberg / Delta Lake idea at the size of a folder. Shards are immutable
+and content-hashed (sha256 in every manifest). A version is a manifest (the
+shards it uses, layouts, codec, counts, change summary, parent) plus its own
+episodes.jsonl, index.npy and split files, all under `versions/`:
+
+    versions/v000003.json            the version's manifest (written once, never rewritten)
+    versions/v000003/episodes.jsonl  its episode records
+    versions/v000003/index.npy       its index
+    versions/v000003/splits/NAME.json
+    dataset.json                     a copy of the CURRENT version's manifest: the pointer
+
+A write puts the version's files in place first, then links
+`versions/vN.json` into place (fails if it exists: no version is ever
+overwritten), and last swaps `dataset.json` with one atomic rename. A crash
+at any point leaves the previous version current and readable; a half
+written `versions/vN/` without its `vN.json` belongs to no version and is
+cleared by the next write. Old versions stay readable
+(`DatasetReader(root, version=N)`) until `htdata gc` removes them, an
+explicit, dry-runnable act. Why no library: Iceberg / Delta need a table
+engine and a catalog for what is here a few JSON files and a rename; zarr's
+`.partial` idea is the same temp + rename each writer here already uses.
+
+Datasets written before versions existed (format_version 1) have no
+`versions/`: they read as one unnumbered version.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import getpass
+import json
+import os
+import re
+import shutil
+import socket
+from pathlib import Path
+
+from htdata import storage
+from htdata.faults import crash_point
+from htdata.format import EPISODES_FILE, INDEX_FILE, MANIFEST_FILE, SPLITS_DIR
+from htdata.fsutil import write_bytes_atomic
+
+VERSIONS_DIR = "versions"
+_VERSION_RE = re.compile(r"^v(\d{6,})\.json$")
+# Episode record fields that say WHERE an episode sits, not WHAT it holds: ignored by diffs.
+POSITIONAL_FIELDS = ("first_sample", "shards")
+
+
+def version_name(n: int) -> str:
+    if n < 1:
+        raise ValueError(f"versions are numbered from 1, got {n}")
+    return f"v{n:06d}"
+
+
+def version_manifest_file(n: int) -> str:
+    return f"{VERSIONS_DIR}/{version_name(n)}.json"
+
+
+def version_dir(n: int) -> str:
+    return f"{VERSIONS_DIR}/{version_name(n)}"
+
+
+def split_file(n: int | None, name: str) -> str:
+    """Where split NAME of version n lives (unversioned datasets: splits/NAME.json)."""
+    return f"{SPLITS_DIR}/{name}.json" if n is None else f"{version_dir(n)}/{SPLITS_DIR}/{name}.json"
+
+
+def list_versions(root: str | os.PathLike) -> list[int]:
+    """Committed version numbers, ascending: those with a manifest, up to the current one.
+
+    A version file numbered after the current version belongs to a writer
+    killed before it swapped the pointer: it was never committed.
+    """
+    pointer = storage.join(root, MANIFEST_FILE)
+    if not storage.exists(pointer):
+        return []
+    current = json.loads(storage.read_text(pointer)).get("version") or 0
+    return [n for n in _version_files(root) if n <= current]
+
+
+def _version_files(root: str | os.PathLike) -> list[int]:
+    """Numbers of every versions/vN.json present, committed or not."""
+    path = storage.join(root, VERSIONS_DIR)
+    local = storage.local_path(path)
+    if local is not None:
+        if not Path(local).is_dir():
+            return []
+        names = os.listdir(local)
+    else:
+        names = [p.rstrip("/").rsplit("/", 1)[-1] for p in storage.listdir(path)] if storage.exists(path) else []
+    return sorted(int(m.group(1)) for m in map(_VERSION_RE.match, names) if m)
+
+
+def manifest_path(root: str | os.PathLike, version: int | None) -> str:
+    """The manifest to open: dataset.json for the current version, versions/vN.json for version N."""
+    if version is None:
+        return storage.join(root, MANIFEST_FILE)
+    path = storage.join(root, version_manifest_file(int(version)))
+    have = list_versions(root)
+    if int(version) not in have:
+        raise FileNotFoundError(f"{root}: no version {version} (versions: "
+                                f"{', '.join(map(str, have)) if have else 'none: dataset has no version history'})")
+    return path
+
+
+def now_utc() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def change_record(command: str, summary: dict, time: str | None = None) -> dict:
+    """The "change" entry of a version: who made it, when, with what command, what changed."""
+    try:
+        author = getpass.getuser()
+    except Exception:   # no user name in some containers: record the uid instead
+        author = f"uid {os.getuid()}"
+    return {"time": time or now_utc(), "author": author, "host": socket.gethostname(), "command": command,
+            "summary": summary}
+
+
+def content_view(record: dict) -> dict:
+    return {k: v for k, v in record.items() if k not in POSITIONAL_FIELDS}
+
+
+def diff_episodes(old: list[dict], new: list[dict]) -> dict:
+    """{added, removed, changed: [episode ids]} and frame counts between two episode lists.
+
+    "changed" = same id, different record (positions ignored): re-ingested
+    from changed inputs, trimmed, renormalised or relabelled. Frames added /
+    removed count whole episodes plus what changed episodes gained or lost.
+    """
+    a = {e["episode_id"]: e for e in old}
+    b = {e["episode_id"]: e for e in new}
+    added = sorted(set(b) - set(a))
+    removed = sorted(set(a) - set(b))
+    changed = sorted(e for e in set(a) & set(b) if content_view(a[e]) != content_view(b[e]))
+    delta = [int(b[e]["num_frames"]) - int(a[e]["num_frames"]) for e in changed]
+    return {"added": added, "removed": removed, "changed": changed,
+            "frames_added": sum(int(b[e]["num_frames"]) for e in added) + sum(d for d in delta if d > 0),
+            "frames_removed": sum(int(a[e]["num_frames"]) for e in removed) - sum(d for d in delta if d < 0),
+            "frames_before": sum(int(e["num_frames"]) for e in old),
+            "frames_after": sum(int(e["num_frames"]) for e in new)}
+
+
+def summarise(diff: dict) -> dict:
+    """The counts of a diff (what a version manifest keeps; ids stay in the episode files)."""
+    return {"episodes_added": len(diff["added"]), "episodes_removed": len(diff["removed"]),
+            "episodes_changed": len(diff["changed"]), "frames_added": diff["frames_added"],
+            "frames_removed": diff["frames_removed"], "frames": diff["frames_after"]}
+
+
+def _link_exclusive(path: Path, data: bytes) -> None:
+    """Write `data` to `path`, which must not exist (temp + fsync + link: never overwrites)."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        raise FileExistsError(f"{path}: version already exists; versions are never rewritten") from None
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def clear_orphans(root: Path, current: int | None) -> None:
+    """Remove versions numbered after the current one: a writer died before swapping the pointer.
+
+    Such a version was never current, so nothing can have read it as the
+    dataset; the next write takes its number. The caller holds the writer lock.
+    """
+    n = (current or 0) + 1
+    for m in _version_files(root):
+        if m >= n:
+            (root / version_manifest_file(m)).unlink()
+    vdir = root / VERSIONS_DIR
+    for d in (vdir.iterdir() if vdir.is_dir() else []):
+        if d.is_dir() and re.fullmatch(r"v\d{6,}", d.name) and int(d.name[1:]) >= n:
+            shutil.rmtree(d)
+
+
+def write_version(root: str | os.PathLike, manifest: dict, episodes_bytes: bytes, index_bytes: bytes,
+                  splits: dict[str, bytes] | None = None) -> dict:
+    """Commit `manifest` as version parent + 1; returns it with version/file fields filled in.
+
+    The caller fills parent, change, shards, counts ...; this writes
+    versions/vN/{episodes.jsonl,index.npy,splits/*}, then versions/vN.json,
+    then swaps dataset.json. The caller holds the writer lock.
+    """
+    root = Path(root)
+    pointer = root / MANIFEST_FILE
+    current = json.loads(pointer.read_text()).get("version") if pointer.is_file() else None
+    if pointer.is_file() and current != manifest.get("parent"):
+        # a write must build on the current version: anything else would drop what came after its parent
+        raise RuntimeError(f"{root}: the current version is {current}, this write was built on "
+                           f"{manifest.get('parent')}; nothing was written (run the command again)")
+    clear_orphans(root, manifest.get("parent"))
+    n = (manifest.get("parent") or 0) + 1
+    files_dir = root / version_dir(n)
+    files_dir.mkdir(parents=True)
+    write_bytes_atomic(files_dir / EPISODES_FILE, episodes_bytes)
+    write_bytes_atomic(files_dir / INDEX_FILE, index_bytes)
+    split_entries = {}
+    for name, data in sorted((splits or {}).items()):
+        (files_dir / SPLITS_DIR).mkdir(exist_ok=True)
+        write_bytes_atomic(root / split_file(n, name), data)
+        split_entries[name] = {"file": split_file(n, name), "sha256": _sha256(data)}
+    manifest = dict(manifest)
+    manifest.update({"version": n, "episodes_file": f"{version_dir(n)}/{EPISODES_FILE}",
+                     "index_file": f"{version_dir(n)}/{INDEX_FILE}", "splits": split_entries})
+    data = (json.dumps(manifest, indent=2) + "\n").encode()
+    crash_point("version_files_written")
+    _link_exclusive(root / version_manifest_file(n), data)
+    crash_point("version_manifest_written")
+    write_bytes_atomic(root / MANIFEST_FILE, data)
+    return manifest
+
+
+def _sha256(data: bytes) -> str:
+    import hashlib
+
+    return hashlib.sha256(data).hexdigest()
+
+
+def log_entries(root: str | os.PathLike) -> list[dict]:
+    """One entry per version, oldest first: version, parent, time, author, command, summary, current."""
+    from htdata.manifest import load_manifest
+
+    current = load_manifest(root, validate=False).get("version")
+    out = []
+    for n in list_versions(root):
+        m = load_manifest(root, validate=False, version=n)
+        change = m.get("change", {})
+        out.append({"version": n, "parent": m.get("parent"), "time": change.get("time", m.get("created")),
+                    "author": change.get("author"), "command": change.get("command"),
+                    "summary": change.get("summary", {}), "current": n == current,
+                    "episodes": m["counts"]["episodes"], "samples": m["counts"]["samples"]})
+    return out
+
+
+def diff_versions(root: str | os.PathLike, a: int, b: int) -> dict:
+    """Episodes added / removed / changed from version a to version b (diff_episodes)."""
+    from htdata.manifest import load_episodes, load_manifest
+
+    old = load_episodes(root, load_manifest(root, validate=False, version=a))
+    new = load_episodes(root, load_manifest(root, validate=False, version=b))
+    return diff_episodes(old, new)
