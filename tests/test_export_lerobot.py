@@ -204,3 +204,36 @@ def test_errors_are_one_line_and_leave_nothing(dataset, tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "nope" in err
     assert not (tmp_path / "z").exists() and not list(tmp_path.glob(".z.partial*"))
+
+
+def tree(root: Path) -> dict[str, tuple[int, int]]:
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*") if p.is_file()}
+
+
+def test_export_is_read_only_and_atomic(dataset, tmp_path, monkeypatch):
+    from htdata import lerobot_export
+
+    before = tree(dataset)
+    out = tmp_path / "lr"
+    # an interrupted export (Ctrl-C in the middle of an episode) leaves no OUT and no partial folder
+    calls = {"n": 0}
+    real_add = lerobot_export.VideoWriter.add
+
+    def interrupted(self, *a, **kw):
+        calls["n"] += 1
+        if calls["n"] == 5:
+            raise KeyboardInterrupt
+        return real_add(self, *a, **kw)
+
+    monkeypatch.setattr(lerobot_export.VideoWriter, "add", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        lerobot_export.export_lerobot(lerobot_export.LeRobotExportConfig(dataset=str(dataset), out=out))
+    assert not out.exists() and not (tmp_path / ".lr.partial").exists()
+    monkeypatch.setattr(lerobot_export.VideoWriter, "add", real_add)
+    # a kill -9 leaves the hidden partial folder: the next export clears it and finishes
+    (tmp_path / ".lr.partial" / "data").mkdir(parents=True)
+    (tmp_path / ".lr.partial" / "data" / "junk.parquet").write_bytes(b"half written")
+    assert cli(["export", "lerobot", str(dataset), str(out), "--quiet"]) == 0
+    assert not (tmp_path / ".lr.partial").exists() and not (out / "data" / "junk.parquet").exists()
+    assert json.loads((out / "meta/info.json").read_text())["total_frames"] == len(DatasetReader(dataset))
+    assert tree(dataset) == before                       # DATASET untouched: no file written or changed
