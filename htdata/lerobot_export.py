@@ -336,6 +336,15 @@ def _episode_schedule(reader: DatasetReader, pos: int, plan: _Plan) -> tuple[lis
     return [first + int(k) for k in nearest], ticks.tolist()
 
 
+def _frames_out(reader: DatasetReader, pos: int, plan: _Plan) -> int:
+    """Rows episode `pos` will have: its frames, or its 1/fps ticks when resampling."""
+    first, n = reader.episode_range(pos)
+    if not plan.resample:
+        return n
+    t = [decode_json(reader.sample(i, (JSON_MEMBER,))[JSON_MEMBER])["t_rgb_ns"] for i in (first, first + n - 1)]
+    return int(np.floor((t[1] - t[0]) / 1e9 * plan.fps + 1e-9)) + 1
+
+
 def _chunk_file(n: int) -> tuple[int, int]:
     return n // CHUNKS_SIZE, n % CHUNKS_SIZE
 
@@ -383,17 +392,15 @@ def _write(reader, plan: _Plan, cfg: LeRobotExportConfig, work: Path, pa, pq, pr
     episode_rows: list[dict] = []
     data_file, data_writer, data_bytes = 0, None, 0
     index = 0
-    schedules = [_episode_schedule(reader, pos, plan) for pos in plan.positions] if plan.resample else None
-    if on_total is not None:
-        on_total(sum(len(s[0]) for s in schedules) if schedules else
-                 sum(reader.episode_range(p)[1] for p in plan.positions))
+    if on_total is not None:   # frames to write, for the progress bar (two JSON reads an episode when resampling)
+        on_total(sum(_frames_out(reader, p, plan) for p in plan.positions))
     wanted = (JSON_MEMBER, RGB_MEMBER, *[raw_member(h) for h in plan.hands],
               *([tactile_member(h) for h in plan.hands] if cfg.maps else []))
     try:
         for ep_index, pos in enumerate(plan.positions):
             ep = reader.episodes[pos]
             eid = ep["episode_id"]
-            samples, times = schedules[ep_index] if schedules else _episode_schedule(reader, pos, plan)
+            samples, times = _episode_schedule(reader, pos, plan)
             task_index = tasks.setdefault(ep["task"], len(tasks))
             chunk, file = _chunk_file(ep_index)
             videos = {k: VideoWriter(work / VIDEO_PATH.format(video_key=k, chunk_index=chunk, file_index=file),
