@@ -40,12 +40,9 @@ export never leaves an OUT that looks complete (the next run removes the leftove
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
-import sys
 from dataclasses import dataclass, field
-from fractions import Fraction
 from pathlib import Path
 from typing import Callable
 
@@ -54,21 +51,14 @@ import numpy as np
 from htdata import storage
 from htdata.codec import decode_json, decode_rgb, decode_tactile
 from htdata.format import CANVAS, HANDS, JSON_MEMBER, RGB_MEMBER, raw_member, tactile_member
+from htdata.lerobot_meta import CHUNKS_SIZE, DATA_FILE_MB, DATA_PATH, VIDEO_PATH, part_of, write_meta
+from htdata.lerobot_stats import FeatureStats, VideoStats
 from htdata.rawstream import paired_row
 from htdata.reader import DatasetReader
+from htdata.videoencode import VideoWriter
 
-CODEBASE_VERSION = "v3.0"
-CHUNKS_SIZE = 1000               # files per chunk folder (LeRobot's default)
-DATA_FILE_MB = 100               # data parquet rolled at this size (LeRobot's default)
-VIDEO_FILE_MB = 200              # stated in info.json; we write one video file per episode
-QUANTILES = (0.01, 0.10, 0.50, 0.90, 0.99)
 RGB_KEY = "observation.images.egocentric"
 PRESENT_KEY = "observation.present"
-VIDEO_TIME_BASE = Fraction(1, 90000)   # mp4's usual clock: 11 us steps, well inside LeRobot's 1e-4 s tolerance
-DATA_PATH = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
-VIDEO_PATH = "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4"
-EPISODES_PATH = "meta/episodes/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
-HTDATA_META = "meta/htdata"
 Progress = Callable[[int], None]
 
 
@@ -107,110 +97,6 @@ class LeRobotExportConfig:
             raise ValueError(f"codec must be libx264 or libsvtav1, got {self.codec!r}")
         if storage.is_url(str(self.out)):
             raise ValueError(f"{self.out}: the export writes a local directory")
-
-
-# --------------------------------------------------------------------------- stats
-class FeatureStats:
-    """Mergeable per-element stats of one non-video feature (sums exact, quantiles per episode)."""
-
-    def __init__(self):
-        self.count = 0
-        self.sum = self.sumsq = self.min = self.max = None
-        self.qsum = None               # frame-weighted sum of per-episode quantiles
-
-    def add_episode(self, values: np.ndarray) -> None:
-        if len(values) == 0:
-            return
-        x = np.asarray(values, np.float64)
-        n = len(x)
-        q = np.quantile(x, QUANTILES, axis=0)
-        if self.sum is None:
-            self.sum, self.sumsq = x.sum(0), (x * x).sum(0)
-            self.min, self.max, self.qsum = x.min(0), x.max(0), q * n
-        else:
-            self.sum += x.sum(0)
-            self.sumsq += (x * x).sum(0)
-            self.min, self.max = np.minimum(self.min, x.min(0)), np.maximum(self.max, x.max(0))
-            self.qsum += q * n
-        self.count += n
-
-    def result(self) -> dict | None:
-        if not self.count:
-            return None
-        mean = self.sum / self.count
-        std = np.sqrt(np.maximum(self.sumsq / self.count - mean * mean, 0.0))
-        out = {"min": self.min, "max": self.max, "mean": mean, "std": std, "count": np.array([self.count])}
-        for q, v in zip(QUANTILES, self.qsum / self.count):
-            out[_qname(q)] = v
-        return {k: np.atleast_1d(v).tolist() for k, v in out.items()}
-
-
-class VideoStats:
-    """Per-channel stats of uint8 frames in [0,1] units, shape (C,1,1) as LeRobot stores image stats."""
-
-    def __init__(self, channels: int = 3):
-        self.hist = np.zeros((channels, 256), np.int64)
-        self.frames = 0
-
-    def add(self, frame: np.ndarray) -> None:
-        for c in range(self.hist.shape[0]):
-            self.hist[c] += np.bincount(frame[..., c].ravel(), minlength=256)
-        self.frames += 1
-
-    def result(self) -> dict | None:
-        if not self.frames:
-            return None
-        levels = np.arange(256) / 255.0
-        total = self.hist.sum(1)
-        mean = (self.hist * levels).sum(1) / total
-        std = np.sqrt(np.maximum((self.hist * levels ** 2).sum(1) / total - mean ** 2, 0.0))
-        nz = [np.flatnonzero(h) for h in self.hist]
-        out = {"min": [levels[z[0]] for z in nz], "max": [levels[z[-1]] for z in nz], "mean": mean, "std": std}
-        cdf = np.cumsum(self.hist, 1) / total[:, None]
-        for q in QUANTILES:
-            out[_qname(q)] = [levels[int(np.searchsorted(c, q))] for c in cdf]
-        shaped = {k: np.asarray(v, np.float64).reshape(-1, 1, 1).tolist() for k, v in out.items()}
-        shaped["count"] = [self.frames]
-        return shaped
-
-
-def _qname(q: float) -> str:
-    return f"q{int(round(q * 100)):02d}"
-
-
-# --------------------------------------------------------------------------- video
-class VideoWriter:
-    """One mp4 of 224x224 RGB frames with explicit pts (seconds from the episode's first frame)."""
-
-    def __init__(self, path: Path, fps: int, codec: str, crf: int, gop: int):
-        import av
-
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self.path = path
-        self.container = av.open(str(path), "w", format="mp4")
-        self.stream = self.container.add_stream(codec, rate=fps)
-        self.stream.width = self.stream.height = CANVAS
-        self.stream.pix_fmt = "yuv420p"
-        self.stream.codec_context.time_base = VIDEO_TIME_BASE
-        self.stream.options = {"crf": str(crf), "g": str(gop)} if codec == "libx264" else \
-            {"crf": str(crf), "g": str(gop), "preset": "10"}
-        self.last_pts = -1
-        self._av = av
-
-    def add(self, rgb: np.ndarray, t_s: float, where: str) -> None:
-        pts = int(round(t_s / VIDEO_TIME_BASE))
-        if pts <= self.last_pts:
-            raise ValueError(f"{where}: timestamp {t_s:.6f} s does not come after the previous frame's")
-        self.last_pts = pts
-        frame = self._av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
-        frame.pts, frame.time_base = pts, VIDEO_TIME_BASE
-        for packet in self.stream.encode(frame):
-            self.container.mux(packet)
-
-    def close(self) -> None:
-        for packet in self.stream.encode():
-            self.container.mux(packet)
-        self.container.close()
 
 
 # --------------------------------------------------------------------------- the export
@@ -394,71 +280,17 @@ def _write(reader, plan: _Plan, cfg: LeRobotExportConfig, work: Path, pa, pq, pr
     index = 0
     if on_total is not None:   # frames to write, for the progress bar (two JSON reads an episode when resampling)
         on_total(sum(_frames_out(reader, p, plan) for p in plan.positions))
-    wanted = (JSON_MEMBER, RGB_MEMBER, *[raw_member(h) for h in plan.hands],
-              *([tactile_member(h) for h in plan.hands] if cfg.maps else []))
     try:
         for ep_index, pos in enumerate(plan.positions):
             ep = reader.episodes[pos]
-            eid = ep["episode_id"]
             samples, times = _episode_schedule(reader, pos, plan)
             task_index = tasks.setdefault(ep["task"], len(tasks))
-            chunk, file = _chunk_file(ep_index)
-            videos = {k: VideoWriter(work / VIDEO_PATH.format(video_key=k, chunk_index=chunk, file_index=file),
-                                     plan.fps, cfg.codec, cfg.crf, cfg.gop) for k in plan.video_keys}
-            raw = [np.zeros((len(samples), *slot.grid), np.float32) for slot in plan.slots]
-            present = np.zeros((len(samples), 1 + len(plan.slots)), bool)
-            slot_of = {h: next(k for k, s in enumerate(plan.slots)
-                               if s.hand == h and s.grid == plan.layout_grids[lid])
-                       for h, lid in ep["layouts"].items()}
-            last_rgb = np.zeros((CANVAS, CANVAS, 3), np.uint8)
-            cache: tuple[int, dict] | None = None
-            first = reader.episode_range(pos)[0]
-            for f, (i, t) in enumerate(zip(samples, times)):
-                if cache is None or cache[0] != i:
-                    _, _, members = reader.read_sample(i, wanted)
-                    cache = (i, members)
-                members = cache[1]
-                where = f"{reader.root}: {reader.key(i)} (episode {eid!r} frame {i - first})"
-                if RGB_MEMBER in members:
-                    last_rgb = decode_rgb(members[RGB_MEMBER], f"{where}.{RGB_MEMBER}")
-                    present[f, 0] = True
-                videos[RGB_KEY].add(last_rgb, t, where)
-                if present[f, 0]:
-                    vstats[RGB_KEY].add(last_rgb)
-                for hand, k in slot_of.items():
-                    if raw_member(hand) in members:
-                        row = paired_row(members, hand, where)
-                        if row.shape != plan.slots[k].grid:
-                            raise ValueError(f"{where}: {hand} raw row shaped {row.shape}, "
-                                             f"expected {plan.slots[k].grid} (its layout's grid)")
-                        # NaN / Inf mark cells without a taxel in some sources: 0 (LeRobot stats and
-                        # normalisation would turn one NaN into NaN everywhere); finite values stay exact
-                        raw[k][f] = np.where(np.isfinite(row), row, 0.0)
-                        present[f, 1 + k] = True
-                for hand in plan.hands:
-                    if cfg.maps:
-                        grey = np.zeros((CANVAS, CANVAS), np.uint8)
-                        if tactile_member(hand) in members:
-                            m = decode_tactile(members[tactile_member(hand)], f"{where}.{tactile_member(hand)}")
-                            grey = np.round(np.clip(np.nan_to_num(m), 0.0, 1.0) * 255).astype(np.uint8)
-                        rgb = np.repeat(grey[..., None], 3, axis=2)
-                        videos[map_key(hand)].add(rgb, t, where)
-                        if tactile_member(hand) in members:
-                            vstats[map_key(hand)].add(rgb)
-                if progress is not None:
-                    progress(1)
-            for v in videos.values():
-                v.close()
+            raw, present = _episode_frames(reader, plan, cfg, pos, samples, times, work, ep_index, vstats, progress)
             n = len(samples)
-            cols = {slot.key: raw[k] for k, slot in enumerate(plan.slots)}
-            cols.update({PRESENT_KEY: present, "timestamp": np.asarray(times, np.float32),
-                         "frame_index": np.arange(n), "episode_index": np.full(n, ep_index),
-                         "index": np.arange(index, index + n), "task_index": np.full(n, task_index)})
-            for k, slot in enumerate(plan.slots):
-                cols[slot.key] = cols[slot.key][present[:, 1 + k]]      # stats of real rows only
-            for key, values in cols.items():
-                if len(values):
-                    stats[key].add_episode(values.reshape(len(values), -1))
+            cols = {PRESENT_KEY: present, "timestamp": np.asarray(times, np.float32),
+                    "frame_index": np.arange(n), "episode_index": np.full(n, ep_index),
+                    "index": np.arange(index, index + n), "task_index": np.full(n, task_index)}
+            _add_stats(stats, plan, raw, cols)
             table = pa.table({slot.key: pa.array(raw[k].reshape(n, -1).tolist(), schema.field(slot.key).type)
                               for k, slot in enumerate(plan.slots)} | {
                 PRESENT_KEY: pa.array(present.tolist(), pa.list_(pa.bool_())),
@@ -468,107 +300,105 @@ def _write(reader, plan: _Plan, cfg: LeRobotExportConfig, work: Path, pa, pq, pr
             if data_writer is not None and data_bytes >= DATA_FILE_MB * 1024 * 1024:
                 data_writer.close()
                 data_writer, data_file = None, data_file + 1
-            d_chunk, d_file = _chunk_file(data_file)
             if data_writer is None:
-                path = work / DATA_PATH.format(chunk_index=d_chunk, file_index=d_file)
+                path = work / DATA_PATH.format(chunk_index=_chunk_file(data_file)[0],
+                                               file_index=_chunk_file(data_file)[1])
                 path.parent.mkdir(parents=True, exist_ok=True)
                 data_writer, data_bytes = pq.ParquetWriter(str(path), schema), 0
             data_writer.write_table(table)
             data_bytes += table.nbytes
-            row = {"episode_index": ep_index, "tasks": [ep["task"]], "length": n,
-                   "data/chunk_index": d_chunk, "data/file_index": d_file,
-                   "dataset_from_index": index, "dataset_to_index": index + n,
-                   "meta/episodes/chunk_index": 0, "meta/episodes/file_index": 0,
-                   "htdata/episode_id": eid, "htdata/part": _part_of(plan, eid),
-                   **{f"htdata/layout/{h}": ep["layouts"].get(h) for h in plan.hands}}
-            for k in plan.video_keys:
-                row.update({f"videos/{k}/chunk_index": chunk, f"videos/{k}/file_index": file,
-                            f"videos/{k}/from_timestamp": 0.0,
-                            f"videos/{k}/to_timestamp": float(times[-1]) + 1.0 / plan.fps})
-            episode_rows.append(row)
+            episode_rows.append(_episode_row(plan, ep, ep_index, index, n, times, data_file))
             index += n
     finally:
         if data_writer is not None:
             data_writer.close()
-    _write_meta(reader, plan, cfg, work, feats, stats, vstats, tasks, episode_rows, index, pa, pq)
+    write_meta(reader, plan, cfg, work, feats, stats, vstats, tasks, episode_rows, index, pa, pq)
     return {"episodes": len(plan.positions), "frames": index, "fps": plan.fps, "resampled": plan.resample,
-            "tasks": len(tasks), "hands": plan.hands, "raw_features": [s.key for s in plan.slots], "video_keys": plan.video_keys,
-            "bytes": sum(p.stat().st_size for p in work.rglob("*") if p.is_file())}
+            "tasks": len(tasks), "hands": plan.hands, "raw_features": [s.key for s in plan.slots],
+            "video_keys": plan.video_keys, "bytes": sum(p.stat().st_size for p in work.rglob("*") if p.is_file())}
 
 
-def _part_of(plan: _Plan, eid: str) -> str | None:
-    for part, ids in plan.parts.items():
-        if eid in ids:
-            return part
-    return None
+def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, samples: list[int], times: list[float],
+                    work: Path, ep_index: int, vstats: dict, progress) -> tuple[list[np.ndarray], np.ndarray]:
+    """Encode one episode's videos; return its raw rows per slot and the presence flags (see the module doc)."""
+    ep = reader.episodes[pos]
+    eid = ep["episode_id"]
+    wanted = (JSON_MEMBER, RGB_MEMBER, *[raw_member(h) for h in plan.hands],
+              *([tactile_member(h) for h in plan.hands] if cfg.maps else []))
+    chunk, file = _chunk_file(ep_index)
+    videos = {k: VideoWriter(work / VIDEO_PATH.format(video_key=k, chunk_index=chunk, file_index=file),
+                             plan.fps, cfg.codec, cfg.crf, cfg.gop) for k in plan.video_keys}
+    raw = [np.zeros((len(samples), *slot.grid), np.float32) for slot in plan.slots]
+    present = np.zeros((len(samples), 1 + len(plan.slots)), bool)
+    slot_of = {h: next(k for k, s in enumerate(plan.slots) if s.hand == h and s.grid == plan.layout_grids[lid])
+               for h, lid in ep["layouts"].items()}
+    last_rgb = np.zeros((CANVAS, CANVAS, 3), np.uint8)
+    cache: tuple[int, dict] | None = None            # a resampled episode may repeat a sample
+    first = reader.episode_range(pos)[0]
+    for f, (i, t) in enumerate(zip(samples, times)):
+        if cache is None or cache[0] != i:
+            cache = (i, reader.read_sample(i, wanted)[2])
+        members = cache[1]
+        where = f"{reader.root}: {reader.key(i)} (episode {eid!r} frame {i - first})"
+        if RGB_MEMBER in members:
+            last_rgb = decode_rgb(members[RGB_MEMBER], f"{where}.{RGB_MEMBER}")
+            present[f, 0] = True
+            vstats[RGB_KEY].add(last_rgb)
+        videos[RGB_KEY].add(last_rgb, t, where)
+        for hand, k in slot_of.items():
+            if raw_member(hand) in members:
+                row = paired_row(members, hand, where)
+                if row.shape != plan.slots[k].grid:
+                    raise ValueError(f"{where}: {hand} raw row shaped {row.shape}, "
+                                     f"expected {plan.slots[k].grid} (its layout's grid)")
+                # NaN / Inf mark cells without a taxel in some sources: 0 (LeRobot stats and
+                # normalisation would turn one NaN into NaN everywhere); finite values stay exact
+                raw[k][f] = np.where(np.isfinite(row), row, 0.0)
+                present[f, 1 + k] = True
+        if cfg.maps:
+            for hand in plan.hands:
+                _add_map_frame(members, hand, t, where, videos[map_key(hand)], vstats[map_key(hand)])
+        if progress is not None:
+            progress(1)
+    for v in videos.values():
+        v.close()
+    return raw, present
 
 
-def _write_meta(reader, plan, cfg, work: Path, feats, stats, vstats, tasks, episode_rows, frames, pa, pq) -> None:
-    meta = work / "meta"
-    meta.mkdir(exist_ok=True)
-    # episodes: one parquet (a row per episode is small)
-    path = work / EPISODES_PATH.format(chunk_index=0, file_index=0)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    pq.write_table(pa.Table.from_pylist(episode_rows), path)
-    # tasks: LeRobot reads it with pandas, the task string as the index
-    task_table = pa.table({"task_index": pa.array(list(tasks.values()), pa.int64()),
-                           "task": pa.array(list(tasks), pa.string())})
-    pandas_meta = {"index_columns": ["task"], "column_indexes": [], "pandas_version": "2.2.0", "creator": None,
-                   "columns": [{"name": "task_index", "field_name": "task_index", "pandas_type": "int64",
-                                "numpy_type": "int64", "metadata": None},
-                               {"name": None, "field_name": "task", "pandas_type": "unicode",
-                                "numpy_type": "object", "metadata": None}]}
-    task_table = task_table.replace_schema_metadata({b"pandas": json.dumps(pandas_meta).encode()})
-    pq.write_table(task_table, meta / "tasks.parquet")
-    # stats
-    all_stats = {k: s.result() for k, s in stats.items()} | {k: s.result() for k, s in vstats.items()}
-    (meta / "stats.json").write_text(json.dumps({k: v for k, v in all_stats.items() if v is not None}, indent=1))
-    # info
-    if plan.parts:
-        splits, start = {}, 0
-        for part, ids in plan.parts.items():
-            splits[part] = f"{start}:{start + len(ids)}"
-            start += len(ids)
-    else:
-        splits = {"train": f"0:{len(plan.positions)}"}   # LeRobot's convention for "the whole dataset"
-    info = {"codebase_version": CODEBASE_VERSION, "robot_type": "tactile_glove",
-            "total_episodes": len(plan.positions), "total_frames": frames, "total_tasks": len(tasks),
-            "chunks_size": CHUNKS_SIZE, "data_files_size_in_mb": DATA_FILE_MB,
-            "video_files_size_in_mb": VIDEO_FILE_MB, "fps": plan.fps, "splits": splits,
-            "data_path": DATA_PATH, "video_path": VIDEO_PATH, "features": feats}
-    (meta / "info.json").write_text(json.dumps(info, indent=2))
-    _write_htdata_meta(reader, plan, cfg, work / HTDATA_META)
+def _add_map_frame(members: dict, hand: str, t: float, where: str, video: VideoWriter, vstats: VideoStats) -> None:
+    """--maps: the canonical map as grey (value x 255); black where the hand has no map this frame."""
+    grey = np.zeros((CANVAS, CANVAS), np.uint8)
+    if tactile_member(hand) in members:
+        m = decode_tactile(members[tactile_member(hand)], f"{where}.{tactile_member(hand)}")
+        grey = np.round(np.clip(np.nan_to_num(m), 0.0, 1.0) * 255).astype(np.uint8)
+    rgb = np.repeat(grey[..., None], 3, axis=2)
+    video.add(rgb, t, where)
+    if tactile_member(hand) in members:
+        vstats.add(rgb)
 
 
-def _write_htdata_meta(reader, plan: _Plan, cfg: LeRobotExportConfig, dest: Path) -> None:
-    """What LeRobot has no place for: masks (constant per glove), layouts, split assignment, episode ids."""
-    dest.mkdir(parents=True)
-    manifest = reader.manifest
-    for hand in plan.hands:
-        for layout_id in plan.layouts[hand]:
-            entry = manifest["layouts"][layout_id]
-            for name in ("file", "coverage"):
-                if entry.get(name):
-                    src = storage.join(reader.root, entry[name])
-                    ext = Path(entry[name]).suffix
-                    (dest / f"layout_{layout_id}{'_coverage' if name == 'coverage' else ''}{ext}").write_bytes(
-                        storage.read_bytes(src))
-    canonical = manifest.get("canonical", {})
-    for name, fname in (("regions", "region_map.png"), ("parts", "part_map.png"), ("file", "canonical_hand.json")):
-        if canonical.get(name):
-            (dest / fname).write_bytes(storage.read_bytes(storage.join(reader.root, canonical[name])))
-    if plan.split_doc is not None:
-        doc = {"split": cfg.split, "exported_parts": list(plan.parts), "assignment": plan.split_doc}
-        (dest / "split.json").write_text(json.dumps(doc, indent=1))
-    with open(dest / "episodes.jsonl", "w") as f:
-        for ep_index, pos in enumerate(plan.positions):
-            ep = reader.episodes[pos]
-            f.write(json.dumps({"episode_index": ep_index, "episode_id": ep["episode_id"], "task": ep["task"],
-                                "scene": ep.get("scene"), "source": ep.get("source"), "layouts": ep["layouts"],
-                                "part": _part_of(plan, ep["episode_id"]), "htdata_frames": ep["num_frames"]}) + "\n")
-    (dest / "README.txt").write_text(
-        f"Exported by htdata from {reader.root} version {reader.version}.\n"
-        "layout_<id>.json: the glove layout (raw grid, live cells, value range) of each raw feature;\n"
-        "layout_<id>_coverage.png: where that glove covers the canonical 224x224 hand (0/1);\n"
-        "region_map.png / part_map.png: canonical place and part ids (thumb=1 .. palm=6);\n"
-        "split.json: the full split assignment (when exported with --split); episodes.jsonl: htdata ids.\n")
+def _add_stats(stats: dict, plan: _Plan, raw: list[np.ndarray], cols: dict) -> None:
+    """One episode into the running stats: raw features over real rows only (absent ones are fill)."""
+    present = cols[PRESENT_KEY]
+    values = {slot.key: raw[k][present[:, 1 + k]] for k, slot in enumerate(plan.slots)} | cols
+    for key, v in values.items():
+        if len(v):
+            stats[key].add_episode(v.reshape(len(v), -1))
+
+
+def _episode_row(plan: _Plan, ep: dict, ep_index: int, index: int, n: int, times: list[float], data_file: int) -> dict:
+    """The episode's row in meta/episodes (LeRobot's columns, then htdata's)."""
+    eid = ep["episode_id"]
+    chunk, file = _chunk_file(ep_index)
+    d_chunk, d_file = _chunk_file(data_file)
+    row = {"episode_index": ep_index, "tasks": [ep["task"]], "length": n,
+           "data/chunk_index": d_chunk, "data/file_index": d_file,
+           "dataset_from_index": index, "dataset_to_index": index + n,
+           "meta/episodes/chunk_index": 0, "meta/episodes/file_index": 0,
+           "htdata/episode_id": eid, "htdata/part": part_of(plan, eid),
+           **{f"htdata/layout/{h}": ep["layouts"].get(h) for h in plan.hands}}
+    for k in plan.video_keys:
+        row.update({f"videos/{k}/chunk_index": chunk, f"videos/{k}/file_index": file,
+                    f"videos/{k}/from_timestamp": 0.0,
+                    f"videos/{k}/to_timestamp": float(times[-1]) + 1.0 / plan.fps})
+    return row

@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from htdata.versions_arg import version_arg
+from htdata.commands.version_arg import version_arg
 from htdata.versions import diff_versions
 
 

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from htdata.versions_arg import version_arg
+from htdata.commands.version_arg import version_arg
 
 EPILOG = """\
 What is written (LeRobot v3.0: meta/info.json, meta/stats.json, meta/tasks.parquet,

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from htdata.versions_arg import version_arg
+from htdata.commands.version_arg import version_arg
 from htdata import validate
 from htdata.format import VALIDATE_REPORT
 
