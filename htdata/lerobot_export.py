@@ -19,15 +19,20 @@ One LeRobot episode per htdata episode. Frame features:
                                       shapes gets one feature per shape, ...raw_<rows>x<cols>)
   observation.tactile.<hand>.map      video (--maps only), the canonical 224x224 map, value x 255 as grey
   observation.present                 bool per source (egocentric, tactile.<hand>...): is the value real?
+  htdata.frame_index                  int64, the stored htdata frame (within its episode) of the row
 LeRobot needs every feature in every frame, so a frame missing a source is filled and flagged
 in observation.present: a missing RGB frame repeats the last real one (black before the first),
 a missing glove row is zeros. Unpaired full-rate glove rows (the ones between two frames) are not
 exported: LeRobot frames are one row per frame.
 
-Timestamps are the stored source clock (each sample's t_rgb_ns minus the episode's first),
-and the video frames carry the same times as their pts, so LeRobot's timestamp -> video
-frame lookup is exact. `fps` is the episodes' frame rate (they must agree); `--fps F`
-resamples each episode to exact 1/F ticks, each tick taking the nearest stored frame.
+Time: LeRobot's loader finds a row's video frame as round(timestamp x fps) and then checks the
+frame's time against the row's within 1e-4 s, so rows must sit on an exact 1/fps grid. Each
+episode is therefore laid on the grid of its stored source clock (t_rgb_ns from its first frame):
+tick k (timestamp k/fps, the video frame's pts) takes the stored frame nearest k/fps on that
+clock, for ticks up to the one nearest the last frame. On a regular clock that is every frame
+once, in order; jitter under half a period changes nothing; a gap repeats the frames beside it,
+a clock running fast skips one. `htdata.frame_index` names the stored frame of every row.
+fps = the episodes' rate (they must agree) unless `--fps F` sets another.
 
 Stats are accumulated in the export's single pass (no second read): exact mean/std/min/max,
 quantiles exact per episode and frame-weighted across episodes (as LeRobot aggregates
@@ -59,6 +64,7 @@ from htdata.videoencode import VideoWriter
 
 RGB_KEY = "observation.images.egocentric"
 PRESENT_KEY = "observation.present"
+SOURCE_KEY = "htdata.frame_index"      # which stored frame a row is: the rows sit on a 1/fps grid
 Progress = Callable[[int], None]
 
 
@@ -193,6 +199,8 @@ def features(plan: _Plan) -> dict:
                            "info": {"grid": [rows, cols], "order": "row-major", "units": "raw glove units"}}
     feats[PRESENT_KEY] = {"dtype": "bool", "shape": [1 + len(plan.slots)],
                           "names": ["egocentric", *[slot.name for slot in plan.slots]]}
+    feats[SOURCE_KEY] = {"dtype": "int64", "shape": [1], "names": None,
+                         "info": {"what": "the htdata frame (within its episode) this row was taken from"}}
     for name, dtype in (("timestamp", "float32"), ("frame_index", "int64"), ("episode_index", "int64"),
                         ("index", "int64"), ("task_index", "int64")):
         feats[name] = {"dtype": dtype, "shape": [1], "names": None}
@@ -213,22 +221,23 @@ def _episode_schedule(reader: DatasetReader, pos: int, plan: _Plan) -> tuple[lis
     if np.any(np.diff(t) <= 0):
         k = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
         raise ValueError(f"episode {eid!r} frame {k}: time does not increase ({t[k - 1]:.6f} s -> {t[k]:.6f} s)")
-    if not plan.resample:
-        return list(range(first, first + n)), t.tolist()
-    ticks = np.arange(int(np.floor(t[-1] * plan.fps + 1e-9)) + 1) / plan.fps
+    ticks = np.arange(_ticks(t[-1], plan.fps)) / plan.fps
     right = np.clip(np.searchsorted(t, ticks), 0, n - 1)
     left = np.clip(right - 1, 0, n - 1)
     nearest = np.where(np.abs(t[left] - ticks) <= np.abs(t[right] - ticks), left, right)
     return [first + int(k) for k in nearest], ticks.tolist()
 
 
+def _ticks(duration_s: float, fps: int) -> int:
+    """Rows of an episode whose last frame is `duration_s` after its first: 1/fps ticks, the last one nearest it."""
+    return int(round(duration_s * fps)) + 1
+
+
 def _frames_out(reader: DatasetReader, pos: int, plan: _Plan) -> int:
-    """Rows episode `pos` will have: its frames, or its 1/fps ticks when resampling."""
+    """Rows episode `pos` will have (two JSON reads)."""
     first, n = reader.episode_range(pos)
-    if not plan.resample:
-        return n
     t = [decode_json(reader.sample(i, (JSON_MEMBER,))[JSON_MEMBER])["t_rgb_ns"] for i in (first, first + n - 1)]
-    return int(np.floor((t[1] - t[0]) / 1e9 * plan.fps + 1e-9)) + 1
+    return _ticks((t[1] - t[0]) / 1e9, plan.fps)
 
 
 def _chunk_file(n: int) -> tuple[int, int]:
@@ -271,7 +280,7 @@ def _write(reader, plan: _Plan, cfg: LeRobotExportConfig, work: Path, pa, pq, pr
         [pa.field(slot.key, pa.list_(pa.float32())) for slot in plan.slots]
         + [pa.field(PRESENT_KEY, pa.list_(pa.bool_())), pa.field("timestamp", pa.float32()),
            pa.field("frame_index", pa.int64()), pa.field("episode_index", pa.int64()),
-           pa.field("index", pa.int64()), pa.field("task_index", pa.int64())])
+           pa.field("index", pa.int64()), pa.field("task_index", pa.int64()), pa.field(SOURCE_KEY, pa.int64())])
     stats = {k: FeatureStats() for k in feats if feats[k]["dtype"] != "video"}
     vstats = {k: VideoStats() for k in plan.video_keys}
     tasks: dict[str, int] = {}
@@ -289,13 +298,15 @@ def _write(reader, plan: _Plan, cfg: LeRobotExportConfig, work: Path, pa, pq, pr
             n = len(samples)
             cols = {PRESENT_KEY: present, "timestamp": np.asarray(times, np.float32),
                     "frame_index": np.arange(n), "episode_index": np.full(n, ep_index),
-                    "index": np.arange(index, index + n), "task_index": np.full(n, task_index)}
+                    "index": np.arange(index, index + n), "task_index": np.full(n, task_index),
+                    SOURCE_KEY: np.asarray(samples) - reader.episode_range(pos)[0]}
             _add_stats(stats, plan, raw, cols)
             table = pa.table({slot.key: pa.array(raw[k].reshape(n, -1).tolist(), schema.field(slot.key).type)
                               for k, slot in enumerate(plan.slots)} | {
                 PRESENT_KEY: pa.array(present.tolist(), pa.list_(pa.bool_())),
                 "timestamp": pa.array(cols["timestamp"], pa.float32()),
-                **{k: pa.array(cols[k], pa.int64()) for k in ("frame_index", "episode_index", "index", "task_index")}},
+                **{k: pa.array(cols[k], pa.int64())
+                   for k in ("frame_index", "episode_index", "index", "task_index", SOURCE_KEY)}},
                 schema=schema)
             if data_writer is not None and data_bytes >= DATA_FILE_MB * 1024 * 1024:
                 data_writer.close()

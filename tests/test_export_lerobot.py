@@ -115,14 +115,16 @@ def test_export_structure_and_values(dataset, tmp_path):
         vt, frames = video(out, info, ep, "observation.images.egocentric")
         assert len(frames) == n
         ts = np.asarray(data["timestamp"][lo:hi], np.float64)
-        assert np.all(np.diff(ts) > 0) and ts[0] == 0.0
+        # rows on LeRobot's exact 1/fps grid; on these regular clocks every stored frame once, in order
+        np.testing.assert_array_equal(data["timestamp"][lo:hi], (np.arange(n) / 30).astype(np.float32))
+        assert data["htdata.frame_index"][lo:hi] == list(range(n)) == data["frame_index"][lo:hi]
         for r in range(lo, hi):
-            f = data["frame_index"][r]
+            f = data["htdata.frame_index"][r]
             members = reader.sample(first + f)
             meta = json.loads(members["json"])
-            # timestamps: the stored source clock; the video frame sits at the same time (LeRobot's lookup)
+            # the row's tick is its stored frame's time on the source clock (half a period at most)
             assert data["timestamp"][r] == pytest.approx((meta["t_rgb_ns"] - json.loads(
-                reader.sample(first)["json"])["t_rgb_ns"]) / 1e9, abs=1e-6)
+                reader.sample(first)["json"])["t_rgb_ns"]) / 1e9, abs=0.5 / 30)
             k = int(np.argmin(np.abs(vt - (ep["videos/observation.images.egocentric/from_timestamp"]
                                            + data["timestamp"][r]))))
             assert abs(vt[k] - ep["videos/observation.images.egocentric/from_timestamp"] - data["timestamp"][r]) < 1e-4
@@ -187,6 +189,7 @@ def test_resampling_takes_the_nearest_frame(dataset, tmp_path):
         np.testing.assert_allclose(ts, np.arange(hi - lo) / 15, atol=1e-6)
         for r, t in zip(range(lo, hi), ts):
             k = int(np.argmin(np.abs(src - t)))
+            assert data["htdata.frame_index"][r] == k
             members = reader.sample(first + k)
             if "raw_right.npy" in members:
                 want = paired_row(members, "right", "test").astype(np.float32).ravel()
@@ -237,3 +240,21 @@ def test_export_is_read_only_and_atomic(dataset, tmp_path, monkeypatch):
     assert not (tmp_path / ".lr.partial").exists() and not (out / "data" / "junk.parquet").exists()
     assert json.loads((out / "meta/info.json").read_text())["total_frames"] == len(DatasetReader(dataset))
     assert tree(dataset) == before                       # DATASET untouched: no file written or changed
+
+
+def test_a_gap_in_the_source_clock_repeats_the_frames_beside_it(tmp_path):
+    t = np.delete(np.arange(10, dtype=np.int64) * PERIOD, [5, 6])        # the glove missed two rows
+    values = np.random.default_rng(5).uniform(0, 3072, (t.size, 16, 16)).astype(np.float32)
+    write_native_recording(tmp_path / "raw" / "rec_gap", NativeRecording(
+        task="squeeze", scene="lab", video_storage="none", video_frames=[], video_timestamps_ns=np.zeros(0, np.int64),
+        hands={"right": NativeHand("opentouch_right_16x16", values, t)}))
+    ds = tmp_path / "ds"
+    assert ingest_cli("--pipeline", f"{small_pipeline(tmp_path, 'native')}={tmp_path / 'raw'}", ds) == 0
+    out = tmp_path / "lr"
+    assert cli(["export", "lerobot", str(ds), str(out), "--quiet", "--fps", "30"]) == 0
+    data = read_export(out)["data"]
+    # stored frames sit at ticks 0-4 and 7-9; ticks 5 and 6 take the nearest stored frame on either side
+    assert data["htdata.frame_index"] == [0, 1, 2, 3, 4, 4, 5, 5, 6, 7]
+    np.testing.assert_array_equal(data["timestamp"], (np.arange(10) / 30).astype(np.float32))
+    raw = np.asarray(data["observation.tactile.right.raw"], np.float32).reshape(10, 16, 16)
+    assert np.array_equal(raw[5], values[4]) and np.array_equal(raw[6], values[5]) and np.array_equal(raw[9], values[7])

@@ -12,10 +12,11 @@ What a LeRobot loader does, done by hand (no htdata code reads the export):
   delta_timestamps windows  {key: [-k/fps .. 0]} -> row indices clamped to the episode, *_is_pad flags
 
 Checks against htdata's DatasetReader (matched through meta/htdata/episodes.jsonl):
+  rows on the exact 1/fps grid, each holding the stored frame nearest its tick on the source clock;
   raw rows equal exactly (float32 bits; NaN/Inf cells exported as 0) where observation.present says real, zeros elsewhere;
   observation.present equals which members the htdata sample holds; task strings equal;
   every video frame decodes at its row's timestamp; RGB within the codec tolerance (measured, printed);
-  windows equal htdata's reader.window(...) frame for frame.
+  windows equal htdata's frames row for row.
 Exit 0 when everything holds; otherwise one line per problem and exit 1.
 """
 
@@ -81,7 +82,7 @@ def check(dataset: Path, export: Path, windows: int, seed: int) -> tuple[list[st
     video_keys = [k for k in feats if feats[k]["dtype"] == "video"]
     present_names = feats["observation.present"]["names"]
     cols = {k: table.column(k).to_pylist() for k in ("timestamp", "frame_index", "episode_index", "index",
-                                                     "task_index", "observation.present")}
+                                                     "task_index", "observation.present", "htdata.frame_index")}
     raws = {k: np.asarray(table.column(k).to_pylist(), np.float32).reshape(len(table), *feats[k]["info"]["grid"])
             for k in raw_keys}   # stored flat, row-major; info.grid restores the glove's shape
     ids = {r["episode_index"]: r for r in map(json.loads, (export / "meta/htdata/episodes.jsonl").read_text().split("\n")[:-1])}
@@ -92,6 +93,7 @@ def check(dataset: Path, export: Path, windows: int, seed: int) -> tuple[list[st
     if cols["index"] != list(range(len(table))):
         problems.append("global index column is not 0..N-1")
     videos = {}
+    grid = {"repeated": 0, "skipped": 0}      # frames a row holds twice / no row holds (0 on a regular clock)
     for ep in ex["episodes"]:
         e = ep["episode_index"]
         lo, hi = ep["dataset_from_index"], ep["dataset_to_index"]
@@ -101,9 +103,18 @@ def check(dataset: Path, export: Path, windows: int, seed: int) -> tuple[list[st
         where = f"episode {e} ({htd['episode_id']!r})"
         if ex["tasks"][cols["task_index"][lo]] != reader.episodes[pos]["task"] or ep["tasks"] != [reader.episodes[pos]["task"]]:
             problems.append(f"{where}: task differs from htdata's {reader.episodes[pos]['task']!r}")
-        if hi - lo != n:
-            problems.append(f"{where}: {hi - lo} rows, htdata has {n} frames")
-            continue
+        # rows sit on the 1/fps grid; each names the stored frame nearest its tick on the source clock
+        t_src = np.array([json.loads(reader.sample(first + i, ("json",))["json"])["t_rgb_ns"] for i in range(n)])
+        t_src = (t_src - t_src[0]) / 1e9
+        ts = np.asarray(cols["timestamp"][lo:hi], np.float64)
+        if not np.allclose(ts, np.arange(hi - lo) / fps, atol=1e-6):
+            problems.append(f"{where}: timestamps are not k/fps")
+        frames_used = np.asarray(cols["htdata.frame_index"][lo:hi])
+        nearest = np.abs(t_src[None, :] - ts[:, None]).argmin(1)
+        if not np.array_equal(np.abs(t_src[frames_used] - ts), np.abs(t_src[nearest] - ts)):
+            problems.append(f"{where}: a row does not hold the stored frame nearest its tick")
+        grid["repeated"] += int(len(frames_used) - len(set(frames_used.tolist())))
+        grid["skipped"] += int(n - len(set(frames_used.tolist())))
         for key in video_keys:
             path = export / info["video_path"].format(video_key=key, chunk_index=ep[f"videos/{key}/chunk_index"],
                                                       file_index=ep[f"videos/{key}/file_index"])
@@ -112,7 +123,7 @@ def check(dataset: Path, export: Path, windows: int, seed: int) -> tuple[list[st
         from_ts = videos[(e, "observation.images.egocentric")][1]
         layouts = htd["layouts"]
         for r in range(lo, hi):
-            f = cols["frame_index"][r]
+            f = cols["htdata.frame_index"][r]
             members = reader.sample(first + f)
             fw = f"{where} frame {f}"
             present = dict(zip(present_names, cols["observation.present"][r]))
@@ -148,7 +159,7 @@ def check(dataset: Path, export: Path, windows: int, seed: int) -> tuple[list[st
         problems.append(f"RGB beyond the codec tolerance: {rgb} (limits mean {RGB_MEAN_ABS_MAX}, p99 {RGB_P99_ABS_MAX})")
     win = check_windows(reader, ex, cols, raws, raw_keys, videos, ids, windows, seed, problems)
     item = one_item(ex, cols, raws, raw_keys, videos, fps)
-    return problems, {"rows": len(table), "episodes": len(ex["episodes"]), "rgb_vs_htdata": rgb,
+    return problems, {"rows": len(table), "episodes": len(ex["episodes"]), "rgb_vs_htdata": rgb, "grid": grid,
                       "windows_checked": win, "item": item}
 
 
@@ -164,7 +175,7 @@ def _grid_tag(reader: DatasetReader, layout_id: str) -> str:
 
 
 def check_windows(reader, ex, cols, raws, raw_keys, videos, ids, count, seed, problems) -> int:
-    """delta_timestamps = {key: [-k/fps, ..., 0]} windows, resolved the way LeRobotDataset does, vs reader.window."""
+    """delta_timestamps = {key: [-k/fps, ..., 0]} windows, resolved the way LeRobotDataset does, vs htdata's frames."""
     fps = ex["info"]["fps"]
     k = 3
     deltas = [d / fps for d in range(-k, 1)]
@@ -182,9 +193,10 @@ def check_windows(reader, ex, cols, raws, raw_keys, videos, ids, count, seed, pr
         eid = ids[e]["episode_id"]
         if any(pad):
             if f >= k:
-                problems.append(f"window at episode {e} frame {f}: padded although {k} earlier frames exist")
+                problems.append(f"window at episode {e} row {f}: padded although {k} earlier rows exist")
             continue
-        ref = reader.window(eid, f, k)
+        first = reader.episode_range(eid)[0]
+        ref = [reader.decoded(first + cols["htdata.frame_index"][q]) for q in query]
         (vt, vframes), from_ts = videos[(e, "observation.images.egocentric")]
         for q, sample in zip(query, ref):
             kf = frame_at(vt, from_ts + cols["timestamp"][q])

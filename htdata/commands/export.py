@@ -19,6 +19,7 @@ meta/episodes/, data/chunk-*/file-*.parquet, videos/<key>/chunk-*/file-*.mp4):
                                     gets one feature per shape: ...raw_<rows>x<cols>
   observation.tactile.<hand>.map    with --maps: the canonical 224x224 map as grey video (value x 255)
   observation.present               bool per source (egocentric, tactile.<hand>): is this frame's value real?
+  htdata.frame_index                which stored htdata frame the row is (see Time)
   meta/htdata/                      glove layouts, coverage and region masks, split assignment, episode ids
 
 Frames missing a source: LeRobot needs every feature in every frame, so none is dropped.
@@ -27,10 +28,12 @@ Frames missing a source: LeRobot needs every feature in every frame, so none is 
                                     observation.present[egocentric] = False
 Unpaired full-rate glove rows (those between two frames) are not exported.
 
-Time: timestamps are the stored source clock (seconds from the episode's first frame) and the
-video frames carry the same times. fps = the episodes' rate (they must agree). --fps F
-resamples every episode to exact 1/F ticks; each tick takes the nearest stored frame
-(frames repeat when F is above the source rate, are skipped below it).
+Time: LeRobot's loader needs rows on an exact 1/fps grid (it finds a video frame as
+round(timestamp x fps)). Row k of an episode (timestamp k/fps) is the stored frame nearest
+k/fps on the episode's source clock: on a regular clock every frame once, in order; a gap
+repeats the frames beside it. htdata.frame_index names the stored frame of each row.
+fps = the episodes' rate (they must agree; default); --fps F lays them on a 1/F grid
+instead (frames repeat when F is above the source rate, are skipped below it).
 
 Stats (meta/stats.json) are gathered in the export's single pass. DATASET is only read.
 The export is atomic: it is built in OUT's sibling .OUT.partial/ and renamed at the end,
