@@ -9,7 +9,7 @@ OOD    ?= palm_push
 JOBS   ?= 2
 
 .PHONY: setup demo sample ingest split validate preview train-smoke compare task-transfer test install-check bench \
-        lerobot-check export-lerobot clean
+        lerobot-check lerobot-load export-lerobot clean
 
 setup: $(VENV)/.installed
 
@@ -79,7 +79,7 @@ export-lerobot: split
 # export with pyarrow + PyAV as LeRobot v3.0 documents it and compares it with htdata's reader.
 # The doctor's "training" check is left out: it FAILs any dataset without an `action` feature,
 # and htdata records observations only (the full report, that FAIL included, is kept in
-# $(DATA)/lerobot_doctor.md). LeRobot's loader itself (lerobot-dataset) needs torchvision: see docs/USAGE.md.
+# $(DATA)/lerobot_doctor.md). LeRobot's loader itself: `make lerobot-load` (below, not in CI).
 LEROBOT_VENV ?= .venv-lerobot
 DOCTOR_CHECKS := metadata,temporal,actions,videos,statistics,episodes,consistency,anomalies,portability,per_episode
 
@@ -92,6 +92,20 @@ lerobot-check: export-lerobot $(LEROBOT_VENV)/.installed
 	-$(LEROBOT_VENV)/bin/lerobot-doctor check $(DATA)/lerobot --markdown $(DATA)/lerobot_doctor.md > /dev/null
 	$(LEROBOT_VENV)/bin/lerobot-doctor check $(DATA)/lerobot --checks $(DOCTOR_CHECKS)
 	$(PY) tools/lerobot_check.py $(DATA)/dataset $(DATA)/lerobot --json $(DATA)/lerobot_check.json
+
+# LeRobot's own loader (lerobot-dataset's LeRobotDataset) on the export: NOT in CI. Its venv is
+# ~6.3 GB (torch 2.14.1 + torchvision 0.29.1, CUDA builds that run on CPU; installed in 1m46s
+# here) and its video decoder, torchcodec, needs the system's FFmpeg libraries (Debian: apt-get
+# install libavcodec59 libavformat59 libavutil57 libswscale6 libswresample4 libavdevice59 libavfilter8).
+LEDATASET_VENV ?= .venv-ledataset
+
+$(LEDATASET_VENV)/.installed:
+	$(PYTHON) -m venv $(LEDATASET_VENV)
+	$(LEDATASET_VENV)/bin/python -m pip install -q "lerobot-dataset==0.4.4" "torch==2.14.1" "torchvision==0.29.1" "torchcodec==0.14.0"
+	touch $@
+
+lerobot-load: export-lerobot $(LEDATASET_VENV)/.installed
+	HF_HUB_OFFLINE=1 $(LEDATASET_VENV)/bin/python tools/lerobot_load.py $(DATA)/lerobot --json $(DATA)/lerobot_load.json
 
 clean:
 	rm -rf $(DATA) runs bench/.work

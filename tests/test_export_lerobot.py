@@ -114,7 +114,6 @@ def test_export_structure_and_values(dataset, tmp_path):
         assert ex["tasks"][data["task_index"][lo]] == reader.episodes[reader.episode_position(eid)]["task"]
         vt, frames = video(out, info, ep, "observation.images.egocentric")
         assert len(frames) == n
-        ts = np.asarray(data["timestamp"][lo:hi], np.float64)
         # rows on LeRobot's exact 1/fps grid; on these regular clocks every stored frame once, in order
         np.testing.assert_array_equal(data["timestamp"][lo:hi], (np.arange(n) / 30).astype(np.float32))
         assert data["htdata.frame_index"][lo:hi] == list(range(n)) == data["frame_index"][lo:hi]
