@@ -1,1 +1,0 @@
-"""Benchmarks behind `htdata bench`: each returns rows (dicts); bench.py runs them side by side."""
