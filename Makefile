@@ -8,7 +8,8 @@ SEED   ?= 0
 OOD    ?= palm_push
 JOBS   ?= 2
 
-.PHONY: setup demo sample ingest split validate preview train-smoke compare task-transfer test install-check bench clean
+.PHONY: setup demo sample ingest split validate preview train-smoke compare task-transfer test install-check bench \
+        lerobot-check lerobot-load export-lerobot clean
 
 setup: $(VENV)/.installed
 
@@ -17,7 +18,7 @@ setup: $(VENV)/.installed
 $(VENV)/.installed: pyproject.toml setup.py
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e ".[torch,train,bench,ray,test]"
+	$(PY) -m pip install -q -e ".[torch,train,bench,export,ray,test]"
 	touch $@
 
 # Raw sample corpus: written once, reused after (--reuse: a finished corpus of this seed, which
@@ -69,6 +70,43 @@ install-check:
 
 bench: setup
 	$(HTDATA) bench --out bench
+
+# LeRobot v3.0 export of the sample dataset (pyarrow comes with make setup's [export] extra).
+export-lerobot: split
+	$(HTDATA) export lerobot $(DATA)/dataset $(DATA)/lerobot --split main --force --quiet
+
+# The export checked by LeRobot's own tooling, in a venv of its own (LeRobot's pins differ from
+# ours): lerobot-doctor (no torch) must report no FAIL, then tools/lerobot_check.py reads the
+# export with pyarrow + PyAV as LeRobot v3.0 documents it and compares it with htdata's reader.
+# The doctor's "training" check is left out: it FAILs any dataset without an `action` feature,
+# and htdata records observations only (the full report, that FAIL included, is kept in
+# $(DATA)/lerobot_doctor.md). LeRobot's loader itself: `make lerobot-load` (below, not in CI).
+LEROBOT_VENV ?= .venv-lerobot
+DOCTOR_CHECKS := metadata,temporal,actions,videos,statistics,episodes,consistency,anomalies,portability,per_episode
+
+$(LEROBOT_VENV)/.installed:
+	$(PYTHON) -m venv $(LEROBOT_VENV)
+	$(LEROBOT_VENV)/bin/python -m pip install -q "lerobot-doctor==0.2.0"
+	touch $@
+
+lerobot-check: export-lerobot $(LEROBOT_VENV)/.installed
+	-$(LEROBOT_VENV)/bin/lerobot-doctor check $(DATA)/lerobot --markdown $(DATA)/lerobot_doctor.md > /dev/null
+	$(LEROBOT_VENV)/bin/lerobot-doctor check $(DATA)/lerobot --checks $(DOCTOR_CHECKS)
+	$(PY) tools/lerobot_check.py $(DATA)/dataset $(DATA)/lerobot --json $(DATA)/lerobot_check.json
+
+# LeRobot's own loader (lerobot-dataset's LeRobotDataset) on the export: NOT in CI. Its venv is
+# ~6.3 GB (torch 2.14.1 + torchvision 0.29.1, CUDA builds that run on CPU; installed in 1m46s
+# here) and its video decoder, torchcodec, needs the system's FFmpeg libraries (Debian: apt-get
+# install libavcodec59 libavformat59 libavutil57 libswscale6 libswresample4 libavdevice59 libavfilter8).
+LEDATASET_VENV ?= .venv-ledataset
+
+$(LEDATASET_VENV)/.installed:
+	$(PYTHON) -m venv $(LEDATASET_VENV)
+	$(LEDATASET_VENV)/bin/python -m pip install -q "lerobot-dataset==0.4.4" "torch==2.14.1" "torchvision==0.29.1" "torchcodec==0.14.0"
+	touch $@
+
+lerobot-load: export-lerobot $(LEDATASET_VENV)/.installed
+	HF_HUB_OFFLINE=1 $(LEDATASET_VENV)/bin/python tools/lerobot_load.py $(DATA)/lerobot --json $(DATA)/lerobot_load.json
 
 clean:
 	rm -rf $(DATA) runs bench/.work

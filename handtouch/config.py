@@ -16,7 +16,7 @@ from htdata.format.table import CANVAS
 from htdata.settings import apply_settings, parse_setting
 
 # model.encoder -> (tactile decoder, quantised latent). "vit" is HandTouch; the others are the
-# paper's four encoder baselines (README "Baselines"): cnn and resnet18 swap the tactile encoder
+# paper's four encoder baselines (docs/HANDTOUCH.md "Baselines"): cnn and resnet18 swap the tactile encoder
 # only; vqvae is a conv VQ-VAE tokeniser (conv encoder -> the same VQ -> conv decoder, no attention
 # in the autoencoder); vit_plain is a plain ViT regressor (the ViT encoder, no codebook, a linear
 # per-patch pixel head). Stages 2-3 keep the same fusion / temporal / predictor for every one, so a
@@ -65,7 +65,7 @@ class ModelConfig:
     # contact"), True = 2 channels (+ the hidden-pixel mask). The paper's, because the mask lost:
     # the smoke with 1 vs 2 channels, test, reconstruction 0.030 vs 0.042, inpainting F 0.038 vs
     # 0.050, H 0.055 vs 0.055, prediction 0.036 vs 0.045, Hit@1 0.305 vs 0.335; `make compare`,
-    # 2 seeds, row "2-channel input" (README, "Encoder input").
+    # 2 seeds, row "2-channel input" (docs/HANDTOUCH.md, "Encoder input").
     mask_channel: bool = False
     # Ablations of the paper's comparison; both True is HandTouch.
     codebook: bool = True         # False = "w/o codebook": continuous latent, the VQ is bypassed
@@ -74,9 +74,9 @@ class ModelConfig:
     # frame (upsampled; needs a readout, e.g. TactileGridRGB) instead of 0, in stage 2 and in
     # inpainting / RGB-to-tactile alike (with mask_channel the mask still marks them). Off = the
     # paper's zeros.
-    # Why: with zeros, 100 stage-2 steps never learned to read the frame (README, "RGB prior").
+    # Why: with zeros, 100 stage-2 steps never learned to read the frame (docs/HANDTOUCH.md, "RGB prior").
     rgb_prior: bool = False
-    # Measured, not adopted (README, "RGB prior"): add each RGB token to the tactile token of the
+    # Measured, not adopted (docs/HANDTOUCH.md, "RGB prior"): add each RGB token to the tactile token of the
     # same canvas cell before the fusion (needs one RGB token per tactile token).
     rgb_skip: bool = False
 
@@ -190,7 +190,7 @@ class LossConfig:
     # Stage-2 reconstruction replay: the whole map through encoder -> VQ -> decoder, as in
     # stage 1, next to the masked terms (stage 2 fine-tunes the shared encoder, VQ and decoder).
     lambda_replay: float = 1.0
-    # Stage 3 is the paper's |t_T - t^_T|^2 by default. Opt-in additions (README, "Stage-3
+    # Stage 3 is the paper's |t_T - t^_T|^2 by default. Opt-in additions (docs/HANDTOUCH.md, "Stage-3
     # loss"): stage3_replay x the reconstruction of t_T through encoder -> VQ -> decoder, and
     # stage3_vq = add vq_weight x the VQ codebook + commitment terms of the predicted tokens.
     stage3_replay: float = 0.0

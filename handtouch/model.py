@@ -21,7 +21,7 @@ Ablation switches (ModelConfig): codebook=False bypasses the VQ (continuous late
 vit_plain baseline has none either), vision=False gives stages 2-3 the hand token as their
 only memory (no RGB). rgb_prior=True fills hidden pixels with the frozen RGB encoder's own
 coarse contact map (`rgb_fill`) instead of zeros; rgb_skip=True adds each RGB token to the
-tactile token of the same cell before the fusion (measured, not adopted: README, "RGB prior").
+tactile token of the same cell before the fusion (measured, not adopted: docs/HANDTOUCH.md, "RGB prior").
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@
         --rgb-encoder runs/smoke/rgb_encoder/KEY/aligned.pt --dataset data/dataset \
         --out runs/rgb2t_sweep/NAME --seeds 0,1 [--set key=value ...]
 
-e.g. the RGB prior (README, "RGB prior"): `--out runs/rgb2t_sweep/prior --set model.rgb_prior=true`
+e.g. the RGB prior (docs/HANDTOUCH.md, "RGB prior"): `--out runs/rgb2t_sweep/prior --set model.rgb_prior=true`
 against `--out runs/rgb2t_sweep/base` (configs/smoke.toml alone keeps the paper's zeros).
 
 For each seed: the stage-1 weights are copied into OUT/seedS/stage1.pt (the frozen RGB

@@ -192,7 +192,7 @@ def learning_checks(stage1_rmse: float | None, zeros_rmse: float | None, retriev
 def rgb_check(results: dict, model: str, part: str = "test", required: bool = True) -> dict:
     """RGB-to-tactile F-RMSE (covered) of `model` below all zeros' on the same items.
 
-    Required on test (with the RGB prior, README "RGB prior"); reported only on ood: the frozen
+    Required on test (with the RGB prior, docs/HANDTOUCH.md "RGB prior"); reported only on ood: the frozen
     probe itself is worse than all zeros on palm_push, which it never saw (`python -m
     handtouch.task_transfer`: a probe trained on the other tasks transfers to 5 of the 7 tasks,
     not to palm_push), so no RGB path built on it can pass there yet."""
@@ -292,7 +292,7 @@ def main(argv=None) -> int:
     # probes train on RGBPretrainConfig.threads (2): nothing else runs meanwhile
     probes = timer.run("rgb_pretrain", ensure_probes, args.dataset, SPLIT_NAME, args.out / "rgb_encoder", pre_cfg)
     # the aligned probe is the frozen RGB encoder, and its coarse contact map is the RGB prior of
-    # hidden pixels (README, "RGB prior"); a user's --set rgb_encoder=FILE comes later and wins
+    # hidden pixels (docs/HANDTOUCH.md, "RGB prior"); a user's --set rgb_encoder=FILE comes later and wins
     # (with --set model.rgb_prior=false unless FILE has a readout)
     sets = [f"rgb_encoder={toml_str(probes['aligned'].resolve())}", "model.rgb_prior=true", *args.set]
     models, stage1_models, train_metrics = {}, {}, {}

@@ -11,7 +11,7 @@ trainer's loop (`handtouch.train.run_stage`) knows nothing else about a stage.
 Stage 2 also replays stage 1's reconstruction (LossConfig.lambda_replay) because it
 fine-tunes the encoder, VQ and decoder that reconstruction shares. Stage 3 is the paper's
 |t_T - t^_T|^2 alone unless LossConfig.stage3_replay / stage3_vq opt in to a replay of
-t_T's reconstruction and to the VQ terms (README, "Stage-3 loss"). Every loss ignores
+t_T's reconstruction and to the VQ terms (docs/HANDTOUCH.md, "Stage-3 loss"). Every loss ignores
 uncovered pixels (coverage 0).
 """
 

@@ -8,7 +8,8 @@ The tree follows the data path (docs/DESIGN.md):
     ingest/    recordings -> a committed version (plan, units, commit)
     store/     versions, manifests, parts, snapshots, the writer lock, remote storage
     read/      DatasetReader and the torch datasets
-    inspect/   stats, health maps, idle spans, previews, the dataset card
+    inspect/   stats, health maps, previews, the dataset card
+    export/    a version in LeRobot's format
     curate/    split, rm/trim, merge, gc, renormalise: new versions from old
     validate/  `htdata validate`
     sample/    the synthetic sample corpus

@@ -34,25 +34,54 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "gc": ("htdata.commands.gc", "delete old versions and shards no kept version lists; --dry-run"),
     "repair": ("htdata.commands.repair", "rewrite dataset.json from the newest version file; --dry-run"),
     "preview": ("htdata.commands.preview", "render a contact sheet: RGB beside left/right tactile maps"),
+    "pipelines": ("htdata.commands.pipelines", "list the shipped ingest pipelines, or print one to copy and edit"),
     "layouts": ("htdata.commands.layouts", "list, check and render hand layouts (register a glove)"),
     "publish": ("htdata.commands.publish", "upload a dataset to an fsspec URL (s3://, gs://, memory://), manifest last"),
+    "export": ("htdata.commands.export", "write a dataset version in another format: `export lerobot` (LeRobot v3.0)"),
     "bench": ("htdata.commands.bench", "run the benchmarks and write bench/results.json + report"),
 }
 
 
+# `htdata --help` lists the commands by what they are for.
+GROUPS: dict[str, tuple[str, ...]] = {
+    "build": ("sample", "ingest", "renormalise", "pipelines", "layouts"),
+    "curate": ("split", "rm", "trim", "merge", "gc", "repair"),
+    "inspect": ("log", "diff", "stats", "validate", "preview", "card"),
+    "share": ("publish", "export"),
+    "measure": ("bench",),
+}
+EXAMPLES = """\
+examples:
+  htdata sample data/raw --scale small                      # a small raw corpus to try things on
+  htdata ingest --pipeline opentouch data/raw/opentouch data/dataset
+  htdata split data/dataset --ood-task palm_push --name main
+  htdata stats data/dataset --brief
+  htdata export lerobot data/dataset data/lerobot
+
+Run `htdata COMMAND --help` for a command's options, defaults and examples."""
+
+
+def grouped_commands() -> str:
+    lines = []
+    for group, names in GROUPS.items():
+        lines.append(f"{group}:")
+        lines += [f"  {name:<12} {COMMANDS[name][1]}" for name in names]
+    return "\n".join(lines)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="htdata",
-        description="Build full-hand tactile + egocentric RGB datasets: "
-        "sample -> ingest -> split -> validate -> preview. "
-        "Run `htdata COMMAND --help` for each command.",
+        prog="htdata", usage="htdata [--version] COMMAND ...",
+        description="Build, curate, inspect and share full-hand tactile + egocentric RGB datasets.\n\n"
+        + grouped_commands(),
+        epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     from htdata import __version__
 
     parser.add_argument("--version", action="version", version=f"htdata {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", help=argparse.SUPPRESS)
     for name, (module, help_text) in COMMANDS.items():
-        p = sub.add_parser(name, help=help_text, description=help_text)
+        p = sub.add_parser(name, description=help_text)
         p.set_defaults(_module=module)
         # Options are added lazily only for the chosen command (fast --help).
     return parser

@@ -361,10 +361,19 @@ class PipelineConfig:
         return cfg
 
 
+def shipped_pipelines() -> list[str]:
+    """Names of the pipelines that ship with htdata (`htdata pipelines list`)."""
+    return sorted(p.stem for p in PIPELINES_DIR.glob("*.toml"))
+
+
 def resolve_pipeline_path(name_or_path: str | Path) -> Path:
-    """A path to a .toml, or a bare name looked up in the project's pipelines/ folder."""
+    """A path to a .toml file, or a bare name looked up among the shipped pipelines.
+
+    A directory is never a pipeline file: `--pipeline opentouch` in a folder holding a
+    subfolder `opentouch/` (the raw data, typically) still means the shipped pipeline.
+    """
     p = Path(name_or_path)
-    if p.suffix == ".toml" or p.exists():
+    if p.suffix == ".toml" or p.is_file():
         return p
     return PIPELINES_DIR / f"{name_or_path}.toml"
 
@@ -373,7 +382,8 @@ def load_pipeline(name_or_path: str | Path) -> PipelineConfig:
     """Load and validate a pipeline TOML; errors name the file."""
     path = resolve_pipeline_path(name_or_path)
     if not path.is_file():
-        raise FileNotFoundError(f"pipeline file not found: {path}")
+        raise FileNotFoundError(f"pipeline file not found: {name_or_path} (a .toml file, or a shipped pipeline "
+                                f"name: {', '.join(shipped_pipelines())}; `htdata pipelines list` shows them)")
     try:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as e:

@@ -55,7 +55,8 @@ def test_card_is_self_contained_with_tables_and_images(tmp_path, capsys):
     page.feed(out.read_text())
     page.close()
     assert page.links == [] and page.stack == []                   # offline, and every tag closed
-    assert page.tables == 4                                        # tasks, scenes, gloves, split "main"
+    # about (licence, size), sources, sample format; tasks, scenes, gloves, split "main"
+    assert page.tables == 7
     # frames/task + frames/scene + 2 gloves x (regions + values) + health + 2 sync + 2 previews
     assert len(page.images) == 11
     for img in page.images:
@@ -68,6 +69,14 @@ def test_card_is_self_contained_with_tables_and_images(tmp_path, capsys):
     assert "| task | episodes |" in md and "](card_files/health.png)" in md
     assert len(list((out.parent / "card_files").glob("*.png"))) == 11
     assert cli_main(["card", str(root), str(tmp_path / "card.txt")]) == 2
+    # what a card opens with: name, description, licence (stated or flagged unset), format, how to load
+    assert "not stated" in md and "htdata.open(" in md and ("float EXR" in md or "half EXR" in md)
+    named = tmp_path / "named.html"
+    assert cli_main(["card", str(root), str(named), "--title", "Kitchen gloves", "--description",
+                     "Two gloves in a test kitchen.", "--license", "CC-BY-4.0", "--version", "v2"]) == 0
+    md = named.with_suffix(".md").read_text()
+    assert md.startswith("# Kitchen gloves: version 2") and "Two gloves in a test kitchen." in md
+    assert "| licence | CC-BY-4.0 |" in md and "not stated" not in md
 
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")

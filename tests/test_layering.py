@@ -122,6 +122,7 @@ LAYERS = (
     ("htdata.store",),
     ("htdata.read",),
     ("htdata.inspect",),
+    ("htdata.export",),
     ("htdata.curate",),
     ("htdata.ingest",),
     ("htdata.validate",),

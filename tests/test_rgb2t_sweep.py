@@ -1,5 +1,5 @@
 """handtouch.rgb2t_sweep: stages 2-3 from one stage-1 checkpoint, scored aligned / zeros /
-mis-paired, on a tiny synthetic dataset (the README's "RGB prior" numbers come from it)."""
+mis-paired, on a tiny synthetic dataset (the "RGB prior" numbers in docs/HANDTOUCH.md come from it)."""
 
 import json
 import math

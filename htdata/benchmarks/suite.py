@@ -48,10 +48,11 @@ from htdata.benchmarks.append import append_rows
 from htdata.benchmarks.stats import stats_rows
 from htdata.benchmarks.lag import lag_rows
 from htdata.benchmarks.raw import raw_rows
+from htdata.benchmarks.export import export_rows
 
 SECTION_GROUP = "htdata.bench_sections"
 BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate", "append", "stats",
-                    "lag", "raw")
+                    "lag", "raw", "export")
 # Top-level keys of results.json that are not sections: no section may take these names.
 RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds")
 
@@ -239,6 +240,9 @@ class Sections:
 
     def raw(self) -> dict:
         return raw_rows(self.corpus, self.cfg.work, bench_sources(), self.dataset, self.cfg.quick)
+
+    def export(self) -> dict:
+        return export_rows(self.dataset, self.cfg.work)
 
     def discovered(self, name: str, entry_point: metadata.EntryPoint) -> dict:
         """Load and run one discovered section; its result must be a JSON-able dict."""

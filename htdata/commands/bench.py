@@ -10,12 +10,13 @@ from pathlib import Path
 from htdata.benchmarks.suite import BenchConfig, run_bench
 
 EPILOG = """\
-examples:
-  htdata bench --out bench            # full: ~6-10 min on 2 cores (make bench)
-  htdata bench --quick --out /tmp/b   # tiny sizes (tests)
-  htdata bench --only codecs,raster   # some sections (installed plugin sections by name too)
 Sections found through the entry point group htdata.bench_sections (e.g. HandTouch's
 "training") run after the built-in ones. A failed section exits 1; the others still report.
+
+Examples:
+  htdata bench --out bench            # full: ~6-10 min on 2 cores (make bench)
+  htdata bench --quick --out /tmp/b   # tiny sizes (tests)
+  htdata bench --only codecs,export   # some sections (installed plugin sections by name too)
 """
 
 

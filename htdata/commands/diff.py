@@ -7,15 +7,26 @@ import json
 import sys
 from pathlib import Path
 
+from htdata.commands.version_arg import version_arg
 from htdata.store.history import diff_versions
 
 
+EPILOG = """\
++ added, - removed, ~ changed: same episode id, different record (re-ingested from changed
+inputs, trimmed, relabelled); where an episode is stored (shards, sample offsets) is ignored.
+Versions are written 3 or v3, as `htdata log` prints them.
+
+Examples:
+  htdata diff data/dataset v1 v3
+  htdata diff data/dataset 2 3 --json
+"""
+
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = ("'changed' = same episode id, different record (re-ingested from changed inputs, "
-                     "trimmed, relabelled); where an episode sits (shards, first sample) is ignored.")
+    parser.epilog = EPILOG
     parser.add_argument("dataset", type=Path, help="committed dataset directory")
-    parser.add_argument("a", type=int, help="older version (htdata log lists them)")
-    parser.add_argument("b", type=int, help="newer version")
+    parser.add_argument("a", type=version_arg, help="older version (htdata log lists them)")
+    parser.add_argument("b", type=version_arg, help="newer version")
     parser.add_argument("--json", action="store_true", help="print the diff as JSON")
 
 

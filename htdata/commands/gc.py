@@ -11,10 +11,26 @@ from htdata.curate import gc
 from htdata.store.lock import DatasetLocked
 
 
+EPILOG = """\
+Every write makes a new version and old versions keep their files; gc frees the disk. It keeps
+the newest K versions (default 1: only the current one) and, whatever K says, every version
+superseded less than --retention ago (default 7 days, as Delta Lake's VACUUM): a training job
+still reading an older version keeps working. Outside the window it deletes the other versions'
+manifests (leaving a tombstone, so a reader of a collected version gets one clear error naming
+the gc), then every shard no kept version lists and unreferenced that long (also leftovers of an
+interrupted write), and stats cache entries no kept episode uses. The current version's files are
+never deleted; a gc killed half-way is finished by the next one. A retention below 1h needs
+--force: readers of the versions it collects then fail.
+
+Examples:
+  htdata gc data/dataset --dry-run                   # what would go, what the 7-day window keeps
+  htdata gc data/dataset --keep-versions 3
+  htdata gc data/dataset --retention 0 --force       # only when no job reads an old version
+"""
+
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = (gc.__doc__ + "\nexamples:\n  htdata gc data/ds --dry-run                 # what would go, what the "
-                     "7-day window keeps\n  htdata gc data/ds --keep-versions 3\n"
-                     "  htdata gc data/ds --retention 0 --force     # no job reads an old version\n")
+    parser.epilog = EPILOG
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("dataset", type=Path, help="committed dataset directory")
     parser.add_argument("--keep-versions", type=int, default=1, metavar="K",

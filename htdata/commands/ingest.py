@@ -40,10 +40,27 @@ from htdata.settings import aim_settings
 from htdata.store.lock import DatasetLocked
 
 
+EPILOG = """\
+A pipeline says how to read one source format: a shipped name (`htdata pipelines list`:
+native, opentouch, touchanything) or your own .toml (`htdata pipelines show NAME` prints one
+to copy). `--set key=value` changes one setting without copying the file.
+Ingesting into an existing dataset appends, as a new version: unchanged episodes are kept,
+changed inputs are re-ingested, edited labels updated; episodes whose source is gone are kept
+(`htdata rm` removes them). An interrupted ingest resumes where it stopped. Failures (file,
+episode, frame) are listed on stderr and in OUT/reports/ingest.json; exit 1 when an episode
+failed (unless --allow-failures), 2 for a usage error, 3 when a work unit kept failing.
+Defaults: one worker per CPU, the process pool, 1 retry.
+
+Examples:
+  htdata ingest --pipeline opentouch data/raw/opentouch data/dataset
+  htdata ingest --pipeline opentouch=data/raw/opentouch --pipeline touchanything=data/raw/touchanything data/dataset
+"""
+
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = __doc__.split("\n\n")[1]
+    parser.epilog = EPILOG
     parser.add_argument("--pipeline", action="append", required=True, metavar="PIPELINE[=SRC]",
-                        help="pipeline TOML (or a name in pipelines/); repeat for a multi-source dataset")
+                        help="a shipped pipeline name (htdata pipelines list) or a .toml path; repeat for several sources")
     parser.add_argument("paths", nargs="+", metavar="SRC... OUT",
                         help="one SRC per --pipeline (unless given as PIPELINE=SRC), then OUT")
     parser.add_argument("--set", action="append", default=[], dest="settings", metavar="[PIPELINE:]KEY=VALUE",
@@ -55,7 +72,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                         help="worker processes (default: CPUs); 0 = run units in this process (debugging)")
     parser.add_argument("--executor", choices=("process", "ray"), default="process",
-                        help="process: local pool, the progress bar advances per finished episode; "
+                        help="process (default): local pool, the progress bar advances per finished episode; "
                              "ray: one Ray task per work unit, the bar advances per finished unit")
     parser.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
     parser.add_argument("--retries", type=int, default=1, help="retries of a unit that raised (default 1)")

@@ -16,7 +16,7 @@ A RECORDING is a source folder read with --pipeline's adapter (default
 native: a recording folder, or a folder of them) or a .npy of raw rows
 (T,H,W). A cell MOVES when its raw range over a recording exceeds
 max(12 x the glove's frame-to-frame noise, 4 x value.step)
-(htdata/glove/activity.py). `check --against` exits 1 when a cell outside every
+(docs/LAYOUTS.md). `check --against` exits 1 when a cell outside every
 block (and not in unused_cells / bend_cells) moves.
 """
 
@@ -160,7 +160,8 @@ def suggest(args: argparse.Namespace) -> int:
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = "\n\n".join(__doc__.split("\n\n")[1:])
+    paras = __doc__.split("\n\n")
+    parser.epilog = "\n\n".join(paras[2:]) + "\n\nExamples:\n" + paras[1]
     parser.add_argument("--layouts", action="append", default=[], metavar="DIR",
                         help=f"also search DIR for layout ids (repeatable; before ${LAYOUTS_ENV} and the "
                              "shipped layouts)")

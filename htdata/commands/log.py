@@ -11,8 +11,16 @@ from htdata.store.history import log_entries
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = ("Every write (ingest, split, rm, trim, merge) makes a new version; old versions stay "
-                     "readable (DatasetReader(path, version=N), htdata validate --version N) until htdata gc.")
+    parser.epilog = """\
+Every write (ingest, split, rm, trim, merge, renormalise) makes a new version, printed as vN
+(* = current) with what it added and removed and the command that made it. Old versions stay
+readable until `htdata gc`: pass --version 3 (or v3) to stats, validate, card or export, or
+htdata.open(path, version=3) in Python.
+
+Examples:
+  htdata log data/dataset
+  htdata diff data/dataset v1 v2
+"""
     parser.add_argument("dataset", type=Path, help="committed dataset directory")
     parser.add_argument("--json", action="store_true", help="print the entries as JSON")
 

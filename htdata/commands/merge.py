@@ -10,8 +10,22 @@ from htdata.curate import merge
 from htdata.store.lock import DatasetLocked
 
 
+EPILOG = """\
+OUT gets every episode of A and B; nothing is re-encoded (shards are hard-linked when A, B and
+OUT share a file system, copied otherwise, and each is checked against its sha256). Refused,
+with the difference named, when A and B use another canonical hand, another codec, a layout id
+with different contents, or one episode id with different content (the same episode with the
+same content is kept once). OUT starts at version 1 with no splits: run `htdata split` on it.
+Running an interrupted merge again starts it over.
+
+Examples:
+  htdata merge data/kitchen data/office data/all
+  htdata split data/all --ood-task palm_push --name main
+"""
+
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = merge.__doc__
+    parser.epilog = EPILOG
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("a", type=Path, help="first dataset (its shard names are kept)")
     parser.add_argument("b", type=Path, help="second dataset")

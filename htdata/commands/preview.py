@@ -9,8 +9,22 @@ from pathlib import Path
 from htdata.inspect import preview
 
 
+EPILOG = """\
+A contact sheet of one episode: rows over time (N frames evenly spaced, first and last
+included), columns RGB | left tactile | right tactile. Tactile maps are colour-mapped (black =
+0, pale yellow = 1) with the hand's region outlines; grey hatching = where the glove has no
+sensor; a grey panel = a hand the episode does not have; magenta = a non-finite value (damage).
+--contrast quantile stretches the colours to the dataset's 99th percentile so faint contact shows.
+Defaults: the two-handed episode with the most contact, 6 frames, fixed contrast.
+
+Examples:
+  htdata preview data/dataset preview.png
+  htdata preview data/dataset ep.png --episode ot-home_kitchen_p1-demo_19 --frames 10 --contrast quantile
+"""
+
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = preview.__doc__
+    parser.epilog = EPILOG
     parser.add_argument("dataset", type=Path, help="committed dataset directory")
     parser.add_argument("out", type=Path, metavar="OUT.png", help="contact sheet to write")
     parser.add_argument("--episode", default=None, metavar="ID",

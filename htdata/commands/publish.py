@@ -9,11 +9,14 @@ from pathlib import Path
 from htdata.store.remote import publish_dataset
 
 EPILOG = """\
-examples:
-  htdata publish data/dataset s3://bucket/ds
-  htdata publish data/dataset memory://ds      (tests; also gs://, file:///x)
 Every file is read back and its sha256 checked; dataset.json goes up last, so
-an interrupted upload never leaves a valid-looking dataset at the URL.
+an interrupted upload never leaves a valid-looking dataset at the URL. Readers
+open the URL directly: htdata.open("s3://bucket/ds"). For LeRobot users, see
+`htdata export lerobot`.
+
+Examples:
+  htdata publish data/dataset s3://bucket/ds
+  htdata publish data/dataset file:///mnt/share/ds
 """
 
 

@@ -21,8 +21,21 @@ from htdata.store.lock import DatasetLocked
 from htdata.pipeline import load_pipeline
 
 
+EPILOG = """\
+A glove recalibrated after recording needs no sources: every sample stores its raw glove rows,
+so new maps are computed from them under the pipeline's [normalise] settings and written as a
+new version (RGB and raw rows are copied unchanged). Episodes whose calibration does not change
+are reused (--force recomputes them, byte for byte the same). Per-episode fits (baseline, noise
+floor) use the episode's first stored frames, as the ingest does. Defaults: every episode.
+
+Examples:
+  htdata renormalise data/dataset --pipeline native --set normalise.opentouch_right_16x16.noise_k=3 --dry-run
+  htdata renormalise data/dataset --pipeline my_gloves.toml --episode 'nat-*'
+"""
+
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = (__doc__ or "") + "\n" + (renormalise.__doc__ or "")
+    parser.epilog = EPILOG
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("dataset", type=Path, help="committed dataset directory (format 3: raw rows stored)")
     parser.add_argument("--episode", dest="episodes", action="append", default=[], metavar="ID_OR_GLOB",

@@ -10,8 +10,20 @@ from htdata.curate import edit as curate_edit
 from htdata.store.lock import DatasetLocked
 
 
+EPILOG = """\
+Nothing is changed in place: the result is a new version (`htdata log` lists versions, old ones
+stay readable until `htdata gc`), planned first and written only then; --dry-run prints the plan.
+Only the storage files holding touched episodes are rewritten. Splits carry over (a removed
+episode leaves its part). An id or glob that matches nothing is an error listing near matches.
+
+Examples:
+  htdata rm data/dataset ot-home_kitchen_p1-demo_19 --dry-run
+  htdata rm data/dataset 'ta-Office-*'
+"""
+
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = curate_edit.__doc__
+    parser.epilog = EPILOG
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("dataset", type=Path, help="committed dataset directory")
     parser.add_argument("episodes", nargs="+", metavar="EPISODE",

@@ -17,6 +17,10 @@ Layout written under OUT:
 Same --seed -> identical tactile arrays and JPEG bytes. OUT/.complete (written last) names
 the seed, scale and formats of a finished corpus; --reuse keeps such a corpus and
 rewrites anything else (a corpus cut short, or one of another seed).
+
+Examples:
+  htdata sample data/raw --scale small
+  htdata sample data/raw --seed 1 --reuse
 """
 
 
@@ -33,7 +37,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("out", help="output folder (created if missing)")
     parser.add_argument("--seed", type=int, default=0, help="corpus seed (default 0)")
     parser.add_argument("--scale", choices=SCALES, default="small",
-                        help="small: ~50 episodes, every task >= 3 episodes; tiny: a few episodes for tests")
+                        help="small: ~50 episodes, every task >= 3 episodes (default); tiny: a few episodes for tests")
     parser.add_argument("--formats", type=_formats, default=FORMATS,
                         help=f"comma list of formats to write (default {','.join(FORMATS)})")
     parser.add_argument("--overwrite", action="store_true", help="replace existing OUT/<format> folders")

@@ -10,8 +10,23 @@ from htdata.curate import split
 from htdata.store.lock import DatasetLocked
 
 
+EPILOG = """\
+The episode is the unit: all frames of an episode land in one part (no near-duplicate
+neighbouring frames in both train and test). Parts: ood = every episode of the --ood-task
+tasks; the others go to test when a seeded hash of their id falls below --test-ratio, else
+train. Adding episodes later never moves an existing one. A task whose episodes all landed in
+one part gets one corrected (listed in the split file); a single-episode task stays in train.
+The split is saved with a new version (versions/vN/splits/NAME.json) and records which
+version it was made from. Defaults: --test-ratio 0.1, --seed 0, --name main.
+
+Examples:
+  htdata split data/dataset --list-tasks
+  htdata split data/dataset --ood-task palm_push --name main
+"""
+
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = split.__doc__
+    parser.epilog = EPILOG
     parser.add_argument("dataset", type=Path, help="committed dataset directory")
     parser.add_argument("--ood-task", action="append", default=[], dest="ood_tasks", metavar="TASK",
                         help="task held out whole as out-of-distribution (repeatable)")

@@ -7,17 +7,35 @@ import json
 import sys
 from pathlib import Path
 
-from htdata.inspect import stats
+from htdata.commands.version_arg import version_arg
 from htdata.glove.health import CLASSES
+from htdata.inspect import stats
+
+
+EPILOG = """\
+The text output starts with a short summary (what --brief prints alone), then per glove:
+  contact        fraction of frames where any taxel is above the contact threshold (pressed)
+  values p1..max quantiles of the normalised [0,1] taxel values; raw: the same in glove units
+  health         taxels flagged dead / stuck / noisy / hot (htdata stats --health OUT.png draws them);
+                 "quiet and never pressed" = taxels that never left zero, so nothing can be said
+  regions        taxels per hand region, how often it was in contact, its mean pressure when pressed
+then frames and duration per task and per scene. Numbers are cached per episode in DATASET/stats/,
+so a second run (or one after appending an episode) computes only what changed.
+
+Examples:
+  htdata stats data/dataset --brief
+  htdata stats data/dataset --by task --health health.png
+"""
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = stats.__doc__
+    parser.epilog = EPILOG
     parser.add_argument("dataset", help="committed dataset directory (or URL)")
-    parser.add_argument("--version", type=int, default=None, metavar="N", help="version (default: current)")
+    parser.add_argument("--version", type=version_arg, default=None, metavar="N", help="version (default: current)")
     parser.add_argument("--by", choices=stats.GROUPINGS, default=None,
                         help="break the glove numbers down per task / scene / source, or merge per layout / hand")
     parser.add_argument("--json", action="store_true", help="print the full JSON (per-taxel mean/std included)")
+    parser.add_argument("--brief", action="store_true", help="print only the short summary (a few lines)")
     parser.add_argument("--health", type=Path, default=None, metavar="OUT.png",
                         help="also draw the taxel health map in the canonical hand frame")
     parser.add_argument("--no-cache", action="store_true",
@@ -36,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(summary, indent=1))
     else:
-        for line in text_lines(summary):
+        for line in brief_lines(summary) + ([] if args.brief else [""] + text_lines(summary)):
             print(line)
     if summary["cache"].get("cache_error"):
         print(f"htdata stats: warning: stats not cached: {summary['cache']['cache_error']}", file=sys.stderr)
@@ -50,6 +68,22 @@ def run(args: argparse.Namespace) -> int:
 
 def _fmt(v) -> str:
     return "-" if v is None else f"{v:.3f}"
+
+
+def brief_lines(s: dict) -> list[str]:
+    """A few lines a newcomer can read: size, tasks, and per glove contact and flagged taxels."""
+    duration = sum(row["duration_s"] for row in s["tasks"].values())
+    out = [f"{s['dataset']} version {s['version']}: {s['episodes']} episodes, {s['frames']} frames "
+           f"({duration / 60:.1f} min), {len(s['tasks'])} tasks, {len(s['scenes'])} scenes",
+           f"contact = a frame where any taxel is above {s['contact_threshold']} (normalised 0..1)"]
+    for g in s["gloves"]:
+        name = " / ".join(str(g[k]) for k in ("task", "scene", "source", "layout", "hand") if k in g)
+        flagged = sum(g["health"]["counts"][k] for k in CLASSES)
+        out.append(f"  {name}: {g['episodes']} episodes, contact in {100 * (g['contact_fraction'] or 0):.0f}% "
+                   f"of frames, {flagged} taxel-episodes flagged unhealthy")
+    if not s["gloves"]:
+        out.append("  no tactile frames")
+    return out
 
 
 def text_lines(s: dict) -> list[str]:

@@ -16,8 +16,22 @@ from htdata.store.lock import DatasetLocked
 from htdata.curate import idle
 
 
+EPILOG = """\
+Nothing is changed in place: the result is a new version (`htdata log` lists versions, old ones
+stay readable until `htdata gc`), planned first and written only then; --dry-run prints the plan.
+Only the storage files holding touched episodes are rewritten. Splits carry over (a removed
+episode leaves its part). An id or glob that matches nothing is an error listing near matches.
+--idle trims, in every episode, the frames before the first and after the last contact (any
+hand above --min-contact, default 0.02), keeping --keep-margin seconds (default 0.5) around them.
+
+Examples:
+  htdata trim data/dataset ot-home_kitchen_p1-demo_19 --frames 10:90 --dry-run
+  htdata trim data/dataset --idle
+"""
+
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = curate_edit.__doc__
+    parser.epilog = EPILOG
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("dataset", type=Path, help="committed dataset directory")
     parser.add_argument("episode", nargs="?", default=None, help="episode id (not with --idle)")
@@ -26,7 +40,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                              "kept frames are renumbered from 0, each sample keeps its source time")
     parser.add_argument("--dry-run", action="store_true", help="print what would change, write nothing")
     parser.add_argument("--idle", action="store_true",
-                        help="trim every episode's head and tail without contact on any hand (htdata/curate/idle.py)")
+                        help="trim every episode's head and tail without contact on any hand (see below)")
     parser.add_argument("--min-contact", type=float, default=None, metavar="X",
                         help="with --idle: a frame is in contact when a taxel reads above X (default 0.02)")
     parser.add_argument("--keep-margin", type=float, default=None, metavar="S",

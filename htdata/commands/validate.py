@@ -6,15 +6,38 @@ import argparse
 import sys
 from pathlib import Path
 
+from htdata.commands.version_arg import version_arg
 from htdata import validate
 from htdata.format.table import VALIDATE_REPORT
 
 
+EPILOG = """\
+Checks, each a section of the report with every failure named by shard / sample / episode / frame:
+  structure  manifest, episode records and sample JSON against the schemas; every shard present
+             with its sha256 and size; sample counts; frames 0..n-1 in order per episode
+  content    decodes every sample (--deep) or a seeded 5% plus each episode's first frame:
+             RGB 224x224x3; tactile maps 224x224 EXR of the dataset's pixel type (float, or half
+             when every glove's resolution allows it), finite, in [0,1], zero where the glove
+             has no sensor
+  time       RGB timestamps increasing; RGB-glove skew within the sync tolerance; gaps and
+             fps deviations are warnings
+  sensors    (warnings) regions that never change, saturated values, all-zero hands
+  splits     (--split NAME) parts disjoint and complete, OOD tasks only in ood, no identical
+             frame in two parts
+The report is written to DATASET/reports/validate.json. Exit 0 when every check passes
+(warnings allowed), 1 otherwise.
+
+Examples:
+  htdata validate data/dataset
+  htdata validate data/dataset --split main --deep
+"""
+
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
-    parser.epilog = validate.__doc__
+    parser.epilog = EPILOG
     parser.add_argument("dataset", type=Path, help="committed dataset directory")
     parser.add_argument("--split", default=None, metavar="NAME", help="also check split NAME of that version")
-    parser.add_argument("--version", type=int, default=None, metavar="N",
+    parser.add_argument("--version", type=version_arg, default=None, metavar="N",
                         help="validate version N (htdata log lists them; default: the current version)")
     parser.add_argument("--deep", action="store_true", help="decode every sample (default: a seeded sample)")
     parser.add_argument("--sample-frac", type=float, default=0.05,

@@ -1,6 +1,7 @@
 """`htdata card DATASET OUT.html`: a self-contained dataset card (HTML + a Markdown twin), plots drawn with cv2.
 
-The card holds the `htdata stats` numbers of one version and these plots:
+The card opens with what a dataset card has (name, description, licence, sources, the sample
+format, how to load it), then holds the `htdata stats` numbers of one version and these plots:
 frames per task and per scene, the contact frequency of each canonical
 region per glove (drawn on the canonical hand), the value histogram per
 glove, the taxel health map, the sync skew, clock-offset and lag distributions
@@ -131,14 +132,56 @@ def _fmt(v) -> str:
     return f"{v:.3f}" if isinstance(v, float) else str(v)
 
 
-def build_card(root, version: int | None = None) -> Card:
+LICENSE_UNSET = "not stated (set it with htdata card --license, e.g. CC-BY-4.0)"
+def sample_format(codec: dict) -> list[list[str]]:
+    """The member table, from the dataset's own codec record (the EXR pixel type is chosen per dataset)."""
+    tactile, rgb = codec.get("tactile", {}), codec.get("rgb", {})
+    return [
+        ["rgb.jpg", f"224x224x3 uint8 JPEG, quality {rgb.get('quality', '?')}", "egocentric camera frame"],
+        ["tactile_<hand>.exr", f"224x224 {tactile.get('pixel_type', 'half')} EXR ({tactile.get('compression', '?')}) "
+         "in [0,1]", "pressure on the canonical hand, 0 where the glove has no sensor"],
+        ["raw_<hand>.npy", "the glove's own grid, its source dtype", "the glove rows exactly as recorded"],
+        ["json", "per-sample metadata", "episode, frame, timestamps, sync offsets, hands present"],
+    ]
+
+
+def _about(card: Card, s: dict, reader, title: str | None, description: str | None,
+           license: str | None) -> None:
+    """What a dataset card opens with: name, description, licence, sources, sample format, how to load."""
+    manifest = reader.manifest
+    card.text(description or manifest.get("description") or
+              f"Full-hand tactile glove recordings paired with egocentric RGB video: {s['episodes']} episodes, "
+              f"{s['frames']} frames, {len(s['tasks'])} tasks.")
+    card.table(["field", "value"], [["licence", license or manifest.get("license") or LICENSE_UNSET],
+                                    ["version", s["version"]], ["episodes", s["episodes"]], ["frames", s["frames"]],
+                                    ["created", manifest.get("created", "-")]])
+    card.heading("Sources")
+    per_source: dict[str, int] = {}
+    for ep in reader.episodes:
+        per_source[ep.get("source", "?")] = per_source.get(ep.get("source", "?"), 0) + 1
+    card.table(["source", "adapter", "gloves (hand: layout)", "episodes"],
+               [[src.get("name", "?"), (src.get("adapter") or {}).get("name", "-"),
+                 ", ".join(f"{h}: {lid}" for h, lid in sorted((src.get("layouts") or {}).items())) or "-",
+                 per_source.get(src.get("name"), 0)] for src in manifest.get("sources", [])])
+    card.heading("Sample format")
+    card.text("One sample per frame; a frame without a glove row (RGB-only) or without video (tactile-only) "
+              "simply lacks that member.")
+    card.table(["member", "format", "what"], sample_format(manifest.get("codec", {})))
+    card.heading("How to load")
+    card.text("pip install htdata, then in Python: import htdata; ds = htdata.open(\"PATH\"); "
+              "sample = ds.decoded(0). For LeRobot: htdata export lerobot PATH OUT.")
+
+
+def build_card(root, version: int | None = None, title: str | None = None, description: str | None = None,
+               license: str | None = None) -> Card:
     """Numbers and plots of one version (stats computed or read from the stats cache)."""
 
     s = dataset_stats(root, version=version)
-    card = Card(title=f"{Path(str(root)).name}: version {s['version']}")
-    card.text(f"{s['episodes']} episodes, {s['frames']} frames. Values: {s['values']}; "
-              f"contact = any taxel above {s['contact_threshold']}.")
+    card = Card(title=f"{title or Path(str(root)).name}: version {s['version']}")
     with DatasetReader(root, version=version) as reader:
+        _about(card, s, reader, title, description, license)
+        card.heading("What the numbers mean")
+        card.text(f"Values: {s['values']}; contact = any taxel above {s['contact_threshold']}.")
         _counts(card, s)
         _gloves(card, s, reader, parse_canonical)
         card.heading("Taxel health")
@@ -275,12 +318,13 @@ def render_markdown(card: Card, files_dir: str) -> str:
     return "\n".join(out)
 
 
-def write_card(root, out, version: int | None = None) -> tuple[Path, Path]:
+def write_card(root, out, version: int | None = None, title: str | None = None, description: str | None = None,
+               license: str | None = None) -> tuple[Path, Path]:
     """Write OUT.html (self-contained), OUT.md and OUT_files/*.png; returns (html, md) paths."""
     out = Path(out)
     if out.suffix.lower() != ".html":
         raise ValueError(f"{out}: the card is written as HTML; give a .html path")
-    card = build_card(root, version)
+    card = build_card(root, version, title=title, description=description, license=license)
     out.parent.mkdir(parents=True, exist_ok=True)
     files = out.with_name(out.stem + "_files")
     files.mkdir(exist_ok=True)

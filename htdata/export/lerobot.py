@@ -1,0 +1,240 @@
+"""Export one htdata dataset version as a LeRobot v3.0 dataset (`htdata export lerobot`).
+
+Layout written (LeRobot's v3.0 format, codebase_version "v3.0"):
+
+    OUT/meta/info.json                          features (dtype/shape/names), fps, path templates, splits
+    OUT/meta/stats.json                         per feature: min/max/mean/std/count/q01/q10/q50/q90/q99
+    OUT/meta/tasks.parquet                      task string (pandas index) -> task_index
+    OUT/meta/episodes/chunk-000/file-000.parquet one row per episode: length, tasks, data/video file, indices
+    OUT/data/chunk-CCC/file-FFF.parquet         one row per frame (episodes appended, files rolled at 100 MB)
+    OUT/videos/<key>/chunk-CCC/file-FFF.mp4     one H.264 file per episode and video feature
+    OUT/meta/htdata/                            what LeRobot has no place for: layouts, coverage / region /
+                                                part masks, the split assignment, episode ids
+
+One LeRobot episode per htdata episode. Frame features:
+  observation.images.egocentric       video, the stored 224x224 RGB frame
+  observation.tactile.<hand>.raw      float32 (rows*cols,): the raw row paired with the frame, the glove's grid
+                                      flattened row-major (info.grid = [rows, cols]; names "r<row>c<col>")
+                                      (non-finite cells, i.e. no taxel there, as 0; a hand recorded with two grid
+                                      shapes gets one feature per shape, ...raw_<rows>x<cols>)
+  observation.tactile.<hand>.map      video (--maps only), the canonical 224x224 map, value x 255 as grey
+  observation.present                 bool per source (egocentric, tactile.<hand>...): is the value real?
+  htdata.frame_index                  int64, the stored htdata frame (within its episode) of the row
+LeRobot needs every feature in every frame, so a frame missing a source is filled and flagged
+in observation.present: a missing RGB frame repeats the last real one (black before the first),
+a missing glove row is zeros. Unpaired full-rate glove rows (the ones between two frames) are not
+exported: LeRobot frames are one row per frame.
+
+Time: LeRobot's loader finds a row's video frame as round(timestamp x fps) and then checks the
+frame's time against the row's within 1e-4 s, so rows must sit on an exact 1/fps grid. Each
+episode is therefore laid on the grid of its stored source clock (t_rgb_ns from its first frame):
+tick k (timestamp k/fps, the video frame's pts) takes the stored frame nearest k/fps on that
+clock, for ticks up to the one nearest the last frame. On a regular clock that is every frame
+once, in order; jitter under half a period changes nothing; a gap repeats the frames beside it,
+a clock running fast skips one. `htdata.frame_index` names the stored frame of every row.
+fps = the episodes' rate (they must agree) unless `--fps F` sets another.
+
+Stats are accumulated in the export's single pass (no second read): exact mean/std/min/max,
+quantiles exact per episode and frame-weighted across episodes (as LeRobot aggregates
+them), exact for video features (per-channel 256-bin histograms).
+
+Read-only on DATASET; memory bounded by one episode's raw rows; atomic: everything is
+written under OUT's sibling `.OUT.partial/` and renamed to OUT at the end, so a killed
+export never leaves an OUT that looks complete (the next run removes the leftover).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from htdata.format.table import CANVAS, JSON_MEMBER, RGB_MEMBER, decode_member, raw_member, tactile_member
+from htdata.export.lerobot_meta import CHUNKS_SIZE, DATA_FILE_MB, DATA_PATH, VIDEO_PATH, part_of, write_meta
+from htdata.export.lerobot_stats import FeatureStats, VideoStats
+from htdata.read.rawstream import paired_row
+from htdata.read.reader import DatasetReader
+from htdata.export.videoencode import VideoWriter
+from htdata.export.lerobot_plan import (PRESENT_KEY, RGB_KEY, SOURCE_KEY, LeRobotExportConfig, RawSlot,  # noqa: F401
+                                        _episode_schedule, _frames_out, _Plan, _ticks, features, map_key,
+                                        plan_export, raw_key)
+
+Progress = Callable[[int], None]
+
+
+def _chunk_file(n: int) -> tuple[int, int]:
+    return n // CHUNKS_SIZE, n % CHUNKS_SIZE
+
+
+def export_lerobot(cfg: LeRobotExportConfig, progress: Progress | None = None,
+                   on_total: Callable[[int], None] | None = None) -> dict:
+    """Write the export (see the module docstring); returns a summary dict."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    cfg.validate()
+    out = Path(cfg.out)
+    if out.exists() and not cfg.force:
+        raise FileExistsError(f"{out} exists (pass --force to replace it)")
+    if Path(cfg.dataset).resolve() == out.resolve() or Path(cfg.dataset).resolve() in out.resolve().parents:
+        raise ValueError(f"{out}: the export may not be written inside DATASET (it is read-only)")
+    work = out.parent / f".{out.name}.partial"
+    if work.exists():
+        shutil.rmtree(work)            # the leftover of a killed export
+    work.mkdir(parents=True)
+    try:
+        with DatasetReader(cfg.dataset, version=cfg.version) as reader:
+            plan = plan_export(reader, cfg)
+            summary = _write(reader, plan, cfg, work, pa, pq, progress, on_total)
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(work, out)
+    except BaseException:
+        shutil.rmtree(work, ignore_errors=True)
+        raise
+    summary["out"] = str(out)
+    return summary
+
+
+def _write(reader, plan: _Plan, cfg: LeRobotExportConfig, work: Path, pa, pq, progress, on_total) -> dict:
+    feats = features(plan)
+    schema = pa.schema(
+        [pa.field(slot.key, pa.list_(pa.float32())) for slot in plan.slots]
+        + [pa.field(PRESENT_KEY, pa.list_(pa.bool_())), pa.field("timestamp", pa.float32()),
+           pa.field("frame_index", pa.int64()), pa.field("episode_index", pa.int64()),
+           pa.field("index", pa.int64()), pa.field("task_index", pa.int64()), pa.field(SOURCE_KEY, pa.int64())])
+    stats = {k: FeatureStats() for k in feats if feats[k]["dtype"] != "video"}
+    vstats = {k: VideoStats() for k in plan.video_keys}
+    tasks: dict[str, int] = {}
+    episode_rows: list[dict] = []
+    data_file, data_writer, data_bytes = 0, None, 0
+    index = 0
+    if on_total is not None:   # frames to write, for the progress bar (two JSON reads an episode when resampling)
+        on_total(sum(_frames_out(reader, p, plan) for p in plan.positions))
+    try:
+        for ep_index, pos in enumerate(plan.positions):
+            ep = reader.episodes[pos]
+            samples, times = _episode_schedule(reader, pos, plan)
+            task_index = tasks.setdefault(ep["task"], len(tasks))
+            raw, present = _episode_frames(reader, plan, cfg, pos, samples, times, work, ep_index, vstats, progress)
+            n = len(samples)
+            cols = {PRESENT_KEY: present, "timestamp": np.asarray(times, np.float32),
+                    "frame_index": np.arange(n), "episode_index": np.full(n, ep_index),
+                    "index": np.arange(index, index + n), "task_index": np.full(n, task_index),
+                    SOURCE_KEY: np.asarray(samples) - reader.episode_range(pos)[0]}
+            _add_stats(stats, plan, raw, cols)
+            table = pa.table({slot.key: pa.array(raw[k].reshape(n, -1).tolist(), schema.field(slot.key).type)
+                              for k, slot in enumerate(plan.slots)} | {
+                PRESENT_KEY: pa.array(present.tolist(), pa.list_(pa.bool_())),
+                "timestamp": pa.array(cols["timestamp"], pa.float32()),
+                **{k: pa.array(cols[k], pa.int64())
+                   for k in ("frame_index", "episode_index", "index", "task_index", SOURCE_KEY)}},
+                schema=schema)
+            if data_writer is not None and data_bytes >= DATA_FILE_MB * 1024 * 1024:
+                data_writer.close()
+                data_writer, data_file = None, data_file + 1
+            if data_writer is None:
+                path = work / DATA_PATH.format(chunk_index=_chunk_file(data_file)[0],
+                                               file_index=_chunk_file(data_file)[1])
+                path.parent.mkdir(parents=True, exist_ok=True)
+                data_writer, data_bytes = pq.ParquetWriter(str(path), schema), 0
+            data_writer.write_table(table)
+            data_bytes += table.nbytes
+            episode_rows.append(_episode_row(plan, ep, ep_index, index, n, times, data_file))
+            index += n
+    finally:
+        if data_writer is not None:
+            data_writer.close()
+    write_meta(reader, plan, cfg, work, feats, stats, vstats, tasks, episode_rows, index, pa, pq)
+    return {"episodes": len(plan.positions), "frames": index, "fps": plan.fps, "resampled": plan.resample,
+            "tasks": len(tasks), "hands": plan.hands, "raw_features": [s.key for s in plan.slots],
+            "video_keys": plan.video_keys, "bytes": sum(p.stat().st_size for p in work.rglob("*") if p.is_file())}
+
+
+def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, samples: list[int], times: list[float],
+                    work: Path, ep_index: int, vstats: dict, progress) -> tuple[list[np.ndarray], np.ndarray]:
+    """Encode one episode's videos; return its raw rows per slot and the presence flags (see the module doc)."""
+    ep = reader.episodes[pos]
+    eid = ep["episode_id"]
+    wanted = (JSON_MEMBER, RGB_MEMBER, *[raw_member(h) for h in plan.hands],
+              *([tactile_member(h) for h in plan.hands] if cfg.maps else []))
+    chunk, file = _chunk_file(ep_index)
+    videos = {k: VideoWriter(work / VIDEO_PATH.format(video_key=k, chunk_index=chunk, file_index=file),
+                             plan.fps, cfg.codec, cfg.crf, cfg.gop) for k in plan.video_keys}
+    raw = [np.zeros((len(samples), *slot.grid), np.float32) for slot in plan.slots]
+    present = np.zeros((len(samples), 1 + len(plan.slots)), bool)
+    slot_of = {h: next(k for k, s in enumerate(plan.slots) if s.hand == h and s.grid == plan.layout_grids[lid])
+               for h, lid in ep["layouts"].items()}
+    last_rgb = np.zeros((CANVAS, CANVAS, 3), np.uint8)
+    cache: tuple[int, dict] | None = None            # a resampled episode may repeat a sample
+    first = reader.episode_range(pos)[0]
+    for f, (i, t) in enumerate(zip(samples, times)):
+        if cache is None or cache[0] != i:
+            cache = (i, reader.read_sample(i, wanted)[2])
+        members = cache[1]
+        where = f"{reader.root}: {reader.key(i)} (episode {eid!r} frame {i - first})"
+        if RGB_MEMBER in members:
+            last_rgb = decode_member(RGB_MEMBER, members[RGB_MEMBER], where)
+            present[f, 0] = True
+            vstats[RGB_KEY].add(last_rgb)
+        videos[RGB_KEY].add(last_rgb, t, where)
+        for hand, k in slot_of.items():
+            if raw_member(hand) in members:
+                row = paired_row(members, hand, where)
+                if row.shape != plan.slots[k].grid:
+                    raise ValueError(f"{where}: {hand} raw row shaped {row.shape}, "
+                                     f"expected {plan.slots[k].grid} (its layout's grid)")
+                # NaN / Inf mark cells without a taxel in some sources: 0 (LeRobot stats and
+                # normalisation would turn one NaN into NaN everywhere); finite values stay exact
+                raw[k][f] = np.where(np.isfinite(row), row, 0.0)
+                present[f, 1 + k] = True
+        if cfg.maps:
+            for hand in plan.hands:
+                _add_map_frame(members, hand, t, where, videos[map_key(hand)], vstats[map_key(hand)])
+        if progress is not None:
+            progress(1)
+    for v in videos.values():
+        v.close()
+    return raw, present
+
+
+def _add_map_frame(members: dict, hand: str, t: float, where: str, video: VideoWriter, vstats: VideoStats) -> None:
+    """--maps: the canonical map as grey (value x 255); black where the hand has no map this frame."""
+    grey = np.zeros((CANVAS, CANVAS), np.uint8)
+    if tactile_member(hand) in members:
+        m = decode_member(tactile_member(hand), members[tactile_member(hand)], where)
+        grey = np.round(np.clip(np.nan_to_num(m), 0.0, 1.0) * 255).astype(np.uint8)
+    rgb = np.repeat(grey[..., None], 3, axis=2)
+    video.add(rgb, t, where)
+    if tactile_member(hand) in members:
+        vstats.add(rgb)
+
+
+def _add_stats(stats: dict, plan: _Plan, raw: list[np.ndarray], cols: dict) -> None:
+    """One episode into the running stats: raw features over real rows only (absent ones are fill)."""
+    present = cols[PRESENT_KEY]
+    values = {slot.key: raw[k][present[:, 1 + k]] for k, slot in enumerate(plan.slots)} | cols
+    for key, v in values.items():
+        if len(v):
+            stats[key].add_episode(v.reshape(len(v), -1))
+
+
+def _episode_row(plan: _Plan, ep: dict, ep_index: int, index: int, n: int, times: list[float], data_file: int) -> dict:
+    """The episode's row in meta/episodes (LeRobot's columns, then htdata's)."""
+    eid = ep["episode_id"]
+    chunk, file = _chunk_file(ep_index)
+    d_chunk, d_file = _chunk_file(data_file)
+    row = {"episode_index": ep_index, "tasks": [ep["task"]], "length": n,
+           "data/chunk_index": d_chunk, "data/file_index": d_file,
+           "dataset_from_index": index, "dataset_to_index": index + n,
+           "meta/episodes/chunk_index": 0, "meta/episodes/file_index": 0,
+           "htdata/episode_id": eid, "htdata/part": part_of(plan, eid),
+           **{f"htdata/layout/{h}": ep["layouts"].get(h) for h in plan.hands}}
+    for k in plan.video_keys:
+        row.update({f"videos/{k}/chunk_index": chunk, f"videos/{k}/file_index": file,
+                    f"videos/{k}/from_timestamp": 0.0,
+                    f"videos/{k}/to_timestamp": float(times[-1]) + 1.0 / plan.fps})
+    return row

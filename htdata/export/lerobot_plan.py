@@ -1,0 +1,200 @@
+"""What a LeRobot export will write, decided before any byte is: features, parts, and each row's stored frame.
+
+`plan_export` reads only the manifest and episode records (and a JSON member
+per episode for the schedule); `features` is meta/info.json's feature table;
+`_episode_schedule` puts an episode's rows on LeRobot's exact 1/fps grid,
+each holding the stored frame nearest its tick on the source clock.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from htdata.store import storage
+from htdata.format.table import CANVAS, HANDS, JSON_MEMBER, decode_member
+from htdata.read.reader import DatasetReader
+
+
+RGB_KEY = "observation.images.egocentric"
+
+
+PRESENT_KEY = "observation.present"
+
+
+SOURCE_KEY = "htdata.frame_index"      # which stored frame a row is: the rows sit on a 1/fps grid
+
+
+def raw_key(hand: str) -> str:
+    return f"observation.tactile.{hand}.raw"
+
+
+def map_key(hand: str) -> str:
+    return f"observation.tactile.{hand}.map"
+
+
+@dataclass
+class LeRobotExportConfig:
+    dataset: str
+    out: Path
+    version: int | None = None
+    split: str | None = None
+    part: str | None = None
+    fps: float | None = None          # None: the episodes' own rate, no resampling
+    maps: bool = False
+    codec: str = "libx264"
+    crf: int = 18
+    gop: int = 2                      # keyframe every 2 frames: LeRobot's default, cheap random access
+    force: bool = False
+
+    def validate(self) -> None:
+        if self.part is not None and self.split is None:
+            raise ValueError("--part needs --split NAME")
+        if self.fps is not None and not (self.fps > 0 and float(self.fps).is_integer()):
+            raise ValueError(f"--fps must be a positive whole number (LeRobot's fps is an int), got {self.fps}")
+        if not 0 <= self.crf <= 51:
+            raise ValueError(f"crf must be in 0..51, got {self.crf}")
+        if self.gop < 1:
+            raise ValueError(f"gop must be >= 1, got {self.gop}")
+        if self.codec not in ("libx264", "libsvtav1"):
+            raise ValueError(f"codec must be libx264 or libsvtav1, got {self.codec!r}")
+        if storage.is_url(str(self.out)):
+            raise ValueError(f"{self.out}: the export writes a local directory")
+
+
+# --------------------------------------------------------------------------- the export
+@dataclass(frozen=True)
+class RawSlot:
+    """One raw feature: a hand's glove rows of one grid shape (a hand recorded with two grid shapes has two)."""
+    hand: str
+    grid: tuple[int, int]
+    key: str                                  # feature name
+    name: str                                 # its entry in observation.present's names
+
+
+@dataclass
+class _Plan:
+    positions: list[int]                     # htdata episode positions, in export order
+    parts: dict[str, list[str]]              # split part -> episode ids (exported ones), in export order
+    hands: list[str]
+    slots: list[RawSlot]
+    layout_grids: dict[str, tuple[int, int]]  # layout id -> raw grid
+    layouts: dict[str, list[str]]            # hand -> layout ids used
+    fps: int
+    resample: bool
+    split_doc: dict | None = None
+    video_keys: list[str] = field(default_factory=list)
+
+
+def plan_export(reader: DatasetReader, cfg: LeRobotExportConfig) -> _Plan:
+    """Which episodes, in which order, with which features; errors name the episode."""
+    split_doc, parts = None, {}
+    if cfg.split is None:
+        positions = reader.episode_positions()
+    else:
+        split_doc = reader.split(cfg.split)
+        names = [cfg.part] if cfg.part is not None else list(split_doc["parts"])
+        positions = []
+        for name in names:
+            # each part contiguous in episode order: info.json "splits" can then say "start:end"
+            pos = reader.episode_positions(cfg.split, name)
+            parts[name] = [reader.episodes[p]["episode_id"] for p in pos]
+            positions += pos
+    if not positions:
+        raise ValueError(f"{reader.root}: nothing to export (no episodes selected)")
+    hands = [h for h in HANDS if any(h in reader.episodes[p]["hands"] for p in positions)]
+    layout_grids: dict[str, tuple[int, int]] = {}
+    layouts: dict[str, list[str]] = {}
+    for p in positions:
+        ep = reader.episodes[p]
+        for hand, layout_id in sorted(ep["layouts"].items()):
+            if layout_id not in layout_grids:
+                grid = reader.layout(layout_id).get("grid")
+                if not grid or len(grid) != 2:
+                    raise ValueError(f"episode {ep['episode_id']!r}: layout {layout_id!r} names no raw grid")
+                layout_grids[layout_id] = (int(grid[0]), int(grid[1]))
+            if layout_id not in layouts.setdefault(hand, []):
+                layouts[hand].append(layout_id)
+    slots = []
+    for hand in hands:
+        grids = list(dict.fromkeys(layout_grids[lid] for lid in layouts.get(hand, [])))
+        for g in grids:
+            # one feature has one shape: a hand seen with two grid shapes gets a feature per shape
+            key = raw_key(hand) if len(grids) == 1 else f"{raw_key(hand)}_{g[0]}x{g[1]}"
+            slots.append(RawSlot(hand, g, key, key.removeprefix("observation.")))
+    if int(reader.manifest.get("format_version", 0)) < 3:
+        raise ValueError(f"{reader.root}: format {reader.manifest.get('format_version')} stores no raw glove rows; "
+                         f"the export needs format 3 (re-ingest the sources)")
+    if cfg.fps is not None:
+        fps, resample = int(cfg.fps), True
+    else:
+        rates = {}
+        for p in positions:
+            ep = reader.episodes[p]
+            rates.setdefault(int(round(float(ep.get("fps") or 0))), ep["episode_id"])
+        if len(rates) != 1 or 0 in rates:
+            raise ValueError(f"episodes have frame rates {sorted(rates)} (e.g. {sorted(rates.items())[:3]}); "
+                             f"LeRobot has one fps per dataset: pass --fps F to resample")
+        fps, resample = next(iter(rates)), False
+    video_keys = [RGB_KEY] + ([map_key(h) for h in hands] if cfg.maps else [])
+    return _Plan(positions, parts, hands, slots, layout_grids, layouts, fps, resample, split_doc, video_keys)
+
+
+def features(plan: _Plan) -> dict:
+    video_info = {"video.height": CANVAS, "video.width": CANVAS, "video.codec": "h264", "video.pix_fmt": "yuv420p",
+                  "video.is_depth_map": False, "video.fps": plan.fps, "video.channels": 3, "has_audio": False}
+    feats: dict = {}
+    for key in plan.video_keys:
+        feats[key] = {"dtype": "video", "shape": [CANVAS, CANVAS, 3], "names": ["height", "width", "channels"],
+                      "info": dict(video_info)}
+    for slot in plan.slots:
+        rows, cols = slot.grid
+        # flat (rows*cols,), row-major, the grid in "info": LeRobot's tooling and policies take state
+        # features as 1-D vectors (lerobot-doctor 0.2.0 crashes on a 2-D one); reshape(rows, cols) restores it
+        feats[slot.key] = {"dtype": "float32", "shape": [rows * cols],
+                           "names": [f"r{r}c{c}" for r in range(rows) for c in range(cols)],
+                           "info": {"grid": [rows, cols], "order": "row-major", "units": "raw glove units"}}
+    feats[PRESENT_KEY] = {"dtype": "bool", "shape": [1 + len(plan.slots)],
+                          "names": ["egocentric", *[slot.name for slot in plan.slots]]}
+    feats[SOURCE_KEY] = {"dtype": "int64", "shape": [1], "names": None,
+                         "info": {"what": "the htdata frame (within its episode) this row was taken from"}}
+    for name, dtype in (("timestamp", "float32"), ("frame_index", "int64"), ("episode_index", "int64"),
+                        ("index", "int64"), ("task_index", "int64")):
+        feats[name] = {"dtype": dtype, "shape": [1], "names": None}
+    return feats
+
+
+def _episode_schedule(reader: DatasetReader, pos: int, plan: _Plan) -> tuple[list[int], list[float]]:
+    """(global sample index per exported frame, timestamp in s per exported frame) of one episode."""
+    first, n = reader.episode_range(pos)
+    eid = reader.episodes[pos]["episode_id"]
+    times = []
+    for i in range(first, first + n):
+        meta = decode_member(JSON_MEMBER, reader.sample(i, (JSON_MEMBER,))[JSON_MEMBER], f"{reader.root}: {reader.key(i)}")
+        if meta.get("t_rgb_ns") is None:
+            raise ValueError(f"{reader.root}: {reader.key(i)}: sample has no t_rgb_ns time")
+        times.append(int(meta["t_rgb_ns"]))
+    t = (np.asarray(times, np.int64) - times[0]) / 1e9
+    if np.any(np.diff(t) <= 0):
+        k = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
+        raise ValueError(f"episode {eid!r} frame {k}: time does not increase ({t[k - 1]:.6f} s -> {t[k]:.6f} s)")
+    ticks = np.arange(_ticks(t[-1], plan.fps)) / plan.fps
+    right = np.clip(np.searchsorted(t, ticks), 0, n - 1)
+    left = np.clip(right - 1, 0, n - 1)
+    nearest = np.where(np.abs(t[left] - ticks) <= np.abs(t[right] - ticks), left, right)
+    return [first + int(k) for k in nearest], ticks.tolist()
+
+
+def _ticks(duration_s: float, fps: int) -> int:
+    """Rows of an episode whose last frame is `duration_s` after its first: 1/fps ticks, the last one nearest it."""
+    return int(round(duration_s * fps)) + 1
+
+
+def _frames_out(reader: DatasetReader, pos: int, plan: _Plan) -> int:
+    """Rows episode `pos` will have (two JSON reads)."""
+    first, n = reader.episode_range(pos)
+    t = [decode_member(JSON_MEMBER, reader.sample(i, (JSON_MEMBER,))[JSON_MEMBER], reader.key(i))["t_rgb_ns"]
+         for i in (first, first + n - 1)]
+    return _ticks((t[1] - t[0]) / 1e9, plan.fps)
