@@ -33,7 +33,7 @@ from htdata.fsutil import write_bytes_atomic
 
 SECTION_GROUP = "htdata.bench_sections"
 BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate", "append", "stats",
-                    "lag", "raw")
+                    "lag", "raw", "rawglove")
 # Top-level keys of results.json that are not sections: no section may take these names.
 RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds")
 
@@ -249,6 +249,11 @@ class Sections:
         from htdata.benchmarks.raw import raw_rows
 
         return raw_rows(self.corpus, self.cfg.work, bench_sources(), self.dataset, self.cfg.quick)
+
+    def rawglove(self) -> dict:
+        from htdata.benchmarks.rawglove import rawglove_rows
+
+        return rawglove_rows(self.cfg.quick, self.cfg.seed)
 
     def discovered(self, name: str, entry_point: metadata.EntryPoint) -> dict:
         """Load and run one discovered section; its result must be a JSON-able dict."""

@@ -33,7 +33,7 @@ from htdata.format import HANDS, JSON_MEMBER, MAP_SHAPE, SIZE_FIELDS, raw_member
 from htdata.health import TaxelGrid, classify
 from htdata.layouts import CanonicalHand, Layout, parse_canonical, parse_layout
 from htdata.rasterise import Rasteriser
-from htdata.rawstream import paired_row
+from htdata.rawstream import paired_row, paired_source_row
 
 CONTACT_THRESHOLD = 0.02      # a taxel above this is in contact (validate's contact threshold)
 HIST_BINS = 1000              # fixed bins over (0, 1]: quantiles to 0.001, mergeable by addition
@@ -142,10 +142,13 @@ class _Series:
         self.items: list[np.ndarray] = []
         self.frames: list[int] = []
         self.keys: list[tuple[str, int]] = []     # (sample key, global sample index): errors name the sample
+        self.source_rows: list[int] = []          # paired source row numbers (baseline = "drift" only)
 
 
-def _read_episode(reader, pos: int, from_raw: list[str], nan_samples: list) -> dict[str, _Series]:
-    """Stream the episode's members once: raw rows for `from_raw` hands, maps for the other hands."""
+def _read_episode(reader, pos: int, from_raw: list[str], nan_samples: list, drifting: tuple = ()
+                  ) -> dict[str, _Series]:
+    """Stream the episode's members once: raw rows for `from_raw` hands, maps for the other hands
+    (+ the paired source row numbers of the `drifting` hands)."""
     ep = reader.episodes[pos]
     first, n = reader.episode_range(pos)
     hands = [h for h in HANDS if h in ep["layouts"]]
@@ -161,6 +164,8 @@ def _read_episode(reader, pos: int, from_raw: list[str], nan_samples: list) -> d
             where = f"{reader.root}: {key}"
             if hand in from_raw:
                 value = paired_row(members, hand, where)
+                if hand in drifting:
+                    series[hand].source_rows.append(paired_source_row(members, hand, where))
             else:
                 value = decode_exr_pixels(data, f"{where}.{wanted[hand]}")  # half as stored: converted once
                 if value.shape != MAP_SHAPE:
@@ -190,7 +195,7 @@ def _raw_taxels(s: _Series, normaliser, glove: "Glove", ep: dict, hand: str, nan
         empty = np.zeros((0, glove.layout.num_live), np.float32)
         return empty, empty
     raw = np.stack(s.items)
-    values, finite = normaliser.apply(raw)
+    values, finite = normaliser.apply(raw, rows=s.source_rows if normaliser.cfg.baseline == "drift" else None)
     if not finite.all():           # the ingest drops such frames: a stored one is damage, named like a NaN map
         for t in np.flatnonzero(~finite):
             nan_samples.append({"episode": ep["episode_id"], "frame": s.frames[t], "hand": hand, "key": s.keys[t][0],
@@ -208,13 +213,15 @@ def compute_episode(reader, pos: int, gloves: dict[str, Glove]) -> dict:
     _, n = reader.episode_range(pos)
     from_raw = raw_hands(reader, pos)
     nan_samples: list = []
-    series = _read_episode(reader, pos, from_raw, nan_samples)
+    normalisers = {hand: episode_normaliser(reader.manifest, ep, hand, gloves[ep["layouts"][hand]].layout)
+                   for hand in from_raw}
+    drifting = tuple(h for h, n in normalisers.items() if n.cfg.baseline == "drift")
+    series = _read_episode(reader, pos, from_raw, nan_samples, drifting)
     out = {"episode_id": ep["episode_id"], "frames": n, "hands": {}, "nan_samples": nan_samples}
     for hand, s in series.items():
         glove = gloves[ep["layouts"][hand]]
         if hand in from_raw:
-            normaliser = episode_normaliser(reader.manifest, ep, hand, glove.layout)
-            x, raw = _raw_taxels(s, normaliser, glove, ep, hand, nan_samples)
+            x, raw = _raw_taxels(s, normalisers[hand], glove, ep, hand, nan_samples)
         else:
             x, raw = _map_taxels(s, glove), None
         out["hands"][hand] = hand_stats(x, s.frames, glove, ep["layouts"][hand], raw)

@@ -302,6 +302,9 @@ class PipelineConfig:
             n.scale = float(n.scale)
             n.noise_floor = float(n.noise_floor)
             n.noise_k = float(n.noise_k)
+            for name in ("rest_seconds", "baseline_percentile", "drift_window_s"):
+                if isinstance(getattr(n, name), int) and not isinstance(getattr(n, name), bool):
+                    setattr(n, name, float(getattr(n, name)))
         cfg.sync.max_skew_ms = float(cfg.sync.max_skew_ms)
         for key in ("max_lag_ms", "min_confidence") + (() if isinstance(cfg.sync.lag, str) else ("lag",)):
             if isinstance(getattr(cfg.sync, key), int) and not isinstance(getattr(cfg.sync, key), bool):

@@ -16,6 +16,7 @@ HEADINGS = {
     "stats": "## htdata stats vs tactile-only decode",
     "lag": "## Tactile-video lag estimator (known lags)",
     "raw": "## Raw glove rows: storage cost and maps from raw rows",
+    "rawglove": "## Raw-count glove: baselines, noise floors and contact against the truth",
 }
 TARGET_OVERHEAD_PCT = 30.0
 TARGET_SCALING = 1.8
@@ -218,6 +219,12 @@ def _lag_markdown(d: dict) -> list[str]:
     return lag_markdown(d)
 
 
+def _rawglove_markdown(d: dict) -> list[str]:
+    from htdata.benchmarks.rawglove import rawglove_markdown   # the section's own module renders its tables
+
+    return rawglove_markdown(d)
+
+
 def _raw_markdown(d: dict) -> list[str]:
     from htdata.benchmarks.raw import raw_markdown   # the section's own module renders its tables
 
@@ -226,7 +233,8 @@ def _raw_markdown(d: dict) -> list[str]:
 
 RENDERERS = {"machine": _machine, "codecs": _codecs, "rgb": _rgb, "raster": _raster, "ingest": _ingest,
              "rss": _rss, "loader": _loader, "index": _index, "validate": _validate,
-             "append": _append, "stats": _stats, "lag": _lag_markdown, "raw": _raw_markdown}
+             "append": _append, "stats": _stats, "lag": _lag_markdown, "raw": _raw_markdown,
+             "rawglove": _rawglove_markdown}
 
 
 def _discovered(name: str, results: dict) -> list[str]:

@@ -75,6 +75,9 @@ def run(args: argparse.Namespace) -> int:
         episode = f" [{f['episode_id']}]" if f["episode_id"] is not None else ""
         frame = f" frame {f['frame']}" if f["frame"] is not None else ""
         print(f"FAILED {f['file']}{episode}{frame}: {f['error']}", file=sys.stderr)
+    for eid, warnings in report.get("episode_warnings", {}).items():
+        for warning in warnings:            # not only in the episode record: out-of-range values are news
+            print(f"episode {eid}: {warning}", file=sys.stderr)
     for note in report["notes"]:
         print(f"note: {note}", file=sys.stderr)
     print(f"ingested {report['episodes_ingested']}/{report['episodes_planned']} episodes, "

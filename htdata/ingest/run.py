@@ -182,6 +182,10 @@ def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, disc
                          if ep.get("out_of_range")},
         "hands_excluded": {ep["episode_id"]: ep["hands_excluded"] for r in ordered for ep in r["episodes"]
                            if ep.get("hands_excluded")},
+        # the episode records' warnings (e.g. raw values out of range, clipped): the CLI prints them on stderr
+        "episode_warnings": {ep["episode_id"]: [n for n in ep.get("notes", []) if n.startswith("warning:")]
+                             for r in ordered for ep in r["episodes"]
+                             if any(n.startswith("warning:") for n in ep.get("notes", []))},
         "timing": timing_summary(ran, time.perf_counter() - t_start),
     }
 
