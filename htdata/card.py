@@ -134,7 +134,8 @@ def build_card(root, version: int | None = None) -> Card:
     s = dataset_stats(root, version=version)
     card = Card(title=f"{Path(str(root)).name}: version {s['version']}")
     card.text(f"{s['episodes']} episodes, {s['frames']} frames. Values: {s['values']}; "
-              f"contact = any taxel above {s['contact_threshold']}.")
+              f"contact per glove and hand from its calibration (htdata/contact.py; the rule of each glove is "
+              f"in the Gloves table; 'old contact' = any taxel above {s['contact_threshold']}).")
     with DatasetReader(root, version=version) as reader:
         _counts(card, s)
         _gloves(card, s, reader, parse_canonical)
@@ -165,8 +166,10 @@ def _gloves(card: Card, s: dict, reader, parse_canonical) -> None:
     import json
     from htdata import storage
     card.heading("Gloves")
-    card.table(["layout", "hand", "episodes", "frames", "contact", "p1", "p50", "p99", "max", "faulty taxels"],
+    card.table(["layout", "hand", "episodes", "frames", "contact", "contact rule", "old contact", "p1", "p50",
+                "p99", "max", "faulty taxels"],
                [[g["layout"], g["hand"], g["episodes"], g["frames"], _fmt(g["contact_fraction"]),
+                 g.get("contact_rule") or "-", _fmt(g.get("contact_fraction_threshold")),
                  *(_fmt(g["quantiles"][k]) for k in ("p1", "p50", "p99", "max")),
                  sum(g["health"]["counts"].values())] for g in s["gloves"]])
     canon_file = reader.manifest["canonical"]["file"]

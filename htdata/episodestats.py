@@ -29,13 +29,14 @@ from functools import cached_property
 import numpy as np
 
 from htdata.codec import decode_exr_pixels
+from htdata.contact import OLD_RULE, THRESHOLD, ContactRule, episode_rule
 from htdata.format import HANDS, JSON_MEMBER, MAP_SHAPE, SIZE_FIELDS, raw_member, tactile_member
 from htdata.health import TaxelGrid, classify
 from htdata.layouts import CanonicalHand, Layout, parse_canonical, parse_layout
 from htdata.rasterise import Rasteriser
 from htdata.rawstream import paired_row, paired_source_row
 
-CONTACT_THRESHOLD = 0.02      # a taxel above this is in contact (validate's contact threshold)
+CONTACT_THRESHOLD = THRESHOLD  # the old rule's level (htdata.contact), kept beside the calibrated one
 HIST_BINS = 1000              # fixed bins over (0, 1]: quantiles to 0.001, mergeable by addition
 CHUNK = 64                    # maps sampled per sparse product (bounds memory: 64 x 50176 float64)
 
@@ -224,7 +225,8 @@ def compute_episode(reader, pos: int, gloves: dict[str, Glove]) -> dict:
             x, raw = _raw_taxels(s, normalisers[hand], glove, ep, hand, nan_samples)
         else:
             x, raw = _map_taxels(s, glove), None
-        out["hands"][hand] = hand_stats(x, s.frames, glove, ep["layouts"][hand], raw)
+        out["hands"][hand] = hand_stats(x, s.frames, glove, ep["layouts"][hand], raw,
+                                        episode_rule(reader.manifest, ep, hand, glove.layout.value))
     return out
 
 
@@ -237,11 +239,17 @@ def raw_histogram(raw: np.ndarray, top: float) -> dict:
             "raw_min": float(v.min()) if v.size else None, "raw_max": float(v.max()) if v.size else None}
 
 
-def hand_stats(x: np.ndarray, frames: list[int], glove: Glove, layout_id: str, raw: np.ndarray | None = None) -> dict:
-    """Mergeable sums of one episode hand's (T, L) taxel series (+ raw-unit sketch when `raw` is given)."""
+def hand_stats(x: np.ndarray, frames: list[int], glove: Glove, layout_id: str, raw: np.ndarray | None = None,
+               rule: ContactRule = OLD_RULE) -> dict:
+    """Mergeable sums of one episode hand's (T, L) taxel series (+ raw-unit sketch when `raw` is given).
+
+    Contact follows `rule` (htdata.contact: the episode hand's calibration);
+    "contact_frames_threshold" keeps the old count (any taxel > 0.02) beside it.
+    """
     x = np.clip(x.astype(np.float64), 0.0, 1.0)
     zeros, hist = value_histogram(x.ravel())
-    contact = x > CONTACT_THRESHOLD
+    in_contact = rule.frames(x) if len(x) else np.zeros(0, bool)
+    contact = rule.taxels(x) & in_contact[:, None]     # a region touches only in a frame the hand touches
     regions = {}
     names = np.asarray(glove.regions)
     for name in sorted(set(glove.regions)):
@@ -251,7 +259,9 @@ def hand_stats(x: np.ndarray, frames: list[int], glove: Glove, layout_id: str, r
                          "pressure_sum": float(x[:, cols][hit].sum()), "pressure_count": int(hit.sum())}
     frame_max = x.max(axis=1) if len(x) else np.zeros(0)
     out = {
-        "layout": layout_id, "frames": int(len(x)), "contact_frames": int(contact.any(axis=1).sum()),
+        "layout": layout_id, "frames": int(len(x)), "contact_frames": int(in_contact.sum()),
+        "contact_frames_threshold": int((x > CONTACT_THRESHOLD).any(axis=1).sum()) if len(x) else 0,
+        "contact_rule": rule.to_dict(), "frame_contact": in_contact.astype(int).tolist(),
         "values_from": "raw" if raw is not None else "maps",
         "zeros": zeros, "hist": hist.tolist(), "max": float(x.max()) if x.size else 0.0,
         "taxel_sum": x.sum(axis=0).tolist(), "taxel_sumsq": (x * x).sum(axis=0).tolist(),
@@ -264,7 +274,7 @@ def hand_stats(x: np.ndarray, frames: list[int], glove: Glove, layout_id: str, r
 
 
 def empty_hand(layout_id: str | None) -> dict:
-    return {"layout": layout_id, "frames": 0, "contact_frames": 0, "zeros": 0, "hist": [0] * HIST_BINS,
+    return {"layout": layout_id, "frames": 0, "contact_frames": 0, "contact_frames_threshold": 0, "contact_rules": [], "zeros": 0, "hist": [0] * HIST_BINS,
             "max": 0.0, "taxel_sum": None, "taxel_sumsq": None, "regions": {}, "episodes": 0,
             "frames_from_raw": 0, "raw_top": None}
 
@@ -293,6 +303,10 @@ def merge_hand(into: dict, h: dict) -> dict:
     into["episodes"] = into.get("episodes", 0) + 1
     into["frames"] += h["frames"]
     into["contact_frames"] += h["contact_frames"]
+    into["contact_frames_threshold"] = into.get("contact_frames_threshold", 0) + h.get("contact_frames_threshold", 0)
+    rule = h.get("contact_rule")
+    if rule is not None and rule not in into.setdefault("contact_rules", []):
+        into["contact_rules"].append(rule)
     into["zeros"] += h["zeros"]
     into["hist"] = (np.asarray(into["hist"], np.int64) + np.asarray(h["hist"], np.int64)).tolist()
     into["max"] = max(into["max"], h["max"])

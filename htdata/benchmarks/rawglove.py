@@ -12,6 +12,8 @@ one count), on clips that start at rest and clips that start mid-grasp:
 - contact precision / recall per taxel: predicted = normalised value > 0,
   truth = true pressure >= TRUTH_LEVEL; taxel-frames with a true pressure
   in between (REST_TRUTH..TRUTH_LEVEL: a blob's faint tail) count for neither;
+- frame contact precision / recall: each hand-frame by its contact rule (htdata/contact.py) against
+  truth = at least the rule's area of taxels with true pressure >= TRUTH_LEVEL;
 - cost: microseconds per two-hand frame of fitting + normalising (in memory).
 
 Plus a long drifting recording (10 minutes, 3 in --quick), right hand:
@@ -73,6 +75,17 @@ def _ratios(c: dict) -> dict:
             "recall": c["tp"] / max(c["tp"] + c["fn"], 1) if c["tp"] + c["fn"] else None}
 
 
+def _share(a: int, b: int) -> float | None:
+    return a / b if b else None
+
+
+def contact_rule(cfg: NormaliseConfig):
+    """The frame contact rule htdata.contact gives this calibration on the sample glove."""
+    from htdata.contact import rule_for
+
+    return rule_for(cfg.to_dict(), glove_layout("right").value)
+
+
 def clip_rows(clips: list[RawGloveClip]) -> list[dict]:
     rows = []
     for baseline, _ in BASELINE_OPTIONS:
@@ -82,6 +95,8 @@ def clip_rows(clips: list[RawGloveClip]) -> list[dict]:
             cfg = config_for(baseline, floor)
             for start in ("rest", "mid_grasp"):
                 total = {"rest": 0, "rest_above_0": 0, "tp": 0, "fp": 0, "fn": 0}
+                rule = contact_rule(cfg)
+                frames_hit = {"tp": 0, "fp": 0, "fn": 0}
                 frames, seconds = 0, 0.0
                 for clip in (c for c in clips if c.start == start):
                     t0 = time.perf_counter()
@@ -89,11 +104,18 @@ def clip_rows(clips: list[RawGloveClip]) -> list[dict]:
                     seconds += time.perf_counter() - t0
                     frames += clip.n_frames
                     for h, v in values.items():
-                        c = score(v, clip.pressure[h][:, glove_layout(h).live_mask])
+                        pressure = clip.pressure[h][:, glove_layout(h).live_mask]
+                        c = score(v, pressure)
                         total = {k: total[k] + c[k] for k in total}
+                        pred, truth = rule.frames(v), (pressure >= TRUTH_LEVEL).sum(axis=1) >= rule.min_taxels
+                        frames_hit["tp"] += int((pred & truth).sum())
+                        frames_hit["fp"] += int((pred & ~truth).sum())
+                        frames_hit["fn"] += int((~pred & truth).sum())
                 rows.append({"baseline": baseline, "noise_floor": f"noise_k={NOISE_K:g}" if floor else "none",
                              "clips": start, "frames": frames, **_ratios(total),
-                             "us_per_frame": 1e6 * seconds / max(frames, 1)})
+                             "us_per_frame": 1e6 * seconds / max(frames, 1), "contact_rule": rule.describe(),
+                             "frame_precision": _share(frames_hit["tp"], frames_hit["tp"] + frames_hit["fp"]),
+                             "frame_recall": _share(frames_hit["tp"], frames_hit["tp"] + frames_hit["fn"])})
     return rows
 
 
@@ -131,7 +153,13 @@ def rawglove_markdown(d: dict) -> list[str]:
     rows = [{k: ("-" if v is None else v) for k, v in r.items()} for r in d["clips"]]   # no prediction: no precision
     lines += table(rows, [("baseline", "baseline"), ("noise_floor", "noise floor"), ("clips", "clips start"),
                                 ("frames", "frames"), ("rest_pixels_above_0", "rest pixels > 0"),
-                                ("precision", "precision"), ("recall", "recall"), ("us_per_frame", "us/frame")])
+                                ("precision", "precision"), ("recall", "recall"),
+                                ("frame_precision", "frame contact precision"), ("frame_recall", "frame contact recall"),
+                                ("us_per_frame", "us/frame")])
+    lines += ["Frame contact: the hand's contact rule (htdata/contact.py) against truth = at least that many "
+              "taxels with true pressure >= the truth level; with a noise floor: " +
+              next((r["contact_rule"] for r in d["clips"] if r["noise_floor"] != "none"), "-") +
+              "; without: " + next((r["contact_rule"] for r in d["clips"] if r["noise_floor"] == "none"), "-") + ".", ""]
     dr = d["drift"]
     lines += ["", f"Drifting recording: {dr['minutes']:g} minutes ({dr['frames']} frames), right hand, "
                   f"noise_k = {d['noise_k']:g}: rest pixels > 0 over the last 30 s.", ""]
