@@ -4,7 +4,8 @@
                 a taxel is in contact when its normalised value is more than LEVEL_STEPS
                 quantisation steps (`value.step / max`, 0 when the layout gives no step)
                 above its noise floor (values are floor-subtracted, so: value > 2 steps);
-                a frame is in contact when at least MIN_AREA_TAXELS taxels of the hand are.
+                a frame is in contact when at least max(MIN_AREA_TAXELS, MIN_AREA_SHARE x the
+                hand's live taxels) taxels are (3 on a 169-taxel glove, 6 on a 580-taxel one).
     threshold   (no noise floor: the clean-world gloves, and the old rule on request)
                 a taxel is in contact above THRESHOLD (0.02) and one taxel is enough.
 
@@ -35,6 +36,9 @@ MIN_AREA_TAXELS = 3        # calibrated rule: taxels above their floor for a fra
 # resting frames have a median of 9 (quietest) / 5 (drift) taxels just above their floor (slow creep and
 # rounding move a count or two), 0 more than 2 steps above it (90th percentile 1); touched frames have >= 30.
 LEVEL_STEPS = 2
+# ... and in 0.18% of resting frames 3 scattered taxels are above that at once (none reach 6): a big glove
+# needs a bigger area, or one stray frame keeps a whole idle tail in `trim --idle`.
+MIN_AREA_SHARE = 0.01
 RULE_VERSION = 1           # part of the stats cache key
 
 
@@ -66,18 +70,24 @@ class ContactRule:
 OLD_RULE = ContactRule("threshold", THRESHOLD, 1)
 
 
-def rule_for(calibration: dict | None, layout_value: dict | None = None) -> ContactRule:
-    """The contact rule of an episode hand from its manifest calibration entry (None: none recorded) and
-    its layout's value block (the quantisation step)."""
+def min_area(live_taxels: int) -> int:
+    """Taxels the calibrated rule needs in contact at once, for a glove hand of `live_taxels` taxels."""
+    return max(MIN_AREA_TAXELS, int(np.ceil(MIN_AREA_SHARE * live_taxels)))
+
+
+def rule_for(calibration: dict | None, layout_value: dict | None = None, live_taxels: int = 0) -> ContactRule:
+    """The contact rule of an episode hand from its manifest calibration entry (None: none recorded), its
+    layout's value block (the quantisation step) and its number of live taxels."""
     if calibration and (float(calibration.get("noise_k", 0) or 0) > 0
                         or float(calibration.get("noise_floor", 0) or 0) > 0):
         step = float((layout_value or {}).get("step") or 0.0)
         top = float(calibration.get("max_value") or (layout_value or {}).get("max") or 1.0)
-        return ContactRule("calibrated", round(LEVEL_STEPS * step / top, 9), MIN_AREA_TAXELS)
+        return ContactRule("calibrated", round(LEVEL_STEPS * step / top, 9), min_area(live_taxels))
     return OLD_RULE
 
 
-def episode_rule(manifest: dict, episode: dict, hand: str, layout_value: dict | None = None) -> ContactRule:
-    """`rule_for` the calibration the episode record names for `hand`."""
+def episode_rule(manifest: dict, episode: dict, hand: str, layout=None) -> ContactRule:
+    """`rule_for` the calibration the episode record names for `hand` (layout: its parsed Layout)."""
     cal = (episode.get("calibration") or {}).get(hand)
-    return rule_for(manifest.get("calibrations", {}).get(cal) if cal else None, layout_value)
+    return rule_for(manifest.get("calibrations", {}).get(cal) if cal else None,
+                    getattr(layout, "value", None), int(layout.live_mask.sum()) if layout is not None else 0)

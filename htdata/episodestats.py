@@ -226,7 +226,7 @@ def compute_episode(reader, pos: int, gloves: dict[str, Glove]) -> dict:
         else:
             x, raw = _map_taxels(s, glove), None
         out["hands"][hand] = hand_stats(x, s.frames, glove, ep["layouts"][hand], raw,
-                                        episode_rule(reader.manifest, ep, hand, glove.layout.value))
+                                        episode_rule(reader.manifest, ep, hand, glove.layout))
     return out
 
 

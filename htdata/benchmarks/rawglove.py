@@ -83,7 +83,8 @@ def contact_rule(cfg: NormaliseConfig):
     """The frame contact rule htdata.contact gives this calibration on the sample glove."""
     from htdata.contact import rule_for
 
-    return rule_for(cfg.to_dict(), glove_layout("right").value)
+    layout = glove_layout("right")
+    return rule_for(cfg.to_dict(), layout.value, int(layout.live_mask.sum()))
 
 
 def clip_rows(clips: list[RawGloveClip]) -> list[dict]:
