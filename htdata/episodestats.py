@@ -32,6 +32,7 @@ from htdata.codec import decode_exr_pixels
 from htdata.contact import OLD_RULE, THRESHOLD, ContactRule, episode_rule
 from htdata.format import HANDS, JSON_MEMBER, MAP_SHAPE, SIZE_FIELDS, raw_member, tactile_member
 from htdata.health import TaxelGrid, classify
+from htdata.rawhealth import classify_raw
 from htdata.layouts import CanonicalHand, Layout, parse_canonical, parse_layout
 from htdata.rasterise import Rasteriser
 from htdata.rawstream import paired_row, paired_source_row
@@ -190,11 +191,10 @@ def _map_taxels(s: _Series, glove: "Glove") -> np.ndarray:
 
 
 def _raw_taxels(s: _Series, normaliser, glove: "Glove", ep: dict, hand: str, nan_samples: list):
-    """((T, L) normalised live values, (T, L) raw live values) of the paired raw rows, exactly as calibrated."""
+    """((T, L) normalised live values, (T, H, W) raw rows) of the paired raw rows, exactly as calibrated."""
     live = glove.layout.live_mask
     if not s.items:
-        empty = np.zeros((0, glove.layout.num_live), np.float32)
-        return empty, empty
+        return np.zeros((0, glove.layout.num_live), np.float32), np.zeros((0, *glove.layout.grid), np.float32)
     raw = np.stack(s.items)
     values, finite = normaliser.apply(raw, rows=s.source_rows if normaliser.cfg.baseline == "drift" else None)
     if not finite.all():           # the ingest drops such frames: a stored one is damage, named like a NaN map
@@ -203,7 +203,7 @@ def _raw_taxels(s: _Series, normaliser, glove: "Glove", ep: dict, hand: str, nan
                                 "sample": s.keys[t][1], "nonfinite_taxels": int((~np.isfinite(raw[t][live])).sum())})
         s.frames = [f for f, ok in zip(s.frames, finite) if ok]
         values, raw = values[finite], raw[finite]
-    return values[:, live], raw[:, live]
+    return values[:, live], raw
 
 
 def compute_episode(reader, pos: int, gloves: dict[str, Glove]) -> dict:
@@ -241,7 +241,8 @@ def raw_histogram(raw: np.ndarray, top: float) -> dict:
 
 def hand_stats(x: np.ndarray, frames: list[int], glove: Glove, layout_id: str, raw: np.ndarray | None = None,
                rule: ContactRule = OLD_RULE) -> dict:
-    """Mergeable sums of one episode hand's (T, L) taxel series (+ raw-unit sketch when `raw` is given).
+    """Mergeable sums of one episode hand's (T, L) taxel series (+ raw-unit sketch and raw-row taxel health
+    when `raw`, its (T, H, W) raw rows, is given).
 
     Contact follows `rule` (htdata.contact: the episode hand's calibration);
     "contact_frames_threshold" keeps the old count (any taxel > 0.02) beside it.
@@ -266,10 +267,11 @@ def hand_stats(x: np.ndarray, frames: list[int], glove: Glove, layout_id: str, r
         "zeros": zeros, "hist": hist.tolist(), "max": float(x.max()) if x.size else 0.0,
         "taxel_sum": x.sum(axis=0).tolist(), "taxel_sumsq": (x * x).sum(axis=0).tolist(),
         "regions": regions, "frame_index": list(frames), "frame_max": [round(float(v), 5) for v in frame_max],
-        "health": classify(x, glove.taxels),
+        # from the raw rows where stored: the glove's own health, whatever the calibration
+        "health": classify(x, glove.taxels) if raw is None else classify_raw(raw, glove.layout, glove.taxels),
     }
     if raw is not None:
-        out.update(raw_histogram(raw, float(glove.layout.value["max"])))
+        out.update(raw_histogram(raw[:, glove.layout.live_mask], float(glove.layout.value["max"])))
     return out
 
 

@@ -1,9 +1,9 @@
 """Taxel health: classify every live taxel of one episode hand from its sampled value series.
 
 Input is the (T, L) series of a glove's L live taxels over an episode's T
-frames (normalised values: the stored raw rows under the episode's
-calibration, or the stored maps sampled at the taxel centres on datasets
-without raw rows; htdata/episodestats.py), plus the layout geometry (`TaxelGrid`). Each
+frames (normalised values: the stored maps sampled at the taxel centres, on
+datasets without raw rows; where the raw rows are stored, htdata/rawhealth.py
+classifies the raw counts instead, in glove units), plus the layout geometry (`TaxelGrid`). Each
 taxel gets at most one class, checked in this order:
 
 - saturated: at the top of the scale (>= SATURATION_LEVEL) in more than
@@ -42,8 +42,8 @@ import numpy as np
 
 from htdata.layouts import Layout
 
-HEALTH_VERSION = 1
-CLASSES = ("saturated", "stuck", "dead", "noisy", "crosstalk")
+HEALTH_VERSION = 2            # 2: "drifting"; raw-row health (htdata/rawhealth.py) where raw rows are stored
+CLASSES = ("saturated", "stuck", "dead", "noisy", "drifting", "crosstalk")
 MIN_FRAMES = 30
 CONTACT_LEVEL = 0.02          # a taxel reads contact above this (validate's contact threshold)
 NOISE_RANGE = 0.01            # p99 - p1 below this: no variation beyond noise
@@ -98,7 +98,7 @@ def classify(series: np.ndarray, taxels: TaxelGrid) -> dict:
     "unexercised"} (cells in raw grid coordinates)."""
     x = np.asarray(series, np.float32)
     T, L = x.shape
-    out = {"assessed": T >= MIN_FRAMES, "frames": int(T), "live": int(L),
+    out = {"assessed": T >= MIN_FRAMES, "frames": int(T), "live": int(L), "basis": "maps",
            "counts": {c: 0 for c in CLASSES}, "cells": {c: [] for c in CLASSES}, "unexercised": 0}
     if not out["assessed"] or L == 0:
         return out
@@ -115,8 +115,10 @@ def classify(series: np.ndarray, taxels: TaxelGrid) -> dict:
     hf = np.percentile(np.abs(np.diff(x, n=2, axis=0)), 75, axis=0)
     near_hf = _neighbour_median(hf, taxels)
     noisy = (hf > NOISY_MIN_HF) & (hf > NOISY_RATIO * near_hf)
-    for k, mask in enumerate((saturated, stuck, quiet & exercised, noisy, crosstalk)):
-        label[(label < 0) & mask] = k
+    masks = {"saturated": saturated, "stuck": stuck, "dead": quiet & exercised, "noisy": noisy,
+             "crosstalk": crosstalk}         # drifting needs the raw rows (htdata/rawhealth.py)
+    for name, mask in masks.items():
+        label[(label < 0) & mask] = CLASSES.index(name)
     for k, name in enumerate(CLASSES):
         hit = np.flatnonzero(label == k)
         out["counts"][name] = int(hit.size)
@@ -228,6 +230,8 @@ def merge_counts(into: dict, health: dict) -> None:
     into.setdefault("episodes_not_assessed", 0)
     into.setdefault("taxels_assessed", 0)
     into.setdefault("unexercised", 0)
+    into.setdefault("unmapped_moving", 0)
+    into.setdefault("basis", [])
     counts = into.setdefault("counts", {c: 0 for c in CLASSES})
     if not health.get("assessed"):
         into["episodes_not_assessed"] += 1
@@ -235,6 +239,9 @@ def merge_counts(into: dict, health: dict) -> None:
     into["episodes_assessed"] += 1
     into["taxels_assessed"] += int(health["live"])
     into["unexercised"] += int(health.get("unexercised", 0))
+    into["unmapped_moving"] += int(health.get("unmapped_moving", 0))
+    if health.get("basis", "maps") not in into["basis"]:
+        into["basis"].append(health.get("basis", "maps"))
     for c in CLASSES:
         counts[c] += int(health["counts"].get(c, 0))
 

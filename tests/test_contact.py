@@ -87,3 +87,13 @@ def test_idle_trim_cuts_where_the_glove_rests(datasets):
     off = [max(abs((c.keep or range(c.frames)).start - truth[e][0]), abs((c.keep or range(c.frames)).stop - truth[e][1]))
            for e, c in cuts.items()]
     assert max(off) > 30
+
+
+def test_taxel_health_comes_from_the_raw_rows_whatever_the_calibration(datasets):
+    from htdata.stats import dataset_stats
+
+    healths = [{g["hand"]: g["health"] for g in dataset_stats(datasets[b], cache_dir=None)["gloves"]}
+               for b in ("quietest", "rest_window")]
+    assert healths[0] == healths[1]
+    assert healths[0]["right"]["basis"] == ["raw"]
+    assert healths[0]["right"]["counts"]["stuck"] > 0 and healths[0]["right"]["counts"]["saturated"] > 0

@@ -91,8 +91,21 @@ def _check_dataset(ds: Loaded, cfg: ValidateConfig, checks: dict[str, Check], pa
         hashes.update(dict(res["hashes"]))
         merge_sensor(sensor, res["sensor"])
     check_time(ds, ts, checks["time"])
-    check_sensors(sensor, checks["sensors"])
+    check_sensors(sensor, checks["sensors"], _region_names(ds))
     check_taxel_health(ds.root, ds.manifest.get("version"), checks["sensors"], compute=cfg.deep)
     if cfg.split is not None:
         check_splits(ds, cfg.split, hashes, checks["splits"])
     return dataset_stats(ds, sensor)
+
+
+def _region_names(ds) -> dict[int, str]:
+    """Canonical region id -> place name, from the dataset's canonical document ({} when unreadable)."""
+    import json
+
+    from htdata import storage
+
+    try:
+        doc = json.loads(storage.read_text(storage.join(ds.root, ds.manifest["canonical"]["file"])))
+        return {int(p["region_id"]): name for name, p in doc.get("places", {}).items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {}
