@@ -59,6 +59,14 @@ CROSSTALK_MIN_FRAMES = 5
 CROSSTALK_SHARE = 0.5
 CROSSTALK_LINE_MATES = 2
 CROSSTALK_SIDE_TAXELS = 3     # live taxels beside the line needed to call a reading isolated
+THRESHOLDS = {"saturated": f">= {SATURATION_LEVEL} in > {SATURATED_SHARE:.0%} of frames",
+              "stuck": f"constant (p99-p1 < {NOISE_RANGE}) at >= {STUCK_LEVEL}",
+              "dead": f"constant below {STUCK_LEVEL} while neighbours read >= {PRESSED_LEVEL}",
+              "noisy": f"high-frequency level > {NOISY_MIN_HF} and {NOISY_RATIO:g}x its neighbours'",
+              "drifting": "needs the raw rows",
+              "crosstalk": f"a raw row/column reads > {CONTACT_LEVEL} with nothing beside it",
+              "unexercised": f"constant below {STUCK_LEVEL}, neighbours never pressed",
+              "unmapped": "needs the raw rows"}
 # `htdata validate` warns when the flagged share of an episode hand's live taxels passes this.
 WARN_SHARE = 0.05
 
@@ -99,7 +107,8 @@ def classify(series: np.ndarray, taxels: TaxelGrid) -> dict:
     x = np.asarray(series, np.float32)
     T, L = x.shape
     out = {"assessed": T >= MIN_FRAMES, "frames": int(T), "live": int(L), "basis": "maps",
-           "counts": {c: 0 for c in CLASSES}, "cells": {c: [] for c in CLASSES}, "unexercised": 0}
+           "counts": {c: 0 for c in CLASSES}, "cells": {c: [] for c in CLASSES}, "unexercised": 0,
+           "unexercised_cells": []}
     if not out["assessed"] or L == 0:
         return out
     label = np.full(L, -1, np.int64)
@@ -111,6 +120,7 @@ def classify(series: np.ndarray, taxels: TaxelGrid) -> dict:
     exercised = _exercised(x, taxels, ignore=crosstalk)     # a ghost line presses nothing
     quiet = flat & (p50 < STUCK_LEVEL)
     out["unexercised"] = int((quiet & ~exercised).sum())
+    out["unexercised_cells"] = taxels.cells[quiet & ~exercised & ~saturated & ~stuck & ~noisy & ~crosstalk].tolist()
     # 75th percentile of |second difference|: smooth pressing and a few steps (taps) stay low, noise does not
     hf = np.percentile(np.abs(np.diff(x, n=2, axis=0)), 75, axis=0)
     near_hf = _neighbour_median(hf, taxels)

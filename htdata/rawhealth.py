@@ -103,7 +103,7 @@ def classify_raw(raw: np.ndarray, layout, taxels: TaxelGrid | None = None) -> di
     L = x.shape[1]
     out = {"assessed": T >= MIN_FRAMES, "frames": int(T), "live": int(L), "basis": "raw",
            "counts": {c: 0 for c in CLASSES}, "cells": {c: [] for c in CLASSES}, "unexercised": 0,
-           "drift_assessed": False, "unmapped_cells": 0, "unmapped_moving": 0, "unmapped_moving_cells": []}
+           "unexercised_cells": [], "drift_assessed": False, "unmapped_cells": 0, "unmapped_moving": 0, "unmapped_moving_cells": []}
     if not out["assessed"] or L == 0:
         return out
     step = float(layout.value.get("step") or 0.0) / float(layout.value["max"]) or DEFAULT_STEP_SHARE
@@ -127,6 +127,7 @@ def classify_raw(raw: np.ndarray, layout, taxels: TaxelGrid | None = None) -> di
     for name in CLASSES:
         label[(label < 0) & masks.get(name, np.zeros(L, bool))] = CLASSES.index(name)
     out["unexercised"] = int((never & ~exercised & (label < 0)).sum())
+    out["unexercised_cells"] = taxels.cells[never & ~exercised & (label < 0)].tolist()
     for k, name in enumerate(CLASSES):
         hit = np.flatnonzero(label == k)
         out["counts"][name] = int(hit.size)

@@ -80,3 +80,26 @@ def test_inverted_gloves_are_read_in_the_pressure_direction(glove):
     inverted = type(LAYOUT)(**{**LAYOUT.__dict__, "value": {"convention": "inverted", "max": 1023.0, "step": 1}})
     h = classify_raw(1023.0 - raw, inverted)
     assert _found(h, "saturated") == set(unit.faults.cells["saturating"])
+
+
+def test_health_map_draws_unexercised_and_unmapped_cells_and_states_thresholds(glove):
+    from htdata.episodestats import Glove
+    from htdata.healthmap import (UNEXERCISED, UNEXERCISED_INDEX, UNMAPPED_MOVING, _legend, draw_grid_panel,
+                                  taxel_classes)
+    from htdata.layouts import load_canonical
+
+    unit, raw = glove
+    raw = raw.copy()
+    raw[:, 13, 5] += np.where(np.arange(len(raw)) % 60 < 30, 0, 80)
+    h = classify_raw(raw, LAYOUT)
+    g = Glove(LAYOUT, load_canonical())
+    per_episode = [{"hands": {"right": {"layout": LAYOUT.layout_id, "health": h}}}]
+    classes = taxel_classes(per_episode, LAYOUT.layout_id, "right", g)
+    idle = {tuple(c) for c in h["unexercised_cells"]}
+    assert idle and all(classes[i] == UNEXERCISED_INDEX for i, c in enumerate(g.taxels.cells.tolist())
+                        if tuple(c) in idle)
+    panel = draw_grid_panel(g, classes, {(13, 5)})
+    assert (panel == np.array(UNMAPPED_MOVING, np.uint8)).all(axis=2).any()
+    assert (panel == np.array(UNEXERCISED, np.uint8)).all(axis=2).any()
+    text = " ".join(t for _, t in _legend({"raw"}))
+    assert "rest >= 98% of full scale" in text and "unexercised (not a fault)" in text and "unmapped, moving" in text
