@@ -120,7 +120,6 @@ def classify(series: np.ndarray, taxels: TaxelGrid) -> dict:
     exercised = _exercised(x, taxels, ignore=crosstalk)     # a ghost line presses nothing
     quiet = flat & (p50 < STUCK_LEVEL)
     out["unexercised"] = int((quiet & ~exercised).sum())
-    out["unexercised_cells"] = taxels.cells[quiet & ~exercised & ~saturated & ~stuck & ~noisy & ~crosstalk].tolist()
     # 75th percentile of |second difference|: smooth pressing and a few steps (taps) stay low, noise does not
     hf = np.percentile(np.abs(np.diff(x, n=2, axis=0)), 75, axis=0)
     near_hf = _neighbour_median(hf, taxels)
@@ -129,6 +128,7 @@ def classify(series: np.ndarray, taxels: TaxelGrid) -> dict:
              "crosstalk": crosstalk}         # drifting needs the raw rows (htdata/rawhealth.py)
     for name, mask in masks.items():
         label[(label < 0) & mask] = CLASSES.index(name)
+    out["unexercised_cells"] = taxels.cells[quiet & ~exercised & (label < 0)].tolist()
     for k, name in enumerate(CLASSES):
         hit = np.flatnonzero(label == k)
         out["counts"][name] = int(hit.size)
