@@ -97,3 +97,11 @@ def test_taxel_health_comes_from_the_raw_rows_whatever_the_calibration(datasets)
     assert healths[0] == healths[1]
     assert healths[0]["right"]["basis"] == ["raw"]
     assert healths[0]["right"]["counts"]["stuck"] > 0 and healths[0]["right"]["counts"]["saturated"] > 0
+
+
+def test_glove_only_dataset_says_why_paired_items_are_none(datasets):
+    from htdata.torchdata import TactileFrameDataset
+
+    with pytest.raises(ValueError, match='glove-only dataset.*frames="tactile"'):
+        TactileFrameDataset(datasets["quietest"])
+    assert len(TactileFrameDataset(datasets["quietest"], frames="tactile")) == 2 * 1380
