@@ -44,6 +44,8 @@ from htdata.layouts import Layout
 
 HEALTH_VERSION = 2            # 2: "drifting"; raw-row health (htdata/rawhealth.py) where raw rows are stored
 CLASSES = ("saturated", "stuck", "dead", "noisy", "drifting", "crosstalk")
+RECORD_HEALTH_VERSION = 1     # episode records' taxel_health (`record_entry`)
+RECORD_CLASSES = ("saturated", "stuck", "dead", "noisy", "crosstalk")
 MIN_FRAMES = 30
 CONTACT_LEVEL = 0.02          # a taxel reads contact above this (validate's contact threshold)
 NOISE_RANGE = 0.01            # p99 - p1 below this: no variation beyond noise
@@ -226,9 +228,12 @@ def record_entry(chunks: list[np.ndarray], layout: Layout) -> dict:
     """
     series = np.concatenate(chunks) if chunks else np.zeros((0, int(layout.live_mask.sum())), np.float32)
     result = classify(series, TaxelGrid.of(layout))
-    out = {"version": HEALTH_VERSION, "assessed": result["assessed"], "live": result["live"],
-           "counts": result["counts"], "unexercised": result["unexercised"]}
-    flagged = {c: cells for c, cells in result["cells"].items() if cells}
+    # the record keeps its version-1 form (the normalised-values classes; no "drifting", which needs the raw
+    # rows): an episode record's bytes do not change with HEALTH_VERSION. `htdata stats` (the health map,
+    # validate's warning, the card) classifies the raw rows where they are stored: htdata/rawhealth.py.
+    out = {"version": RECORD_HEALTH_VERSION, "assessed": result["assessed"], "live": result["live"],
+           "counts": {c: result["counts"][c] for c in RECORD_CLASSES}, "unexercised": result["unexercised"]}
+    flagged = {c: cells for c, cells in result["cells"].items() if cells and c in RECORD_CLASSES}
     if flagged:
         out["cells"] = flagged
     return out
