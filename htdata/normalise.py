@@ -90,6 +90,11 @@ class NormaliseConfig:
     rest_seconds: float = 1.0  # span length of baseline="quietest" (and of the noise spread of the episode baselines)
     baseline_percentile: float = 5.0  # baseline="percentile": per-taxel percentile over the episode
     drift_window_s: float = 30.0      # baseline="drift": window of the running rest level
+    # A per-glove calibration measured once: an .npz with per-taxel `offset` (rest, raw units) and `gain`
+    # (multiplier after the offset, 1 = nominal: a taxel twice as sensitive has 0.5), each (H,W). The pipeline resolves the path and fills in its sha256
+    # (PipelineConfig.normalise_for); the arrays travel in each episode record's calibration_fit.
+    taxel_calibration: str = ""
+    taxel_calibration_sha256: str = ""
 
     @property
     def per_episode(self) -> bool:
@@ -99,7 +104,7 @@ class NormaliseConfig:
     @property
     def fits(self) -> bool:
         """True when the calibration has per-episode fitted arrays (baseline / noise floor)."""
-        return self.baseline != "none" or self.noise_k > 0
+        return self.baseline != "none" or self.noise_k > 0 or bool(self.taxel_calibration_sha256)
 
     def validate(self, where: str = "normalise") -> "NormaliseConfig":
         if self.convention not in CONVENTIONS:
@@ -143,7 +148,8 @@ class NormaliseConfig:
         """The settings; the activity-baseline fields only when they differ from their defaults, so the
         calibration ids (a hash of this) of pipelines written before they existed stay the same."""
         d = asdict(self)
-        for name in ("rest_seconds", "baseline_percentile", "drift_window_s"):
+        del d["taxel_calibration"]        # where the file was is not its identity: its sha256 is
+        for name in ("rest_seconds", "baseline_percentile", "drift_window_s", "taxel_calibration_sha256"):
             if d[name] == type(self).__dataclass_fields__[name].default:
                 del d[name]
         return d
@@ -166,6 +172,10 @@ class Normaliser:
         self.floor = np.full(self.grid, max(cfg.noise_floor, self.min_floor), dtype=np.float32)
         if cfg.baseline == "none":
             self.baseline = np.zeros(self.grid, dtype=np.float32)
+        self.offset: np.ndarray | None = None     # per-glove calibration file (raw units) and gain
+        self.gain: np.ndarray | None = None
+        if cfg.taxel_calibration:
+            self.offset, self.gain = load_taxel_calibration(cfg.taxel_calibration, self.grid, self.layout_id)
 
     def _check(self, raw) -> np.ndarray:
         arr = np.asarray(raw, dtype=np.float32)
@@ -175,11 +185,17 @@ class Normaliser:
         return arr
 
     def to_unit(self, raw: np.ndarray) -> np.ndarray:
-        """Convention + max only (before baseline/scale/clip)."""
+        """Convention + max (+ the calibration file's per-taxel offset and gain), before baseline/scale/clip."""
+        if self.cfg.taxel_calibration_sha256 and self.offset is None:
+            raise RuntimeError(f"layout {self.layout_id}: the taxel calibration file is not loaded (restore())")
         with np.errstate(invalid="ignore", over="ignore"):
+            top = np.float32(self.cfg.max_value)
+            if self.offset is not None:       # rest reads 0, a taxel's press counts by its own sensitivity
+                above = (self.offset - raw) if self.cfg.convention == "inverted" else (raw - self.offset)
+                return above * self.gain / top
             if self.cfg.convention == "inverted":
-                return (np.float32(self.cfg.max_value) - raw) / np.float32(self.cfg.max_value)
-            return raw / np.float32(self.cfg.max_value)
+                return (top - raw) / top
+            return raw / top
 
     def out_of_range(self, raw) -> tuple[np.ndarray, np.ndarray]:
         """(below, above): per frame, how many live finite taxels of `raw` lie below 0 / above max_value."""
@@ -298,6 +314,8 @@ class Normaliser:
         out = {"baseline": self.baseline, "noise_floor": self.floor}
         if self.cfg.baseline == "drift":
             out["knot_rows"] = self.knot_rows
+        if self.offset is not None:
+            out["offset"], out["gain"] = self.offset, self.gain
         return out
 
     def restore(self, fitted: dict[str, np.ndarray]) -> "Normaliser":
@@ -314,6 +332,12 @@ class Normaliser:
                 raise ValueError(f"layout {self.layout_id}: fitted calibration lacks {sorted(missing)}")
             self.baseline = np.asarray(fitted["baseline"], dtype=np.float32)
             self.floor = np.asarray(fitted["noise_floor"], dtype=np.float32)
+            if self.cfg.taxel_calibration_sha256:
+                if "offset" not in fitted or "gain" not in fitted:
+                    raise ValueError(f"layout {self.layout_id}: fitted calibration lacks the taxel calibration "
+                                     f"(offset, gain)")
+                self.offset = np.asarray(fitted["offset"], np.float32)
+                self.gain = np.asarray(fitted["gain"], np.float32)
             if self.cfg.baseline == "drift":
                 knots = self.baseline.reshape(-1, *self.grid)
                 rows = np.asarray(fitted.get("knot_rows", []), np.float32).reshape(-1)
@@ -393,3 +417,22 @@ class _nan_quiet:
 
     def __exit__(self, *exc):
         return self._w.__exit__(*exc)
+
+
+def load_taxel_calibration(path: str, grid: tuple[int, int], layout_id: str) -> tuple[np.ndarray, np.ndarray]:
+    """(offset, gain) float32 (H,W) from a per-glove calibration .npz; errors name the file."""
+    try:
+        with np.load(path) as z:
+            offset, gain = np.asarray(z["offset"], np.float32), np.asarray(z["gain"], np.float32)
+    except (OSError, KeyError, ValueError) as exc:
+        raise ValueError(f"{path}: not a taxel calibration of layout {layout_id} (an .npz with offset and gain "
+                         f"arrays): {exc}") from None
+    for name, arr in (("offset", offset), ("gain", gain)):
+        if arr.shape != tuple(grid):
+            raise ValueError(f"{path}: {name} has shape {arr.shape}, layout {layout_id} has a {grid[0]}x{grid[1]} "
+                             f"grid")
+        if not np.isfinite(arr).all():
+            raise ValueError(f"{path}: {name} holds NaN/Inf")
+    if (gain <= 0).any():
+        raise ValueError(f"{path}: gain must be > 0 everywhere (a dead taxel: leave it out of the layout)")
+    return offset, gain

@@ -63,7 +63,8 @@ def test_write_rawglove_is_a_glove_only_native_corpus(tmp_path):
     with np.load(tmp_path / "rg" / "rawknit_00_pinch_pick_rest" / "tactile_left.npz") as z:
         assert z["values"].dtype == np.float16 and z["values"].shape[1:] == (32, 32)
     assert sorted(p.name for p in (tmp_path / "rg" / "layouts").iterdir()) == \
-        ["rawknit_left_32x32.json", "rawknit_right_32x32.json"]
+        ["rawknit_left_32x32.calibration.npz", "rawknit_left_32x32.json",
+         "rawknit_right_32x32.calibration.npz", "rawknit_right_32x32.json"]
 
 
 def _rates(values, clip, hand):
@@ -211,3 +212,57 @@ def test_out_of_range_warnings_reach_stderr(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "episode nat-rawknit_00_pinch_pick_rest: warning: right hand: 240 of 240 frames" in err
     assert "outside [0, 472]" in err and "FULL-SCALE" in err
+
+
+def test_taxel_calibration_file_formula_and_errors(tmp_path):
+    lay = glove_layout("right")
+    offset = np.full((32, 32), 550.0, np.float32)
+    offset[3, 3] = 600.0
+    gain = np.ones((32, 32), np.float32)
+    gain[3, 3] = 0.5
+    path = tmp_path / "cal.npz"
+    np.savez(path, offset=offset, gain=gain)
+    cfg = NormaliseConfig(convention="direct", max_value=FULL_SCALE, taxel_calibration=str(path),
+                          taxel_calibration_sha256="x" * 64)
+    n = Normaliser(cfg, lay)
+    raw = np.full((1, 32, 32), 652.3, np.float32)
+    v, _ = n.apply(raw)
+    assert v[0, 0, 0] == pytest.approx(102.3 / FULL_SCALE, rel=1e-5)            # (raw - offset) * gain / max
+    assert v[0, 3, 3] == pytest.approx(52.3 * 0.5 / FULL_SCALE, rel=1e-5)
+    assert set(n.fitted()) == {"baseline", "noise_floor", "offset", "gain"}
+    np.savez(tmp_path / "bad.npz", offset=offset[:8], gain=gain)
+    with pytest.raises(ValueError, match="bad.npz: offset has shape"):
+        Normaliser(NormaliseConfig(taxel_calibration=str(tmp_path / "bad.npz")), lay)
+    np.savez(tmp_path / "zero.npz", offset=offset, gain=gain * 0)
+    with pytest.raises(ValueError, match="gain must be > 0"):
+        Normaliser(NormaliseConfig(taxel_calibration=str(tmp_path / "zero.npz")), lay)
+
+
+def test_ingest_with_a_taxel_calibration_file_and_renormalise_from_the_record(tmp_path, capsys):
+    from htdata.cli import main
+    from htdata.reader import DatasetReader
+    from htdata.stats import dataset_stats
+    from tests.factories import ingest_cli
+
+    write_rawglove(tmp_path / "rg")
+    pipe = tmp_path / "rg" / "rawknit_cal.toml"          # the calibration path is relative to this file
+    pipe.write_text('name = "rawknit"\n[adapter]\nname = "native"\n[adapter.params]\n'
+                    '[normalise.rawknit_right_32x32]\ntaxel_calibration = "layouts/rawknit_right_32x32.calibration.npz"\n'
+                    'baseline = "quietest"\nnoise_k = 3\n')
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", pipe, "--layouts", tmp_path / "rg" / "layouts", tmp_path / "rg", out) == 0
+    with DatasetReader(out) as reader:
+        entry = next(e for e in reader.manifest["calibrations"].values() if e["layout"] == "rawknit_right_32x32")
+        assert len(entry["taxel_calibration_sha256"]) == 64 and "taxel_calibration" not in entry
+        assert "offset" in reader.episodes[0]["calibration_fit"]["right"]
+        before = [reader.decoded(i)["tactile"]["right"] for i in (10, 120)]
+    # --force: the same calibration, rebuilt from the record's offset and gain, gives the same maps
+    assert main(["renormalise", str(out), "--pipeline", str(pipe), "--force"]) == 0
+    with DatasetReader(out) as reader:
+        assert all(np.array_equal(a, reader.decoded(i)["tactile"]["right"]) for a, i in zip(before, (10, 120)))
+    # the dataset needs no copy of the file: stats from the raw rows restore offset and gain from the records
+    (tmp_path / "rg" / "layouts" / "rawknit_right_32x32.calibration.npz").unlink()
+    stats = dataset_stats(out, cache_dir=None)
+    assert all(g["frames_from_raw"] == g["frames"] for g in stats["gloves"])
+    right = next(g for g in stats["gloves"] if g["hand"] == "right")
+    assert 0.4 < right["contact_fraction"] < 0.7

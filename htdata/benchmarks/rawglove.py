@@ -15,6 +15,8 @@ one count), on clips that start at rest and clips that start mid-grasp:
 - frame contact precision / recall: each hand-frame by its contact rule (htdata/contact.py) against
   truth = at least the rule's area of taxels with true pressure >= TRUTH_LEVEL;
 - cost: microseconds per two-hand frame of fitting + normalising (in memory).
+Rows "file": the per-glove calibration file (`taxel_calibration`: the generator's true per-taxel offsets
+and gains, measured once), alone and under a quietest-span baseline with the noise floor.
 
 Plus a long drifting recording (10 minutes, 3 in --quick), right hand:
 rest pixels > 0 over its last 30 s, for each baseline.
@@ -44,10 +46,14 @@ def config_for(baseline: str, floor: bool) -> NormaliseConfig:
                            noise_k=NOISE_K if floor else 0.0, **extra).validate()
 
 
-def normalise_clip(clip: RawGloveClip, hand: str, cfg: NormaliseConfig) -> np.ndarray:
-    """(T, L) normalised live values of one hand of a clip, fitted as the ingest fits them."""
+def normalise_clip(clip: RawGloveClip, hand: str, cfg: NormaliseConfig, unit: GloveUnit | None = None
+                   ) -> np.ndarray:
+    """(T, L) normalised live values of one hand of a clip, fitted as the ingest fits them (with `unit`:
+    its offsets and gains as the per-glove calibration file, `taxel_calibration`, would give them)."""
     layout = glove_layout(hand)
     norm = Normaliser(cfg, layout)
+    if unit is not None:
+        norm.offset, norm.gain = unit.offset.astype(np.float32), (1.0 / unit.gain).astype(np.float32)
     raw = clip.counts[hand].astype(np.float32)
     rows = np.arange(len(raw))
     if cfg.per_episode:
@@ -87,12 +93,18 @@ def contact_rule(cfg: NormaliseConfig):
     return rule_for(cfg.to_dict(), layout.value, int(layout.live_mask.sum()))
 
 
-def clip_rows(clips: list[RawGloveClip]) -> list[dict]:
+# rows with the per-glove calibration file (offset + gain measured once): (label, baseline, noise floor)
+CALIBRATION_FILE_ROWS = (("file", "none", False), ("file + quietest", "quietest", True))
+
+
+def clip_rows(clips: list[RawGloveClip], units: dict[str, GloveUnit] | None = None) -> list[dict]:
+    plans = [(b, b, floor, False) for b, _ in BASELINE_OPTIONS for floor in (False, True)
+             if not floor or b in FLOORED]
+    if units:
+        plans += [(label, b, floor, True) for label, b, floor in CALIBRATION_FILE_ROWS]
     rows = []
-    for baseline, _ in BASELINE_OPTIONS:
-        for floor in (False, True):
-            if floor and baseline not in FLOORED:
-                continue
+    for label, baseline, floor, with_file in plans:
+        if True:
             cfg = config_for(baseline, floor)
             for start in ("rest", "mid_grasp"):
                 total = {"rest": 0, "rest_above_0": 0, "tp": 0, "fp": 0, "fn": 0}
@@ -101,7 +113,8 @@ def clip_rows(clips: list[RawGloveClip]) -> list[dict]:
                 frames, seconds = 0, 0.0
                 for clip in (c for c in clips if c.start == start):
                     t0 = time.perf_counter()
-                    values = {h: normalise_clip(clip, h, cfg) for h in clip.counts}
+                    values = {h: normalise_clip(clip, h, cfg, units[h] if with_file else None)
+                              for h in clip.counts}
                     seconds += time.perf_counter() - t0
                     frames += clip.n_frames
                     for h, v in values.items():
@@ -112,7 +125,7 @@ def clip_rows(clips: list[RawGloveClip]) -> list[dict]:
                         frames_hit["tp"] += int((pred & truth).sum())
                         frames_hit["fp"] += int((pred & ~truth).sum())
                         frames_hit["fn"] += int((~pred & truth).sum())
-                rows.append({"baseline": baseline, "noise_floor": f"noise_k={NOISE_K:g}" if floor else "none",
+                rows.append({"baseline": label, "noise_floor": f"noise_k={NOISE_K:g}" if floor else "none",
                              "clips": start, "frames": frames, **_ratios(total),
                              "us_per_frame": 1e6 * seconds / max(frames, 1), "contact_rule": rule.describe(),
                              "frame_precision": _share(frames_hit["tp"], frames_hit["tp"] + frames_hit["fp"]),
@@ -138,10 +151,10 @@ def drift_rows(minutes: float, seed: int) -> dict:
 
 
 def rawglove_rows(quick: bool, seed: int) -> dict:
-    _, clips = corpus_clips(seed)
+    units, clips = corpus_clips(seed)
     if quick:
         clips = [c for c in clips if c.n_frames <= 270][:3] + [c for c in clips if c.start == "mid_grasp"][:1]
-    return {"clips": clip_rows(clips), "drift": drift_rows(3.0 if quick else 10.0, seed),
+    return {"clips": clip_rows(clips, units), "drift": drift_rows(3.0 if quick else 10.0, seed),
             "truth_level": TRUTH_LEVEL, "noise_k": NOISE_K}
 
 

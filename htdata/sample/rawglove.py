@@ -220,7 +220,8 @@ def corpus_clips(seed: int = 0) -> tuple[dict[str, GloveUnit], list[RawGloveClip
 
 
 def write_rawglove(out: Path, seed: int = 0) -> dict:
-    """Write OUT/layouts/*.json, OUT/<clip>/ (htdata-native, glove only, float16) and OUT/truth.json.
+    """Write OUT/layouts/*.json, OUT/<clip>/ (htdata-native, glove only, float16), OUT/truth.json and
+    OUT/layouts/<layout>.calibration.npz (the glove's per-taxel offset and gain: `taxel_calibration`).
 
     Ingest: `htdata ingest --source native=OUT --layouts OUT/layouts ...`.
     truth.json names each clip's start ("rest" / "mid_grasp") and each hand's fault cells and ghost rows.
@@ -245,4 +246,8 @@ def write_rawglove(out: Path, seed: int = 0) -> dict:
             extra={"seed": seed, "start": clip.start}))
         truth["clips"][clip.name] = {"task": clip.task, "start": clip.start, "frames": clip.n_frames}
     (out / "truth.json").write_text(json.dumps(truth, indent=1))
+    # the glove's per-taxel offsets and gains, as a calibration measured once (pipeline key taxel_calibration)
+    for hand, unit in units.items():
+        np.savez(out / "layouts" / f"{LAYOUT_IDS[hand]}.calibration.npz", offset=unit.offset.astype(np.float32),
+                 gain=(1.0 / unit.gain).astype(np.float32))   # the multiplier that evens out sensitivity
     return {"clips": len(clips), "frames": sum(c.n_frames for c in clips)}
