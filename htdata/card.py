@@ -187,14 +187,18 @@ def _gloves(card: Card, s: dict, reader, parse_canonical) -> None:
 
 def _sync(card: Card, reader) -> None:
     skew, offset = [], []
+    glove_only = sum(bool(ep.get("tactile_only")) for ep in reader.episodes)
     for ep in reader.episodes:
+        if ep.get("tactile_only"):     # no video: its frames run on the glove's own clock, nothing to sync
+            continue
         for hand in HANDS:
             h = (ep.get("sync") or {}).get("hands", {}).get(hand)
             if h:
                 skew.append(h.get("median_abs_skew_ns", 0) / 1e6)
                 offset.append(h.get("offset_ns", 0) / 1e6)
     card.heading("Synchronisation")
-    card.text(f"{len(skew)} episode hands with sync records: median |RGB-tactile skew| and clock offset (ms).")
+    card.text(f"{len(skew)} episode hands with sync records: median |RGB-tactile skew| and clock offset (ms)."
+              + (f" {glove_only} glove-only episode(s) (no video) have none." if glove_only else ""))
     lags = [lag for lag in ((ep.get("sync") or {}).get("lag") for ep in reader.episodes) if lag]
     applied = [float(lag["lag_ms"]) for lag in lags if lag.get("applied")]
     if lags:   # only pipelines with [sync] lag set report one (htdata/lag.py)

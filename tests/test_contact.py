@@ -105,3 +105,12 @@ def test_glove_only_dataset_says_why_paired_items_are_none(datasets):
     with pytest.raises(ValueError, match='glove-only dataset.*frames="tactile"'):
         TactileFrameDataset(datasets["quietest"])
     assert len(TactileFrameDataset(datasets["quietest"], frames="tactile")) == 2 * 1380
+
+
+def test_card_of_a_glove_only_dataset_states_its_contact_rule_and_draws_no_sync_plots(datasets, tmp_path):
+    from htdata.card import write_card
+
+    write_card(datasets["quietest"], tmp_path / "card.html")
+    md = (tmp_path / "card.md").read_text()
+    assert "glove-only episode(s) (no video) have none" in md
+    assert "sync_skew" not in md and "taxels more than 2 quantisation steps above their noise floor" in md
