@@ -98,38 +98,38 @@ CALIBRATION_FILE_ROWS = (("file", "none", False), ("file + quietest", "quietest"
 
 
 def clip_rows(clips: list[RawGloveClip], units: dict[str, GloveUnit] | None = None) -> list[dict]:
+    """One row per (baseline option or calibration-file row, noise floor, clip start): see the module docstring."""
     plans = [(b, b, floor, False) for b, _ in BASELINE_OPTIONS for floor in (False, True)
              if not floor or b in FLOORED]
     if units:
         plans += [(label, b, floor, True) for label, b, floor in CALIBRATION_FILE_ROWS]
     rows = []
     for label, baseline, floor, with_file in plans:
-        if True:
-            cfg = config_for(baseline, floor)
-            for start in ("rest", "mid_grasp"):
-                total = {"rest": 0, "rest_above_0": 0, "tp": 0, "fp": 0, "fn": 0}
-                rule = contact_rule(cfg)
-                frames_hit = {"tp": 0, "fp": 0, "fn": 0}
-                frames, seconds = 0, 0.0
-                for clip in (c for c in clips if c.start == start):
-                    t0 = time.perf_counter()
-                    values = {h: normalise_clip(clip, h, cfg, units[h] if with_file else None)
-                              for h in clip.counts}
-                    seconds += time.perf_counter() - t0
-                    frames += clip.n_frames
-                    for h, v in values.items():
-                        pressure = clip.pressure[h][:, glove_layout(h).live_mask]
-                        c = score(v, pressure)
-                        total = {k: total[k] + c[k] for k in total}
-                        pred, truth = rule.frames(v), (pressure >= TRUTH_LEVEL).sum(axis=1) >= rule.min_taxels
-                        frames_hit["tp"] += int((pred & truth).sum())
-                        frames_hit["fp"] += int((pred & ~truth).sum())
-                        frames_hit["fn"] += int((~pred & truth).sum())
-                rows.append({"baseline": label, "noise_floor": f"noise_k={NOISE_K:g}" if floor else "none",
-                             "clips": start, "frames": frames, **_ratios(total),
-                             "us_per_frame": 1e6 * seconds / max(frames, 1), "contact_rule": rule.describe(),
-                             "frame_precision": _share(frames_hit["tp"], frames_hit["tp"] + frames_hit["fp"]),
-                             "frame_recall": _share(frames_hit["tp"], frames_hit["tp"] + frames_hit["fn"])})
+        cfg = config_for(baseline, floor)
+        for start in ("rest", "mid_grasp"):
+            total = {"rest": 0, "rest_above_0": 0, "tp": 0, "fp": 0, "fn": 0}
+            rule = contact_rule(cfg)
+            frames_hit = {"tp": 0, "fp": 0, "fn": 0}
+            frames, seconds = 0, 0.0
+            for clip in (c for c in clips if c.start == start):
+                t0 = time.perf_counter()
+                values = {h: normalise_clip(clip, h, cfg, units[h] if with_file else None)
+                          for h in clip.counts}
+                seconds += time.perf_counter() - t0
+                frames += clip.n_frames
+                for h, v in values.items():
+                    pressure = clip.pressure[h][:, glove_layout(h).live_mask]
+                    c = score(v, pressure)
+                    total = {k: total[k] + c[k] for k in total}
+                    pred, truth = rule.frames(v), (pressure >= TRUTH_LEVEL).sum(axis=1) >= rule.min_taxels
+                    frames_hit["tp"] += int((pred & truth).sum())
+                    frames_hit["fp"] += int((pred & ~truth).sum())
+                    frames_hit["fn"] += int((~pred & truth).sum())
+            rows.append({"baseline": label, "noise_floor": f"noise_k={NOISE_K:g}" if floor else "none",
+                         "clips": start, "frames": frames, **_ratios(total),
+                         "us_per_frame": 1e6 * seconds / max(frames, 1), "contact_rule": rule.describe(),
+                         "frame_precision": _share(frames_hit["tp"], frames_hit["tp"] + frames_hit["fp"]),
+                         "frame_recall": _share(frames_hit["tp"], frames_hit["tp"] + frames_hit["fn"])})
     return rows
 
 
