@@ -35,6 +35,9 @@ Example (pipelines/opentouch.toml):
     max_value = 3072
     [sync]
     max_skew_ms = 20
+
+Long because every section's dataclass lives beside the loader that checks them
+against schemas/pipeline.schema.json, so a new key is one edit in one file.
 """
 
 from __future__ import annotations
@@ -290,7 +293,23 @@ class PipelineConfig:
             return base
         cfg = self.normalise[layout.layout_id]
         given = self.normalise_given.get(layout.layout_id, tuple(cfg.to_dict()))
-        return dataclasses.replace(base, **{k: getattr(cfg, k) for k in given}).validate()
+        out = dataclasses.replace(base, **{k: getattr(cfg, k) for k in given})
+        if out.taxel_calibration:
+            out = self._taxel_calibration(out)
+        return out.validate()
+
+    def _taxel_calibration(self, cfg: NormaliseConfig) -> NormaliseConfig:
+        """Resolve the calibration file (relative to the pipeline file, else the working folder) + its sha256."""
+        import hashlib
+
+        p = Path(cfg.taxel_calibration)
+        if not p.is_absolute() and self.path and (Path(self.path).parent / p).is_file():
+            p = Path(self.path).parent / p
+        if not p.is_file():
+            raise ValueError(f"{self.path or self.name}: taxel_calibration file {cfg.taxel_calibration!r} not found "
+                             f"(relative to the pipeline file or the working folder)")
+        return dataclasses.replace(cfg, taxel_calibration=str(p.resolve()),
+                                   taxel_calibration_sha256=hashlib.sha256(p.read_bytes()).hexdigest())
 
     def to_dict(self) -> dict:
         """Plain dict (the TOML content with defaults filled in); recorded in the manifest."""
@@ -298,7 +317,7 @@ class PipelineConfig:
             "name": self.name,
             "adapter": {"name": self.adapter.name, "params": dict(self.adapter.params)},
             "layouts": dict(self.layouts),
-            "normalise": {**{k: {kk: vv for kk, vv in v.to_dict().items()
+            "normalise": {**{k: {kk: vv for kk, vv in _settings(v).items()
                                  if k not in self.normalise_given or kk in self.normalise_given[k]}
                              for k, v in self.normalise.items()}, **self.out_of_range.to_dict()},
             "sync": self.sync.to_dict(),
@@ -344,6 +363,9 @@ class PipelineConfig:
             n.scale = float(n.scale)
             n.noise_floor = float(n.noise_floor)
             n.noise_k = float(n.noise_k)
+            for name in ("rest_seconds", "baseline_percentile", "drift_window_s"):
+                if isinstance(getattr(n, name), int) and not isinstance(getattr(n, name), bool):
+                    setattr(n, name, float(getattr(n, name)))
         cfg.sync.max_skew_ms = float(cfg.sync.max_skew_ms)
         for key in ("max_lag_ms", "min_confidence") + (() if isinstance(cfg.sync.lag, str) else ("lag",)):
             if isinstance(getattr(cfg.sync, key), int) and not isinstance(getattr(cfg.sync, key), bool):
@@ -364,6 +386,15 @@ class PipelineConfig:
 def shipped_pipelines() -> list[str]:
     """Names of the pipelines that ship with htdata (`htdata pipelines list`)."""
     return sorted(p.stem for p in PIPELINES_DIR.glob("*.toml"))
+
+
+def _settings(cfg: NormaliseConfig) -> dict:
+    """A [normalise.<layout>] table as written: the calibration's settings + the calibration file's path."""
+    d = cfg.to_dict()
+    d.pop("taxel_calibration_sha256", None)          # filled in from the file, never written by hand
+    if cfg.taxel_calibration:
+        d["taxel_calibration"] = cfg.taxel_calibration
+    return d
 
 
 def resolve_pipeline_path(name_or_path: str | Path) -> Path:

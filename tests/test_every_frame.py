@@ -88,12 +88,15 @@ def test_a_glove_only_recording_ingests_as_tactile_only_samples(tmp_path):
     reader = DatasetReader(out)
     assert all(RGB_MEMBER not in reader.sample(i) for i in range(len(reader)))
     assert cli(["validate", str(out), "--deep"]) == 0
-    assert len(TactileFrameDataset(out)) == 0                           # nothing to pair with RGB
+    with pytest.raises(ValueError, match='glove-only dataset.*frames="tactile"'):   # says why, not length 0
+        TactileFrameDataset(out)
     tactile = TactileFrameDataset(out, frames="tactile")                # e.g. stage-1 tokeniser data
     assert len(tactile) == rows
     item = tactile[0]
     assert not bool(item["has_rgb"]) and int(item["rgb"].max()) == 0 and item["tactile"].shape == (1, 224, 224)
-    assert len(list(TactileStream(out, frames="tactile"))) == rows and len(list(TactileStream(out))) == 0
+    assert len(list(TactileStream(out, frames="tactile"))) == rows
+    with pytest.raises(ValueError, match="glove-only dataset"):
+        len(TactileStream(out))
 
 
 def test_frames_option_is_checked(tmp_path):

@@ -213,7 +213,7 @@ def tree(root: Path) -> dict[str, tuple[int, int]]:
 
 
 def test_export_is_read_only_and_atomic(dataset, tmp_path, monkeypatch):
-    from htdata import lerobot_export
+    from htdata.export import lerobot as lerobot_export
 
     before = tree(dataset)
     out = tmp_path / "lr"

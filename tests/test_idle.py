@@ -72,7 +72,7 @@ def test_dry_run_lists_and_writes_nothing(ds, capsys):
     assert cli_main(["trim", str(ds), "--idle", "--keep-margin", "0.3", "--dry-run"]) == 0
     out = capsys.readouterr().out
     assert "episode ep_a: would drop 12 head + 12 tail idle frames, keep 12:28 of 40" in out
-    assert "episode ep_b: no contact above 0.02 in any of its 12 frames" in out
+    assert "episode ep_b: no contact by its contact rule in any of its 12 frames" in out
     assert "episode ep_c: no idle head or tail beyond the margin" in out
     assert "24 frames would be removed" in out
     assert json.loads((ds / "dataset.json").read_text())["version"] == 1

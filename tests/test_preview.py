@@ -50,7 +50,7 @@ def test_cli_writes_png_of_expected_size(ds, tmp_path):
 
 
 def test_absent_hand_is_a_grey_panel_and_tactile_is_drawn(ds):
-    sheet = pv.render_contact_sheet(ds, episode="ep_r", frames=3)
+    sheet = pv.render_contact_sheet(ds, episode="ep_r", frames=3, pick="even")
     left = _panel(sheet, 0, 1)
     grey = np.all(left == pv.ABSENT_GREY, axis=2).mean()
     assert grey > 0.9          # the rest is the "no left hand" text
@@ -109,7 +109,7 @@ def test_colour_bar_is_drawn_with_its_values(ds):
     labels = sheet[sheet.shape[0] - pv.BAR_H + 4 + pv.BAR_STRIP_H + 5:, pv.PAD + pv.CANVAS:]
     assert (labels.mean(axis=2) > 120).sum() > 100                               # tick values + caption drawn
     with pytest.raises(ValueError, match="--contrast"):
-        pv.render_contact_sheet(ds, episode="ep_lr", frames=2, contrast="auto")
+        pv.render_contact_sheet(ds, episode="ep_lr", frames=2, contrast="bogus")
 
 
 def test_quantile_contrast_brightens_faint_maps(tmp_path):
@@ -129,3 +129,40 @@ def test_quantile_contrast_brightens_faint_maps(tmp_path):
     hot = [max(hottest(_panel(s, r, 2)) for r in rows) for s in (fixed, quant)]
     assert hot[0] < 400 < hot[1]                                              # faint stays dark unless stretched
     assert cli_main(["preview", str(root), str(tmp_path / "q.png"), "--contrast", "quantile"]) == 0
+
+
+def test_contact_pick_takes_the_frames_with_most_contact_in_time_order():
+    n = 40
+    frame_max = np.zeros(n)
+    frame_max[[5, 6, 7, 30]] = [0.2, 0.5, 0.3, 0.4]
+    contact = (frame_max > 0).astype(int)
+    stats = {"hands": {"right": {"frame_index": list(range(n)), "frame_max": frame_max.tolist(),
+                                 "frame_contact": contact.tolist()}}}
+    # 2 rows: the peak (6) and the next best at least n/(2*2) = 10 frames away (30), not its neighbour 7
+    assert pv.contact_positions(stats, n, 2).tolist() == [6, 30]
+    # more rows than frames in contact: every row still drawn (contact frames first, then even spacing)
+    four = pv.contact_positions(stats, n, 4).tolist()
+    assert len(four) == 4 and {6, 30} <= set(four) and four == sorted(four)
+    none = {"hands": {"right": {**stats["hands"]["right"], "frame_contact": [0] * n}}}
+    assert pv.contact_positions(none, n, 3).tolist() == pv.frame_positions(n, 3).tolist()
+
+
+def test_auto_contrast_stretches_weak_gloves_only(tmp_path):
+    from tests.tactile_factories import RIGHT, clean_series, write_taxel_dataset
+    faint = write_taxel_dataset(tmp_path / "faint", [{"episode_id": "f", "hands": {
+        "right": (RIGHT, clean_series(RIGHT, 8, seed=4, blobs=4) * 0.15)}}])
+    strong = write_taxel_dataset(tmp_path / "strong", [{"episode_id": "s", "hands": {
+        "right": (RIGHT, np.clip(clean_series(RIGHT, 8, seed=4, blobs=4) * 3.0, 0, 1))}}])
+    used, vmax = pv.contrast_scale(faint, "auto")
+    assert used == "quantile" and vmax < pv.AUTO_QUANTILE_BELOW
+    assert pv.contrast_scale(strong, "auto") == ("fixed", 1.0)
+
+
+def test_cli_prints_the_colour_bar_range(tmp_path, capsys):
+    from tests.tactile_factories import RIGHT, clean_series, write_taxel_dataset
+    faint = write_taxel_dataset(tmp_path / "faint", [{"episode_id": "f", "hands": {
+        "right": (RIGHT, clean_series(RIGHT, 8, seed=4, blobs=4) * 0.15)}}])
+    assert cli_main(["preview", str(faint), str(tmp_path / "f.png")]) == 0
+    out = capsys.readouterr().out
+    used, vmax = pv.contrast_scale(faint, "auto")
+    assert f"colour bar 0..{vmax:.3g} (quantile contrast" in out and "contact frames" in out

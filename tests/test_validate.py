@@ -484,3 +484,18 @@ def test_bad_arguments():
 def test_validate_benchmark_reports_frames_per_second(pristine):
     result = validate_benchmark(pristine, workers=1)
     assert result["ok"] and result["frames"] == 16 and result["frames_per_s"] > 0
+
+
+def test_regions_never_pressed_are_unexercised_by_name_not_dead():
+    from htdata.validate.report import Check
+    from htdata.validate.sensors import check_sensors
+
+    means = [np.array([0.0, 0.0, 0.1 + 0.01 * f, 0.0]) for f in range(5)]   # ids 1 and 3 read 0 throughout
+    sensor = {"ep_a:left": {"frames": list(range(5)), "region_means": means, "max": 0.2, "saturated": 0,
+                            "covered": 100}}
+    check = Check("sensors", 10)
+    check_sensors(sensor, check, {1: "thumb.distal", 2: "thumb.proximal", 3: "index.distal"})
+    assert dict(check.warning_counts) == {"unexercised_regions": 1}
+    w = check.warnings[0]
+    assert w["regions"] == ["thumb.distal", "index.distal"] and "dead" not in w["what"]
+    assert "never pressed" in w["message"] and "thumb.distal, index.distal" in w["message"]

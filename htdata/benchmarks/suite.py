@@ -49,10 +49,11 @@ from htdata.benchmarks.stats import stats_rows
 from htdata.benchmarks.lag import lag_rows
 from htdata.benchmarks.raw import raw_rows
 from htdata.benchmarks.export import export_rows
+from htdata.benchmarks.rawglove import rawglove_rows
 
 SECTION_GROUP = "htdata.bench_sections"
 BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate", "append", "stats",
-                    "lag", "raw", "export")
+                    "lag", "raw", "export", "rawglove")
 # Top-level keys of results.json that are not sections: no section may take these names.
 RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds")
 
@@ -243,6 +244,9 @@ class Sections:
 
     def export(self) -> dict:
         return export_rows(self.dataset, self.cfg.work)
+
+    def rawglove(self) -> dict:
+        return rawglove_rows(self.cfg.quick, self.cfg.seed)
 
     def discovered(self, name: str, entry_point: metadata.EntryPoint) -> dict:
         """Load and run one discovered section; its result must be a JSON-able dict."""

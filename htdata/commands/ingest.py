@@ -102,6 +102,9 @@ def run(args: argparse.Namespace) -> int:
     n_fail = len(report["failures"])
     for f in report["failures"]:
         print(f"FAILED {failure_line(f)}", file=sys.stderr)
+    for eid, warnings in report.get("episode_warnings", {}).items():
+        for warning in warnings:            # not only in the episode record: out-of-range values are news
+            print(f"episode {eid}: {warning}", file=sys.stderr)
     for note in report["notes"]:
         print(f"note: {note}", file=sys.stderr)
     for episode_id, hands in report.get("unmapped_moving", {}).items():

@@ -29,19 +29,25 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("out", type=Path, metavar="OUT.png", help="contact sheet to write")
     parser.add_argument("--episode", default=None, metavar="ID",
                         help="episode id (default: the two-handed episode with the most contact)")
-    parser.add_argument("--frames", type=int, default=6, metavar="N",
-                        help="rows: N frames evenly spaced over the episode (default 6)")
-    parser.add_argument("--contrast", choices=preview.CONTRASTS, default="fixed",
-                        help="fixed: colour scale 0..1 (default); quantile: 0..p99 of the dataset's positive "
-                             "taxel values, so faint contact shows (uses `htdata stats`, cached)")
+    parser.add_argument("--frames", type=int, default=6, metavar="N", help="rows: N frames (default 6)")
+    parser.add_argument("--pick", choices=preview.PICKS, default="contact",
+                        help="contact (default): the N frames with the most contact (each glove hand's contact "
+                             "rule: docs/USAGE.md), in time order; even: N frames evenly spaced")
+    parser.add_argument("--contrast", choices=preview.CONTRASTS, default="auto",
+                        help="auto (default): quantile when the dataset's p99 of positive taxel values is below "
+                             f"{preview.AUTO_QUANTILE_BELOW}, else fixed; fixed: colour scale 0..1; quantile: "
+                             "0..that p99, so faint contact shows (uses `htdata stats`, cached). Example: "
+                             "htdata preview DATA/dataset sheet.png --frames 4 --contrast fixed")
 
 
 def run(args: argparse.Namespace) -> int:
     try:
+        used, vmax = preview.contrast_scale(args.dataset, args.contrast)
         out = preview.write_preview(args.dataset, args.out, episode=args.episode, frames=args.frames,
-                                     contrast=args.contrast)
+                                     contrast=used, pick=args.pick)
     except (ValueError, FileNotFoundError, OSError) as exc:
         print(f"htdata preview: error: {exc}", file=sys.stderr)
         return 2
-    print(f"wrote {out}")
+    print(f"wrote {out}; colour bar 0..{vmax:.3g} ({used} contrast"
+          f"{', p99 of the positive taxel values' if used == 'quantile' else ''}; {args.pick} frames)")
     return 0

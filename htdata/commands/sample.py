@@ -8,12 +8,19 @@ import sys
 import time
 
 from htdata.sample.corpus import COMPLETE_MARKER, FORMATS, SCALES, CorpusConfig, corpus_complete, plan_corpus, write_corpus
+from htdata.sample.rawglove import CLIPS, write_rawglove
 
 EPILOG = """\
 Layout written under OUT:
   opentouch/<scene>.hdf5 + annotations.csv      right hand, 16x16, inverted 0..3072, 30 fps
   touchanything/<Scene>/<task>/<traj>/ + split.json   both hands, 21x21, chest.mp4 640x480
   native/<recording>/                            100 Hz tactile, 30 Hz video, clock offset
+With --raw-glove, only OUT/rawglove/ (not part of the default corpus):
+  rawglove/<clip>/ + layouts/ + truth.json       two-hand 32x32 raw-count knit glove, float16
+                                                 counts, glove only, with ground truth
+  htdata sample data/raw --raw-glove
+  htdata ingest --pipeline native --layouts data/raw/rawglove/layouts data/raw/rawglove OUT \
+      --set normalise.rawknit_right_32x32.baseline=quietest --set normalise.rawknit_right_32x32.noise_k=3
 Same --seed -> identical tactile arrays and JPEG bytes. OUT/.complete (written last) names
 the seed, scale and formats of a finished corpus; --reuse keeps such a corpus and
 rewrites anything else (a corpus cut short, or one of another seed).
@@ -44,6 +51,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reuse", action="store_true",
                         help=f"exit 0 without writing if OUT holds a finished corpus ({COMPLETE_MARKER}) of the "
                              "same seed, scale and formats; otherwise write it, replacing OUT/<format> folders")
+    parser.add_argument("--raw-glove", action="store_true",
+                        help="write only OUT/rawglove: the realistic raw-count glove (5 glove-only clips, "
+                             "1380 frames, ~6 MB) with its layouts and ground truth")
     parser.add_argument("--dry-run", action="store_true", help="print the planned episodes and exit")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -51,6 +61,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     cfg = CorpusConfig(out=args.out, seed=args.seed, scale=args.scale, formats=tuple(args.formats),
                        overwrite=args.overwrite, progress=not args.quiet)
+    if getattr(args, "raw_glove", False):
+        return _raw_glove(args)
     try:
         cfg.validate()
         if args.dry_run:
@@ -71,5 +83,28 @@ def run(args: argparse.Namespace) -> int:
         return 2
     summary["seconds"] = round(time.perf_counter() - t0, 2)
     summary["out"] = str(cfg.out)
+    print(json.dumps(summary, indent=1))
+    return 0
+
+
+def _raw_glove(args: argparse.Namespace) -> int:
+    """`htdata sample OUT --raw-glove`: OUT/rawglove only."""
+    from pathlib import Path
+
+
+    target = Path(args.out) / "rawglove"
+    if args.dry_run:
+        for task, n, start in CLIPS:
+            print(f"rawglove\t{task}\t{n}\t{start}\tleft,right")
+        return 0
+    if target.exists() and any(target.iterdir()):
+        if not (args.overwrite or args.reuse):
+            print(f"htdata sample: error: {target} exists and is not empty; pass --overwrite to replace it",
+                  file=sys.stderr)
+            return 2
+        import shutil
+        shutil.rmtree(target)
+    summary = write_rawglove(target, seed=args.seed)
+    summary["out"] = str(target)
     print(json.dumps(summary, indent=1))
     return 0

@@ -90,7 +90,8 @@ def text_lines(s: dict) -> list[str]:
     c = s["cache"]
     out = [f"{s['dataset']} version {s['version']}: {s['episodes']} episodes, {s['frames']} frames "
            f"(stats: {c['computed']} episodes computed, {c['cached']} cached)",
-           f"values: {s['values']}; contact = any taxel > {s['contact_threshold']}"]
+           f"values: {s['values']}; contact per glove and hand from its calibration (htdata/glove/contact.py), "
+           f"'old' = any taxel > {s['contact_threshold']}"]
     if not s["gloves"]:
         out.append("no tactile frames")
     for g in s["gloves"]:
@@ -98,7 +99,8 @@ def text_lines(s: dict) -> list[str]:
         q = g["quantiles"]
         h = g["health"]
         flagged = ", ".join(f"{k} {h['counts'][k]}" for k in CLASSES if h["counts"][k]) or "none"
-        out += [f"\n{name}: {g['episodes']} episodes, {g['frames']} frames, contact {_fmt(g['contact_fraction'])}",
+        out += [f"\n{name}: {g['episodes']} episodes, {g['frames']} frames, contact {_fmt(g['contact_fraction'])} "
+                f"({g.get('contact_rule') or '-'}; old {_fmt(g.get('contact_fraction_threshold'))})",
                 f"  values p1 {_fmt(q['p1'])}  p50 {_fmt(q['p50'])}  p99 {_fmt(q['p99'])}  max {_fmt(q['max'])}",
                 *([f"  raw (glove units, {g['frames_from_raw']} frames) " + "  ".join(
                     f"{k} {_fmt(g['raw_quantiles'][k])}" for k in ("p1", "p50", "p99", "max"))]

@@ -42,7 +42,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--idle", action="store_true",
                         help="trim every episode's head and tail without contact on any hand (see below)")
     parser.add_argument("--min-contact", type=float, default=None, metavar="X",
-                        help="with --idle: a frame is in contact when a taxel reads above X (default 0.02)")
+                        help="with --idle: a frame is in contact when a taxel reads above X (the old rule, e.g. "
+                             "0.02); default: each glove hand's contact rule from its calibration "
+                             "(from its calibration: at least 3 taxels above their noise floor, or any taxel "
+                             "> 0.02 for a calibration without a floor)")
     parser.add_argument("--keep-margin", type=float, default=None, metavar="S",
                         help="with --idle: seconds kept before the first and after the last contact (default 0.5)")
 
@@ -71,7 +74,8 @@ def run_idle(args: argparse.Namespace) -> int:
     cfg = idle.IdleConfig()
     cfg.min_contact = cfg.min_contact if args.min_contact is None else args.min_contact
     cfg.keep_margin_s = cfg.keep_margin_s if args.keep_margin is None else args.keep_margin
-    command = f"htdata trim --idle --min-contact {cfg.min_contact:g} --keep-margin {cfg.keep_margin_s:g}"
+    rule = "" if cfg.min_contact is None else f" --min-contact {cfg.min_contact:g}"
+    command = f"htdata trim --idle{rule} --keep-margin {cfg.keep_margin_s:g}"
     try:
         cfg.validate()
         cuts, edit, manifest = idle.trim_idle(args.dataset, cfg, args.dry_run, command)

@@ -1,9 +1,10 @@
 """`htdata trim DATASET --idle`: drop the head and tail of each episode where no hand touches anything.
 
-A frame is in contact when any taxel of any hand reads above `min_contact`
-(normalised value, sampled at the taxel centres of the stored maps: the
-per-frame maxima of the stats cache, htdata/inspect/stats.py, so a dataset whose
-stats are cached is planned without reading a shard). Each episode keeps
+A frame is in contact when any hand is, by the hand's contact rule
+(htdata/glove/contact.py: from its calibration, the per-frame contact of the stats
+cache, htdata/inspect/stats.py, so a dataset whose stats are cached is planned
+without reading a shard). `min_contact` = X applies the old rule instead:
+any taxel of any hand above X (the per-frame maxima of the same cache). Each episode keeps
 its frames from the first contact minus `keep_margin_s` to the last contact
 plus `keep_margin_s` (frames = round(seconds x the episode's fps)). Idle
 stretches in the middle stay: a trim keeps one contiguous range. An episode
@@ -21,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from htdata.curate import edit as curate_edit
-from htdata.inspect.episodestats import CONTACT_THRESHOLD
+from htdata.glove.contact import THRESHOLD
 from htdata.store.lock import WriterLock
 from htdata.read.reader import DatasetReader
 from htdata.store.snapshot import open_snapshot
@@ -30,11 +31,11 @@ from htdata.inspect.stats import default_cache_dir, episode_stats
 
 @dataclass
 class IdleConfig:
-    min_contact: float = CONTACT_THRESHOLD
+    min_contact: float | None = None     # None: each hand's contact rule; X: any taxel above X (the old rule)
     keep_margin_s: float = 0.5
 
     def validate(self) -> None:
-        if not 0.0 <= self.min_contact < 1.0:
+        if self.min_contact is not None and not 0.0 <= self.min_contact < 1.0:
             raise ValueError(f"--min-contact must be in [0, 1), got {self.min_contact}")
         if self.keep_margin_s < 0:
             raise ValueError(f"--keep-margin must be >= 0 seconds, got {self.keep_margin_s}")
@@ -61,15 +62,20 @@ class IdleCut:
                 f"{self.keep.start}:{self.keep.stop} of {self.frames}")
 
 
-def contact_frames(stats: dict, min_contact: float) -> np.ndarray:
-    """(frames,) bool: any hand above `min_contact`; frames with no readable map count as contact."""
+def contact_frames(stats: dict, min_contact: float | None) -> np.ndarray:
+    """(frames,) bool: any hand in contact (its rule, or a taxel above `min_contact` when given);
+    frames with no readable map count as contact."""
     n = int(stats["frames"])
     readable = np.zeros(n, bool)
     contact = np.zeros(n, bool)
     for h in stats["hands"].values():
         idx = np.asarray(h["frame_index"], np.int64)
         readable[idx] = True
-        contact[idx] |= np.asarray(h["frame_max"], np.float64) > min_contact
+        if min_contact is None and "frame_contact" in h:
+            contact[idx] |= np.asarray(h["frame_contact"], bool)
+        else:   # the old rule (asked for, or stats computed before the contact rules)
+            level = THRESHOLD if min_contact is None else min_contact
+            contact[idx] |= np.asarray(h["frame_max"], np.float64) > level
     return contact | ~readable
 
 
@@ -78,7 +84,8 @@ def plan_cut(record: dict, stats: dict, cfg: IdleConfig) -> IdleCut:
     eid = record["episode_id"]
     hit = np.flatnonzero(contact_frames(stats, cfg.min_contact))
     if hit.size == 0:
-        return IdleCut(eid, n, None, f"no contact above {cfg.min_contact} in any of its {n} frames: left as "
+        rule = "by its contact rule" if cfg.min_contact is None else f"above {cfg.min_contact}"
+        return IdleCut(eid, n, None, f"no contact {rule} in any of its {n} frames: left as "
                                      f"it is (remove it with htdata rm if it should go)")
     margin = int(round(cfg.keep_margin_s * float(record.get("fps") or 0.0)))
     keep = range(max(0, int(hit[0]) - margin), min(n, int(hit[-1]) + 1 + margin))

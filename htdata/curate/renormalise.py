@@ -26,14 +26,15 @@ import numpy as np
 from htdata.glove.calibration import (calibration_id, episode_calibrations, episode_normaliser, fit_record)
 from htdata.format.codec import MEMBER_CODECS
 from htdata.curate.edit import resolve_episodes
-from htdata.format.table import JSON_MEMBER, SIZE_FIELDS, CodecSettings, bend_member, raw_member, tactile_member
+from htdata.format.table import (JSON_MEMBER, SIZE_FIELDS, CodecSettings, bend_member, decode_member, raw_member,
+                                 tactile_member)
 from htdata.glove.health import record_entry
 from htdata.glove.layouts import Layout, load_layout
 from htdata.store.lock import WriterLock
 from htdata.glove.normalise import Normaliser
 from htdata.pipeline import PipelineConfig
 from htdata.glove.rasterise import Rasteriser
-from htdata.read.rawstream import paired_row
+from htdata.read.rawstream import apply_paired, paired_row, paired_source_row
 from htdata.read.reader import DatasetReader
 from htdata.curate.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
 from htdata.store.snapshot import Snapshot, commit_parts, open_snapshot
@@ -124,7 +125,10 @@ class Recalibration:
                 normaliser = episode_normaliser(self.snap.manifest, ep, hand, layout)
             else:
                 normaliser = Normaliser(self.pipeline.normalise_for(layout), layout)
-                normaliser.fit_baseline(self._first_rows(eid, hand))
+                if normaliser.cfg.per_episode:      # chosen by activity: fitted on every paired row
+                    normaliser.fit_episode(*self._paired_rows(eid, hand))
+                else:
+                    normaliser.fit_baseline(self._first_rows(eid, hand))
             state[hand] = (normaliser, Rasteriser(layout, mode=self.raster_mode), [0.0, 0.0], [])
         self.state = {eid: state}    # one episode at a time: repack walks episodes in order
         return state
@@ -141,6 +145,25 @@ class Recalibration:
                 rows.append(paired_row(members, hand, f"{eid} frame {i - first}"))
         return np.stack(rows)
 
+    def _paired_rows(self, eid: str, hand: str) -> tuple[np.ndarray, float, np.ndarray]:
+        """(paired raw rows, glove fps, their source row numbers) of the whole episode, each source row once
+        (what the ingest fits the baselines chosen by activity on)."""
+        first, n = self.reader.episode_range(eid)
+        rows, numbers, times = [], [], []
+        for i in range(first, first + n):
+            members = self.reader.sample(i, (JSON_MEMBER, tactile_member(hand), raw_member(hand)))
+            if tactile_member(hand) in members:   # RGB-only samples hold no rows
+                where = f"{eid} frame {i - first}"
+                number = paired_source_row(members, hand, where)
+                if numbers and number == numbers[-1]:
+                    continue
+                rows.append(paired_row(members, hand, where))
+                numbers.append(number)
+                meta = decode_member(JSON_MEMBER, members[JSON_MEMBER], where)
+                times.append(int(meta["t_tactile_ns"][hand]))
+        step = float(np.median(np.diff(times))) if len(times) > 1 else 0.0
+        return np.stack(rows), (1e9 / step if step > 0 else 30.0), np.asarray(numbers, np.int64)
+
     def members(self, episode_id: str, frame: int, members: dict[str, bytes]) -> dict[str, bytes]:
         if episode_id not in self.plan.changes:
             return members
@@ -151,7 +174,7 @@ class Recalibration:
                 continue
             where = f"{episode_id} frame {frame} {hand} hand"
             try:
-                values, finite = normaliser.apply(paired_row(members, hand, where)[None])
+                values, finite = apply_paired(normaliser, members, hand, where)
             except ValueError as exc:   # e.g. clip = false and a value outside [0,1] under the new settings
                 raise ValueError(f"{where}: {exc}") from exc
             if not finite.all():

@@ -5,6 +5,9 @@
     activity.py     which raw cells move (noise from second differences): live cells a layout leaves out
     layoutsuggest.py a starting layout from the cells that move in recordings (`htdata layouts suggest`)
     normalise.py    glove units -> [0,1] (baselines, noise floor, full scale)
+    restlevel.py    quiet (resting) frames; the per-glove calibration file
+    contact.py      when a hand is in contact, from its calibration
+    rawhealth.py    taxel health from the raw rows, in glove units
     calibration.py  the per-episode calibration a normalisation used, stored with the data
     rasterise.py    taxels -> the 224x224 map, its coverage and regions (and back)
     health.py       per-taxel health (dead, stuck, noisy ...) of one episode

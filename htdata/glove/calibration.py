@@ -58,11 +58,23 @@ def encode_array(arr: np.ndarray) -> str:
     return base64.b64encode(np.ascontiguousarray(arr, dtype="<f4").tobytes()).decode("ascii")
 
 
-def decode_array(text: str, shape: tuple[int, int], where: str) -> np.ndarray:
+def decode_array(text: str, shape: tuple[int, ...], where: str) -> np.ndarray:
+    """base64 float32 -> array of `shape`; a leading -1 takes any whole number of (shape[1:]) items."""
     data = base64.b64decode(text.encode("ascii"), validate=True)
-    if len(data) != 4 * shape[0] * shape[1]:
-        raise ValueError(f"{where}: {len(data)} bytes, expected {shape[0]}x{shape[1]} float32")
+    item = 4 * int(np.prod(shape[1:] if shape and shape[0] == -1 else shape))
+    if (shape and shape[0] == -1 and (not data or len(data) % max(item, 1))) or \
+            (not (shape and shape[0] == -1) and len(data) != item):
+        raise ValueError(f"{where}: {len(data)} bytes, expected {'x'.join(str(v) for v in shape)} float32")
     return np.frombuffer(data, dtype="<f4").reshape(shape).astype(np.float32)
+
+
+def _fit_shape(name: str, cfg: NormaliseConfig, grid: tuple[int, int]) -> tuple[int, ...]:
+    """Stored shape of a fitted array: the drift baseline is (K,H,W) knots and knot_rows (K,)."""
+    if name == "knot_rows":
+        return (-1,)
+    if name == "baseline" and cfg.baseline == "drift":
+        return (-1, *grid)
+    return grid
 
 
 def fit_record(normaliser: Normaliser) -> dict:
@@ -86,7 +98,8 @@ def episode_normaliser(manifest: dict, episode: dict, hand: str, layout) -> Norm
     normaliser = Normaliser(config_of(entry), layout)
     fit = (episode.get("calibration_fit") or {}).get(hand, {})
     grid = normaliser.grid
-    normaliser.restore({k: decode_array(v, grid, f"{where} calibration_fit.{k}") for k, v in fit.items()})
+    normaliser.restore({k: decode_array(v, _fit_shape(k, normaliser.cfg, grid), f"{where} calibration_fit.{k}")
+                        for k, v in fit.items()})
     return normaliser
 
 

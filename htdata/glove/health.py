@@ -1,9 +1,9 @@
 """Taxel health: classify every live taxel of one episode hand from its sampled value series.
 
 Input is the (T, L) series of a glove's L live taxels over an episode's T
-frames (normalised values: the stored raw rows under the episode's
-calibration, or the stored maps sampled at the taxel centres on datasets
-without raw rows; htdata/inspect/episodestats.py), plus the layout geometry (`TaxelGrid`). Each
+frames (normalised values: the stored maps sampled at the taxel centres, on
+datasets without raw rows; where the raw rows are stored, htdata/glove/rawhealth.py
+classifies the raw counts instead, in glove units), plus the layout geometry (`TaxelGrid`). Each
 taxel gets at most one class, checked in this order:
 
 - saturated: at the top of the scale (>= SATURATION_LEVEL) in more than
@@ -42,8 +42,10 @@ import numpy as np
 
 from htdata.glove.layouts import Layout
 
-HEALTH_VERSION = 1
-CLASSES = ("saturated", "stuck", "dead", "noisy", "crosstalk")
+HEALTH_VERSION = 2            # 2: "drifting"; raw-row health (htdata/glove/rawhealth.py) where raw rows are stored
+CLASSES = ("saturated", "stuck", "dead", "noisy", "drifting", "crosstalk")
+RECORD_HEALTH_VERSION = 1     # episode records' taxel_health (`record_entry`)
+RECORD_CLASSES = ("saturated", "stuck", "dead", "noisy", "crosstalk")
 MIN_FRAMES = 30
 CONTACT_LEVEL = 0.02          # a taxel reads contact above this (validate's contact threshold)
 NOISE_RANGE = 0.01            # p99 - p1 below this: no variation beyond noise
@@ -59,6 +61,14 @@ CROSSTALK_MIN_FRAMES = 5
 CROSSTALK_SHARE = 0.5
 CROSSTALK_LINE_MATES = 2
 CROSSTALK_SIDE_TAXELS = 3     # live taxels beside the line needed to call a reading isolated
+THRESHOLDS = {"saturated": f">= {SATURATION_LEVEL} in > {SATURATED_SHARE:.0%} of frames",
+              "stuck": f"constant (p99-p1 < {NOISE_RANGE}) at >= {STUCK_LEVEL}",
+              "dead": f"constant below {STUCK_LEVEL} while neighbours read >= {PRESSED_LEVEL}",
+              "noisy": f"high-frequency level > {NOISY_MIN_HF} and {NOISY_RATIO:g}x its neighbours'",
+              "drifting": "needs the raw rows",
+              "crosstalk": f"a raw row/column reads > {CONTACT_LEVEL} with nothing beside it",
+              "unexercised": f"constant below {STUCK_LEVEL}, neighbours never pressed",
+              "unmapped": "needs the raw rows"}
 # `htdata validate` warns when the flagged share of an episode hand's live taxels passes this.
 WARN_SHARE = 0.05
 
@@ -98,8 +108,9 @@ def classify(series: np.ndarray, taxels: TaxelGrid) -> dict:
     "unexercised"} (cells in raw grid coordinates)."""
     x = np.asarray(series, np.float32)
     T, L = x.shape
-    out = {"assessed": T >= MIN_FRAMES, "frames": int(T), "live": int(L),
-           "counts": {c: 0 for c in CLASSES}, "cells": {c: [] for c in CLASSES}, "unexercised": 0}
+    out = {"assessed": T >= MIN_FRAMES, "frames": int(T), "live": int(L), "basis": "maps",
+           "counts": {c: 0 for c in CLASSES}, "cells": {c: [] for c in CLASSES}, "unexercised": 0,
+           "unexercised_cells": []}
     if not out["assessed"] or L == 0:
         return out
     label = np.full(L, -1, np.int64)
@@ -115,8 +126,11 @@ def classify(series: np.ndarray, taxels: TaxelGrid) -> dict:
     hf = np.percentile(np.abs(np.diff(x, n=2, axis=0)), 75, axis=0)
     near_hf = _neighbour_median(hf, taxels)
     noisy = (hf > NOISY_MIN_HF) & (hf > NOISY_RATIO * near_hf)
-    for k, mask in enumerate((saturated, stuck, quiet & exercised, noisy, crosstalk)):
-        label[(label < 0) & mask] = k
+    masks = {"saturated": saturated, "stuck": stuck, "dead": quiet & exercised, "noisy": noisy,
+             "crosstalk": crosstalk}         # drifting needs the raw rows (htdata/glove/rawhealth.py)
+    for name, mask in masks.items():
+        label[(label < 0) & mask] = CLASSES.index(name)
+    out["unexercised_cells"] = taxels.cells[quiet & ~exercised & (label < 0)].tolist()
     for k, name in enumerate(CLASSES):
         hit = np.flatnonzero(label == k)
         out["counts"][name] = int(hit.size)
@@ -214,9 +228,12 @@ def record_entry(chunks: list[np.ndarray], layout: Layout) -> dict:
     """
     series = np.concatenate(chunks) if chunks else np.zeros((0, int(layout.live_mask.sum())), np.float32)
     result = classify(series, TaxelGrid.of(layout))
-    out = {"version": HEALTH_VERSION, "assessed": result["assessed"], "live": result["live"],
-           "counts": result["counts"], "unexercised": result["unexercised"]}
-    flagged = {c: cells for c, cells in result["cells"].items() if cells}
+    # the record keeps its version-1 form (the normalised-values classes; no "drifting", which needs the raw
+    # rows): an episode record's bytes do not change with HEALTH_VERSION. `htdata stats` (the health map,
+    # validate's warning, the card) classifies the raw rows where they are stored: htdata/glove/rawhealth.py.
+    out = {"version": RECORD_HEALTH_VERSION, "assessed": result["assessed"], "live": result["live"],
+           "counts": {c: result["counts"][c] for c in RECORD_CLASSES}, "unexercised": result["unexercised"]}
+    flagged = {c: cells for c, cells in result["cells"].items() if cells and c in RECORD_CLASSES}
     if flagged:
         out["cells"] = flagged
     return out
@@ -228,6 +245,8 @@ def merge_counts(into: dict, health: dict) -> None:
     into.setdefault("episodes_not_assessed", 0)
     into.setdefault("taxels_assessed", 0)
     into.setdefault("unexercised", 0)
+    into.setdefault("unmapped_moving", 0)
+    into.setdefault("basis", [])
     counts = into.setdefault("counts", {c: 0 for c in CLASSES})
     if not health.get("assessed"):
         into["episodes_not_assessed"] += 1
@@ -235,6 +254,9 @@ def merge_counts(into: dict, health: dict) -> None:
     into["episodes_assessed"] += 1
     into["taxels_assessed"] += int(health["live"])
     into["unexercised"] += int(health.get("unexercised", 0))
+    into["unmapped_moving"] += int(health.get("unmapped_moving", 0))
+    if health.get("basis", "maps") not in into["basis"]:
+        into["basis"].append(health.get("basis", "maps"))
     for c in CLASSES:
         counts[c] += int(health["counts"].get(c, 0))
 

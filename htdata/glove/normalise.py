@@ -30,6 +30,39 @@ Streaming: the baseline (and floor) is fitted once on the first chunk
 as on the whole. `fitted()` / `restore()` carry the fitted arrays into the
 episode record and back (htdata.glove.calibration), so the stored raw rows can be
 renormalised later without the first chunk.
+
+The formula, in full (raw-count gloves, "direct": rest ~550, full scale 1023):
+
+    v = clip(max(max(to_unit(raw) - baseline, 0) - floor, 0) * scale, 0, 1)
+    to_unit(raw) = raw / max_value  (direct)  or  (max_value - raw) / max_value  (inverted)
+
+`max_value` is the FULL-SCALE raw value (the ADC's top, the layout's
+`value.max`), not the range above the baseline: a press from rest 550 to
+1022 on a 1023 glove reads 0.46. Setting max_value to that range (472)
+puts every raw value above it (all of them: rest is 550) out of range.
+
+Baselines chosen by activity (episode-wide: the ingest reads the episode's
+paired rows once more before normalising it, `fit_episode`):
+- "quietest": the per-taxel median of the quietest span of `rest_seconds`
+  (default 1 s): the span whose mean live value is lowest (a press raises
+  the value, so the hands are most at rest there), wherever it lies. A clip
+  that starts mid-grasp keeps its grip instead of taking it for rest.
+- "percentile": the per-taxel `baseline_percentile` (default 5) percentile
+  over the whole episode: keeps every press a taxel holds for less than
+  95% of the episode.
+- "drift": a rest level that follows slow drift: per window of
+  `drift_window_s` seconds (default 30), the per-taxel median of the
+  window's quiet frames (those whose mean live value stays near the window's
+  lowest: `quiet_frames`), knots at the window centres, linearly interpolated between them
+  by the raw row's position in the episode (the line through the first / last
+  two knots continued beyond the first / last centre). Stored as knots (`baseline` is then (K,H,W), `knot_rows`
+  their row positions); `apply` needs the rows' positions (`rows=`).
+For these three, the noise spread of `noise_k` is measured on the quietest span.
+
+Noise floor: with `noise_k` > 0 (or noise_floor > 0), the per-taxel floor is
+never below the glove's quantisation step (`value.step / max_value`, the
+layout's step, one count): a taxel whose counts did not move in the rest
+window (spread 0) would otherwise have floor 0 and flicker at one count.
 """
 
 from __future__ import annotations
@@ -38,8 +71,12 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from htdata.glove.restlevel import load_taxel_calibration, nan_quiet, quiet_frames
+
 CONVENTIONS = ("inverted", "direct")
-BASELINES = ("none", "first_frame", "rest_window")
+BASELINES = ("none", "first_frame", "rest_window", "quietest", "percentile", "drift")
+# baselines fitted on the whole episode (`fit_episode`), not on its first chunk
+EPISODE_BASELINES = ("quietest", "percentile", "drift")
 
 
 @dataclass
@@ -52,11 +89,24 @@ class NormaliseConfig:
     scale: float = 1.0
     noise_floor: float = 0.0  # constant floor in unit values (after the baseline)
     noise_k: float = 0.0      # + k x robust spread of the rest window, per taxel
+    rest_seconds: float = 1.0  # span length of baseline="quietest" (and of the noise spread of the episode baselines)
+    baseline_percentile: float = 5.0  # baseline="percentile": per-taxel percentile over the episode
+    drift_window_s: float = 30.0      # baseline="drift": window of the running rest level
+    # A per-glove calibration measured once: an .npz with per-taxel `offset` (rest, raw units) and `gain`
+    # (multiplier after the offset, 1 = nominal: a taxel twice as sensitive has 0.5), each (H,W). The pipeline resolves the path and fills in its sha256
+    # (PipelineConfig.normalise_for); the arrays travel in each episode record's calibration_fit.
+    taxel_calibration: str = ""
+    taxel_calibration_sha256: str = ""
+
+    @property
+    def per_episode(self) -> bool:
+        """True when the baseline is fitted on the whole episode (`Normaliser.fit_episode`)."""
+        return self.baseline in EPISODE_BASELINES
 
     @property
     def fits(self) -> bool:
         """True when the calibration has per-episode fitted arrays (baseline / noise floor)."""
-        return self.baseline != "none" or self.noise_k > 0
+        return self.baseline != "none" or self.noise_k > 0 or bool(self.taxel_calibration_sha256)
 
     def validate(self, where: str = "normalise") -> "NormaliseConfig":
         if self.convention not in CONVENTIONS:
@@ -79,9 +129,16 @@ class NormaliseConfig:
                 raise ValueError(f"{where}: {name} must be a finite number >= 0, got {value!r}")
         if self.noise_floor >= 1:
             raise ValueError(f"{where}: noise_floor must be < 1 (unit values), got {self.noise_floor!r}")
-        if self.noise_k > 0 and self.baseline != "rest_window":
+        if self.noise_k > 0 and self.baseline not in ("rest_window", *EPISODE_BASELINES):
             raise ValueError(f"{where}: noise_k needs baseline = \"rest_window\" (the floor is k x the rest "
-                             f"window's spread), got baseline = {self.baseline!r}")
+                             f"window's spread) or one of {EPISODE_BASELINES}, got baseline = {self.baseline!r}")
+        for name, lo, hi in (("rest_seconds", 0.0, None), ("baseline_percentile", 0.0, 100.0),
+                             ("drift_window_s", 0.0, None)):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
+                    and value > lo and (hi is None or value <= hi)):
+                raise ValueError(f"{where}: {name} must be a finite number > {lo:g}"
+                                 f"{'' if hi is None else f' and <= {hi:g}'}, got {value!r}")
         return self
 
     @classmethod
@@ -90,7 +147,14 @@ class NormaliseConfig:
         return cls(convention=value["convention"], max_value=float(value["max"])).validate()
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """The settings; the activity-baseline fields only when they differ from their defaults, so the
+        calibration ids (a hash of this) of pipelines written before they existed stay the same."""
+        d = asdict(self)
+        del d["taxel_calibration"]        # where the file was is not its identity: its sha256 is
+        for name in ("rest_seconds", "baseline_percentile", "drift_window_s", "taxel_calibration_sha256"):
+            if d[name] == type(self).__dataclass_fields__[name].default:
+                del d[name]
+        return d
 
 
 class Normaliser:
@@ -102,9 +166,18 @@ class Normaliser:
         self.grid = tuple(self.live_mask.shape)
         self.layout_id = getattr(layout, "layout_id", "?")
         self.baseline: np.ndarray | None = None
-        self.floor = np.full(self.grid, cfg.noise_floor, dtype=np.float32)
+        self.knot_rows: np.ndarray | None = None     # baseline="drift": row position of each knot
+        step = (getattr(layout, "value", None) or {}).get("step")
+        # a floor (when there is one) never lies below one quantisation step of the glove
+        self.min_floor = (np.float32(float(step) / cfg.max_value)
+                          if step and (cfg.noise_k > 0 or cfg.noise_floor > 0) else np.float32(0.0))
+        self.floor = np.full(self.grid, max(cfg.noise_floor, self.min_floor), dtype=np.float32)
         if cfg.baseline == "none":
             self.baseline = np.zeros(self.grid, dtype=np.float32)
+        self.offset: np.ndarray | None = None     # per-glove calibration file (raw units) and gain
+        self.gain: np.ndarray | None = None
+        if cfg.taxel_calibration:
+            self.offset, self.gain = load_taxel_calibration(cfg.taxel_calibration, self.grid, self.layout_id)
 
     def _check(self, raw) -> np.ndarray:
         arr = np.asarray(raw, dtype=np.float32)
@@ -114,11 +187,17 @@ class Normaliser:
         return arr
 
     def to_unit(self, raw: np.ndarray) -> np.ndarray:
-        """Convention + max only (before baseline/scale/clip)."""
+        """Convention + max (+ the calibration file's per-taxel offset and gain), before baseline/scale/clip."""
+        if self.cfg.taxel_calibration_sha256 and self.offset is None:
+            raise RuntimeError(f"layout {self.layout_id}: the taxel calibration file is not loaded (restore())")
         with np.errstate(invalid="ignore", over="ignore"):
+            top = np.float32(self.cfg.max_value)
+            if self.offset is not None:       # rest reads 0, a taxel's press counts by its own sensitivity
+                above = (self.offset - raw) if self.cfg.convention == "inverted" else (raw - self.offset)
+                return above * self.gain / top
             if self.cfg.convention == "inverted":
-                return (np.float32(self.cfg.max_value) - raw) / np.float32(self.cfg.max_value)
-            return raw / np.float32(self.cfg.max_value)
+                return (top - raw) / top
+            return raw / top
 
     def out_of_range(self, raw) -> tuple[np.ndarray, np.ndarray]:
         """(below, above): per frame, how many live finite taxels of `raw` lie below 0 / above max_value."""
@@ -131,6 +210,11 @@ class Normaliser:
     def fit_baseline(self, first_chunk) -> np.ndarray:
         """Fix the per-taxel baseline from the episode's first frames (idempotent per episode)."""
         if self.cfg.baseline == "none":
+            return self.baseline
+        if self.cfg.per_episode:
+            if self.baseline is None:
+                raise RuntimeError(f"layout {self.layout_id}: baseline={self.cfg.baseline!r} is fitted on the "
+                                   f"whole episode: call fit_episode() first")
             return self.baseline
         unit = self.to_unit(self._check(first_chunk))
         if unit.shape[0] == 0:
@@ -150,9 +234,78 @@ class Normaliser:
             if has.any():
                 mad = np.nanmedian(np.abs(filled[:, has] - base[has]), axis=0)
                 spread[has] = np.float32(1.4826) * mad
-            self.floor = (np.float32(self.cfg.noise_floor)
-                          + np.float32(self.cfg.noise_k) * spread).astype(np.float32)
+            self.floor = np.maximum(np.float32(self.cfg.noise_floor) + np.float32(self.cfg.noise_k) * spread,
+                                    self.min_floor).astype(np.float32)
         return self.baseline
+
+    def quietest_span(self, unit: np.ndarray, fps: float) -> slice:
+        """The `rest_seconds` span (>= 2 frames) of (T,H,W) unit values whose mean live value is lowest."""
+        T = unit.shape[0]
+        n = min(T, max(2, int(round(self.cfg.rest_seconds * fps))))
+        level = np.nanmean(unit[:, self.live_mask], axis=1) if self.live_mask.any() else np.zeros(T)
+        level = np.where(np.isfinite(level), level, np.inf)    # a damaged frame is never "quiet"
+        run = np.convolve(level, np.ones(n), mode="valid")    # sum over each span of n frames
+        start = int(np.argmin(run)) if np.isfinite(run).any() else 0
+        return slice(start, start + n)
+
+    def fit_episode(self, raw, fps: float, rows=None) -> np.ndarray:
+        """Fit baseline="quietest" / "percentile" / "drift" (and the noise floor) on a whole episode's rows.
+
+        `raw` (T,H,W) are the episode's rows in time order, `rows` their
+        positions (default 0..T-1, the positions `apply(rows=)` gets for drift).
+        """
+        if not self.cfg.per_episode:
+            return self.fit_baseline(raw)
+        unit = self.to_unit(self._check(raw))
+        T = unit.shape[0]
+        if T == 0:
+            raise ValueError(f"layout {self.layout_id}: cannot fit a baseline on zero frames")
+        if not (np.isfinite(fps) and fps > 0):
+            raise ValueError(f"layout {self.layout_id}: fit_episode needs fps > 0, got {fps!r}")
+        rows = np.arange(T) if rows is None else np.asarray(rows, np.int64)
+        quiet = unit[self.quietest_span(unit, fps)]
+        with np.errstate(invalid="ignore"), nan_quiet():
+            if self.cfg.baseline == "quietest":
+                base = np.nanmedian(quiet, axis=0)
+            elif self.cfg.baseline == "percentile":
+                base = np.nanpercentile(unit, self.cfg.baseline_percentile, axis=0)
+            else:
+                base, self.knot_rows = self._drift_knots(unit, rows, fps)
+            q_base = np.nanmedian(quiet, axis=0)
+            spread = np.float32(1.4826) * np.nanmedian(np.abs(quiet - q_base), axis=0)
+        self.baseline = np.clip(np.nan_to_num(base, nan=0.0), 0.0, 1.0).astype(np.float32)
+        if self.cfg.noise_k > 0:
+            self.floor = np.maximum(np.float32(self.cfg.noise_floor)
+                                    + np.float32(self.cfg.noise_k) * np.nan_to_num(spread, nan=0.0),
+                                    self.min_floor).astype(np.float32)
+        return self.baseline
+
+    def _drift_knots(self, unit: np.ndarray, rows: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
+        """((K,H,W) rest level per window of drift_window_s: median of its quiet frames, (K,) centre rows)."""
+        T = unit.shape[0]
+        w = max(2, int(round(self.cfg.drift_window_s * fps)))
+        level = np.nanmean(unit[:, self.live_mask], axis=1) if self.live_mask.any() else np.zeros(T)
+        knots, centres = [], []
+        for a in range(0, T, w):
+            b = min(T, a + w)
+            if b - a < max(2, w // 2) and knots:   # a short tail joins the previous window
+                a = max(0, b - w)
+            seg = level[a:b]
+            quiet = np.flatnonzero(quiet_frames(seg)) + a
+            knots.append(np.nanmedian(unit[quiet], axis=0))
+            centres.append(float(np.mean(rows[a:b])))
+        return np.stack(knots), np.asarray(centres, np.float32)
+
+    def baseline_at(self, rows) -> np.ndarray:
+        """(T,H,W) drift baseline at raw row positions `rows` (linear between knots, constant outside)."""
+        rows = np.asarray(rows, np.float32)
+        knots, at = self.baseline, self.knot_rows
+        if len(at) == 1:
+            return np.broadcast_to(knots[0], (len(rows), *self.grid))
+        k = np.clip(np.searchsorted(at, rows, side="right") - 1, 0, len(at) - 2)
+        # linear between knots and continued past the first / last centre (at most half a window: the ends)
+        frac = ((rows - at[k]) / np.maximum(at[k + 1] - at[k], 1e-6))[:, None, None]
+        return (knots[k] * (1 - frac) + knots[k + 1] * frac).astype(np.float32)
 
     def fitted(self) -> dict[str, np.ndarray]:
         """The per-episode fitted arrays ({} when the config fits nothing): "baseline", "noise_floor"."""
@@ -160,12 +313,19 @@ class Normaliser:
             return {}
         if self.baseline is None:
             raise RuntimeError(f"layout {self.layout_id}: nothing fitted yet")
-        return {"baseline": self.baseline, "noise_floor": self.floor}
+        out = {"baseline": self.baseline, "noise_floor": self.floor}
+        if self.cfg.baseline == "drift":
+            out["knot_rows"] = self.knot_rows
+        if self.offset is not None:
+            out["offset"], out["gain"] = self.offset, self.gain
+        return out
 
     def restore(self, fitted: dict[str, np.ndarray]) -> "Normaliser":
         """Set the arrays `fitted()` returned (an episode's calibration), instead of fitting them."""
         for name, arr in fitted.items():
             arr = np.asarray(arr, dtype=np.float32)
+            if name == "knot_rows" or (name == "baseline" and self.cfg.baseline == "drift"):
+                continue     # knots (K,H,W) and their rows (K,): checked below
             if arr.shape != self.grid:
                 raise ValueError(f"layout {self.layout_id}: fitted {name} has shape {arr.shape}, expected {self.grid}")
         if self.cfg.fits:
@@ -174,22 +334,44 @@ class Normaliser:
                 raise ValueError(f"layout {self.layout_id}: fitted calibration lacks {sorted(missing)}")
             self.baseline = np.asarray(fitted["baseline"], dtype=np.float32)
             self.floor = np.asarray(fitted["noise_floor"], dtype=np.float32)
+            if self.cfg.taxel_calibration_sha256:
+                if "offset" not in fitted or "gain" not in fitted:
+                    raise ValueError(f"layout {self.layout_id}: fitted calibration lacks the taxel calibration "
+                                     f"(offset, gain)")
+                self.offset = np.asarray(fitted["offset"], np.float32)
+                self.gain = np.asarray(fitted["gain"], np.float32)
+            if self.cfg.baseline == "drift":
+                knots = self.baseline.reshape(-1, *self.grid)
+                rows = np.asarray(fitted.get("knot_rows", []), np.float32).reshape(-1)
+                if len(rows) != len(knots) or len(rows) == 0:
+                    raise ValueError(f"layout {self.layout_id}: drift baseline has {len(knots)} knots and "
+                                     f"{len(rows)} knot rows")
+                self.baseline, self.knot_rows = knots, rows
         return self
 
-    def apply(self, raw) -> tuple[np.ndarray, np.ndarray]:
+    def apply(self, raw, rows=None) -> tuple[np.ndarray, np.ndarray]:
         """raw (T,H,W) -> (values (T,H,W) float32, finite_mask (T,) bool).
 
         Finite live taxels of values are in [0,1]; non-finite live taxels are
-        set to NaN and their frame is False in finite_mask.
+        set to NaN and their frame is False in finite_mask. `rows`: the raw
+        rows' positions in the episode (needed by baseline="drift" only).
         """
         arr = self._check(raw)
+        if self.cfg.baseline == "drift" and self.baseline is not None:
+            if rows is None:
+                raise ValueError(f"layout {self.layout_id}: baseline=\"drift\" needs the raw rows' positions "
+                                 f"(apply(raw, rows=...))")
+            if len(rows) != len(arr):
+                raise ValueError(f"layout {self.layout_id}: {len(rows)} row positions for {len(arr)} rows")
         if self.baseline is None:
             raise RuntimeError(f"layout {self.layout_id}: fit_baseline() must be called before apply() "
                                f"with baseline={self.cfg.baseline!r}")
         finite_mask = np.isfinite(arr[:, self.live_mask]).all(axis=1)
         with np.errstate(invalid="ignore", over="ignore"):
             v = self.to_unit(arr)
-            if self.cfg.baseline != "none":
+            if self.cfg.baseline == "drift":
+                v = np.maximum(v - self.baseline_at(rows), 0.0)
+            elif self.cfg.baseline != "none":
                 v = np.maximum(v - self.baseline, 0.0)
             if self.cfg.noise_k > 0 or self.cfg.noise_floor > 0:
                 v = np.maximum(v - self.floor, 0.0)
@@ -208,3 +390,5 @@ class Normaliser:
             # Clipping would turn +Inf into 1: mark every non-finite input NaN instead.
             v = np.where(np.isfinite(arr), v, np.float32(np.nan))
         return v.astype(np.float32, copy=False), finite_mask
+
+

@@ -66,7 +66,7 @@ def read_chunk(ref, streams, tally: EpisodeTally, normalisers: dict, start: int,
         with clock.stage("normalise"):
             if start == 0:
                 normalisers[h].fit_baseline(raw)
-            v, finite = normalisers[h].apply(raw)
+            v, finite = normalisers[h].apply(raw, rows=paired)
             below, above = normalisers[h].out_of_range(raw)
         for j in np.flatnonzero(ok & ~finite):
             tally.dropped.append((int(rgb_idx[j]), f"nonfinite_tactile:{h}"))

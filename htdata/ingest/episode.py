@@ -164,6 +164,28 @@ def _pair_clocks(ref, cfg: PipelineConfig, streams, hands: list[str], adapter) -
     return sync
 
 
+def _fit_episode_baselines(ref, cfg: PipelineConfig, adapter, streams, sync, normalisers: dict) -> None:
+    """Fit the baselines chosen by activity (quietest / percentile / drift) on the hand's paired rows.
+
+    They need the whole episode before its first frame is normalised: the
+    rows are read through a second opening of the source (the main pass stays
+    one forward pass, as streamed sources need), at the glove's own frame rate.
+    """
+    wanted = [h for h, n in normalisers.items() if n.cfg.per_episode]
+    if not wanted:
+        return
+    with adapter.open(ref, cfg.adapter.params) as again:
+        for h in wanted:
+            rows = np.unique(sync.tactile_index[h])
+            ts = np.asarray(streams.tactile_timestamps_ns[h], np.int64)[rows]
+            step = np.median(np.diff(ts)) if ts.size > 1 else 0
+            fps = 1e9 / step if step > 0 else 30.0
+            try:
+                normalisers[h].fit_episode(np.asarray(again.read_tactile(h, rows), np.float32), fps, rows)
+            except ValueError as exc:
+                raise EpisodeError(ref, None, f"{h} hand baseline {normalisers[h].cfg.baseline!r}: {exc}") from exc
+
+
 def _render_kept(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict, tally: EpisodeTally):
     """Maps (and bend vectors) of a chunk's kept frames; their contact goes into the tally."""
     maps, bends = {}, {}
@@ -258,6 +280,8 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
         sync = tally.sync = _pair_clocks(ref, cfg, streams, hands, adapter)
         tally.dropped = list(sync.dropped)
         normalisers = tally.normalisers = {h: Normaliser(cfg.normalise_for(layouts[h]), layouts[h]) for h in hands}
+        with clock.stage("normalise"):
+            _fit_episode_baselines(ref, cfg, adapter, streams, sync, normalisers)
         rasters = {h: rasteriser_for(layouts[h], cfg.tactile.raster_mode) for h in hands}
         keep_bend = {h: cfg.tactile.keep_bend and len(layouts[h].bend_cells) > 0 for h in hands}
         fetcher, unpaired = _rgb_source(ref, cfg, streams, sync, clock, with_rgb)

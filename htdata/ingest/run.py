@@ -224,6 +224,10 @@ def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, disc
         # cells outside every block whose raw values move (htdata/glove/activity.py), per episode and hand
         "unmapped_moving": {ep["episode_id"]: {h: {**e, "layout": ep["layouts"][h]} for h, e in ep["unmapped_moving"].items()}
                             for r in ordered for ep in r["episodes"] if ep.get("unmapped_moving")},
+        # the episode records' warnings (e.g. raw values out of range, clipped): the CLI prints them on stderr
+        "episode_warnings": {ep["episode_id"]: [n for n in ep.get("notes", []) if n.startswith("warning:")]
+                             for r in ordered for ep in r["episodes"]
+                             if any(n.startswith("warning:") for n in ep.get("notes", []))},
         "timing": timing_summary(ran, time.perf_counter() - t_start),
     }
 

@@ -92,7 +92,9 @@ class EpisodeTally:
             if self.oor_policy.policy == "clip" and share > self.oor_policy.warn_share:
                 notes.append(f"warning: {h} hand: {c['frames']} of {total} frames ({share:.1%}) hold raw values "
                              f"outside [0, {self.raw_max.get(h, '?'):g}] ({c['below']} below, {c['above']} above): "
-                             f"clipped (pipeline [normalise] out_of_range = \"clip\")")
+                             f"clipped (pipeline [normalise] out_of_range = \"clip\")"
+                             + ("; max_value is the glove's FULL-SCALE raw value (its ADC top), not the range above "
+                                "its rest level" if c["above"] and share >= 0.5 else ""))
         return notes
 
     def add_contact(self, hand: str, live: np.ndarray) -> None:

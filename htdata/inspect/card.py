@@ -178,6 +178,9 @@ def build_card(root, version: int | None = None, title: str | None = None, descr
 
     s = dataset_stats(root, version=version)
     card = Card(title=f"{title or Path(str(root)).name}: version {s['version']}")
+    card.text(f"{s['episodes']} episodes, {s['frames']} frames. Values: {s['values']}; "
+              f"contact per glove and hand from its calibration (the rule of each glove is "
+              f"in the Gloves table; 'old contact' = any taxel above {s['contact_threshold']}).")
     with DatasetReader(root, version=version) as reader:
         _about(card, s, reader, title, description, license)
         card.heading("What the numbers mean")
@@ -210,8 +213,10 @@ def _counts(card: Card, s: dict) -> None:
 def _gloves(card: Card, s: dict, reader, parse_canonical) -> None:
     import json
     card.heading("Gloves")
-    card.table(["layout", "hand", "episodes", "frames", "contact", "p1", "p50", "p99", "max", "faulty taxels"],
+    card.table(["layout", "hand", "episodes", "frames", "contact", "contact rule", "old contact", "p1", "p50",
+                "p99", "max", "faulty taxels"],
                [[g["layout"], g["hand"], g["episodes"], g["frames"], _fmt(g["contact_fraction"]),
+                 g.get("contact_rule") or "-", _fmt(g.get("contact_fraction_threshold")),
                  *(_fmt(g["quantiles"][k]) for k in ("p1", "p50", "p99", "max")),
                  sum(g["health"]["counts"].values())] for g in s["gloves"]])
     canon_file = reader.manifest["canonical"]["file"]
@@ -229,14 +234,18 @@ def _gloves(card: Card, s: dict, reader, parse_canonical) -> None:
 
 def _sync(card: Card, reader) -> None:
     skew, offset = [], []
+    glove_only = sum(bool(ep.get("tactile_only")) for ep in reader.episodes)
     for ep in reader.episodes:
+        if ep.get("tactile_only"):     # no video: its frames run on the glove's own clock, nothing to sync
+            continue
         for hand in HANDS:
             h = (ep.get("sync") or {}).get("hands", {}).get(hand)
             if h:
                 skew.append(h.get("median_abs_skew_ns", 0) / 1e6)
                 offset.append(h.get("offset_ns", 0) / 1e6)
     card.heading("Synchronisation")
-    card.text(f"{len(skew)} episode hands with sync records: median |RGB-tactile skew| and clock offset (ms).")
+    card.text(f"{len(skew)} episode hands with sync records: median |RGB-tactile skew| and clock offset (ms)."
+              + (f" {glove_only} glove-only episode(s) (no video) have none." if glove_only else ""))
     lags = [lag for lag in ((ep.get("sync") or {}).get("lag") for ep in reader.episodes) if lag]
     applied = [float(lag["lag_ms"]) for lag in lags if lag.get("applied")]
     if lags:   # only pipelines with [sync] lag set report one (htdata/source/lag.py)

@@ -30,14 +30,16 @@ import numpy as np
 
 from htdata.format.codec import decode_exr_pixels
 from htdata.format.table import HANDS, JSON_MEMBER, MAP_SHAPE, SIZE_FIELDS, raw_member, tactile_member
+from htdata.glove.contact import OLD_RULE, THRESHOLD, ContactRule, episode_rule
 from htdata.glove.health import TaxelGrid, classify
+from htdata.glove.rawhealth import classify_raw
 from htdata.glove.layouts import CanonicalHand, Layout, parse_canonical, parse_layout
 from htdata.glove.rasterise import Rasteriser
-from htdata.read.rawstream import paired_row
+from htdata.read.rawstream import paired_row, paired_source_row
 from htdata.store import storage
 from htdata.glove.calibration import episode_normaliser
 
-CONTACT_THRESHOLD = 0.02      # a taxel above this is in contact (validate's contact threshold)
+CONTACT_THRESHOLD = THRESHOLD  # the old rule's level (htdata.glove.contact), kept beside the calibrated one
 HIST_BINS = 1000              # fixed bins over (0, 1]: quantiles to 0.001, mergeable by addition
 CHUNK = 64                    # maps sampled per sparse product (bounds memory: 64 x 50176 float64)
 
@@ -143,10 +145,13 @@ class _Series:
         self.items: list[np.ndarray] = []
         self.frames: list[int] = []
         self.keys: list[tuple[str, int]] = []     # (sample key, global sample index): errors name the sample
+        self.source_rows: list[int] = []          # paired source row numbers (baseline = "drift" only)
 
 
-def _read_episode(reader, pos: int, from_raw: list[str], nan_samples: list) -> dict[str, _Series]:
-    """Stream the episode's members once: raw rows for `from_raw` hands, maps for the other hands."""
+def _read_episode(reader, pos: int, from_raw: list[str], nan_samples: list, drifting: tuple = ()
+                  ) -> dict[str, _Series]:
+    """Stream the episode's members once: raw rows for `from_raw` hands, maps for the other hands
+    (+ the paired source row numbers of the `drifting` hands)."""
     ep = reader.episodes[pos]
     first, n = reader.episode_range(pos)
     hands = [h for h in HANDS if h in ep["layouts"]]
@@ -162,6 +167,8 @@ def _read_episode(reader, pos: int, from_raw: list[str], nan_samples: list) -> d
             where = f"{reader.root}: {key}"
             if hand in from_raw:
                 value = paired_row(members, hand, where)
+                if hand in drifting:
+                    series[hand].source_rows.append(paired_source_row(members, hand, where))
             else:
                 value = decode_exr_pixels(data, f"{where}.{wanted[hand]}")  # half as stored: converted once
                 if value.shape != MAP_SHAPE:
@@ -185,20 +192,19 @@ def _map_taxels(s: _Series, glove: "Glove") -> np.ndarray:
 
 
 def _raw_taxels(s: _Series, normaliser, glove: "Glove", ep: dict, hand: str, nan_samples: list):
-    """((T, L) normalised live values, (T, L) raw live values) of the paired raw rows, exactly as calibrated."""
+    """((T, L) normalised live values, (T, H, W) raw rows) of the paired raw rows, exactly as calibrated."""
     live = glove.layout.live_mask
     if not s.items:
-        empty = np.zeros((0, glove.layout.num_live), np.float32)
-        return empty, empty
+        return np.zeros((0, glove.layout.num_live), np.float32), np.zeros((0, *glove.layout.grid), np.float32)
     raw = np.stack(s.items)
-    values, finite = normaliser.apply(raw)
+    values, finite = normaliser.apply(raw, rows=s.source_rows if normaliser.cfg.baseline == "drift" else None)
     if not finite.all():           # the ingest drops such frames: a stored one is damage, named like a NaN map
         for t in np.flatnonzero(~finite):
             nan_samples.append({"episode": ep["episode_id"], "frame": s.frames[t], "hand": hand, "key": s.keys[t][0],
                                 "sample": s.keys[t][1], "nonfinite_taxels": int((~np.isfinite(raw[t][live])).sum())})
         s.frames = [f for f, ok in zip(s.frames, finite) if ok]
         values, raw = values[finite], raw[finite]
-    return values[:, live], raw[:, live]
+    return values[:, live], raw
 
 
 def compute_episode(reader, pos: int, gloves: dict[str, Glove]) -> dict:
@@ -208,16 +214,19 @@ def compute_episode(reader, pos: int, gloves: dict[str, Glove]) -> dict:
     _, n = reader.episode_range(pos)
     from_raw = raw_hands(reader, pos)
     nan_samples: list = []
-    series = _read_episode(reader, pos, from_raw, nan_samples)
+    normalisers = {hand: episode_normaliser(reader.manifest, ep, hand, gloves[ep["layouts"][hand]].layout)
+                   for hand in from_raw}
+    drifting = tuple(h for h, n in normalisers.items() if n.cfg.baseline == "drift")
+    series = _read_episode(reader, pos, from_raw, nan_samples, drifting)
     out = {"episode_id": ep["episode_id"], "frames": n, "hands": {}, "nan_samples": nan_samples}
     for hand, s in series.items():
         glove = gloves[ep["layouts"][hand]]
         if hand in from_raw:
-            normaliser = episode_normaliser(reader.manifest, ep, hand, glove.layout)
-            x, raw = _raw_taxels(s, normaliser, glove, ep, hand, nan_samples)
+            x, raw = _raw_taxels(s, normalisers[hand], glove, ep, hand, nan_samples)
         else:
             x, raw = _map_taxels(s, glove), None
-        out["hands"][hand] = hand_stats(x, s.frames, glove, ep["layouts"][hand], raw)
+        out["hands"][hand] = hand_stats(x, s.frames, glove, ep["layouts"][hand], raw,
+                                        episode_rule(reader.manifest, ep, hand, glove.layout))
     return out
 
 
@@ -230,11 +239,18 @@ def raw_histogram(raw: np.ndarray, top: float) -> dict:
             "raw_min": float(v.min()) if v.size else None, "raw_max": float(v.max()) if v.size else None}
 
 
-def hand_stats(x: np.ndarray, frames: list[int], glove: Glove, layout_id: str, raw: np.ndarray | None = None) -> dict:
-    """Mergeable sums of one episode hand's (T, L) taxel series (+ raw-unit sketch when `raw` is given)."""
+def hand_stats(x: np.ndarray, frames: list[int], glove: Glove, layout_id: str, raw: np.ndarray | None = None,
+               rule: ContactRule = OLD_RULE) -> dict:
+    """Mergeable sums of one episode hand's (T, L) taxel series (+ raw-unit sketch and raw-row taxel health
+    when `raw`, its (T, H, W) raw rows, is given).
+
+    Contact follows `rule` (htdata.glove.contact: the episode hand's calibration);
+    "contact_frames_threshold" keeps the old count (any taxel > 0.02) beside it.
+    """
     x = np.clip(x.astype(np.float64), 0.0, 1.0)
     zeros, hist = value_histogram(x.ravel())
-    contact = x > CONTACT_THRESHOLD
+    in_contact = rule.frames(x) if len(x) else np.zeros(0, bool)
+    contact = rule.taxels(x) & in_contact[:, None]     # a region touches only in a frame the hand touches
     regions = {}
     names = np.asarray(glove.regions)
     for name in sorted(set(glove.regions)):
@@ -244,20 +260,23 @@ def hand_stats(x: np.ndarray, frames: list[int], glove: Glove, layout_id: str, r
                          "pressure_sum": float(x[:, cols][hit].sum()), "pressure_count": int(hit.sum())}
     frame_max = x.max(axis=1) if len(x) else np.zeros(0)
     out = {
-        "layout": layout_id, "frames": int(len(x)), "contact_frames": int(contact.any(axis=1).sum()),
+        "layout": layout_id, "frames": int(len(x)), "contact_frames": int(in_contact.sum()),
+        "contact_frames_threshold": int((x > CONTACT_THRESHOLD).any(axis=1).sum()) if len(x) else 0,
+        "contact_rule": rule.to_dict(), "frame_contact": in_contact.astype(int).tolist(),
         "values_from": "raw" if raw is not None else "maps",
         "zeros": zeros, "hist": hist.tolist(), "max": float(x.max()) if x.size else 0.0,
         "taxel_sum": x.sum(axis=0).tolist(), "taxel_sumsq": (x * x).sum(axis=0).tolist(),
         "regions": regions, "frame_index": list(frames), "frame_max": [round(float(v), 5) for v in frame_max],
-        "health": classify(x, glove.taxels),
+        # from the raw rows where stored: the glove's own health, whatever the calibration
+        "health": classify(x, glove.taxels) if raw is None else classify_raw(raw, glove.layout, glove.taxels),
     }
     if raw is not None:
-        out.update(raw_histogram(raw, float(glove.layout.value["max"])))
+        out.update(raw_histogram(raw[:, glove.layout.live_mask], float(glove.layout.value["max"])))
     return out
 
 
 def empty_hand(layout_id: str | None) -> dict:
-    return {"layout": layout_id, "frames": 0, "contact_frames": 0, "zeros": 0, "hist": [0] * HIST_BINS,
+    return {"layout": layout_id, "frames": 0, "contact_frames": 0, "contact_frames_threshold": 0, "contact_rules": [], "zeros": 0, "hist": [0] * HIST_BINS,
             "max": 0.0, "taxel_sum": None, "taxel_sumsq": None, "regions": {}, "episodes": 0,
             "frames_from_raw": 0, "raw_top": None}
 
@@ -286,6 +305,10 @@ def merge_hand(into: dict, h: dict) -> dict:
     into["episodes"] = into.get("episodes", 0) + 1
     into["frames"] += h["frames"]
     into["contact_frames"] += h["contact_frames"]
+    into["contact_frames_threshold"] = into.get("contact_frames_threshold", 0) + h.get("contact_frames_threshold", 0)
+    rule = h.get("contact_rule")
+    if rule is not None and rule not in into.setdefault("contact_rules", []):
+        into["contact_rules"].append(rule)
     into["zeros"] += h["zeros"]
     into["hist"] = (np.asarray(into["hist"], np.int64) + np.asarray(h["hist"], np.int64)).tolist()
     into["max"] = max(into["max"], h["max"])

@@ -1,7 +1,11 @@
 """`htdata preview`: a contact sheet of one episode, drawn with cv2 only.
 
-Rows run over time (N frames evenly spaced over the episode, first and last
-included); columns are RGB | left tactile | right tactile. Tactile maps are
+Rows are N frames in time order: by default the N frames with the most
+contact (`pick="contact"`: hands in contact by each glove hand's contact
+rule, htdata/glove/contact.py, then the highest taxel value; at least
+len/(2N) frames apart; evenly spaced when nothing is in contact), or N
+frames evenly spaced over the episode, first and last included
+(`pick="even"`); columns are RGB | left tactile | right tactile. Tactile maps are
 colour-mapped (inferno, 0 = black, 1 = pale yellow), the canonical region
 outlines are drawn on top, pixels the glove does not cover are shaded with a
 grey hatch, and a hand the episode does not have is a grey panel labelled
@@ -11,9 +15,11 @@ dataset) show as magenta rather than being hidden.
 Contrast: "fixed" maps 0..1 onto the colour scale; "quantile" maps
 0..vmax, vmax = the CONTRAST_QUANTILE of the dataset's positive taxel
 values (from `htdata stats`, cached in DATASET/stats/), so faint contact
-(0.02-0.2 after normalisation, common for raw-count gloves) becomes
-visible; values above vmax saturate. A colour bar under the tactile
-columns shows the scale with its values either way.
+(0.02-0.45 after normalisation, common for raw-count gloves) becomes
+visible; values above vmax saturate. "auto" (the default) is "quantile"
+when that p99 is below AUTO_QUANTILE_BELOW (0.3), "fixed" otherwise. A
+colour bar under the tactile columns shows the scale with its values
+either way, and `htdata preview` prints its range.
 
 Sheet size is fixed by the row count: see `sheet_size`.
 """
@@ -29,6 +35,7 @@ from htdata.format.table import CANVAS, HANDS
 from htdata.inspect.outline import region_outline  # noqa: F401  (preview.region_outline stays a name of this module)
 from htdata.inspect.stats import positive_value_quantile
 from htdata.read.reader import DatasetReader
+from htdata.inspect.stats import default_cache_dir, episode_stats
 
 PAD = 8
 TITLE_H = 30
@@ -44,7 +51,9 @@ FONT = cv2.FONT_HERSHEY_SIMPLEX
 BAR_H = 52                       # colour bar band under the rows
 BAR_STRIP_H = 14
 BAR_TICKS = 5
-CONTRASTS = ("fixed", "quantile")
+CONTRASTS = ("auto", "fixed", "quantile")
+PICKS = ("contact", "even")
+AUTO_QUANTILE_BELOW = 0.3        # contrast "auto": quantile when the dataset's p99 is below this
 CONTRAST_QUANTILE = 0.99         # of the dataset's positive taxel values
 MIN_VMAX = 0.01                  # never stretch further than this: noise would fill the panel
 
@@ -103,14 +112,58 @@ def _label(img: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.45
     cv2.putText(img, text, org, FONT, scale, TEXT, 1, cv2.LINE_AA)
 
 
-def contrast_vmax(dataset, contrast: str, version: int | None = None) -> float:
-    """Top of the colour scale: 1.0 ("fixed") or the dataset's CONTRAST_QUANTILE of positive taxel values."""
+def contrast_scale(dataset, contrast: str, version: int | None = None) -> tuple[str, float]:
+    """(contrast used, top of the colour scale): "fixed" -> 1.0, "quantile" -> the dataset's
+    CONTRAST_QUANTILE of positive taxel values, "auto" -> quantile when that is below AUTO_QUANTILE_BELOW."""
     if contrast not in CONTRASTS:
         raise ValueError(f"--contrast must be one of {', '.join(CONTRASTS)}, got {contrast!r}")
     if contrast == "fixed":
-        return 1.0
-    q = positive_value_quantile(dataset, CONTRAST_QUANTILE, version=version)
-    return float(min(1.0, max(MIN_VMAX, q))) if q else 1.0
+        return "fixed", 1.0
+    try:
+        q = positive_value_quantile(dataset, CONTRAST_QUANTILE, version=version)
+    except (ValueError, KeyError):
+        if contrast == "quantile":
+            raise
+        q = None       # auto on a dataset whose layouts the stats cannot sample: the fixed scale (said on the bar)
+    vmax = float(min(1.0, max(MIN_VMAX, q))) if q else 1.0
+    if contrast == "auto":
+        return ("quantile", vmax) if q and q < AUTO_QUANTILE_BELOW else ("fixed", 1.0)
+    return "quantile", vmax
+
+
+def contrast_vmax(dataset, contrast: str, version: int | None = None) -> float:
+    """Top of the colour scale of `contrast_scale`."""
+    return contrast_scale(dataset, contrast, version)[1]
+
+
+def contact_positions(stats: dict, num_frames: int, rows: int) -> np.ndarray:
+    """The `rows` frames of an episode with the most contact, in time order (see the module docstring).
+
+    `stats`: the episode's `htdata stats` entry (per hand: frame_index, frame_max, frame_contact).
+    """
+    hands = np.zeros(num_frames)
+    peak = np.zeros(num_frames)
+    for h in stats["hands"].values():
+        idx = np.asarray(h["frame_index"], np.int64)
+        if "frame_contact" in h:
+            hands[idx] += np.asarray(h["frame_contact"], bool)
+        peak[idx] += np.asarray(h["frame_max"], np.float64)
+    if not hands.any():
+        return frame_positions(num_frames, rows)
+    gap = max(1, num_frames // (2 * max(rows, 1)))
+    chosen: list[int] = []
+    for f in np.lexsort((np.arange(num_frames), -peak, -hands)):      # most hands, then highest value
+        if hands[f] == 0 or len(chosen) == rows:
+            break
+        if all(abs(int(f) - c) >= gap for c in chosen):
+            chosen.append(int(f))
+    # fewer frames in contact than rows: fill with evenly spaced frames, then any, so every row is drawn
+    for f in [*frame_positions(num_frames, rows).tolist(), *range(num_frames)]:
+        if len(chosen) >= min(rows, num_frames):
+            break
+        if f not in chosen:
+            chosen.append(int(f))
+    return np.asarray(sorted(chosen), np.int64)
 
 
 def draw_colour_bar(sheet: np.ndarray, x: int, y: int, width: int, vmax: float, label: str) -> None:
@@ -137,16 +190,19 @@ def _default_episode(episodes: list[dict]) -> str:
     return max(candidates, key=mean_contact)["episode_id"]   # max() keeps the first on ties
 
 
-def render_contact_sheet(dataset, episode: str | None = None, frames: int = 6, contrast: str = "fixed"
-                         ) -> np.ndarray:
-    """Contact sheet of one episode as a BGR uint8 image (contrast: "fixed" 0..1 or "quantile").
+def render_contact_sheet(dataset, episode: str | None = None, frames: int = 6, contrast: str = "auto",
+                         pick: str = "contact") -> np.ndarray:
+    """Contact sheet of one episode as a BGR uint8 image (contrast: "auto", "fixed" 0..1 or "quantile";
+    pick: "contact" or "even" frames).
 
     Default episode: among those with the most hands (so a two-handed
     dataset shows both gloves and mirroring can be checked by eye), the one
     with the highest mean contact in its ingest stats (first on ties).
     """
 
-    vmax = contrast_vmax(dataset, contrast)
+    if pick not in PICKS:
+        raise ValueError(f"--pick must be one of {', '.join(PICKS)}, got {pick!r}")
+    contrast, vmax = contrast_scale(dataset, contrast)
     with DatasetReader(dataset) as reader:
         if not reader.episodes:
             raise ValueError(f"{dataset}: dataset has no episodes")
@@ -160,6 +216,14 @@ def render_contact_sheet(dataset, episode: str | None = None, frames: int = 6, c
         ep = reader.episodes[pos]
         first, n = reader.episode_range(pos)
         chosen = frame_positions(n, frames)
+        picked = "evenly spaced"
+        if pick == "contact" and n:
+            try:
+                (entry,), _ = episode_stats(reader, [pos], cache_dir=default_cache_dir(reader.root))
+                chosen = contact_positions(entry, n, frames)
+                picked = "most contact"
+            except (ValueError, KeyError):   # layouts the stats cannot sample: even spacing, said in the caption
+                picked = "evenly spaced (no stats for this dataset)"
         outline = region_outline(reader.place_map)
         coverage = {hand: reader.coverage(layout_id) for hand, layout_id in ep["layouts"].items()}
 
@@ -190,16 +254,17 @@ def render_contact_sheet(dataset, episode: str | None = None, frames: int = 6, c
             _label(sheet, f"frame {int(frame)}  t={(t - t0) / 1e9:.3f}s", (PAD + 4, y + 16))
         caption = ("tactile value, fixed scale 0..1" if contrast == "fixed" else
                    f"tactile value 0..{vmax:.3g} (p{CONTRAST_QUANTILE * 100:g} of the dataset's positive "
-                   f"taxel values; above saturates)")
+                   f"taxel values; above saturates)") + f"; frames: {picked}"
         draw_colour_bar(sheet, PAD + CANVAS + PAD, height - BAR_H + 4, 2 * CANVAS + PAD, vmax, caption)
     return sheet
 
 
-def write_preview(dataset, out, episode: str | None = None, frames: int = 6, contrast: str = "fixed") -> Path:
+def write_preview(dataset, out, episode: str | None = None, frames: int = 6, contrast: str = "auto",
+                  pick: str = "contact") -> Path:
     out = Path(out)
     if out.suffix.lower() != ".png":
         raise ValueError(f"{out}: the preview is written as PNG; give a .png path")
-    sheet = render_contact_sheet(dataset, episode=episode, frames=frames, contrast=contrast)
+    sheet = render_contact_sheet(dataset, episode=episode, frames=frames, contrast=contrast, pick=pick)
     out.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(out), sheet):
         raise OSError(f"{out}: cv2 could not write the PNG")

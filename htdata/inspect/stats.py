@@ -32,6 +32,7 @@ import numpy as np
 from htdata.store import storage
 from htdata.inspect.episodestats import (CONTACT_THRESHOLD, HIST_BINS, compute_episode, dataset_gloves, empty_hand,
                                  merge_hand, quantile)
+from htdata.glove.contact import RULE_VERSION, ContactRule
 from htdata.format.table import HANDS
 from htdata.store.fsutil import write_bytes_atomic
 from htdata.glove.health import CLASSES, HEALTH_VERSION, merge_counts
@@ -40,7 +41,8 @@ from htdata.inspect.healthmap import write_health_map as write_png
 
 STATS_DIR = "stats"
 # /2: values from the raw rows where stored (format 3), raw-unit sketches; the key covers the calibration
-STATS_SCHEMA = f"htdata-episode-stats/2 health/{HEALTH_VERSION} bins/{HIST_BINS} contact/{CONTACT_THRESHOLD}"
+STATS_SCHEMA = (f"htdata-episode-stats/2 health/{HEALTH_VERSION} bins/{HIST_BINS} contact/{CONTACT_THRESHOLD} "
+                f"rule/{RULE_VERSION}")
 GROUPINGS = ("task", "scene", "source", "layout", "hand")
 QUANTILES = {"p1": 0.01, "p50": 0.50, "p99": 0.99}
 HIST_COARSE = 50                  # bins of the summary's value_histogram (divides HIST_BINS)
@@ -139,6 +141,8 @@ def _glove_summary(acc: dict, gloves: dict, health: dict) -> dict:
     frames = acc["frames"]
     out = {"episodes": acc["episodes"], "layout": acc["layout"], "frames": frames,
            "contact_fraction": round(acc["contact_frames"] / frames, 6) if frames else None,
+           "contact_fraction_threshold": round(acc["contact_frames_threshold"] / frames, 6) if frames else None,
+           "contact_rule": "; ".join(ContactRule(**r).describe() for r in acc["contact_rules"]) or None,
            "quantiles": {k: quantile(acc["zeros"], hist, q) for k, q in QUANTILES.items()},
            "regions": {}, "health": health}
     out["quantiles"]["max"] = acc["max"] if frames else None

@@ -99,6 +99,22 @@ def serves_maps_from_raw(manifest: dict, map_source: str = "auto") -> bool:
             and manifest.get("format_version", 1) >= 3)
 
 
+def paired_source_row(members: dict[str, bytes], hand: str, where: str) -> int:
+    """The source row number of the raw row paired with a sample's frame (meta raw_row / raw_paired)."""
+    meta = decode_member(JSON_MEMBER, members[JSON_MEMBER], where)
+    rows = (meta.get("raw_row") or {}).get(hand)
+    at = (meta.get("raw_paired") or {}).get(hand, 0)
+    if not rows or not 0 <= at < len(rows):
+        raise ValueError(f"{where}: meta raw_row / raw_paired do not name the paired {hand} row")
+    return int(rows[at])
+
+
+def apply_paired(normaliser, members: dict[str, bytes], hand: str, where: str):
+    """normaliser.apply on a sample's paired raw row (with its source row number when the baseline drifts)."""
+    rows = [paired_source_row(members, hand, where)] if normaliser.cfg.baseline == "drift" else None
+    return normaliser.apply(paired_row(members, hand, where)[None], rows=rows)
+
+
 class RawMapRenderer:
     """Maps from the paired raw rows (see the module docstring); one normaliser per episode hand, cached."""
 
@@ -126,7 +142,7 @@ class RawMapRenderer:
     def render(self, episode: int, hand: str, members: dict[str, bytes], where: str = "sample") -> np.ndarray:
         """(224,224) float32 map from `members` (json + raw_<hand>.npy) of a sample of episode position `episode`."""
         normaliser, raster = self.parts_for(episode, hand)
-        values, _ = normaliser.apply(paired_row(members, hand, where)[None])
+        values, _ = apply_paired(normaliser, members, hand, where)
         return raster.render(values)[0]
 
     def sample_map(self, index: int, hand: str) -> np.ndarray:

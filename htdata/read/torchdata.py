@@ -207,8 +207,19 @@ def _frame_items(reader: DatasetReader, indices: np.ndarray, hands: tuple[str, .
         present = _tactile_present(rows, hand, frames) if hand in hands else np.zeros(len(rows), bool)
         cols.append(present)
     present = np.stack(cols, axis=1)  # (N, 2)
+    if frames == "paired" and not present.any():
+        _explain_no_pairs(reader, rows, hands)
     sample_pos, hand_ids = np.nonzero(present)  # row-major: left before right per sample
     return np.stack([indices[sample_pos], hand_ids], axis=1).astype(np.int64)
+
+
+def _explain_no_pairs(reader: DatasetReader, rows: np.ndarray, hands: tuple[str, ...]) -> None:
+    """frames="paired" found nothing: if tactile frames are there (a glove-only dataset), say so, not length 0."""
+    tactile = sum(int(_tactile_present(rows, h, "tactile").sum()) for h in hands)
+    if tactile:
+        raise ValueError(f"{reader.root}: none of the {len(rows)} selected samples pairs an RGB frame with "
+                         f"{'/'.join(hands)} tactile ({tactile} hand frames have tactile only: a glove-only "
+                         f"dataset?); pass frames=\"tactile\" for tactile-only items")
 
 
 class _ItemDataset(Dataset):

@@ -89,7 +89,7 @@ class GloveRateWindowDataset(_ItemDataset):
         stream = self._stream(row.episode, hand)
         normaliser, raster = builder.renderer.parts_for(row.episode, hand)
         rows = stream.rows[pos - self.window + 1:pos + 1]
-        values, _ = normaliser.apply(rows)
+        values, _ = normaliser.apply(rows, rows=stream.source_row[pos - self.window + 1:pos + 1])
         out = builder.ids(row, index, hand)
         del out[keys.HAS_RGB]
         out[keys.TACTILE] = torch.from_numpy(raster.render(values)[:, None])

@@ -254,12 +254,16 @@ def _contact_series(streams, hand: str, normaliser, chunk: int = 1024) -> tuple[
     non-finite rows removed (rows are read in file order, `chunk` at a time)."""
     ts = np.asarray(streams.tactile_timestamps_ns[hand])
     contact = np.full(ts.size, np.nan)
+    if normaliser.cfg.per_episode and ts.size:    # a baseline chosen by activity sees every row first
+        step = float(np.median(np.diff(np.sort(ts)))) if ts.size > 1 else 0.0
+        normaliser.fit_episode(np.asarray(streams.read_tactile(hand, np.arange(ts.size)), np.float32),
+                               1e9 / step if step > 0 else 30.0)
     for start in range(0, ts.size, chunk):
         rows = np.arange(start, min(ts.size, start + chunk))
         raw = np.asarray(streams.read_tactile(hand, rows), dtype=np.float32)
         if start == 0:
             normaliser.fit_baseline(raw)
-        values, finite = normaliser.apply(raw)
+        values, finite = normaliser.apply(raw, rows=rows)
         live = values[:, normaliser.live_mask]
         contact[rows[finite]] = live[finite].mean(axis=1)
     order = time_order(ts)

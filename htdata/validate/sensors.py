@@ -3,8 +3,8 @@
 The content check feeds `accumulate` one decoded map at a time (in the shard
 workers); `merge_sensor` joins the workers' accumulators; `check_sensors`
 warns about regions (canonical region map within coverage) whose mean never
-changes over an episode's decoded frames (dead if always 0, stuck
-otherwise), a saturated fraction above SATURATED_WARN_FRACTION, and hands
+changes over an episode's decoded frames (unexercised if always 0: never
+pressed or dead, the maps cannot tell; stuck otherwise; named by place), a saturated fraction above SATURATED_WARN_FRACTION, and hands
 whose every decoded map is all zero. The accumulator also collects the
 contact-area and pressure histograms of the report's stats.
 `check_taxel_health` warns about episode hands with many faulty taxels
@@ -84,7 +84,8 @@ def merge_sensor(into: dict, part: dict) -> None:
             into[k] = v
 
 
-def check_sensors(sensor: dict, check: Check) -> None:
+def check_sensors(sensor: dict, check: Check, region_names: dict[int, str] | None = None) -> None:
+    """Warnings per episode hand; `region_names` (canonical region id -> place name) names regions."""
     for name in sorted(k for k in sensor if not k.startswith("_")):
         eid, hand = name.rsplit(":", 1)
         acc = sensor[name]
@@ -99,7 +100,7 @@ def check_sensors(sensor: dict, check: Check) -> None:
             check.warn("saturated", f"episode {eid}: {frac:.1%} of covered {hand} pixels saturated",
                        **where, found=round(frac, 4))
         if len(acc["region_means"]) >= 2:
-            _check_regions(np.stack(acc["region_means"]), eid, hand, where, check)
+            _check_regions(np.stack(acc["region_means"]), eid, hand, where, check, region_names or {})
 
 
 def check_taxel_health(root, version: int | None, check: Check, compute: bool = False) -> None:
@@ -139,18 +140,28 @@ def check_taxel_health(root, version: int | None, check: Check, compute: bool = 
                                found=found, share=round(share, 4))
 
 
-def _check_regions(means: np.ndarray, eid: str, hand: str, where: dict, check: Check) -> None:
-    """`means`: (frames, regions+1) region means of one episode hand; constant regions warn."""
+def _check_regions(means: np.ndarray, eid: str, hand: str, where: dict, check: Check,
+                   names: dict[int, str]) -> None:
+    """`means`: (frames, regions+1) region means of one episode hand; constant regions warn.
+
+    A region that reads 0 in every frame was never pressed, or its sensors are dead: the maps cannot tell
+    which (an idle finger is not a fault), so it is "unexercised"; taxel health (`htdata stats --health`,
+    from the raw rows) tells dead taxels apart.
+    """
     valid = np.isfinite(means).all(axis=0)
     valid[0] = False
     constant = valid & (np.ptp(np.where(np.isfinite(means), means, 0), axis=0) == 0)
-    dead = np.flatnonzero(constant & (means[0] == 0))
+    quiet = np.flatnonzero(constant & (means[0] == 0))
     stuck = np.flatnonzero(constant & (means[0] != 0))
-    if dead.size:
-        check.warn("dead_regions", f"episode {eid}: {dead.size} {hand} region(s) stay 0 over "
-                   f"{len(means)} frames: ids {dead.tolist()}", **where, count=int(dead.size),
-                   regions=dead.tolist())
+
+    def named(ids) -> list[str]:
+        return [names.get(int(i), f"region {int(i)}") for i in ids]
+
+    if quiet.size:
+        check.warn("unexercised_regions", f"episode {eid}: {quiet.size} {hand} region(s) read 0 in all "
+                   f"{len(means)} frames (never pressed, or dead: htdata stats --health tells them apart): "
+                   f"{', '.join(named(quiet))}", **where, count=int(quiet.size), regions=named(quiet))
     if stuck.size:
         check.warn("stuck_regions", f"episode {eid}: {stuck.size} {hand} region(s) never change "
-                   f"over {len(means)} frames: ids {stuck.tolist()}", **where,
-                   count=int(stuck.size), regions=stuck.tolist())
+                   f"over {len(means)} frames: {', '.join(named(stuck))}", **where,
+                   count=int(stuck.size), regions=named(stuck))

@@ -17,6 +17,7 @@ from htdata.validate.splits import check_splits
 from htdata.validate.stats import dataset_stats
 from htdata.validate.structure import Loaded, check_index, check_shard_files, load_dataset
 from htdata.validate.timestamps import check_time, empty_timestamps, merge_timestamps
+from htdata.store import storage
 
 
 @dataclass
@@ -93,8 +94,20 @@ def _check_dataset(ds: Loaded, cfg: ValidateConfig, checks: dict[str, Check], pa
         merge_sensor(sensor, res["sensor"])
     check_served_maps(ds.root, ds.manifest.get("version"), decode, checks["content"])
     check_time(ds, ts, checks["time"])
-    check_sensors(sensor, checks["sensors"])
+    check_sensors(sensor, checks["sensors"], _region_names(ds))
     check_taxel_health(ds.root, ds.manifest.get("version"), checks["sensors"], compute=cfg.deep)
     if cfg.split is not None:
         check_splits(ds, cfg.split, hashes, checks["splits"])
     return dataset_stats(ds, sensor)
+
+
+def _region_names(ds) -> dict[int, str]:
+    """Canonical region id -> place name, from the dataset's canonical document ({} when unreadable)."""
+    import json
+
+
+    try:
+        doc = json.loads(storage.read_text(storage.join(ds.root, ds.manifest["canonical"]["file"])))
+        return {int(p["region_id"]): name for name, p in doc.get("places", {}).items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {}

@@ -23,6 +23,7 @@ class NativeHand:
     values: np.ndarray           # (M,H,W) float32 raw glove units, H,W = the layout's grid
     timestamps_ns: np.ndarray    # (M,) int64 on the glove's OWN clock, at its own rate
     clock_offset_ns: int = 0     # added to timestamps_ns to bring them onto the video clock
+    dtype: str = "float32"       # stored dtype of `values` (a raw-count glove records float16)
 
 
 @dataclass
@@ -90,7 +91,7 @@ def write_native_recording(folder: Path, rec: NativeRecording) -> None:
     hands = {}
     for hand, h in sorted(rec.hands.items()):
         name = f"tactile_{hand}.npz"
-        np.savez(folder / name, values=np.asarray(h.values, dtype=np.float32),
+        np.savez(folder / name, values=np.asarray(h.values, dtype=h.dtype),
                  timestamps_ns=np.asarray(h.timestamps_ns, dtype=np.int64))
         hands[hand] = {"layout": h.layout, "file": name, "clock_offset_ns": int(h.clock_offset_ns)}
 

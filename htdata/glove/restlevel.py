@@ -1,0 +1,58 @@
+"""Rest-level helpers of the normaliser: which frames are quiet, and the per-glove calibration file.
+
+`quiet_frames` picks the resting frames of a window (the quietest span,
+the drift-following baseline and raw-row health use it);
+`load_taxel_calibration` reads a glove's measured per-taxel offset and gain.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def quiet_frames(level: np.ndarray) -> np.ndarray:
+    """(n,) bool: frames of a window whose mean live value is near its lowest (rest), not raised by a press.
+
+    Near = at most the window's 10th percentile + 4 robust spreads of its lower half (+ 1e-4): a window at
+    rest keeps (nearly) all its frames, so the median sits at the window's centre even while the rest
+    level drifts; a press raises the level by far more and is left out.
+    """
+    finite = np.isfinite(level)
+    if not finite.any():
+        return finite
+    lv = level[finite]
+    low = lv[lv <= np.median(lv)]
+    mad = 1.4826 * np.median(np.abs(low - np.median(low)))
+    return finite & (level <= np.percentile(lv, 10) + 4 * mad + 1e-4)
+
+
+class nan_quiet:
+    """Silence numpy's all-NaN slice warnings (a taxel never finite gets baseline 0)."""
+
+    def __enter__(self):
+        import warnings
+        self._w = warnings.catch_warnings()
+        self._w.__enter__()
+        warnings.simplefilter("ignore", RuntimeWarning)
+
+    def __exit__(self, *exc):
+        return self._w.__exit__(*exc)
+
+
+def load_taxel_calibration(path: str, grid: tuple[int, int], layout_id: str) -> tuple[np.ndarray, np.ndarray]:
+    """(offset, gain) float32 (H,W) from a per-glove calibration .npz; errors name the file."""
+    try:
+        with np.load(path) as z:
+            offset, gain = np.asarray(z["offset"], np.float32), np.asarray(z["gain"], np.float32)
+    except (OSError, KeyError, ValueError) as exc:
+        raise ValueError(f"{path}: not a taxel calibration of layout {layout_id} (an .npz with offset and gain "
+                         f"arrays): {exc}") from None
+    for name, arr in (("offset", offset), ("gain", gain)):
+        if arr.shape != tuple(grid):
+            raise ValueError(f"{path}: {name} has shape {arr.shape}, layout {layout_id} has a {grid[0]}x{grid[1]} "
+                             f"grid")
+        if not np.isfinite(arr).all():
+            raise ValueError(f"{path}: {name} holds NaN/Inf")
+    if (gain <= 0).any():
+        raise ValueError(f"{path}: gain must be > 0 everywhere (a dead taxel: leave it out of the layout)")
+    return offset, gain

@@ -1,0 +1,116 @@
+"""Contact per glove hand from its calibration (htdata/glove/contact.py), in stats and trim --idle, on the raw-count glove."""
+
+import numpy as np
+import pytest
+
+from htdata.glove.contact import MIN_AREA_TAXELS, OLD_RULE, min_area, rule_for
+from htdata.sample.rawglove import glove_layout
+from htdata.sample.rawglove import FULL_SCALE, corpus_clips, write_rawglove
+
+STEP = {"convention": "direct", "max": FULL_SCALE, "step": 1}
+
+
+def test_a_flickering_handful_is_not_contact_under_a_calibrated_rule():
+    x = np.zeros((10, 700), np.float32)
+    x[:, :2] = 0.03                               # two taxels above 0.02: the old rule calls every frame contact
+    x[5, 100:140] = 0.2                           # a press of 40 taxels in frame 5
+    rule = rule_for({"noise_k": 3.0, "noise_floor": 0.0, "max_value": FULL_SCALE}, STEP, 169)
+    assert rule.basis == "calibrated" and rule.min_taxels == MIN_AREA_TAXELS
+    assert min_area(580) == 6 and min_area(100) == 3
+    assert rule.level == pytest.approx(2 / FULL_SCALE)       # two quantisation steps above the floor
+    assert rule.frames(x).tolist() == [i == 5 for i in range(10)]
+    assert OLD_RULE.frames(x).all()
+
+
+def test_a_calibration_without_a_floor_keeps_the_old_rule():
+    assert rule_for({"noise_k": 0.0, "noise_floor": 0.0}, STEP) == OLD_RULE
+    assert rule_for(None) == OLD_RULE
+    assert "any taxel > 0.02" in OLD_RULE.describe()
+
+
+def _truth_spans(margin):
+    _, clips = corpus_clips(0)
+    out = {}
+    for c in clips:
+        hit = np.zeros(c.n_frames, bool)
+        for h in c.counts:
+            hit |= c.truth_contact(h).sum(axis=1) >= min_area(int(glove_layout(h).live_mask.sum()))
+        f = np.flatnonzero(hit)
+        out[f"nat-{c.name}"] = (max(0, f[0] - margin), min(c.n_frames, f[-1] + 1 + margin))
+    return out
+
+
+@pytest.fixture(scope="module")
+def datasets(tmp_path_factory):
+    from tests.factories import ingest_cli
+
+    tmp = tmp_path_factory.mktemp("contact")
+    write_rawglove(tmp / "rg")
+    out = {}
+    for baseline in ("quietest", "rest_window"):
+        sets = [f"normalise.rawknit_{h}_32x32.{k}={v}" for h in ("left", "right")
+                for k, v in (("baseline", baseline), ("noise_k", 3))]
+        args = ["--pipeline", "native", "--layouts", tmp / "rg" / "layouts"]
+        for s in sets:
+            args += ["--set", s]
+        assert ingest_cli(*args, tmp / "rg", tmp / baseline) == 0
+        out[baseline] = tmp / baseline
+    return out
+
+
+def test_stats_contact_follows_the_glove_truth(datasets):
+    from htdata.inspect.stats import dataset_stats
+
+    _, clips = corpus_clips(0)
+    s = dataset_stats(datasets["quietest"], cache_dir=None)
+    for g in s["gloves"]:
+        area = min_area(int(glove_layout(g["hand"]).live_mask.sum()))
+        truth = np.concatenate([c.truth_contact(g["hand"]).sum(axis=1) >= area for c in clips]).mean()
+        assert abs(g["contact_fraction"] - truth) < 0.03
+        assert f"{area} taxels more than 2 quantisation steps above their noise floor" in g["contact_rule"]
+        assert g["contact_fraction_threshold"] is not None          # the old figure, beside it
+
+
+def test_idle_trim_cuts_where_the_glove_rests(datasets):
+    from htdata.curate.idle import IdleConfig, plan_idle
+    from htdata.read.reader import DatasetReader
+
+    truth = _truth_spans(margin=15)                  # 0.5 s at 30 fps
+    with DatasetReader(datasets["quietest"]) as reader:
+        cuts = {c.episode: c for c in plan_idle(reader, IdleConfig(), cache_dir=None)}
+    for eid, (a, b) in truth.items():
+        keep = cuts[eid].keep or range(0, cuts[eid].frames)
+        assert abs(keep.start - a) <= 10 and abs(keep.stop - b) <= 10, (eid, keep, (a, b))
+    # the first-frames rest window absorbs the grip / misses the drift: some cut is far off the truth
+    with DatasetReader(datasets["rest_window"]) as reader:
+        cuts = {c.episode: c for c in plan_idle(reader, IdleConfig(), cache_dir=None)}
+    off = [max(abs((c.keep or range(c.frames)).start - truth[e][0]), abs((c.keep or range(c.frames)).stop - truth[e][1]))
+           for e, c in cuts.items()]
+    assert max(off) > 30
+
+
+def test_taxel_health_comes_from_the_raw_rows_whatever_the_calibration(datasets):
+    from htdata.inspect.stats import dataset_stats
+
+    healths = [{g["hand"]: g["health"] for g in dataset_stats(datasets[b], cache_dir=None)["gloves"]}
+               for b in ("quietest", "rest_window")]
+    assert healths[0] == healths[1]
+    assert healths[0]["right"]["basis"] == ["raw"]
+    assert healths[0]["right"]["counts"]["stuck"] > 0 and healths[0]["right"]["counts"]["saturated"] > 0
+
+
+def test_glove_only_dataset_says_why_paired_items_are_none(datasets):
+    from htdata.read.torchdata import TactileFrameDataset
+
+    with pytest.raises(ValueError, match='glove-only dataset.*frames="tactile"'):
+        TactileFrameDataset(datasets["quietest"])
+    assert len(TactileFrameDataset(datasets["quietest"], frames="tactile")) == 2 * 1380
+
+
+def test_card_of_a_glove_only_dataset_states_its_contact_rule_and_draws_no_sync_plots(datasets, tmp_path):
+    from htdata.inspect.card import write_card
+
+    write_card(datasets["quietest"], tmp_path / "card.html")
+    md = (tmp_path / "card.md").read_text()
+    assert "glove-only episode(s) (no video) have none" in md
+    assert "sync_skew" not in md and "taxels more than 2 quantisation steps above their noise floor" in md

@@ -1,0 +1,105 @@
+"""Taxel health from raw counts (htdata/glove/rawhealth.py): one test per class a real knit glove has, on synthetic
+raw counts with the real glove's numbers (rest ~550 of 1023, per-taxel offsets, ~1 count of noise)."""
+
+import numpy as np
+import pytest
+
+from htdata.glove.rawhealth import DRIFT_MIN_FRAMES, classify_raw
+from htdata.sample.rawglove import GloveUnit, corpus_clips, glove_layout, make_clip
+
+LAYOUT = glove_layout("right")
+
+
+@pytest.fixture(scope="module")
+def glove():
+    unit = GloveUnit.make("right", 7)
+    # a pressed clip (so neighbours of dead cells are exercised), 20 s at 30 fps: long enough for drift
+    clip = make_clip("h", "power_grasp", 600, "rest", 7, {"right": unit})
+    return unit, clip.counts["right"].astype(np.float32)
+
+
+def _found(health, name):
+    return {tuple(c) for c in health["cells"][name]}
+
+
+def test_each_planted_fault_is_its_class(glove):
+    unit, raw = glove
+    h = classify_raw(raw, LAYOUT)
+    assert h["assessed"] and h["basis"] == "raw"
+    planted = unit.faults.cells
+    assert _found(h, "saturated") == set(planted["saturating"])
+    assert _found(h, "stuck") == set(planted["stuck"])
+    assert _found(h, "noisy") == set(planted["noisy"])
+    assert _found(h, "dead") <= set(planted["dead"]) and _found(h, "dead")    # dead where it was exercised
+    assert h["unexercised"] > 0                                             # idle taxels: not dead, not healthy
+
+
+def test_a_drifting_taxel_is_flagged(glove):
+    _, raw = glove
+    raw = raw.copy()
+    r, c = 20, 14                                  # a palm taxel: its rest creeps 30 counts over the episode
+    raw[:, r, c] += np.linspace(0, 30, len(raw)).round()
+    h = classify_raw(raw, LAYOUT)
+    assert h["drift_assessed"] and (r, c) in _found(h, "drifting")
+    short = classify_raw(raw[:DRIFT_MIN_FRAMES - 1], LAYOUT)
+    assert not short["drift_assessed"] and not short["cells"]["drifting"]
+
+
+def test_clean_counts_flag_nothing():
+    unit = GloveUnit.make("right", 11)
+    unit.faults.cells = {k: [] for k in unit.faults.cells}
+    unit.faults.crosstalk_rows = []
+    unit.noise = np.minimum(unit.noise, 1.2)      # no loud taxels either
+    raw = make_clip("c", "power_grasp", 400, "rest", 11, {"right": unit}).counts["right"].astype(np.float32)
+    h = classify_raw(raw, LAYOUT)
+    assert sum(h["counts"].values()) == 0, {k: v for k, v in h["cells"].items() if v}
+
+
+def test_a_crosstalk_row_is_found():
+    units, clips = corpus_clips(0)
+    unit = units["right"]
+    # a pinch: the ghost row (1) runs across fingertips that are not pressed, so it is seen on its own
+    h = classify_raw(clips[0].counts["right"].astype(np.float32), LAYOUT)
+    rows = {r for r, _ in _found(h, "crosstalk")}
+    assert rows and rows <= set(unit.faults.crosstalk_rows)
+
+
+def test_unmapped_cells_that_move_are_counted():
+    _, clips = corpus_clips(0)
+    raw = clips[1].counts["right"].astype(np.float32)
+    quiet = classify_raw(raw, LAYOUT)
+    raw = raw.copy()
+    raw[:, 13, 5] += np.where(np.arange(len(raw)) % 60 < 30, 0, 80)   # a gap cell (row 13) that responds
+    moved = classify_raw(raw, LAYOUT)
+    assert moved["unmapped_cells"] == quiet["unmapped_cells"] > 0
+    assert [13, 5] in moved["unmapped_moving_cells"] and [13, 5] not in quiet["unmapped_moving_cells"]
+
+
+def test_inverted_gloves_are_read_in_the_pressure_direction(glove):
+    unit, raw = glove
+    inverted = type(LAYOUT)(**{**LAYOUT.__dict__, "value": {"convention": "inverted", "max": 1023.0, "step": 1}})
+    h = classify_raw(1023.0 - raw, inverted)
+    assert _found(h, "saturated") == set(unit.faults.cells["saturating"])
+
+
+def test_health_map_draws_unexercised_and_unmapped_cells_and_states_thresholds(glove):
+    from htdata.inspect.episodestats import Glove
+    from htdata.inspect.healthmap import (UNEXERCISED, UNEXERCISED_INDEX, UNMAPPED_MOVING, _legend, draw_grid_panel,
+                                  taxel_classes)
+    from htdata.glove.layouts import load_canonical
+
+    unit, raw = glove
+    raw = raw.copy()
+    raw[:, 13, 5] += np.where(np.arange(len(raw)) % 60 < 30, 0, 80)
+    h = classify_raw(raw, LAYOUT)
+    g = Glove(LAYOUT, load_canonical())
+    per_episode = [{"hands": {"right": {"layout": LAYOUT.layout_id, "health": h}}}]
+    classes = taxel_classes(per_episode, LAYOUT.layout_id, "right", g)
+    idle = {tuple(c) for c in h["unexercised_cells"]}
+    assert idle and all(classes[i] == UNEXERCISED_INDEX for i, c in enumerate(g.taxels.cells.tolist())
+                        if tuple(c) in idle)
+    panel = draw_grid_panel(g, classes, {(13, 5)})
+    assert (panel == np.array(UNMAPPED_MOVING, np.uint8)).all(axis=2).any()
+    assert (panel == np.array(UNEXERCISED, np.uint8)).all(axis=2).any()
+    text = " ".join(t for _, t in _legend({"raw"}))
+    assert "rest >= 98% of full scale" in text and "unexercised (not a fault)" in text and "unmapped, moving" in text
