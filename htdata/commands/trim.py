@@ -44,7 +44,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-contact", type=float, default=None, metavar="X",
                         help="with --idle: a frame is in contact when a taxel reads above X (the old rule, e.g. "
                              "0.02); default: each glove hand's contact rule from its calibration "
-                             "(from its calibration: at least 3 taxels above their noise floor, or any taxel "
+                             "(at least 3 taxels above their noise floor, or any taxel "
                              "> 0.02 for a calibration without a floor)")
     parser.add_argument("--keep-margin", type=float, default=None, metavar="S",
                         help="with --idle: seconds kept before the first and after the last contact (default 0.5)")
