@@ -32,7 +32,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 READS = """
 import sys, time, numpy as np
-from htdata.read.reader import DatasetReader
+from htdata.reader import DatasetReader   # the old name: it imports in every revision (htdata/_moved.py)
 r = DatasetReader(sys.argv[1]); n = len(r)
 idx = np.random.default_rng(0).integers(0, n, 400)
 r.decoded(int(idx[0]))
@@ -43,7 +43,7 @@ print(len(idx) / (time.perf_counter() - t))
 
 ITEMS = """
 import sys, time, numpy as np
-from htdata.read.torchdata import TactileFrameDataset
+from htdata.torchdata import TactileFrameDataset   # (the old name, as above)
 d = TactileFrameDataset(sys.argv[1]); n = len(d)
 idx = np.random.default_rng(0).integers(0, n, 400)
 d[int(idx[0])]

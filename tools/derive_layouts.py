@@ -5,14 +5,15 @@ For a glove of your own, use `htdata layouts suggest RECORDING... OUT.json`
 same JSON style); this tool only holds the facts of the three shipped
 layouts, read from the releases' reference files.
 
-Reads the reference files (OpenTouch taxel regions, TouchAnything NaN masks,
-bend-sensor positions and derived regions), cross-checks them against the
-facts stated in SOURCE_FORMATS.md, and writes
+Reads the reference files given as --reference (the source releases' OpenTouch
+taxel regions, TouchAnything NaN masks, bend-sensor positions and derived
+regions, with the format notes that state their facts; they are not part of
+this repository), cross-checks them against those facts, and writes
 schemas/layouts/{opentouch_right_16x16,touchanything_left_21x21,
 touchanything_right_21x21}.json. Runtime code never reads the reference
 directory; it reads only the files written here.
 
-    .venv/bin/python tools/derive_layouts.py [--reference DIR] [--check]
+    .venv/bin/python tools/derive_layouts.py --reference DIR [--check]
 """
 
 from __future__ import annotations
@@ -30,7 +31,6 @@ sys.path.insert(0, str(ROOT))
 from htdata.glove.layouts import parse_layout  # noqa: E402
 from htdata.glove.layoutsuggest import layout_json_text  # noqa: E402
 
-DEFAULT_REFERENCE = Path("/work/shared/reference")
 OUT_DIR = ROOT / "schemas" / "layouts"
 
 # OpenTouch region name -> canonical place (rows 0-2 distal ... 6-8 proximal;
@@ -171,7 +171,8 @@ def check_right_against_reference(right: dict, ref: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--reference", type=Path, default=DEFAULT_REFERENCE)
+    ap.add_argument("--reference", type=Path, required=True,
+                    help="folder of the source releases' reference files (not in this repository)")
     ap.add_argument("--check", action="store_true", help="only compare with the committed files")
     args = ap.parse_args(argv)
     ot = opentouch_layout(args.reference)

@@ -29,8 +29,6 @@ from htdata.curate.repack import KeptEpisode, repack_unit, samples_per_shard_of
 from htdata.store.snapshot import Snapshot
 from htdata.read.reader import DatasetReader
 
-# Episode-record fields that come from discovery labels, not from the samples.
-LABEL_FIELDS = ("task", "scene", "source_ref", "source_split")
 # Pipeline sections that do not shape a sample (packing and naming only).
 NOT_SAMPLE_SETTINGS = ("name", "shards")
 
@@ -42,7 +40,7 @@ def input_fingerprint(ref, pipeline: dict) -> str:
 
 
 def labels_of(ref) -> dict:
-    """The label fields a ref gives its record (source_split None = the record has none)."""
+    """The label fields a ref gives its record, not its samples (source_split None = the record has none)."""
     split = ref.extra.get("source_split") if isinstance(ref.extra, dict) else None
     return {"task": ref.task, "scene": ref.scene, "source_ref": ref.source_ref,
             "source_split": str(split) if split else None}
