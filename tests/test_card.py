@@ -113,3 +113,31 @@ def test_card_renders_in_headless_chromium(tmp_path):
     n_img = out.read_text().count("<img ")
     assert result["images"] == n_img >= 5 and result["decoded"] == n_img
     assert result["remote"] == [] and result["width"] > 200
+
+
+def test_histogram_y_ticks_read_as_counts_and_stay_apart():
+    from htdata.inspect.card import _count_label, _y_ticks
+
+    linear = _y_ticks(np.array([0, 2, 4]), log=False)
+    assert linear == [(0.0, 0.0), (0.5, 2.0), (1.0, 4.0)]
+    log = _y_ticks(np.array([3, 15700, 40]), log=True)
+    assert log[0] == (0.0, 0.0) and log[-1] == (1.0, 15700.0)
+    fracs = [f for f, _ in log]
+    assert all(b - a >= 0.12 for a, b in zip(fracs, fracs[1:]))            # labels never overlap
+    assert {c for _, c in log[1:-1]} <= {1.0, 10.0, 100.0, 1000.0}          # powers of ten in between
+    assert _y_ticks(np.zeros(5), log=True) == [(0.0, 0.0)]
+    assert [_count_label(c) for c in (0, 7, 1500, 2.5e6)] == ["0", "7", "1.5k", "2.5M"]
+
+
+def test_region_map_names_the_digits_and_the_health_legend_names_no_sensor():
+    from htdata.inspect.card import _label_fingers
+    from htdata.inspect.healthmap import _legend
+
+    region_map = np.zeros((224, 224), np.uint8)
+    region_map[20:60, 100:140] = 1
+    region_map[150:200, 40:180] = 2
+    panel = np.zeros((224, 224, 3), np.uint8)
+    _label_fingers(panel, region_map, {"index.distal": 1, "palm.upper_ulnar": 2})
+    assert panel[30:50, 100:140].max() > 200 and panel[165:185, 60:160].max() > 200     # a label in each place
+    assert not panel[80:140].any()                                                      # and nowhere else
+    assert any("no sensor" in text for _, text in _legend({"maps"}))

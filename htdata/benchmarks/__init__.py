@@ -1,1 +1,1 @@
-"""Benchmarks behind `htdata bench`: each returns rows (dicts); bench.py runs them side by side."""
+"""Benchmarks behind `htdata bench`: each returns rows (dicts); suite.py runs them side by side, report.py renders REPORT.md."""

@@ -1,4 +1,4 @@
-"""What one episode's ingest learned, for its record in episodes.jsonl (filled by `episode_frames`).
+"""What one episode's ingest learned, for its record in episodes.jsonl (filled while its frames are read: ingest/episode.py).
 
 `EpisodeTally` accumulates while htdata.ingest.episode yields the frames:
 the sync report, frames dropped from pairing and RGB-only samples kept,

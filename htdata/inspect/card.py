@@ -71,10 +71,39 @@ def histogram_chart(counts: list[int], lo: float, hi: float, title: str, log: bo
             cv2.rectangle(img, (int(x0 + i * bw), base - int(v * plot_h)), (int(x0 + (i + 1) * bw) - 1, base),
                           BAR, cv2.FILLED)
     cv2.line(img, (x0, base), (x1, base), INK, 1)
+    cv2.line(img, (x0, base), (x0, base - plot_h), INK, 1)
     for x, text in ((x0, f"{lo:g}"), (x1 - 30, f"{hi:g}")):
         cv2.putText(img, text, (x, base + 16), FONT, 0.4, INK, 1, cv2.LINE_AA)
+    for frac, count in _y_ticks(c, log):
+        y = base - int(round(frac * plot_h))
+        cv2.line(img, (x0 - 3, y), (x0, y), INK, 1)
+        cv2.putText(img, _count_label(count), (2, y + 4), FONT, 0.32, INK, 1, cv2.LINE_AA)
     cv2.putText(img, "log count" if log else "count", (x1 - 80, 34), FONT, 0.35, INK, 1, cv2.LINE_AA)
     return img
+
+
+def _y_ticks(counts: np.ndarray, log: bool) -> list[tuple[float, float]]:
+    """(height fraction, count) of the y-axis ticks: 0, the middle and the top of the tallest bar.
+
+    Log charts place their ticks at powers of ten (bar height log10(1 + count)), so the
+    labels read as counts whatever the scale.
+    """
+    top = float(counts.max()) if counts.size else 0.0
+    if top <= 0:
+        return [(0.0, 0.0)]
+    if not log:
+        return [(0.0, 0.0), (0.5, top / 2), (1.0, top)]
+    h_top = np.log10(1 + top)
+    powers = [(np.log10(1 + 10.0 ** k) / h_top, 10.0 ** k) for k in range(int(np.floor(np.log10(top))) + 1)]
+    ticks = [(0.0, 0.0)]
+    for frac, count in powers:    # keep labels apart: no tick within 12% of the chart of another
+        if frac - ticks[-1][0] >= 0.12 and 1.0 - frac >= 0.12:
+            ticks.append((frac, count))
+    return ticks + [(1.0, top)]
+
+
+def _count_label(count: float) -> str:
+    return f"{count / 1e6:.3g}M" if count >= 1e6 else f"{count / 1e3:.3g}k" if count >= 1e3 else f"{count:.3g}"
 
 
 def region_heatmap(glove: dict, region_map: np.ndarray, region_ids: dict[str, int], title: str) -> np.ndarray:
@@ -92,10 +121,26 @@ def region_heatmap(glove: dict, region_map: np.ndarray, region_ids: dict[str, in
     panel[~known] = (90, 90, 90)
     panel[region_map == 0] = (32, 32, 32)
     panel[region_outline(region_map)] = (255, 255, 255)
+    _label_fingers(panel, region_map, region_ids)
     img[28:28 + CANVAS, 8:8 + CANVAS] = panel
     cv2.putText(img, title[:32], (8, 18), FONT, 0.45, (235, 235, 235), 1, cv2.LINE_AA)
     draw_colour_bar(img, 8, 28 + CANVAS + 6, CANVAS, vmax, "contact frequency (share of frames)")
     return img
+
+
+def _label_fingers(panel: np.ndarray, region_map: np.ndarray, region_ids: dict[str, int]) -> None:
+    """Write each digit's and the palm's name at the centre of its places (e.g. "index" over index.*)."""
+    groups: dict[str, list[int]] = {}
+    for name, rid in region_ids.items():
+        groups.setdefault(name.split(".")[0], []).append(rid)
+    for group, ids in groups.items():
+        ys, xs = np.nonzero(np.isin(region_map, ids))
+        if ys.size == 0:
+            continue
+        size = cv2.getTextSize(group, FONT, 0.33, 1)[0]
+        org = (int(xs.mean()) - size[0] // 2, int(ys.mean()) + size[1] // 2)
+        cv2.putText(panel, group, org, FONT, 0.33, (0, 0, 0), 3, cv2.LINE_AA)       # dark rim: readable on any fill
+        cv2.putText(panel, group, org, FONT, 0.33, (255, 255, 255), 1, cv2.LINE_AA)
 
 
 @dataclass

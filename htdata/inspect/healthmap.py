@@ -148,6 +148,7 @@ def _legend(bases: set) -> list[tuple[tuple, str]]:
     lines = [(HEALTHY, f"healthy: none of the below ({unit}{'; some gloves from maps' if len(bases) > 1 else ''})")]
     lines += [(CLASS_COLOURS[c], f"{c}: {table[c]}") for c in CLASSES]
     lines += [(UNEXERCISED, f"unexercised (not a fault): {table['unexercised']}")]
+    lines += [(HAND_GREY, "no sensor: canonical hand outside the glove's coverage")]
     if raw:
         lines += [(UNMAPPED_MOVING, f"unmapped, moving (raw grid): {table['unmapped']}"),
                   (UNMAPPED, "unmapped (raw grid): outside every block, quiet"), (LAYOUT_DEAD, "layout dead cell")]
