@@ -53,8 +53,8 @@ assert root not in package.parents, f"htdata imported from the checkout: {packag
 for path in (resources.SCHEMAS_DIR, resources.LAYOUTS_DIR, resources.PIPELINES_DIR, config_file("smoke")):
     assert package.parent in Path(path).resolve().parents, f"{path} is not inside the installed package"
     print("  ", path)
-from htdata.benchmarks.suite import discover_sections
-sections = discover_sections()
+from importlib import metadata   # (not htdata.benchmarks: the bench needs the [bench] extra)
+sections = {ep.name: ep for ep in metadata.entry_points(group="htdata.bench_sections")}
 assert "training" in sections, f"HandTouch's bench section is not registered: {sorted(sections)}"
 print("   bench sections:", ", ".join(f"{n} = {ep.value}" for n, ep in sections.items()))
 EOF
