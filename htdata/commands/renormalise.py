@@ -26,7 +26,8 @@ A glove recalibrated after recording needs no sources: every sample stores its r
 so new maps are computed from them under the pipeline's [normalise] settings and written as a
 new version (RGB and raw rows are copied unchanged). Episodes whose calibration does not change
 are reused (--force recomputes them, byte for byte the same). Per-episode fits (baseline, noise
-floor) use the episode's first stored frames, as the ingest does. Defaults: every episode.
+floor) are made from the stored raw rows as the ingest makes them (the rest window's first frames;
+the whole episode for quietest / percentile / drift). Defaults: every episode.
 
 Examples:
   htdata renormalise data/dataset --pipeline native --set normalise.opentouch_right_16x16.noise_k=3 --dry-run
