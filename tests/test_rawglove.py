@@ -199,6 +199,11 @@ def test_ingest_stats_and_renormalise_with_the_activity_baselines(tmp_path):
         assert reader.version == 3
         again = [reader.decoded(i)["tactile"]["right"] for i in (0, 150, 400)]
     assert all(np.array_equal(a, b) for a, b in zip(first, again))
+    # the loaders serve maps rendered from the raw rows (drift knots by source row): validate finds them equal
+    from htdata.validate import validate_dataset
+    report = validate_dataset(out, deep=True)
+    assert report["checks"]["content"]["checked"]["served_maps"] > 0
+    assert "served_map" not in report["checks"]["content"]["failure_counts"]
 
 
 def test_out_of_range_warnings_reach_stderr(tmp_path, capsys):

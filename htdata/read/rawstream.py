@@ -145,6 +145,16 @@ class RawMapRenderer:
         values, _ = apply_paired(normaliser, members, hand, where)
         return raster.render(values)[0]
 
+    def render_many(self, episode: int, hand: str, members_list: list[dict[str, bytes]], where: str = "sample"
+                    ) -> np.ndarray:
+        """(n,224,224) float32 maps of n samples of one episode hand: one normalise and one rasterise call."""
+        normaliser, raster = self.parts_for(episode, hand)
+        raw = np.stack([paired_row(m, hand, where) for m in members_list])
+        rows = ([paired_source_row(m, hand, where) for m in members_list]
+                if normaliser.cfg.baseline == "drift" else None)
+        values, _ = normaliser.apply(raw, rows=rows)
+        return raster.render(values)
+
     def sample_map(self, index: int, hand: str) -> np.ndarray:
         row, key, members = self.reader.read_sample(index, (JSON_MEMBER, raw_member(hand)))
         if raw_member(hand) not in members:

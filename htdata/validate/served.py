@@ -30,32 +30,52 @@ def allowed_error(stored: np.ndarray, pixel_type: str) -> np.ndarray | float:
     return FLOAT_TOLERANCE
 
 
-def check_served_maps(root, version: int | None, rows: np.ndarray, check: Check) -> None:
-    """Compare served and stored maps for sample positions `rows`; failures go to `check` ("served_map")."""
+def check_served_maps(root, version: int | None, rows: np.ndarray, check: Check, batch: int = 64) -> None:
+    """Compare served and stored maps for sample positions `rows`; failures go to `check` ("served_map").
+
+    Samples are read once each (json, maps and raw rows of both hands) and rendered in batches per
+    episode hand, one normalise and one rasterise call per batch.
+    """
     reader = DatasetReader(root, version=version)
     if not serves_maps_from_raw(reader.manifest):
         check.checked["served_maps_stored"] += 1    # the loaders decode the stored maps: one truth already
         return
     renderer = RawMapRenderer(reader)
     pixel_type = reader.manifest["codec"]["tactile"].get("pixel_type", "half")
+    suffixes = (JSON_MEMBER, *(tactile_member(h) for h in HANDS), *(raw_member(h) for h in HANDS))
+    pending: dict[tuple[int, str], list[tuple[str, dict]]] = {}
     for i in np.flatnonzero(rows):
+        row, key, members = reader.read_sample(int(i), suffixes)
         for hand in HANDS:
-            suffixes = (JSON_MEMBER, tactile_member(hand), raw_member(hand))
-            row, key, members = reader.read_sample(int(i), suffixes)
-            if tactile_member(hand) not in members or raw_member(hand) not in members:
-                continue
-            where = f"{key} ({hand})"
-            try:
-                stored = decode_member(tactile_member(hand), members[tactile_member(hand)], key)
-                served = renderer.render(row.episode, hand, members, key)
-            except (ValueError, KeyError) as exc:
-                check.fail("served_map", f"{where}: map from raw rows not rendered: {exc}", sample=key, hand=hand)
-                continue
-            check.checked["served_maps"] += 1
-            err = np.abs(served.astype(np.float32) - stored.astype(np.float32))
-            over = err > allowed_error(stored, pixel_type)
-            if over.any():
-                check.fail("served_map", f"{where}: the map the loaders render from raw rows differs from the "
-                           f"stored map at {int(over.sum())} pixels (max {float(err.max()):.3g}): the calibration "
-                           f"record and the stored maps disagree (`htdata renormalise` remakes both)",
-                           sample=key, hand=hand, found=float(err.max()))
+            if tactile_member(hand) in members and raw_member(hand) in members:
+                group = pending.setdefault((row.episode, hand), [])
+                group.append((key, members))
+                if len(group) >= batch:
+                    _compare(renderer, row.episode, hand, pending.pop((row.episode, hand)), pixel_type, check)
+    for (episode, hand), group in pending.items():
+        _compare(renderer, episode, hand, group, pixel_type, check)
+
+
+def _compare(renderer: RawMapRenderer, episode: int, hand: str, group: list[tuple[str, dict]], pixel_type: str,
+             check: Check) -> None:
+    """Render one batch of an episode hand's samples and compare each with its stored map."""
+    try:
+        served = renderer.render_many(episode, hand, [m for _, m in group], group[0][0])
+    except (ValueError, KeyError) as exc:
+        for key, _ in group:
+            check.fail("served_map", f"{key} ({hand}): map from raw rows not rendered: {exc}", sample=key, hand=hand)
+        return
+    for (key, members), one in zip(group, served):
+        try:
+            stored = decode_member(tactile_member(hand), members[tactile_member(hand)], key)
+        except ValueError as exc:
+            check.fail("served_map", f"{key} ({hand}): stored map does not decode: {exc}", sample=key, hand=hand)
+            continue
+        check.checked["served_maps"] += 1
+        err = np.abs(one.astype(np.float32) - stored.astype(np.float32))
+        over = err > allowed_error(stored, pixel_type)
+        if over.any():
+            check.fail("served_map", f"{key} ({hand}): the map the loaders render from raw rows differs from the "
+                       f"stored map at {int(over.sum())} pixels (max {float(err.max()):.3g}): the calibration "
+                       f"record and the stored maps disagree (`htdata renormalise` remakes both)",
+                       sample=key, hand=hand, found=float(err.max()))
