@@ -1,6 +1,8 @@
 """Taxel health from raw counts (htdata/glove/rawhealth.py): one test per class a real knit glove has, on synthetic
 raw counts with the real glove's numbers (rest ~550 of 1023, per-taxel offsets, ~1 count of noise)."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -103,3 +105,20 @@ def test_health_map_draws_unexercised_and_unmapped_cells_and_states_thresholds(g
     assert (panel == np.array(UNEXERCISED, np.uint8)).all(axis=2).any()
     text = " ".join(t for _, t in _legend({"raw"}))
     assert "rest >= 98% of full scale" in text and "unexercised (not a fault)" in text and "unmapped, moving" in text
+
+
+def test_nanpercentile_columns_equals_numpy_with_and_without_nan():
+    from htdata.glove.restlevel import nanpercentile_columns
+
+    rng = np.random.default_rng(3)
+    x = rng.normal(550, 20, size=(301, 40)).astype(np.float32)
+    x[rng.random(x.shape) < 0.1] = np.nan
+    x[:, 7] = np.nan                  # a column never finite
+    x[:299, 8] = np.nan               # a column with two finite values
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for q in (0, 1, 5, 50, 75, 99, 100, [1, 50, 99]):
+            ours, ref = nanpercentile_columns(x, q), np.nanpercentile(x.astype(np.float64), q, axis=0)
+            np.testing.assert_allclose(ours, ref, rtol=1e-12, atol=0, equal_nan=True)
+        clean = np.nan_to_num(x, nan=0.0)
+        np.testing.assert_array_equal(nanpercentile_columns(clean, 5), np.percentile(clean.astype(np.float64), 5, axis=0))

@@ -39,7 +39,7 @@ from __future__ import annotations
 import numpy as np
 
 from htdata.glove.health import CLASSES, MIN_FRAMES, TaxelGrid, _crosstalk, _exercised, _neighbour_median
-from htdata.glove.restlevel import quiet_frames
+from htdata.glove.restlevel import nanpercentile_columns, quiet_frames
 from htdata.glove import health
 
 SATURATED_REST = 0.98        # rest level >= this share of full scale
@@ -109,8 +109,8 @@ def classify_raw(raw: np.ndarray, layout, taxels: TaxelGrid | None = None) -> di
         return out
     step = float(layout.value.get("step") or 0.0) / float(layout.value["max"]) or DEFAULT_STEP_SHARE
     with np.errstate(invalid="ignore"):
-        p1, p50, p99 = np.nanpercentile(x, [1, 50, 99], axis=0)
-        rest = np.nanpercentile(x, 5, axis=0)
+        p1, p50, p99 = nanpercentile_columns(x, [1, 50, 99])
+        rest = nanpercentile_columns(x, 5)
         rise = np.clip(np.nan_to_num(x - rest, nan=0.0), 0.0, 1.0)
     glove_rest = float(np.nanmedian(rest))
     saturated = rest >= SATURATED_REST
@@ -119,7 +119,7 @@ def classify_raw(raw: np.ndarray, layout, taxels: TaxelGrid | None = None) -> di
     crosstalk = _crosstalk(np.where(rise > CROSSTALK_RISE, rise, 0.0), taxels)
     exercised = _exercised_raw(rise, taxels, crosstalk)
     never = np.percentile(rise, 99, axis=0) < DEAD_RISE
-    hf = np.nanpercentile(np.abs(np.diff(x, n=2, axis=0)), 75, axis=0)
+    hf = nanpercentile_columns(np.abs(np.diff(x, n=2, axis=0)), 75)
     noisy = (hf > NOISY_MIN_STEPS * step) & (hf > NOISY_RATIO * _neighbour_median(hf, taxels))
     drifting, out["drift_assessed"] = _drifting(x)
     label = np.full(L, -1, np.int64)
@@ -158,7 +158,7 @@ def _unmapped(u_all: np.ndarray, layout, out: dict) -> None:
         return
     v = u_all[:, cells[:, 0], cells[:, 1]]
     with np.errstate(invalid="ignore"):
-        rise = np.nanpercentile(v, 99, axis=0) - np.nanpercentile(v, 5, axis=0)
+        rise = nanpercentile_columns(v, 99) - nanpercentile_columns(v, 5)
     moving = np.nan_to_num(rise, nan=0.0) >= UNMAPPED_RISE
     out["unmapped_moving"] = int(moving.sum())
     out["unmapped_moving_cells"] = cells[moving].tolist()

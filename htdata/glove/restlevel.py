@@ -56,3 +56,33 @@ def load_taxel_calibration(path: str, grid: tuple[int, int], layout_id: str) -> 
     if (gain <= 0).any():
         raise ValueError(f"{path}: gain must be > 0 everywhere (a dead taxel: leave it out of the layout)")
     return offset, gain
+
+
+def nanpercentile_columns(x: np.ndarray, q):
+    """np.nanpercentile(x, q, axis=0) (linear method) for a (T, L) array, without numpy's per-column loop.
+
+    numpy falls back to apply_along_axis (one Python call per column) as soon as one value is NaN;
+    here every column is sorted at once (NaN last) and interpolated between the two order
+    statistics around q * (n - 1), n = the column's finite count. A column without a finite value
+    gives NaN. Equal to numpy's result up to float round-off (tests/test_rawhealth.py).
+    """
+    x = np.asarray(x, np.float64)
+    scalar = np.ndim(q) == 0
+    qs = np.atleast_1d(np.asarray(q, np.float64)) / 100.0
+    if not np.isnan(x).any():
+        out = np.percentile(x, qs * 100.0, axis=0)
+        return out[0] if scalar else out
+    xs = np.sort(x, axis=0)                       # NaN sort last
+    n = np.sum(~np.isnan(xs), axis=0)
+    last = np.maximum(n - 1, 0)
+    out = np.empty((qs.size, x.shape[1]), np.float64)
+    for k, frac in enumerate(qs):
+        pos = frac * last
+        lo = np.floor(pos).astype(np.int64)
+        hi = np.minimum(lo + 1, last)
+        t = pos - lo
+        a = np.take_along_axis(xs, lo[None], axis=0)[0]
+        b = np.take_along_axis(xs, hi[None], axis=0)[0]
+        out[k] = np.where(t >= 0.5, b - (b - a) * (1 - t), a + (b - a) * t)   # numpy's _lerp
+        out[k][n == 0] = np.nan
+    return out[0] if scalar else out

@@ -15,8 +15,9 @@ module each:
   (`--sample-frac`, plus the first frame of every episode): RGB (224,224,3)
   uint8; tactile EXR (224,224; half or float, as the codec records), finite, in [0,1], zero outside the
   layout's coverage; bend vectors 1-D finite.
-- served maps (`served.py`, part of content): for the decoded samples, each
-  map as the torch datasets serve it (rendered from the raw rows under the
+- served maps (`served.py`, part of content): for each episode's first
+  decoded sample and a seeded tenth of the others, each map as the torch
+  datasets serve it (rendered from the raw rows under the
   recorded calibration, their default) equals the stored map within the
   stored pixel type's rounding: one truth for what a map is.
 - time (`timestamps.py`): RGB timestamps strictly increasing per episode;

@@ -21,6 +21,7 @@ from htdata.read.reader import DatasetReader
 from htdata.validate.report import Check
 
 FLOAT_TOLERANCE = 1e-6
+SERVED_FRACTION = 0.1
 
 
 def allowed_error(stored: np.ndarray, pixel_type: str) -> np.ndarray | float:
@@ -28,6 +29,15 @@ def allowed_error(stored: np.ndarray, pixel_type: str) -> np.ndarray | float:
     if pixel_type == "half":
         return np.spacing(np.abs(stored).astype(np.float16)).astype(np.float32) / 2 + FLOAT_TOLERANCE
     return FLOAT_TOLERANCE
+
+
+def served_rows(decoded: np.ndarray, episodes: np.ndarray, seed: int) -> np.ndarray:
+    """Mask of the samples checked: each episode's first decoded one and a seeded share of the others."""
+    chosen = decoded & (np.random.default_rng(seed).random(len(decoded)) < SERVED_FRACTION)
+    positions = np.flatnonzero(decoded)
+    _, first = np.unique(episodes[positions], return_index=True)
+    chosen[positions[first]] = True
+    return chosen
 
 
 def check_served_maps(root, version: int | None, rows: np.ndarray, check: Check, batch: int = 64) -> None:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from htdata.validate.content import decode_mask, layout_maps
 from htdata.validate.report import CHECKS, Check
-from htdata.validate.served import check_served_maps
+from htdata.validate.served import check_served_maps, served_rows
 from htdata.validate.sensors import check_sensors, check_taxel_health, merge_sensor
 from htdata.validate.shards import run_jobs, shard_jobs
 from htdata.validate.splits import check_splits
@@ -92,7 +92,8 @@ def _check_dataset(ds: Loaded, cfg: ValidateConfig, checks: dict[str, Check], pa
         merge_timestamps(ts, res["timestamps"], res["timestamps"]["row"])
         hashes.update(dict(res["hashes"]))
         merge_sensor(sensor, res["sensor"])
-    check_served_maps(ds.root, ds.manifest.get("version"), decode, checks["content"])
+    check_served_maps(ds.root, ds.manifest.get("version"), served_rows(decode, ds.index["episode"], cfg.seed),
+                      checks["content"])
     check_time(ds, ts, checks["time"])
     check_sensors(sensor, checks["sensors"], _region_names(ds))
     check_taxel_health(ds.root, ds.manifest.get("version"), checks["sensors"], compute=cfg.deep)
