@@ -111,8 +111,14 @@ def paired_source_row(members: dict[str, bytes], hand: str, where: str) -> int:
 
 def apply_paired(normaliser, members: dict[str, bytes], hand: str, where: str):
     """normaliser.apply on a sample's paired raw row (with its source row number when the baseline drifts)."""
-    rows = [paired_source_row(members, hand, where)] if normaliser.cfg.baseline == "drift" else None
-    return normaliser.apply(paired_row(members, hand, where)[None], rows=rows)
+    return apply_paired_many(normaliser, [members], hand, where)
+
+
+def apply_paired_many(normaliser, members_list: list[dict[str, bytes]], hand: str, where: str):
+    """normaliser.apply on the paired raw rows of several samples of one episode hand, in one call."""
+    rows = ([paired_source_row(m, hand, where) for m in members_list]
+            if normaliser.cfg.baseline == "drift" else None)
+    return normaliser.apply(np.stack([paired_row(m, hand, where) for m in members_list]), rows=rows)
 
 
 class RawMapRenderer:
@@ -149,10 +155,7 @@ class RawMapRenderer:
                     ) -> np.ndarray:
         """(n,224,224) float32 maps of n samples of one episode hand: one normalise and one rasterise call."""
         normaliser, raster = self.parts_for(episode, hand)
-        raw = np.stack([paired_row(m, hand, where) for m in members_list])
-        rows = ([paired_source_row(m, hand, where) for m in members_list]
-                if normaliser.cfg.baseline == "drift" else None)
-        values, _ = normaliser.apply(raw, rows=rows)
+        values, _ = apply_paired_many(normaliser, members_list, hand, where)
         return raster.render(values)
 
     def sample_map(self, index: int, hand: str) -> np.ndarray:
