@@ -55,11 +55,17 @@ def load_schema(name: str) -> dict:
     return json.loads(path.read_text())
 
 
-def validate_json(instance, schema_name: str, where: str = "") -> None:
-    """Validate `instance` against a project schema; raise ValueError naming `where`."""
+@lru_cache(maxsize=None)
+def _validator(schema_name: str):
+    """One validator per schema per process: building one costs more than most validations."""
     import jsonschema
 
-    validator = jsonschema.Draft202012Validator(load_schema(schema_name))
+    return jsonschema.Draft202012Validator(load_schema(schema_name))
+
+
+def validate_json(instance, schema_name: str, where: str = "") -> None:
+    """Validate `instance` against a project schema; raise ValueError naming `where`."""
+    validator = _validator(schema_name)
     errors = sorted(validator.iter_errors(instance), key=lambda e: list(e.path))
     if errors:
         e = errors[0]

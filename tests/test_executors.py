@@ -64,3 +64,41 @@ def test_ray_task_body_caps_threads():
 def test_bad_threads_argument():
     with pytest.raises((TypeError, ValueError)):
         ProcessExecutor(workers=1, threads="many")
+
+
+def _which_modules(_task) -> bool:
+    import sys
+
+    return "colorsys" in sys.modules      # a stdlib module nothing here imports
+
+
+def _report_then_return(task):
+    executors.report_progress({"task": task})
+    return task
+
+
+def test_started_pool_preloads_and_still_delivers_every_progress_event():
+    """start() spawns the workers with the unit code imported; a unit's events all reach the driver."""
+    pool = ProcessExecutor(workers=2, threads=1)
+    pool.start(preload=("colorsys",))
+    assert all(r for _, r in pool.map_units(_which_modules, [0, 1]))
+    assert not any(r for _, r in ProcessExecutor(workers=1, threads=1).map_units(_which_modules, [0]))
+    events = []
+    pool.start()
+    results = sorted(r for _, r in pool.map_units(_report_then_return, list(range(6)), on_progress=events.append))
+    assert results == list(range(6)) and sorted(e["task"] for e in events) == list(range(6))
+    pool.close()                                  # nothing running: a no-op
+    InlineExecutor().start(preload=("htdata.ingest.unit",))
+
+
+def test_hash_files_threads_agree_with_serial(tmp_path):
+    from htdata.ingest.sourcesums import hash_files
+    from htdata.store.fsutil import sha256_file
+
+    paths = []
+    for i in range(5):
+        p = tmp_path / f"f{i}.bin"
+        p.write_bytes(bytes([i]) * (100_000 * (i + 1)))
+        paths.append(str(p))
+    serial = {p: sha256_file(p) for p in paths}
+    assert hash_files(paths + paths[:2], threads=3) == serial == hash_files(paths, threads=1)

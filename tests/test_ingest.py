@@ -370,6 +370,7 @@ def test_changed_source_redoes_only_its_unit(tmp_path, clean_run):
 
 TIMING_KEYS = {"frames", "total_s", "worker_s", "decode_s", "resize_s", "normalise_s", "rasterise_s",
                "encode_s", "write_s", "other_s"}
+DRIVER_KEYS = {"plan_s", "run_s", "commit_s"}
 
 
 def test_progress_events_arrive_per_episode_from_the_process_pool(tmp_path, monkeypatch):
@@ -425,8 +426,11 @@ def test_report_has_stage_timing(tmp_path):
     pipe = small_pipeline(tmp_path, "touchanything")
     assert ingest_cli("--pipeline", pipe, raw, out) == 0
     timing = json.loads((out / "reports" / "ingest.json").read_text())["timing"]
-    assert set(timing) == TIMING_KEYS
+    assert set(timing) == TIMING_KEYS | DRIVER_KEYS
     assert timing["frames"] == 11
+    # the driver's phases add up to the wall time, and the units ran inside run_s
+    assert sum(timing[k] for k in DRIVER_KEYS) == pytest.approx(timing["total_s"])
+    assert timing["run_s"] >= timing["worker_s"]
     for stage in ("decode_s", "resize_s", "normalise_s", "rasterise_s", "encode_s", "write_s"):
         assert timing[stage] > 0, stage
     stages = sum(timing[k] for k in TIMING_KEYS - {"frames", "total_s", "worker_s", "other_s"})

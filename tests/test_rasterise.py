@@ -250,3 +250,26 @@ def test_raster_benchmark_reports():
     res = raster_benchmark("opentouch_right_16x16", "nearest", frames=8)
     assert set(res) >= {"ms_per_frame", "max_roundtrip_error", "rmse"}
     assert res["max_roundtrip_error"] < 1e-6 and res["ms_per_frame"] > 0
+
+
+@pytest.mark.parametrize("lid", SHIPPED)
+def test_nearest_gather_is_the_sparse_product_byte_for_byte(lid):
+    """Nearest mode renders by gather; it must give the CSR product's exact bytes, hard values included."""
+    r = _rast(lid, "nearest")
+    assert r._gather is not None
+    g = np.random.default_rng(3).normal(0.5, 0.8, (6, *r.layout.grid)).astype(np.float32)   # beyond [0,1] too
+    g[0, 0, :] = np.nan
+    g[1] = -0.0
+    g[2, 1, 1] = np.inf
+    x = g.reshape(6, -1)[:, r.live_index]
+    product = np.ascontiguousarray((r._render_t @ x.T).T, dtype=np.float32)
+    np.clip(product, 0.0, 1.0, out=product)
+    rendered = r.render(g)
+    assert rendered.dtype == np.float32 and rendered.flags["C_CONTIGUOUS"]
+    assert rendered.reshape(6, -1).tobytes() == product.tobytes()
+    assert r.render(g[:1]).tobytes() == rendered[:1].tobytes()          # one frame at a time: the same
+
+
+@pytest.mark.parametrize("lid", SHIPPED)
+def test_bilinear_keeps_the_sparse_product(lid):
+    assert _rast(lid, "bilinear")._gather is None

@@ -224,3 +224,22 @@ def test_long_episode_ids_round_trip_and_webdataset_reads_them(tmp_path):
     keys = [s["__key__"] for name in sorted((root / "shards").glob("*.tar"))
             for s in wds.WebDataset(str(name), shardshuffle=False)]
     assert keys[:3] == [reader.key(i) for i in range(3)] and all(len(k) < 100 for k in keys)
+
+
+def test_member_header_is_tarfiles_own_bytes():
+    """The hand-filled USTAR header equals tarfile's for every name and size a shard can hold."""
+    from htdata.format.shardio import _tarfile_header, member_header
+
+    rng = np.random.default_rng(0)
+    alphabet = list("abcXYZ019_-.é")
+    names = ["a", "k__000001.json", "x" * 100, "é" * 50,
+             "ta-Home-hook_carry-20260321_113311_723__000000.tactile_left.exr"]
+    names += ["".join(rng.choice(alphabet, int(rng.integers(1, 45)))) for _ in range(300)]
+    sizes = [0, 1, 511, 512, 513, 10629, 8**11 - 1] + [int(s) for s in rng.integers(0, 2**33, 20)]
+    for name in names:
+        for size in sizes:
+            assert member_header(name, size) == _tarfile_header(name, size), (name, size)
+    with pytest.raises(ValueError, match="longer than 100 bytes"):
+        member_header("y" * 101, 1)
+    with pytest.raises(ValueError):              # beyond 11 octal digits: tarfile's own refusal
+        member_header("big", 8**11)

@@ -29,8 +29,10 @@ from htdata.store.manifest import load_manifest
 from htdata.ingest import Source, ingest
 from htdata.pipeline import load_pipeline
 from htdata.glove.layouts import load_layout
-from htdata.sample.corpus import NATIVE_IMAGE, NATIVE_TACTILE_HZ, OPENTOUCH_LAYOUT, VIDEO_FPS, native_raw
-from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+from htdata.sample.corpus import (NATIVE_IMAGE, NATIVE_TACTILE_HZ, OPENTOUCH_LAYOUT, TA_IMAGE, TA_LAYOUTS, VIDEO_FPS,
+                                  native_raw, touchanything_raw)
+from htdata.sample.formats import (NativeHand, NativeRecording, TouchAnythingEpisode, write_native_recording,
+                                   write_touchanything_episode)
 from htdata.sample.world import EpisodeSpec, World
 
 STAGES = ("decode", "resize", "normalise", "rasterise", "encode", "write", "other")
@@ -115,6 +117,20 @@ def write_long_native(folder: Path, n_frames: int, seed: int = 0) -> None:
         task=spec.task, scene=spec.scene, video_frames=world.render_frames(video_times, NATIVE_IMAGE),
         video_timestamps_ns=video_start + np.round(video_times * 1e9).astype(np.int64),
         hands={"right": hand}, operator="bench", notes=f"htdata bench: {n_frames}-frame episode"))
+
+
+def write_long_touchanything(root: Path, n_frames: int, seed: int = 0) -> Path:
+    """One moving two-hand TouchAnything episode of `n_frames` under `root` (Scene/task/traj); returns root."""
+    spec = EpisodeSpec("power_grasp", "lab_bench", seed, n_frames, VIDEO_FPS, ("left", "right")).validate()
+    world = World(spec)
+    rng = np.random.default_rng(seed)
+    grids = {h: touchanything_raw(world.contact_grids(load_layout(i), h, fill=float("nan")), load_layout(i), rng)
+             for h, i in TA_LAYOUTS.items()}
+    times = spec.frame_times()
+    write_touchanything_episode(root / "Bench" / "power_grasp" / f"20260101_000000_{n_frames % 1000:03d}",
+                                TouchAnythingEpisode(grids["left"], grids["right"],
+                                                     world.render_frames(times, TA_IMAGE), 1.774e9 + times))
+    return root
 
 
 _RSS_CHILD = """

@@ -44,7 +44,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("out", help="output folder (created if missing)")
     parser.add_argument("--seed", type=int, default=0, help="corpus seed (default 0)")
     parser.add_argument("--scale", choices=SCALES, default="small",
-                        help="small: ~50 episodes, every task >= 3 episodes (default); tiny: a few episodes for tests")
+                        help="small: ~50 episodes, every task >= 3 episodes (default); tiny: a few episodes for tests; "
+                             "medium: 3x small (~140 episodes, ~9k frames: the ingest benchmark's worker scaling)")
     parser.add_argument("--formats", type=_formats, default=FORMATS,
                         help=f"comma list of formats to write (default {','.join(FORMATS)})")
     parser.add_argument("--overwrite", action="store_true", help="replace existing OUT/<format> folders")

@@ -92,10 +92,8 @@ def member_offsets(first_header_offset: int, sizes: Iterable[int]) -> list[int]:
     return offsets
 
 
-def member_header(name: str, size: int) -> bytes:
-    """A deterministic USTAR header block for a regular file."""
-    if len(name.encode("utf-8")) > MAX_NAME:
-        raise ValueError(f"tar member name longer than {MAX_NAME} bytes (USTAR): {name!r}")
+def _tarfile_header(name: str, size: int) -> bytes:
+    """tarfile's own USTAR header of a regular file (mtime 0, mode 644, root, no user names)."""
     info = tarfile.TarInfo(name)
     info.size = size
     info.mtime = 0
@@ -104,6 +102,32 @@ def member_header(name: str, size: int) -> bytes:
     info.uname = info.gname = ""
     info.type = tarfile.REGTYPE
     return info.tobuf(tarfile.USTAR_FORMAT, "utf-8", "strict")
+
+
+# The header block of a sample member with the name and size fields blank: every other field is the
+# same for all members. Filling in those two fields by hand gives tarfile's exact bytes (tests check
+# that) at ~1/10th of tarfile's cost, which was ~5% of an ingest (8 members per sample).
+_HEADER_TEMPLATE = bytearray(_tarfile_header("x", 0))
+_HEADER_TEMPLATE[0:100] = bytes(100)
+_HEADER_TEMPLATE[124:136] = bytes(12)
+_HEADER_TEMPLATE[148:156] = b" " * 8          # checksum field counts as spaces while summing
+_HEADER_SUM = sum(_HEADER_TEMPLATE)
+
+
+def member_header(name: str, size: int) -> bytes:
+    """A deterministic USTAR header block for a regular file (byte-identical to tarfile's)."""
+    raw = name.encode("utf-8")
+    if len(raw) > MAX_NAME:
+        raise ValueError(f"tar member name longer than {MAX_NAME} bytes (USTAR): {name!r}")
+    if not 0 <= size < 8 ** 11:       # what 11 octal digits hold; tarfile would refuse too
+        return _tarfile_header(name, size)
+    size_field = b"%011o\0" % size
+    checksum = _HEADER_SUM + sum(raw) + sum(size_field)
+    block = bytearray(_HEADER_TEMPLATE)
+    block[0:len(raw)] = raw
+    block[124:136] = size_field
+    block[148:156] = b"%06o\0 " % checksum
+    return bytes(block)
 
 
 def parse_header(header: bytes) -> tuple[str, int]:

@@ -83,6 +83,15 @@ class TaxelGrid:
 
     @classmethod
     def of(cls, layout: Layout) -> "TaxelGrid":
+        """The layout's taxel grid, built once per (frozen) Layout object: every episode of a glove shares it."""
+        cached = layout.__dict__.get("_taxel_grid")
+        if cached is None:
+            cached = cls._build(layout)
+            object.__setattr__(layout, "_taxel_grid", cached)
+        return cached
+
+    @classmethod
+    def _build(cls, layout: Layout) -> "TaxelGrid":
         H, W = layout.grid
         owner = np.full((H, W), -1, np.int64)
         for i, b in enumerate(layout.blocks):

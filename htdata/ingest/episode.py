@@ -186,16 +186,27 @@ def _fit_episode_baselines(ref, cfg: PipelineConfig, adapter, streams, sync, nor
                 raise EpisodeError(ref, None, f"{h} hand baseline {normalisers[h].cfg.baseline!r}: {exc}") from exc
 
 
-def _render_kept(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict, tally: EpisodeTally):
-    """Maps (and bend vectors) of a chunk's kept frames; their contact goes into the tally."""
-    maps, bends = {}, {}
+def _kept_values(values: dict, keep: np.ndarray, layouts: dict, rasters: dict, keep_bend: dict,
+                 tally: EpisodeTally):
+    """Normalised taxels (and bend vectors) of a chunk's kept frames; their contact goes into the tally.
+
+    Maps are rendered one frame at a time as each frame leaves (`_frame_maps`): a chunk of
+    rendered maps is 200 KiB per frame and hand, and frames waiting in the FrameQueue would keep
+    two chunks of them alive; the taxels are 1/100th of that.
+    """
+    kept, bends = {}, {}
     for h in tally.hands if keep.size else ():
-        v = values[h][keep]
-        maps[h] = rasters[h].render(v)
-        tally.add_contact(h, v[:, tally.layouts[h].live_mask])
+        kept[h] = values[h][keep]
+        tally.add_contact(h, kept[h][:, layouts[h].live_mask])
         if keep_bend[h]:
-            bends[h] = rasters[h].bend_vector(v)
-    return maps, bends
+            bends[h] = rasters[h].bend_vector(kept[h])
+    return kept, bends
+
+
+def _frame_maps(kept: dict, n: int, rasters: dict, clock: StageClock) -> dict:
+    """The (224,224) maps of kept frame n of the chunk, one per hand."""
+    with clock.stage("rasterise"):
+        return {h: rasters[h].render(v[n:n + 1])[0] for h, v in kept.items()}
 
 
 def _rgb_source(ref, cfg: PipelineConfig, streams, sync, clock: StageClock, with_rgb: bool):
@@ -303,7 +314,7 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
                     for j in np.flatnonzero(~ok):
                         fetcher.discard(rgb_idx[j])
                 with clock.stage("rasterise"):
-                    maps, bends = _render_kept(values, np.flatnonzero(ok), rasters, keep_bend, tally)
+                    kept, bends = _kept_values(values, np.flatnonzero(ok), layouts, rasters, keep_bend, tally)
             n = 0
             for j in range(stop - start):
                 k, i = start + j, int(rgb_idx[j])
@@ -324,7 +335,7 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
                 tally.frames += 1
                 tally.paired += 1
                 yield from queue.push(Frame(key=meta["key"], source_frame=i, meta=meta, rgb=rgb,
-                                            maps={h: maps[h][n] for h in hands},
+                                            maps=_frame_maps(kept, n, rasters, clock),
                                             bends={h: b[n] for h, b in bends.items()}, raw=rows), paired=True)
                 n += 1
         for frame in emit.before(None):

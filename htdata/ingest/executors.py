@@ -28,6 +28,7 @@ there): callers see progress only when a unit's result arrives.
 
 from __future__ import annotations
 
+import importlib
 import multiprocessing as mp
 import os
 import signal
@@ -117,14 +118,22 @@ def parent_alive() -> bool:
     return _parent_pid is None or os.getppid() == _parent_pid
 
 
-def _init_worker(queue, threads: int, parent_pid: int | None = None) -> None:
-    """Process-pool initializer: die with the parent, thread caps, events go to the driver's queue."""
+def _init_worker(queue, threads: int, parent_pid: int | None = None, preload: tuple[str, ...] = ()) -> None:
+    """Process-pool initializer: die with the parent, thread caps, events go to the driver's queue, and the
+    unit function's modules imported now (while the driver still plans), not on the first unit."""
     global _progress_sink
     if parent_pid is not None:
         die_with_parent(parent_pid)
     limit_threads(threads)
     if queue is not None:
         _progress_sink = queue.put
+    for name in preload:
+        importlib.import_module(name)
+
+
+def _started() -> int:
+    """The warm-up task: returns once this worker's initializer has run."""
+    return os.getpid()
 
 
 def _run_ray_unit(fn: Callable[[Any], Any], threads: int, task: Any) -> Any:
@@ -150,6 +159,12 @@ class InlineExecutor:
     def __init__(self, max_retries: int = 1):
         self.max_retries = max(0, int(max_retries))
 
+    def start(self, preload: tuple[str, ...] = ()) -> None:
+        """Nothing to start: units run in this process."""
+
+    def close(self) -> None:
+        """Nothing to stop."""
+
     def map_units(self, fn: Callable[[Any], Any], tasks: Iterable[Any],
                   on_progress: ProgressCallback | None = None) -> Iterator[tuple[Any, Any]]:
         global _progress_sink
@@ -168,7 +183,14 @@ class InlineExecutor:
 
 
 class ProcessExecutor:
-    """concurrent.futures process pool; keeps at most `2 * workers` tasks in flight."""
+    """concurrent.futures process pool; keeps at most `2 * workers` tasks in flight.
+
+    `start(preload)` spawns the workers and has them import `preload` while the caller goes on
+    (an ingest plans meanwhile): spawning + importing takes ~0.5 s per worker, which otherwise
+    sits between planning and the first unit. `map_units` starts the pool itself if nobody did,
+    and shuts it down when its units are done (workers flush their last progress events as they
+    exit, and those are delivered before it returns). `close()` shuts down a pool never used.
+    """
 
     def __init__(self, workers: int | None = None, max_retries: int = 1, start_method: str = "spawn",
                  threads: int | None = None):
@@ -177,51 +199,66 @@ class ProcessExecutor:
         self.threads = threads_per_worker(self.workers) if threads is None else max(1, int(threads))
         # spawn: the parent may hold threads (tqdm monitor, BLAS) that fork would copy mid-lock.
         self.start_method = start_method
+        self._pool = None
+        self._queue = None
+
+    def start(self, preload: tuple[str, ...] = ()) -> None:
+        if self._pool is not None:
+            return
+        ctx = mp.get_context(self.start_method)
+        self._queue = ctx.Queue()
+        self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, initializer=_init_worker,
+                                         initargs=(self._queue, self.threads, os.getpid(), tuple(preload)))
+        for _ in range(self.workers):   # one process per submit until the pool is full
+            self._pool.submit(_started)
+
+    def close(self, on_progress: ProgressCallback | None = None) -> None:
+        pool, queue, self._pool, self._queue = self._pool, self._queue, None, None
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+        if queue is not None:
+            if on_progress is not None:
+                _drain(queue, on_progress)   # the workers have exited: their last events are in
+            queue.close()
 
     def map_units(self, fn: Callable[[Any], Any], tasks: Iterable[Any],
                   on_progress: ProgressCallback | None = None) -> Iterator[tuple[Any, Any]]:
         pending = list(tasks)
         pending.reverse()  # pop() from the end keeps submission in task order
         attempts: dict[int, int] = {}
-        ctx = mp.get_context(self.start_method)
-        queue = ctx.Queue() if on_progress is not None else None
-        pool_kwargs = {"initializer": _init_worker, "initargs": (queue, self.threads, os.getpid())}
-        # With a listener, wake up a few times a second to forward events between unit results.
-        timeout = 0.2 if queue is not None else None
+        self.start()
+        sink = on_progress or (lambda event: None)
+        # Wake up a few times a second to forward progress events between unit results.
+        timeout = 0.2 if on_progress is not None else None
         try:
-            yield from self._run(fn, pending, attempts, ctx, pool_kwargs, queue, on_progress, timeout)
+            yield from self._run(fn, pending, attempts, self._pool, self._queue, sink, timeout)
         finally:
-            if queue is not None:
-                queue.close()
+            self.close(sink)
 
-    def _run(self, fn, pending, attempts, ctx, pool_kwargs, queue, on_progress, timeout):
-        with ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, **pool_kwargs) as pool:
-            running = {}
-            while pending or running:
-                while pending and len(running) < 2 * self.workers:
-                    task = pending.pop()
-                    running[pool.submit(fn, task)] = task
-                done, _ = wait(running, timeout=timeout, return_when=FIRST_COMPLETED)
-                if queue is not None:
-                    _drain(queue, on_progress)  # before results, so a unit's events precede its completion
-                for fut in done:
-                    task = running.pop(fut)
-                    exc = fut.exception()
-                    if exc is None:
-                        yield task, fut.result()
-                        continue
-                    from concurrent.futures.process import BrokenProcessPool
+    def _run(self, fn, pending, attempts, pool, queue, on_progress, timeout):
+        running = {}
+        while pending or running:
+            while pending and len(running) < 2 * self.workers:
+                task = pending.pop()
+                running[pool.submit(fn, task)] = task
+            done, _ = wait(running, timeout=timeout, return_when=FIRST_COMPLETED)
+            _drain(queue, on_progress)  # before results, so a unit's events precede its completion
+            for fut in done:
+                task = running.pop(fut)
+                exc = fut.exception()
+                if exc is None:
+                    yield task, fut.result()
+                    continue
+                from concurrent.futures.process import BrokenProcessPool
 
-                    if isinstance(exc, BrokenProcessPool):
-                        raise UnitFailed(f"a worker process died while running {task!r}; "
-                                         f"re-run the same command to resume") from exc
-                    n = attempts.get(id(task), 0) + 1
-                    attempts[id(task)] = n
-                    if n > self.max_retries:
-                        raise UnitFailed(f"{task!r} failed after {n} attempt(s): {exc}") from exc
-                    running[pool.submit(fn, task)] = task
-        if queue is not None:
-            _drain(queue, on_progress)  # the pool has shut down: its workers flushed their last events
+                if isinstance(exc, BrokenProcessPool):
+                    raise UnitFailed(f"a worker process died while running {task!r}; "
+                                     f"re-run the same command to resume") from exc
+                n = attempts.get(id(task), 0) + 1
+                attempts[id(task)] = n
+                if n > self.max_retries:
+                    raise UnitFailed(f"{task!r} failed after {n} attempt(s): {exc}") from exc
+                running[pool.submit(fn, task)] = task
 
 
 class RayExecutor:
@@ -241,6 +278,12 @@ class RayExecutor:
         self.address = address
         self.workers = workers
         self.max_retries = max(0, int(max_retries))
+
+    def start(self, preload: tuple[str, ...] = ()) -> None:
+        """Ray starts (or joins) in map_units: a cluster is not started for an ingest with nothing to do."""
+
+    def close(self) -> None:
+        """map_units shuts down the Ray it started."""
 
     def _init(self) -> bool:
         """Connect/start Ray; True when this call started it (so we shut it down)."""

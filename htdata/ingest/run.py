@@ -13,10 +13,11 @@ from __future__ import annotations
 
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 from htdata.glove.codecrule import resolve_sources
-from htdata.ingest.executors import make_executor
+from htdata.ingest.executors import make_executor, usable_cores
 from htdata.format.table import INGEST_REPORT
 from htdata.store.fsutil import write_bytes_atomic
 from htdata.ingest.append import kept_unavailable, plan_append
@@ -94,7 +95,7 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
     t_start = time.perf_counter()
     check_settings_agree(sources)
     check_output(out)
-    with WriterLock(out, command) as lock:
+    with WriterLock(out, command) as lock, _started_executor(executor, workers, address, retries) as runner:
         prepare_output(out)
         parent = current_snapshot(out)
         refs, plan_failures = discover_sources(sources, tuple(layout_dirs))
@@ -109,13 +110,15 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         plan = plan_append(parent, [r for r, _ in pairs], [settings[id(s)] for _, s in pairs])
         source_of = {r.episode_id: s for r, s in pairs}
         checked = check_sources(plan.todo, {r.episode_id: source_of[r.episode_id].root for r in plan.todo},
-                                verify_sources)
+                                verify_sources, threads=usable_cores())
         plan.todo = checked.refs
         plan_failures = plan_failures + checked.failures
         first_unit = parent.next_unit() if parent else 0
         tasks = plan_units([(r, source_of[r.episode_id]) for r in plan.todo], out, first_unit)
         remove_strays(out, tasks, first_unit)
-        records, ran = run_units(tasks, out, workers, executor, address, retries, progress)
+        t_run = time.perf_counter()
+        records, ran = run_units(tasks, out, runner, progress)
+        t_ran = time.perf_counter()
         report = build_report(sources, tasks, records, ran, plan_failures, plan, parent,
                               discovered={r.episode_id for rs in refs for r in rs}, t_start=t_start)
         report["notes"] += checked.notes
@@ -127,6 +130,7 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
             more = f"; ... {len(report['failures']) - 3} more" if len(report["failures"]) > 3 else ""
             raise ValueError(f"no episode could be ingested ({len(report['failures'])} failures); see "
                              f"{out / INGEST_REPORT}: {shown}{more}")
+        report["timing"].update(plan_s=t_run - t_start, run_s=t_ran - t_run)
         if report["episodes_ingested"] or plan.relabelled:
             manifest = commit(out, sources, records, plan, command)
             report["version"] = manifest["version"]
@@ -134,8 +138,20 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
             report["version"] = parent.version
             report["notes"].append(f"nothing changed: version {parent.version} stays current")
     report["timing"]["total_s"] = time.perf_counter() - t_start
+    report["timing"]["commit_s"] = report["timing"]["total_s"] - (t_ran - t_start)
     write_bytes_atomic(out / INGEST_REPORT, dumps(report))
     return report
+
+
+@contextmanager
+def _started_executor(kind: str, workers: int, address: str | None, retries: int):
+    """The unit executor, its workers spawned and importing the unit code while the driver plans."""
+    runner = make_executor(kind, workers, address, retries)
+    runner.start(preload=(run_unit.__module__,))
+    try:
+        yield runner
+    finally:
+        runner.close()
 
 
 def check_found_something(sources, refs: list[list], failures: list[dict]) -> None:
@@ -148,8 +164,7 @@ def check_found_something(sources, refs: list[list], failures: list[dict]) -> No
                              f"{source.pipeline.adapter.name!r}); check the folder and the pipeline")
 
 
-def run_units(tasks: list[UnitTask], out: Path, workers: int, executor: str, address: str | None,
-              retries: int, progress: bool) -> tuple[list[dict], list[dict]]:
+def run_units(tasks: list[UnitTask], out: Path, runner, progress: bool) -> tuple[list[dict], list[dict]]:
     """Resume finished units, run the rest (largest first); returns (records in unit order, records run now)."""
     records, todo = {}, []
     for t in tasks:
@@ -164,7 +179,6 @@ def run_units(tasks: list[UnitTask], out: Path, workers: int, executor: str, add
     bar = EpisodeProgress(tasks, set(records), progress)
     try:
         if todo:
-            runner = make_executor(executor, workers, address, retries)
             for task, rec in runner.map_units(run_unit, todo, on_progress=bar.event):
                 records[task.unit] = rec
                 bar.unit_done(task, rec)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from htdata.errors import EpisodeError
@@ -59,15 +60,26 @@ class SourceCheck:
     notes: list[str]
 
 
-def check_sources(refs: list, roots: dict[str, Path], strict: bool) -> SourceCheck:
-    """Hash every file of `refs` (once), compare with the checksum lists of their source roots.
+def hash_files(paths: list[str], threads: int) -> dict[str, str]:
+    """{path: sha256} of every path, `threads` at a time: hashlib releases the GIL on large updates, so
+    threads hash in parallel (the driver does this before any unit runs: serial, it would cap scaling)."""
+    unique = list(dict.fromkeys(paths))
+    if threads <= 1 or len(unique) <= 1:
+        return {p: sha256_file(p) for p in unique}
+    with ThreadPoolExecutor(max_workers=min(threads, len(unique))) as pool:
+        return dict(zip(unique, pool.map(sha256_file, unique)))
+
+
+def check_sources(refs: list, roots: dict[str, Path], strict: bool, threads: int = 1) -> SourceCheck:
+    """Hash every file of `refs` (once, `threads` files at a time), compare with the checksum lists of their
+    source roots.
 
     `roots`: episode id -> source root. `strict` (--verify-sources): a mismatch or a file no list covers
     fails the episode; otherwise a mismatch is a note and the episode is ingested.
     """
 
     lists: dict[Path, dict] = {}
-    digests: dict[str, str] = {}
+    digests = hash_files([str(Path(p).resolve()) for ref in refs for p in ref.source_files], threads)
     noted: set[str] = set()          # a file many episodes share (an OpenTouch scene) is reported once
     out = SourceCheck(refs=[], failures=[], notes=[])
     for ref in refs:
@@ -78,8 +90,6 @@ def check_sources(refs: list, roots: dict[str, Path], strict: bool) -> SourceChe
         sums, problem = {}, None
         for path in ref.source_files:
             resolved = str(Path(path).resolve())
-            if resolved not in digests:
-                digests[resolved] = sha256_file(resolved)
             sha = digests[resolved]
             try:
                 rel = Path(path).relative_to(root).as_posix()
