@@ -120,7 +120,16 @@ def test_quick_bench_content_is_consistent(quick_run):
     assert lossless[0]["max_error"] == 0.0
     assert {s["adapter"] for s in r["ingest"]["summary"]} == {"opentouch", "touchanything", "native"}
     for s in r["ingest"]["summary"]:
-        assert s["frames"] > 0 and s["bound_frames_per_s"] > 0 and "scaling" in s
+        assert s["frames"] > 0 and s["bound_frames_per_s"] > 0 and len(s["overhead_pct_reps"]) == s["reps"] == 1
+        assert s["overhead_pct"] == pytest.approx(100 * (1 - s["ratio_to_bound"]))
+    assert "revision" not in r["ingest"]            # quick runs skip the revision rows
+    scaling = r["scaling"]
+    assert {s["adapter"] for s in scaling["summary"]} == {"opentouch", "touchanything", "native"}
+    for s in scaling["summary"]:
+        assert (s["workers_lo"], s["workers_hi"]) == (1, 2) and s["scaling"] > 0 and s["fixed_s_hi"] > 0
+    assert [e["adapter"] for e in scaling["estimate"]] == [s["adapter"] for s in scaling["summary"]]
+    assert all(e["frames"] == 10_000_000 and e["wall_hours"] > 0 for e in scaling["estimate"])
+    assert [(d["map_source"], d["workers_hi"]) for d in r["loader"]["dataloader"]] == [("auto", 2), ("stored", 2)]
     assert [row["frames"] for row in r["rss"]] == list(BenchConfig.quick_config(out).rss_lengths)
     assert all(row["peak_rss_mb"] > 10 for row in r["rss"])
     assert {row["mode"] for row in r["raster"]["rows"]} == {"nearest", "bilinear"}
@@ -203,6 +212,9 @@ def test_finite_json_replaces_non_finite():
     ({"rgb_frames": 0}, "rgb_frames"),
     ({"sections": ("nope",)}, "unknown section"),
     ({"ingest_workers": ()}, "ingest_workers"),
+    ({"ingest_workers": (2, 2)}, "two worker counts"),
+    ({"scaling_scale": "huge"}, "scaling_scale"),
+    ({"ingest_reps": 0}, "ingest_reps"),
     ({"scale": "huge"}, "scale"),
 ])
 def test_bench_config_rejects_bad_sizes(tmp_path, change, match):
@@ -216,3 +228,13 @@ def test_bench_config_rejects_bad_sizes(tmp_path, change, match):
 def test_unknown_section_is_refused(tmp_path, capsys):
     assert cli_main(["bench", "--quick", "--out", str(tmp_path), "--only", "nope"]) == 2
     assert "unknown section" in capsys.readouterr().err
+
+
+def test_scale_estimate_arithmetic():
+    """10M frames: core-hours from in-worker seconds per frame; 64-core wall = driver serial + core-hours / 64."""
+    from htdata.benchmarks.scaling import scale_estimate
+
+    row = scale_estimate([{"adapter": "x", "core_s_per_frame_hi": 0.0036, "driver_s_per_frame": 3.6e-5}])[0]
+    assert row["core_hours"] == pytest.approx(10.0) and row["driver_serial_hours"] == pytest.approx(0.1)
+    assert row["wall_hours"] == pytest.approx(0.1 + 10.0 / 64)
+    assert row["speedup_on_cores"] == pytest.approx(10.1 / (0.1 + 10.0 / 64))

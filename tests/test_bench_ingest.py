@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from htdata.benchmarks.ingest import own_peak_rss_kb
 from htdata.benchmarks.sources import bare_bound, discover
@@ -36,3 +37,21 @@ def test_bare_bound_times_the_ingest_stages(tmp_path):
     assert np.isclose(b["decode_s"], b["open_s"] + b["rgb_decode_s"] + b["tactile_read_s"])
     assert np.isclose(b["total_s"], b["decode_s"] + b["resize_s"] + b["jpeg_s"] + b["exr_s"])
     assert b["frames_per_s"] == b["frames"] / b["total_s"]
+
+
+def test_revision_rows_run_both_trees_side_by_side(tmp_path):
+    """The revision rows export a commit with git archive and ingest the same inputs under both trees."""
+    from htdata.benchmarks.ingest import write_long_touchanything
+    from htdata.benchmarks.revisions import checkout_root, revision_rows
+
+    if checkout_root() is None:
+        pytest.skip("not running from a git checkout")
+    root = write_long_touchanything(tmp_path / "corpus" / "touchanything", 12)
+    r = revision_rows(tmp_path / "work", root, tmp_path / "corpus", base="HEAD", reps=1, corpus_reps=1,
+                      adapters=("touchanything",))
+    assert [row["case"] for row in r["rows"]] == ["episode_600", "corpus_1w"]
+    for row in r["rows"]:
+        assert row["frames"] == 12 and row["base_wall_s"] > 0 and row["current_peak_rss_mb"] > 10
+        assert row["runs"]["base"][0]["frames"] == row["runs"]["current"][0]["frames"]
+    assert (tmp_path / "work" / "revision_base" / "htdata" / "cli.py").is_file()
+    assert revision_rows(tmp_path / "w2", root, tmp_path / "corpus", base="0" * 40)["skipped"].startswith("commit")

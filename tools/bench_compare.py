@@ -29,6 +29,8 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+from htdata.benchmarks.revisions import export_revision  # noqa: E402  (the same export as `make bench`)
 
 READS = """
 import sys, time, numpy as np
@@ -64,10 +66,8 @@ def export(rev: str | None, into: Path) -> Path:
             if src.is_file():
                 (into / f).parent.mkdir(parents=True, exist_ok=True)
                 shutil.copy2(src, into / f)
-    else:
-        archive = subprocess.run(["git", "archive", rev], cwd=REPO, check=True, capture_output=True).stdout
-        subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
-    return into
+        return into
+    return export_revision(REPO, rev, into)
 
 
 def run_py(tree: Path, args: list[str], cwd: Path) -> tuple[float, str]:

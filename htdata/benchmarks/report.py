@@ -14,6 +14,7 @@ HEADINGS = {
     "rgb": "## RGB: JPEG quality and resize method",
     "raster": "## Rasterisation mode x layout",
     "ingest": "## Ingest throughput per adapter",
+    "scaling": "## Ingest worker scaling, and HT-Bench (10M frames) on paper",
     "rss": "## Ingest peak memory vs episode length",
     "loader": "## Loader access patterns",
     "index": "## Index load at scale",
@@ -25,9 +26,11 @@ HEADINGS = {
     "export": "## htdata export lerobot: speed and size vs htdata's shards",
     "rawglove": "## Raw-count glove: baselines, noise floors and contact against the truth",
 }
-TARGET_OVERHEAD_PCT = 30.0
-TARGET_SCALING = 1.8
+TARGET_OVERHEAD_PCT = 15.0  # issue #22: share of our in-worker time the bare bound does not spend
+TARGET_SCALING = 1.9        # 1 -> 2 workers, opentouch and touchanything (#22)
+SCALING_TARGETED = ("opentouch", "touchanything")
 TARGET_RSS_FLAT = 1.25      # peak RSS of the longest episode / the shortest
+TARGET_RSS_600_MB = 150.0   # the 600-frame episode (#22: back to the round-one code's peak)
 
 
 def _machine(m: dict) -> list[str]:
@@ -76,12 +79,16 @@ def _raster(d: dict) -> list[str]:
 
 
 def _ingest(g: dict) -> list[str]:
-    lines = table(g["summary"], [("adapter", "adapter"), ("frames", "frames"), ("units", "units"),
-                                 ("frames_per_s_1w", "frames/s 1 worker"),
-                                 ("in_worker_frames_per_s", "in-worker frames/s"),
-                                 ("bound_frames_per_s", "bare bound frames/s"),
-                                 ("ratio_to_bound", "ours / bound"), ("overhead_pct", "overhead %"),
-                                 ("frames_per_s_max", "frames/s 2 workers"), ("scaling", "2w / 1w")])
+    reps = g["summary"][0].get("reps", 1) if g["summary"] else 1
+    lines = [f"One worker, each adapter's ingest and its bare bound run back to back {reps} time(s); ratios are "
+             f"the median of the pairs. overhead % = the share of our in-worker time the bound does not spend "
+             f"(1 - bound/ours); time over bound % = ours/bound - 1.", ""]
+    lines += table(g["summary"], [("adapter", "adapter"), ("frames", "frames"), ("units", "units"),
+                                  ("frames_per_s_1w", "frames/s 1 worker"),
+                                  ("in_worker_frames_per_s", "in-worker frames/s"),
+                                  ("bound_frames_per_s", "bare bound frames/s"),
+                                  ("ratio_to_bound", "bound / ours"), ("overhead_pct", "overhead %"),
+                                  ("over_bound_pct", "time over bound %")])
     staged = [r for r in g["runs"] if "stages_s" in r]
     if staged:
         cols = [("pipelines", "run"), ("workers", "workers"), ("ingest_s", "total s"), ("worker_s", "in-worker s")]
@@ -96,13 +103,31 @@ def _ingest(g: dict) -> list[str]:
         lines += table(rows, cols)
     else:
         lines += ["Stage breakdown: the ingest report carried no `timing` section in this run.", ""]
-    lines += ["Bare bound per adapter (same kept frames and hands: open streams + source decode + tactile read, "
-              "the pipeline's resize, JPEG + EXR encode at the pipeline's settings; no sync, normalise, "
-              "rasterise or write):", ""]
+    lines += ["Bare bound per adapter, the median pair's (same kept frames and hands: open streams + source decode "
+              "+ tactile read, the pipeline's resize, JPEG + EXR encode at the pipeline's settings; no sync, "
+              "normalise, rasterise or write):", ""]
     lines += table([{"adapter": k, **v} for k, v in g["bound"].items()],
                    [("adapter", "adapter"), ("frames", "frames"), ("decode_s", "decode s"), ("resize_s", "resize s"),
                     ("jpeg_s", "jpeg s"), ("exr_s", "exr s"), ("frames_per_s", "frames/s")])
     lines += _targets_ingest(g)
+    lines += _revision(g.get("revision"))
+    return lines
+
+
+def _revision(rev: dict | None) -> list[str]:
+    if not rev:
+        return []
+    lines = [f"### Against revision {rev['base']} (the round-one code)", ""]
+    if "skipped" in rev:
+        return lines + [f"Not measured: {rev['skipped']}.", ""]
+    lines += ["Each case alternates the base revision and the current code in fresh interpreters "
+              "(`htdata.benchmarks.revisions`); ratios are current / base, medians of the pairs. episode_600: one "
+              "moving two-hand TouchAnything episode of 600 frames, inline; corpus_1w: the small sample corpus, "
+              "all three sources, 1 worker.", ""]
+    lines += table(rev["rows"], [("case", "case"), ("frames", "frames"), ("reps", "pairs"),
+                                 ("base_wall_s", "base wall s"), ("current_wall_s", "current wall s"),
+                                 ("wall_ratio", "wall current/base"), ("base_peak_rss_mb", "base peak MiB"),
+                                 ("current_peak_rss_mb", "current peak MiB"), ("rss_ratio", "peak current/base")])
     return lines
 
 
@@ -116,50 +141,98 @@ def _dominant(g: dict, adapter: str) -> str:
     return ", ".join(f"{k} {100 * v / total:.0f}%" for k, v in top)
 
 
-def _contention(g: dict, adapter: str) -> str:
-    """How much slower each worker got with more workers: >1 means they shared cores with others."""
-    runs = {r["workers"]: r for r in g["runs"] if r["pipelines"] == adapter and r.get("worker_s")}
-    if len(runs) < 2:
-        return "no in-worker timing to compare."
-    lo, hi = runs[min(runs)], runs[max(runs)]
-    factor = (hi["worker_s"] / hi["frames"]) / (lo["worker_s"] / lo["frames"])
-    return (f"in-worker time per frame was {factor:.2f}x at {hi['workers']} workers vs {lo['workers']} "
-            f"(1.0 = each worker had a core of its own; see the load average under Machine).")
-
-
 def _targets_ingest(g: dict) -> list[str]:
     lines = []
     for s in g["summary"]:
-        ok = s["overhead_pct"] < TARGET_OVERHEAD_PCT
-        lines.append(f"- {s['adapter']}: overhead {s['overhead_pct']:.0f}% (target < {TARGET_OVERHEAD_PCT:.0f}%): "
-                     f"{'met' if ok else 'MISSED'}; largest stages: {_dominant(g, s['adapter'])}.")
-        if "scaling" in s:
-            ok = s["scaling"] >= TARGET_SCALING
-            why = "" if ok else (f" {s['units']} work unit(s) over {s['workers_max']} workers bound it at "
-                                 f"{s['units'] / -(-s['units'] // s['workers_max']):.2f}x if units were equal; "
-                                 f"{_contention(g, s['adapter'])}")
-            lines.append(f"- {s['adapter']}: 1 -> {s['workers_max']} workers scaling {s['scaling']:.2f}x "
-                         f"(target >= {TARGET_SCALING}x): {'met' if ok else 'MISSED'}.{why}")
+        ok = s["overhead_pct"] <= TARGET_OVERHEAD_PCT
+        spread = ", ".join(f"{v:.0f}" for v in s.get("overhead_pct_reps", []))
+        lines.append(f"- {s['adapter']}: overhead {s['overhead_pct']:.0f}% (reps: {spread}; target <= "
+                     f"{TARGET_OVERHEAD_PCT:.0f}%): {'met' if ok else 'MISSED'}; largest stages: "
+                     f"{_dominant(g, s['adapter'])}.")
     return lines + [""]
 
 
+def _scaling(d: dict) -> list[str]:
+    s0 = d["summary"][0] if d["summary"] else {"reps": 0, "workers_lo": 1, "workers_hi": 2}
+    lines = [f"Each adapter's part of the medium sample corpus at {s0['workers_lo']} and {s0['workers_hi']} "
+             f"workers, alternated {s0['reps']} time(s); speed-up = median of the pairs' wall-time ratios. "
+             f"run phase = first unit submitted to last result (the driver's planning and commit left out). "
+             f"fixed s = planning + source hashing + commit at {s0['workers_hi']} workers.", ""]
+    lines += table(d["summary"], [("adapter", "adapter"), ("frames", "frames"), ("units", "units"),
+                                  ("frames_per_s_lo", "frames/s 1 worker"), ("frames_per_s_hi", "frames/s 2 workers"),
+                                  ("scaling", "speed-up"), ("run_phase_scaling", "run-phase speed-up"),
+                                  ("fixed_s_hi", "fixed s"), ("core_s_per_frame_lo", "core s/frame 1w"),
+                                  ("core_s_per_frame_hi", "core s/frame 2w")])
+    for s in d["summary"]:
+        reps = ", ".join(f"{v:.2f}" for v in s["scaling_reps"])
+        if s["adapter"] in SCALING_TARGETED:
+            ok = s["scaling"] >= TARGET_SCALING
+            lines.append(f"- {s['adapter']}: {s['workers_lo']} -> {s['workers_hi']} workers {s['scaling']:.2f}x "
+                         f"(pairs: {reps}; target >= {TARGET_SCALING}x): {'met' if ok else 'MISSED'}; "
+                         f"{s['units']} units, so unequal units cap it at "
+                         f"{s['units'] / -(-s['units'] // s['workers_hi']):.2f}x.")
+        else:
+            lines.append(f"- {s['adapter']}: {s['scaling']:.2f}x (pairs: {reps}; no target: {s['units']} units).")
+    lines += ["", "HT-Bench on paper: 10M frames of each source (`htdata.benchmarks.scaling.scale_estimate`: "
+              "core-hours from the 2-worker in-worker seconds per frame; wall on 64 cores = the driver's serial "
+              "seconds per frame x 10M + core-hours / 64; storage bandwidth and cluster scheduling not modelled):",
+              ""]
+    lines += table(d["estimate"], [("adapter", "source"), ("core_s_per_frame", "core s/frame"),
+                                   ("core_hours", "core-hours"), ("driver_serial_hours", "driver serial h"),
+                                   ("wall_hours", "wall h on 64 cores"), ("speedup_on_cores", "speed-up on 64")])
+    return lines
+
+
 def _rss(rows: list[dict]) -> list[str]:
-    lines = table(rows, [("frames", "episode frames"), ("peak_rss_mb", "peak RSS MiB"), ("seconds", "seconds"),
-                         ("rss_vs_shortest", "vs shortest")])
+    lines = ["One moving two-hand TouchAnything episode (640x480 H.264, 21x21 gloves) per length, ingested inline "
+             "in a fresh interpreter; peak = its own VmHWM.", ""]
+    lines += table(rows, [("frames", "episode frames"), ("peak_rss_mb", "peak RSS MiB"), ("seconds", "seconds"),
+                          ("rss_vs_shortest", "vs shortest")])
     worst = max(r["rss_vs_shortest"] for r in rows)
     lines += [f"Flat-memory target (longest / shortest <= {TARGET_RSS_FLAT}): "
               f"{'met' if worst <= TARGET_RSS_FLAT else 'MISSED'} ({worst:.2f}x over "
-              f"{rows[0]['frames']}..{rows[-1]['frames']} frames).", ""]
-    return lines
+              f"{rows[0]['frames']}..{rows[-1]['frames']} frames)."]
+    at600 = [r for r in rows if r["frames"] == 600]
+    if at600:
+        ok = at600[0]["peak_rss_mb"] <= TARGET_RSS_600_MB
+        lines.append(f"600-frame episode: {at600[0]['peak_rss_mb']:.0f} MiB (target <= {TARGET_RSS_600_MB:.0f} "
+                     f"MiB): {'met' if ok else 'MISSED'}.")
+    return lines + [""]
 
 
 def _loader(d: dict) -> list[str]:
     lines = [f"Each row's bound decodes, from bytes already in memory, exactly the members that row's "
              f"path decodes (reader: every member; torch items: JPEG + the item hand's EXR), timed "
              f"alternately with it. {d['samples_in_dataset']} samples in the dataset.", ""]
-    return lines + table(d["rows"], [("access", "access"), ("items", "items"), ("samples_decoded", "frames decoded"),
-                                     ("samples_per_s", "frames/s"), ("bound_samples_per_s", "bound frames/s"),
-                                     ("ratio_to_bound", "ours / bound")])
+    lines += table(d["rows"], [("access", "access"), ("items", "items"), ("samples_decoded", "frames decoded"),
+                               ("samples_per_s", "frames/s"), ("bound_samples_per_s", "bound frames/s"),
+                               ("ratio_to_bound", "ours / bound")])
+    return lines + _dataloader(d.get("dataloader"))
+
+
+TARGET_DATALOADER_SCALING = 1.8     # TactileFrameDataset, DataLoader 1 -> 2 workers (#22)
+
+
+def _dataloader(rows: list[dict] | None) -> list[str]:
+    if not rows:
+        return []
+    r0 = rows[0]
+    lines = [f"TactileFrameDataset in a torch DataLoader (`htdata.benchmarks.dataloader`): {r0['items']} shuffled "
+             f"items per epoch, batch {r0['batch_size']}, persistent workers, one untimed warm-up epoch, then one "
+             f"timed; {r0['workers_lo']} and {r0['workers_hi']} workers alternated {r0['reps']} time(s).", ""]
+    lines += table(rows, [("map_source", "map_source"), ("items_per_s_lo", f"items/s {r0['workers_lo']} worker"),
+                          ("items_per_s_hi", f"items/s {r0['workers_hi']} workers"), ("scaling", "speed-up")])
+    for r in rows:
+        reps = ", ".join(f"{v:.2f}" for v in r["scaling_reps"])
+        ok = r["scaling"] >= TARGET_DATALOADER_SCALING
+        lines.append(f"- map_source={r['map_source']}: {r['scaling']:.2f}x (pairs: {reps}; target >= "
+                     f"{TARGET_DATALOADER_SCALING}x): {'met' if ok else 'MISSED'}.")
+    by = {r["map_source"]: r for r in rows}
+    if {"auto", "stored"} <= set(by):
+        ratio = by["auto"]["items_per_s_lo"] / by["stored"]["items_per_s_lo"]
+        lines.append(f"- maps rendered from raw rows (auto) vs stored EXR decoded, 1 worker: {ratio:.2f}x the items/s "
+                     f"(target >= 1): {'met' if ratio >= 1 else 'MISSED'}.")
+    return lines + [""]
 
 
 def _index(rows: list[dict]) -> list[str]:
@@ -198,7 +271,7 @@ def _stats(d: dict) -> list[str]:
 
 
 RENDERERS = {"machine": _machine, "codecs": _codecs, "rgb": _rgb, "raster": _raster, "ingest": _ingest,
-             "rss": _rss, "loader": _loader, "index": _index, "validate": _validate,
+             "scaling": _scaling, "rss": _rss, "loader": _loader, "index": _index, "validate": _validate,
              "append": _append, "stats": _stats, "lag": lag_markdown, "raw": raw_markdown,
              "export": export_markdown, "rawglove": rawglove_markdown}
 

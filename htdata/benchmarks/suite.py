@@ -31,7 +31,7 @@ from pathlib import Path
 
 from htdata.store.fsutil import write_bytes_atomic
 from htdata.sample.corpus import FORMATS
-from htdata.sample.corpus import CorpusConfig, corpus_complete, write_corpus
+from htdata.sample.corpus import SCALES, CorpusConfig, corpus_complete, write_corpus
 from htdata.benchmarks.machine import machine_info
 from htdata.benchmarks.report import render_report
 from htdata.benchmarks.ingest import ingest_run
@@ -39,9 +39,11 @@ from htdata.benchmarks.codecs import codec_rows, real_maps
 from htdata.benchmarks.rgb import rgb_section
 from htdata.benchmarks.sources import discover, source_rgb_frames
 from htdata.benchmarks.raster import raster_rows
-from htdata.benchmarks.ingest import adapter_rows
-from htdata.benchmarks.ingest import peak_rss_rows
+from htdata.benchmarks.ingest import adapter_rows, peak_rss_rows, write_long_touchanything
+from htdata.benchmarks.revisions import ROUND_ONE, revision_rows
+from htdata.benchmarks.scaling import scaling_rows
 from htdata.benchmarks.loader import loader_rows
+from htdata.benchmarks.dataloader import dataloader_rows
 from htdata.benchmarks.index import index_rows
 from htdata.benchmarks.validation import validate_rows
 from htdata.benchmarks.append import append_rows
@@ -52,7 +54,7 @@ from htdata.benchmarks.export import export_rows
 from htdata.benchmarks.rawglove import rawglove_rows
 
 SECTION_GROUP = "htdata.bench_sections"
-BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate", "append", "stats",
+BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "scaling", "rss", "loader", "index", "validate", "append", "stats",
                     "lag", "raw", "export", "rawglove")
 # Top-level keys of results.json that are not sections: no section may take these names.
 RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds")
@@ -64,6 +66,11 @@ class BenchConfig:
     quick: bool = False
     seed: int = 0
     scale: str = "small"                   # sample corpus scale
+    scaling_scale: str = "medium"          # the corpus of the 1 -> 2 worker runs (enough units)
+    ingest_reps: int = 3                   # ours vs the bare bound, alternated
+    scaling_reps: int = 2                  # 1 vs 2 workers, alternated
+    revision: str | None = ROUND_ONE       # the ingest section's revision rows (None: none)
+    revision_frames: int = 600             # the moving TouchAnything episode they ingest
     codec_maps_per_glove: int = 96         # per glove layout
     rgb_frames: int = 12
     raster_frames: int = 256
@@ -71,6 +78,7 @@ class BenchConfig:
     rss_lengths: tuple[int, ...] = (150, 600, 2400)
     loader_random: int = 400
     loader_windows: int = 100
+    dataloader_items: int = 2000           # items per timed DataLoader epoch
     index_rows: tuple[int, ...] = (1_000_000, 10_000_000)
     validate_workers: tuple[int, ...] = (1, 2)
     append_sizes: tuple[int, ...] = (20, 200)    # episodes before the one appended (an order of magnitude apart)
@@ -78,22 +86,27 @@ class BenchConfig:
 
     @classmethod
     def quick_config(cls, out: Path, seed: int = 0) -> "BenchConfig":
-        return cls(out=out, quick=True, seed=seed, scale="tiny", codec_maps_per_glove=8, rgb_frames=2,
-                   raster_frames=8, rss_lengths=(20, 40), loader_random=20, loader_windows=5,
+        return cls(out=out, quick=True, seed=seed, scale="tiny", scaling_scale="tiny", ingest_reps=1,
+                   scaling_reps=1, revision=None, codec_maps_per_glove=8, rgb_frames=2,
+                   raster_frames=8, rss_lengths=(20, 40), loader_random=20, loader_windows=5, dataloader_items=64,
                    index_rows=(10_000,), append_sizes=(2, 20))
 
     def validate(self) -> "BenchConfig":
         self.out = Path(self.out)
-        if self.scale not in ("tiny", "small"):
-            raise ValueError(f"scale must be tiny or small, got {self.scale!r}")
+        for name in ("scale", "scaling_scale"):
+            if getattr(self, name) not in SCALES:
+                raise ValueError(f"{name} must be one of {SCALES}, got {getattr(self, name)!r}")
+        if min(self.ingest_reps, self.scaling_reps, self.revision_frames) < 1:
+            raise ValueError("ingest_reps, scaling_reps and revision_frames must be >= 1")
         positive = {"codec_maps_per_glove": self.codec_maps_per_glove, "rgb_frames": self.rgb_frames,
                     "raster_frames": self.raster_frames, "loader_random": self.loader_random,
-                    "loader_windows": self.loader_windows}
+                    "loader_windows": self.loader_windows, "dataloader_items": self.dataloader_items}
         bad = {k: v for k, v in positive.items() if not isinstance(v, int) or v < 1}
         if bad:
             raise ValueError(f"bench sizes must be integers >= 1, got {bad}")
-        if not self.ingest_workers or min(self.ingest_workers) < 1:
-            raise ValueError(f"ingest_workers must be >= 1, got {self.ingest_workers}")
+        if len(set(self.ingest_workers)) < 2 or min(self.ingest_workers) < 1:
+            raise ValueError(f"ingest_workers must name two worker counts >= 1 (1 -> N scaling), "
+                             f"got {self.ingest_workers}")
         if len(self.rss_lengths) < 2 or list(self.rss_lengths) != sorted(set(self.rss_lengths)) or self.rss_lengths[0] < 2:
             raise ValueError(f"rss_lengths must be >= 2 increasing lengths >= 2 frames, got {self.rss_lengths}")
         if len(self.append_sizes) < 2 or min(self.append_sizes) < 1:
@@ -133,11 +146,12 @@ def bench_sources() -> tuple[str, ...]:
     return FORMATS
 
 
-def ensure_corpus(cfg: BenchConfig) -> Path:
+def ensure_corpus(cfg: BenchConfig, scale: str | None = None) -> Path:
     """The deterministic sample corpus; reused when a complete one of the same scale/seed exists."""
 
-    root = cfg.work / f"raw_{cfg.scale}_{cfg.seed}"
-    corpus = CorpusConfig(out=root, seed=cfg.seed, scale=cfg.scale, progress=False, overwrite=True)
+    scale = scale or cfg.scale
+    root = cfg.work / f"raw_{scale}_{cfg.seed}"
+    corpus = CorpusConfig(out=root, seed=cfg.seed, scale=scale, progress=False, overwrite=True)
     if not corpus_complete(corpus):
         write_corpus(corpus)
     return root
@@ -211,16 +225,32 @@ class Sections:
         return raster_rows(self.cfg.raster_frames)
 
     def ingest(self) -> dict:
-        result = adapter_rows(self.corpus, self.cfg.work, bench_sources(), self.cfg.ingest_workers)
+        result = adapter_rows(self.corpus, self.cfg.work, bench_sources(), self.cfg.ingest_reps)
         self.dataset   # noqa: B018 (build the combined dataset now so its run is reported here)
         result["runs"].append(self.combined_run)
+        if self.cfg.revision:
+            episode = self.cfg.work / f"long_touchanything_{self.cfg.revision_frames}"
+            if not episode.exists():
+                write_long_touchanything(episode, self.cfg.revision_frames)
+            self.log(f"ingest: revision {self.cfg.revision} vs current code")
+            result["revision"] = revision_rows(self.cfg.work, episode, self.corpus, self.cfg.revision)
         return result
+
+    def scaling(self) -> dict:
+        self.log(f"sample corpus ({self.cfg.scaling_scale})")
+        corpus = ensure_corpus(self.cfg, self.cfg.scaling_scale)
+        workers = (min(self.cfg.ingest_workers), max(self.cfg.ingest_workers))
+        return scaling_rows(corpus, self.cfg.work, bench_sources(), workers, self.cfg.scaling_reps)
 
     def rss(self) -> list:
         return peak_rss_rows(self.cfg.work, self.cfg.rss_lengths)
 
     def loader(self) -> dict:
-        return loader_rows(self.dataset, self.cfg.loader_random, self.cfg.loader_windows, self.cfg.seed)
+        result = loader_rows(self.dataset, self.cfg.loader_random, self.cfg.loader_windows, self.cfg.seed)
+        workers = (min(self.cfg.ingest_workers), max(self.cfg.ingest_workers))
+        result["dataloader"] = dataloader_rows(self.dataset, workers, self.cfg.scaling_reps,
+                                               self.cfg.dataloader_items, seed=self.cfg.seed)
+        return result
 
     def index(self) -> list:
         tmp = self.cfg.work / "index"

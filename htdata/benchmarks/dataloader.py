@@ -1,0 +1,54 @@
+"""TactileFrameDataset through a torch DataLoader at 1 and N worker processes: does reading scale?
+
+Steady state, as training sees it: `persistent_workers=True`, one untimed
+epoch first (worker start-up, imports, file handles), then one timed epoch
+of shuffled items (seeded) in batches. 1 and N workers alternate `reps`
+times; the speed-up is the median of the pairs. Map source is the loaders'
+default ("auto": rendered from raw rows where the version stores them) and,
+for comparison, "stored" (the EXR decoded). Worker processes take the
+DataLoader's default start method on this platform.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.utils.data import DataLoader, Subset
+
+from htdata.read import keys
+from htdata.read.torchdata import TactileFrameDataset
+
+
+def _epoch_rate(root: Path, workers: int, map_source: str, items: int, batch_size: int, seed: int) -> float:
+    dataset = TactileFrameDataset(root, map_source=map_source)
+    pick = np.random.default_rng(seed).permutation(len(dataset))[:items].tolist()
+    loader = DataLoader(Subset(dataset, pick), batch_size=batch_size, shuffle=True, num_workers=workers,
+                        persistent_workers=workers > 0, generator=torch.Generator().manual_seed(seed))
+    for _ in loader:        # warm-up epoch: workers started, files opened
+        pass
+    t0 = time.perf_counter()
+    n = sum(len(batch[keys.INDEX]) for batch in loader)
+    seconds = time.perf_counter() - t0
+    del loader
+    return n / seconds
+
+
+def dataloader_rows(root: Path, workers: tuple[int, int] = (1, 2), reps: int = 2, items: int = 2000,
+                    batch_size: int = 32, seed: int = 0) -> list[dict]:
+    """Per map source: items/s at workers[0] and workers[1] (alternated), and the median speed-up."""
+    lo, hi = workers
+    rows = []
+    for source in ("auto", "stored"):
+        rates: dict[int, list[float]] = {lo: [], hi: []}
+        for rep in range(reps):
+            for w in (lo, hi):
+                rates[w].append(_epoch_rate(root, w, source, items, batch_size, seed + rep))
+        ratios = [b / a for a, b in zip(rates[lo], rates[hi])]
+        rows.append({"map_source": source, "items": min(items, len(TactileFrameDataset(root))), "batch_size": batch_size,
+                     "workers_lo": lo, "workers_hi": hi, "reps": reps,
+                     "items_per_s_lo": float(np.median(rates[lo])), "items_per_s_hi": float(np.median(rates[hi])),
+                     "scaling": float(np.median(ratios)), "scaling_reps": ratios})
+    return rows
