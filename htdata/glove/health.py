@@ -73,6 +73,9 @@ THRESHOLDS = {"saturated": f">= {SATURATION_LEVEL} in > {SATURATED_SHARE:.0%} of
 WARN_SHARE = 0.05
 
 
+_TAXEL_GRIDS: dict[int, tuple] = {}     # id(layout) -> (layout, TaxelGrid); layouts are few and cached too
+
+
 @dataclass(frozen=True)
 class TaxelGrid:
     """Where a layout's live taxels sit in its raw grid, and which are neighbours."""
@@ -83,12 +86,11 @@ class TaxelGrid:
 
     @classmethod
     def of(cls, layout: Layout) -> "TaxelGrid":
-        """The layout's taxel grid, built once per (frozen) Layout object: every episode of a glove shares it."""
-        cached = layout.__dict__.get("_taxel_grid")
-        if cached is None:
-            cached = cls._build(layout)
-            object.__setattr__(layout, "_taxel_grid", cached)
-        return cached
+        """The layout's taxel grid, built once per Layout object: every episode of a glove shares it."""
+        key = id(layout)
+        if key not in _TAXEL_GRIDS:   # the layout is kept in the value, so its id is never reused
+            _TAXEL_GRIDS[key] = (layout, cls._build(layout))
+        return _TAXEL_GRIDS[key][1]
 
     @classmethod
     def _build(cls, layout: Layout) -> "TaxelGrid":
