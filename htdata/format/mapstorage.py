@@ -53,3 +53,8 @@ def hand_present(rows: np.ndarray, hand: str) -> np.ndarray:
 def has_hand(members: dict, hand: str) -> bool:
     """The same test on a sample's members (those read: ask for the tactile and raw members)."""
     return tactile_member(hand) in members or raw_member(hand) in members
+
+
+def map_member(manifest: dict, hand: str) -> str:
+    """The member whose presence says a sample holds `hand`'s map: its EXR when stored, else its raw rows."""
+    return tactile_member(hand) if maps_stored(manifest) else raw_member(hand)
