@@ -48,12 +48,13 @@ from htdata.benchmarks.append import append_rows
 from htdata.benchmarks.stats import stats_rows
 from htdata.benchmarks.lag import lag_rows
 from htdata.benchmarks.raw import raw_rows
+from htdata.benchmarks.maps import maps_rows
 from htdata.benchmarks.export import export_rows
 from htdata.benchmarks.rawglove import rawglove_rows
 
 SECTION_GROUP = "htdata.bench_sections"
 BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "rss", "loader", "index", "validate", "append", "stats",
-                    "lag", "raw", "export", "rawglove")
+                    "lag", "raw", "maps", "export", "rawglove")
 # Top-level keys of results.json that are not sections: no section may take these names.
 RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds")
 
@@ -241,6 +242,9 @@ class Sections:
 
     def raw(self) -> dict:
         return raw_rows(self.corpus, self.cfg.work, bench_sources(), self.dataset, self.cfg.quick)
+
+    def maps(self) -> dict:
+        return maps_rows(self.corpus, self.cfg.work, bench_sources(), self.cfg.quick)
 
     def export(self) -> dict:
         return export_rows(self.dataset, self.cfg.work)

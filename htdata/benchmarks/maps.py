@@ -1,0 +1,175 @@
+"""Maps stored or rendered from raw rows ([tactile] maps): what storing them costs in bytes, buys in read speed.
+
+Per adapter of the sample corpus, the same episodes ingested with `maps = "stored"` and `maps = "raw"`
+(1 worker). Bytes: every member of every shard, by kind (rgb jpg, tactile maps, raw rows, bend, json, the
+tar headers and padding = shard bytes minus member bytes) per frame, for both, and the total per frame and
+at 10M frames. Read speed, side by side, alternating A/B runs (medians): TactileFrameDataset items/s
+(map_source="stored" on the stored dataset: the EXR decoded; the default on the other: rendered) and
+DatasetReader.decoded samples/s. Exactness: every decoded map of the one equals the other's (max |difference|).
+
+The default is picked from these numbers by `RULE` (`pick_default`); the report says whether the
+pipeline's actual default (`TactileConfig().maps`) is the rule's pick.
+
+Imports inside functions: torch (optional) is loaded by `htdata.read.torchdata` only when measured.
+"""
+
+from __future__ import annotations
+
+import statistics
+import tarfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from htdata.benchmarks.ingest import ingest_run
+from htdata.benchmarks.tables import fmt, table
+from htdata.format.table import SHARDS_DIR
+from htdata.pipeline import TactileConfig
+from htdata.read.reader import DatasetReader
+
+KINDS = (("rgb", "rgb jpg"), ("maps", "tactile maps"), ("raw", "raw rows"), ("bend", "bend"), ("json", "json"),
+         ("tar", "tar headers + padding"))
+FRAMES_AT_SCALE = 10_000_000
+MIN_SAVING = 0.10          # the rule: rendering must save at least this share of the bytes per frame
+RULE = ("render from raw (maps not stored) when rendering is exact (max |difference| 0 on every map checked) "
+        "AND at least as fast as decoding the stored maps (ratio >= 1.0, TactileFrameDataset and "
+        "DatasetReader.decoded, every adapter) AND it saves at least 10% of the bytes per frame (every "
+        "adapter); otherwise store maps")
+
+
+def member_kind(name: str) -> str:
+    suffix = name.split(".", 1)[1] if "." in name else name
+    if suffix == "rgb.jpg":
+        return "rgb"
+    for stem, kind in (("tactile_", "maps"), ("raw_", "raw"), ("bend_", "bend")):
+        if suffix.startswith(stem):
+            return kind
+    if suffix == "json":
+        return "json"
+    raise ValueError(f"{name}: member of no known kind")
+
+
+def bytes_per_frame(root: Path) -> dict:
+    """{kind: bytes per frame} over every shard of the dataset's current version, + "total"."""
+    reader = DatasetReader(root)
+    sums = dict.fromkeys((k for k, _ in KINDS), 0)
+    shard_bytes = 0
+    for entry in reader.manifest["shards"]:
+        path = root / SHARDS_DIR / entry["name"]
+        shard_bytes += path.stat().st_size
+        with tarfile.open(path) as tar:
+            for m in tar.getmembers():
+                sums[member_kind(m.name)] += m.size
+    sums["tar"] = shard_bytes - sum(sums.values())
+    n = max(len(reader), 1)
+    out = {k: v / n for k, v in sums.items()}
+    out["total"] = shard_bytes / n
+    return out
+
+
+def max_map_difference(stored: Path, rendered: Path) -> tuple[float, int]:
+    """(max |difference|, maps compared) between the two datasets' decoded maps, every sample and hand."""
+    a, b = DatasetReader(stored), DatasetReader(rendered)
+    diff, n = 0.0, 0
+    for i in range(len(a)):
+        ma, mb = a.decoded(i)["tactile"], b.decoded(i)["tactile"]
+        if sorted(ma) != sorted(mb):
+            return float("inf"), n
+        for hand in ma:
+            diff = max(diff, float(np.abs(ma[hand] - mb[hand]).max()))
+            n += 1
+    return diff, n
+
+
+def _rate(run) -> float:
+    """Things per second of `run()`, which returns how many it did."""
+    t0 = time.perf_counter()
+    done = run()
+    return done / (time.perf_counter() - t0) if done else 0.0
+
+
+def read_speeds(stored: Path, rendered: Path, limit: int, reps: int) -> dict:
+    """Items/s and samples/s, stored maps decoded vs rendered from raw, alternating runs, medians."""
+    from htdata.read.torchdata import TactileFrameDataset
+
+    datasets = {"stored": TactileFrameDataset(stored, map_source="stored"), "rendered": TactileFrameDataset(rendered)}
+    readers = {"stored": DatasetReader(stored), "rendered": DatasetReader(rendered)}
+    items = min(limit, len(datasets["stored"]))
+    samples = min(limit, len(readers["stored"]))
+    runs: dict[str, list] = {f"{k}_{w}": [] for k in ("frame", "decoded") for w in ("stored", "rendered")}
+    for which in ("stored", "rendered"):   # warm-up, not timed: layouts, normalisers, index maps, page cache
+        datasets[which][0], readers[which].decoded(0)
+    for _ in range(reps):
+        for which in ("stored", "rendered"):     # A then B, every repetition
+            ds, reader = datasets[which], readers[which]
+            runs[f"frame_{which}"].append(_rate(lambda: sum(1 for i in range(items) if ds[i] is not None)))
+            runs[f"decoded_{which}"].append(_rate(lambda: sum(1 for i in range(samples) if reader.decoded(i) is not None)))
+    med = {k: statistics.median(v) for k, v in runs.items()}
+    return {"items": items, "samples": samples, "reps": reps,
+            "frame_items_per_s_stored": med["frame_stored"], "frame_items_per_s_rendered": med["frame_rendered"],
+            "frame_ratio": med["frame_rendered"] / med["frame_stored"],
+            "decoded_samples_per_s_stored": med["decoded_stored"],
+            "decoded_samples_per_s_rendered": med["decoded_rendered"],
+            "decoded_ratio": med["decoded_rendered"] / med["decoded_stored"]}
+
+
+def adapter_row(name: str, root: Path, work: Path, limit: int, reps: int) -> dict:
+    paths = {}
+    for choice in ("stored", "raw"):
+        paths[choice] = work / f"maps_{name}_{choice}"
+        ingest_run([(name, root)], paths[choice], 1, (f"tactile.maps={choice}",))
+    sizes = {c: bytes_per_frame(p) for c, p in paths.items()}
+    diff, compared = max_map_difference(paths["stored"], paths["raw"])
+    stored = DatasetReader(paths["stored"]).manifest["codec"]["tactile"]
+    row = {"adapter": name, "samples": len(DatasetReader(paths["stored"])), "maps_compared": compared,
+           "stored_pixel_type": stored.get("pixel_type", "half"),
+           "max_abs_difference": diff, "bytes_stored": sizes["stored"], "bytes_raw": sizes["raw"],
+           "saving": 1 - sizes["raw"]["total"] / sizes["stored"]["total"],
+           "gb_at_10m_stored": sizes["stored"]["total"] * FRAMES_AT_SCALE / 1e9,
+           "gb_at_10m_raw": sizes["raw"]["total"] * FRAMES_AT_SCALE / 1e9}
+    row.update(read_speeds(paths["stored"], paths["raw"], limit, reps))
+    return row
+
+
+def pick_default(rows: list[dict]) -> tuple[str, str]:
+    """(default, why) by RULE from the per-adapter rows."""
+    exact = all(r["max_abs_difference"] == 0 for r in rows)
+    fast = all(min(r["frame_ratio"], r["decoded_ratio"]) >= 1.0 for r in rows)
+    saves = all(r["saving"] >= MIN_SAVING for r in rows)
+    why = (f"exact: {'yes' if exact else 'no'}; as fast: {'yes' if fast else 'no'} (lowest ratio "
+           f"{min(min(r['frame_ratio'], r['decoded_ratio']) for r in rows):.2f}); saves >= {MIN_SAVING:.0%}: "
+           f"{'yes' if saves else 'no'} (least {min(r['saving'] for r in rows):.0%})")
+    return ("raw" if exact and fast and saves else "stored"), why
+
+
+def maps_rows(corpus: Path, work: Path, adapters: tuple[str, ...], quick: bool) -> dict:
+    rows = [adapter_row(name, corpus / name, work, 60 if quick else 400, 1 if quick else 3) for name in adapters]
+    default, why = pick_default(rows)
+    return {"rows": rows, "rule": RULE, "default": default, "why": why, "pipeline_default": TactileConfig().maps,
+            "frames_at_scale": FRAMES_AT_SCALE}
+
+
+def maps_markdown(d: dict) -> list[str]:
+    lines = ["Bytes per frame by member kind, maps stored / not stored (same episodes, 1 worker):", ""]
+    bytes_rows = [{"adapter": r["adapter"], **{k: f"{fmt(r['bytes_stored'][k])} / {fmt(r['bytes_raw'][k])}"
+                                               for k, _ in KINDS + (("total", "total"),)},
+                   "saving": f"{r['saving']:.0%}", "gb": f"{r['gb_at_10m_stored']:.0f} / {r['gb_at_10m_raw']:.0f}"}
+                  for r in d["rows"]]
+    lines += table(bytes_rows, [("adapter", "adapter"), *KINDS, ("total", "total B/frame"), ("saving", "saved"),
+                                ("gb", f"GB at {d['frames_at_scale'] / 1e6:.0f}M frames")])
+    lines += ["Read speed, stored maps decoded vs rendered from raw rows (alternating runs, medians):", ""]
+    lines += table(d["rows"], [("adapter", "adapter"), ("frame_items_per_s_stored", "TactileFrameDataset items/s, stored"),
+                               ("frame_items_per_s_rendered", "items/s, rendered"), ("frame_ratio", "ratio"),
+                               ("decoded_samples_per_s_stored", "decoded() samples/s, stored"),
+                               ("decoded_samples_per_s_rendered", "samples/s, rendered"), ("decoded_ratio", "ratio"),
+                               ("maps_compared", "maps compared"), ("max_abs_difference", "max |difference|"),
+                               ("stored_pixel_type", "stored EXR pixels")])
+    same = "equals" if d["default"] == d["pipeline_default"] else "DIFFERS FROM"
+    if any(r["max_abs_difference"] > 0 for r in d["rows"]):
+        lines += ["A difference > 0 is the stored maps' rounding where the codec rule stores half floats: the "
+                  "rendered maps hold the exact normalised values, the stored ones these values rounded.", ""]
+    return lines + [f"**Default: {d['default']}** (computed from the tables above) — rule: {d['rule']}. "
+                    f"Measured: {d['why']}.",
+                    f"The pipeline's actual default (`[tactile] maps = \"{d['pipeline_default']}\"`) {same} the "
+                    f"rule's pick.", ""]
