@@ -57,7 +57,7 @@ from htdata.source.adapters.base import check_adapter_params as check
 from htdata.source.lag import LAG_MODES
 from htdata.glove.codecrule import CodecChoice
 from htdata.format.table import CodecSettings
-from htdata.format.mapstorage import DEFAULT_MAP_STORAGE, MAP_STORAGE
+from htdata.format.mapstorage import MAP_STORAGE
 
 
 
@@ -112,6 +112,10 @@ class RgbConfig:
     keep_unpaired: bool = True   # RGB frames without tactile within the skew become RGB-only samples
 
 
+# [tactile] maps when a pipeline does not say; `make bench` section "maps" states the rule that should pick it
+DEFAULT_MAPS = "stored"
+
+
 @dataclass
 class TactileConfig:
     compression: str = "zip"
@@ -121,7 +125,7 @@ class TactileConfig:
     chunk_frames: int = 64   # tactile frames read/normalised/rasterised per step (memory bound)
     # "stored": tactile_<hand>.exr members; "raw": none, readers render maps from the raw rows
     # (htdata/format/mapstorage.py): only exact, so only with keep_raw and nearest raster mode
-    maps: str = DEFAULT_MAP_STORAGE
+    maps: str = DEFAULT_MAPS
 
     def validate(self, where: str) -> "TactileConfig":
         if self.maps not in MAP_STORAGE:
@@ -138,7 +142,7 @@ class TactileConfig:
 
     def to_dict(self) -> dict:
         d = asdict(self)
-        if d["maps"] == DEFAULT_MAP_STORAGE:   # only when set: other pipelines keep their to_dict() (and fingerprints)
+        if d["maps"] == DEFAULT_MAPS:   # only when set: other pipelines keep their to_dict() (and fingerprints)
             del d["maps"]
         return d
 

@@ -22,12 +22,12 @@ import numpy as np
 from htdata.format.table import SIZE_FIELDS, raw_member, tactile_member
 
 MAP_STORAGE = ("stored", "raw")   # [tactile] maps / manifest codec.tactile.maps
-DEFAULT_MAP_STORAGE = "stored"
+UNRECORDED = "stored"             # what a version without the record holds (written before the setting)
 
 
 def map_storage(manifest: dict) -> str:
     """The version's choice ("stored" when not recorded); an unknown value is an error naming it."""
-    value = manifest.get("codec", {}).get("tactile", {}).get("maps", DEFAULT_MAP_STORAGE)
+    value = manifest.get("codec", {}).get("tactile", {}).get("maps", UNRECORDED)
     if value not in MAP_STORAGE:
         raise ValueError(f"manifest codec.tactile.maps = {value!r}: not one of {MAP_STORAGE} "
                          f"(written by a newer htdata?)")
@@ -41,7 +41,7 @@ def maps_stored(manifest: dict) -> bool:
 def with_map_record(codec: dict) -> dict:
     """A copy of a manifest "codec" block with codec.tactile.maps filled in (absent = "stored"), to compare two."""
     tactile = {**codec.get("tactile", {})}
-    tactile.setdefault("maps", DEFAULT_MAP_STORAGE)
+    tactile.setdefault("maps", UNRECORDED)
     return {**codec, "tactile": tactile}
 
 
