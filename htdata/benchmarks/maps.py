@@ -7,6 +7,7 @@ at 10M frames. Read speed, side by side, alternating A/B runs (medians): Tactile
 (map_source="stored" on the stored dataset: the EXR decoded; the default on the other: rendered) and
 DatasetReader.decoded samples/s. Exactness: every rendered map against the float32 map the ingest computes before the codec
 (`ingest_map_difference`), and the stored maps against the rendered ones (the codec's rounding).
+Ingest: frames/s and encode-stage seconds of the two ingests (one run each, so indicative only).
 
 The default is picked from these numbers by `RULE` (`pick_default`); the report says whether the
 pipeline's actual default (`TactileConfig().maps`) is the rule's pick.
@@ -142,10 +143,10 @@ def read_speeds(stored: Path, rendered: Path, limit: int, reps: int) -> dict:
 
 
 def adapter_row(name: str, root: Path, work: Path, limit: int, reps: int) -> dict:
-    paths = {}
+    paths, runs = {}, {}
     for choice in ("stored", "raw"):
         paths[choice] = work / f"maps_{name}_{choice}"
-        ingest_run([(name, root)], paths[choice], 1, (f"tactile.maps={choice}",))
+        runs[choice] = ingest_run([(name, root)], paths[choice], 1, (f"tactile.maps={choice}",))
     sizes = {c: bytes_per_frame(p) for c, p in paths.items()}
     diff, compared = max_map_difference(paths["stored"], paths["raw"])
     exact, checked = ingest_map_difference(name, root, paths["raw"])
@@ -156,7 +157,10 @@ def adapter_row(name: str, root: Path, work: Path, limit: int, reps: int) -> dic
            "bytes_stored": sizes["stored"], "bytes_raw": sizes["raw"],
            "saving": 1 - sizes["raw"]["total"] / sizes["stored"]["total"],
            "gb_at_10m_stored": sizes["stored"]["total"] * FRAMES_AT_SCALE / 1e9,
-           "gb_at_10m_raw": sizes["raw"]["total"] * FRAMES_AT_SCALE / 1e9}
+           "gb_at_10m_raw": sizes["raw"]["total"] * FRAMES_AT_SCALE / 1e9,
+           # what it does to the ingest (one run each, not the ingest section's alternating medians)
+           **{f"ingest_{k}_{c}": v for c, r in runs.items()
+              for k, v in (("frames_per_s", r["frames_per_s"]), ("encode_s", r.get("stages_s", {}).get("encode", 0.0)))}}
     row.update(read_speeds(paths["stored"], paths["raw"], limit, reps))
     return row
 
@@ -200,6 +204,10 @@ def maps_markdown(d: dict) -> list[str]:
     lines += ["Exact = every map rendered from raw rows equals, bit for bit, the float32 map the ingest computes "
               "before any codec (the same episodes through EpisodeStream); max |stored - rendered| is the stored "
               "maps' own codec rounding (> 0 where the codec rule stores half floats), not a rendering error.", ""]
+    lines += ["Ingest, maps stored vs not (1 worker, one run each: no EXR encode when the maps are not stored):", ""]
+    lines += table(d["rows"], [("adapter", "adapter"), ("ingest_frames_per_s_stored", "ingest frames/s, stored"),
+                               ("ingest_frames_per_s_raw", "frames/s, not stored"),
+                               ("ingest_encode_s_stored", "encode s, stored"), ("ingest_encode_s_raw", "encode s, not stored")])
     return lines + [f"**Default: {d['default']}** (computed from the tables above) — rule: {d['rule']}. "
                     f"Measured: {d['why']}.",
                     f"The pipeline's actual default (`[tactile] maps = \"{d['pipeline_default']}\"`) {same} the "
