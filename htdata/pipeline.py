@@ -113,7 +113,7 @@ class RgbConfig:
 
 
 # [tactile] maps when a pipeline does not say; `make bench` section "maps" states the rule that should pick it
-DEFAULT_MAPS = "stored"
+DEFAULT_MAPS = "raw"
 
 
 @dataclass

@@ -169,7 +169,7 @@ def test_merge_of_different_choices_is_refused(pair, tmp_path, capsys):
 def test_append_with_the_other_choice_is_refused(pair, tmp_path, capsys):
     copy = shutil.copytree(pair[1], tmp_path / "ds")
     corpus = Path(pair[0]).parent / "raw"
-    assert ingest_cli("--pipeline", f"native={corpus / 'native'}", copy) != 0   # default: maps stored
+    assert ingest_cli("--pipeline", f"native={corpus / 'native'}", "--set", "tactile.maps=stored", copy) != 0
     assert "tactile.maps" in capsys.readouterr().err
 
 

@@ -185,7 +185,7 @@ class Sections:
             out = self.cfg.work / "dataset_all"
             self.log("ingest: all sources into one dataset")
             self.combined_run = ingest_run([(s, self.corpus / s) for s in bench_sources()], out,
-                                           max(self.cfg.ingest_workers))
+                                           max(self.cfg.ingest_workers), ("tactile.maps=stored",))
             self._dataset = out
         return self._dataset
 
