@@ -57,6 +57,7 @@ from htdata.source.adapters.base import check_adapter_params as check
 from htdata.source.lag import LAG_MODES
 from htdata.glove.codecrule import CodecChoice
 from htdata.format.table import CodecSettings
+from htdata.format.mapstorage import MAP_STORAGE
 
 
 
@@ -111,6 +112,10 @@ class RgbConfig:
     keep_unpaired: bool = True   # RGB frames without tactile within the skew become RGB-only samples
 
 
+# [tactile] maps when a pipeline does not say; `make bench` section "maps" states the rule that should pick it
+DEFAULT_MAPS = "raw"
+
+
 @dataclass
 class TactileConfig:
     compression: str = "zip"
@@ -118,6 +123,28 @@ class TactileConfig:
     keep_bend: bool = True
     keep_raw: bool = True    # raw_<hand>.npy: every glove row as read (source dtype), full rate
     chunk_frames: int = 64   # tactile frames read/normalised/rasterised per step (memory bound)
+    # "stored": tactile_<hand>.exr members; "raw": none, readers render maps from the raw rows
+    # (htdata/format/mapstorage.py): only exact, so only with keep_raw and nearest raster mode
+    maps: str = DEFAULT_MAPS
+
+    def validate(self, where: str) -> "TactileConfig":
+        if self.maps not in MAP_STORAGE:
+            raise ValueError(f"{where}: [tactile] maps = {self.maps!r}: must be one of "
+                             f"{', '.join(repr(m) for m in MAP_STORAGE)}{nearest_hint(str(self.maps), MAP_STORAGE)}")
+        if self.maps == "raw" and not self.keep_raw:
+            raise ValueError(f"{where}: [tactile] maps = \"raw\" needs keep_raw = true: readers render the maps "
+                             f"from the stored raw rows, and keep_raw = false stores none")
+        if self.maps == "raw" and self.raster_mode != "nearest":
+            raise ValueError(f"{where}: [tactile] maps = \"raw\" needs raster_mode = \"nearest\" (got "
+                             f"{self.raster_mode!r}): only a nearest raster renders from raw rows exactly what "
+                             f"the ingest would have stored; keep maps = \"stored\" for {self.raster_mode}")
+        return self
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        if d["maps"] == DEFAULT_MAPS:   # only when set: other pipelines keep their to_dict() (and fingerprints)
+            del d["maps"]
+        return d
 
 
 @dataclass
@@ -228,6 +255,7 @@ class PipelineConfig:
                 raise ValueError(f"{where}: shared_layouts lists {lid!r}, which no [normalise.<layout>] table or "
                                  f"[layouts] entry of this pipeline names{nearest_hint(lid, named)}")
         self.sync.validate(where)
+        self.tactile.validate(where)
         check_adapter_params(self.adapter.name, self.adapter.params, where)
         return self
 
@@ -322,7 +350,7 @@ class PipelineConfig:
                              for k, v in self.normalise.items()}, **self.out_of_range.to_dict()},
             "sync": self.sync.to_dict(),
             "rgb": asdict(self.rgb),
-            "tactile": asdict(self.tactile),
+            "tactile": self.tactile.to_dict(),
             "codec": self.codec.to_dict(),
             "shards": asdict(self.shards),
         }

@@ -18,13 +18,15 @@ def _pixels(root) -> set:
 
 def test_auto_picks_float_for_opentouch_gloves_and_half_for_touchanything(tmp_path):
     ot = tmp_path / "ot"
-    assert ingest_cli("--pipeline", "native", make_native(tmp_path / "src_native"), ot) == 0
+    assert ingest_cli("--pipeline", "native", "--set", "tactile.maps=stored", make_native(tmp_path / "src_native"),
+                      ot) == 0
     m = json.loads((ot / "dataset.json").read_text())
     assert m["codec"]["tactile"]["pixel_type"] == "float" and _pixels(ot) == {"float32"}
     assert m["codec"]["choice"]["chosen_by"] == "rule" and "opentouch_right_16x16" in m["codec"]["choice"]["reason"]
     assert validate_dataset(ot, deep=True)["ok"]
     ta = tmp_path / "ta"
-    assert ingest_cli("--pipeline", "touchanything", make_touchanything(tmp_path / "src_ta"), ta) == 0
+    assert ingest_cli("--pipeline", "touchanything", "--set", "tactile.maps=stored",
+                      make_touchanything(tmp_path / "src_ta"), ta) == 0
     m = json.loads((ta / "dataset.json").read_text())
     assert m["codec"]["choice"]["codec"] == "exr_half_zip" and _pixels(ta) == {"float16"}
 
@@ -32,13 +34,14 @@ def test_auto_picks_float_for_opentouch_gloves_and_half_for_touchanything(tmp_pa
 def test_explicit_setting_and_append_keep_one_codec(tmp_path):
     src = make_native(tmp_path / "src")
     pipe = tmp_path / "native.toml"
-    pipe.write_text((PIPELINES_DIR / "native.toml").read_text() + '\n[codec]\ntactile = "exr_half"\n')
+    pipe.write_text((PIPELINES_DIR / "native.toml").read_text().replace("[tactile]", '[tactile]\nmaps = "stored"')
+                    + '\n[codec]\ntactile = "exr_half"\n')
     out = tmp_path / "ds"
     assert ingest_cli("--pipeline", pipe, src, out) == 0
     m = json.loads((out / "dataset.json").read_text())
     assert m["codec"]["choice"]["chosen_by"] == "pipeline" and "levels NOT kept for: opentouch" in m["codec"]["choice"]["reason"]
     # appending with "auto" to this half dataset keeps half (one codec per dataset) and says so
-    assert ingest_cli("--pipeline", "native", src, out) == 0
+    assert ingest_cli("--pipeline", "native", "--set", "tactile.maps=stored", src, out) == 0
     m = json.loads((out / "dataset.json").read_text())
     assert m["codec"]["tactile"]["pixel_type"] == "half" and _pixels(out) == {"float16"}
     assert m["codec"]["choice"]["chosen_by"] == "dataset" and "would pick exr_float_zip" in m["codec"]["choice"]["reason"]

@@ -69,7 +69,8 @@ def native_counts(tmp_path):
     src = tmp_path / "raw"
     values, ts = counts_recording(src / "rec_counts")
     out = tmp_path / "ds"
-    assert ingest_cli("--pipeline", f"{small_pipeline(tmp_path, 'native')}={src}", out) == 0
+    assert ingest_cli("--pipeline", f"{small_pipeline(tmp_path, 'native')}={src}", "--set", "tactile.maps=stored",
+                      out) == 0
     return out, values, ts
 
 
@@ -127,7 +128,8 @@ def test_rows_of_dropped_frames_and_duplicate_timestamps_are_kept(tmp_path):
 def test_keep_raw_false_stores_no_raw_and_maps_are_unchanged(tmp_path, native_counts):
     out, _, _ = native_counts
     pipeline = small_pipeline(tmp_path, "native")
-    pipeline.write_text(pipeline.read_text().replace("keep_bend = true", "keep_bend = true\nkeep_raw = false"))
+    pipeline.write_text(pipeline.read_text().replace("keep_bend = true", "keep_bend = true\nkeep_raw = false\n"
+                                                                         "maps = \"stored\""))
     out2 = tmp_path / "ds_noraw"
     assert ingest_cli("--pipeline", f"{pipeline}={tmp_path / 'raw'}", out2) == 0
     a, b = DatasetReader(out), DatasetReader(out2)
@@ -170,9 +172,9 @@ def test_renormalise_to_a_new_calibration_and_back(tmp_path, native_counts):
 
 def test_renormalise_refuses_episodes_without_raw_rows(tmp_path, capsys):
     pipeline = small_pipeline(tmp_path, "opentouch")
-    pipeline.write_text(pipeline.read_text() + "\n[tactile]\nkeep_raw = false\n"
+    pipeline.write_text(pipeline.read_text() + "\n[tactile]\nkeep_raw = false\nmaps = \"stored\"\n"
                         if "[tactile]" not in pipeline.read_text()
-                        else pipeline.read_text().replace("[tactile]", "[tactile]\nkeep_raw = false"))
+                        else pipeline.read_text().replace("[tactile]", "[tactile]\nkeep_raw = false\nmaps = \"stored\""))
     out = tmp_path / "ds"
     assert ingest_cli("--pipeline", f"{pipeline}={make_opentouch(tmp_path / 'ot')}", out) == 0
     assert cli(["renormalise", str(out), "--pipeline", "opentouch", "--force"]) == 2
@@ -316,7 +318,8 @@ def test_merge_keeps_the_calibrations_of_both_datasets(tmp_path, native_counts):
     src = tmp_path / "raw_b"
     counts_recording(src / "rec_other", seed=5)
     other = tmp_path / "ds_b"
-    assert ingest_cli("--pipeline", f"{small_pipeline(tmp_path, 'native')}={src}", other) == 0
+    assert ingest_cli("--pipeline", f"{small_pipeline(tmp_path, 'native')}={src}", "--set", "tactile.maps=stored",
+                      other) == 0
     merged = tmp_path / "merged"
     assert cli(["merge", str(out), str(other), str(merged)]) == 0
     manifest, episodes = load_manifest(merged), load_episodes(merged)

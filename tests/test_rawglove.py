@@ -178,7 +178,7 @@ def test_ingest_stats_and_renormalise_with_the_activity_baselines(tmp_path):
 
     write_rawglove(tmp_path / "rg")
     pipe = tmp_path / "rawknit.toml"
-    pipe.write_text('name = "rawknit"\n[adapter]\nname = "native"\n[adapter.params]\n[tactile]\nkeep_raw = true\n'
+    pipe.write_text('name = "rawknit"\n[adapter]\nname = "native"\n[adapter.params]\n[tactile]\nkeep_raw = true\nmaps = "stored"\n'
                     '[normalise.rawknit_left_32x32]\nbaseline = "quietest"\nnoise_k = 3\n'
                     '[normalise.rawknit_right_32x32]\nbaseline = "drift"\ndrift_window_s = 2\nnoise_k = 3\n')
     out = tmp_path / "ds"

@@ -38,7 +38,7 @@ def storage_row(name: str, root: Path, work: Path, reps: int) -> dict:
     for _ in range(reps):
         for keep in (False, True):
             run = ingest_run([(name, root)], work / f"raw_{name}_{keep}", 1,
-                             (f"tactile.keep_raw={'true' if keep else 'false'}",))
+                             (f"tactile.keep_raw={'true' if keep else 'false'}", "tactile.maps=stored"))
             times[keep].append(run["wall_s"])
             frames = run["frames"]
     with_raw = work / f"raw_{name}_True"

@@ -5,6 +5,7 @@ from __future__ import annotations
 from htdata.benchmarks.export import export_markdown
 from htdata.benchmarks.lag import lag_markdown
 from htdata.benchmarks.raw import raw_markdown
+from htdata.benchmarks.maps import maps_markdown
 from htdata.benchmarks.rawglove import rawglove_markdown
 from htdata.benchmarks.tables import fmt as _fmt, table
 
@@ -23,6 +24,7 @@ HEADINGS = {
     "stats": "## htdata stats vs tactile-only decode",
     "lag": "## Tactile-video lag estimator (known lags)",
     "raw": "## Raw glove rows: storage cost and maps from raw rows",
+    "maps": "## Maps stored or rendered from raw rows: bytes per frame vs read speed",
     "export": "## htdata export lerobot: speed and size vs htdata's shards",
     "rawglove": "## Raw-count glove: baselines, noise floors and contact against the truth",
 }
@@ -272,7 +274,7 @@ def _stats(d: dict) -> list[str]:
 
 RENDERERS = {"machine": _machine, "codecs": _codecs, "rgb": _rgb, "raster": _raster, "ingest": _ingest,
              "scaling": _scaling, "rss": _rss, "loader": _loader, "index": _index, "validate": _validate,
-             "append": _append, "stats": _stats, "lag": lag_markdown, "raw": raw_markdown,
+             "append": _append, "stats": _stats, "lag": lag_markdown, "raw": raw_markdown, "maps": maps_markdown,
              "export": export_markdown, "rawglove": rawglove_markdown}
 
 

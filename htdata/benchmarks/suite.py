@@ -50,12 +50,13 @@ from htdata.benchmarks.append import append_rows
 from htdata.benchmarks.stats import stats_rows
 from htdata.benchmarks.lag import lag_rows
 from htdata.benchmarks.raw import raw_rows
+from htdata.benchmarks.maps import maps_rows
 from htdata.benchmarks.export import export_rows
 from htdata.benchmarks.rawglove import rawglove_rows
 
 SECTION_GROUP = "htdata.bench_sections"
-BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "scaling", "rss", "loader", "index", "validate", "append", "stats",
-                    "lag", "raw", "export", "rawglove")
+BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "scaling", "rss", "loader", "index", "validate", "append",
+                    "stats", "lag", "raw", "maps", "export", "rawglove")
 # Top-level keys of results.json that are not sections: no section may take these names.
 RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds")
 
@@ -198,7 +199,7 @@ class Sections:
             out = self.cfg.work / "dataset_all"
             self.log("ingest: all sources into one dataset")
             self.combined_run = ingest_run([(s, self.corpus / s) for s in bench_sources()], out,
-                                           max(self.cfg.ingest_workers))
+                                           max(self.cfg.ingest_workers), ("tactile.maps=stored",))
             self._dataset = out
         return self._dataset
 
@@ -271,6 +272,9 @@ class Sections:
 
     def raw(self) -> dict:
         return raw_rows(self.corpus, self.cfg.work, bench_sources(), self.dataset, self.cfg.quick)
+
+    def maps(self) -> dict:
+        return maps_rows(self.corpus, self.cfg.work, bench_sources(), self.cfg.quick)
 
     def export(self) -> dict:
         return export_rows(self.dataset, self.cfg.work)

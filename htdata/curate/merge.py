@@ -30,6 +30,7 @@ import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from htdata.format.mapstorage import with_map_record
 from htdata.faults import crash_point
 from htdata.format.table import MANIFEST_FILE, SHARDS_DIR
 from htdata.store.fsutil import sha256_file, write_bytes_atomic
@@ -77,10 +78,15 @@ def check_compatible(a: Snapshot, b: Snapshot) -> None:
         raise MergeConflict(f"different canonical hand templates (sha256 {ma['canonical']['sha256'][:12]} in "
                             f"{a.root} vs {mb['canonical']['sha256'][:12]} in {b.root})")
     # the settings must agree; codec.choice only says how each dataset arrived at them (reason texts differ)
-    keys = sorted({f"{k}.{s}" for k in ("tactile", "rgb") for s in set(ma["codec"].get(k, {}))
-                   | set(mb["codec"].get(k, {})) if ma["codec"].get(k, {}).get(s) != mb["codec"].get(k, {}).get(s)})
+    # maps stored or rendered from raw rows (codec.tactile.maps, absent = stored) is one choice per version
+    ca, cb = with_map_record(ma["codec"]), with_map_record(mb["codec"])
+    keys = sorted({f"{k}.{s}" for k in ("tactile", "rgb") for s in set(ca.get(k, {}))
+                   | set(cb.get(k, {})) if ca.get(k, {}).get(s) != cb.get(k, {}).get(s)})
     if keys:
-        raise MergeConflict(f"different codec settings: {', '.join(keys)}")
+        raise MergeConflict(f"different codec settings: {', '.join(keys)}"
+                            + (f" (maps {ca['tactile']['maps']} vs {cb['tactile']['maps']}: a version either stores "
+                               f"its maps or not; re-ingest one with the other's [tactile] maps)"
+                               if "tactile.maps" in keys else ""))
     for lid in set(ma["layouts"]) & set(mb["layouts"]):
         if ma["layouts"][lid]["sha256"] != mb["layouts"][lid]["sha256"]:
             raise MergeConflict(f"layout {lid!r} differs between {a.root} and {b.root} (same id, other document)")

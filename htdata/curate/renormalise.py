@@ -34,6 +34,7 @@ from htdata.store.lock import WriterLock
 from htdata.glove.normalise import Normaliser
 from htdata.pipeline import PipelineConfig
 from htdata.glove.rasterise import Rasteriser
+from htdata.format.mapstorage import has_hand, hand_present, maps_stored
 from htdata.read.rawstream import apply_paired, paired_row, paired_source_row
 from htdata.read.reader import DatasetReader
 from htdata.curate.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
@@ -88,7 +89,7 @@ def plan_renormalise(snap: Snapshot, pipeline: PipelineConfig, patterns: list[st
             plan.unchanged += 1
             continue
         rows = snap.index[snap.index["episode"] == pos]
-        mapped = {h: rows[SIZE_FIELDS[tactile_member(h)]] > 0 for h in hands}   # RGB-only samples have no map
+        mapped = {h: hand_present(rows, h) for h in hands}   # RGB-only samples have no map
         if any(not np.all(rows[SIZE_FIELDS[raw_member(h)]][mapped[h]] > 0) for h in hands):
             no_raw.append(eid)
         plan.changes[eid] = hands
@@ -113,6 +114,7 @@ class Recalibration:
         self.settings = CodecSettings(tactile_compression=codec.get("compression", "zip"),
                                       tactile_pixel_type=codec.get("pixel_type", "half"))   # the dataset's maps
         self.records = {ep["episode_id"]: ep for ep in snap.episodes}
+        self.store_maps = maps_stored(snap.manifest)
         # episode -> hand -> (normaliser, rasteriser, [contact sum, max], live-value rows for taxel health)
         self.state: dict[str, dict] = {}
 
@@ -141,7 +143,7 @@ class Recalibration:
             if len(rows) == self.pipeline.tactile.chunk_frames:
                 break
             members = self.reader.sample(i, (JSON_MEMBER, tactile_member(hand), raw_member(hand)))
-            if tactile_member(hand) in members:   # RGB-only samples hold no rows
+            if has_hand(members, hand):   # RGB-only samples hold no rows
                 rows.append(paired_row(members, hand, f"{eid} frame {i - first}"))
         return np.stack(rows)
 
@@ -152,7 +154,7 @@ class Recalibration:
         rows, numbers, times = [], [], []
         for i in range(first, first + n):
             members = self.reader.sample(i, (JSON_MEMBER, tactile_member(hand), raw_member(hand)))
-            if tactile_member(hand) in members:   # RGB-only samples hold no rows
+            if has_hand(members, hand):   # RGB-only samples hold no rows
                 where = f"{eid} frame {i - first}"
                 number = paired_source_row(members, hand, where)
                 if numbers and number == numbers[-1]:
@@ -170,7 +172,7 @@ class Recalibration:
         state = self.state.get(episode_id) or self._start(episode_id)
         out = dict(members)
         for hand, (normaliser, raster, contact, series) in state.items():
-            if tactile_member(hand) not in members:   # an RGB-only sample: nothing to renormalise
+            if not has_hand(members, hand):   # an RGB-only sample: nothing to renormalise
                 continue
             where = f"{episode_id} frame {frame} {hand} hand"
             try:
@@ -183,8 +185,9 @@ class Recalibration:
             series.append(live[None])
             contact[0] += float(live.sum(dtype=np.float64))
             contact[1] = max(contact[1], float(live.max(initial=0.0)))
-            out[tactile_member(hand)] = MEMBER_CODECS["exr"][0](raster.render(values)[0], self.settings,
-                                                                f"{where} map")
+            if self.store_maps:   # else readers render the map from the raw rows under the new calibration
+                out[tactile_member(hand)] = MEMBER_CODECS["exr"][0](raster.render(values)[0], self.settings,
+                                                                    f"{where} map")
             if bend_member(hand) in members:
                 out[bend_member(hand)] = MEMBER_CODECS["npy"][0](raster.bend_vector(values)[0], self.settings,
                                                                  f"{where} bend")

@@ -55,7 +55,8 @@ import numpy as np
 from htdata.format.table import CANVAS, JSON_MEMBER, RGB_MEMBER, decode_member, raw_member, tactile_member
 from htdata.export.lerobot_meta import CHUNKS_SIZE, DATA_FILE_MB, DATA_PATH, VIDEO_PATH, part_of, write_meta
 from htdata.export.lerobot_stats import FeatureStats, VideoStats
-from htdata.read.rawstream import paired_row
+from htdata.format.mapstorage import maps_stored
+from htdata.read.rawstream import RawMapRenderer, paired_row
 from htdata.read.reader import DatasetReader
 from htdata.export.videoencode import VideoWriter
 from htdata.export.lerobot_plan import (PRESENT_KEY, RGB_KEY, SOURCE_KEY, LeRobotExportConfig, RawSlot,  # noqa: F401
@@ -170,6 +171,8 @@ def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, sam
                for h, lid in ep["layouts"].items()}
     last_rgb = np.zeros((CANVAS, CANVAS, 3), np.uint8)
     cache: tuple[int, dict] | None = None            # a resampled episode may repeat a sample
+    # a version that stores no maps (htdata/format/mapstorage.py): --maps renders them from the raw rows
+    renderer = None if maps_stored(reader.manifest) else RawMapRenderer(reader)
     first = reader.episode_range(pos)[0]
     for f, (i, t) in enumerate(zip(samples, times)):
         if cache is None or cache[0] != i:
@@ -193,7 +196,8 @@ def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, sam
                 present[f, 1 + k] = True
         if cfg.maps:
             for hand in plan.hands:
-                _add_map_frame(members, hand, t, where, videos[map_key(hand)], vstats[map_key(hand)])
+                _add_map_frame(_hand_map(members, hand, where, renderer, pos), t, where, videos[map_key(hand)],
+                               vstats[map_key(hand)])
         if progress is not None:
             progress(1)
     for v in videos.values():
@@ -201,15 +205,23 @@ def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, sam
     return raw, present
 
 
-def _add_map_frame(members: dict, hand: str, t: float, where: str, video: VideoWriter, vstats: VideoStats) -> None:
+def _hand_map(members: dict, hand: str, where: str, renderer: RawMapRenderer | None, episode: int):
+    """The hand's map this frame: decoded, or rendered from its raw rows when not stored; None without one."""
+    if renderer is not None:
+        return renderer.render(episode, hand, members, where) if raw_member(hand) in members else None
+    if tactile_member(hand) in members:
+        return decode_member(tactile_member(hand), members[tactile_member(hand)], where)
+    return None
+
+
+def _add_map_frame(m: np.ndarray | None, t: float, where: str, video: VideoWriter, vstats: VideoStats) -> None:
     """--maps: the canonical map as grey (value x 255); black where the hand has no map this frame."""
     grey = np.zeros((CANVAS, CANVAS), np.uint8)
-    if tactile_member(hand) in members:
-        m = decode_member(tactile_member(hand), members[tactile_member(hand)], where)
+    if m is not None:
         grey = np.round(np.clip(np.nan_to_num(m), 0.0, 1.0) * 255).astype(np.uint8)
     rgb = np.repeat(grey[..., None], 3, axis=2)
     video.add(rgb, t, where)
-    if tactile_member(hand) in members:
+    if m is not None:
         vstats.add(rgb)
 
 

@@ -75,8 +75,10 @@ class Frame:
             self.meta.update({"raw_t_ns": t_ns, "raw_row": rows, "raw_paired": paired})
         return self
 
-    def sample(self) -> dict:
-        return {"meta": self.meta, "rgb": self.rgb, "tactile": self.maps, "bend": self.bends, "raw": self.raw}
+    def sample(self, with_maps: bool = True) -> dict:
+        """The sample dict to encode; without the maps for a dataset whose readers render them ([tactile] maps)."""
+        return {"meta": self.meta, "rgb": self.rgb, "tactile": self.maps if with_maps else {}, "bend": self.bends,
+                "raw": self.raw}
 
 
 @contextmanager

@@ -74,6 +74,7 @@ SHARED_SETTINGS = {
     "tactile.compression": lambda c: c.tactile.compression,
     "codec.tactile": lambda c: c.codec.tactile,
     "tactile.raster_mode": lambda c: c.tactile.raster_mode,
+    "tactile.maps": lambda c: c.tactile.maps,
     "rgb.quality": lambda c: c.rgb.quality,
     "rgb.crop": lambda c: c.rgb.crop,
     "rgb.interpolation": lambda c: c.rgb.interpolation,

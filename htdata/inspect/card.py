@@ -181,10 +181,12 @@ LICENSE_UNSET = "not stated (set it with htdata card --license, e.g. CC-BY-4.0)"
 def sample_format(codec: dict) -> list[list[str]]:
     """The member table, from the dataset's own codec record (the EXR pixel type is chosen per dataset)."""
     tactile, rgb = codec.get("tactile", {}), codec.get("rgb", {})
+    stored = tactile.get("maps", "stored") == "stored"   # htdata/format/mapstorage.py
     return [
         ["rgb.jpg", f"224x224x3 uint8 JPEG, quality {rgb.get('quality', '?')}", "egocentric camera frame"],
         ["tactile_<hand>.exr", f"224x224 {tactile.get('pixel_type', 'half')} EXR ({tactile.get('compression', '?')}) "
-         "in [0,1]", "pressure on the canonical hand, 0 where the glove has no sensor"],
+         "in [0,1]" if stored else "not stored (maps = raw): htdata's readers render it from raw_<hand>.npy",
+         "pressure on the canonical hand, 0 where the glove has no sensor"],
         ["raw_<hand>.npy", "the glove's own grid, its source dtype", "the glove rows exactly as recorded"],
         ["json", "per-sample metadata", "episode, frame, timestamps, sync offsets, hands present"],
     ]

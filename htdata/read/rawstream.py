@@ -20,10 +20,13 @@ from pathlib import Path
 import numpy as np
 
 from htdata.glove.calibration import episode_normaliser
+from htdata.format.mapstorage import maps_stored
 from htdata.format.table import JSON_MEMBER, decode_member, raw_member
 from htdata.glove.layouts import load_layout
 from htdata.glove.rasterise import Rasteriser
-from htdata.read.reader import DatasetReader
+
+# `reader` below is a htdata.read.reader.DatasetReader, not imported: the reader renders the maps of a
+# version that does not store them with RawMapRenderer, so it imports this module.
 
 
 @dataclass
@@ -37,7 +40,7 @@ class RawStream:
         return int(self.t_ns.size)
 
 
-def episode_stream(reader: DatasetReader, episode: str | int, hand: str) -> RawStream:
+def episode_stream(reader, episode: str | int, hand: str) -> RawStream:
     """Every stored raw row of `hand` in `episode`, in time order, each source row once.
 
     Raises ValueError naming the episode when its samples hold no raw rows
@@ -83,16 +86,23 @@ def paired_row(members: dict[str, bytes], hand: str, where: str) -> np.ndarray:
 MAP_SOURCES = ("auto", "stored", "raw")
 
 
-def serves_maps_from_raw(manifest: dict, map_source: str = "auto") -> bool:
+def serves_maps_from_raw(manifest: dict, map_source: str = "auto", where: str = "") -> bool:
     """Whether the loaders serve a version's maps rendered from raw rows (else the stored EXR is decoded).
 
     THE rule, shared by the torch datasets and `htdata validate` (which checks that both agree):
     "auto" (the loaders' default) renders from raw rows when the version stores them (format 3)
     and was rasterised in nearest mode, where rendering is a gather of the exact normalised values;
     "stored" never does; "raw" always does (and a sample without raw rows is an error).
+    A version whose maps are not stored (codec.tactile.maps = "raw") is always served from raw rows;
+    "stored" on it is an error.
     """
     if map_source not in MAP_SOURCES:
         raise ValueError(f"map_source must be one of {MAP_SOURCES}, got {map_source!r}")
+    if not maps_stored(manifest):
+        if map_source == "stored":
+            raise ValueError(f"{where or 'dataset'}: map_source='stored', but this version stores no tactile maps (ingested with [tactile] "
+                             "maps = \"raw\"); its maps are rendered from the raw rows: use map_source='auto' or 'raw'")
+        return True
     if map_source != "auto":
         return map_source == "raw"
     return (manifest["codec"]["tactile"].get("raster_mode") == "nearest"
@@ -124,7 +134,7 @@ def apply_paired_many(normaliser, members_list: list[dict[str, bytes]], hand: st
 class RawMapRenderer:
     """Maps from the paired raw rows (see the module docstring); one normaliser per episode hand, cached."""
 
-    def __init__(self, reader: DatasetReader):
+    def __init__(self, reader):
         self.reader = reader
         self.mode = reader.manifest["codec"]["tactile"].get("raster_mode", "nearest")
         self._layouts: dict = {}

@@ -33,11 +33,14 @@ import numpy as np
 from htdata.errors import HtdataError
 from htdata.store import storage
 from htdata.format.codec import decode_png_u8
-from htdata.format.table import INDEX_DTYPE, LAYOUTS_DIR, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS, SPLITS_DIR, decode_sample
+from htdata.format.mapstorage import maps_stored
+from htdata.format.table import (HANDS, INDEX_DTYPE, JSON_MEMBER, LAYOUTS_DIR, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
+                                 SPLITS_DIR, decode_sample, raw_member, tactile_member)
 from htdata.store.manifest import load_episodes, load_index, load_manifest
 from htdata.format.shardio import BLOCK, describe_header, header_matches, padded, sample_key
 from htdata.store.remote import load_cached_index
 from htdata.store.gcrecord import collected_error
+from htdata.read.rawstream import RawMapRenderer
 
 class SplitRejected(HtdataError, ValueError):
     """A split whose file no longer matches its version's manifest, or whose parts overlap."""
@@ -91,6 +94,8 @@ class DatasetReader:
         self._handles: OrderedDict[int, object] = OrderedDict()
         self._pid = os.getpid()
         self._maps: dict[str, np.ndarray] = {}
+        # a version that does not store its maps: decoded samples get them rendered from the raw rows
+        self._renderer = None if maps_stored(self.manifest) else RawMapRenderer(self)
 
     @contextmanager
     def _collected_guard(self, where: str | None = None):
@@ -247,8 +252,26 @@ class DatasetReader:
         return decode_sample(members, where)
 
     def decoded(self, i: int, suffixes=None) -> dict:
-        _, key, members = self.read_sample(i, suffixes)
-        return self.decode(members, where=f"{self.root}: {key}")
+        """Sample `i` decoded (its `suffixes` only, when given). A version whose maps are not stored
+        (htdata/format/mapstorage.py) gets each map rendered from the raw rows (+ json) it reads for it."""
+        row, key, members = self.read_sample(i, self._members_to_read(suffixes))
+        return self._decode_row(row, members, f"{self.root}: {key}", suffixes)
+
+    def _members_to_read(self, suffixes):
+        if self._renderer is None or suffixes is None:
+            return suffixes
+        hands = [h for h in HANDS if tactile_member(h) in suffixes]
+        return tuple(suffixes) + ((JSON_MEMBER, *(raw_member(h) for h in hands)) if hands else ())
+
+    def _decode_row(self, row: SampleRow, members: dict[str, bytes], where: str, suffixes) -> dict:
+        """decode_sample of the members asked for, plus the maps rendered from raw rows when not stored."""
+        asked = members if suffixes is None else {s: b for s, b in members.items() if s in suffixes}
+        out = decode_sample(asked, where)
+        if self._renderer is not None:
+            for hand in HANDS:
+                if raw_member(hand) in members and (suffixes is None or tactile_member(hand) in suffixes):
+                    out["tactile"][hand] = self._renderer.render(row.episode, hand, members, where)
+        return out
 
     def window(self, episode: str | int, frame: int, k: int) -> list[dict]:
         """Decoded frames T-k..T (k+1 frames) of one episode; never crosses its start."""
@@ -265,7 +288,7 @@ class DatasetReader:
                      suffixes=None) -> Iterator[tuple[int, dict]]:
         """Stream (global index, members) shard by shard, each shard read front to back.
 
-        `suffixes` limits which members are returned (and decoded), as in sample().
+        `suffixes` limits which members are returned (and decoded), as in sample() and decoded().
         """
         rows = self.index
         for shard in (range(len(self._shard_names)) if shards is None else shards):
@@ -280,8 +303,8 @@ class DatasetReader:
                         raise ValueError(f"{self.root}: index row {i} names shard {row.shard}, "
                                          f"manifest puts it in {shard}")
                     key = self._key(row)
-                    members = self._read_members(f, row, key, suffixes)
-                    yield i, (self.decode(members, where=f"{self.root}: {key}") if decode else members)
+                    members = self._read_members(f, row, key, self._members_to_read(suffixes) if decode else suffixes)
+                    yield i, (self._decode_row(row, members, f"{self.root}: {key}", suffixes) if decode else members)
 
     # -- layouts / maps ----------------------------------------------------
     def _png(self, relpath: str) -> np.ndarray:

@@ -16,7 +16,8 @@ no map to learn from.
 
 Where maps come from: `map_source="auto"` (default) renders each map from the
 sample's stored raw glove row under its recorded calibration when the
-dataset has raw rows and was rasterised in nearest mode (a gather of the
+dataset stores no maps ([tactile] maps = "raw": always rendered, "stored" is
+an error), or has raw rows and was rasterised in nearest mode (a gather of the
 exact normalised values, ~1.4x faster than decoding the EXR on the sample
 data: `make bench`, section "maps from raw rows"); otherwise, and with
 `map_source="stored"`, the stored EXR is decoded (values rounded to half,
@@ -49,6 +50,7 @@ from htdata.read import keys
 from htdata.format.table import (CANVAS, HANDS, JSON_MEMBER, MEMBER_ORDER, RGB_MEMBER, SIZE_FIELDS, decode_member, raw_member,
                            tactile_member)
 from htdata.read.keys import HAND_IDS
+from htdata.format.mapstorage import has_hand, hand_present
 from htdata.read.rawstream import MAP_SOURCES, RawMapRenderer, serves_maps_from_raw  # noqa: F401  (MAP_SOURCES: a name of this module)
 from htdata.read.reader import DatasetReader, SampleRow
 
@@ -60,7 +62,7 @@ _RGB_POS = MEMBER_ORDER.index(RGB_MEMBER)   # in SampleRow.sizes
 
 
 def _tactile_present(rows: np.ndarray, hand: str, frames: str = "paired") -> np.ndarray:
-    present = rows[SIZE_FIELDS[tactile_member(hand)]] > 0
+    present = hand_present(rows, hand)   # its map stored, or rendered from its raw rows
     return present & (rows[SIZE_FIELDS[RGB_MEMBER]] > 0) if frames == "paired" else present
 
 
@@ -102,7 +104,7 @@ class _ItemBuilder:
     def __init__(self, root, rgb_float: bool, version: int | None = None, map_source: str = "auto"):
         self.reader = DatasetReader(root, version=version)
         self.rgb_float = rgb_float
-        self.from_raw = serves_maps_from_raw(self.reader.manifest, map_source)
+        self.from_raw = serves_maps_from_raw(self.reader.manifest, map_source, where=str(self.reader.root))
         self.strict_raw = map_source == "raw"
         self.renderer = RawMapRenderer(self.reader) if self.from_raw else None
         self._task_ids = {t: i for i, t in enumerate(self.reader.manifest["tasks"])}
@@ -370,7 +372,7 @@ class TactileStream(IterableDataset):
         for index, members in reader.iter_samples(shards, suffixes=wanted):
             if not self._selected[index]:
                 continue
-            hands = [h for h in HAND_NAMES if h in self.hands and tactile_member(h) in members]
+            hands = [h for h in HAND_NAMES if h in self.hands and has_hand(members, h)]
             if not hands or (self.frames == "paired" and RGB_MEMBER not in members):
                 continue
             row = reader.row(index)

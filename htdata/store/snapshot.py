@@ -23,8 +23,8 @@ import numpy as np
 
 from htdata import __version__
 from htdata.store import storage
-from htdata.format.table import (EPISODES_FILE, FORMAT, FORMAT_VERSION, HANDS, MANIFEST_FILE, SHARDS_DIR, SIZE_FIELDS,
-                           tactile_member)
+from htdata.format.mapstorage import hand_present
+from htdata.format.table import EPISODES_FILE, FORMAT, FORMAT_VERSION, HANDS, MANIFEST_FILE, SHARDS_DIR
 from htdata.glove.calibration import merge_calibrations
 from htdata.store.manifest import load_episodes, load_index, load_manifest
 from htdata.store.parts import Part, assemble, parts_of_version, unit_of_shard
@@ -82,7 +82,7 @@ def current_snapshot(root: str | os.PathLike) -> Snapshot | None:
 
 
 def _frames_per_hand(rows: np.ndarray) -> dict[str, int]:
-    return {hand: int(np.count_nonzero(rows[SIZE_FIELDS[tactile_member(hand)]])) for hand in HANDS}
+    return {hand: int(np.count_nonzero(hand_present(rows, hand))) for hand in HANDS}   # maps stored or not
 
 
 def _check_shards_on_disk(root: Path, shards: list[dict]) -> None:

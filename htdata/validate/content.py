@@ -112,7 +112,12 @@ def _check_tactile(geometry: dict[str, CoverageGeometry], rec: Recorder, key: st
         rec.fail("tactile_shape", f"{name}: {pixels.shape} {pixels.dtype}", **where, hand=hand,
                  expected=f"{MAP_SHAPE} {pixels_dtype}", found=f"{pixels.shape} {pixels.dtype}")
         return
-    tmap = pixels.astype(np.float32)
+    check_map_values(geometry, rec, name, where, hand, pixels.astype(np.float32), sensor)
+
+
+def check_map_values(geometry: dict[str, CoverageGeometry], rec: Recorder, name: str, where: dict, hand: str,
+                     tmap: np.ndarray, sensor: dict) -> None:
+    """A (224,224) float32 map, stored or rendered from raw rows: finite, in [0,1], zero outside coverage."""
     finite = np.isfinite(tmap)
     if not finite.all():
         bad = np.argwhere(~finite)[0]
@@ -126,7 +131,7 @@ def _check_tactile(geometry: dict[str, CoverageGeometry], rec: Recorder, key: st
                  expected="[0, 1]", found=f"[{lo:.6g}, {hi:.6g}]")
     geo = geometry.get(hand_key(where["episode"], hand))
     if geo is None:
-        rec.fail("coverage_missing", f"{key}: no coverage map for the {hand} hand's layout", **where, hand=hand)
+        rec.fail("coverage_missing", f"{name}: no coverage map for the {hand} hand's layout", **where, hand=hand)
         return
     flat = tmap.ravel()
     covered = flat[geo.idx]

@@ -15,13 +15,59 @@ from __future__ import annotations
 
 import numpy as np
 
+from dataclasses import dataclass, field
+
+from htdata.format.mapstorage import maps_stored
 from htdata.format.table import HANDS, JSON_MEMBER, decode_member, raw_member, tactile_member
 from htdata.read.rawstream import RawMapRenderer, serves_maps_from_raw
 from htdata.read.reader import DatasetReader
-from htdata.validate.report import Check
+from htdata.validate.content import check_map_values
+from htdata.validate.geometry import CoverageGeometry
+from htdata.validate.report import Check, Recorder
+from htdata.validate.sensors import hand_key
 
 FLOAT_TOLERANCE = 1e-6
 SERVED_FRACTION = 0.1
+
+
+@dataclass
+class RenderedCheck:
+    """For a version without stored maps: which samples' maps to render and check, and where results go."""
+    rows: np.ndarray                                 # (N,) bool: the samples whose content is decoded
+    geometry: dict[str, CoverageGeometry]            # hand_key -> coverage geometry (validate.geometry)
+    sensor: dict = field(default_factory=dict)       # the sensor accumulator (validate.sensors.accumulate)
+
+
+def _check_rendered(reader: DatasetReader, rendered: RenderedCheck, check: Check, batch: int) -> None:
+    """Render the maps of `rendered.rows` (batched per episode hand) and check their values."""
+    rec, renderer = Recorder(), RawMapRenderer(reader)
+    pending: dict[tuple[int, str], list[tuple[str, dict, int]]] = {}
+
+    def flush(episode: int, hand: str, group: list) -> None:
+        eid = reader.episodes[episode]["episode_id"]
+        try:
+            maps = renderer.render_many(episode, hand, [m for _, m, _ in group], group[0][0])
+        except (ValueError, KeyError) as exc:
+            for key, _, _ in group:
+                rec.fail("served_map", f"{key} ({hand}): map from raw rows not rendered: {exc}", sample=key, hand=hand)
+            return
+        for (key, _, frame), tmap in zip(group, maps):
+            rec.checked["served_maps_rendered"] += 1
+            check_map_values(rendered.geometry, rec, f"{key} ({hand}, rendered from raw rows)",
+                             {"key": key, "episode": eid, "frame": frame}, hand,
+                             tmap.astype(np.float32, copy=False), rendered.sensor)
+
+    for i in np.flatnonzero(rendered.rows):
+        row, key, members = reader.read_sample(int(i), (JSON_MEMBER, *(raw_member(h) for h in HANDS)))
+        for hand in HANDS:
+            if raw_member(hand) in members:
+                group = pending.setdefault((row.episode, hand), [])
+                group.append((key, members, row.frame))
+                if len(group) >= batch:
+                    flush(row.episode, hand, pending.pop((row.episode, hand)))
+    for (episode, hand), group in pending.items():
+        flush(episode, hand, group)
+    check.merge(rec.to_dict())
 
 
 def allowed_error(stored: np.ndarray, pixel_type: str) -> np.ndarray | float:
@@ -40,13 +86,20 @@ def served_rows(decoded: np.ndarray, episodes: np.ndarray, seed: int) -> np.ndar
     return chosen
 
 
-def check_served_maps(root, version: int | None, rows: np.ndarray, check: Check, batch: int = 64) -> None:
+def check_served_maps(root, version: int | None, rows: np.ndarray, check: Check, batch: int = 64,
+                      rendered: RenderedCheck | None = None) -> None:
     """Compare served and stored maps for sample positions `rows`; failures go to `check` ("served_map").
 
     Samples are read once each (json, maps and raw rows of both hands) and rendered in batches per
-    episode hand, one normalise and one rasterise call per batch.
+    episode hand, one normalise and one rasterise call per batch. A version that stores no maps has
+    nothing to compare: its maps exist only as served, so `rendered` checks them as the content check
+    checks stored ones (finite, in [0,1], zero outside coverage, the sensor accumulator).
     """
     reader = DatasetReader(root, version=version)
+    if not maps_stored(reader.manifest):
+        if rendered is not None:
+            _check_rendered(reader, rendered, check, batch)
+        return
     if not serves_maps_from_raw(reader.manifest):
         check.checked["served_maps_stored"] += 1    # the loaders decode the stored maps: one truth already
         return

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from htdata.format.mapstorage import map_member
 from htdata.format.table import HANDS, JSON_MEMBER, SHARDS_DIR, tactile_member
 from htdata.store.fsutil import sha256_file
 from htdata.format.shardio import sample_key
@@ -44,6 +45,7 @@ class ShardJob:
     coverage: dict[str, np.ndarray] = field(default_factory=dict)   # hand_key -> (224,224) bool
     region_map: np.ndarray | None = None
     tactile_pixel_type: str = "half"       # manifest codec.tactile.pixel_type
+    map_members: dict[str, str] | None = None   # hand -> member carrying its map (format.mapstorage.map_member)
 
 
 def shard_jobs(ds: Loaded, decode: np.ndarray, coverage: dict[str, np.ndarray], region_map: np.ndarray | None,
@@ -68,7 +70,8 @@ def shard_jobs(ds: Loaded, decode: np.ndarray, coverage: dict[str, np.ndarray], 
             sha256=entry["sha256"], bytes=entry["bytes"], rows=shard_rows, row_ids=ids,
             episode_ids=ep_ids, decode=decode[ids], content_hash=content_hash,
             coverage={k: v for k, v in cov_by_hand.items() if k in needed}, region_map=region_map,
-            tactile_pixel_type=ds.manifest["codec"]["tactile"].get("pixel_type", "half")))
+            tactile_pixel_type=ds.manifest["codec"]["tactile"].get("pixel_type", "half"),
+            map_members={h: map_member(ds.manifest, h) for h in HANDS}))
     return jobs
 
 
@@ -139,7 +142,8 @@ class _ShardCheck:
         if JSON_MEMBER not in members:
             self.structure.fail("sample_json", f"{key}: no {JSON_MEMBER} member in the index", **where)
             return
-        meta = check_sample_json(self.structure, members[JSON_MEMBER], key, eid, frame, row, where)
+        meta = check_sample_json(self.structure, members[JSON_MEMBER], key, eid, frame, row, where,
+                                 self.job.map_members)
         if meta is None:
             return
         record_timestamps(self.timestamps, i, meta)

@@ -13,7 +13,7 @@ import hashlib
 import json
 from collections import defaultdict
 
-from htdata.format.table import HANDS, MANIFEST_FILE, RGB_MEMBER, tactile_member
+from htdata.format.table import HANDS, MANIFEST_FILE, RGB_MEMBER, raw_member, tactile_member
 from htdata.resources import validate_json
 from htdata.format.shardio import sample_key
 from htdata.store.splitfiles import PARTS, list_splits, split_path
@@ -21,13 +21,21 @@ from htdata.validate.report import Check
 from htdata.validate.structure import Loaded
 
 HASHED_MEMBERS = (RGB_MEMBER, *(tactile_member(hand) for hand in HANDS))
+_RAW_OF = {tactile_member(hand): raw_member(hand) for hand in HANDS}
 
 
 def frame_digest(members: dict[str, bytes]) -> str:
-    """sha256 over a sample's rgb + tactile member bytes (absent members hash as empty)."""
+    """sha256 over a sample's rgb + tactile member bytes (absent members hash as empty).
+
+    A hand whose map is not stored (htdata/format/mapstorage.py) hashes its raw rows, which the map is
+    rendered from, in its place.
+    """
     h = hashlib.sha256()
     for suffix in HASHED_MEMBERS:
-        h.update(suffix.encode() + b"\0" + members.get(suffix, b""))
+        data = members.get(suffix)
+        if data is None and suffix in _RAW_OF:
+            data = members.get(_RAW_OF[suffix])
+        h.update(suffix.encode() + b"\0" + (data or b""))
     return h.hexdigest()
 
 

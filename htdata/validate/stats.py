@@ -6,7 +6,8 @@ from collections import Counter
 
 import numpy as np
 
-from htdata.format.table import HANDS, SIZE_FIELDS, tactile_member
+from htdata.format.mapstorage import hand_present
+from htdata.format.table import HANDS
 from htdata.validate.sensors import CONTACT_THRESHOLD, HIST_BINS
 from htdata.validate.structure import Loaded
 
@@ -25,7 +26,7 @@ def dataset_stats(ds: Loaded, sensor: dict) -> dict:
     return {
         "frames_per_task": dict(sorted(by_task.items())),
         "frames_per_scene": dict(sorted(by_scene.items())),
-        "frames_per_hand": {h: int(np.count_nonzero(rows[SIZE_FIELDS[tactile_member(h)]])) for h in HANDS},
+        "frames_per_hand": {h: int(np.count_nonzero(hand_present(rows, h))) for h in HANDS},
         "contact_area_histogram": {"bin_edges": edges.tolist(),
                                    "counts": np.histogram(area, bins=edges)[0].tolist(),
                                    "threshold": CONTACT_THRESHOLD, "maps": int(area.size)},

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata.format.codec import decode_json
+from htdata.format.mapstorage import map_member
 from htdata.format.table import (HANDS, INDEX_DTYPE, JSON_MEMBER, RGB_MEMBER, MANIFEST_FILE, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
                            tactile_member)
 from htdata.store.manifest import IndexDtypeError, load_manifest, parse_episodes, parse_index, parse_manifest
@@ -255,8 +256,9 @@ def _check_episode_rows(ds: Loaded, ep: dict, pos_rows: np.ndarray, check: Check
     if sorted(ep["shards"]) != shard_names:
         check.fail("episode_shards", f"episode {eid}: shards list disagrees with the index", **where,
                    expected=shard_names, found=sorted(ep["shards"]))
-    # RGB-only samples (format 3: RGB frames kept without tactile) hold no tactile member of any hand
-    no_tactile = np.all([rows[SIZE_FIELDS[tactile_member(h)]][pos_rows] == 0 for h in HANDS], axis=0)
+    # RGB-only samples (format 3: RGB frames kept without tactile) hold no map member of any hand (its raw
+    # rows when the version does not store maps: htdata/format/mapstorage.py)
+    no_tactile = np.all([rows[SIZE_FIELDS[map_member(ds.manifest, h)]][pos_rows] == 0 for h in HANDS], axis=0)
     rgb_only = no_tactile & (rows[SIZE_FIELDS[RGB_MEMBER]][pos_rows] > 0)
     declared = sum((ep.get("rgb_only_frames") or {}).values())
     if int(rgb_only.sum()) != declared:
@@ -264,9 +266,14 @@ def _check_episode_rows(ds: Loaded, ep: dict, pos_rows: np.ndarray, check: Check
                    f"the record declares {declared} RGB-only frames", **where,
                    expected=declared, found=int(rgb_only.sum()))
     for hand in HANDS:
-        member = tactile_member(hand)
+        member = map_member(ds.manifest, hand)
         col = rows[SIZE_FIELDS[member]][pos_rows]
         has = hand in ep["hands"]
+        unstored = rows[SIZE_FIELDS[tactile_member(hand)]][pos_rows] if member != tactile_member(hand) else col[:0]
+        if unstored.any():
+            r = int(pos_rows[np.flatnonzero(unstored)[0]])
+            check.fail("hand_member", f"episode {eid}: index row {r} has a {tactile_member(hand)}, but the version "
+                       f"records maps = \"raw\" (no map members)", **where, sample=r, frame=int(rows['frame'][r]))
         if has and not ((col > 0) | rgb_only).all():
             r = int(pos_rows[np.flatnonzero((col == 0) & ~rgb_only)[0]])
             check.fail("hand_member", f"episode {eid} has a {hand} hand but index row {r} has no "
@@ -360,8 +367,8 @@ def _sample_validator():
 
 
 def check_sample_json(rec: Recorder, data: bytes, key: str, eid: str, frame: int, row,
-                      where: dict) -> dict | None:
-    """The sample JSON: schema, key/episode/frame as indexed, hands as the members present.
+                      where: dict, map_members: dict[str, str] | None = None) -> dict | None:
+    """The sample JSON: schema, key/episode/frame as indexed, hands as the map members present (`map_members`).
 
     Returns the parsed JSON, or None when its timestamps cannot be trusted.
     """
@@ -379,7 +386,7 @@ def check_sample_json(rec: Recorder, data: bytes, key: str, eid: str, frame: int
             rec.fail("sample_json_mismatch", f"{where_json}: {field_name} disagrees with the index",
                      **where, expected=expected, found=meta[field_name])
     for hand in HANDS:
-        member = tactile_member(hand)
+        member = (map_members or {}).get(hand, tactile_member(hand))
         has_map = int(row[SIZE_FIELDS[member]]) > 0
         if bool(meta["hands"][hand]) != has_map:
             rec.fail("sample_hands", f"{where_json}: hands.{hand}={meta['hands'][hand]} but the "

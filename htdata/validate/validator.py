@@ -10,8 +10,9 @@ from pathlib import Path
 
 from htdata.validate.content import decode_mask, layout_maps
 from htdata.validate.report import CHECKS, Check
-from htdata.validate.served import check_served_maps, served_rows
-from htdata.validate.sensors import check_sensors, check_taxel_health, merge_sensor
+from htdata.validate.served import RenderedCheck, check_served_maps, served_rows
+from htdata.validate.geometry import coverage_geometries
+from htdata.validate.sensors import check_sensors, check_taxel_health, hand_key, merge_sensor
 from htdata.validate.shards import run_jobs, shard_jobs
 from htdata.validate.splits import check_splits
 from htdata.validate.stats import dataset_stats
@@ -93,7 +94,8 @@ def _check_dataset(ds: Loaded, cfg: ValidateConfig, checks: dict[str, Check], pa
         hashes.update(dict(res["hashes"]))
         merge_sensor(sensor, res["sensor"])
     check_served_maps(ds.root, ds.manifest.get("version"), served_rows(decode, ds.index["episode"], cfg.seed),
-                      checks["content"])
+                      checks["content"], rendered=RenderedCheck(decode, _hand_geometries(ds, coverage, region_map),
+                                                                sensor))
     check_time(ds, ts, checks["time"])
     check_sensors(sensor, checks["sensors"], _region_names(ds))
     check_taxel_health(ds.root, ds.manifest.get("version"), checks["sensors"], compute=cfg.deep)
@@ -112,3 +114,10 @@ def _region_names(ds) -> dict[int, str]:
         return {int(p["region_id"]): name for name, p in doc.get("places", {}).items()}
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return {}
+
+
+def _hand_geometries(ds: Loaded, coverage: dict, region_map) -> dict:
+    """hand_key -> coverage geometry of every episode hand (rendered maps are checked in this process)."""
+    by_hand = {hand_key(ep["episode_id"], hand): coverage[lid]
+               for ep in ds.episodes for hand, lid in ep["layouts"].items() if lid in coverage}
+    return coverage_geometries(by_hand, region_map)

@@ -1,0 +1,214 @@
+"""Maps stored or rendered from raw rows ([tactile] maps): what storing them costs in bytes, buys in read speed.
+
+Per adapter of the sample corpus, the same episodes ingested with `maps = "stored"` and `maps = "raw"`
+(1 worker). Bytes: every member of every shard, by kind (rgb jpg, tactile maps, raw rows, bend, json, the
+tar headers and padding = shard bytes minus member bytes) per frame, for both, and the total per frame and
+at 10M frames. Read speed, side by side, alternating A/B runs (medians): TactileFrameDataset items/s
+(map_source="stored" on the stored dataset: the EXR decoded; the default on the other: rendered) and
+DatasetReader.decoded samples/s. Exactness: every rendered map against the float32 map the ingest computes before the codec
+(`ingest_map_difference`), and the stored maps against the rendered ones (the codec's rounding).
+Ingest: frames/s and encode-stage seconds of the two ingests (one run each, so indicative only).
+
+The default is picked from these numbers by `RULE` (`pick_default`); the report says whether the
+pipeline's actual default (`TactileConfig().maps`) is the rule's pick.
+
+Imports inside functions: torch (optional) is loaded by `htdata.read.torchdata` only when measured.
+"""
+
+from __future__ import annotations
+
+import statistics
+import tarfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from htdata.benchmarks.ingest import ingest_run
+from htdata.benchmarks.sources import discover
+from htdata.benchmarks.tables import fmt, table
+from htdata.format.table import HANDS, JSON_MEMBER, SHARDS_DIR, tactile_member
+from htdata.ingest.episode import EpisodeStream
+from htdata.pipeline import TactileConfig
+from htdata.read.reader import DatasetReader
+
+KINDS = (("rgb", "rgb jpg"), ("maps", "tactile maps"), ("raw", "raw rows"), ("bend", "bend"), ("json", "json"),
+         ("tar", "tar headers + padding"))
+MAP_MEMBERS = tuple(tactile_member(h) for h in HANDS)
+FRAMES_AT_SCALE = 10_000_000
+MIN_SAVING = 0.10          # the rule: rendering must save at least this share of the bytes per frame
+RULE = ("render from raw (maps not stored) when rendering is exact (max |rendered - ingest's map| 0 on every "
+        "map checked) "
+        "AND at least as fast as decoding the stored maps (ratio >= 1.0, TactileFrameDataset and "
+        "DatasetReader.decoded, every adapter) AND it saves at least 10% of the bytes per frame (every "
+        "adapter); otherwise store maps")
+
+
+def member_kind(name: str) -> str:
+    suffix = name.split(".", 1)[1] if "." in name else name
+    if suffix == "rgb.jpg":
+        return "rgb"
+    for stem, kind in (("tactile_", "maps"), ("raw_", "raw"), ("bend_", "bend")):
+        if suffix.startswith(stem):
+            return kind
+    if suffix == "json":
+        return "json"
+    raise ValueError(f"{name}: member of no known kind")
+
+
+def bytes_per_frame(root: Path) -> dict:
+    """{kind: bytes per frame} over every shard of the dataset's current version, + "total"."""
+    reader = DatasetReader(root)
+    sums = dict.fromkeys((k for k, _ in KINDS), 0)
+    shard_bytes = 0
+    for entry in reader.manifest["shards"]:
+        path = root / SHARDS_DIR / entry["name"]
+        shard_bytes += path.stat().st_size
+        with tarfile.open(path) as tar:
+            for m in tar.getmembers():
+                sums[member_kind(m.name)] += m.size
+    sums["tar"] = shard_bytes - sum(sums.values())
+    n = max(len(reader), 1)
+    out = {k: v / n for k, v in sums.items()}
+    out["total"] = shard_bytes / n
+    return out
+
+
+def ingest_map_difference(name: str, root: Path, rendered: Path) -> tuple[float, int]:
+    """(max |difference|, maps compared) between the maps rendered from raw rows and the float32 maps the
+    ingest computes before any codec (EpisodeStream on the sources): whether rendering is exact.
+
+    Frames are matched by (episode, source frame): a stream without RGB skips RGB-only samples."""
+    cfg, adapter, refs = discover(name, root)
+    reader = DatasetReader(rendered)
+    at = {}
+    for i, members in reader.iter_samples(decode=True, suffixes=(JSON_MEMBER,)):
+        meta = members["meta"]
+        if any(meta["hands"].values()):
+            at[(meta["episode_id"], int(meta["source_frame"]))] = i
+    diff, n = 0.0, 0
+    for ref in refs:
+        for frame in EpisodeStream(ref, cfg, adapter, with_rgb=False):
+            served = reader.decoded(at[(ref.episode_id, frame.source_frame)], MAP_MEMBERS)["tactile"]
+            for hand, m in frame.maps.items():
+                diff = max(diff, float(np.abs(served[hand] - m).max()))
+                n += 1
+    return diff, n
+
+
+def max_map_difference(stored: Path, rendered: Path) -> tuple[float, int]:
+    """(max |difference|, maps compared) between the two datasets' decoded maps, every sample and hand."""
+    a, b = DatasetReader(stored), DatasetReader(rendered)
+    diff, n = 0.0, 0
+    for i in range(len(a)):
+        ma, mb = a.decoded(i)["tactile"], b.decoded(i)["tactile"]
+        if sorted(ma) != sorted(mb):
+            return float("inf"), n
+        for hand in ma:
+            diff = max(diff, float(np.abs(ma[hand] - mb[hand]).max()))
+            n += 1
+    return diff, n
+
+
+def _rate(run) -> float:
+    """Things per second of `run()`, which returns how many it did."""
+    t0 = time.perf_counter()
+    done = run()
+    return done / (time.perf_counter() - t0) if done else 0.0
+
+
+def read_speeds(stored: Path, rendered: Path, limit: int, reps: int) -> dict:
+    """Items/s and samples/s, stored maps decoded vs rendered from raw, alternating runs, medians."""
+    from htdata.read.torchdata import TactileFrameDataset
+
+    datasets = {"stored": TactileFrameDataset(stored, map_source="stored"), "rendered": TactileFrameDataset(rendered)}
+    readers = {"stored": DatasetReader(stored), "rendered": DatasetReader(rendered)}
+    items = min(limit, len(datasets["stored"]))
+    samples = min(limit, len(readers["stored"]))
+    runs: dict[str, list] = {f"{k}_{w}": [] for k in ("frame", "decoded") for w in ("stored", "rendered")}
+    for which in ("stored", "rendered"):   # warm-up, not timed: layouts, normalisers, index maps, page cache
+        datasets[which][0], readers[which].decoded(0)
+    for _ in range(reps):
+        for which in ("stored", "rendered"):     # A then B, every repetition
+            ds, reader = datasets[which], readers[which]
+            runs[f"frame_{which}"].append(_rate(lambda: sum(1 for i in range(items) if ds[i] is not None)))
+            runs[f"decoded_{which}"].append(_rate(lambda: sum(1 for i in range(samples) if reader.decoded(i) is not None)))
+    med = {k: statistics.median(v) for k, v in runs.items()}
+    return {"items": items, "samples": samples, "reps": reps,
+            "frame_items_per_s_stored": med["frame_stored"], "frame_items_per_s_rendered": med["frame_rendered"],
+            "frame_ratio": med["frame_rendered"] / med["frame_stored"],
+            "decoded_samples_per_s_stored": med["decoded_stored"],
+            "decoded_samples_per_s_rendered": med["decoded_rendered"],
+            "decoded_ratio": med["decoded_rendered"] / med["decoded_stored"]}
+
+
+def adapter_row(name: str, root: Path, work: Path, limit: int, reps: int) -> dict:
+    paths, runs = {}, {}
+    for choice in ("stored", "raw"):
+        paths[choice] = work / f"maps_{name}_{choice}"
+        runs[choice] = ingest_run([(name, root)], paths[choice], 1, (f"tactile.maps={choice}",))
+    sizes = {c: bytes_per_frame(p) for c, p in paths.items()}
+    diff, compared = max_map_difference(paths["stored"], paths["raw"])
+    exact, checked = ingest_map_difference(name, root, paths["raw"])
+    stored = DatasetReader(paths["stored"]).manifest["codec"]["tactile"]
+    row = {"adapter": name, "samples": len(DatasetReader(paths["stored"])), "maps_compared": compared,
+           "stored_pixel_type": stored.get("pixel_type", "half"), "stored_over_rendered_difference": diff,
+           "maps_checked_against_ingest": checked, "max_abs_difference": exact,
+           "bytes_stored": sizes["stored"], "bytes_raw": sizes["raw"],
+           "saving": 1 - sizes["raw"]["total"] / sizes["stored"]["total"],
+           "gb_at_10m_stored": sizes["stored"]["total"] * FRAMES_AT_SCALE / 1e9,
+           "gb_at_10m_raw": sizes["raw"]["total"] * FRAMES_AT_SCALE / 1e9,
+           # what it does to the ingest (one run each, not the ingest section's alternating medians)
+           **{f"ingest_{k}_{c}": v for c, r in runs.items()
+              for k, v in (("frames_per_s", r["frames_per_s"]), ("encode_s", r.get("stages_s", {}).get("encode", 0.0)))}}
+    row.update(read_speeds(paths["stored"], paths["raw"], limit, reps))
+    return row
+
+
+def pick_default(rows: list[dict]) -> tuple[str, str]:
+    """(default, why) by RULE from the per-adapter rows."""
+    exact = all(r["max_abs_difference"] == 0 for r in rows)
+    fast = all(min(r["frame_ratio"], r["decoded_ratio"]) >= 1.0 for r in rows)
+    saves = all(r["saving"] >= MIN_SAVING for r in rows)
+    why = (f"exact: {'yes' if exact else 'no'}; as fast: {'yes' if fast else 'no'} (lowest ratio "
+           f"{min(min(r['frame_ratio'], r['decoded_ratio']) for r in rows):.2f}); saves >= {MIN_SAVING:.0%}: "
+           f"{'yes' if saves else 'no'} (least {min(r['saving'] for r in rows):.0%})")
+    return ("raw" if exact and fast and saves else "stored"), why
+
+
+def maps_rows(corpus: Path, work: Path, adapters: tuple[str, ...], quick: bool) -> dict:
+    rows = [adapter_row(name, corpus / name, work, 60 if quick else 400, 1 if quick else 3) for name in adapters]
+    default, why = pick_default(rows)
+    return {"rows": rows, "rule": RULE, "default": default, "why": why, "pipeline_default": TactileConfig().maps,
+            "frames_at_scale": FRAMES_AT_SCALE}
+
+
+def maps_markdown(d: dict) -> list[str]:
+    lines = ["Bytes per frame by member kind, maps stored / not stored (same episodes, 1 worker):", ""]
+    bytes_rows = [{"adapter": r["adapter"], **{k: f"{fmt(r['bytes_stored'][k])} / {fmt(r['bytes_raw'][k])}"
+                                               for k, _ in KINDS + (("total", "total"),)},
+                   "saving": f"{r['saving']:.0%}", "gb": f"{r['gb_at_10m_stored']:.0f} / {r['gb_at_10m_raw']:.0f}"}
+                  for r in d["rows"]]
+    lines += table(bytes_rows, [("adapter", "adapter"), *KINDS, ("total", "total B/frame"), ("saving", "saved"),
+                                ("gb", f"GB at {d['frames_at_scale'] / 1e6:.0f}M frames")])
+    lines += ["Read speed, stored maps decoded vs rendered from raw rows (alternating runs, medians):", ""]
+    lines += table(d["rows"], [("adapter", "adapter"), ("frame_items_per_s_stored", "TactileFrameDataset items/s, stored"),
+                               ("frame_items_per_s_rendered", "items/s, rendered"), ("frame_ratio", "ratio"),
+                               ("decoded_samples_per_s_stored", "decoded() samples/s, stored"),
+                               ("decoded_samples_per_s_rendered", "samples/s, rendered"), ("decoded_ratio", "ratio"),
+                               ("maps_checked_against_ingest", "maps checked"),
+                               ("max_abs_difference", "max |rendered - ingest's map|"),
+                               ("stored_over_rendered_difference", "max |stored - rendered|"),
+                               ("stored_pixel_type", "stored EXR pixels")])
+    same = "equals" if d["default"] == d["pipeline_default"] else "DIFFERS FROM"
+    lines += ["Exact = every map rendered from raw rows equals, bit for bit, the float32 map the ingest computes "
+              "before any codec (the same episodes through EpisodeStream); max |stored - rendered| is the stored "
+              "maps' own codec rounding (> 0 where the codec rule stores half floats), not a rendering error.", ""]
+    lines += ["Ingest, maps stored vs not (1 worker, one run each: no EXR encode when the maps are not stored):", ""]
+    lines += table(d["rows"], [("adapter", "adapter"), ("ingest_frames_per_s_stored", "ingest frames/s, stored"),
+                               ("ingest_frames_per_s_raw", "frames/s, not stored"),
+                               ("ingest_encode_s_stored", "encode s, stored"), ("ingest_encode_s_raw", "encode s, not stored")])
+    return lines + [f"**Default: {d['default']}** (computed from the tables above) — rule: {d['rule']}. "
+                    f"Measured: {d['why']}.",
+                    f"The pipeline's actual default (`[tactile] maps = \"{d['pipeline_default']}\"`) {same} the "
+                    f"rule's pick.", ""]
