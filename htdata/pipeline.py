@@ -57,7 +57,7 @@ from htdata.source.adapters.base import check_adapter_params as check
 from htdata.source.lag import LAG_MODES
 from htdata.glove.codecrule import CodecChoice
 from htdata.format.table import CodecSettings
-from htdata.format.mapstorage import MAP_STORAGE
+from htdata.format.mapstorage import MAP_SETTINGS
 
 
 
@@ -112,8 +112,9 @@ class RgbConfig:
     keep_unpaired: bool = True   # RGB frames without tactile within the skew become RGB-only samples
 
 
-# [tactile] maps when a pipeline does not say; `make bench` section "maps" states the rule that should pick it
-DEFAULT_MAPS = "raw"
+# [tactile] maps when a pipeline does not say: resolved per ingest (htdata/format/mapstorage.py
+# resolve_map_storage); `make bench` section "maps" states the rule its new-dataset choice follows
+DEFAULT_MAPS = "auto"
 
 
 @dataclass
@@ -124,13 +125,14 @@ class TactileConfig:
     keep_raw: bool = True    # raw_<hand>.npy: every glove row as read (source dtype), full rate
     chunk_frames: int = 64   # tactile frames read/normalised/rasterised per step (memory bound)
     # "stored": tactile_<hand>.exr members; "raw": none, readers render maps from the raw rows
-    # (htdata/format/mapstorage.py): only exact, so only with keep_raw and nearest raster mode
+    # (htdata/format/mapstorage.py): only exact, so only with keep_raw and nearest raster mode;
+    # "auto": the parent version's choice on append, else "raw" where exact, else "stored"
     maps: str = DEFAULT_MAPS
 
     def validate(self, where: str) -> "TactileConfig":
-        if self.maps not in MAP_STORAGE:
+        if self.maps not in MAP_SETTINGS:
             raise ValueError(f"{where}: [tactile] maps = {self.maps!r}: must be one of "
-                             f"{', '.join(repr(m) for m in MAP_STORAGE)}{nearest_hint(str(self.maps), MAP_STORAGE)}")
+                             f"{', '.join(repr(m) for m in MAP_SETTINGS)}{nearest_hint(str(self.maps), MAP_SETTINGS)}")
         if self.maps == "raw" and not self.keep_raw:
             raise ValueError(f"{where}: [tactile] maps = \"raw\" needs keep_raw = true: readers render the maps "
                              f"from the stored raw rows, and keep_raw = false stores none")
@@ -142,7 +144,10 @@ class TactileConfig:
 
     def to_dict(self) -> dict:
         d = asdict(self)
-        if d["maps"] == DEFAULT_MAPS:   # only when set: other pipelines keep their to_dict() (and fingerprints)
+        # Left out when "stored" (what every dataset before the setting holds: their episode settings and unit
+        # fingerprints stay equal) or "auto" (an ingest resolves it before anything is fingerprinted or sent
+        # to a worker; a worker reads a missing key as "not raw": htdata.ingest.unit).
+        if d["maps"] in ("auto", "stored"):
             del d["maps"]
         return d
 
@@ -296,6 +301,15 @@ class PipelineConfig:
             raise ValueError(f"{self.path or self.name}: [codec] tactile = {self.codec.tactile!r} is not resolved "
                              f"for a dataset yet (htdata.glove.codecrule.resolve_sources / with_codec_choice)")
         return CodecChoice.from_info(self.codec.choice)
+
+    def with_maps(self, maps: str) -> "PipelineConfig":
+        """A copy whose [tactile] maps is `maps` (an ingest resolves "auto" before its units run)."""
+        import copy
+
+        cfg = copy.deepcopy(self)
+        cfg.tactile.maps = maps
+        cfg.tactile.validate(self.path or self.name)
+        return cfg
 
     def with_codec_choice(self, choice) -> "PipelineConfig":
         """A copy whose [codec] carries `choice` (a CodecChoice for this pipeline's compression)."""

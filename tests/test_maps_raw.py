@@ -196,3 +196,33 @@ def test_a_version_without_the_record_stores_its_maps():
     assert not maps_stored({"codec": {"tactile": {"maps": "raw"}}})
     with pytest.raises(ValueError, match="not one of"):
         maps_stored({"codec": {"tactile": {"maps": "sometimes"}}})
+
+
+def test_auto_keeps_the_parents_choice_on_append_and_is_raw_for_a_new_dataset(pair, tmp_path):
+    """The default "auto": an append to a dataset that stores its maps stores them too (nothing refused),
+    one that does not stays without; a new dataset is "raw" only where rendering is exact."""
+    stored, rendered = pair
+    corpus = Path(stored).parent / "raw"
+    for parent, kind in ((stored, "stored"), (rendered, "raw")):
+        copy = shutil.copytree(parent, tmp_path / kind)
+        assert cli(["rm", str(copy), "ot-*"]) == 0                      # the append re-ingests these
+        old_shards = {s["name"] for s in DatasetReader(copy).manifest["shards"]}
+        assert ingest_cli("--pipeline", f"opentouch={corpus / 'opentouch'}", copy) == 0
+        after = DatasetReader(copy)
+        new_shards = [s["name"] for s in after.manifest["shards"] if s["name"] not in old_shards]
+        names = [n for s in new_shards for n in tarfile.open(copy / SHARDS_DIR / s).getnames()]
+        assert new_shards and map_storage(after.manifest) == kind
+        assert any(n.endswith(".exr") for n in names) == (kind == "stored")
+    new = tmp_path / "new"
+    assert ingest_cli("--pipeline", f"native={corpus / 'native'}", new) == 0
+    assert map_storage(DatasetReader(new).manifest) == "raw"
+    no_raw = tmp_path / "no_raw"
+    assert ingest_cli("--pipeline", f"native={corpus / 'native'}", "--set", "tactile.keep_raw=false", no_raw) == 0
+    assert map_storage(DatasetReader(no_raw).manifest) == "stored"
+
+
+def test_an_explicit_raw_onto_stored_maps_is_refused(pair, tmp_path, capsys):
+    copy = shutil.copytree(pair[0], tmp_path / "ds")
+    corpus = Path(pair[0]).parent / "raw"
+    assert ingest_cli("--pipeline", f"native={corpus / 'native'}", "--set", "tactile.maps=raw", copy) != 0
+    assert "tactile.maps" in capsys.readouterr().err

@@ -23,6 +23,7 @@ from htdata.glove.codecrule import resolve_sources
 from htdata.ingest import Source
 from htdata.ingest.episode import EpisodeStream
 from htdata.ingest.plan import resolve_layouts
+from htdata.format.mapstorage import resolve_map_storage
 from htdata.pipeline import PipelineConfig, load_pipeline
 from htdata.source.rgb import to_square_224
 
@@ -85,7 +86,8 @@ def bare_bound(cfg: PipelineConfig, adapter, refs: list) -> dict:
     in `chunk_frames` chunks: the ingest's "decode" stage. resize_s:
     `rgb.to_square_224` with the pipeline's size, crop and interpolation.
     jpeg_s: `encode_rgb` at the pipeline's quality. exr_s: `encode_tactile`
-    of every hand's map with the pipeline's compression and resolved pixel type. Nothing else (sync,
+    of every hand's map with the pipeline's compression and resolved pixel type, when the ingest stores
+    maps (`[tactile] maps`; 0 when the readers render them from raw rows). Nothing else (sync,
     normalise, rasterise, JSON, spool, shard writing) is timed; the maps are
     rasterised beforehand, untimed. `open_s`, `rgb_decode_s` and
     `tactile_read_s` split decode_s.
@@ -94,6 +96,9 @@ def bare_bound(cfg: PipelineConfig, adapter, refs: list) -> dict:
     frames = 0
     rgb = cfg.rgb
     pixel_type = cfg.codec_settings().tactile_pixel_type
+    # maps encoded only where the ingest stores them (a new dataset: "auto" resolved as the ingest does)
+    stores_maps = resolve_map_storage(cfg.tactile.maps, cfg.tactile.keep_raw, cfg.tactile.raster_mode, None) == "stored"
+    t["maps_stored"] = stores_maps
     for ref in refs:
         em = episode_maps(cfg, adapter, ref)
         wanted = {int(i): k for k, i in enumerate(em.rgb_index)}
@@ -120,7 +125,7 @@ def bare_bound(cfg: PipelineConfig, adapter, refs: list) -> dict:
                     t2 = time.perf_counter()
                     encode_rgb(square, rgb.quality)
                     t3 = time.perf_counter()
-                    for maps in em.maps.values():
+                    for maps in em.maps.values() if stores_maps else ():
                         encode_tactile(maps[k], cfg.tactile.compression, pixel_type=pixel_type)
                     t4 = time.perf_counter()
                     t["resize_s"] += t2 - t1

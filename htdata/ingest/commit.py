@@ -31,7 +31,8 @@ def codec_info(cfg: PipelineConfig) -> dict:
     codec = json.loads(json.dumps(DEFAULT_CODEC_INFO))
     codec["tactile"]["compression"] = cfg.tactile.compression
     codec["tactile"]["raster_mode"] = cfg.tactile.raster_mode
-    codec["tactile"]["maps"] = cfg.tactile.maps     # htdata/format/mapstorage.py: readers render when "raw"
+    # htdata/format/mapstorage.py: readers render when "raw" (the driver resolved "auto" before the units ran)
+    codec["tactile"]["maps"] = "raw" if cfg.tactile.maps == "raw" else "stored"
     codec["rgb"]["quality"] = cfg.rgb.quality
     codec["rgb"]["crop"] = cfg.rgb.crop
     codec["rgb"]["interpolation"] = cfg.rgb.interpolation

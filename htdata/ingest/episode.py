@@ -272,10 +272,12 @@ def _frame_meta(ref, sync, k: int, rgb_index: int, frame_index: int, hands: list
 
 
 def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock: StageClock | None = None,
-                   with_rgb: bool = True) -> Iterator[Frame]:
+                   with_rgb: bool = True, with_maps: bool = True) -> Iterator[Frame]:
     """Yield the frames of one planned episode in time order (see the module docstring); raise EpisodeError.
 
-    `ref` must come from planning (layouts resolved). `with_rgb=False` skips
+    `ref` must come from planning (layouts resolved). `with_maps=False` renders no
+    map (Frame.maps is empty: a dataset whose readers render them from the raw
+    rows, [tactile] maps = "raw"; contact and bend vectors are still computed). `with_rgb=False` skips
     the RGB decode (Frame.rgb is None, no RGB-only frames): the benchmarks
     that only need maps. Per chunk: the tactile rows (paired and unpaired)
     are read, normalised and rasterised first, then the chunk's RGB frames
@@ -337,7 +339,7 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
                 tally.frames += 1
                 tally.paired += 1
                 yield from queue.push(Frame(key=meta["key"], source_frame=i, meta=meta, rgb=rgb,
-                                            maps=_frame_maps(kept, n, rasters, clock),
+                                            maps=_frame_maps(kept, n, rasters, clock) if with_maps else {},
                                             bends={h: b[n] for h, b in bends.items()}, raw=rows), paired=True)
                 n += 1
         for frame in emit.before(None):
@@ -360,8 +362,10 @@ class EpisodeStream:
         record = stream.finished_tally().record()
     """
 
-    def __init__(self, ref, cfg: PipelineConfig, adapter, clock: StageClock | None = None, with_rgb: bool = True):
+    def __init__(self, ref, cfg: PipelineConfig, adapter, clock: StageClock | None = None, with_rgb: bool = True,
+                 with_maps: bool = True):
         self.ref, self.cfg, self.adapter, self.clock, self.with_rgb = ref, cfg, adapter, clock, with_rgb
+        self.with_maps = with_maps
         self._tally = EpisodeTally()
         self._state = "new"        # -> "reading" -> "done"
 
@@ -369,7 +373,8 @@ class EpisodeStream:
         if self._state != "new":
             raise RuntimeError(f"episode {self.ref.episode_id}: an EpisodeStream is read once")
         self._state = "reading"
-        yield from episode_frames(self.ref, self.cfg, self.adapter, self._tally, self.clock, self.with_rgb)
+        yield from episode_frames(self.ref, self.cfg, self.adapter, self._tally, self.clock, self.with_rgb,
+                                  self.with_maps)
         self._state = "done"
 
     def finished_tally(self) -> EpisodeTally:

@@ -11,11 +11,13 @@ per finished episode (per finished unit with Ray).
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
 
+from htdata.format.mapstorage import resolve_map_storage
 from htdata.glove.codecrule import resolve_sources
 from htdata.ingest.executors import make_executor, usable_cores
 from htdata.format.table import INGEST_REPORT
@@ -103,6 +105,9 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         check_unique_ids(refs)
         # the codec rule needs the run's gloves: resolved after discovery, before anything is fingerprinted
         sources = resolve_sources(sources, refs, parent.manifest["codec"]["tactile"] if parent else None)
+        sources = [dataclasses.replace(s, pipeline=s.pipeline.with_maps(resolve_map_storage(
+            s.pipeline.tactile.maps, s.pipeline.tactile.keep_raw, s.pipeline.tactile.raster_mode,
+            parent.manifest if parent else None))) for s in sources]
         check_compatible(parent, sources)
         # pipeline (CLI) order, then episode id: the order units are numbered in
         pairs = [(r, s) for s, rs in zip(sources, refs) for r in sorted(rs, key=lambda r: r.episode_id)]

@@ -81,8 +81,8 @@ def codec_settings(cfg: PipelineConfig) -> CodecSettings:
 def spool_episode(ref, cfg: PipelineConfig, adapter, spool: Spool, clock: StageClock) -> EpisodeTally:
     """Encode and spool every kept frame of one episode; raise on any failure."""
     settings = codec_settings(cfg)
-    with_maps = cfg.tactile.maps == "stored"   # "raw": readers render the maps from the raw rows
-    stream = EpisodeStream(ref, cfg, adapter, clock)
+    with_maps = cfg.tactile.maps != "raw"   # "raw": readers render the maps from the raw rows (resolved by the driver)
+    stream = EpisodeStream(ref, cfg, adapter, clock, with_maps=with_maps)   # no map rendered that is not stored
     spool.start()
     for frame in stream:
         with frame_errors(ref, frame.source_frame):
