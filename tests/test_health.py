@@ -109,3 +109,17 @@ def test_validate_warns_from_the_stats_cache_or_deep(tmp_path):
     hits = [w for w in cached["warnings"] if w["what"] == "taxel_health"]
     assert [(w["episode"], w["found"]) for w in hits] == [("faulty", {"stuck": len(live_cells(RIGHT)[::8])})]
     assert report["ok"]
+
+
+@pytest.mark.parametrize("block", [7, 64, 10**6])
+def test_frame_blocks_give_the_same_classes(monkeypatch, block):
+    """The per-frame tests run in blocks of frames (memory bounded by the block): the classes do not change."""
+    layout = load_layout(LEFT)
+    H, W = layout.grid
+    g = clean_series(LEFT, 700, seed=5, blobs=4)
+    press = np.clip(np.sin(np.arange(700) / 6.0), 0, None) * 0.8
+    g[:, 14:17, 2:5] = press[:, None, None]
+    g[:, 15, [c for c in range(6, W) if layout.live_mask[15, c]]] += 0.3 * press[:, None]   # a ghost row
+    reference = _classify(g, LEFT)
+    monkeypatch.setattr(health, "BLOCK_FRAMES", block)
+    assert _classify(g, LEFT) == reference and reference["counts"]["crosstalk"] > 0

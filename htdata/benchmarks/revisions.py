@@ -81,6 +81,7 @@ def _pipelines(tree: Path, sources: dict[str, Path]) -> list[str]:
 def revision_rows(work: Path, episode: Path, corpus: Path, base: str = ROUND_ONE, reps: int = 3,
                   corpus_reps: int = 2, adapters: tuple[str, ...] = ("opentouch", "touchanything", "native")) -> dict:
     """Base revision vs the current code (see the module docstring); {"skipped": why} without a checkout."""
+    work, episode, corpus = Path(work).resolve(), Path(episode).resolve(), Path(corpus).resolve()  # children run in the trees
     repo = checkout_root()
     if repo is None:
         return {"base": base, "skipped": "htdata is not running from a git checkout (installed package)"}

@@ -184,6 +184,15 @@ def _neighbour_tables(taxels: TaxelGrid) -> tuple[np.ndarray, np.ndarray, np.nda
     return near, pairs, counts
 
 
+# Frames per block of the per-frame tests below: they only sum over frames, so blocks give the same
+# counts with memory bounded by the block, not by the episode's length.
+BLOCK_FRAMES = 512
+
+
+def _blocks(x: np.ndarray):
+    return (x[i:i + BLOCK_FRAMES] for i in range(0, len(x), BLOCK_FRAMES))
+
+
 def _exercised(x: np.ndarray, taxels: TaxelGrid, ignore: np.ndarray) -> np.ndarray:
     """(L,) bool: enough neighbours (not in `ignore`) were pressed in enough frames to expect a reading.
 
@@ -191,16 +200,32 @@ def _exercised(x: np.ndarray, taxels: TaxelGrid, ignore: np.ndarray) -> np.ndarr
     them on opposite sides; vectorised over frames and taxels through padded neighbour tables.
     """
     near, pairs, counts = _neighbour_tables(taxels)
-    pressed = (x >= PRESSED_LEVEL) & ~ignore
-    padded = np.concatenate([pressed, np.zeros((len(x), 1), bool)], axis=1)   # index -1 = never pressed
-    n_pressed = padded[:, near].sum(axis=2)                                    # (T, L)
-    around = (padded[:, pairs[:, :, 0]] & padded[:, pairs[:, :, 1]]).any(axis=2)
-    enough = n_pressed >= np.minimum(DEAD_NEIGHBOURS, counts)
-    return (counts > 0) & ((around & enough).sum(axis=0) >= EXERCISED_FRAMES)
+    frames = np.zeros(len(counts), np.int64)
+    for block in _blocks(x):
+        pressed = (block >= PRESSED_LEVEL) & ~ignore
+        padded = np.concatenate([pressed, np.zeros((len(block), 1), bool)], axis=1)   # index -1 = never pressed
+        n_pressed = padded[:, near].sum(axis=2, dtype=np.int8)                         # (T, L), <= 8 neighbours
+        around = (padded[:, pairs[:, :, 0]] & padded[:, pairs[:, :, 1]]).any(axis=2)
+        frames += (around & (n_pressed >= np.minimum(DEAD_NEIGHBOURS, counts))).sum(axis=0)
+    return (counts > 0) & (frames >= EXERCISED_FRAMES)
 
 
 def _crosstalk(x: np.ndarray, taxels: TaxelGrid) -> np.ndarray:
     """(L,) bool: the taxel lights up with its raw row / column mates and nothing around the line."""
+    L = len(taxels.cells)
+    n_ghost, n_active = np.zeros((2, L), np.int64), np.zeros(L, np.int64)
+    for block in _blocks(x):
+        ghost, active = _crosstalk_counts(block, taxels)
+        n_ghost += ghost
+        n_active += active
+    found = np.zeros(L, bool)
+    for axis in (0, 1):
+        found |= (n_ghost[axis] >= CROSSTALK_MIN_FRAMES) & (n_ghost[axis] > CROSSTALK_SHARE * np.maximum(n_active, 1))
+    return found
+
+
+def _crosstalk_counts(x: np.ndarray, taxels: TaxelGrid) -> tuple[np.ndarray, np.ndarray]:
+    """((2, L) frames each taxel was a ghost on a row / column line, (L,) frames it was active) in `x`."""
     H, W = taxels.grid
     T = x.shape[0]
     grid = np.zeros((T, H + 2, W + 2), bool)       # one cell of padding: no wrap-around
@@ -208,7 +233,7 @@ def _crosstalk(x: np.ndarray, taxels: TaxelGrid) -> np.ndarray:
     grid[:, r, c] = x > CONTACT_LEVEL
     live = np.zeros((H + 2, W + 2), bool)
     live[r, c] = True
-    found = np.zeros(len(r), bool)
+    n_ghost = np.zeros((2, len(r)), np.int64)
     for axis in (0, 1):                            # 0: row lines (look above/below), 1: column lines
         side = np.zeros_like(grid)
         sides_live = []
@@ -222,12 +247,10 @@ def _crosstalk(x: np.ndarray, taxels: TaxelGrid) -> np.ndarray:
         # quiet sides only mean "no contact nearby" where BOTH sides have live taxels to be quiet
         watched = (np.minimum(*sides_live) >= 1) & (sides_live[0] + sides_live[1] >= CROSSTALK_SIDE_TAXELS)
         isolated = grid & ~side & watched
-        mates = isolated.sum(axis=2 if axis == 0 else 1, keepdims=True) - isolated
-        ghost = isolated & (mates >= CROSSTALK_LINE_MATES)
-        n_ghost = ghost[:, r, c].sum(axis=0)
-        n_active = grid[:, r, c].sum(axis=0)
-        found |= (n_ghost >= CROSSTALK_MIN_FRAMES) & (n_ghost > CROSSTALK_SHARE * np.maximum(n_active, 1))
-    return found
+        line = isolated.sum(axis=2 if axis == 0 else 1, keepdims=True, dtype=np.int16)   # a line < 2**15 taxels
+        ghost = isolated & (line - isolated >= CROSSTALK_LINE_MATES)
+        n_ghost[axis] = ghost[:, r, c].sum(axis=0)
+    return n_ghost, grid[:, r, c].sum(axis=0)
 
 
 def record_entry(chunks: list[np.ndarray], layout: Layout) -> dict:
