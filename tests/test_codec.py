@@ -127,3 +127,23 @@ def test_codec_benchmark_reports_every_codec():
     assert by["exr_float_zip"]["max_error"] == 0.0
     with pytest.raises(ValueError):
         codec_benchmark(np.zeros((0, 224, 224), np.float32))
+
+
+def test_encode_npy_is_np_save_byte_for_byte():
+    """The cached-header fast path gives np.save's exact bytes, for every order, dtype and shape."""
+    import io
+
+    from htdata.format.codec import encode_npy
+
+    def reference(a):
+        buf = io.BytesIO()
+        np.save(buf, np.asarray(a), allow_pickle=False)
+        return buf.getvalue()
+
+    rng = np.random.default_rng(0)
+    cases = [rng.random((3, 21, 21)).astype(np.float32), rng.random((1, 16, 16)).astype(np.float16),
+             np.arange(7, dtype=np.int64), rng.random((5, 4)).astype(">f4"), np.asfortranarray(rng.random((4, 5))),
+             rng.random((4, 5))[:, ::2], rng.random((4, 5)), np.zeros((0, 21, 21), np.float32), np.float32(3.5),
+             np.array(True)]
+    for a in cases + cases:            # the second pass takes the cached headers
+        assert encode_npy(a) == reference(a), (np.asarray(a).dtype, np.shape(a))

@@ -243,3 +243,12 @@ def test_member_header_is_tarfiles_own_bytes():
         member_header("y" * 101, 1)
     with pytest.raises(ValueError):              # beyond 11 octal digits: tarfile's own refusal
         member_header("big", 8**11)
+
+
+def test_sample_record_to_dict_is_asdict():
+    import dataclasses
+
+    from htdata.format.shardio import SampleRecord
+
+    rec = SampleRecord(key="k__000001", shard=2, offset=1536, sizes={"json": 10, "rgb.jpg": 99})
+    assert rec.to_dict() == dataclasses.asdict(rec) and rec.to_dict()["sizes"] is not rec.sizes

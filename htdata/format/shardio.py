@@ -179,6 +179,10 @@ class SampleRecord:
     offset: int                       # byte offset of the first member's header
     sizes: dict[str, int] = field(default_factory=dict)  # member suffix -> bytes
 
+    def to_dict(self) -> dict:
+        """dataclasses.asdict's result, built directly (asdict deep-copies: ~1% of an ingest for every sample)."""
+        return {"key": self.key, "shard": self.shard, "offset": self.offset, "sizes": dict(self.sizes)}
+
 
 class _HashingFile:
     """Write-through file that hashes and counts the bytes written."""

@@ -160,10 +160,10 @@ def run_unit(task) -> dict:
         "unit": task.unit, "fingerprint": task.fingerprint(),
         "episode_ids": [r.episode_id for r in task.episodes],
         "shards": [dataclasses.asdict(s) for s in shards],
-        "samples": [dataclasses.asdict(s) for s in samples],
+        "samples": [s.to_dict() for s in samples],
         "episodes": episodes, "failures": failures, "dropped": dropped, "layouts": layouts,
         "calibrations": calibrations,
         "seconds": time.perf_counter() - t0, "timing": clock.as_record(),
     }
-    write_bytes_atomic(unit_record_path(out, task.unit), dumps(record))
+    write_bytes_atomic(unit_record_path(out, task.unit), dumps(record, compact=True))
     return record
