@@ -65,19 +65,21 @@ def ingest_run(pipelines: list[tuple[str, Path]], out: Path, workers: int, setti
     return row
 
 
-def adapter_rows(corpus: Path, work: Path, adapters: tuple[str, ...], reps: int = 3) -> dict:
+def adapter_rows(corpus: Path, work: Path, adapters: tuple[str, ...], reps: int = 3,
+                 settings: tuple[str, ...] = ()) -> dict:
     """Per adapter: a 1-worker ingest and the bare bound on the same episodes, alternated `reps` times.
 
     Ours and the bound run back to back in each rep, so machine drift hits both; the overhead is the
-    median over reps of each pair's ratio (in-worker seconds per frame vs the bound's).
+    median over reps of each pair's ratio (in-worker seconds per frame vs the bound's). `settings`:
+    `--set` overrides for both (e.g. "tactile.maps=stored": the bound then encodes the maps too).
     """
     rows, bounds, summary = [], {}, []
     for name in adapters:
         root = corpus / name
-        cfg, adapter, refs = discover(name, root)
+        cfg, adapter, refs = discover(name, root, settings)
         pairs = []
         for rep in range(reps):
-            run = ingest_run([(name, root)], work / f"ingest_{name}_w1", 1)
+            run = ingest_run([(name, root)], work / f"ingest_{name}_w1", 1, settings)
             run["rep"] = rep
             bound = bare_bound(cfg, adapter, refs)
             rows.append(run)

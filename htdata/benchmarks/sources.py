@@ -38,9 +38,11 @@ class EpisodeMaps:
     tactile_index: dict[str, np.ndarray] = field(default_factory=dict)
 
 
-def discover(pipeline: str, root: Path) -> tuple[PipelineConfig, object, list]:
-    """The pipeline, its adapter and its episodes, planned as ingest plans them (layouts resolved)."""
+def discover(pipeline: str, root: Path, settings: tuple[str, ...] = ()) -> tuple[PipelineConfig, object, list]:
+    """The pipeline (with `--set` overrides), its adapter and its episodes, planned as ingest plans them."""
     cfg = load_pipeline(pipeline)
+    if settings:
+        cfg = cfg.with_overrides(list(settings))
     adapter = get_adapter(cfg.adapter.name)
     refs = [resolve_layouts(r, cfg) for r in adapter.discover(Path(root), cfg.adapter.params)]
     cfg = resolve_sources([Source(pipeline=cfg, root=Path(root))], [refs])[0].pipeline   # the codec an ingest picks
