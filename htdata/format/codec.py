@@ -220,7 +220,8 @@ _NPY_SAVE_HEADERS: dict[tuple[str, tuple], bytes] = {}
 def encode_npy(array: np.ndarray) -> bytes:
     """np.save bytes (no pickle): dtype and shape travel with the data; byte-identical to np.save."""
     arr = np.asarray(array)
-    fast = arr.flags.c_contiguous and not arr.dtype.hasobject   # np.save writes others F-ordered or copied
+    # np.save writes an F-contiguous (not C) array in Fortran order; anything else as C-order bytes
+    fast = not (arr.flags.f_contiguous and not arr.flags.c_contiguous) and not arr.dtype.hasobject
     key = (arr.dtype.str, arr.shape)
     header = _NPY_SAVE_HEADERS.get(key) if fast else None
     if header is None:

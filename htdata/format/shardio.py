@@ -273,12 +273,14 @@ class ShardWriter:
         out = self._out
         record = SampleRecord(key=key, shard=len(self.shards), offset=out.size,
                               sizes={s: len(d) for s, d in ordered})
+        parts = []
         for suffix, data in ordered:
-            out.write(member_header(f"{key}.{suffix}", len(data)))
-            out.write(bytes(data))
+            parts.append(member_header(f"{key}.{suffix}", len(data)))
+            parts.append(data)
             pad = padded(len(data)) - len(data)
             if pad:
-                out.write(b"\0" * pad)
+                parts.append(bytes(pad))
+        out.write(b"".join(parts))   # one write and one hash update per sample, not three per member
         self._count += 1
         self._last_key = key
         self.samples.append(record)
