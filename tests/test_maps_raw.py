@@ -226,3 +226,8 @@ def test_an_explicit_raw_onto_stored_maps_is_refused(pair, tmp_path, capsys):
     corpus = Path(pair[0]).parent / "raw"
     assert ingest_cli("--pipeline", f"native={corpus / 'native'}", "--set", "tactile.maps=raw", copy) != 0
     assert "tactile.maps" in capsys.readouterr().err
+
+
+def test_auto_can_be_written_out_and_is_the_default():
+    assert load_pipeline("opentouch").tactile.maps == "auto"
+    assert load_pipeline("opentouch").with_overrides(["tactile.maps=auto"]).tactile.maps == "auto"
