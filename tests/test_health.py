@@ -123,3 +123,24 @@ def test_frame_blocks_give_the_same_classes(monkeypatch, block):
     reference = _classify(g, LEFT)
     monkeypatch.setattr(health, "BLOCK_FRAMES", block)
     assert _classify(g, LEFT) == reference and reference["counts"]["crosstalk"] > 0
+
+
+def test_neighbour_median_is_nanmedian():
+    """The sorted-table median equals np.nanmedian over each taxel's neighbours (NaN ignored, none = inf)."""
+    rng = np.random.default_rng(0)
+    for layout_id in (LEFT, RIGHT):
+        taxels = health.TaxelGrid.of(load_layout(layout_id))
+        for trial in range(60):
+            v = rng.random(len(taxels.cells)).astype(np.float32)
+            if trial % 3 == 0:
+                v[rng.random(v.size) < 0.3] = np.nan
+            if trial % 5 == 0:
+                v[:] = np.nan
+            if trial % 7 == 0:
+                v = np.round(v * 4) / 4                       # ties
+            width = max(len(n) for n in taxels.neighbours)
+            table = np.full((v.size, width), np.nan)
+            for i, near in enumerate(taxels.neighbours):
+                table[i, :len(near)] = v[near]
+            table[np.isnan(table).all(axis=1)] = np.inf
+            assert np.array_equal(health._neighbour_median(v, taxels), np.nanmedian(table, axis=1), equal_nan=True)

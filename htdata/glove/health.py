@@ -150,14 +150,19 @@ def classify(series: np.ndarray, taxels: TaxelGrid) -> dict:
 
 
 def _neighbour_median(values: np.ndarray, taxels: TaxelGrid) -> np.ndarray:
-    """(L,) median of each taxel's neighbours' values (inf for a taxel without neighbours)."""
-    width = max((len(n) for n in taxels.neighbours), default=0)
-    table = np.full((len(values), max(width, 1)), np.nan)
-    for i, near in enumerate(taxels.neighbours):
-        table[i, :len(near)] = values[near]
-    lonely = np.isnan(table).all(axis=1)
-    table[lonely] = np.inf
-    return np.nanmedian(table, axis=1)
+    """(L,) median of each taxel's neighbours' non-NaN values (inf for a taxel without any).
+
+    np.nanmedian's result, through the cached neighbour table and one sort (NaN sorts last): nanmedian
+    goes through masked arrays, and this ran once per hand and episode.
+    """
+    near = _neighbour_tables(taxels)[0]
+    table = np.append(np.asarray(values, np.float64), np.nan)[near]     # index -1 = no neighbour = NaN
+    table.sort(axis=1)
+    n = (~np.isnan(table)).sum(axis=1)
+    rows = np.arange(len(table))
+    # the middle one (odd n) or the two middle ones (even n) of the n values sorted first in each row
+    lo, hi = table[rows, np.maximum(n - 1, 0) // 2], table[rows, n // 2]
+    return np.where(n > 0, (lo + hi) / 2, np.inf)
 
 
 def _neighbour_tables(taxels: TaxelGrid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -224,6 +229,28 @@ def _crosstalk(x: np.ndarray, taxels: TaxelGrid) -> np.ndarray:
     return found
 
 
+def _watched(taxels: TaxelGrid) -> tuple[np.ndarray, np.ndarray]:
+    """Per line axis (0: rows, 1: columns), the padded cells whose two sides both have live taxels to be
+    quiet ("no contact nearby" means nothing elsewhere); depends on the layout only, so kept on the grid."""
+    cached = taxels.__dict__.get("_watched")
+    if cached is not None:
+        return cached
+    H, W = taxels.grid
+    live = np.zeros((H + 2, W + 2), bool)
+    live[taxels.cells[:, 0] + 1, taxels.cells[:, 1] + 1] = True
+    out = []
+    for axis in (0, 1):
+        sides_live = []
+        for d in (-1, 1):
+            n_live = np.zeros(live.shape, np.int64)
+            for e in (-1, 0, 1):
+                n_live += np.roll(live, (d, e) if axis == 0 else (e, d), axis=(0, 1))
+            sides_live.append(n_live)
+        out.append((np.minimum(*sides_live) >= 1) & (sides_live[0] + sides_live[1] >= CROSSTALK_SIDE_TAXELS))
+    object.__setattr__(taxels, "_watched", tuple(out))
+    return tuple(out)
+
+
 def _crosstalk_counts(x: np.ndarray, taxels: TaxelGrid) -> tuple[np.ndarray, np.ndarray]:
     """((2, L) frames each taxel was a ghost on a row / column line, (L,) frames it was active) in `x`."""
     H, W = taxels.grid
@@ -231,22 +258,13 @@ def _crosstalk_counts(x: np.ndarray, taxels: TaxelGrid) -> tuple[np.ndarray, np.
     grid = np.zeros((T, H + 2, W + 2), bool)       # one cell of padding: no wrap-around
     r, c = taxels.cells[:, 0] + 1, taxels.cells[:, 1] + 1
     grid[:, r, c] = x > CONTACT_LEVEL
-    live = np.zeros((H + 2, W + 2), bool)
-    live[r, c] = True
     n_ghost = np.zeros((2, len(r)), np.int64)
     for axis in (0, 1):                            # 0: row lines (look above/below), 1: column lines
         side = np.zeros_like(grid)
-        sides_live = []
         for d in (-1, 1):
-            n_live = np.zeros(live.shape, np.int64)
             for e in (-1, 0, 1):
-                shift = (d, e) if axis == 0 else (e, d)
-                side |= np.roll(grid, shift, axis=(1, 2))
-                n_live += np.roll(live, shift, axis=(0, 1))
-            sides_live.append(n_live)
-        # quiet sides only mean "no contact nearby" where BOTH sides have live taxels to be quiet
-        watched = (np.minimum(*sides_live) >= 1) & (sides_live[0] + sides_live[1] >= CROSSTALK_SIDE_TAXELS)
-        isolated = grid & ~side & watched
+                side |= np.roll(grid, (d, e) if axis == 0 else (e, d), axis=(1, 2))
+        isolated = grid & ~side & _watched(taxels)[axis]
         line = isolated.sum(axis=2 if axis == 0 else 1, keepdims=True, dtype=np.int16)   # a line < 2**15 taxels
         ghost = isolated & (line - isolated >= CROSSTALK_LINE_MATES)
         n_ghost[axis] = ghost[:, r, c].sum(axis=0)
