@@ -171,18 +171,27 @@ def test_truth_level_is_stated():
     assert 0 < TRUTH_LEVEL < 0.2
 
 
-def test_ingest_stats_and_renormalise_with_the_activity_baselines(tmp_path):
-    from htdata.read.reader import DatasetReader
-    from htdata.inspect.stats import dataset_stats
+def _ingest_rawglove(tmp_path, pipeline_name: str, tables: str):
+    """The raw-count glove corpus under tmp_path/rg, ingested with a native pipeline of these TOML tables;
+    returns (pipeline path, dataset path)."""
     from tests.factories import ingest_cli
 
     write_rawglove(tmp_path / "rg")
-    pipe = tmp_path / "rawknit.toml"
-    pipe.write_text('name = "rawknit"\n[adapter]\nname = "native"\n[adapter.params]\n[tactile]\nkeep_raw = true\nmaps = "stored"\n'
-                    '[normalise.rawknit_left_32x32]\nbaseline = "quietest"\nnoise_k = 3\n'
-                    '[normalise.rawknit_right_32x32]\nbaseline = "drift"\ndrift_window_s = 2\nnoise_k = 3\n')
+    pipe = tmp_path / pipeline_name
+    pipe.write_text('name = "rawknit"\n[adapter]\nname = "native"\n[adapter.params]\n' + tables)
     out = tmp_path / "ds"
     assert ingest_cli("--pipeline", pipe, "--layouts", tmp_path / "rg" / "layouts", tmp_path / "rg", out) == 0
+    return pipe, out
+
+
+def test_ingest_stats_and_renormalise_with_the_activity_baselines(tmp_path):
+    from htdata.read.reader import DatasetReader
+    from htdata.inspect.stats import dataset_stats
+
+    pipe, out = _ingest_rawglove(tmp_path, "rawknit.toml",
+                                 '[tactile]\nkeep_raw = true\nmaps = "stored"\n'
+                                 '[normalise.rawknit_left_32x32]\nbaseline = "quietest"\nnoise_k = 3\n'
+                                 '[normalise.rawknit_right_32x32]\nbaseline = "drift"\ndrift_window_s = 2\nnoise_k = 3\n')
     with DatasetReader(out) as reader:
         cals = reader.manifest["calibrations"]
         assert sorted(e["baseline"] for e in cals.values()) == ["drift", "quietest"]
@@ -247,15 +256,11 @@ def test_ingest_with_a_taxel_calibration_file_and_renormalise_from_the_record(tm
     from htdata.cli import main
     from htdata.read.reader import DatasetReader
     from htdata.inspect.stats import dataset_stats
-    from tests.factories import ingest_cli
 
-    write_rawglove(tmp_path / "rg")
-    pipe = tmp_path / "rg" / "rawknit_cal.toml"          # the calibration path is relative to this file
-    pipe.write_text('name = "rawknit"\n[adapter]\nname = "native"\n[adapter.params]\n'
-                    '[normalise.rawknit_right_32x32]\ntaxel_calibration = "layouts/rawknit_right_32x32.calibration.npz"\n'
-                    'baseline = "quietest"\nnoise_k = 3\n')
-    out = tmp_path / "ds"
-    assert ingest_cli("--pipeline", pipe, "--layouts", tmp_path / "rg" / "layouts", tmp_path / "rg", out) == 0
+    pipe, out = _ingest_rawglove(tmp_path, "rg/rawknit_cal.toml",   # the calibration path is relative to this file
+                                 '[normalise.rawknit_right_32x32]\n'
+                                 'taxel_calibration = "layouts/rawknit_right_32x32.calibration.npz"\n'
+                                 'baseline = "quietest"\nnoise_k = 3\n')
     with DatasetReader(out) as reader:
         entry = next(e for e in reader.manifest["calibrations"].values() if e["layout"] == "rawknit_right_32x32")
         assert len(entry["taxel_calibration_sha256"]) == 64 and "taxel_calibration" not in entry
