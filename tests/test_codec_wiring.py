@@ -2,7 +2,6 @@
 
 import json
 
-import numpy as np
 
 from htdata.format.codec import decode_exr_pixels
 from htdata.read.reader import DatasetReader

@@ -151,7 +151,7 @@ def test_renormalise_with_the_original_calibration_is_byte_identical(tmp_path, n
 
 def test_renormalise_to_a_new_calibration_and_back(tmp_path, native_counts):
     out, _, _ = native_counts
-    setting = [f"--set", f"normalise.{LAYOUT}.baseline=rest_window", "--set", f"normalise.{LAYOUT}.noise_k=3"]
+    setting = ["--set", f"normalise.{LAYOUT}.baseline=rest_window", "--set", f"normalise.{LAYOUT}.noise_k=3"]
     assert cli(["renormalise", str(out), "--pipeline", "native", "--dry-run", *setting]) == 0
     assert load_manifest(out)["version"] == 1                         # dry run wrote nothing
     assert cli(["renormalise", str(out), "--pipeline", "native", *setting]) == 0
@@ -228,7 +228,7 @@ def test_a_format_2_index_is_read_as_the_current_dtype(native_counts):
     np.save(buf, legacy)
     index_path.write_bytes(buf.getvalue())
     again = load_index(out)
-    assert again.dtype == rows.dtype and not again[f"size_raw_right"].any()
+    assert again.dtype == rows.dtype and not again["size_raw_right"].any()
     assert all(np.array_equal(again[n], rows[n]) for n in LEGACY_INDEX_DTYPE.names)
     assert INDEX_FILE == "index.npy"
 

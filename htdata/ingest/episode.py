@@ -75,10 +75,8 @@ class Frame:
             self.meta.update({"raw_t_ns": t_ns, "raw_row": rows, "raw_paired": paired})
         return self
 
-    def sample(self, with_maps: bool = True) -> dict:
-        """The sample dict to encode; without the maps for a dataset whose readers render them ([tactile] maps)."""
-        return {"meta": self.meta, "rgb": self.rgb, "tactile": self.maps if with_maps else {}, "bend": self.bends,
-                "raw": self.raw}
+    def sample(self) -> dict:
+        return {"meta": self.meta, "rgb": self.rgb, "tactile": self.maps, "bend": self.bends, "raw": self.raw}
 
 
 @contextmanager
@@ -188,8 +186,7 @@ def _fit_episode_baselines(ref, cfg: PipelineConfig, adapter, streams, sync, nor
                 raise EpisodeError(ref, None, f"{h} hand baseline {normalisers[h].cfg.baseline!r}: {exc}") from exc
 
 
-def _kept_values(values: dict, keep: np.ndarray, layouts: dict, rasters: dict, keep_bend: dict,
-                 tally: EpisodeTally):
+def _kept_values(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict, tally: EpisodeTally):
     """Normalised taxels (and bend vectors) of a chunk's kept frames; their contact goes into the tally.
 
     Maps are rendered one frame at a time as each frame leaves (`_frame_maps`): a chunk of
@@ -199,7 +196,7 @@ def _kept_values(values: dict, keep: np.ndarray, layouts: dict, rasters: dict, k
     kept, bends = {}, {}
     for h in tally.hands if keep.size else ():
         kept[h] = values[h][keep]
-        tally.add_contact(h, kept[h][:, layouts[h].live_mask])
+        tally.add_contact(h, kept[h][:, tally.layouts[h].live_mask])
         if keep_bend[h]:
             bends[h] = rasters[h].bend_vector(kept[h])
     return kept, bends
@@ -318,7 +315,7 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
                     for j in np.flatnonzero(~ok):
                         fetcher.discard(rgb_idx[j])
                 with clock.stage("rasterise"):
-                    kept, bends = _kept_values(values, np.flatnonzero(ok), layouts, rasters, keep_bend, tally)
+                    kept, bends = _kept_values(values, np.flatnonzero(ok), rasters, keep_bend, tally)
             n = 0
             for j in range(stop - start):
                 k, i = start + j, int(rgb_idx[j])

@@ -81,13 +81,13 @@ def codec_settings(cfg: PipelineConfig) -> CodecSettings:
 def spool_episode(ref, cfg: PipelineConfig, adapter, spool: Spool, clock: StageClock) -> EpisodeTally:
     """Encode and spool every kept frame of one episode; raise on any failure."""
     settings = codec_settings(cfg)
-    with_maps = cfg.tactile.maps != "raw"   # "raw": readers render the maps from the raw rows (resolved by the driver)
-    stream = EpisodeStream(ref, cfg, adapter, clock, with_maps=with_maps)   # no map rendered that is not stored
+    # "raw" (resolved by the driver): no map rendered or stored; readers render them from the raw rows
+    stream = EpisodeStream(ref, cfg, adapter, clock, with_maps=cfg.tactile.maps != "raw")
     spool.start()
     for frame in stream:
         with frame_errors(ref, frame.source_frame):
             with clock.stage("encode"):
-                members = encode_sample(frame.sample(with_maps), settings, where=frame.key)
+                members = encode_sample(frame.sample(), settings, where=frame.key)
             with clock.stage("write"):
                 spool.add(frame.key, members)
     return stream.finished_tally()

@@ -24,7 +24,6 @@ from htdata.read.reader import DatasetReader
 from htdata.validate.content import check_map_values
 from htdata.validate.geometry import CoverageGeometry
 from htdata.validate.report import Check, Recorder
-from htdata.validate.sensors import hand_key
 
 FLOAT_TOLERANCE = 1e-6
 SERVED_FRACTION = 0.1
