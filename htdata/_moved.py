@@ -1,11 +1,19 @@
-"""Old module names of the flat htdata root, kept importable for one release (deprecated).
+"""Old names of htdata, kept importable until `REMOVED_IN` (deprecated): the one shim mechanism.
 
 Round three regrouped htdata by concern (htdata/__init__.py). Code written
-against the old names (`from htdata.reader import DatasetReader`,
-`import htdata.torchdata`) keeps working: `install()` puts a finder on
-sys.meta_path that answers an old name with the module at its new place (the
-same module object, so monkeypatching and isinstance checks agree), and warns
-once with a DeprecationWarning naming the new place. Remove in htdata 0.3.
+against the old names keeps working, and every old name warns with a
+DeprecationWarning naming its new place:
+
+- old modules (`from htdata.reader import DatasetReader`, `import htdata.torchdata`):
+  `install()` puts a finder on sys.meta_path that answers an old name with the
+  module at its new place (the same module object, so monkeypatching and
+  isinstance checks agree);
+- old names of a package that kept its name (`from htdata.format import SHARDS_DIR`,
+  `htdata.curate.rm_episodes`): the package's `__getattr__` calls `moved_name`.
+
+`REMOVED_IN` is the one place that says when all of it goes;
+tests/test_moved.py fails once htdata's version reaches it, so the shim cannot
+outlive its promise unnoticed.
 """
 
 from __future__ import annotations
@@ -15,6 +23,9 @@ import importlib.abc
 import importlib.util
 import sys
 import warnings
+
+# The htdata version that deletes this module and the two `__getattr__` hand-offs below.
+REMOVED_IN = (0, 3)
 
 # old name -> new name (a package's submodules follow it: htdata.adapters.base -> htdata.source.adapters.base)
 MOVED = {
@@ -40,7 +51,11 @@ MOVED = {
     "htdata.card": "htdata.inspect.card", "htdata.preview": "htdata.inspect.preview",
     "htdata.executors": "htdata.ingest.executors", "htdata.bench": "htdata.benchmarks.suite",
 }
-# htdata.format and htdata.curate kept their names as packages: their __init__ hands the old names on.
+# Packages that kept their names: an attribute they no longer have is looked up in this module.
+MOVED_NAMES = {
+    "htdata.format": "htdata.format.table",   # the format was one module: its names are the table's now
+    "htdata.curate": "htdata.curate.edit",    # `htdata.curate` was one module: rm / trim are edit.py now
+}
 
 
 def new_name(fullname: str) -> str | None:
@@ -49,6 +64,20 @@ def new_name(fullname: str) -> str | None:
         if fullname == old or fullname.startswith(old + "."):
             return new + fullname[len(old):]
     return None
+
+
+def moved_name(package: str, name: str):
+    """`package.name` from the module it moved to (MOVED_NAMES), with a DeprecationWarning.
+
+    For a package's module-level `__getattr__`: AttributeError, as Python expects, when
+    the old module never had that name either.
+    """
+    target = importlib.import_module(MOVED_NAMES[package])
+    if name.startswith("__") or not hasattr(target, name):
+        raise AttributeError(f"module {package!r} has no attribute {name!r}")
+    warnings.warn(f"{package}.{name} is deprecated: it moved to {target.__name__}.{name}",
+                  DeprecationWarning, stacklevel=3)
+    return getattr(target, name)
 
 
 class _Alias(importlib.abc.Loader):

@@ -34,7 +34,10 @@ from htdata.benchmarks.revisions import export_revision  # noqa: E402  (the same
 
 READS = """
 import sys, time, numpy as np
-from htdata.reader import DatasetReader   # the old name: it imports in every revision (htdata/_moved.py)
+try:   # the current name, else the flat name older revisions have as a real module (no shim needed)
+    from htdata.read.reader import DatasetReader
+except ImportError:
+    from htdata.reader import DatasetReader
 r = DatasetReader(sys.argv[1]); n = len(r)
 idx = np.random.default_rng(0).integers(0, n, 400)
 r.decoded(int(idx[0]))
@@ -45,7 +48,10 @@ print(len(idx) / (time.perf_counter() - t))
 
 ITEMS = """
 import sys, time, numpy as np
-from htdata.torchdata import TactileFrameDataset   # (the old name, as above)
+try:   # (as above)
+    from htdata.read.torchdata import TactileFrameDataset
+except ImportError:
+    from htdata.torchdata import TactileFrameDataset
 d = TactileFrameDataset(sys.argv[1]); n = len(d)
 idx = np.random.default_rng(0).integers(0, n, 400)
 d[int(idx[0])]

@@ -14,17 +14,12 @@ May import: the store, reading, inspection (the stats cache), the glove model, t
 htdata.pipeline and the base modules. Never ingest, validate, the benchmarks or the commands.
 
 Imports inside functions: `__getattr__` hands on the names of the old one-module
-`htdata.curate` (now edit.py) for one release, importing edit.py only when asked.
+`htdata.curate` (now edit.py), with a DeprecationWarning, until htdata/_moved.py's
+REMOVED_IN, importing edit.py only when asked.
 """
 
 
 def __getattr__(name: str):
-    # `htdata.curate` was one module (now edit.py): its names stay reachable for one release.
-    import importlib
-    import warnings
+    from htdata._moved import moved_name   # lazy: see the docstring
 
-    edit = importlib.import_module("htdata.curate.edit")
-    if not hasattr(edit, name):
-        raise AttributeError(f"module 'htdata.curate' has no attribute {name!r}")
-    warnings.warn(f"htdata.curate.{name} moved to htdata.curate.edit.{name}", DeprecationWarning, stacklevel=2)
-    return getattr(edit, name)
+    return moved_name(__name__, name)

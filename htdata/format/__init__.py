@@ -8,19 +8,17 @@
 
 May import: htdata's base modules only. Everything else builds on it.
 
-`from htdata.format import NAME` keeps working for the names of the format table
-(table.py) for one release; new code imports `htdata.format.table`.
+`from htdata.format import NAME` keeps working, with a DeprecationWarning, for the
+names of the format table (table.py) until htdata/_moved.py's REMOVED_IN; new code
+imports `htdata.format.table`.
 
-Imports inside functions: `__getattr__` imports table.py when an old name is
-asked for, so importing htdata.format.codec does not import the table (which
-imports the codecs).
+Imports inside functions: `__getattr__` imports htdata._moved (which imports table.py)
+only when an old name is asked for, so importing htdata.format.codec does not import
+the table (which imports the codecs).
 """
 
 
 def __getattr__(name: str):
-    # Lazy, so that importing htdata.format.codec does not import the table (which imports codec).
-    from htdata.format import table
-    try:
-        return getattr(table, name)
-    except AttributeError:
-        raise AttributeError(f"module 'htdata.format' has no attribute {name!r}") from None
+    from htdata._moved import moved_name   # lazy: see the docstring
+
+    return moved_name(__name__, name)

@@ -1,0 +1,52 @@
+"""The deprecated old names (htdata/_moved.py): one mechanism, every name warns, and an end date."""
+
+import importlib
+import sys
+import warnings
+
+import pytest
+
+import htdata
+from htdata import _moved
+
+
+def _version(text: str) -> tuple[int, ...]:
+    return tuple(int(part) for part in text.split(".")[:2])
+
+
+def test_the_shim_is_removed_by_the_version_it_promised():
+    # Fails on the release that reaches REMOVED_IN: delete htdata/_moved.py, the two package
+    # __getattr__ hand-offs and this test, as the deprecation warnings announced.
+    assert _version(htdata.__version__) < _moved.REMOVED_IN, (
+        f"htdata {htdata.__version__} reached {_moved.REMOVED_IN}: remove the deprecated names")
+
+
+@pytest.mark.parametrize("package, name, target", [
+    ("htdata.format", "SHARDS_DIR", "htdata.format.table"),
+    ("htdata.curate", "plan_edit", "htdata.curate.edit"),
+])
+def test_an_old_name_of_a_package_warns_and_is_the_same_object(package, name, target):
+    module = importlib.import_module(package)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        value = getattr(module, name)
+    assert value is getattr(importlib.import_module(target), name)
+    assert [w.category for w in caught] == [DeprecationWarning]
+    assert f"{target}.{name}" in str(caught[0].message)
+
+
+def test_an_old_module_name_warns():
+    sys.modules.pop("htdata.keys", None)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        old = importlib.import_module("htdata.keys")
+    assert old is importlib.import_module("htdata.read.keys")
+    assert any(w.category is DeprecationWarning and "htdata.read.keys" in str(w.message) for w in caught)
+
+
+@pytest.mark.parametrize("package", ["htdata.format", "htdata.curate"])
+def test_a_name_that_never_existed_is_an_attribute_error(package):
+    module = importlib.import_module(package)
+    with pytest.raises(AttributeError, match="no_such_name"):
+        module.no_such_name  # noqa: B018
+    assert not hasattr(module, "__wrapped__")   # dunder probes (inspect, pickle) stay AttributeErrors
