@@ -255,7 +255,23 @@ def test_cli_list_check_render(tmp_path, capsys):
     png = tmp_path / "ot.png"
     assert main(["layouts", "render", "opentouch_right_16x16", str(png)]) == 0
     img = cv2.imread(str(png))
-    assert img is not None and img.shape[0] == 2 * CANVAS and img.shape[1] > 2 * CANVAS
+    from htdata.commands.layouts import RENDER_BAND
+    assert img is not None and img.shape[0] == RENDER_BAND + 2 * CANVAS and img.shape[1] > 2 * CANVAS
+
+
+def test_render_draws_its_legend_beside_the_blocks_never_over_them(tmp_path):
+    import cv2
+
+    from htdata.commands.layouts import RENDER_BAND, layout_panels, render_layout_png
+
+    for lid in ("opentouch_right_16x16", "touchanything_left_21x21"):
+        layout = load_layout(lid)
+        png = tmp_path / f"{lid}.png"
+        render_layout_png(layout, png)
+        img = cv2.imread(str(png))
+        # the panels are exactly what layout_panels draws (no text on them); the title and legend are in the band
+        assert np.array_equal(img[RENDER_BAND:], layout_panels(layout))
+        assert (img[:RENDER_BAND] > 200).all(axis=2).sum() > 200
 
 
 def test_docs_example_layout_is_valid():
