@@ -351,3 +351,17 @@ def test_cli_lists_user_layouts(tmp_path, capsys):
     _write_layout(tmp_path, "my_glove_32")
     assert main(["layouts", "--layouts", str(tmp_path)]) == 0
     assert "my_glove_32" in capsys.readouterr().out
+
+
+def test_bend_and_dead_cells_are_optional_and_empty_by_default():
+    doc = _doc("opentouch_right_16x16")
+    doc["dead_cells"], doc["bend_cells"] = [], []
+    full = parse_layout(doc, "full.json")
+    lean = {k: v for k, v in doc.items() if k not in ("dead_cells", "bend_cells")}
+    bare = parse_layout(lean, "lean.json")
+    assert bare.dead_cells.shape == (0, 2) and bare.bend_cells.shape == (0, 2)
+    assert np.array_equal(bare.live_mask, full.live_mask)
+    # the fields the schema still requires are named when missing
+    for field in ("source", "blocks", "value"):
+        with pytest.raises(ValueError, match=field):
+            parse_layout({k: v for k, v in lean.items() if k != field}, "x.json")
