@@ -38,6 +38,7 @@ from htdata.store.fsutil import write_bytes_atomic
 from htdata.glove.health import CLASSES, HEALTH_VERSION, merge_counts
 from htdata.read.reader import DatasetReader
 from htdata.inspect.healthmap import write_health_map as write_png
+from htdata.inspect.scalehint import scale_suggestions
 
 STATS_DIR = "stats"
 # /2: values from the raw rows where stored (format 3), raw-unit sketches; the key covers the calibration
@@ -203,7 +204,9 @@ def summarise(reader: DatasetReader, per_episode: list[dict], by: str | None = N
                        "(exact; frames_from_raw) where the dataset has them, else the stored maps sampled at "
                        "taxel centres; raw_quantiles in raw glove units"),
             "gloves": groups, "tasks": _table(reader, "task"), "scenes": _table(reader, "scene"),
-            "health_classes": list(CLASSES), "nan_samples": nan_samples}
+            "health_classes": list(CLASSES), "nan_samples": nan_samples,
+            "contact_rules": sorted({g["contact_rule"] for g in groups if g.get("contact_rule")}),
+            "scale": scale_suggestions(reader, per_episode)}
 
 
 def _key_names(by: str | None) -> tuple:
