@@ -4,9 +4,11 @@ The card opens with what a dataset card has (name, description, licence, sources
 format, how to load it), then holds the `htdata stats` numbers of one version and these plots:
 frames per task and per scene, the contact frequency of each canonical
 region per glove (drawn on the canonical hand), the value histogram per
-glove, the taxel health map, the sync skew, clock-offset and lag distributions
-(episode records' "sync"), the split sizes, and preview strips of a few
-episodes. Every image is a PNG embedded as a data: URI and there is no
+glove (over a range fitted to its values, htdata/inspect/cardplots.py), the
+suggested `scale` per glove layout (htdata/inspect/scalehint.py), the taxel
+health map, the sync skew, clock-offset and lag distributions (episode
+records' "sync"), the split sizes, and preview strips of a few episodes. A
+glove-only dataset (no RGB in any sample) says so and lists no rgb.jpg member. Every image is a PNG embedded as a data: URI and there is no
 script, stylesheet or font from elsewhere, so the page opens offline. The
 Markdown twin (OUT.md) has the same tables and links the same PNGs written
 to OUT_files/.
