@@ -14,10 +14,10 @@ from htdata.inspect import stats
 
 EPILOG = """\
 The text output starts with a short summary (what --brief prints alone), then per glove:
-  contact        fraction of frames in contact by the glove hand's contact rule (htdata/glove/contact.py:
+  contact        fraction of frames in contact by the glove hand's contact rule (docs/USAGE.md "Contact":
                  with a noise floor, a few taxels above it; without one, any taxel above 0.02)
   scale          where a glove's pressed values use less than half of 0..1: a suggested `scale` and the
-                 lines to paste into the pipeline TOML (htdata/inspect/scalehint.py)
+                 lines to paste into the pipeline TOML (docs/USAGE.md "A scale from the data")
   values p1..max quantiles of the normalised [0,1] taxel values; raw: the same in glove units
   health         taxels flagged dead / stuck / noisy / hot (htdata stats --health OUT.png draws them);
                  "quiet and never pressed" = taxels that never left zero, so nothing can be said

@@ -23,7 +23,7 @@ Only the storage files holding touched episodes are rewritten. Splits carry over
 episode leaves its part). An id or glob that matches nothing is an error listing near matches.
 --idle trims, in every episode, the frames before the first and after the last contact of any
 hand, keeping --keep-margin seconds (default 0.5) around them. Contact is each glove hand's
-contact rule from its calibration (htdata/glove/contact.py: with a noise floor, a few taxels
+contact rule from its calibration (docs/USAGE.md "Contact": with a noise floor, a few taxels
 above their floor; without one, any taxel above 0.02); --min-contact X: any taxel above X.
 It prints one line per episode, then one summary line per kind of change.
 
