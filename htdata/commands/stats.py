@@ -98,7 +98,8 @@ def scale_lines(s: dict) -> list[str]:
     out = []
     for layout, hint in (s.get("scale") or {}).items():
         if hint.get("toml"):
-            out += [f"scale {layout}: {hint['reason']}. Paste into the pipeline TOML:",
+            out += [f"scale {layout}: {hint['reason']}. In the pipeline TOML, the scale line goes under the "
+                    f"layout's table (add the table if the pipeline has none):",
                     *(f"    {line}" for line in hint["toml"].splitlines()),
                     f"  then: htdata renormalise {s['dataset']} --pipeline PIPELINE.toml"]
     return out
