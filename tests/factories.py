@@ -355,3 +355,30 @@ def commit_dataset(root: str | os.PathLike, units: list[UnitResult], layouts: li
     parts = [part_from_unit(u) for u in sorted(units, key=lambda u: u.unit)]
     return commit_parts(root, parts, fields, current_snapshot(root), command, created=created,
                         htdata_version=htdata_version, splits=lambda eps, sha: {})
+
+
+# --------------------------------------------------------------------------- a glove-only raw-count dataset
+RAWGLOVE_PIPELINE = ('name = "rawknit"\n[adapter]\nname = "native"\n[adapter.params]\n'
+                     '[tactile]\nkeep_raw = true\n'
+                     '[normalise.rawknit_left_32x32]\nbaseline = "quietest"\nnoise_k = 3\n'
+                     '[normalise.rawknit_right_32x32]\nbaseline = "quietest"\nnoise_k = 3\n')
+
+
+def ingest_rawglove(tmp: Path, clips: int = 2) -> Path:
+    """The sample raw-count glove (htdata.sample.rawglove: glove only, no RGB, faint 32x32 counts), its first
+    `clips` clips ingested with a pipeline named "rawknit" (not its adapter's name) that sets the quietest
+    baseline and a noise floor (so the calibrated contact rule applies); returns the dataset path."""
+    import shutil
+
+    from htdata.sample.rawglove import write_rawglove
+
+    raw = tmp / "rawglove"
+    write_rawglove(raw)
+    for folder in sorted(p for p in raw.iterdir() if p.is_dir() and p.name != "layouts")[clips:]:
+        shutil.rmtree(folder)
+    pipe = tmp / "rawknit.toml"
+    pipe.write_text(RAWGLOVE_PIPELINE)
+    out = tmp / "rawknit_ds"
+    if ingest_cli("--pipeline", pipe, "--layouts", raw / "layouts", raw, out) != 0:
+        raise RuntimeError(f"{raw}: the raw-count glove sample did not ingest")
+    return out

@@ -55,8 +55,8 @@ def test_card_is_self_contained_with_tables_and_images(tmp_path, capsys):
     page.feed(out.read_text())
     page.close()
     assert page.links == [] and page.stack == []                   # offline, and every tag closed
-    # about (licence, size), sources, sample format; tasks, scenes, gloves, split "main"
-    assert page.tables == 7
+    # about (licence, size), sources, sample format; tasks, scenes, gloves, scale, split "main"
+    assert page.tables == 8
     # frames/task + frames/scene + 2 gloves x (regions + values) + health + 2 sync + 2 previews
     assert len(page.images) == 11
     for img in page.images:
@@ -141,3 +141,45 @@ def test_region_map_names_the_digits_and_the_health_legend_names_no_sensor():
     assert panel[30:50, 100:140].max() > 200 and panel[165:185, 60:160].max() > 200     # a label in each place
     assert not panel[80:140].any()                                                      # and nowhere else
     assert any("no sensor" in text for _, text in _legend({"maps"}))
+
+
+# --------------------------------------------------------------------------- a glove-only raw-count dataset
+
+
+def test_glove_only_card_says_what_the_dataset_is(tmp_path):
+    from tests.factories import ingest_rawglove
+
+    root = ingest_rawglove(tmp_path, clips=2)
+    md = tmp_path / "card.md"
+    assert cli_main(["card", str(root), str(tmp_path / "card.html")]) == 0
+    text = md.read_text()
+    # Sources: the pipeline is named "rawknit", its episodes' records name the adapter "native": both count
+    row = next(line for line in text.splitlines() if line.startswith("| rawknit |"))
+    assert row.rstrip().endswith("| 2 |") and "right: rawknit_right_32x32" in row
+    assert "paired with egocentric RGB video" not in text and "glove only" in text
+    assert "| rgb.jpg |" not in text
+    # what the numbers mean: the calibrated rule used, not the old threshold
+    meaning = text.split("## What the numbers mean")[1].split("##")[0]
+    assert "any taxel above 0.02" not in meaning and "quantisation steps above their noise floor" in meaning
+    # a scale suggestion per faint layout, as the line to paste
+    assert re.search(r"\| rawknit_left_32x32 \| \d+ \| 0\.\d+ \| 1\.000 \| \[normalise\.rawknit_left_32x32\] "
+                     r"scale = [\d.]+ \|", text)
+
+
+def test_value_histogram_fits_the_data_and_has_ticks():
+    from htdata.inspect.card import histogram_chart, value_histogram_chart
+    from htdata.inspect.episodestats import HIST_BINS, value_histogram
+    from htdata.inspect.stats import fitted_histogram
+
+    values = np.random.default_rng(0).uniform(0, 0.03, 10_000)      # a faint glove: nothing above 0.03
+    zeros, hist = value_histogram(np.concatenate([values, np.zeros(50)]))
+    h = fitted_histogram(zeros, hist)
+    assert h["range"] == [0.0, 0.05] and h["above"] == 0 and sum(h["counts"]) == 10_000 and h["zeros"] == 50
+    assert sum(c > 0 for c in h["counts"]) >= 25            # spread over the plot, not one bar at 0
+    full = fitted_histogram(0, np.ones(HIST_BINS, np.int64))
+    assert full["range"] == [0.0, 1.0] and sum(full["counts"]) == HIST_BINS
+    img = value_histogram_chart(h, "faint")
+    ticks = histogram_chart([1] * 50, 0.0, 0.05, "t")
+    base = ticks.shape[0] - 24
+    marks = np.flatnonzero((ticks[base + 2:base + 4].mean(axis=(0, 2)) < 128))  # tick marks under the axis
+    assert len(marks) >= 5 and img.shape == ticks.shape

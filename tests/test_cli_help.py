@@ -100,7 +100,7 @@ def test_stats_brief_is_a_short_summary_first(tmp_path, capsys):
     brief = capsys.readouterr().out.strip().split("\n")
     assert len(brief) == 4 and "2 episodes" in brief[0] and "2 tasks" in brief[0]
     assert "contact in" in brief[2] and "flagged" in brief[2]
-    assert brief[1].startswith("contact = a frame where any taxel is above")
+    assert brief[1].startswith("contact = a frame with any taxel > 0.02")     # the rule these gloves use
     assert cli(["stats", str(root)]) == 0
     full = capsys.readouterr().out.strip().split("\n")
     assert full[:len(brief)] == brief and len(full) > len(brief) + 5

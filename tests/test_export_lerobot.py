@@ -257,3 +257,29 @@ def test_a_gap_in_the_source_clock_repeats_the_frames_beside_it(tmp_path):
     np.testing.assert_array_equal(data["timestamp"], (np.arange(10) / 30).astype(np.float32))
     raw = np.asarray(data["observation.tactile.right.raw"], np.float32).reshape(10, 16, 16)
     assert np.array_equal(raw[5], values[4]) and np.array_equal(raw[6], values[5]) and np.array_equal(raw[9], values[7])
+
+
+def test_a_glove_only_dataset_exports_no_video_feature(tmp_path):
+    # before: an all-black observation.images.egocentric mp4 per episode and a present flag that is never true
+    glove_only_recording(tmp_path / "raw" / "rec_a")
+    glove_only_recording(tmp_path / "raw" / "rec_b", rows=5)
+    ds = tmp_path / "ds"
+    assert ingest_cli("--pipeline", f"{small_pipeline(tmp_path, 'native')}={tmp_path / 'raw'}", ds) == 0
+    out = tmp_path / "lr"
+    assert cli(["export", "lerobot", str(ds), str(out)]) == 0
+    ex = read_export(out)
+    feats = ex["info"]["features"]
+    assert not [k for k, f in feats.items() if f["dtype"] == "video"]
+    assert not (out / "videos").exists() and not any(k.startswith("videos/") for k in ex["episodes"][0])
+    assert feats["observation.present"]["names"] == ["tactile.right.raw"]
+    assert all(p == [True] for p in ex["data"]["observation.present"])
+    with DatasetReader(ds) as r:
+        first = r.episode_range("nat-rec_b")[0]
+        want = paired_row(r.sample(first + 2), "right", "x")
+    e = next(e for e in ex["episodes"] if e["htdata/episode_id"] == "nat-rec_b")
+    row = ex["data"]["observation.tactile.right.raw"][e["dataset_from_index"] + 2]
+    assert np.array_equal(np.asarray(row, np.float32), want.astype(np.float32).ravel())
+    # --maps still writes the map videos (and only those)
+    assert cli(["export", "lerobot", str(ds), str(tmp_path / "lr_maps"), "--maps"]) == 0
+    info = json.loads((tmp_path / "lr_maps" / "meta/info.json").read_text())
+    assert [k for k, f in info["features"].items() if f["dtype"] == "video"] == ["observation.tactile.right.map"]

@@ -105,3 +105,15 @@ def test_cli_refuses_mixed_modes(ds, capsys):
     assert cli_main(["trim", str(ds), "ep_a"]) == 2
     assert cli_main(["trim", str(ds), "--idle", "--keep-margin", "-1"]) == 2
     assert "--keep-margin" in capsys.readouterr().err
+
+
+def test_many_shards_are_summed_up_in_one_line(tmp_path, capsys):
+    # five episodes over many small shards: the plan names the shards in one summary line, not one line each
+    eps = [{"episode_id": f"ep_{k}", "fps": 10.0, "hands": {"right": (RIGHT, _pressed(range(15, 25)))}}
+           for k in range(5)]
+    root = write_taxel_dataset(tmp_path / "many", eps, samples_per_shard=8)
+    assert cli_main(["trim", str(root), "--idle", "--keep-margin", "0.3", "--dry-run"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    shard_lines = [line for line in out if "stop listing" in line]
+    assert len(shard_lines) == 1 and "would stop listing 25 shards (" in shard_lines[0]
+    assert sum("re-pack" in line for line in out) == 1 and "would re-pack 5 work units (0 .. 4;" in "\n".join(out)

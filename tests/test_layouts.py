@@ -255,7 +255,23 @@ def test_cli_list_check_render(tmp_path, capsys):
     png = tmp_path / "ot.png"
     assert main(["layouts", "render", "opentouch_right_16x16", str(png)]) == 0
     img = cv2.imread(str(png))
-    assert img is not None and img.shape[0] == 2 * CANVAS and img.shape[1] > 2 * CANVAS
+    from htdata.commands.layouts import RENDER_BAND
+    assert img is not None and img.shape[0] == RENDER_BAND + 2 * CANVAS and img.shape[1] > 2 * CANVAS
+
+
+def test_render_draws_its_legend_beside_the_blocks_never_over_them(tmp_path):
+    import cv2
+
+    from htdata.commands.layouts import RENDER_BAND, layout_panels, render_layout_png
+
+    for lid in ("opentouch_right_16x16", "touchanything_left_21x21"):
+        layout = load_layout(lid)
+        png = tmp_path / f"{lid}.png"
+        render_layout_png(layout, png)
+        img = cv2.imread(str(png))
+        # the panels are exactly what layout_panels draws (no text on them); the title and legend are in the band
+        assert np.array_equal(img[RENDER_BAND:], layout_panels(layout))
+        assert (img[:RENDER_BAND] > 200).all(axis=2).sum() > 200
 
 
 def test_docs_example_layout_is_valid():
@@ -335,3 +351,17 @@ def test_cli_lists_user_layouts(tmp_path, capsys):
     _write_layout(tmp_path, "my_glove_32")
     assert main(["layouts", "--layouts", str(tmp_path)]) == 0
     assert "my_glove_32" in capsys.readouterr().out
+
+
+def test_bend_and_dead_cells_are_optional_and_empty_by_default():
+    doc = _doc("opentouch_right_16x16")
+    doc["dead_cells"], doc["bend_cells"] = [], []
+    full = parse_layout(doc, "full.json")
+    lean = {k: v for k, v in doc.items() if k not in ("dead_cells", "bend_cells")}
+    bare = parse_layout(lean, "lean.json")
+    assert bare.dead_cells.shape == (0, 2) and bare.bend_cells.shape == (0, 2)
+    assert np.array_equal(bare.live_mask, full.live_mask)
+    # the fields the schema still requires are named when missing
+    for field in ("source", "blocks", "value"):
+        with pytest.raises(ValueError, match=field):
+            parse_layout({k: v for k, v in lean.items() if k != field}, "x.json")

@@ -166,3 +166,43 @@ def test_cli_prints_the_colour_bar_range(tmp_path, capsys):
     out = capsys.readouterr().out
     used, vmax = pv.contrast_scale(faint, "auto")
     assert f"colour bar 0..{vmax:.3g} (quantile contrast" in out and "contact frames" in out
+
+
+@pytest.fixture(scope="module")
+def glove_only(tmp_path_factory):
+    from tests.factories import ingest_rawglove
+    return ingest_rawglove(tmp_path_factory.mktemp("pv_glove"), clips=1)
+
+
+def test_glove_only_sheet_has_no_rgb_column_and_rows_show_clip_time(glove_only):
+    from htdata.read.reader import DatasetReader
+
+    sheet = pv.render_contact_sheet(glove_only, frames=3, pick="even", contrast="quantile")
+    assert sheet.shape[:2] == pv.sheet_size(3, rgb=False)
+    assert sheet.shape[1] == pv.PAD + 2 * (pv.CANVAS + pv.PAD) < pv.sheet_size(3)[1]
+    for col in (0, 1):                                   # both columns are the gloves: no grey "no RGB" panel
+        assert np.all(_panel(sheet, 0, col) == pv.ABSENT_GREY, axis=2).mean() < 0.1
+    with DatasetReader(glove_only) as r:
+        first, n = r.episode_range(0)
+        assert n > 82 and round(r.episodes[0]["fps"]) == 30
+        assert pv.clip_time_s(r, first, first + 82) == pytest.approx(82 / 30, abs=1e-3)     # 2.733 s, not 0
+        assert pv.clip_time_s(r, first, first) == 0.0
+
+
+def test_colour_bar_caption_wraps_inside_the_sheet(glove_only, tmp_path):
+    from tests.tactile_factories import RIGHT, clean_series, write_taxel_dataset
+    with_rgb = write_taxel_dataset(tmp_path / "faint", [{"episode_id": "f", "hands": {
+        "right": (RIGHT, clean_series(RIGHT, 8, seed=4, blobs=4) * 0.15)}}])
+    caption = ("tactile value 0..0.778 (p99 of the dataset's positive taxel values; above saturates); "
+               "frames: evenly spaced (no stats for this dataset)")
+    width = 2 * pv.CANVAS + pv.PAD
+    lines = pv.wrap_text(caption, width)
+    assert 1 < len(lines) <= pv.BAR_CAPTION_LINES and " ".join(lines) == caption
+    assert all(cv2.getTextSize(line, pv.FONT, pv.BAR_FONT, 1)[0][0] <= width for line in lines)
+    assert pv.wrap_text("word " * 200, 100)[-1].endswith("...")
+    for root in (with_rgb, glove_only):                   # the long quantile caption on both sheet widths
+        sheet = pv.render_contact_sheet(root, frames=2, contrast="quantile")
+        band = sheet[sheet.shape[0] - pv.BAR_H:]
+        assert not (band[:, -pv.PAD:] > 120).any()        # nothing drawn into the right margin (it was cut there)
+        assert not (band[-2:] > 120).any()                # nor onto the bottom edge
+        assert (band[pv.BAR_STRIP_H + 36:, :] > 120).any(axis=2).sum() > 100   # the caption's lines are there

@@ -294,3 +294,60 @@ def test_map_finiteness_by_bits_matches_numpy_on_every_half_pattern():
     halves = np.arange(65536, dtype=np.uint32).astype(np.uint16).view(np.float16)
     assert [all_finite(halves[i:i + 1]) for i in range(0, 65536, 1)] == np.isfinite(halves).tolist()
     assert all_finite(np.zeros((224, 224), np.float32)) and not all_finite(np.array([np.inf], np.float32))
+
+
+# --------------------------------------------------------------------------- words that match; a scale from the data
+
+
+@pytest.fixture(scope="module")
+def rawknit(tmp_path_factory):
+    from tests.factories import ingest_rawglove
+    return ingest_rawglove(tmp_path_factory.mktemp("rawknit"), clips=2)
+
+
+def test_brief_names_the_contact_rule_actually_used(rawknit, known, capsys):
+    assert cli_main(["stats", str(rawknit), "--brief", "--no-cache"]) == 0
+    out = capsys.readouterr().out
+    assert "above 0.02" not in out          # the calibrated gloves do not use the old threshold
+    assert "contact = a frame with at least" in out and "quantisation steps above their noise floor" in out
+    assert cli_main(["stats", str(known), "--brief", "--no-cache"]) == 0     # no noise floor: the old rule, said so
+    assert "contact = a frame with any taxel > 0.02" in capsys.readouterr().out
+
+
+def test_scale_is_suggested_for_faint_gloves_only(tmp_path):
+    from htdata.inspect.scalehint import SUGGEST_BELOW, scale_suggestions
+
+    faint = write_taxel_dataset(tmp_path / "faint", [{"episode_id": f"f{k}", "hands": {
+        "right": (RIGHT, clean_series(RIGHT, 40, seed=k, blobs=4) * 0.15)}} for k in range(2)])
+    strong = write_taxel_dataset(tmp_path / "strong", [{"episode_id": "s", "hands": {
+        "right": (RIGHT, np.clip(clean_series(RIGHT, 40, seed=4, blobs=4) * 3.0, 0, 1))}}])
+    hint = stats.dataset_stats(faint, cache_dir=None)["scale"][RIGHT]
+    # the p99.9 of the values above the contact level (0.02), from the raw values the factory wrote
+    values = np.concatenate([clean_series(RIGHT, 40, seed=k, blobs=4) * 0.15 for k in range(2)])
+    values = values[:, load_layout(RIGHT).live_mask].ravel()
+    p999 = float(np.quantile(values[values > 0.02], 0.999))
+    assert hint["p99_9"] == pytest.approx(p999, abs=0.002) and hint["p99_9"] < SUGGEST_BELOW
+    assert hint["suggested_scale"] <= 1.0 / hint["p99_9"] < hint["suggested_scale"] * 1.1     # rounded down
+    assert hint["toml"] == f"[normalise.{RIGHT}]\nscale = {hint['suggested_scale']:g}"
+    assert stats.dataset_stats(strong, cache_dir=None)["scale"][RIGHT]["suggested_scale"] is None
+    with DatasetReader(faint) as r:        # too few pressed values: nothing suggested, and why
+        few = scale_suggestions(r, [{"hands": {"right": {"layout": RIGHT, "contact_rule": {"level": 0.02},
+                                                         "hist": [0] * 100 + [5] + [0] * (HIST_BINS - 101)}}}])
+    assert few[RIGHT]["suggested_scale"] is None and "need" in few[RIGHT]["reason"]
+
+
+def test_the_suggested_scale_pasted_into_the_pipeline_fills_the_colour_scale(rawknit, capsys):
+    assert cli_main(["stats", str(rawknit), "--brief", "--no-cache"]) == 0
+    out = capsys.readouterr().out
+    hints = stats.dataset_stats(rawknit, cache_dir=None)["scale"]
+    faint = [lid for lid, h in hints.items() if h["suggested_scale"]]
+    assert faint, hints
+    lid = faint[0]
+    scale = hints[lid]["suggested_scale"]
+    assert f"    [normalise.{lid}]\n    scale = {scale:g}\n" in out          # the lines to paste, as printed
+    pipe = rawknit.parent / "rawknit.toml"
+    pipe.write_text(pipe.read_text().replace(f"[normalise.{lid}]\n", f"[normalise.{lid}]\nscale = {scale:g}\n"))
+    assert cli_main(["renormalise", str(rawknit), "--pipeline", str(pipe)]) == 0
+    after = stats.dataset_stats(rawknit, cache_dir=None)["scale"][lid]
+    assert after["scale"] == scale and after["suggested_scale"] is None
+    assert 0.85 <= after["p99_9"] <= 1.0                  # the strongest presses now reach the top of 0..1

@@ -38,6 +38,7 @@ from htdata.read.reader import DatasetReader
 
 TOLERANCE_S = 1e-4           # LeRobotDataset's default tolerance_s
 RGB_MEAN_ABS_MAX = 4.0       # H.264 crf 18 on 224x224 (yuv420p): measured mean |diff| ~1-2 levels
+EGO = "observation.images.egocentric"   # absent from a glove-only export
 RGB_P99_ABS_MAX = 40.0       # chroma subsampling at colour edges: the worst 1% of pixels
 
 
@@ -119,21 +120,21 @@ def check(dataset: Path, export: Path, windows: int, seed: int) -> tuple[list[st
             path = export / info["video_path"].format(video_key=key, chunk_index=ep[f"videos/{key}/chunk_index"],
                                                       file_index=ep[f"videos/{key}/file_index"])
             videos[(e, key)] = (decode_video(path), ep[f"videos/{key}/from_timestamp"])
-        vt, vframes = videos[(e, "observation.images.egocentric")][0]
-        from_ts = videos[(e, "observation.images.egocentric")][1]
+        # a glove-only export has no egocentric video (nor an "egocentric" present flag)
+        (vt, vframes), from_ts = videos.get((e, EGO), ((None, None), 0.0))
         layouts = htd["layouts"]
         for r in range(lo, hi):
             f = cols["htdata.frame_index"][r]
             members = reader.sample(first + f)
             fw = f"{where} frame {f}"
             present = dict(zip(present_names, cols["observation.present"][r]))
-            if present["egocentric"] != (RGB_MEMBER in members):
-                problems.append(f"{fw}: present[egocentric]={present['egocentric']} but htdata RGB member "
+            if present.get("egocentric", False) != (RGB_MEMBER in members):
+                problems.append(f"{fw}: present[egocentric]={present.get('egocentric')} but htdata RGB member "
                                 f"{'present' if RGB_MEMBER in members else 'absent'}")
-            k = frame_at(vt, from_ts + cols["timestamp"][r])
-            if k is None:
+            k = frame_at(vt, from_ts + cols["timestamp"][r]) if vt is not None else None
+            if vt is not None and k is None:
                 problems.append(f"{fw}: no video frame within {TOLERANCE_S} s of t={cols['timestamp'][r]:.6f}")
-            elif RGB_MEMBER in members:
+            elif k is not None and RGB_MEMBER in members:
                 ref = decode_rgb(members[RGB_MEMBER]).astype(np.int16)
                 rgb_diffs.append(np.abs(vframes[k].astype(np.int16) - ref).ravel())
             for key in raw_keys:
@@ -197,12 +198,12 @@ def check_windows(reader, ex, cols, raws, raw_keys, videos, ids, count, seed, pr
             continue
         first = reader.episode_range(eid)[0]
         ref = [reader.decoded(first + cols["htdata.frame_index"][q]) for q in query]
-        (vt, vframes), from_ts = videos[(e, "observation.images.egocentric")]
+        (vt, vframes), from_ts = videos.get((e, EGO), ((None, None), 0.0))
         for q, sample in zip(query, ref):
-            kf = frame_at(vt, from_ts + cols["timestamp"][q])
-            if kf is None:
+            kf = frame_at(vt, from_ts + cols["timestamp"][q]) if vt is not None else None
+            if vt is not None and kf is None:
                 problems.append(f"window at episode {e} frame {f}: row {q} has no video frame")
-            elif "rgb" in sample and np.abs(vframes[kf].astype(np.int16) - sample["rgb"]).mean() > RGB_MEAN_ABS_MAX:
+            elif kf is not None and "rgb" in sample and np.abs(vframes[kf].astype(np.int16) - sample["rgb"]).mean() > RGB_MEAN_ABS_MAX:
                 problems.append(f"window at episode {e} frame {f}: row {q} RGB is not htdata's frame")
             for key in raw_keys:
                 hand = key.split(".")[2]
@@ -222,13 +223,14 @@ def one_item(ex, cols, raws, raw_keys, videos, fps) -> dict:
     """What a LeRobotDataset item holds for one row, read by hand (shapes, task, a few values)."""
     r = next(i for i, p in enumerate(cols["observation.present"]) if all(p[:2]))
     e = cols["episode_index"][r]
-    (vt, vframes), from_ts = videos[(e, "observation.images.egocentric")]
-    frame = vframes[frame_at(vt, from_ts + cols["timestamp"][r])]
     item = {"index": r, "episode_index": e, "frame_index": cols["frame_index"][r],
-            "timestamp": round(cols["timestamp"][r], 6), "task": ex["tasks"][cols["task_index"][r]],
-            "observation.images.egocentric": f"{list(frame.shape)} uint8, mean {frame.mean():.1f}",
-            "observation.present": dict(zip(ex["info"]["features"]["observation.present"]["names"],
-                                            cols["observation.present"][r]))}
+            "timestamp": round(cols["timestamp"][r], 6), "task": ex["tasks"][cols["task_index"][r]]}
+    if (e, EGO) in videos:
+        (vt, vframes), from_ts = videos[(e, EGO)]
+        frame = vframes[frame_at(vt, from_ts + cols["timestamp"][r])]
+        item[EGO] = f"{list(frame.shape)} uint8, mean {frame.mean():.1f}"
+    item["observation.present"] = dict(zip(ex["info"]["features"]["observation.present"]["names"],
+                                           cols["observation.present"][r]))
     for key in raw_keys:
         row = raws[key][r]
         item[key] = f"{list(row.shape)} float32, min {row.min():.1f} max {row.max():.1f} sum {row.sum():.1f}"

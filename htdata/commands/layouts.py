@@ -39,6 +39,8 @@ from htdata.store.fsutil import write_bytes_atomic
 # BGR colours per part id (0 = background), for `htdata layouts render`.
 _PART_BGR = np.array([[0, 0, 0], [60, 60, 230], [60, 200, 60], [230, 140, 40], [200, 60, 200],
                       [40, 200, 230], [150, 150, 150]], np.uint8)
+_FIRST_ROW = (40, 40, 230)       # BGR red: a block's first raw row
+_FIRST_CELL = (0, 230, 255)      # BGR yellow: its first cell
 
 
 def orientation_grids(layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -54,8 +56,11 @@ def orientation_grids(layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return ramp, first_row, first_cell
 
 
-def render_layout_png(layout: Layout, out: Path, scale: int = 2) -> None:
-    """Two panels: the canonical regions coloured by part, and this glove's coverage and block orientation.
+RENDER_BAND = 44          # px above the panels (at any scale) for the title and the legend: never over a block
+
+
+def layout_panels(layout: Layout, scale: int = 2) -> np.ndarray:
+    """Two panels, no text: the canonical regions coloured by part, and this glove's coverage and block orientation.
 
     Coverage panel: covered pixels grow brighter along each block's raw columns; the block's first raw
     row is red and its first cell (rows[0], cols[0]) yellow, so transpose/rotate/flips can be checked.
@@ -72,15 +77,28 @@ def render_layout_png(layout: Layout, out: Path, scale: int = 2) -> None:
     ramp, first_row, first_cell = (r.render(g)[0] for g in orientation_grids(layout))
     covered = r.coverage == 1
     cov[covered] = (255 * ramp[covered])[:, None]
-    cov[covered & (first_row > 0)] = (40, 40, 230)      # BGR red
-    cov[covered & (first_cell > 0)] = (0, 230, 255)     # BGR yellow
+    cov[covered & (first_row > 0)] = _FIRST_ROW
+    cov[covered & (first_cell > 0)] = _FIRST_CELL
     img = np.concatenate([regions, np.full((CANVAS, 4, 3), 255, np.float32), cov], axis=1).astype(np.uint8)
-    img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
-    text = f"{layout.layout_id}  coverage {r.coverage_fraction:.3f}"
-    cv2.putText(img, text, (6, img.shape[0] - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
-    legend = "red: first raw row  yellow: first cell  brighter: higher raw column"
-    cv2.putText(img, legend, (img.shape[1] // 2 + 6, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.36, (255, 255, 255), 1,
-                cv2.LINE_AA)
+    return cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
+
+
+def render_layout_png(layout: Layout, out: Path, scale: int = 2) -> None:
+    """`layout_panels` under a band holding the title (id, coverage) and the legend with colour swatches."""
+    import cv2
+
+    panels = layout_panels(layout, scale)
+    img = np.zeros((RENDER_BAND + panels.shape[0], panels.shape[1], 3), np.uint8)
+    img[RENDER_BAND:] = panels
+    font, white = cv2.FONT_HERSHEY_SIMPLEX, (255, 255, 255)
+    text = f"{layout.layout_id}  coverage {Rasteriser(layout).coverage_fraction:.3f}"
+    cv2.putText(img, text, (6, 16), font, 0.45, white, 1, cv2.LINE_AA)
+    x = 6
+    for colour, words in ((_FIRST_ROW, "first raw row"), (_FIRST_CELL, "first cell"),
+                          ((200, 200, 200), "brighter: higher raw column")):
+        cv2.rectangle(img, (x, 26), (x + 10, 36), colour, cv2.FILLED)
+        cv2.putText(img, words, (x + 14, 36), font, 0.4, white, 1, cv2.LINE_AA)
+        x += 14 + cv2.getTextSize(words, font, 0.4, 1)[0][0] + 16
     out.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(out), img):
         raise OSError(f"could not write {out}")

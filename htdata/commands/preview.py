@@ -10,12 +10,14 @@ from htdata.inspect import preview
 
 
 EPILOG = """\
-A contact sheet of one episode: rows over time (N frames evenly spaced, first and last
-included), columns RGB | left tactile | right tactile. Tactile maps are colour-mapped (black =
-0, pale yellow = 1) with the hand's region outlines; grey hatching = where the glove has no
-sensor; a grey panel = a hand the episode does not have; magenta = a non-finite value (damage).
+A contact sheet of one episode: rows over time (the N frames with the most contact, or with
+--pick even N frames evenly spaced), each labelled with its frame number and clip time (seconds
+since the episode's first frame); columns RGB | left tactile | right tactile (no RGB column when
+the episode has no video). Tactile maps are colour-mapped (black = 0, pale yellow = the top of
+the colour bar) with the hand's region outlines; grey hatching = where the glove has no sensor;
+a grey panel = a hand the episode does not have; magenta = a non-finite value (damage).
 --contrast quantile stretches the colours to the dataset's 99th percentile so faint contact shows.
-Defaults: the two-handed episode with the most contact, 6 frames, fixed contrast.
+Defaults: the two-handed episode with the most contact, 6 frames, auto contrast.
 
 Examples:
   htdata preview data/dataset preview.png

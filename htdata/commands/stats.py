@@ -14,7 +14,10 @@ from htdata.inspect import stats
 
 EPILOG = """\
 The text output starts with a short summary (what --brief prints alone), then per glove:
-  contact        fraction of frames where any taxel is above the contact threshold (pressed)
+  contact        fraction of frames in contact by the glove hand's contact rule (docs/USAGE.md "Contact":
+                 with a noise floor, a few taxels above it; without one, any taxel above 0.02)
+  scale          where a glove's pressed values use less than half of 0..1: a suggested `scale` and the
+                 lines to paste into the pipeline TOML (docs/USAGE.md "A scale from the data")
   values p1..max quantiles of the normalised [0,1] taxel values; raw: the same in glove units
   health         taxels flagged dead / stuck / noisy / hot (htdata stats --health OUT.png draws them);
                  "quiet and never pressed" = taxels that never left zero, so nothing can be said
@@ -73,16 +76,32 @@ def _fmt(v) -> str:
 def brief_lines(s: dict) -> list[str]:
     """A few lines a newcomer can read: size, tasks, and per glove contact and flagged taxels."""
     duration = sum(row["duration_s"] for row in s["tasks"].values())
+    rules = s.get("contact_rules") or []
     out = [f"{s['dataset']} version {s['version']}: {s['episodes']} episodes, {s['frames']} frames "
            f"({duration / 60:.1f} min), {len(s['tasks'])} tasks, {len(s['scenes'])} scenes",
-           f"contact = a frame where any taxel is above {s['contact_threshold']} (normalised 0..1)"]
+           # the rule each glove hand's calibration gives (htdata/glove/contact.py), not a fixed threshold
+           f"contact = a frame with {rules[0]} (normalised 0..1)" if len(rules) == 1 else
+           "contact = a frame where the glove hand's contact rule holds (htdata/glove/contact.py; per glove below)"]
     for g in s["gloves"]:
         name = " / ".join(str(g[k]) for k in ("task", "scene", "source", "layout", "hand") if k in g)
         flagged = sum(g["health"]["counts"][k] for k in CLASSES)
         out.append(f"  {name}: {g['episodes']} episodes, contact in {100 * (g['contact_fraction'] or 0):.0f}% "
-                   f"of frames, {flagged} taxel-episodes flagged unhealthy")
+                   f"of frames, {flagged} taxel-episodes flagged unhealthy"
+                   + (f" (contact: {g['contact_rule']})" if len(rules) > 1 and g.get("contact_rule") else ""))
     if not s["gloves"]:
         out.append("  no tactile frames")
+    return out + scale_lines(s)
+
+
+def scale_lines(s: dict) -> list[str]:
+    """Per layout whose maps look faint: the suggested `scale` and the lines to paste (htdata/inspect/scalehint.py)."""
+    out = []
+    for layout, hint in (s.get("scale") or {}).items():
+        if hint.get("toml"):
+            out += [f"scale {layout}: {hint['reason']}. In the pipeline TOML, the scale line goes under the "
+                    f"layout's table (add the table if the pipeline has none):",
+                    *(f"    {line}" for line in hint["toml"].splitlines()),
+                    f"  then: htdata renormalise {s['dataset']} --pipeline PIPELINE.toml"]
     return out
 
 
@@ -101,7 +120,8 @@ def text_lines(s: dict) -> list[str]:
         flagged = ", ".join(f"{k} {h['counts'][k]}" for k in CLASSES if h["counts"][k]) or "none"
         out += [f"\n{name}: {g['episodes']} episodes, {g['frames']} frames, contact {_fmt(g['contact_fraction'])} "
                 f"({g.get('contact_rule') or '-'}; old {_fmt(g.get('contact_fraction_threshold'))})",
-                f"  values p1 {_fmt(q['p1'])}  p50 {_fmt(q['p50'])}  p99 {_fmt(q['p99'])}  max {_fmt(q['max'])}",
+                f"  values p1 {_fmt(q['p1'])}  p50 {_fmt(q['p50'])}  p99 {_fmt(q['p99'])}  max {_fmt(q['max'])}"
+                + (f"; scale: {hint['reason']}" if (hint := (s.get("scale") or {}).get(g["layout"])) else ""),
                 *([f"  raw (glove units, {g['frames_from_raw']} frames) " + "  ".join(
                     f"{k} {_fmt(g['raw_quantiles'][k])}" for k in ("p1", "p50", "p99", "max"))]
                   if g.get("raw_quantiles") else []),

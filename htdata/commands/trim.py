@@ -21,8 +21,11 @@ Nothing is changed in place: the result is a new version (`htdata log` lists ver
 stay readable until `htdata gc`), planned first and written only then; --dry-run prints the plan.
 Only the storage files holding touched episodes are rewritten. Splits carry over (a removed
 episode leaves its part). An id or glob that matches nothing is an error listing near matches.
---idle trims, in every episode, the frames before the first and after the last contact (any
-hand above --min-contact, default 0.02), keeping --keep-margin seconds (default 0.5) around them.
+--idle trims, in every episode, the frames before the first and after the last contact of any
+hand, keeping --keep-margin seconds (default 0.5) around them. Contact is each glove hand's
+contact rule from its calibration (docs/USAGE.md "Contact": with a noise floor, a few taxels
+above their floor; without one, any taxel above 0.02); --min-contact X: any taxel above X.
+It prints one line per episode, then one summary line per kind of change.
 
 Examples:
   htdata trim data/dataset ot-home_kitchen_p1-demo_19 --frames 10:90 --dry-run

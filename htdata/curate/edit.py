@@ -74,11 +74,23 @@ class Edit:
         would = "would " if dry_run else ""
         out = [f"{would}remove episode {e}" for e in self.removed]
         out += [f"{would}trim episode {e}: keep frames {r.start}:{r.stop}" for e, r in self.trimmed.items()]
-        out += [f"{would}re-pack work unit {u} (its other samples are copied into new shards)"
-                for u in self.repacked_units]
-        out += [f"{would}stop listing shard {s}" for s in self.dropped_shards]
+        if self.repacked_units:     # one line each, however many: a dataset-wide trim touches every unit
+            out.append(f"{would}re-pack {_count(self.repacked_units, 'work unit')} "
+                       f"({_span(self.repacked_units)}; their other samples are copied into new shards)")
+        if self.dropped_shards:
+            out.append(f"{would}stop listing {_count(self.dropped_shards, 'shard')} ({_span(self.dropped_shards)})")
         out.append(f"{self.frames_removed} frames {'would be ' if dry_run else ''}removed")
         return out
+
+
+def _count(items: list, what: str) -> str:
+    return f"{len(items)} {what}{'' if len(items) == 1 else 's'}"
+
+
+def _span(items: list) -> str:
+    """The items named when few, else the first and last: a summary stays one short line."""
+    names = [str(i) for i in items]
+    return ", ".join(names) if len(names) <= 3 else f"{names[0]} .. {names[-1]}"
 
 
 def plan_edit(snap: Snapshot, remove: list[str], trim: dict[str, range]) -> tuple[Edit, list]:

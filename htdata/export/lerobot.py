@@ -12,13 +12,14 @@ Layout written (LeRobot's v3.0 format, codebase_version "v3.0"):
                                                 part masks, the split assignment, episode ids
 
 One LeRobot episode per htdata episode. Frame features:
-  observation.images.egocentric       video, the stored 224x224 RGB frame
+  observation.images.egocentric       video, the stored 224x224 RGB frame (only when some exported frame holds
+                                      RGB: a glove-only export has no video feature, not an all-black one)
   observation.tactile.<hand>.raw      float32 (rows*cols,): the raw row paired with the frame, the glove's grid
                                       flattened row-major (info.grid = [rows, cols]; names "r<row>c<col>")
                                       (non-finite cells, i.e. no taxel there, as 0; a hand recorded with two grid
                                       shapes gets one feature per shape, ...raw_<rows>x<cols>)
   observation.tactile.<hand>.map      video (--maps only), the canonical 224x224 map, value x 255 as grey
-  observation.present                 bool per source (egocentric, tactile.<hand>...): is the value real?
+  observation.present                 bool per source (egocentric when exported, tactile.<hand>...): real value?
   htdata.frame_index                  int64, the stored htdata frame (within its episode) of the row
 LeRobot needs every feature in every frame, so a frame missing a source is filled and flagged
 in observation.present: a missing RGB frame repeats the last real one (black before the first),
@@ -160,13 +161,13 @@ def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, sam
     """Encode one episode's videos; return its raw rows per slot and the presence flags (see the module doc)."""
     ep = reader.episodes[pos]
     eid = ep["episode_id"]
-    wanted = (JSON_MEMBER, RGB_MEMBER, *[raw_member(h) for h in plan.hands],
+    wanted = (JSON_MEMBER, *((RGB_MEMBER,) if plan.rgb else ()), *[raw_member(h) for h in plan.hands],
               *([tactile_member(h) for h in plan.hands] if cfg.maps else []))
     chunk, file = _chunk_file(ep_index)
     videos = {k: VideoWriter(work / VIDEO_PATH.format(video_key=k, chunk_index=chunk, file_index=file),
                              plan.fps, cfg.codec, cfg.crf, cfg.gop) for k in plan.video_keys}
     raw = [np.zeros((len(samples), *slot.grid), np.float32) for slot in plan.slots]
-    present = np.zeros((len(samples), 1 + len(plan.slots)), bool)
+    present = np.zeros((len(samples), len(plan.present_names)), bool)
     slot_of = {h: next(k for k, s in enumerate(plan.slots) if s.hand == h and s.grid == plan.layout_grids[lid])
                for h, lid in ep["layouts"].items()}
     last_rgb = np.zeros((CANVAS, CANVAS, 3), np.uint8)
@@ -179,11 +180,12 @@ def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, sam
             cache = (i, reader.read_sample(i, wanted)[2])
         members = cache[1]
         where = f"{reader.root}: {reader.key(i)} (episode {eid!r} frame {i - first})"
-        if RGB_MEMBER in members:
-            last_rgb = decode_member(RGB_MEMBER, members[RGB_MEMBER], where)
-            present[f, 0] = True
-            vstats[RGB_KEY].add(last_rgb)
-        videos[RGB_KEY].add(last_rgb, t, where)
+        if plan.rgb:
+            if RGB_MEMBER in members:
+                last_rgb = decode_member(RGB_MEMBER, members[RGB_MEMBER], where)
+                present[f, 0] = True
+                vstats[RGB_KEY].add(last_rgb)
+            videos[RGB_KEY].add(last_rgb, t, where)
         for hand, k in slot_of.items():
             if raw_member(hand) in members:
                 row = paired_row(members, hand, where)
@@ -193,7 +195,7 @@ def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, sam
                 # NaN / Inf mark cells without a taxel in some sources: 0 (LeRobot stats and
                 # normalisation would turn one NaN into NaN everywhere); finite values stay exact
                 raw[k][f] = np.where(np.isfinite(row), row, 0.0)
-                present[f, 1 + k] = True
+                present[f, plan.present_col(k)] = True
         if cfg.maps:
             for hand in plan.hands:
                 _add_map_frame(_hand_map(members, hand, where, renderer, pos), t, where, videos[map_key(hand)],
@@ -228,7 +230,7 @@ def _add_map_frame(m: np.ndarray | None, t: float, where: str, video: VideoWrite
 def _add_stats(stats: dict, plan: _Plan, raw: list[np.ndarray], cols: dict) -> None:
     """One episode into the running stats: raw features over real rows only (absent ones are fill)."""
     present = cols[PRESENT_KEY]
-    values = {slot.key: raw[k][present[:, 1 + k]] for k, slot in enumerate(plan.slots)} | cols
+    values = {slot.key: raw[k][present[:, plan.present_col(k)]] for k, slot in enumerate(plan.slots)} | cols
     for key, v in values.items():
         if len(v):
             stats[key].add_episode(v.reshape(len(v), -1))

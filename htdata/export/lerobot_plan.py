@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata.store import storage
-from htdata.format.table import CANVAS, HANDS, JSON_MEMBER, decode_member
+from htdata.format.table import CANVAS, HANDS, JSON_MEMBER, RGB_MEMBER, SIZE_FIELDS, decode_member
 from htdata.read.reader import DatasetReader
 
 
@@ -86,6 +86,16 @@ class _Plan:
     resample: bool
     split_doc: dict | None = None
     video_keys: list[str] = field(default_factory=list)
+    rgb: bool = True                         # any exported frame holds RGB: else no egocentric video at all
+
+    @property
+    def present_names(self) -> list[str]:
+        """observation.present's columns: "egocentric" (when the export has RGB), then each raw slot."""
+        return (["egocentric"] if self.rgb else []) + [slot.name for slot in self.slots]
+
+    def present_col(self, k: int) -> int:
+        """Column of raw slot k in observation.present."""
+        return k + (1 if self.rgb else 0)
 
 
 def plan_export(reader: DatasetReader, cfg: LeRobotExportConfig) -> _Plan:
@@ -138,8 +148,16 @@ def plan_export(reader: DatasetReader, cfg: LeRobotExportConfig) -> _Plan:
             raise ValueError(f"episodes have frame rates {sorted(rates)} (e.g. {sorted(rates.items())[:3]}); "
                              f"LeRobot has one fps per dataset: pass --fps F to resample")
         fps, resample = next(iter(rates)), False
-    video_keys = [RGB_KEY] + ([map_key(h) for h in hands] if cfg.maps else [])
-    return _Plan(positions, parts, hands, slots, layout_grids, layouts, fps, resample, split_doc, video_keys)
+    # a glove-only selection (no frame holds RGB) has no egocentric feature: no all-black video
+    rgb = any(_has_rgb(reader, p) for p in positions)
+    video_keys = ([RGB_KEY] if rgb else []) + ([map_key(h) for h in hands] if cfg.maps else [])
+    return _Plan(positions, parts, hands, slots, layout_grids, layouts, fps, resample, split_doc, video_keys, rgb)
+
+
+def _has_rgb(reader: DatasetReader, pos: int) -> bool:
+    """Whether any stored frame of episode `pos` holds an RGB member (from the index: no shard read)."""
+    first, n = reader.episode_range(pos)
+    return bool(np.any(reader.index[SIZE_FIELDS[RGB_MEMBER]][first:first + n] > 0))
 
 
 def features(plan: _Plan) -> dict:
@@ -156,8 +174,7 @@ def features(plan: _Plan) -> dict:
         feats[slot.key] = {"dtype": "float32", "shape": [rows * cols],
                            "names": [f"r{r}c{c}" for r in range(rows) for c in range(cols)],
                            "info": {"grid": [rows, cols], "order": "row-major", "units": "raw glove units"}}
-    feats[PRESENT_KEY] = {"dtype": "bool", "shape": [1 + len(plan.slots)],
-                          "names": ["egocentric", *[slot.name for slot in plan.slots]]}
+    feats[PRESENT_KEY] = {"dtype": "bool", "shape": [len(plan.present_names)], "names": plan.present_names}
     feats[SOURCE_KEY] = {"dtype": "int64", "shape": [1], "names": None,
                          "info": {"what": "the htdata frame (within its episode) this row was taken from"}}
     for name, dtype in (("timestamp", "float32"), ("frame_index", "int64"), ("episode_index", "int64"),

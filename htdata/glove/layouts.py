@@ -224,8 +224,8 @@ def parse_layout(doc: dict, where: str = "<layout>", canonical: CanonicalHand | 
         region[...] = i
         blocks.append(b)
 
-    dead = _cells(doc["dead_cells"], grid, "dead_cells", where)
-    bend = _cells(doc["bend_cells"], grid, "bend_cells", where)
+    dead = _cells(doc.get("dead_cells", []), grid, "dead_cells", where)     # optional: none by default
+    bend = _cells(doc.get("bend_cells", []), grid, "bend_cells", where)
     if len(dead) and (owner[dead[:, 0], dead[:, 1]] < 0).any():
         c = dead[owner[dead[:, 0], dead[:, 1]] < 0][0].tolist()
         raise ValueError(f"{where}: dead cell {c} is not inside any block (only cells inside blocks can be dead)")

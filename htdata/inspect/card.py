@@ -4,9 +4,11 @@ The card opens with what a dataset card has (name, description, licence, sources
 format, how to load it), then holds the `htdata stats` numbers of one version and these plots:
 frames per task and per scene, the contact frequency of each canonical
 region per glove (drawn on the canonical hand), the value histogram per
-glove, the taxel health map, the sync skew, clock-offset and lag distributions
-(episode records' "sync"), the split sizes, and preview strips of a few
-episodes. Every image is a PNG embedded as a data: URI and there is no
+glove (over a range fitted to its values, htdata/inspect/cardplots.py), the
+suggested `scale` per glove layout (htdata/inspect/scalehint.py), the taxel
+health map, the sync skew, clock-offset and lag distributions (episode
+records' "sync"), the split sizes, and preview strips of a few episodes. A
+glove-only dataset (no RGB in any sample) says so and lists no rgb.jpg member. Every image is a PNG embedded as a data: URI and there is no
 script, stylesheet or font from elsewhere, so the page opens offline. The
 Markdown twin (OUT.md) has the same tables and links the same PNGs written
 to OUT_files/.
@@ -22,9 +24,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from htdata.format.table import CANVAS, HANDS
+from htdata.format.table import HANDS, RGB_MEMBER, SIZE_FIELDS
+from htdata.inspect.cardplots import (_count_label, _label_fingers, _y_ticks, bar_chart,  # noqa: F401 (names of card)
+                                      histogram_chart, region_heatmap, value_histogram_chart)
 from htdata.inspect.stats import dataset_stats
-from htdata.inspect.preview import draw_colour_bar, region_outline
 from htdata.glove.layouts import parse_canonical
 from htdata.read.reader import DatasetReader
 from htdata.inspect.stats import write_health_map
@@ -32,115 +35,8 @@ from htdata.store import storage
 from htdata.inspect.preview import render_contact_sheet
 from htdata.store.fsutil import write_bytes_atomic
 
-BG = (255, 255, 255)            # BGR, white plots for a white page
-INK = (40, 40, 40)
-BAR = (180, 119, 31)
-FONT = cv2.FONT_HERSHEY_SIMPLEX
 PREVIEW_EPISODES = 2
 PREVIEW_FRAMES = 3
-
-
-def bar_chart(labels: list[str], values: list[float], title: str, unit: str = "", width: int = 560) -> np.ndarray:
-    """Horizontal bars, one row per label, value written at the end of each bar."""
-    row, left, top = 20, 170, 30
-    img = np.full((top + row * max(len(labels), 1) + 10, width, 3), BG, np.uint8)
-    cv2.putText(img, title, (8, 18), FONT, 0.5, INK, 1, cv2.LINE_AA)
-    top_value = max([float(v) for v in values] + [1e-12])
-    for i, (label, value) in enumerate(zip(labels, values)):
-        y = top + i * row
-        cv2.putText(img, str(label)[:24], (8, y + 13), FONT, 0.4, INK, 1, cv2.LINE_AA)
-        w = int(round((width - left - 90) * float(value) / top_value))
-        cv2.rectangle(img, (left, y + 2), (left + max(w, 1), y + row - 4), BAR, cv2.FILLED)
-        cv2.putText(img, f"{value:g}{unit}", (left + w + 6, y + 13), FONT, 0.4, INK, 1, cv2.LINE_AA)
-    if not labels:
-        cv2.putText(img, "(none)", (left, top + 13), FONT, 0.4, INK, 1, cv2.LINE_AA)
-    return img
-
-
-def histogram_chart(counts: list[int], lo: float, hi: float, title: str, log: bool = True,
-                    width: int = 560, height: int = 170) -> np.ndarray:
-    """Vertical bars over [lo, hi] (log10(1 + count) heights when `log`), axis ends labelled."""
-    img = np.full((height, width, 3), BG, np.uint8)
-    cv2.putText(img, title, (8, 18), FONT, 0.5, INK, 1, cv2.LINE_AA)
-    c = np.asarray(counts, np.float64)
-    h = np.log10(1 + c) if log else c
-    base, plot_h, x0, x1 = height - 24, height - 54, 40, width - 12
-    if h.size and h.max() > 0:
-        bw = (x1 - x0) / h.size
-        for i, v in enumerate(h / h.max()):
-            cv2.rectangle(img, (int(x0 + i * bw), base - int(v * plot_h)), (int(x0 + (i + 1) * bw) - 1, base),
-                          BAR, cv2.FILLED)
-    cv2.line(img, (x0, base), (x1, base), INK, 1)
-    cv2.line(img, (x0, base), (x0, base - plot_h), INK, 1)
-    for x, text in ((x0, f"{lo:g}"), (x1 - 30, f"{hi:g}")):
-        cv2.putText(img, text, (x, base + 16), FONT, 0.4, INK, 1, cv2.LINE_AA)
-    for frac, count in _y_ticks(c, log):
-        y = base - int(round(frac * plot_h))
-        cv2.line(img, (x0 - 3, y), (x0, y), INK, 1)
-        cv2.putText(img, _count_label(count), (2, y + 4), FONT, 0.32, INK, 1, cv2.LINE_AA)
-    cv2.putText(img, "log count" if log else "count", (x1 - 80, 34), FONT, 0.35, INK, 1, cv2.LINE_AA)
-    return img
-
-
-def _y_ticks(counts: np.ndarray, log: bool) -> list[tuple[float, float]]:
-    """(height fraction, count) of the y-axis ticks: 0, the middle and the top of the tallest bar.
-
-    Log charts place their ticks at powers of ten (bar height log10(1 + count)), so the
-    labels read as counts whatever the scale.
-    """
-    top = float(counts.max()) if counts.size else 0.0
-    if top <= 0:
-        return [(0.0, 0.0)]
-    if not log:
-        return [(0.0, 0.0), (0.5, top / 2), (1.0, top)]
-    h_top = np.log10(1 + top)
-    powers = [(np.log10(1 + 10.0 ** k) / h_top, 10.0 ** k) for k in range(int(np.floor(np.log10(top))) + 1)]
-    ticks = [(0.0, 0.0)]
-    for frac, count in powers:    # keep labels apart: no tick within 12% of the chart of another
-        if frac - ticks[-1][0] >= 0.12 and 1.0 - frac >= 0.12:
-            ticks.append((frac, count))
-    return ticks + [(1.0, top)]
-
-
-def _count_label(count: float) -> str:
-    return f"{count / 1e6:.3g}M" if count >= 1e6 else f"{count / 1e3:.3g}k" if count >= 1e3 else f"{count:.3g}"
-
-
-def region_heatmap(glove: dict, region_map: np.ndarray, region_ids: dict[str, int], title: str) -> np.ndarray:
-    """Canonical hand, each place filled by its contact frequency (inferno, 0..the highest one), with a value bar."""
-    img = np.full((CANVAS + 28 + 62, CANVAS + 16, 3), (32, 32, 32), np.uint8)
-    values = np.zeros(region_map.shape, np.float32)
-    known = np.zeros(region_map.shape, bool)
-    for name, r in glove["regions"].items():
-        if name in region_ids and r["contact_frequency"] is not None:
-            mask = region_map == region_ids[name]
-            values[mask] = r["contact_frequency"]
-            known |= mask
-    vmax = max(float(values.max()), 0.01)
-    panel = cv2.applyColorMap(np.round(np.clip(values / vmax, 0, 1) * 255).astype(np.uint8), cv2.COLORMAP_INFERNO)
-    panel[~known] = (90, 90, 90)
-    panel[region_map == 0] = (32, 32, 32)
-    panel[region_outline(region_map)] = (255, 255, 255)
-    _label_fingers(panel, region_map, region_ids)
-    img[28:28 + CANVAS, 8:8 + CANVAS] = panel
-    cv2.putText(img, title[:32], (8, 18), FONT, 0.45, (235, 235, 235), 1, cv2.LINE_AA)
-    draw_colour_bar(img, 8, 28 + CANVAS + 6, CANVAS, vmax, "contact frequency (share of frames)")
-    return img
-
-
-def _label_fingers(panel: np.ndarray, region_map: np.ndarray, region_ids: dict[str, int]) -> None:
-    """Write each digit's and the palm's name at the centre of its places (e.g. "index" over index.*)."""
-    groups: dict[str, list[int]] = {}
-    for name, rid in region_ids.items():
-        groups.setdefault(name.split(".")[0], []).append(rid)
-    for group, ids in groups.items():
-        ys, xs = np.nonzero(np.isin(region_map, ids))
-        if ys.size == 0:
-            continue
-        size = cv2.getTextSize(group, FONT, 0.33, 1)[0]
-        org = (int(xs.mean()) - size[0] // 2, int(ys.mean()) + size[1] // 2)
-        cv2.putText(panel, group, org, FONT, 0.33, (0, 0, 0), 3, cv2.LINE_AA)       # dark rim: readable on any fill
-        cv2.putText(panel, group, org, FONT, 0.33, (255, 255, 255), 1, cv2.LINE_AA)
 
 
 @dataclass
@@ -178,12 +74,19 @@ def _fmt(v) -> str:
 
 
 LICENSE_UNSET = "not stated (set it with htdata card --license, e.g. CC-BY-4.0)"
-def sample_format(codec: dict) -> list[list[str]]:
-    """The member table, from the dataset's own codec record (the EXR pixel type is chosen per dataset)."""
+def has_rgb(reader) -> bool:
+    """Whether any sample of the version holds an RGB frame (from the index: no shard read)."""
+    return bool(len(reader) and np.any(reader.index[SIZE_FIELDS[RGB_MEMBER]] > 0))
+
+
+def sample_format(codec: dict, rgb_frames: bool = True) -> list[list[str]]:
+    """The member table, from the dataset's own codec record (the EXR pixel type is chosen per dataset);
+    no rgb.jpg row for a dataset without video."""
     tactile, rgb = codec.get("tactile", {}), codec.get("rgb", {})
     stored = tactile.get("maps", "stored") == "stored"   # htdata/format/mapstorage.py
     return [
-        ["rgb.jpg", f"224x224x3 uint8 JPEG, quality {rgb.get('quality', '?')}", "egocentric camera frame"],
+        *([["rgb.jpg", f"224x224x3 uint8 JPEG, quality {rgb.get('quality', '?')}", "egocentric camera frame"]]
+          if rgb_frames else []),
         ["tactile_<hand>.exr", f"224x224 {tactile.get('pixel_type', 'half')} EXR ({tactile.get('compression', '?')}) "
          "in [0,1]" if stored else "not stored (maps = raw): htdata's readers render it from raw_<hand>.npy",
          "pressure on the canonical hand, 0 where the glove has no sensor"],
@@ -196,27 +99,53 @@ def _about(card: Card, s: dict, reader, title: str | None, description: str | No
            license: str | None) -> None:
     """What a dataset card opens with: name, description, licence, sources, sample format, how to load."""
     manifest = reader.manifest
+    rgb = has_rgb(reader)
     card.text(description or manifest.get("description") or
-              f"Full-hand tactile glove recordings paired with egocentric RGB video: {s['episodes']} episodes, "
-              f"{s['frames']} frames, {len(s['tasks'])} tasks.")
+              f"Full-hand tactile glove recordings {'paired with egocentric RGB video' if rgb else '(glove only, no video)'}"
+              f": {s['episodes']} episodes, {s['frames']} frames, {len(s['tasks'])} tasks.")
     card.table(["field", "value"], [["licence", license or manifest.get("license") or LICENSE_UNSET],
                                     ["version", s["version"]], ["episodes", s["episodes"]], ["frames", s["frames"]],
                                     ["created", manifest.get("created", "-")]])
     card.heading("Sources")
-    per_source: dict[str, int] = {}
-    for ep in reader.episodes:
-        per_source[ep.get("source", "?")] = per_source.get(ep.get("source", "?"), 0) + 1
-    card.table(["source", "adapter", "gloves (hand: layout)", "episodes"],
-               [[src.get("name", "?"), (src.get("adapter") or {}).get("name", "-"),
-                 ", ".join(f"{h}: {lid}" for h, lid in sorted((src.get("layouts") or {}).items())) or "-",
-                 per_source.get(src.get("name"), 0)] for src in manifest.get("sources", [])])
+    card.table(["source", "adapter", "gloves (hand: layout)", "episodes"], source_rows(manifest, reader.episodes))
     card.heading("Sample format")
     card.text("One sample per frame; a frame without a glove row (RGB-only) or without video (tactile-only) "
-              "simply lacks that member.")
-    card.table(["member", "format", "what"], sample_format(manifest.get("codec", {})))
+              "simply lacks that member." if rgb else
+              "One sample per glove frame (glove only: no camera, so no rgb.jpg member).")
+    card.table(["member", "format", "what"], sample_format(manifest.get("codec", {}), rgb))
     card.heading("How to load")
     card.text("pip install htdata, then in Python: import htdata; ds = htdata.open(\"PATH\"); "
               "sample = ds.decoded(0). For LeRobot: htdata export lerobot PATH OUT.")
+
+
+def source_rows(manifest: dict, episodes: list[dict]) -> list[list]:
+    """Sources table rows: name, adapter, the gloves its episodes use, its episodes.
+
+    An episode record names its ADAPTER ("source"), a manifest source its pipeline's name: an episode
+    belongs to the source whose folder holds its source_ref, else to the one of its name or adapter.
+    """
+    sources = manifest.get("sources", [])
+    counts = [0] * len(sources)
+    gloves: list[dict] = [dict(src.get("layouts") or {}) for src in sources]
+
+    def owner(ep: dict) -> int | None:
+        ref, name = str(ep.get("source_ref", "")), ep.get("source")
+        for test in (lambda s: s.get("source_root") and ref.startswith(str(s["source_root"]).rstrip("/") + "/"),
+                     lambda s: s.get("name") == name, lambda s: (s.get("adapter") or {}).get("name") == name):
+            hits = [k for k, src in enumerate(sources) if test(src)]
+            if hits:
+                return hits[0]
+        return None
+
+    for ep in episodes:
+        k = owner(ep)
+        if k is not None:
+            counts[k] += 1
+            for hand, lid in ep.get("layouts", {}).items():
+                gloves[k].setdefault(hand, lid)
+    return [[src.get("name", "?"), (src.get("adapter") or {}).get("name", "-"),
+             ", ".join(f"{h}: {lid}" for h, lid in sorted(gloves[k].items())) or "-", counts[k]]
+            for k, src in enumerate(sources)]
 
 
 def build_card(root, version: int | None = None, title: str | None = None, description: str | None = None,
@@ -231,7 +160,10 @@ def build_card(root, version: int | None = None, title: str | None = None, descr
     with DatasetReader(root, version=version) as reader:
         _about(card, s, reader, title, description, license)
         card.heading("What the numbers mean")
-        card.text(f"Values: {s['values']}; contact = any taxel above {s['contact_threshold']}.")
+        rules = s.get("contact_rules") or ["-"]
+        card.text(f"Values: {s['values']}. Contact (htdata/glove/contact.py, from each glove hand's calibration): "
+                  + ("a frame with " + rules[0] if len(rules) == 1 else
+                     "per glove, the rule in the Gloves table (" + "; ".join(rules) + ")") + ".")
         _counts(card, s)
         _gloves(card, s, reader, parse_canonical)
         card.heading("Taxel health")
@@ -273,10 +205,16 @@ def _gloves(card: Card, s: dict, reader, parse_canonical) -> None:
         card.image(f"regions_{tag}", region_heatmap(g, canonical.region_map, canonical.region_ids,
                                                     f"{g['hand']}: {g['layout']}"),
                    f"contact frequency per region, {g['hand']} {g['layout']}")
-        h = g["value_histogram"]
-        card.image(f"values_{tag}", histogram_chart(h["counts"], 0.0, 1.0,
-                                                    f"{g['hand']} {g['layout']}: values > 0 ({h['zeros']} exact zeros)"),
+        card.image(f"values_{tag}", value_histogram_chart(g["value_histogram"], f"{g['hand']} {g['layout']}"),
                    f"value histogram, {g['hand']} {g['layout']}")
+    hints = s.get("scale") or {}
+    if hints:
+        card.text("Scale (htdata/inspect/scalehint.py): per glove layout, the p99.9 of its pressed values and, "
+                  "where the maps use less than half of 0..1, a suggested `scale` for the pipeline TOML.")
+        card.table(["layout", "pressed values", "p99.9", "scale", "suggestion"],
+                   [[lid, h["pressed"], _fmt(h["p99_9"]), _fmt(h["scale"]),
+                     h["toml"].replace("\n", " ") if h.get("toml") else h.get("reason", "-")]
+                    for lid, h in hints.items()])
 
 
 def _sync(card: Card, reader) -> None:

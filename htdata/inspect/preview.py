@@ -5,7 +5,9 @@ contact (`pick="contact"`: hands in contact by each glove hand's contact
 rule, htdata/glove/contact.py, then the highest taxel value; at least
 len/(2N) frames apart; evenly spaced when nothing is in contact), or N
 frames evenly spaced over the episode, first and last included
-(`pick="even"`); columns are RGB | left tactile | right tactile. Tactile maps are
+(`pick="even"`); columns are RGB | left tactile | right tactile (no RGB column for an
+episode without video: a glove-only sheet is two columns wide). Each row is labelled with
+its frame number and CLIP time (seconds since the episode's first frame). Tactile maps are
 colour-mapped (inferno, 0 = black, 1 = pale yellow), the canonical region
 outlines are drawn on top, pixels the glove does not cover are shaded with a
 grey hatch, and a hand the episode does not have is a grey panel labelled
@@ -19,7 +21,7 @@ values (from `htdata stats`, cached in DATASET/stats/), so faint contact
 visible; values above vmax saturate. "auto" (the default) is "quantile"
 when that p99 is below AUTO_QUANTILE_BELOW (0.3), "fixed" otherwise. A
 colour bar under the tactile columns shows the scale with its values
-either way, and `htdata preview` prints its range.
+either way (its caption wrapped to the bar's width), and `htdata preview` prints its range.
 
 Sheet size is fixed by the row count: see `sheet_size`.
 """
@@ -31,7 +33,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from htdata.format.table import CANVAS, HANDS
+from htdata.format.table import CANVAS, HANDS, JSON_MEMBER, RGB_MEMBER, SIZE_FIELDS, decode_member
 from htdata.inspect.outline import region_outline  # noqa: F401  (preview.region_outline stays a name of this module)
 from htdata.inspect.stats import positive_value_quantile
 from htdata.read.reader import DatasetReader
@@ -48,8 +50,11 @@ OUTLINE = (255, 255, 255)
 NONFINITE = (255, 0, 255)
 TEXT = (235, 235, 235)
 FONT = cv2.FONT_HERSHEY_SIMPLEX
-BAR_H = 52                       # colour bar band under the rows
 BAR_STRIP_H = 14
+BAR_FONT = 0.4
+BAR_LINE_H = 14                  # caption line spacing
+BAR_CAPTION_LINES = 2            # the caption wraps to at most this many lines under the ticks
+BAR_H = 56 + (BAR_CAPTION_LINES - 1) * BAR_LINE_H   # colour bar band under the rows (+ room for descenders)
 BAR_TICKS = 5
 CONTRASTS = ("auto", "fixed", "quantile")
 PICKS = ("contact", "even")
@@ -58,9 +63,14 @@ CONTRAST_QUANTILE = 0.99         # of the dataset's positive taxel values
 MIN_VMAX = 0.01                  # never stretch further than this: noise would fill the panel
 
 
-def sheet_size(rows: int) -> tuple[int, int]:
-    """(height, width) in pixels of a sheet with `rows` frames."""
-    width = PAD + len(COLUMNS) * (CANVAS + PAD)
+def sheet_columns(rgb: bool = True) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(columns, their titles): RGB and both hands, or only the hands for an episode without video."""
+    return (COLUMNS, COLUMN_TITLES) if rgb else (COLUMNS[1:], COLUMN_TITLES[1:])
+
+
+def sheet_size(rows: int, rgb: bool = True) -> tuple[int, int]:
+    """(height, width) in pixels of a sheet with `rows` frames (`rgb` False: no RGB column)."""
+    width = PAD + len(sheet_columns(rgb)[0]) * (CANVAS + PAD)
     height = TITLE_H + HEADER_H + rows * (CANVAS + PAD) + PAD + BAR_H
     return height, width
 
@@ -166,18 +176,56 @@ def contact_positions(stats: dict, num_frames: int, rows: int) -> np.ndarray:
     return np.asarray(sorted(chosen), np.int64)
 
 
+def wrap_text(text: str, width: int, scale: float = BAR_FONT, max_lines: int = BAR_CAPTION_LINES) -> list[str]:
+    """`text` broken at spaces into lines no wider than `width` px (cv2's Hershey font at `scale`); a text
+    longer than `max_lines` ends in "..." on the last line, so nothing is ever drawn past `width`."""
+    def fits(line: str) -> bool:
+        return cv2.getTextSize(line, FONT, scale, 1)[0][0] <= width
+
+    lines: list[str] = []
+    for word in text.split():
+        if lines and fits(f"{lines[-1]} {word}"):
+            lines[-1] = f"{lines[-1]} {word}"
+        else:
+            lines.append(word)
+    if len(lines) > max_lines:
+        lines = lines[:max_lines]
+        lines[-1] += " ..."
+    for k, line in enumerate(lines):        # a single word wider than the bar is cut with "..."
+        while not fits(line) and len(line) > 4:
+            line = line[:-4] + "..."
+        lines[k] = line
+    return lines
+
+
 def draw_colour_bar(sheet: np.ndarray, x: int, y: int, width: int, vmax: float, label: str) -> None:
-    """Inferno strip 0..vmax at (x, y) with BAR_TICKS labelled ticks and a caption."""
+    """Inferno strip 0..vmax at (x, y) with BAR_TICKS labelled ticks and a caption wrapped to `width`."""
     ramp = np.linspace(0, 255, width).astype(np.uint8)[None, :].repeat(BAR_STRIP_H, axis=0)
     sheet[y:y + BAR_STRIP_H, x:x + width] = cv2.applyColorMap(ramp, cv2.COLORMAP_INFERNO)
     for k in range(BAR_TICKS):
         tx = x + round(k * (width - 1) / (BAR_TICKS - 1))
         cv2.line(sheet, (tx, y + BAR_STRIP_H), (tx, y + BAR_STRIP_H + 4), TEXT, 1)
         text = f"{vmax * k / (BAR_TICKS - 1):.3g}" + ("+" if k == BAR_TICKS - 1 and vmax < 1.0 else "")
-        (tw, _), _ = cv2.getTextSize(text, FONT, 0.4, 1)
-        cv2.putText(sheet, text, (min(max(tx - tw // 2, x), x + width - tw), y + BAR_STRIP_H + 17), FONT, 0.4,
+        (tw, _), _ = cv2.getTextSize(text, FONT, BAR_FONT, 1)
+        cv2.putText(sheet, text, (min(max(tx - tw // 2, x), x + width - tw), y + BAR_STRIP_H + 17), FONT, BAR_FONT,
                     TEXT, 1, cv2.LINE_AA)
-    cv2.putText(sheet, label, (x, y + BAR_STRIP_H + 33), FONT, 0.4, TEXT, 1, cv2.LINE_AA)
+    for k, line in enumerate(wrap_text(label, width)):
+        cv2.putText(sheet, line, (x, y + BAR_STRIP_H + 33 + k * BAR_LINE_H), FONT, BAR_FONT, TEXT, 1, cv2.LINE_AA)
+
+
+def clip_time_s(reader: DatasetReader, first: int, i: int) -> float:
+    """Seconds from the episode's first stored frame (sample `first`) to sample `i`, on the frames' own clock."""
+    def t_ns(k: int) -> int:
+        meta = decode_member(JSON_MEMBER, reader.sample(k, (JSON_MEMBER,))[JSON_MEMBER], reader.key(k))
+        return int(meta["t_rgb_ns"])
+
+    return (t_ns(i) - t_ns(first)) / 1e9
+
+
+def episode_has_rgb(reader: DatasetReader, pos: int) -> bool:
+    """Whether any frame of episode `pos` holds an RGB member (from the index, no shard read)."""
+    first, n = reader.episode_range(pos)
+    return bool(np.any(reader.index[SIZE_FIELDS[RGB_MEMBER]][first:first + n] > 0))
 
 
 def _default_episode(episodes: list[dict]) -> str:
@@ -226,36 +274,47 @@ def render_contact_sheet(dataset, episode: str | None = None, frames: int = 6, c
                 picked = "evenly spaced (no stats for this dataset)"
         outline = region_outline(reader.place_map)
         coverage = {hand: reader.coverage(layout_id) for hand, layout_id in ep["layouts"].items()}
-
-        height, width = sheet_size(len(chosen))
-        sheet = np.empty((height, width, 3), np.uint8)
-        sheet[:] = BACKGROUND
-        _label(sheet, f"{ep['episode_id']}  task={ep['task']}  scene={ep['scene']}  "
-                      f"{n} frames @ {ep['fps']:g} fps", (PAD, 20), 0.5)
-        for c, title in enumerate(COLUMN_TITLES):
-            _label(sheet, title, (PAD + c * (CANVAS + PAD), TITLE_H + 15))
-        t0 = None
-        for r, frame in enumerate(chosen):
-            sample = reader.decoded(first + int(frame))
-            y = TITLE_H + HEADER_H + r * (CANVAS + PAD)
-            panels = [cv2.cvtColor(sample["rgb"], cv2.COLOR_RGB2BGR) if "rgb" in sample
-                      else absent_panel("RGB (glove only)")]
-            for hand in HANDS:
-                if hand in sample["tactile"]:
-                    panels.append(render_tactile(sample["tactile"][hand], coverage[hand], outline, vmax))
-                else:   # an RGB-only sample (format 3) or a hand the episode does not have
-                    panels.append(absent_panel("tactile" if sample["meta"].get("rgb_only") and hand in ep["hands"]
-                                              else f"{hand} hand"))
-            for c, panel in enumerate(panels):
-                x = PAD + c * (CANVAS + PAD)
-                sheet[y:y + CANVAS, x:x + CANVAS] = panel
-            t = sample["meta"]["t_rgb_ns"]
-            t0 = t if t0 is None else t0
-            _label(sheet, f"frame {int(frame)}  t={(t - t0) / 1e9:.3f}s", (PAD + 4, y + 16))
+        rgb = episode_has_rgb(reader, pos)
+        sheet = _draw_rows(reader, ep, first, n, chosen, rgb, coverage, outline, vmax)
         caption = ("tactile value, fixed scale 0..1" if contrast == "fixed" else
                    f"tactile value 0..{vmax:.3g} (p{CONTRAST_QUANTILE * 100:g} of the dataset's positive "
                    f"taxel values; above saturates)") + f"; frames: {picked}"
-        draw_colour_bar(sheet, PAD + CANVAS + PAD, height - BAR_H + 4, 2 * CANVAS + PAD, vmax, caption)
+        x0 = PAD + (CANVAS + PAD if rgb else 0)          # under the tactile columns
+        draw_colour_bar(sheet, x0, sheet.shape[0] - BAR_H + 4, 2 * CANVAS + PAD, vmax, caption)
+    return sheet
+
+
+def _draw_rows(reader: DatasetReader, ep: dict, first: int, n: int, chosen: np.ndarray, rgb: bool,
+               coverage: dict, outline: np.ndarray, vmax: float) -> np.ndarray:
+    """The sheet without its colour bar: title, column heads, one row of panels per chosen frame."""
+    _, titles = sheet_columns(rgb)
+    height, width = sheet_size(len(chosen), rgb)
+    sheet = np.empty((height, width, 3), np.uint8)
+    sheet[:] = BACKGROUND
+    title = (f"{ep['episode_id']}  task={ep['task']}  scene={ep['scene']}  {n} frames @ {ep['fps']:g} fps"
+             + ("" if rgb else "  (glove only: no RGB)"))
+    # a long id on a narrow (glove-only) sheet: a smaller font rather than text cut at the edge
+    scale = min(0.5, 0.5 * (width - 2 * PAD - 4) / cv2.getTextSize(title, FONT, 0.5, 1)[0][0])
+    _label(sheet, title, (PAD, 20), scale)
+    for c, title in enumerate(titles):
+        _label(sheet, title, (PAD + c * (CANVAS + PAD), TITLE_H + 15))
+    for r, frame in enumerate(chosen):
+        sample = reader.decoded(first + int(frame))
+        y = TITLE_H + HEADER_H + r * (CANVAS + PAD)
+        panels = []
+        if rgb:
+            panels.append(cv2.cvtColor(sample["rgb"], cv2.COLOR_RGB2BGR) if "rgb" in sample
+                          else absent_panel("RGB (glove only)"))
+        for hand in HANDS:
+            if hand in sample["tactile"]:
+                panels.append(render_tactile(sample["tactile"][hand], coverage[hand], outline, vmax))
+            else:   # an RGB-only sample (format 3) or a hand the episode does not have
+                panels.append(absent_panel("tactile" if sample["meta"].get("rgb_only") and hand in ep["hands"]
+                                           else f"{hand} hand"))
+        for c, panel in enumerate(panels):
+            x = PAD + c * (CANVAS + PAD)
+            sheet[y:y + CANVAS, x:x + CANVAS] = panel
+        _label(sheet, f"frame {int(frame)}  t={clip_time_s(reader, first, first + int(frame)):.3f}s", (PAD + 4, y + 16))
     return sheet
 
 

@@ -38,6 +38,7 @@ from htdata.store.fsutil import write_bytes_atomic
 from htdata.glove.health import CLASSES, HEALTH_VERSION, merge_counts
 from htdata.read.reader import DatasetReader
 from htdata.inspect.healthmap import write_health_map as write_png
+from htdata.inspect.scalehint import scale_suggestions
 
 STATS_DIR = "stats"
 # /2: values from the raw rows where stored (format 3), raw-unit sketches; the key covers the calibration
@@ -46,6 +47,8 @@ STATS_SCHEMA = (f"htdata-episode-stats/2 health/{HEALTH_VERSION} bins/{HIST_BINS
 GROUPINGS = ("task", "scene", "source", "layout", "hand")
 QUANTILES = {"p1": 0.01, "p50": 0.50, "p99": 0.99}
 HIST_COARSE = 50                  # bins of the summary's value_histogram (divides HIST_BINS)
+# value_histogram x ranges: each a whole number of fine bins per coarse bin (HIST_BINS x r / HIST_COARSE)
+HIST_RANGES = (0.05, 0.1, 0.2, 0.25, 0.5, 1.0)
 Progress = Callable[[int, int], None]
 
 
@@ -152,9 +155,7 @@ def _glove_summary(acc: dict, gloves: dict, health: dict) -> dict:
         raw_hist, top = np.asarray(acc["raw_hist"], np.int64), acc["raw_top"]
         out["raw_quantiles"] = {k: _scaled(quantile(acc["raw_zeros"], raw_hist, q), top) for k, q in QUANTILES.items()}
         out["raw_quantiles"].update({"min": acc["raw_min"], "max": acc["raw_max"], "range": [0.0, top]})
-    # coarse twin of the fixed-bin histogram for plots: exact zeros + HIST_COARSE bins over (0, 1]
-    out["value_histogram"] = {"zeros": int(acc["zeros"]),
-                              "counts": hist.reshape(HIST_COARSE, -1).sum(axis=1).tolist()}
+    out["value_histogram"] = fitted_histogram(int(acc["zeros"]), hist)
     for name, r in sorted(acc["regions"].items()):
         out["regions"][name] = {
             "taxels": r["taxels"],
@@ -166,6 +167,17 @@ def _glove_summary(acc: dict, gloves: dict, health: dict) -> dict:
         std = np.sqrt(np.maximum(np.asarray(acc["taxel_sumsq"]) / frames - mean ** 2, 0.0))
         out["taxel_mean"], out["taxel_std"] = _on_grid(mean, glove), _on_grid(std, glove)
     return out
+
+
+def fitted_histogram(zeros: int, hist: np.ndarray) -> dict:
+    """Coarse twin of the fixed-bin histogram for plots: exact zeros + HIST_COARSE bins over (0, hi], hi the
+    smallest of HIST_RANGES at or above the p99.9 of the positive values (a faint glove's values fill the plot,
+    not its first bar); "above" counts the values beyond hi."""
+    q = quantile(0, hist, 0.999) if hist.sum() else None
+    hi = next((r for r in HIST_RANGES if q is not None and q <= r), 1.0)
+    fine = int(round(hi * HIST_BINS))
+    return {"zeros": zeros, "range": [0.0, hi], "above": int(hist[fine:].sum()),
+            "counts": hist[:fine].reshape(HIST_COARSE, -1).sum(axis=1).tolist()}
 
 
 def _scaled(q: float | None, top: float) -> float | None:
@@ -203,7 +215,9 @@ def summarise(reader: DatasetReader, per_episode: list[dict], by: str | None = N
                        "(exact; frames_from_raw) where the dataset has them, else the stored maps sampled at "
                        "taxel centres; raw_quantiles in raw glove units"),
             "gloves": groups, "tasks": _table(reader, "task"), "scenes": _table(reader, "scene"),
-            "health_classes": list(CLASSES), "nan_samples": nan_samples}
+            "health_classes": list(CLASSES), "nan_samples": nan_samples,
+            "contact_rules": sorted({g["contact_rule"] for g in groups if g.get("contact_rule")}),
+            "scale": scale_suggestions(reader, per_episode)}
 
 
 def _key_names(by: str | None) -> tuple:
