@@ -32,6 +32,7 @@ import numpy as np
 
 from htdata.errors import HtdataError
 from htdata.store import storage
+from htdata.store.confine import inside
 from htdata.format.codec import decode_png_u8
 from htdata.format.mapstorage import maps_stored
 from htdata.format.table import (HANDS, INDEX_DTYPE, JSON_MEMBER, LAYOUTS_DIR, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
@@ -192,15 +193,25 @@ class DatasetReader:
         return first + int(frame)
 
     # -- bytes -------------------------------------------------------------
+    def _shard_name(self, shard: int) -> str:
+        if not 0 <= shard < len(self._shard_names):   # a damaged or hostile index row: one line, not IndexError
+            raise ValueError(f"{self.root}: an index row names shard {shard}, but version {self.version} has "
+                             f"{len(self._shard_names)} shards (index.npy damaged?); run `htdata validate`")
+        return self._shard_names[shard]
+
     def _shard_path(self, shard: int) -> str:
-        return storage.join(self.root, SHARDS_DIR, self._shard_names[shard])
+        return storage.join(self.root, SHARDS_DIR, self._shard_name(shard))
+
+    def _confined_shard(self, shard: int) -> str:
+        """The shard's path, refused when it resolves outside the dataset (a symlink to elsewhere)."""
+        return inside(self.root, f"{SHARDS_DIR}/{self._shard_name(shard)}", f"shards[{shard}]")
 
     def _handle(self, shard: int):
         self._check_pid()
         handle = self._handles.get(shard)
         if handle is None:
             with self._collected_guard(self._shard_path(shard)):
-                handle = storage.open_binary(self._shard_path(shard))
+                handle = storage.open_binary(self._confined_shard(shard))
             self._handles[shard] = handle
             if len(self._handles) > MAX_OPEN_SHARDS:
                 _, oldest = self._handles.popitem(last=False)
@@ -294,7 +305,7 @@ class DatasetReader:
         for shard in (range(len(self._shard_names)) if shards is None else shards):
             entry = self.manifest["shards"][shard]
             first, count = int(entry["first_sample"]), int(entry["samples"])
-            with storage.open_binary(self._shard_path(shard)) as f:
+            with storage.open_binary(self._confined_shard(shard)) as f:
                 for i in range(first, first + count):
                     values = rows[i].item()
                     row = SampleRow(values[0], values[1], values[2], values[3],
@@ -309,7 +320,7 @@ class DatasetReader:
     # -- layouts / maps ----------------------------------------------------
     def _png(self, relpath: str) -> np.ndarray:
         if relpath not in self._maps:
-            path = storage.join(self.root, relpath)
+            path = inside(self.root, relpath)
             self._maps[relpath] = decode_png_u8(storage.read_bytes(path), path)
         return self._maps[relpath]
 
@@ -323,7 +334,7 @@ class DatasetReader:
     def layout(self, layout_id: str) -> dict:
         if layout_id not in self.manifest["layouts"]:
             raise KeyError(f"{self.root}: layout {layout_id!r} not in dataset")
-        return json.loads(storage.read_text(storage.join(self.root, self.manifest["layouts"][layout_id]["file"])))
+        return json.loads(storage.read_text(inside(self.root, self.manifest["layouts"][layout_id]["file"])))
 
     @property
     def region_map(self) -> np.ndarray:
@@ -349,7 +360,7 @@ class DatasetReader:
                 raise FileNotFoundError(f"{self.root}: version {self.version} has no split named {name!r} "
                                         f"(splits: {sorted(self.manifest.get('splits', {})) or 'none'}; "
                                         f"run `htdata split`)")
-            path = storage.join(self.root, entry["file"])
+            path = inside(self.root, entry["file"], f"splits.{name}.file")
         else:
             path = storage.join(self.root, f"{SPLITS_DIR}/{name}.json")
         if not storage.exists(path):

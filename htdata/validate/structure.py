@@ -23,6 +23,7 @@ from htdata.format.codec import decode_json
 from htdata.format.mapstorage import map_member
 from htdata.format.table import (HANDS, INDEX_DTYPE, JSON_MEMBER, RGB_MEMBER, MANIFEST_FILE, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
                            tactile_member)
+from htdata.store.confine import PathOutsideDataset, inside
 from htdata.store.manifest import IndexDtypeError, load_manifest, parse_episodes, parse_index, parse_manifest
 from htdata.resources import validate_json
 from htdata.format.shardio import BLOCK, member_offsets, parse_header, sample_key
@@ -92,7 +93,11 @@ def _load_manifest(root: Path, check: Check, version: int | None) -> tuple[dict,
 
 def _read_listed(root: Path, manifest: dict, stem: str, check: Check) -> tuple[Path, bytes] | None:
     """The file the manifest lists as `{stem}_file`, its sha256 checked against `{stem}_sha256`."""
-    path = root / manifest[f"{stem}_file"]
+    try:
+        path = Path(inside(root, manifest[f"{stem}_file"], f"{stem}_file"))
+    except PathOutsideDataset as exc:   # a symlink out of the dataset: named, never read
+        check.fail("path_outside", str(exc), file=manifest[f"{stem}_file"])
+        return None
     if not path.is_file():
         check.fail(f"{stem}_missing", f"{path} missing", file=manifest[f"{stem}_file"])
         return None
@@ -299,6 +304,11 @@ def check_shard_files(ds: Loaded, check: Check) -> None:
                 listed |= {s["name"] for s in load_manifest(ds.root, validate=False, version=v)["shards"]}
             except (OSError, ValueError) as exc:
                 check.warn("version_unreadable", f"version {v}: {exc}", version=v)
+    for entry in ds.manifest["shards"]:
+        try:
+            inside(ds.root, f"{SHARDS_DIR}/{entry['name']}", "shard")
+        except PathOutsideDataset as exc:
+            check.fail("path_outside", str(exc), shard=entry["name"])
     shard_dir = ds.root / SHARDS_DIR
     present = sorted(p.name for p in shard_dir.iterdir()) if shard_dir.is_dir() else []
     for name in present:
