@@ -128,6 +128,47 @@ def test_hdf5_dataset_shape_beyond_its_storage_is_refused(tmp_path, capsys):
                                                                    "ot-home_kitchen_p1-demo_01"]
 
 
+# --------------------------------------------------------------------------- bytes of other files (issue 26 item 5)
+
+def _external_raw(g, outside: Path) -> None:
+    rows = np.asarray(g["right_pressure"][()], np.float32)
+    outside.write_bytes(rows.tobytes())
+    del g["right_pressure"]
+    g.create_dataset("right_pressure", shape=rows.shape, dtype=np.float32, external=[(str(outside), 0, rows.nbytes)])
+
+
+def _external_link(g, outside: Path) -> None:
+    with h5py.File(outside, "w") as o:
+        o.create_dataset("p", data=np.asarray(g["right_pressure"][()], np.float32))
+    del g["right_pressure"]
+    g["right_pressure"] = h5py.ExternalLink(str(outside), "/p")
+
+
+def _virtual(g, outside: Path) -> None:
+    rows = np.asarray(g["right_pressure"][()], np.float32)
+    with h5py.File(outside, "w") as o:
+        o.create_dataset("p", data=rows)
+    layout = h5py.VirtualLayout(shape=rows.shape, dtype=np.float32)
+    layout[:] = h5py.VirtualSource(str(outside), "p", shape=rows.shape)
+    del g["right_pressure"]
+    g.create_virtual_dataset("right_pressure", layout)
+
+
+@pytest.mark.parametrize("how,said", [(_external_raw, "stored in external raw file(s)"),
+                                      (_external_link, "an HDF5 external link to"),
+                                      (_virtual, "a virtual dataset mapping")])
+def test_hdf5_reaching_another_file_is_refused(tmp_path, capsys, how, said):
+    raw = make_opentouch(tmp_path / "raw")
+    with h5py.File(raw / "home_kitchen_p1.hdf5", "r+") as f:
+        how(f["data/demo_02"], tmp_path / "outside.bin")
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", "opentouch", raw, out) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if "demo_02" in line]
+    assert len(err) == 1 and "/data/demo_02/right_pressure: " + said in err[0], err
+    assert sorted(e["episode_id"] for e in load_episodes(out)) == ["ot-home_kitchen_p1-demo_003",
+                                                                   "ot-home_kitchen_p1-demo_01"]
+
+
 # --------------------------------------------------------------------------- non-regular files, symlinks
 
 def test_fifo_named_chest_mp4_is_refused_not_hanging(tmp_path, capsys):

@@ -49,6 +49,7 @@ from htdata.source.adapters.base import (
     sanitise_id, walk_source,
 )
 from htdata.errors import EpisodeError
+from htdata.source.adapters.hdf5safe import check_hdf5_size, in_file
 from htdata.source.rgb import CHANNEL_ORDERS, to_rgb
 
 log = logging.getLogger(__name__)
@@ -277,25 +278,6 @@ class OpenTouchAdapter(FileDiscovery):
         return OpenTouchStreams(ref, params)
 
 
-# Deflate (the usual HDF5 filter) expands at most ~1032:1.
-MAX_FILTER_RATIO = 1100
-
-
-def check_hdf5_size(ref: EpisodeRef, ds, path: Path) -> None:
-    """Refuse a dataset whose declared shape needs more bytes than its storage can hold (before reading it).
-
-    Contiguous data must be fully stored; chunked (filtered) data may expand
-    at most MAX_FILTER_RATIO times its stored bytes. A shape forged to 2e8
-    rows is an error here instead of a multi-GB allocation on read.
-    """
-    need = int(np.prod(ds.shape, dtype=np.float64)) * ds.dtype.itemsize if ds.shape else ds.dtype.itemsize
-    stored = int(ds.id.get_storage_size())
-    limit = stored if ds.chunks is None else stored * MAX_FILTER_RATIO + (1 << 20)
-    if need > limit:
-        raise EpisodeError(ref, None, f"{ds.name}: declared shape {ds.shape} {ds.dtype} needs {need} bytes but the "
-                           f"file stores {stored} bytes for it: refused before reading", file=path)
-
-
 class OpenTouchStreams(EpisodeStreams):
     def __init__(self, ref: EpisodeRef, params: dict):
         import h5py
@@ -320,14 +302,15 @@ class OpenTouchStreams(EpisodeStreams):
         ref = self.ref
         if group not in self._file:
             raise EpisodeError(ref, None, f"clip {group} not found")
-        g = self._file[group]
         try:
-            check_hdf5_size(ref, g["timestamps"], self.path)
-            ts = np.asarray(g["timestamps"][()], dtype=np.int64)
-            self._jpegs = g["rgb_images_jpeg"]
+            g = in_file(ref, self._file, group, self.path)
+            stamps = in_file(ref, g, "timestamps", self.path)
+            check_hdf5_size(ref, stamps, self.path)
+            ts = np.asarray(stamps[()], dtype=np.int64)
+            self._jpegs = in_file(ref, g, "rgb_images_jpeg", self.path)
             self._pressure = {}
             for hand in ref.hands:
-                ds = g[f"{hand}_pressure"]
+                ds = in_file(ref, g, f"{hand}_pressure", self.path)
                 check_tactile_shape(ref, hand, ds.shape, self.path)
                 check_hdf5_size(ref, ds, self.path)
                 self._pressure[hand] = ds
