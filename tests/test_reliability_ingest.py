@@ -11,7 +11,7 @@ import subprocess
 import sys
 
 from htdata.read.reader import DatasetReader
-from tests.factories import ingest_cli, make_opentouch, small_pipeline
+from tests.factories import ingest_cli, make_native, make_opentouch, small_pipeline
 
 
 def test_labels_edited_between_a_crash_and_its_resume_are_honoured(tmp_path):
@@ -77,8 +77,9 @@ def test_every_record_keeps_its_source_files_sha256(tmp_path):
     raw = make_opentouch(tmp_path / "raw")
     assert ingest_cli("--pipeline", small_pipeline(tmp_path, "opentouch"), raw, tmp_path / "ds") == 0
     want = hashlib.sha256((raw / "home_kitchen_p1.hdf5").read_bytes()).hexdigest()
+    labels = hashlib.sha256((raw / "annotations.csv").read_bytes()).hexdigest()   # it decides the task (#26)
     assert {e["episode_id"]: e["source_sha256"] for e in DatasetReader(tmp_path / "ds").episodes} == {
-        e: {"home_kitchen_p1.hdf5": want} for e in ("ot-home_kitchen_p1-demo_01", "ot-home_kitchen_p1-demo_02",
+        e: {"home_kitchen_p1.hdf5": want, "annotations.csv": labels} for e in ("ot-home_kitchen_p1-demo_01", "ot-home_kitchen_p1-demo_02",
                                                    "ot-home_kitchen_p1-demo_003")}
 
 
@@ -104,7 +105,9 @@ def test_verify_sources_passes_matching_files_and_refuses_unlisted_ones(tmp_path
     raw = make_opentouch(tmp_path / "raw")
     pipe = small_pipeline(tmp_path, "opentouch")
     assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "none") == 2      # no list at all
-    _sums(raw, ["home_kitchen_p1.hdf5"])
+    _sums(raw, ["home_kitchen_p1.hdf5"])                # the label table decides tasks: it must be listed too
+    assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "unlisted") == 2
+    _sums(raw, ["home_kitchen_p1.hdf5", "annotations.csv"])
     assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "ok") == 0
     assert len(DatasetReader(tmp_path / "ok").episodes) == 3
 
@@ -128,3 +131,30 @@ def test_timestamps_are_read_in_bounded_blocks_not_via_whole_length_index_arrays
         rows.close()
     assert np.array_equal(got, ts)
     assert peak < ts.nbytes + 6 * 2**20, peak     # the array + ~1 MB blocks; before #18: ~4x the array
+
+
+def test_a_native_recordings_own_layout_json_is_hashed_and_verified(tmp_path):
+    """Issue 26 item 5: the layout JSON a recording keeps decides its maps; before, it was neither in
+    source_sha256 nor checked by --verify-sources (damaged after SHA256SUMS, it ingested with rc 0)."""
+    import shutil
+
+    from htdata.resources import SCHEMAS_DIR
+
+    raw = make_native(tmp_path / "raw")
+    rec = raw / "rec_good"
+    doc = json.loads((rec / "recording.json").read_text())
+    layout = json.loads((SCHEMAS_DIR / "layouts" / "opentouch_right_16x16.json").read_text())
+    layout["layout_id"] = "my_glove_right_16x16"
+    (rec / "my_glove.json").write_text(json.dumps(layout, indent=1))
+    doc["hands"]["right"]["layout"] = "my_glove.json"
+    (rec / "recording.json").write_text(json.dumps(doc, indent=1))
+    _sums(raw, sorted(p.relative_to(raw).as_posix() for p in raw.rglob("*") if p.is_file()))
+    pipe = small_pipeline(tmp_path, "native")
+    assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "ok") == 0
+    assert "rec_good/my_glove.json" in DatasetReader(tmp_path / "ok").episodes[0]["source_sha256"]
+    layout["value"]["max"] = 1536                       # damaged after SHA256SUMS was written: other maps
+    (rec / "my_glove.json").write_text(json.dumps(layout, indent=1))
+    assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "strict") == 2
+    report = json.loads((tmp_path / "strict" / "reports" / "ingest.json").read_text())
+    assert "my_glove.json" in report["failures"][0]["file"] and "differs from" in report["failures"][0]["error"]
+    shutil.rmtree(tmp_path / "ok")

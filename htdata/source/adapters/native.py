@@ -124,10 +124,12 @@ class NativeAdapter(FileDiscovery):
             files += [paths["video_file"]] if "video_file" in paths else _frame_files(paths["frames_dir"])
         hands = tuple(sorted(doc["hands"]))
         layouts = _recording_layouts(folder, doc, rec_path, episode_id)
+        # a layout JSON the recording keeps decides its maps: hashed with it (not in the fingerprint, as before)
+        read = files + [Path(v) for v in layouts.values() if Path(v).is_absolute()]
         return [EpisodeRef(
             episode_id=episode_id, source=SOURCE, source_ref=str(folder), task=doc["task"], scene=doc["scene"],
             hands=hands, layouts=layouts, est_frames=est_frames,
-            fingerprint=fingerprint_files(root, files), source_files=tuple(sorted(map(str, files))),
+            fingerprint=fingerprint_files(root, files), source_files=tuple(sorted(set(map(str, read)))),
             extra={"operator": doc.get("operator", ""), "layouts_from": str(rec_path), "clock_offset_ns":
                    {h: int(doc["hands"][h].get("clock_offset_ns", 0)) for h in hands}},
         )]

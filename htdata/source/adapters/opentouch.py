@@ -194,6 +194,7 @@ class OpenTouchContext:
     layouts: dict[str, str]
     allowed_hands: tuple[str, ...]
     missing_table: Path | None = None   # annotations given but absent, allowed by allow_unlabelled
+    table: Path | None = None           # the annotation table read: it decides tasks, so it is a source file
 
 
 class OpenTouchAdapter(FileDiscovery):
@@ -226,7 +227,8 @@ class OpenTouchAdapter(FileDiscovery):
                     f"point to it with {FIX_TABLE}, or ingest without labels with {FIX_UNLABELLED}")
         return OpenTouchContext(tasks=tasks, by_number=_annotation_lookup(tasks or {}),
                                 layouts={**DEFAULT_LAYOUTS, **params["layouts"]},
-                                allowed_hands=tuple(params["hands"]), missing_table=missing)
+                                allowed_hands=tuple(params["hands"]), missing_table=missing,
+                                table=path if tasks is not None else None)
 
     def discovery_files(self, root: Path, params: dict) -> list[Path]:
         return walk_source(root, lambda name: name.endswith(".hdf5"))
@@ -258,7 +260,7 @@ class OpenTouchAdapter(FileDiscovery):
                 episode_id=episode_id, source=SOURCE, source_ref=f"{path}::data/{demo_id}", task=task, scene=scene,
                 hands=hands, layouts={h: layouts[h] for h in hands}, est_frames=n_frames,
                 fingerprint=fingerprint, extra={"task_source": task_source, "demo_id": demo_id},
-                source_files=(str(path),),
+                source_files=(str(path),) + ((str(context.table),) if context.table is not None else ()),
             ))
         return refs
 
