@@ -101,6 +101,27 @@ def test_native_forged_timestamps_npz_fails_its_episode_only(tmp_path, capsys):
     assert [e["episode_id"] for e in load_episodes(out)] == ["nat-rec_good"]
 
 
+def test_native_timestamps_declaring_far_more_rows_than_values_are_refused_unread(tmp_path, capsys):
+    """Issue 26 item 6: a 0.84 MB deflated npz of 1e8 real timestamps beside a few hundred value rows reached
+    862 MB before failing; now the header's row count is refused before a stamp is read (2e6 here: fast)."""
+    import shutil
+
+    raw = make_native(tmp_path / "raw")
+    bad = raw / "rec_bad"
+    shutil.copytree(raw / "rec_good", bad)
+    npz = bad / "tactile_right.npz"
+    values = np.load(npz)["values"]
+    stamps = np.zeros(2_000_000, np.int64)
+    stamps[:values.shape[0]] = np.load(npz)["timestamps_ns"]     # real stamps first: old code ingested it whole
+    np.savez_compressed(npz, values=values, timestamps_ns=stamps)
+    assert npz.stat().st_size < 100_000
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", "native", raw, out) == 1
+    err = capsys.readouterr().err
+    assert f"timestamps_ns.npy declares 2000000 rows beside {values.shape[0]} value rows: refused" in err
+    assert [e["episode_id"] for e in load_episodes(out)] == ["nat-rec_good"]
+
+
 def test_standalone_npy_header_larger_than_file_is_refused(tmp_path):
     path = tmp_path / "video_timestamps.npy"
     path.write_bytes(npy_header((1_000_000_000,)) + np.arange(5, dtype=np.int64).tobytes())

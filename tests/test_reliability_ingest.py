@@ -10,6 +10,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 from htdata.read.reader import DatasetReader
 from tests.factories import ingest_cli, make_native, make_opentouch, small_pipeline
 
@@ -158,3 +160,40 @@ def test_a_native_recordings_own_layout_json_is_hashed_and_verified(tmp_path):
     report = json.loads((tmp_path / "strict" / "reports" / "ingest.json").read_text())
     assert "my_glove.json" in report["failures"][0]["file"] and "differs from" in report["failures"][0]["error"]
     shutil.rmtree(tmp_path / "ok")
+
+
+@pytest.mark.parametrize("how", ["packed", "stuck"])
+def test_glove_rows_per_sample_are_bounded_by_count(tmp_path, capsys, how):
+    """Issue 26 item 6: rows packed 100 ns apart inside the 1-s window after the last frame (or a stuck glove
+    clock: thousands of rows at one timestamp) all went into one sample (3.5 GB RSS for a 2.8 MB npz)."""
+    import numpy as np
+
+    from htdata.ingest.fullrate import raw_row_cap
+    from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+    from tests.factories import COLOURS, FRAME_NS
+
+    t_video = np.arange(9, dtype=np.int64) * FRAME_NS
+    t_glove = np.arange(0, 9 * FRAME_NS, 10_000_000, dtype=np.int64)               # 100 Hz beside the video
+    extra = 20_000
+    start = t_video[-1] + 1_000_000
+    burst = start + np.arange(extra, dtype=np.int64) * 100 if how == "packed" else np.full(extra, start)
+    t_all = np.concatenate([t_glove, burst])
+    values = np.full((t_all.size, 16, 16), 1536.0, np.float32)
+    write_native_recording(tmp_path / "raw" / "rec", NativeRecording(
+        task="grasp_cup", scene="lab", video_storage="jpeg", video_timestamps_ns=t_video,
+        video_frames=[np.full((40, 40, 3), COLOURS[0], np.uint8)] * 9,
+        hands={"right": NativeHand("opentouch_right_16x16", values, t_all)}))
+    out = tmp_path / "ds"
+    capsys.readouterr()
+    assert ingest_cli("--pipeline", small_pipeline(tmp_path, "native"), tmp_path / "raw", out) == 0
+    err = capsys.readouterr().err
+    cap = raw_row_cap(t_all, 10**9)
+    assert cap == (4016 if how == "packed" else 216)     # 2 kHz at most (packed), else the glove's 100 Hz
+    reader = DatasetReader(out)
+    stored = [len(json.loads(reader.sample(i)["json"])["raw_row"]["right"]) for i in range(len(reader))]
+    assert max(stored) <= cap + 1                                          # + the paired row
+    capped = reader.episodes[0]["raw_rows_capped"]["right"]
+    assert capped >= extra - cap
+    report = json.loads((out / "reports" / "ingest.json").read_text())
+    assert report["raw_rows_capped"] == {"nat-rec": {"right": capped}}
+    assert f"{capped} glove rows dropped over the {cap} rows one sample may store" in err

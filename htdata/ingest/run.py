@@ -243,6 +243,8 @@ def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, disc
         "hands_excluded": {ep["episode_id"]: ep["hands_excluded"] for r in ordered for ep in r["episodes"]
                            if ep.get("hands_excluded")},
         "raw_rows_dropped": raw_dropped,
+        "raw_rows_capped": {ep["episode_id"]: ep["raw_rows_capped"] for r in ordered for ep in r["episodes"]
+                            if ep.get("raw_rows_capped")},
         # cells outside every block whose raw values move (htdata/glove/activity.py), per episode and hand
         "unmapped_moving": {ep["episode_id"]: {h: {**e, "layout": ep["layouts"][h]} for h, e in ep["unmapped_moving"].items()}
                             for r in ordered for ep in r["episodes"] if ep.get("unmapped_moving")},

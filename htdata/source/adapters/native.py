@@ -93,6 +93,12 @@ def _frame_files(frames_dir: Path) -> list[Path]:
     return sorted(p for p in frames_dir.iterdir() if p.suffix.lower() in JPEG_SUFFIXES)
 
 
+# timestamps_ns declaring more rows than this beside the value rows are refused unread (issue 26: a
+# 0.84 MB deflated npz declaring 1e8 stamps beside a few hundred rows reached 862 MB before failing)
+MAX_STAMP_RATIO = 2
+MAX_STAMP_SLACK = 4096
+
+
 class NativeAdapter(FileDiscovery):
     name = SOURCE
     # Everything a native recording needs is in its recording.json: no params.
@@ -188,7 +194,11 @@ class NativeStreams(EpisodeStreams):
             self._rows[hand] = rows
             ts_rows = NpzRows(path, "timestamps_ns")
             try:
-                ts = ts_rows.read_all()
+                declared = ts_rows.num_rows
+                if declared > MAX_STAMP_RATIO * rows.num_rows + MAX_STAMP_SLACK:   # by header, before reading
+                    raise NpzRowError(None, f"timestamps_ns.npy declares {declared} rows beside {rows.num_rows} "
+                                      f"value rows: refused before reading (a stream has one stamp per row)")
+                ts = ts_rows.read_all(limit=rows.num_rows)   # stamps past the last value row pair with nothing
             finally:
                 ts_rows.close()
         except NpzRowError as exc:
