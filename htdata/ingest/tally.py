@@ -103,6 +103,12 @@ class EpisodeTally:
         self.contact_sum[hand] += float(live.sum(dtype=np.float64))
         self.contact_max[hand] = max(self.contact_max[hand], float(live.max(initial=0.0)))
 
+    def count_row_plans(self, plans: dict) -> None:
+        """What the hands' RowPlans (htdata/ingest/fullrate.py) left out: rows beyond the span, rows over the cap."""
+        self.raw_rows_dropped = {h: plan.dropped for h, plan in plans.items() if plan.dropped}
+        self.raw_rows_capped = {h: (plan.capped, plan.cap) for h, plan in plans.items() if plan.capped}
+        self.raw_span_ms = {h: plan.span_ns / 1e6 for h, plan in plans.items()}
+
     def finish(self, streams) -> None:
         ref = self.ref
         self.notes = list(streams.notes) + list(self.sync.report.get("warnings", [])) + self._out_of_range_notes()

@@ -26,7 +26,8 @@ from htdata.validate.geometry import coverage_geometries
 from htdata.validate.report import Recorder
 from htdata.validate.sensors import hand_key
 from htdata.validate.splits import frame_digest
-from htdata.validate.structure import Loaded, check_sample_json, group_rows, read_members
+from htdata.validate.samplejson import check_sample_json
+from htdata.validate.structure import Loaded, group_rows, read_members
 from htdata.validate.timestamps import empty_timestamps, record_timestamps
 
 
