@@ -60,6 +60,9 @@ def test_open_and_validate_refuse_dotdot(tmp_path):
         DatasetReader(root, validate_manifest=False)
     res = htdata("validate", root)
     assert res.returncode != 0 and "'../payload/e.jsonl'" in res.stdout + res.stderr
+    res = htdata("gc", root)
+    assert res.returncode != 0 and "'../payload/e.jsonl'" in res.stderr
+    assert (tmp_path / "payload" / "e.jsonl").exists()
 
 
 def test_publish_writes_nothing_outside_the_destination(tmp_path):
