@@ -103,6 +103,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(module.run(args) or 0)
     except OSError as exc:
+        if exc.errno == errno.EROFS:   # a read-only dataset: one line, whichever write met it first
+            print(f"htdata {name}: error: {exc.filename or 'the dataset'} is on a read-only file system; nothing "
+                  f"was written", file=sys.stderr)
+            return 2
         if exc.errno not in _NO_SPACE:
             raise
         # every writer writes temp + rename and commits last: a failed write leaves the current version as it was

@@ -67,6 +67,9 @@ class AdapterConfig:
     params: dict = field(default_factory=dict)
 
 
+MAX_SYNC_MS = 3_600_000   # sync tolerances past an hour are typos (1e300 overflowed int64 nanoseconds)
+
+
 @dataclass
 class SyncConfig:
     max_skew_ms: float = 20.0
@@ -83,6 +86,12 @@ class SyncConfig:
         return int(round(self.max_skew_ms * 1e6))
 
     def validate(self, where: str) -> "SyncConfig":
+        if isinstance(self.max_skew_ms, bool) or not (isinstance(self.max_skew_ms, (int, float))
+                                                      and 0 <= self.max_skew_ms <= MAX_SYNC_MS):
+            raise ValueError(f"{where}: sync.max_skew_ms must be in [0, {MAX_SYNC_MS}] (one hour), "
+                             f"got {self.max_skew_ms!r}")
+        if isinstance(self.lag, (int, float)) and not isinstance(self.lag, bool) and abs(self.lag) > MAX_SYNC_MS:
+            raise ValueError(f"{where}: sync.lag must be within +-{MAX_SYNC_MS} ms (one hour), got {self.lag!r}")
         if isinstance(self.lag, bool) or not (self.lag in LAG_MODES if isinstance(self.lag, str)
                                               else isinstance(self.lag, (int, float)) and math.isfinite(self.lag)):
             raise ValueError(f"{where}: sync.lag must be one of {LAG_MODES} or a finite number of ms, got {self.lag!r}")

@@ -283,3 +283,39 @@ def test_a_glove_only_dataset_exports_no_video_feature(tmp_path):
     assert cli(["export", "lerobot", str(ds), str(tmp_path / "lr_maps"), "--maps"]) == 0
     info = json.loads((tmp_path / "lr_maps" / "meta/info.json").read_text())
     assert [k for k, f in info["features"].items() if f["dtype"] == "video"] == ["observation.tactile.right.map"]
+
+
+def test_force_replaces_only_a_previous_export(dataset, tmp_path, capsys):
+    """Issue 26 item 7: before, `--force data/ds data` deleted the dataset and a note beside it."""
+    import shutil
+
+    home = tmp_path / "data"
+    ds = home / "ds"
+    shutil.copytree(dataset, ds)
+    (home / "notes.txt").write_text("mine")
+    before = tree(ds)
+
+    def refused(out, *flags):
+        assert cli(["export", "lerobot", str(ds), str(out), "--quiet", *flags]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1, err
+        return err
+
+    assert "holds DATASET" in refused(home, "--force")                  # the folder holding the dataset
+    (home / "other").mkdir()
+    (home / "other" / "keep.txt").write_text("keep")
+    assert "not a previous htdata export" in refused(home / "other", "--force")
+    assert "is a file" in refused(home / "notes.txt", "--force")
+    (tmp_path / "link").symlink_to(home / "other")
+    assert "is a symlink" in refused(tmp_path / "link")
+    assert "inside DATASET" in refused(ds / "lr", "--force")
+    assert tree(ds) == before and (home / "notes.txt").read_text() == "mine"
+    assert (home / "other" / "keep.txt").exists()
+    # a previous export is replaced; one that somebody put a dataset into is not
+    out = tmp_path / "lr"
+    assert cli(["export", "lerobot", str(ds), str(out), "--quiet"]) == 0
+    assert (out / ".htdata-export.json").is_file()
+    assert cli(["export", "lerobot", str(ds), str(out), "--quiet", "--force"]) == 0
+    shutil.copytree(dataset, out / "inner")
+    assert "holds an htdata dataset" in refused(out, "--force")
+    assert (out / "inner" / "dataset.json").is_file()

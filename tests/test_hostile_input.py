@@ -101,6 +101,27 @@ def test_native_forged_timestamps_npz_fails_its_episode_only(tmp_path, capsys):
     assert [e["episode_id"] for e in load_episodes(out)] == ["nat-rec_good"]
 
 
+def test_native_timestamps_declaring_far_more_rows_than_values_are_refused_unread(tmp_path, capsys):
+    """Issue 26 item 6: a 0.84 MB deflated npz of 1e8 real timestamps beside a few hundred value rows reached
+    862 MB before failing; now the header's row count is refused before a stamp is read (2e6 here: fast)."""
+    import shutil
+
+    raw = make_native(tmp_path / "raw")
+    bad = raw / "rec_bad"
+    shutil.copytree(raw / "rec_good", bad)
+    npz = bad / "tactile_right.npz"
+    values = np.load(npz)["values"]
+    stamps = np.zeros(2_000_000, np.int64)
+    stamps[:values.shape[0]] = np.load(npz)["timestamps_ns"]     # real stamps first: old code ingested it whole
+    np.savez_compressed(npz, values=values, timestamps_ns=stamps)
+    assert npz.stat().st_size < 100_000
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", "native", raw, out) == 1
+    err = capsys.readouterr().err
+    assert f"timestamps_ns.npy declares 2000000 rows beside {values.shape[0]} value rows: refused" in err
+    assert [e["episode_id"] for e in load_episodes(out)] == ["nat-rec_good"]
+
+
 def test_standalone_npy_header_larger_than_file_is_refused(tmp_path):
     path = tmp_path / "video_timestamps.npy"
     path.write_bytes(npy_header((1_000_000_000,)) + np.arange(5, dtype=np.int64).tobytes())
@@ -124,6 +145,47 @@ def test_hdf5_dataset_shape_beyond_its_storage_is_refused(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "home_kitchen_p1.hdf5 [ot-home_kitchen_p1-demo_02]" in err
     assert "declared shape (200000000,) int64 needs 1600000000 bytes" in err
+    assert sorted(e["episode_id"] for e in load_episodes(out)) == ["ot-home_kitchen_p1-demo_003",
+                                                                   "ot-home_kitchen_p1-demo_01"]
+
+
+# --------------------------------------------------------------------------- bytes of other files (issue 26 item 5)
+
+def _external_raw(g, outside: Path) -> None:
+    rows = np.asarray(g["right_pressure"][()], np.float32)
+    outside.write_bytes(rows.tobytes())
+    del g["right_pressure"]
+    g.create_dataset("right_pressure", shape=rows.shape, dtype=np.float32, external=[(str(outside), 0, rows.nbytes)])
+
+
+def _external_link(g, outside: Path) -> None:
+    with h5py.File(outside, "w") as o:
+        o.create_dataset("p", data=np.asarray(g["right_pressure"][()], np.float32))
+    del g["right_pressure"]
+    g["right_pressure"] = h5py.ExternalLink(str(outside), "/p")
+
+
+def _virtual(g, outside: Path) -> None:
+    rows = np.asarray(g["right_pressure"][()], np.float32)
+    with h5py.File(outside, "w") as o:
+        o.create_dataset("p", data=rows)
+    layout = h5py.VirtualLayout(shape=rows.shape, dtype=np.float32)
+    layout[:] = h5py.VirtualSource(str(outside), "p", shape=rows.shape)
+    del g["right_pressure"]
+    g.create_virtual_dataset("right_pressure", layout)
+
+
+@pytest.mark.parametrize("how,said", [(_external_raw, "stored in external raw file(s)"),
+                                      (_external_link, "an HDF5 external link to"),
+                                      (_virtual, "a virtual dataset mapping")])
+def test_hdf5_reaching_another_file_is_refused(tmp_path, capsys, how, said):
+    raw = make_opentouch(tmp_path / "raw")
+    with h5py.File(raw / "home_kitchen_p1.hdf5", "r+") as f:
+        how(f["data/demo_02"], tmp_path / "outside.bin")
+    out = tmp_path / "ds"
+    assert ingest_cli("--pipeline", "opentouch", raw, out) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if "demo_02" in line]
+    assert len(err) == 1 and "/data/demo_02/right_pressure: " + said in err[0], err
     assert sorted(e["episode_id"] for e in load_episodes(out)) == ["ot-home_kitchen_p1-demo_003",
                                                                    "ot-home_kitchen_p1-demo_01"]
 

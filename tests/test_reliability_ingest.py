@@ -10,8 +10,10 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 from htdata.read.reader import DatasetReader
-from tests.factories import ingest_cli, make_opentouch, small_pipeline
+from tests.factories import ingest_cli, make_native, make_opentouch, small_pipeline
 
 
 def test_labels_edited_between_a_crash_and_its_resume_are_honoured(tmp_path):
@@ -77,8 +79,9 @@ def test_every_record_keeps_its_source_files_sha256(tmp_path):
     raw = make_opentouch(tmp_path / "raw")
     assert ingest_cli("--pipeline", small_pipeline(tmp_path, "opentouch"), raw, tmp_path / "ds") == 0
     want = hashlib.sha256((raw / "home_kitchen_p1.hdf5").read_bytes()).hexdigest()
+    labels = hashlib.sha256((raw / "annotations.csv").read_bytes()).hexdigest()   # it decides the task (#26)
     assert {e["episode_id"]: e["source_sha256"] for e in DatasetReader(tmp_path / "ds").episodes} == {
-        e: {"home_kitchen_p1.hdf5": want} for e in ("ot-home_kitchen_p1-demo_01", "ot-home_kitchen_p1-demo_02",
+        e: {"home_kitchen_p1.hdf5": want, "annotations.csv": labels} for e in ("ot-home_kitchen_p1-demo_01", "ot-home_kitchen_p1-demo_02",
                                                    "ot-home_kitchen_p1-demo_003")}
 
 
@@ -104,7 +107,9 @@ def test_verify_sources_passes_matching_files_and_refuses_unlisted_ones(tmp_path
     raw = make_opentouch(tmp_path / "raw")
     pipe = small_pipeline(tmp_path, "opentouch")
     assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "none") == 2      # no list at all
-    _sums(raw, ["home_kitchen_p1.hdf5"])
+    _sums(raw, ["home_kitchen_p1.hdf5"])                # the label table decides tasks: it must be listed too
+    assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "unlisted") == 2
+    _sums(raw, ["home_kitchen_p1.hdf5", "annotations.csv"])
     assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "ok") == 0
     assert len(DatasetReader(tmp_path / "ok").episodes) == 3
 
@@ -128,3 +133,67 @@ def test_timestamps_are_read_in_bounded_blocks_not_via_whole_length_index_arrays
         rows.close()
     assert np.array_equal(got, ts)
     assert peak < ts.nbytes + 6 * 2**20, peak     # the array + ~1 MB blocks; before #18: ~4x the array
+
+
+def test_a_native_recordings_own_layout_json_is_hashed_and_verified(tmp_path):
+    """Issue 26 item 5: the layout JSON a recording keeps decides its maps; before, it was neither in
+    source_sha256 nor checked by --verify-sources (damaged after SHA256SUMS, it ingested with rc 0)."""
+    import shutil
+
+    from htdata.resources import SCHEMAS_DIR
+
+    raw = make_native(tmp_path / "raw")
+    rec = raw / "rec_good"
+    doc = json.loads((rec / "recording.json").read_text())
+    layout = json.loads((SCHEMAS_DIR / "layouts" / "opentouch_right_16x16.json").read_text())
+    layout["layout_id"] = "my_glove_right_16x16"
+    (rec / "my_glove.json").write_text(json.dumps(layout, indent=1))
+    doc["hands"]["right"]["layout"] = "my_glove.json"
+    (rec / "recording.json").write_text(json.dumps(doc, indent=1))
+    _sums(raw, sorted(p.relative_to(raw).as_posix() for p in raw.rglob("*") if p.is_file()))
+    pipe = small_pipeline(tmp_path, "native")
+    assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "ok") == 0
+    assert "rec_good/my_glove.json" in DatasetReader(tmp_path / "ok").episodes[0]["source_sha256"]
+    layout["value"]["max"] = 1536                       # damaged after SHA256SUMS was written: other maps
+    (rec / "my_glove.json").write_text(json.dumps(layout, indent=1))
+    assert ingest_cli("--pipeline", pipe, "--verify-sources", raw, tmp_path / "strict") == 2
+    report = json.loads((tmp_path / "strict" / "reports" / "ingest.json").read_text())
+    assert "my_glove.json" in report["failures"][0]["file"] and "differs from" in report["failures"][0]["error"]
+    shutil.rmtree(tmp_path / "ok")
+
+
+@pytest.mark.parametrize("how", ["packed", "stuck"])
+def test_glove_rows_per_sample_are_bounded_by_count(tmp_path, capsys, how):
+    """Issue 26 item 6: rows packed 100 ns apart inside the 1-s window after the last frame (or a stuck glove
+    clock: thousands of rows at one timestamp) all went into one sample (3.5 GB RSS for a 2.8 MB npz)."""
+    import numpy as np
+
+    from htdata.ingest.fullrate import raw_row_cap
+    from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+    from tests.factories import COLOURS, FRAME_NS
+
+    t_video = np.arange(9, dtype=np.int64) * FRAME_NS
+    t_glove = np.arange(0, 9 * FRAME_NS, 10_000_000, dtype=np.int64)               # 100 Hz beside the video
+    extra = 20_000
+    start = t_video[-1] + 1_000_000
+    burst = start + np.arange(extra, dtype=np.int64) * 100 if how == "packed" else np.full(extra, start)
+    t_all = np.concatenate([t_glove, burst])
+    values = np.full((t_all.size, 16, 16), 1536.0, np.float32)
+    write_native_recording(tmp_path / "raw" / "rec", NativeRecording(
+        task="grasp_cup", scene="lab", video_storage="jpeg", video_timestamps_ns=t_video,
+        video_frames=[np.full((40, 40, 3), COLOURS[0], np.uint8)] * 9,
+        hands={"right": NativeHand("opentouch_right_16x16", values, t_all)}))
+    out = tmp_path / "ds"
+    capsys.readouterr()
+    assert ingest_cli("--pipeline", small_pipeline(tmp_path, "native"), tmp_path / "raw", out) == 0
+    err = capsys.readouterr().err
+    cap = raw_row_cap(t_all, 10**9)
+    assert cap == (4016 if how == "packed" else 216)     # 2 kHz at most (packed), else the glove's 100 Hz
+    reader = DatasetReader(out)
+    stored = [len(json.loads(reader.sample(i)["json"])["raw_row"]["right"]) for i in range(len(reader))]
+    assert max(stored) <= cap + 1                                          # + the paired row
+    capped = reader.episodes[0]["raw_rows_capped"]["right"]
+    assert capped >= extra - cap
+    report = json.loads((out / "reports" / "ingest.json").read_text())
+    assert report["raw_rows_capped"] == {"nat-rec": {"right": capped}}
+    assert f"{capped} glove rows dropped over the {cap} rows one sample may store" in err

@@ -39,6 +39,8 @@ instead (frames repeat when F is above the source rate, are skipped below it).
 Stats (meta/stats.json) are gathered in the export's single pass. DATASET is only read.
 The export is atomic: it is built in OUT's sibling .OUT.partial/ and renamed at the end,
 so an interrupted export leaves no OUT (the next run clears the leftover).
+--force replaces only a previous export (marked by OUT/.htdata-export.json), never a folder
+holding or inside a dataset, nor another non-empty folder; OUT a file or a symlink is refused.
 Needs pyarrow: pip install 'htdata[export]'.
 
 Examples:
@@ -70,7 +72,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                    help="resample to F frames/s (default: the episodes' own rate, no resampling)")
     p.add_argument("--maps", action="store_true", help="also export each hand's canonical map as a video feature")
     p.add_argument("--crf", type=int, default=18, help="H.264 quality, 0 (lossless) .. 51 (default 18)")
-    p.add_argument("--force", action="store_true", help="replace OUT if it exists")
+    p.add_argument("--force", action="store_true",
+                   help="replace OUT if it is a previous htdata export (never anything else)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 

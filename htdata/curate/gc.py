@@ -45,6 +45,8 @@ from htdata.store.gcrecord import tombstone_file
 
 DEFAULT_RETENTION_S = 7 * 86400     # Delta Lake's default; Iceberg uses 3 days
 FORCE_BELOW_S = 3600                # a shorter window may break running readers: needs --force
+# what gc may delete in shards/: the format's shard names (format/shardio.py shard_name) and their temp files
+COLLECTABLE = re.compile(r"\.?shard-[0-9]{6}-[0-9]{3}\.tar(\.tmp)?")
 _UNITS = {"s": 1, "m": 60, "h": 3600, "d": 86400}
 
 
@@ -80,6 +82,7 @@ class GcPlan:
     window_kept: list[tuple[int, float]] = field(default_factory=list)    # (version, collectable after: epoch s)
     window_kept_shards: int = 0        # unlisted shards younger than the window
     leftover_dirs: list[str] = field(default_factory=list)               # versions/vN/ without vN.json
+    symlinked_shards: bool = False     # shards/ is a symlink: gc deletes nothing through it
     retention_s: float = DEFAULT_RETENTION_S
 
     @property
@@ -100,6 +103,8 @@ class GcPlan:
         if self.window_kept_shards:
             out.append(f"keep {self.window_kept_shards} unlisted shards written less than {window} ago "
                        f"(retention window)")
+        if self.symlinked_shards:
+            out.append(f"{SHARDS_DIR}/ is a symlink: gc deletes no shard through it (collect them where it points)")
         out.append(f"{would}keep versions {', '.join(map(str, self.kept_versions)) or '(unversioned)'}; "
                    f"{len(self.dropped_shards)} shards, {self.bytes_freed} bytes {'would be ' if dry_run else ''}freed")
         return out
@@ -127,8 +132,11 @@ def plan_gc(root: Path, keep_versions: int, retention_s: float = DEFAULT_RETENTI
     for v in plan.kept_versions:
         listed |= {s["name"] for s in load_manifest(root, version=v)["shards"]}
     of_dropped = {s["name"] for v in plan.dropped_versions for s in load_manifest(root, version=v)["shards"]}
-    for path in sorted((root / SHARDS_DIR).iterdir()) if (root / SHARDS_DIR).is_dir() else []:
-        if path.name in listed or not (path.suffix == ".tar" or path.name.endswith(".tmp")):
+    shard_dir = root / SHARDS_DIR
+    plan.symlinked_shards = shard_dir.is_symlink()
+    for path in sorted(shard_dir.iterdir()) if shard_dir.is_dir() and not plan.symlinked_shards else []:
+        # only files named as the format names shards (or their temp files), never through a symlink
+        if path.name in listed or not COLLECTABLE.fullmatch(path.name) or path.is_symlink() or not path.is_file():
             continue
         if path.name in of_dropped or now - path.stat().st_mtime >= retention_s:
             plan.dropped_shards.append((path.name, path.stat().st_size))
@@ -138,7 +146,7 @@ def plan_gc(root: Path, keep_versions: int, retention_s: float = DEFAULT_RETENTI
     vdir = root / VERSIONS_DIR
     head = versions[-1] if versions else 0
     plan.leftover_dirs = [f"{VERSIONS_DIR}/{d.name}" for d in (sorted(vdir.iterdir()) if vdir.is_dir() else [])
-                          if d.is_dir() and re.fullmatch(r"v\d{6,}", d.name) and int(d.name[1:]) not in have
+                          if d.is_dir() and not d.is_symlink() and re.fullmatch(r"v\d{6,}", d.name) and int(d.name[1:]) not in have
                           and int(d.name[1:]) < head]
     plan.dropped_stats = unused_stats_entries(root, plan.kept_versions or [None])
     return plan
@@ -193,7 +201,9 @@ def collect(root, keep_versions: int, dry_run: bool, command: str, retention_s: 
         for rel in plan.leftover_dirs:
             shutil.rmtree(root / rel, ignore_errors=True)
         for name in sorted(doomed):
-            (root / SHARDS_DIR / name).unlink(missing_ok=True)
+            path = root / SHARDS_DIR / name
+            if COLLECTABLE.fullmatch(name) and not path.is_symlink() and not path.parent.is_symlink():
+                path.unlink(missing_ok=True)
         for name, _ in plan.dropped_stats:
             (root / STATS_DIR / name).unlink(missing_ok=True)
         return plan

@@ -33,6 +33,7 @@ from pathlib import Path
 from htdata.format.mapstorage import with_map_record
 from htdata.faults import crash_point
 from htdata.format.table import MANIFEST_FILE, SHARDS_DIR
+from htdata.store.confine import inside
 from htdata.store.fsutil import sha256_file, write_bytes_atomic
 from htdata.store.lock import LOCK_FILE, WriterLock
 from htdata.store.parts import Part
@@ -233,7 +234,7 @@ def copy_layout_files(snap: Snapshot, out: Path) -> None:
     paths = [p for entry in m["layouts"].values() for p in (entry["file"], entry["coverage"])]
     paths += [m["canonical"][k] for k in ("file", "regions", "parts") if k in m["canonical"]]
     for rel in paths:
-        src, dst = snap.root / rel, out / rel
+        src, dst = Path(inside(snap.root, rel)), out / rel   # never a file from outside the dataset
         if dst.exists():
             if dst.read_bytes() != src.read_bytes():
                 raise MergeConflict(f"{rel} differs between the two datasets")

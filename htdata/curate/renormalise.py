@@ -20,6 +20,7 @@ units (htdata/curate/repack.py); everything else is reused; `dry_run` plans only
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -30,6 +31,7 @@ from htdata.format.table import (JSON_MEMBER, SIZE_FIELDS, CodecSettings, bend_m
                                  tactile_member)
 from htdata.glove.health import record_entry
 from htdata.glove.layouts import Layout, load_layout
+from htdata.store.confine import inside
 from htdata.store.lock import WriterLock
 from htdata.glove.normalise import Normaliser
 from htdata.pipeline import PipelineConfig
@@ -61,7 +63,8 @@ class RenormalisePlan:
 
 def dataset_layouts(snap: Snapshot) -> dict[str, Layout]:
     """The glove layouts a version lists, loaded from the dataset's own layout files."""
-    return {lid: load_layout(snap.root / entry["file"]) for lid, entry in snap.manifest["layouts"].items()}
+    return {lid: load_layout(Path(inside(snap.root, entry["file"], f"layouts.{lid}.file")))
+            for lid, entry in snap.manifest["layouts"].items()}
 
 
 def plan_renormalise(snap: Snapshot, pipeline: PipelineConfig, patterns: list[str] | None = None,

@@ -54,6 +54,7 @@ from typing import Callable
 import numpy as np
 
 from htdata.format.table import CANVAS, JSON_MEMBER, RGB_MEMBER, decode_member, raw_member, tactile_member
+from htdata.export.lerobot_out import check_out, write_marker
 from htdata.export.lerobot_meta import CHUNKS_SIZE, DATA_FILE_MB, DATA_PATH, VIDEO_PATH, part_of, write_meta
 from htdata.export.lerobot_stats import FeatureStats, VideoStats
 from htdata.format.mapstorage import maps_stored
@@ -79,14 +80,14 @@ def export_lerobot(cfg: LeRobotExportConfig, progress: Progress | None = None,
 
     cfg.validate()
     out = Path(cfg.out)
-    if out.exists() and not cfg.force:
-        raise FileExistsError(f"{out} exists (pass --force to replace it)")
-    if Path(cfg.dataset).resolve() == out.resolve() or Path(cfg.dataset).resolve() in out.resolve().parents:
-        raise ValueError(f"{out}: the export may not be written inside DATASET (it is read-only)")
+    check_out(out, Path(cfg.dataset), cfg.force)
     work = out.parent / f".{out.name}.partial"
+    if work.is_symlink() or work.is_file():
+        raise FileExistsError(f"{work}: the export's work folder is a file or a symlink; remove it by hand")
     if work.exists():
         shutil.rmtree(work)            # the leftover of a killed export
     work.mkdir(parents=True)
+    write_marker(work, cfg)
     try:
         with DatasetReader(cfg.dataset, version=cfg.version) as reader:
             plan = plan_export(reader, cfg)

@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 from htdata.store import storage
+from htdata.store.confine import inside
 
 CODEBASE_VERSION = "v3.0"
 CHUNKS_SIZE = 1000               # files per chunk folder (LeRobot's default)
@@ -70,14 +71,14 @@ def write_htdata_meta(reader, plan, cfg, dest: Path) -> None:
             entry = manifest["layouts"][layout_id]
             for name in ("file", "coverage"):
                 if entry.get(name):
-                    src = storage.join(reader.root, entry[name])
+                    src = inside(reader.root, entry[name], f"layouts.{layout_id}.{name}")
                     ext = Path(entry[name]).suffix
                     (dest / f"layout_{layout_id}{'_coverage' if name == 'coverage' else ''}{ext}").write_bytes(
                         storage.read_bytes(src))
     canonical = manifest.get("canonical", {})
     for name, fname in (("regions", "region_map.png"), ("parts", "part_map.png"), ("file", "canonical_hand.json")):
         if canonical.get(name):
-            (dest / fname).write_bytes(storage.read_bytes(storage.join(reader.root, canonical[name])))
+            (dest / fname).write_bytes(storage.read_bytes(inside(reader.root, canonical[name], f"canonical.{name}")))
     if plan.split_doc is not None:
         doc = {"split": cfg.split, "exported_parts": list(plan.parts), "assignment": plan.split_doc}
         (dest / "split.json").write_text(json.dumps(doc, indent=1))

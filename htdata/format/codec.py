@@ -143,7 +143,22 @@ def decode_tactile(data: bytes, where: str = "tactile map") -> np.ndarray:
     arr = decode_exr(data, where)
     if arr.shape != MAP_SHAPE:
         raise ValueError(f"{where}: decoded tactile map has shape {arr.shape}, expected {MAP_SHAPE}")
-    return arr
+    return check_finite_maps(arr, where)
+
+
+def check_finite_maps(maps: np.ndarray, where: str) -> np.ndarray:
+    """`maps` ((224,224) or (n,224,224)) when every value is finite; else a ValueError naming `where`.
+
+    One sum per map (maps are in [0,1], so a finite map never sums to inf): a NaN served
+    to a training run poisons its loss silently, so the loaders refuse it here.
+    """
+    sums = maps.reshape(-1, maps.shape[-2] * maps.shape[-1]).sum(axis=1, dtype=np.float64)
+    bad = np.flatnonzero(~np.isfinite(sums))
+    if bad.size:
+        which = "" if maps.ndim == 2 else f" (map {int(bad[0])} of {len(sums)} in this batch)"
+        raise ValueError(f"{where}: tactile map holds NaN/Inf values{which}: its raw glove rows are not finite; "
+                         f"`htdata validate --deep` lists every such sample")
+    return maps
 
 
 def encode_png16(tactile_map: np.ndarray) -> bytes:

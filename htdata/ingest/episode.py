@@ -299,8 +299,7 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
         fetcher, unpaired = _rgb_source(ref, cfg, streams, sync, clock, with_rgb)
         plans = ({h: RowPlan.build(streams.tactile_timestamps_ns[h], sync.tactile_index[h], sync.t_rgb_ns)
                   for h in hands} if cfg.tactile.keep_raw else {})
-        tally.raw_rows_dropped = {h: plan.dropped for h, plan in plans.items() if plan.dropped}
-        tally.raw_span_ms = {h: plan.span_ns / 1e6 for h, plan in plans.items()}
+        tally.count_row_plans(plans)
         grids = {h: tuple(layouts[h].grid) for h in hands}
         queue = FrameQueue(lambda f: f.finish_raw(grids))
         emit = _RgbOnlyFrames(ref, tally, fetcher, unpaired)

@@ -11,7 +11,10 @@ slower than 2 fps): a glove that ran on for minutes after (or before) the
 video, or through a long video gap, would otherwise put every one of those
 rows into one sample (1e6 rows: a 1 GB sample, 3.5 GB of RAM). Rows outside
 the span are dropped and counted: the episode record's "raw_rows_dropped"
-and a note in the ingest report and on stderr. Rows of frames the ingest drops
+and a note in the ingest report and on stderr. The count is bounded too
+(`raw_row_cap`: two spans at the glove's nominal rate, never faster than
+MAX_GLOVE_RATE_HZ): rows over it, the farthest from the frame time, are
+dropped and counted as "raw_rows_capped" (record, report, stderr). Rows of frames the ingest drops
 (non-finite or out-of-range values) are unpaired rows too and land in the
 previous kept sample (the next one when none precedes). Duplicate-timestamp
 rows, which sync cannot pair, are stored the same way. Within a sample the
@@ -38,6 +41,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
+# Bounded by count too: a sample stores at most `raw_row_cap` unpaired rows per hand, the rows two spans hold
+# at the glove's nominal rate (median interval between its distinct timestamps), never more than a glove at
+# MAX_GLOVE_RATE_HZ makes (rows packed 100 ns apart, or a stuck clock giving 300k rows one timestamp,
+# would otherwise reach GBs). The rows nearest the frame time are kept; the rest are counted as capped.
+MAX_GLOVE_RATE_HZ = 2000
+ROW_CAP_SLACK = 16
 MIN_RAW_SPAN_NS = 1_000_000_000   # a sample stores unpaired rows at most this far from its frame time ...
 RAW_SPAN_INTERVALS = 2             # ... or this many frame intervals, when that is longer (slow cameras)
 
@@ -48,6 +57,24 @@ def raw_span_ns(t_frames: np.ndarray) -> int:
     return max(MIN_RAW_SPAN_NS, RAW_SPAN_INTERVALS * int(np.median(d)) if d.size else 0)
 
 
+def raw_row_cap(timestamps: np.ndarray, span_ns: int) -> int:
+    """Most unpaired rows of one hand a sample stores (see MAX_GLOVE_RATE_HZ)."""
+    d = np.diff(np.unique(np.asarray(timestamps, dtype=np.int64)))
+    floor = 1_000_000_000 // MAX_GLOVE_RATE_HZ
+    interval = max(int(np.median(d)) if d.size else floor, floor)
+    return 2 * int(span_ns) // interval + ROW_CAP_SLACK
+
+
+def _cap_per_slot(slot: np.ndarray, distance: np.ndarray, rows: np.ndarray, cap: int) -> np.ndarray:
+    """Mask of the rows kept: per slot, the `cap` nearest its frame time (then source order)."""
+    order = np.lexsort((rows, distance, slot))
+    sorted_slots = slot[order]
+    rank = np.arange(order.size) - np.searchsorted(sorted_slots, sorted_slots, side="left")
+    keep = np.zeros(slot.size, dtype=bool)
+    keep[order[rank < cap]] = True
+    return keep
+
+
 @dataclass
 class RowPlan:
     """One hand's unpaired rows, grouped by the synchronised frame (slot) that stores them."""
@@ -56,6 +83,8 @@ class RowPlan:
     slots: np.ndarray        # their slot (position in the synchronised frames), same order
     dropped: int = 0         # unpaired rows farther than raw_span_ns from every sample: stored nowhere
     span_ns: int = MIN_RAW_SPAN_NS
+    capped: int = 0          # unpaired rows over a sample's raw_row_cap: stored nowhere
+    cap: int = 0
 
     @classmethod
     def build(cls, timestamps, paired_rows: np.ndarray, t_frames: np.ndarray) -> "RowPlan":
@@ -75,8 +104,15 @@ class RowPlan:
             unpaired, t, slot = unpaired[near], t[near], slot[near]
         else:
             dropped = 0
+        cap = raw_row_cap(ts, span)
+        capped = 0
+        if unpaired.size > cap:
+            keep = _cap_per_slot(slot, np.abs(t - t_frames[slot]) if t_frames.size else t, unpaired, cap)
+            capped = int(unpaired.size - np.count_nonzero(keep))
+            unpaired, t, slot = unpaired[keep], t[keep], slot[keep]
         order = np.lexsort((unpaired, t, slot))
-        return cls(timestamps=ts, rows=unpaired[order], slots=slot[order], dropped=dropped, span_ns=span)
+        return cls(timestamps=ts, rows=unpaired[order], slots=slot[order], dropped=dropped, span_ns=span,
+                   capped=capped, cap=cap)
 
     def rows_for(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
         """(rows, slots) of the unpaired rows stored by slots [start, stop)."""

@@ -20,7 +20,7 @@ from pathlib import Path
 from htdata.format.mapstorage import resolve_map_storage
 from htdata.glove.codecrule import resolve_sources
 from htdata.ingest.executors import make_executor, usable_cores
-from htdata.format.table import INGEST_REPORT
+from htdata.format.table import INGEST_REPORT, MANIFEST_FILE
 from htdata.store.fsutil import write_bytes_atomic
 from htdata.ingest.append import kept_unavailable, plan_append
 from htdata.ingest.commit import check_compatible, commit
@@ -33,6 +33,7 @@ from htdata.ingest.workdir import (check_output, clear_unit_files, dumps, load_v
                                    remove_strays)
 from htdata.store.lock import WriterLock
 from htdata.store.snapshot import current_snapshot
+from htdata.store.versions import restore_pointer
 
 
 class EpisodeProgress:
@@ -142,6 +143,8 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         else:
             report["version"] = parent.version
             report["notes"].append(f"nothing changed: version {parent.version} stays current")
+            if parent.version is not None and restore_pointer(out, parent.version):   # a lost or stale pointer
+                report["notes"].append(f"{MANIFEST_FILE} rewritten from version {parent.version}'s file")
     report["timing"]["total_s"] = time.perf_counter() - t_start
     report["timing"]["commit_s"] = report["timing"]["total_s"] - (t_ran - t_start)
     write_bytes_atomic(out / INGEST_REPORT, dumps(report))
@@ -240,15 +243,23 @@ def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, disc
         "hands_excluded": {ep["episode_id"]: ep["hands_excluded"] for r in ordered for ep in r["episodes"]
                            if ep.get("hands_excluded")},
         "raw_rows_dropped": raw_dropped,
+        "raw_rows_capped": {ep["episode_id"]: ep["raw_rows_capped"] for r in ordered for ep in r["episodes"]
+                            if ep.get("raw_rows_capped")},
         # cells outside every block whose raw values move (htdata/glove/activity.py), per episode and hand
         "unmapped_moving": {ep["episode_id"]: {h: {**e, "layout": ep["layouts"][h]} for h, e in ep["unmapped_moving"].items()}
                             for r in ordered for ep in r["episodes"] if ep.get("unmapped_moving")},
         # the episode records' warnings (e.g. raw values out of range, clipped): the CLI prints them on stderr
-        "episode_warnings": {ep["episode_id"]: [n for n in ep.get("notes", []) if n.startswith("warning:")]
-                             for r in ordered for ep in r["episodes"]
-                             if any(n.startswith("warning:") for n in ep.get("notes", []))},
+        "episode_warnings": {eid: w for eid, w in ((ep["episode_id"], _episode_warnings(ep))
+                                                     for r in ordered for ep in r["episodes"]) if w},
         "timing": timing_summary(ran, time.perf_counter() - t_start),
     }
+
+
+def _episode_warnings(ep: dict) -> list[str]:
+    """An episode record's warnings for stderr: its "warning:" notes and its clock's (reordered, duplicate,
+    stuck timestamps: htdata/source/sync.py), each once."""
+    notes = [n for n in ep.get("notes", []) if n.startswith("warning:")]
+    return list(dict.fromkeys(notes + list((ep.get("sync") or {}).get("warnings", []))))
 
 
 def _counts(dicts) -> dict[str, int]:

@@ -45,6 +45,7 @@ class EpisodeTally:
         self.rgb_only: dict[str, int] = {}   # reason -> RGB-only samples kept (htdata.ingest.fullrate)
         self.raw_rows_dropped: dict[str, int] = {}   # hand -> unpaired rows beyond every sample's raw span
         self.raw_span_ms: dict[str, float] = {}
+        self.raw_rows_capped: dict[str, tuple[int, int]] = {}   # hand -> (rows over the per-sample cap, the cap)
         self.activity: dict[str, CellActivity] = {}   # hand -> raw activity of every cell (htdata.glove.activity)
 
     def start(self, ref, hands: list[str], layouts: dict[str, Layout], oor_policy=None) -> None:
@@ -102,12 +103,22 @@ class EpisodeTally:
         self.contact_sum[hand] += float(live.sum(dtype=np.float64))
         self.contact_max[hand] = max(self.contact_max[hand], float(live.max(initial=0.0)))
 
+    def count_row_plans(self, plans: dict) -> None:
+        """What the hands' RowPlans (htdata/ingest/fullrate.py) left out: rows beyond the span, rows over the cap."""
+        self.raw_rows_dropped = {h: plan.dropped for h, plan in plans.items() if plan.dropped}
+        self.raw_rows_capped = {h: (plan.capped, plan.cap) for h, plan in plans.items() if plan.capped}
+        self.raw_span_ms = {h: plan.span_ns / 1e6 for h, plan in plans.items()}
+
     def finish(self, streams) -> None:
         ref = self.ref
         self.notes = list(streams.notes) + list(self.sync.report.get("warnings", [])) + self._out_of_range_notes()
         for h, n in sorted(self.raw_rows_dropped.items()):
             self.notes.append(f"{h} hand: {n} glove rows more than {self.raw_span_ms[h]:g} ms from every video "
                               f"frame (after the last, before the first, or in a gap) dropped: no sample stores them")
+        for h, (n, cap) in sorted(self.raw_rows_capped.items()):
+            self.notes.append(f"warning: {h} hand: {n} glove rows dropped over the {cap} rows one sample may "
+                              f"store (htdata/ingest/fullrate.py raw_row_cap: rows packed closer than the glove's "
+                              f"rate, or a stuck clock)")
         self.fps = _fps(streams.rgb_timestamps_ns)
         self.has_video = streams.has_video
         if self.fps is None:
@@ -148,6 +159,8 @@ class EpisodeTally:
             record["out_of_range"] = self.out_of_range_record()
         if self.raw_rows_dropped:
             record["raw_rows_dropped"] = dict(sorted(self.raw_rows_dropped.items()))
+        if self.raw_rows_capped:
+            record["raw_rows_capped"] = {h: n for h, (n, _) in sorted(self.raw_rows_capped.items())}
         if self.unmapped_moving_record():   # live cells the layout leaves out (htdata.glove.activity)
             record["unmapped_moving"] = self.unmapped_moving_record()
         if isinstance(ref.extra, dict) and ref.extra.get("hands_excluded"):

@@ -21,7 +21,9 @@ import numpy as np
 
 from htdata.glove.calibration import episode_normaliser
 from htdata.format.mapstorage import maps_stored
+from htdata.format.codec import check_finite_maps
 from htdata.format.table import JSON_MEMBER, decode_member, raw_member
+from htdata.store.confine import inside
 from htdata.glove.layouts import load_layout
 from htdata.glove.rasterise import Rasteriser
 
@@ -149,7 +151,7 @@ class RawMapRenderer:
             lid = ep["layouts"][hand]
             if lid not in self._layouts:
                 entry = self.reader.manifest["layouts"][lid]
-                self._layouts[lid] = load_layout(Path(self.reader.root) / entry["file"])
+                self._layouts[lid] = load_layout(Path(inside(self.reader.root, entry["file"], f"layouts.{lid}.file")))
                 self._rasters[lid] = Rasteriser(self._layouts[lid], mode=self.mode)
             self._normalisers[key] = (episode_normaliser(self.reader.manifest, ep, hand, self._layouts[lid]),
                                       self._rasters[lid])
@@ -159,14 +161,14 @@ class RawMapRenderer:
         """(224,224) float32 map from `members` (json + raw_<hand>.npy) of a sample of episode position `episode`."""
         normaliser, raster = self.parts_for(episode, hand)
         values, _ = apply_paired(normaliser, members, hand, where)
-        return raster.render(values)[0]
+        return check_finite_maps(raster.render(values)[0], f"{where} ({hand})")
 
     def render_many(self, episode: int, hand: str, members_list: list[dict[str, bytes]], where: str = "sample"
                     ) -> np.ndarray:
         """(n,224,224) float32 maps of n samples of one episode hand: one normalise and one rasterise call."""
         normaliser, raster = self.parts_for(episode, hand)
         values, _ = apply_paired_many(normaliser, members_list, hand, where)
-        return raster.render(values)
+        return check_finite_maps(raster.render(values), f"{where} ({hand})")
 
     def sample_map(self, index: int, hand: str) -> np.ndarray:
         row, key, members = self.reader.read_sample(index, (JSON_MEMBER, raw_member(hand)))

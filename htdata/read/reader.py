@@ -30,8 +30,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from htdata.errors import HtdataError
 from htdata.store import storage
+from htdata.store.confine import inside
+from htdata.store.splitfiles import SplitRejected, parse_split_doc  # noqa: F401 (SplitRejected: its old home)
 from htdata.format.codec import decode_png_u8
 from htdata.format.mapstorage import maps_stored
 from htdata.format.table import (HANDS, INDEX_DTYPE, JSON_MEMBER, LAYOUTS_DIR, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
@@ -41,10 +42,6 @@ from htdata.format.shardio import BLOCK, describe_header, header_matches, padded
 from htdata.store.remote import load_cached_index
 from htdata.store.gcrecord import collected_error
 from htdata.read.rawstream import RawMapRenderer
-
-class SplitRejected(HtdataError, ValueError):
-    """A split whose file no longer matches its version's manifest, or whose parts overlap."""
-
 
 MAX_OPEN_SHARDS = 128   # an LRU of open shard files; one-episode units make many small shards
 _SIZE_POS = tuple(INDEX_DTYPE.names.index(SIZE_FIELDS[s]) for s in MEMBER_ORDER)
@@ -192,15 +189,20 @@ class DatasetReader:
         return first + int(frame)
 
     # -- bytes -------------------------------------------------------------
-    def _shard_path(self, shard: int) -> str:
-        return storage.join(self.root, SHARDS_DIR, self._shard_names[shard])
+    def _shard_path(self, shard: int, confined: bool = False) -> str:
+        """shards/NAME of shard `shard`; `confined`: refused when it resolves outside the dataset (a symlink)."""
+        if not 0 <= shard < len(self._shard_names):   # a damaged or hostile index row: one line, not IndexError
+            raise ValueError(f"{self.root}: an index row names shard {shard}, but version {self.version} has "
+                             f"{len(self._shard_names)} shards (index.npy damaged?); run `htdata validate`")
+        rel = f"{SHARDS_DIR}/{self._shard_names[shard]}"
+        return inside(self.root, rel, f"shards[{shard}]") if confined else storage.join(self.root, rel)
 
     def _handle(self, shard: int):
         self._check_pid()
         handle = self._handles.get(shard)
         if handle is None:
             with self._collected_guard(self._shard_path(shard)):
-                handle = storage.open_binary(self._shard_path(shard))
+                handle = storage.open_binary(self._shard_path(shard, confined=True))
             self._handles[shard] = handle
             if len(self._handles) > MAX_OPEN_SHARDS:
                 _, oldest = self._handles.popitem(last=False)
@@ -294,7 +296,7 @@ class DatasetReader:
         for shard in (range(len(self._shard_names)) if shards is None else shards):
             entry = self.manifest["shards"][shard]
             first, count = int(entry["first_sample"]), int(entry["samples"])
-            with storage.open_binary(self._shard_path(shard)) as f:
+            with storage.open_binary(self._shard_path(shard, confined=True)) as f:
                 for i in range(first, first + count):
                     values = rows[i].item()
                     row = SampleRow(values[0], values[1], values[2], values[3],
@@ -309,7 +311,7 @@ class DatasetReader:
     # -- layouts / maps ----------------------------------------------------
     def _png(self, relpath: str) -> np.ndarray:
         if relpath not in self._maps:
-            path = storage.join(self.root, relpath)
+            path = inside(self.root, relpath)
             self._maps[relpath] = decode_png_u8(storage.read_bytes(path), path)
         return self._maps[relpath]
 
@@ -323,7 +325,7 @@ class DatasetReader:
     def layout(self, layout_id: str) -> dict:
         if layout_id not in self.manifest["layouts"]:
             raise KeyError(f"{self.root}: layout {layout_id!r} not in dataset")
-        return json.loads(storage.read_text(storage.join(self.root, self.manifest["layouts"][layout_id]["file"])))
+        return json.loads(storage.read_text(inside(self.root, self.manifest["layouts"][layout_id]["file"])))
 
     @property
     def region_map(self) -> np.ndarray:
@@ -349,7 +351,7 @@ class DatasetReader:
                 raise FileNotFoundError(f"{self.root}: version {self.version} has no split named {name!r} "
                                         f"(splits: {sorted(self.manifest.get('splits', {})) or 'none'}; "
                                         f"run `htdata split`)")
-            path = storage.join(self.root, entry["file"])
+            path = inside(self.root, entry["file"], f"splits.{name}.file")
         else:
             path = storage.join(self.root, f"{SPLITS_DIR}/{name}.json")
         if not storage.exists(path):
@@ -359,19 +361,7 @@ class DatasetReader:
         if "version" in self.manifest and hashlib.sha256(data).hexdigest() != entry["sha256"]:
             raise SplitRejected(f"{path}: sha256 differs from version {self.version}'s manifest (edited after "
                                 f"it was committed?); re-make it with `htdata split --name {name}`")
-        try:
-            doc = json.loads(data)
-        except ValueError as exc:
-            raise SplitRejected(f"{path}: not valid JSON ({exc})") from None
-        if not isinstance(doc.get("parts"), dict):
-            raise ValueError(f"{path}: split has no 'parts' object")
-        seen: dict[str, str] = {}
-        for part, body in sorted(doc["parts"].items()):
-            for eid in body.get("episodes", []) if isinstance(body, dict) else []:
-                if seen.setdefault(eid, part) != part:
-                    raise SplitRejected(f"{path}: episode {eid!r} is in both {seen[eid]} and {part}: the parts "
-                                        f"overlap (train/test leakage); re-make it with `htdata split --name {name}`")
-        return doc
+        return parse_split_doc(data, path, name)
 
     def episode_positions(self, split: str | None = None, part: str | None = None) -> list[int]:
         """Episode positions selected by a split part (all episodes when split is None)."""

@@ -16,7 +16,11 @@ Timestamp cleaning (`clean_timestamps`), applied to every stream first:
 - non-monotonic timestamps are put in time order by a STABLE sort (equal
   timestamps keep their file order) and a warning is recorded;
 - exact duplicates keep the FIRST occurrence in file order; the others are
-  removed (for RGB they are dropped frames with reason "duplicate_timestamp").
+  removed (for RGB they are dropped frames with reason "duplicate_timestamp");
+- two consecutive timestamps more than a day apart (`MAX_GAP_NS`, e.g. a last
+  stamp of int64 max) are refused, naming the stream: no recording has such a gap.
+The warnings go to the episode record and, through the ingest report's
+`episode_warnings`, to stderr.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import numpy as np
 log = logging.getLogger(__name__)
 
 SYNC_POLICIES = ("nearest",)
+MAX_GAP_NS = 24 * 3_600_000_000_000   # one day between two frames of one stream: no recording, a broken clock
 
 
 @dataclass
@@ -85,7 +90,10 @@ def clean_timestamps(ts, name: str) -> tuple[np.ndarray, CleanReport]:
     is_dup[1:] = sorted_ts[1:] == sorted_ts[:-1]
     dup_idx = np.sort(order[is_dup])
     keep = order[~is_dup]
+    _refuse_impossible_gap(arr[keep], name)
     warnings: list[str] = []
+    if keep.size == 1 and arr.size > 1:
+        warnings.append(f"{name}: all {arr.size} timestamps are equal (a stuck clock?); kept the first frame only")
     if reordered:
         warnings.append(f"{name}: timestamps not monotonic; stable-sorted ({reordered} frames moved)")
     if dup_idx.size:
@@ -95,6 +103,19 @@ def clean_timestamps(ts, name: str) -> tuple[np.ndarray, CleanReport]:
     report = CleanReport(name=name, n_in=int(arr.size), n_out=int(keep.size), reordered=reordered,
                          duplicates=int(dup_idx.size), duplicate_indices=dup_idx, warnings=warnings)
     return keep, report
+
+
+def _refuse_impossible_gap(sorted_ts: np.ndarray, name: str) -> None:
+    """A gap between two consecutive timestamps longer than MAX_GAP_NS is a broken clock, not a recording."""
+    if sorted_ts.size < 2:
+        return
+    # differences of sorted int64 taken as uint64: exact even when they overflow int64 (e.g. a last stamp of int64 max)
+    gaps = sorted_ts[1:].view(np.uint64) - sorted_ts[:-1].view(np.uint64)
+    worst = int(np.argmax(gaps))
+    if int(gaps[worst]) > MAX_GAP_NS:
+        raise ValueError(f"{name}: timestamps {int(sorted_ts[worst])} and {int(sorted_ts[worst + 1])} ns lie "
+                         f"{int(gaps[worst]) / 86400e9:.3g} days apart (more than {MAX_GAP_NS // 3_600_000_000_000} "
+                         f"h): a broken clock, no recording has such a gap")
 
 
 def nearest(sorted_ts: np.ndarray, query: np.ndarray) -> np.ndarray:

@@ -2,6 +2,7 @@
 
     fsutil.py    atomic writes, checksums
     storage.py   local paths and fsspec URLs behind one small API (readers)
+    confine.py   the paths a dataset's records name stay inside its root
     lock.py      the one-writer lock
     versions.py  version files: names, paths, write a version, change records
     manifest.py  load / parse dataset.json, episodes.jsonl, index.npy; layout files of a version

@@ -17,6 +17,7 @@ Readers take no lock: a version, once committed, never changes.
 from __future__ import annotations
 
 import datetime as _dt
+import errno
 import json
 import os
 import socket
@@ -103,8 +104,16 @@ class WriterLock:
             return True
         except FileExistsError:
             return False
+        except OSError as exc:
+            if exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM):   # one line, not a traceback inside another
+                raise DatasetLocked(f"{self.path.parent}: cannot take the writer lock {self.path}: "
+                                    f"{exc.strerror} (a read-only dataset?); nothing was written") from None
+            raise
         finally:
-            tmp.unlink(missing_ok=True)
+            try:
+                tmp.unlink(missing_ok=True)
+            except OSError:
+                pass    # a read-only folder: there is no temp file to remove
 
     def _take_over(self, stale: dict) -> None:
         """Remove the lock if it still holds `stale`, under a short mutex so two writers cannot both
@@ -131,11 +140,15 @@ class WriterLock:
 
     def read_holder(self) -> dict | None:
         try:
-            return json.loads(self.path.read_text())
+            holder = json.loads(self.path.read_bytes().decode("utf-8"))
         except FileNotFoundError:
             return None
+        except UnicodeDecodeError:
+            raise DatasetLocked(f"{self.path}: not a writer lock htdata wrote (binary content); if no writer is "
+                                f"running on this dataset, remove it by hand") from None
         except (OSError, json.JSONDecodeError):
             return {}   # half-written by a writer killed mid-write: no live holder wrote it fully
+        return holder if isinstance(holder, dict) else {}
 
     def acquire(self) -> "WriterLock":
         self.path.parent.mkdir(parents=True, exist_ok=True)

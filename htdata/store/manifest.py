@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata.store import storage
+from htdata.store.confine import check_manifest_paths, inside
 from htdata.format.codec import encode_png_u8
 from htdata.format.table import (CANONICAL_FILE, EPISODES_FILE, FORMAT, INDEX_DTYPE, INDEX_FILE, LAYOUTS_DIR,
                            INDEX_DTYPES, MANIFEST_FILE, PARTS_FILE, READABLE_FORMAT_VERSIONS, REGIONS_FILE)
@@ -131,6 +132,7 @@ def parse_manifest(data: str | bytes, where: str, validate: bool = True) -> dict
                          f"expected {FORMAT!r} v{' or v'.join(map(str, READABLE_FORMAT_VERSIONS))}")
     if validate:
         validate_json(manifest, "manifest", where=str(where))
+    check_manifest_paths(manifest, str(where))   # always: a stranger's dataset never names files outside its root
     return manifest
 
 
@@ -149,7 +151,7 @@ def parse_episodes(text: str, where: str) -> list[dict]:
 def load_episodes(root: str | os.PathLike, manifest: dict | None = None) -> list[dict]:
     """Episode records of `manifest`'s version (the current version's when None)."""
     manifest = manifest if manifest is not None else load_manifest(root, validate=False)
-    path = storage.join(root, manifest.get("episodes_file", EPISODES_FILE))
+    path = inside(root, manifest.get("episodes_file", EPISODES_FILE), "episodes_file")
     return parse_episodes(storage.read_text(path), path)
 
 
@@ -185,7 +187,7 @@ def parse_index(data: bytes, where: str) -> np.ndarray:
 def load_index(root: str | os.PathLike, mmap: bool = True, manifest: dict | None = None) -> np.ndarray:
     """`manifest`'s index (the current version's when None) as INDEX_DTYPE; mmap for local datasets."""
     manifest = manifest if manifest is not None else load_manifest(root, validate=False)
-    return load_index_file(storage.join(root, manifest.get("index_file", INDEX_FILE)), mmap)
+    return load_index_file(inside(root, manifest.get("index_file", INDEX_FILE), "index_file"), mmap)
 
 
 def load_index_file(path: str, mmap: bool = True) -> np.ndarray:

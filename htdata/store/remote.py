@@ -31,6 +31,7 @@ import numpy as np
 
 from htdata.store import storage
 from htdata.format.table import EPISODES_FILE, INDEX_FILE, LAYOUTS_DIR, MANIFEST_FILE, SHARDS_DIR, SPLITS_DIR
+from htdata.store.confine import inside
 from htdata.store.fsutil import atomic_open, sha256_file, sha256_stream
 from htdata.store.manifest import load_index_file, load_manifest
 from htdata.store.versions import list_versions, version_manifest_file
@@ -81,6 +82,7 @@ def publish_plan(local_root: str | os.PathLike) -> tuple[dict, list[tuple[str, s
     plan += [(version_manifest_file(v), None) for v in versions]
     plan = list(dict.fromkeys(plan))   # shards shared by versions once, in first-listed order
     for rel, _ in plan:
+        inside(root, rel)   # a dataset never makes publish read, or write, outside its folder
         if not (root / rel).is_file():
             raise FileNotFoundError(f"{root / rel}: listed by the dataset but missing; cannot publish")
     return manifest, plan

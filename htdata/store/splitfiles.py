@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from htdata.errors import HtdataError
 from htdata.format.table import SPLITS_DIR
 from htdata.store import storage
 from htdata.store.versions import manifest_path, split_file
@@ -117,3 +118,24 @@ def list_splits(dataset, manifest: dict | None = None) -> list[str]:
         return sorted(manifest.get("splits", {}))
     folder = Path(dataset) / SPLITS_DIR
     return sorted(p.stem for p in folder.glob("*.json")) if folder.is_dir() else []
+
+
+class SplitRejected(HtdataError, ValueError):
+    """A split whose file no longer matches its version's manifest, or whose parts overlap."""
+
+
+def parse_split_doc(data: bytes, path: str, name: str) -> dict:
+    """A split file's bytes -> its document, refused when not JSON, without parts, or when parts overlap."""
+    try:
+        doc = json.loads(data)
+    except ValueError as exc:
+        raise SplitRejected(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("parts"), dict):
+        raise ValueError(f"{path}: split has no 'parts' object")
+    seen: dict[str, str] = {}
+    for part, body in sorted(doc["parts"].items()):
+        for eid in body.get("episodes", []) if isinstance(body, dict) else []:
+            if seen.setdefault(eid, part) != part:
+                raise SplitRejected(f"{path}: episode {eid!r} is in both {seen[eid]} and {part}: the parts "
+                                    f"overlap (train/test leakage); re-make it with `htdata split --name {name}`")
+    return doc

@@ -273,6 +273,20 @@ def write_version(root: str | os.PathLike, manifest: dict, episodes_bytes: bytes
     return manifest
 
 
+def restore_pointer(root: str | os.PathLike, n: int) -> bool:
+    """Rewrite dataset.json from versions/vN.json (N the newest version) when it is missing or differs;
+    True when it was rewritten. A write that changes nothing still leaves the pointer right."""
+    root = Path(root)
+    if not _version_files(root) or _version_files(root)[-1] != n:
+        return False
+    data = (root / version_manifest_file(n)).read_bytes()
+    pointer = root / MANIFEST_FILE
+    if pointer.is_file() and pointer.read_bytes() == data:
+        return False
+    write_bytes_atomic(pointer, data)
+    return True
+
+
 def _sha256(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 

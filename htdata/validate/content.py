@@ -18,6 +18,7 @@ import numpy as np
 # Maps are checked as stored (half or float pixels, before conversion): decode_exr_pixels; every other
 # member decodes through the member table like every reader.
 from htdata.format.codec import decode_exr_pixels, decode_png_u8
+from htdata.store.confine import inside
 from htdata.format.table import (CANVAS, HANDS, JSON_MEMBER, MAP_SHAPE, RGB_MEMBER, bend_member, decode_member,
                                  raw_member, tactile_member)
 from htdata.validate.geometry import CoverageGeometry, coverage_geometries, coverage_geometry  # noqa: F401
@@ -33,15 +34,15 @@ def layout_maps(root: Path, manifest: dict, check: Check) -> tuple[dict[str, np.
     """(layout id -> coverage bool map, canonical region ids) as the manifest lists them."""
     coverage = {}
     for layout_id, entry in manifest["layouts"].items():
-        path = root / entry["coverage"]
         try:
-            coverage[layout_id] = decode_png_u8(path.read_bytes(), str(path)) > 0
+            path = inside(root, entry["coverage"], f"layouts.{layout_id}.coverage")
+            coverage[layout_id] = decode_png_u8(Path(path).read_bytes(), str(path)) > 0
         except (OSError, ValueError) as exc:
             check.fail("coverage_unreadable", f"layout {layout_id}: {exc}", file=entry["coverage"])
     region_map = None
-    path = root / manifest["canonical"]["regions"]
     try:
-        region_map = decode_png_u8(path.read_bytes(), str(path))
+        path = inside(root, manifest["canonical"]["regions"], "canonical.regions")
+        region_map = decode_png_u8(Path(path).read_bytes(), str(path))
     except (OSError, ValueError) as exc:
         check.fail("regions_unreadable", f"canonical region map: {exc}", file=manifest["canonical"]["regions"])
     return coverage, region_map

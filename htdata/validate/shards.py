@@ -18,6 +18,7 @@ import numpy as np
 
 from htdata.format.mapstorage import map_member
 from htdata.format.table import HANDS, JSON_MEMBER, SHARDS_DIR, tactile_member
+from htdata.store.confine import PathOutsideDataset, inside
 from htdata.store.fsutil import sha256_file
 from htdata.format.shardio import sample_key
 from htdata.validate.content import check_content
@@ -25,7 +26,8 @@ from htdata.validate.geometry import coverage_geometries
 from htdata.validate.report import Recorder
 from htdata.validate.sensors import hand_key
 from htdata.validate.splits import frame_digest
-from htdata.validate.structure import Loaded, check_sample_json, group_rows, read_members
+from htdata.validate.samplejson import check_sample_json
+from htdata.validate.structure import Loaded, group_rows, read_members
 from htdata.validate.timestamps import empty_timestamps, record_timestamps
 
 
@@ -48,6 +50,15 @@ class ShardJob:
     map_members: dict[str, str] | None = None   # hand -> member carrying its map (format.mapstorage.map_member)
 
 
+def outside(root, name: str) -> bool:
+    """True when shards/NAME resolves outside the dataset root (a symlink to elsewhere)."""
+    try:
+        inside(root, f"{SHARDS_DIR}/{name}", "shard")
+    except PathOutsideDataset:
+        return True
+    return False
+
+
 def shard_jobs(ds: Loaded, decode: np.ndarray, coverage: dict[str, np.ndarray], region_map: np.ndarray | None,
                content_hash: bool) -> list[ShardJob]:
     """One job per manifest shard, each carrying only the coverage maps of its episodes."""
@@ -61,6 +72,8 @@ def shard_jobs(ds: Loaded, decode: np.ndarray, coverage: dict[str, np.ndarray], 
     rows = ds.index
     shard_rows_of = group_rows(rows["shard"], len(ds.manifest["shards"]))
     for pos, entry in enumerate(ds.manifest["shards"]):
+        if outside(ds.root, entry["name"]):
+            continue   # check_shard_files failed it (path_outside): a file outside the dataset is never read
         ids = shard_rows_of[pos]
         shard_rows = np.asarray(rows[ids])
         ep_ids = [eids[int(e)] for e in shard_rows["episode"]]

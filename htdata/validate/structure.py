@@ -4,9 +4,9 @@ Dataset level (`load_dataset`, `check_index`, `check_shard_files`): schemas
 of dataset.json and episodes.jsonl, their sha256, counts per shard and per
 episode, unique keys, each episode contiguous with frames 0..n-1, the hands
 each episode declares. Sample level, called by the shard workers
-(`read_members`, `check_sample_json`): the tar header at every index offset
-names `key.suffix` with the indexed size (one 512-byte read per member), and
-the sample JSON is valid and agrees with the index.
+(`read_members`): the tar header at every index offset names `key.suffix`
+with the indexed size (one 512-byte read per member); the sample JSON is
+checked by samplejson.py.
 """
 
 from __future__ import annotations
@@ -14,21 +14,19 @@ from __future__ import annotations
 import hashlib
 from collections import Counter
 from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
-from htdata.format.codec import decode_json
 from htdata.format.mapstorage import map_member
 from htdata.format.table import (HANDS, INDEX_DTYPE, JSON_MEMBER, RGB_MEMBER, MANIFEST_FILE, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
                            tactile_member)
+from htdata.store.confine import PathOutsideDataset, inside
 from htdata.store.manifest import IndexDtypeError, load_manifest, parse_episodes, parse_index, parse_manifest
 from htdata.resources import validate_json
 from htdata.format.shardio import BLOCK, member_offsets, parse_header, sample_key
 from htdata.validate.report import Check, Recorder
 from htdata.store.versions import list_versions, manifest_path, version_manifest_file
-from htdata.resources import load_schema
 
 
 @dataclass
@@ -92,7 +90,11 @@ def _load_manifest(root: Path, check: Check, version: int | None) -> tuple[dict,
 
 def _read_listed(root: Path, manifest: dict, stem: str, check: Check) -> tuple[Path, bytes] | None:
     """The file the manifest lists as `{stem}_file`, its sha256 checked against `{stem}_sha256`."""
-    path = root / manifest[f"{stem}_file"]
+    try:
+        path = Path(inside(root, manifest[f"{stem}_file"], f"{stem}_file"))
+    except PathOutsideDataset as exc:   # a symlink out of the dataset: named, never read
+        check.fail("path_outside", str(exc), file=manifest[f"{stem}_file"])
+        return None
     if not path.is_file():
         check.fail(f"{stem}_missing", f"{path} missing", file=manifest[f"{stem}_file"])
         return None
@@ -299,6 +301,11 @@ def check_shard_files(ds: Loaded, check: Check) -> None:
                 listed |= {s["name"] for s in load_manifest(ds.root, validate=False, version=v)["shards"]}
             except (OSError, ValueError) as exc:
                 check.warn("version_unreadable", f"version {v}: {exc}", version=v)
+    for entry in ds.manifest["shards"]:
+        try:
+            inside(ds.root, f"{SHARDS_DIR}/{entry['name']}", "shard")
+        except PathOutsideDataset as exc:
+            check.fail("path_outside", str(exc), shard=entry["name"])
     shard_dir = ds.root / SHARDS_DIR
     present = sorted(p.name for p in shard_dir.iterdir()) if shard_dir.is_dir() else []
     for name in present:
@@ -355,44 +362,3 @@ def read_members(f, shard: str, key: str, row, where: dict, need_bytes: bool,
                 return None
             members[suffix] = data
     return members
-
-
-@lru_cache(maxsize=1)
-def _sample_validator():
-    """One compiled validator per process: building it per sample costs ~1 ms each."""
-    import jsonschema
-
-
-    return jsonschema.Draft202012Validator(load_schema("sample"))
-
-
-def check_sample_json(rec: Recorder, data: bytes, key: str, eid: str, frame: int, row,
-                      where: dict, map_members: dict[str, str] | None = None) -> dict | None:
-    """The sample JSON: schema, key/episode/frame as indexed, hands as the map members present (`map_members`).
-
-    Returns the parsed JSON, or None when its timestamps cannot be trusted.
-    """
-    where_json = f"{key}.{JSON_MEMBER}"
-    try:
-        meta = decode_json(data, where_json)
-        if not _sample_validator().is_valid(meta):
-            validate_json(meta, "sample", where=where_json)  # raises with the first error
-    except ValueError as exc:
-        rec.fail("sample_json", str(exc), **where)
-        return None
-    rec.checked["sample_json"] += 1
-    for field_name, expected in (("key", key), ("episode_id", eid), ("frame_index", frame)):
-        if meta[field_name] != expected:
-            rec.fail("sample_json_mismatch", f"{where_json}: {field_name} disagrees with the index",
-                     **where, expected=expected, found=meta[field_name])
-    for hand in HANDS:
-        member = (map_members or {}).get(hand, tactile_member(hand))
-        has_map = int(row[SIZE_FIELDS[member]]) > 0
-        if bool(meta["hands"][hand]) != has_map:
-            rec.fail("sample_hands", f"{where_json}: hands.{hand}={meta['hands'][hand]} but the "
-                     f"{member} member is {'present' if has_map else 'absent'}",
-                     **where, expected=has_map, found=meta["hands"][hand])
-        if has_map and hand not in meta["t_tactile_ns"]:
-            rec.fail("sample_json", f"{where_json}: no t_tactile_ns for the {hand} hand", **where)
-            return None
-    return meta

@@ -93,6 +93,12 @@ def _frame_files(frames_dir: Path) -> list[Path]:
     return sorted(p for p in frames_dir.iterdir() if p.suffix.lower() in JPEG_SUFFIXES)
 
 
+# timestamps_ns declaring more rows than this beside the value rows are refused unread (issue 26: a
+# 0.84 MB deflated npz declaring 1e8 stamps beside a few hundred rows reached 862 MB before failing)
+MAX_STAMP_RATIO = 2
+MAX_STAMP_SLACK = 4096
+
+
 class NativeAdapter(FileDiscovery):
     name = SOURCE
     # Everything a native recording needs is in its recording.json: no params.
@@ -124,10 +130,12 @@ class NativeAdapter(FileDiscovery):
             files += [paths["video_file"]] if "video_file" in paths else _frame_files(paths["frames_dir"])
         hands = tuple(sorted(doc["hands"]))
         layouts = _recording_layouts(folder, doc, rec_path, episode_id)
+        # a layout JSON the recording keeps decides its maps: hashed with it (not in the fingerprint, as before)
+        read = files + [Path(v) for v in layouts.values() if Path(v).is_absolute()]
         return [EpisodeRef(
             episode_id=episode_id, source=SOURCE, source_ref=str(folder), task=doc["task"], scene=doc["scene"],
             hands=hands, layouts=layouts, est_frames=est_frames,
-            fingerprint=fingerprint_files(root, files), source_files=tuple(sorted(map(str, files))),
+            fingerprint=fingerprint_files(root, files), source_files=tuple(sorted(set(map(str, read)))),
             extra={"operator": doc.get("operator", ""), "layouts_from": str(rec_path), "clock_offset_ns":
                    {h: int(doc["hands"][h].get("clock_offset_ns", 0)) for h in hands}},
         )]
@@ -186,7 +194,11 @@ class NativeStreams(EpisodeStreams):
             self._rows[hand] = rows
             ts_rows = NpzRows(path, "timestamps_ns")
             try:
-                ts = ts_rows.read_all()
+                declared = ts_rows.num_rows
+                if declared > MAX_STAMP_RATIO * rows.num_rows + MAX_STAMP_SLACK:   # by header, before reading
+                    raise NpzRowError(None, f"timestamps_ns.npy declares {declared} rows beside {rows.num_rows} "
+                                      f"value rows: refused before reading (a stream has one stamp per row)")
+                ts = ts_rows.read_all(limit=rows.num_rows)   # stamps past the last value row pair with nothing
             finally:
                 ts_rows.close()
         except NpzRowError as exc:

@@ -169,15 +169,16 @@ class NpzRows:
             pos = end
         return out
 
-    def read_all(self) -> np.ndarray:
-        """Whole member (timestamps), streamed in chunk_rows blocks into one array: peak memory is the
-        array itself, not the 4x that index, order and gather arrays over every row would add."""
-        out = np.empty((self.num_rows,) + self.row_shape, dtype=self.dtype)
+    def read_all(self, limit: int | None = None) -> np.ndarray:
+        """Whole member (timestamps), or its first `limit` rows, streamed in chunk_rows blocks into one array:
+        peak memory is the array itself, not the 4x that index, order and gather arrays over every row would add."""
+        n = self.num_rows if limit is None else min(self.num_rows, max(0, int(limit)))
+        out = np.empty((n,) + self.row_shape, dtype=self.dtype)
         if self._next_row > 0:
             self._open_member()
         block = max(self.chunk_rows, (1 << 20) // max(self.row_bytes, 1))   # ~1 MB per read
-        for start in range(0, self.num_rows, block):
-            out[start:start + block] = self._read_block(min(block, self.num_rows - start))
+        for start in range(0, n, block):
+            out[start:start + block] = self._read_block(min(block, n - start))
         return out
 
     def close(self) -> None:

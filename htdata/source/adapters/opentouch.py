@@ -49,6 +49,7 @@ from htdata.source.adapters.base import (
     sanitise_id, walk_source,
 )
 from htdata.errors import EpisodeError
+from htdata.source.adapters.hdf5safe import check_hdf5_size, in_file
 from htdata.source.rgb import CHANNEL_ORDERS, to_rgb
 
 log = logging.getLogger(__name__)
@@ -193,6 +194,7 @@ class OpenTouchContext:
     layouts: dict[str, str]
     allowed_hands: tuple[str, ...]
     missing_table: Path | None = None   # annotations given but absent, allowed by allow_unlabelled
+    table: Path | None = None           # the annotation table read: it decides tasks, so it is a source file
 
 
 class OpenTouchAdapter(FileDiscovery):
@@ -225,7 +227,8 @@ class OpenTouchAdapter(FileDiscovery):
                     f"point to it with {FIX_TABLE}, or ingest without labels with {FIX_UNLABELLED}")
         return OpenTouchContext(tasks=tasks, by_number=_annotation_lookup(tasks or {}),
                                 layouts={**DEFAULT_LAYOUTS, **params["layouts"]},
-                                allowed_hands=tuple(params["hands"]), missing_table=missing)
+                                allowed_hands=tuple(params["hands"]), missing_table=missing,
+                                table=path if tasks is not None else None)
 
     def discovery_files(self, root: Path, params: dict) -> list[Path]:
         return walk_source(root, lambda name: name.endswith(".hdf5"))
@@ -257,7 +260,7 @@ class OpenTouchAdapter(FileDiscovery):
                 episode_id=episode_id, source=SOURCE, source_ref=f"{path}::data/{demo_id}", task=task, scene=scene,
                 hands=hands, layouts={h: layouts[h] for h in hands}, est_frames=n_frames,
                 fingerprint=fingerprint, extra={"task_source": task_source, "demo_id": demo_id},
-                source_files=(str(path),),
+                source_files=(str(path),) + ((str(context.table),) if context.table is not None else ()),
             ))
         return refs
 
@@ -275,25 +278,6 @@ class OpenTouchAdapter(FileDiscovery):
 
     def open(self, ref: EpisodeRef, params: dict) -> "OpenTouchStreams":
         return OpenTouchStreams(ref, params)
-
-
-# Deflate (the usual HDF5 filter) expands at most ~1032:1.
-MAX_FILTER_RATIO = 1100
-
-
-def check_hdf5_size(ref: EpisodeRef, ds, path: Path) -> None:
-    """Refuse a dataset whose declared shape needs more bytes than its storage can hold (before reading it).
-
-    Contiguous data must be fully stored; chunked (filtered) data may expand
-    at most MAX_FILTER_RATIO times its stored bytes. A shape forged to 2e8
-    rows is an error here instead of a multi-GB allocation on read.
-    """
-    need = int(np.prod(ds.shape, dtype=np.float64)) * ds.dtype.itemsize if ds.shape else ds.dtype.itemsize
-    stored = int(ds.id.get_storage_size())
-    limit = stored if ds.chunks is None else stored * MAX_FILTER_RATIO + (1 << 20)
-    if need > limit:
-        raise EpisodeError(ref, None, f"{ds.name}: declared shape {ds.shape} {ds.dtype} needs {need} bytes but the "
-                           f"file stores {stored} bytes for it: refused before reading", file=path)
 
 
 class OpenTouchStreams(EpisodeStreams):
@@ -320,14 +304,15 @@ class OpenTouchStreams(EpisodeStreams):
         ref = self.ref
         if group not in self._file:
             raise EpisodeError(ref, None, f"clip {group} not found")
-        g = self._file[group]
         try:
-            check_hdf5_size(ref, g["timestamps"], self.path)
-            ts = np.asarray(g["timestamps"][()], dtype=np.int64)
-            self._jpegs = g["rgb_images_jpeg"]
+            g = in_file(ref, self._file, group, self.path)
+            stamps = in_file(ref, g, "timestamps", self.path)
+            check_hdf5_size(ref, stamps, self.path)
+            ts = np.asarray(stamps[()], dtype=np.int64)
+            self._jpegs = in_file(ref, g, "rgb_images_jpeg", self.path)
             self._pressure = {}
             for hand in ref.hands:
-                ds = g[f"{hand}_pressure"]
+                ds = in_file(ref, g, f"{hand}_pressure", self.path)
                 check_tactile_shape(ref, hand, ds.shape, self.path)
                 check_hdf5_size(ref, ds, self.path)
                 self._pressure[hand] = ds

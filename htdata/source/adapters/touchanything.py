@@ -46,12 +46,13 @@ VIDEO_NAMES = {"chest": "chest.mp4", "left": "left.mp4", "right": "right.mp4"}
 JQ_NAME = "jq_pressure.json"
 GRID_KEYS = {"left": "left_pressure_grid", "right": "right_pressure_grid"}
 DEFAULT_LAYOUTS = {"left": "touchanything_left_21x21", "right": "touchanything_right_21x21"}
+SPLIT_FILE = "split.json"
 SPLIT_KEYS = ("train", "val", "test_seen", "test_unseen")
 
 
 def load_split(root: Path) -> dict[tuple[str, ...], str]:
     """(Scene, task, trajectory) -> split name from root/split.json ({} when absent)."""
-    path = Path(root) / "split.json"
+    path = Path(root) / SPLIT_FILE
     if not path.is_file():
         return {}
     try:
@@ -121,14 +122,16 @@ class TouchAnythingAdapter(FileDiscovery):
         # exists(), not is_file(): a FIFO or an outside symlink must reach fingerprint_files' check and be refused
         files = [npz] + [folder / n for n in (VIDEO_NAMES[video], JQ_NAME) if os.path.lexists(folder / n)]
         extra: dict = {"video": video}
+        read = list(files)
         if (scene, task, traj) in context.splits:
             extra["source_split"] = context.splits[(scene, task, traj)]
+            read.append(Path(root) / SPLIT_FILE)   # it decided the record's source_split: hashed with the episode
         if excluded:
             extra["hands_excluded"] = excluded
         return [EpisodeRef(
             episode_id=episode_id, source=SOURCE, source_ref=str(folder), task=task, scene=scene,
             hands=hands, layouts={h: context.layouts[h] for h in hands}, est_frames=n_frames,
-            fingerprint=fingerprint_files(root, files), extra=extra, source_files=tuple(sorted(map(str, files))),
+            fingerprint=fingerprint_files(root, files), extra=extra, source_files=tuple(sorted(map(str, read))),
         )]
 
     @staticmethod
