@@ -215,7 +215,8 @@ def _about(card: Card, s: dict, reader, title: str | None, description: str | No
               "simply lacks that member.")
     card.table(["member", "format", "what"], sample_format(manifest.get("codec", {})))
     card.heading("How to load")
-    card.text("pip install htdata, then in Python: import htdata; ds = htdata.open(\"PATH\"); "
+    card.text("Install htdata from its source folder (no package index serves it): pip install . in the "
+              "htdata checkout; then in Python: import htdata; ds = htdata.open(\"PATH\"); "
               "sample = ds.decoded(0). For LeRobot: htdata export lerobot PATH OUT.")
 
 
@@ -229,9 +230,7 @@ def build_card(root, version: int | None = None, title: str | None = None, descr
               f"contact per glove and hand from its calibration (the rule of each glove is "
               f"in the Gloves table; 'old contact' = any taxel above {s['contact_threshold']}).")
     with DatasetReader(root, version=version) as reader:
-        _about(card, s, reader, title, description, license)
-        card.heading("What the numbers mean")
-        card.text(f"Values: {s['values']}; contact = any taxel above {s['contact_threshold']}.")
+        _about(card, s, reader, title, description, license)   # the values are said once, in the opening line
         _counts(card, s)
         _gloves(card, s, reader, parse_canonical)
         card.heading("Taxel health")
