@@ -9,6 +9,7 @@ from pathlib import Path
 from htdata.commands.version_arg import version_arg
 from htdata import validate
 from htdata.format.table import VALIDATE_REPORT
+from htdata.commands.outputs import output_path
 
 
 EPILOG = """\
@@ -63,14 +64,14 @@ def run(args: argparse.Namespace) -> int:
     if missing is not None:      # not a dataset (or no such version): its one line, and nothing written into it
         print(f"htdata validate: FAIL manifest_missing: {missing['message']}", file=sys.stderr)
         if args.json is not None:
-            validate.write_report(report, args.json)
+            validate.write_report(report, output_path(args.json, "validate"))
         return 1
     print(validate.format_report(report))
     if args.json is None and not Path(args.dataset).is_dir():
         print(f"htdata validate: {args.dataset} is not a directory: no report written", file=sys.stderr)
         return 1
     try:
-        validate.write_report(report, out)
+        validate.write_report(report, output_path(out, "validate") if args.json is not None else out)
         print(f"report: {out}")
     except OSError as exc:
         print(f"htdata validate: cannot write report {out}: {exc}", file=sys.stderr)
