@@ -76,13 +76,15 @@ export-lerobot: split
 	$(HTDATA) export lerobot $(DATA)/dataset $(DATA)/lerobot --split main --force --quiet
 
 # The export checked by LeRobot's own tooling, in a venv of its own (LeRobot's pins differ from
-# ours): lerobot-doctor (no torch) must report no FAIL, then tools/lerobot_check.py reads the
-# export with pyarrow + PyAV as LeRobot v3.0 documents it and compares it with htdata's reader.
-# The doctor's "training" check is left out: it FAILs any dataset without an `action` feature,
-# and htdata records observations only (the full report, that FAIL included, is kept in
-# $(DATA)/lerobot_doctor.md). LeRobot's loader itself: `make lerobot-load` (below, not in CI).
+# ours): lerobot-doctor (no torch) must report no FAIL but "Training Readiness" (it FAILs any
+# dataset without an `action` feature; htdata records observations only), then
+# tools/lerobot_check.py reads the export with pyarrow + PyAV as LeRobot v3.0 documents it and
+# compares it with htdata's reader. Both write their full reports to files (the doctor prints a
+# line per flagged taxel dimension, ~1,500 on the sample); tools/lerobot_summary.py prints one
+# line per doctor check, the rows compared and the RGB difference, names the files and gives
+# the verdict (the exit status). LeRobot's loader itself: `make lerobot-load` (below, not in CI).
 LEROBOT_VENV ?= .venv-lerobot
-DOCTOR_CHECKS := metadata,temporal,actions,videos,statistics,episodes,consistency,anomalies,portability,per_episode
+LEROBOT_REPORTS := $(DATA)/lerobot_doctor.md $(DATA)/lerobot_doctor.txt $(DATA)/lerobot_check.json $(DATA)/lerobot_check.txt
 
 $(LEROBOT_VENV)/.installed:
 	$(PYTHON) -m venv $(LEROBOT_VENV)
@@ -90,9 +92,14 @@ $(LEROBOT_VENV)/.installed:
 	touch $@
 
 lerobot-check: export-lerobot $(LEROBOT_VENV)/.installed
-	-$(LEROBOT_VENV)/bin/lerobot-doctor check $(DATA)/lerobot --markdown $(DATA)/lerobot_doctor.md > /dev/null
-	$(LEROBOT_VENV)/bin/lerobot-doctor check $(DATA)/lerobot --checks $(DOCTOR_CHECKS)
-	$(PY) tools/lerobot_check.py $(DATA)/dataset $(DATA)/lerobot --json $(DATA)/lerobot_check.json
+	@rm -f $(LEROBOT_REPORTS)
+	@$(LEROBOT_VENV)/bin/lerobot-doctor check $(DATA)/lerobot --markdown $(DATA)/lerobot_doctor.md \
+	  > $(DATA)/lerobot_doctor.txt 2>&1; \
+	$(PY) tools/lerobot_check.py $(DATA)/dataset $(DATA)/lerobot --json $(DATA)/lerobot_check.json \
+	  > $(DATA)/lerobot_check.txt 2>&1; \
+	$(PY) tools/lerobot_summary.py $(DATA)/lerobot_doctor.md $(DATA)/lerobot_check.json \
+	  --expected-fail "Training Readiness=no action feature: htdata records observations only" \
+	  $(foreach f,$(LEROBOT_REPORTS),--full $(f))
 
 # LeRobot's own loader (lerobot-dataset's LeRobotDataset) on the export: NOT in CI. Its venv is
 # ~6.3 GB (torch 2.14.1 + torchvision 0.29.1, CUDA builds that run on CPU; installed in 1m46s

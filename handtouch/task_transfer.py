@@ -49,7 +49,7 @@ def subset(items: ProbeItems, mask: np.ndarray) -> ProbeItems:
 def item_parts(episodes: list[dict], item_episode: np.ndarray, held_task: str, test_ratio: float,
                seed: int) -> np.ndarray:
     """(N,) part of each item ("train", "test" or "ood") with `held_task` held out whole."""
-    assignment, _, _ = assign_episodes(episodes, [held_task], test_ratio, seed)
+    assignment, _ = assign_episodes(episodes, [held_task], test_ratio, seed)
     by_position = np.array([assignment[ep["episode_id"]] for ep in episodes])
     return by_position[item_episode]
 

@@ -16,6 +16,8 @@ import errno
 import importlib
 import sys
 
+from htdata.errors import HtdataError
+
 # name -> (module, one-line help). Order is the order of the data path.
 COMMANDS: dict[str, tuple[str, str]] = {
     "sample": ("htdata.commands.sample", "generate a small raw corpus in all three source formats"),
@@ -102,6 +104,9 @@ def main(argv: list[str] | None = None) -> int:
     args = sub.parse_args(argv[1:])
     try:
         return int(module.run(args) or 0)
+    except HtdataError as exc:   # a user-caused error no command caught itself: its one line, no traceback
+        print(f"htdata {name}: error: {exc}", file=sys.stderr)
+        return 2
     except OSError as exc:
         if exc.errno == errno.EROFS:   # a read-only dataset: one line, whichever write met it first
             print(f"htdata {name}: error: {exc.filename or 'the dataset'} is on a read-only file system; nothing "

@@ -20,6 +20,11 @@ class LayoutNotFound(HtdataError, FileNotFoundError):
     naming where it looked and the layouts that exist (htdata.glove.layouts.resolve_layout)."""
 
 
+class BackendMissing(HtdataError, ImportError):
+    """A URL whose fsspec backend is not installed (s3:// without s3fs, ...); the message is one
+    line naming the URL, the package and the htdata extra that brings it (htdata/store/storage.py)."""
+
+
 class EpisodeError(HtdataError):
     """A recording (or one frame of it) cannot be read.
 

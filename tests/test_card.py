@@ -71,6 +71,8 @@ def test_card_is_self_contained_with_tables_and_images(tmp_path, capsys):
     assert cli_main(["card", str(root), str(tmp_path / "card.txt")]) == 2
     # what a card opens with: name, description, licence (stated or flagged unset), format, how to load
     assert "not stated" in md and "htdata.open(" in md and ("float EXR" in md or "half EXR" in md)
+    # the values are said once; how to install is how the README says (no index serves "pip install htdata")
+    assert md.count("Values:") == 1 and "pip install htdata" not in md and "pip install . in the htdata checkout" in md
     named = tmp_path / "named.html"
     assert cli_main(["card", str(root), str(named), "--title", "Kitchen gloves", "--description",
                      "Two gloves in a test kitchen.", "--license", "CC-BY-4.0", "--version", "v2"]) == 0

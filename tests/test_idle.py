@@ -95,7 +95,7 @@ def test_trim_writes_one_version_and_stats_recompute_only_the_trimmed_episode(ds
     assert s["cache"]["computed"] == 1 and s["cache"]["cached"] == 2
     # trimming again finds nothing idle and writes no version
     assert cli_main(["trim", str(ds), "--idle", "--keep-margin", "0.3"]) == 0
-    assert "no new version written" in capsys.readouterr().out
+    assert "nothing changed: version 2 stays current" in capsys.readouterr().out
     assert json.loads((ds / "dataset.json").read_text())["version"] == 2
 
 

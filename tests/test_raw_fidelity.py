@@ -149,7 +149,7 @@ def test_renormalise_with_the_original_calibration_is_byte_identical(tmp_path, n
         assert a.sample(i) == b.sample(i)
 
 
-def test_renormalise_to_a_new_calibration_and_back(tmp_path, native_counts):
+def test_renormalise_to_a_new_calibration_and_back(tmp_path, native_counts, capsys):
     out, _, _ = native_counts
     setting = ["--set", f"normalise.{LAYOUT}.baseline=rest_window", "--set", f"normalise.{LAYOUT}.noise_k=3"]
     assert cli(["renormalise", str(out), "--pipeline", "native", "--dry-run", *setting]) == 0
@@ -167,6 +167,10 @@ def test_renormalise_to_a_new_calibration_and_back(tmp_path, native_counts):
     assert cli(["renormalise", str(out), "--pipeline", "native"]) == 0
     v3 = DatasetReader(out, version=3)
     assert all(v1.sample(i) == v3.sample(i) for i in range(len(v1)))
+    capsys.readouterr()
+    assert cli(["renormalise", str(out), "--pipeline", "native"]) == 0     # again: nothing to change, no version
+    assert "nothing changed: version 3 stays current" in capsys.readouterr().out
+    assert load_manifest(out)["version"] == 3
     assert cli(["validate", str(out), "--deep"]) == 0
 
 

@@ -167,3 +167,25 @@ def test_publish_command(dataset, capsys):
     assert len(DatasetReader(url)) == 10
     assert cli_main(["publish", str(dataset / "missing"), fresh_url(), "--quiet"]) == 2
     assert "no manifest" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("url, package, extra", [("s3://bucket/my-dataset", "s3fs", "s3"),
+                                                 ("gs://bucket/ds", "gcsfs", "gcs"),
+                                                 ("abfs://container/ds", "adlfs", "azure")])
+def test_missing_backend_is_one_line_naming_what_to_install(dataset, monkeypatch, capsys, url, package, extra):
+    monkeypatch.setitem(__import__("sys").modules, package, None)   # the backend is not installed
+    assert cli_main(["publish", str(dataset), url, "--quiet"]) == 2          # publishing to it
+    assert cli_main(["stats", url, "--brief"]) == 2                          # reading a dataset there
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "Traceback" not in "".join(err)
+    for line, command in zip(err, ("publish", "stats")):
+        assert line.startswith(f"htdata {command}: error: {url}")
+        assert f"pip install {package}" in line and f"'.[{extra}]'" in line
+    from htdata.errors import BackendMissing
+    with pytest.raises(BackendMissing, match=f"needs the {package} package"):
+        htdata_open(url)
+
+
+def htdata_open(url):
+    import htdata
+    return htdata.open(url)

@@ -89,43 +89,61 @@ def test_stratified_ratio_per_task_and_overall():
     assert doc["ratios"]["ood_of_all"]["episodes"] == pytest.approx(10 / 1210)
 
 
-def test_adding_episodes_never_moves_threshold_decided_episodes():
+def test_updating_a_split_never_moves_an_existing_episode_and_fills_each_task_share():
     base = _episodes({"pour": 4, "grasp": 30, "wipe": 3, "lift": 2})
     more = base + _episodes({"grasp": 50, "wipe": 20, "lift": 10, "pour": 3}, start=1000)
     for seed in range(6):
         before = sp.build_split(base, _config(seed=seed, test_ratio=0.15), "0" * 64)
-        after = sp.build_split(more, _config(seed=seed, test_ratio=0.15), "0" * 64)
-        corrected = {c["episode_id"] for c in before["corrections"] + after["corrections"]}
+        after = sp.build_split(more, _config(seed=seed, test_ratio=0.15), "0" * 64, fixed=_parts(before))
         pb, pa = _parts(before), _parts(after)
-        for eid, part in pb.items():
-            if eid not in corrected:
-                assert pa[eid] == part, (seed, eid)
-        # and the threshold rule itself is what decided the uncorrected ones
-        for eid, part in pa.items():
-            if eid not in corrected and part != "ood":
-                assert (part == "test") == (sp.episode_uniform(seed, eid) < 0.15)
+        assert all(pa[eid] == part for eid, part in pb.items()), seed
+        fresh = sp.build_split(more, _config(seed=seed, test_ratio=0.15), "0" * 64)
+        for task in ("grasp", "wipe", "lift"):   # new episodes filled each task up to the rule's share
+            assert abs(after["tasks"][task]["test"]["episodes"] - fresh["tasks"][task]["test"]["episodes"]) <= 1
+        # a task's test episodes are its smallest-u ones (from scratch)
+        for task in ("grasp", "wipe", "lift"):
+            us = sorted((sp.episode_uniform(seed, e["episode_id"]), _parts(fresh)[e["episode_id"]])
+                        for e in more if e["task"] == task)
+            parts = [p for _, p in us]
+            assert parts == sorted(parts, key=lambda p: p != "test")
 
 
-def test_every_test_task_keeps_train_and_test_episodes():
-    # tiny tasks: the pure threshold would often leave test (or train) empty
+def test_every_task_keeps_train_and_test_and_the_total_stays_near_the_ratio():
     eps = _episodes({"pour": 2, **{f"t{i}": 2 + i % 3 for i in range(40)}})
     doc = sp.build_split(eps, _config(test_ratio=0.1, seed=11), "0" * 64)
     for task, counts in doc["tasks"].items():
         if task == "pour":
             continue
         assert counts["train"]["episodes"] >= 1 and counts["test"]["episodes"] >= 1, task
-    assert doc["corrections"], "with 40 tiny tasks at ratio 0.1 corrections must happen"
-    for c in doc["corrections"]:
-        assert _parts(doc)[c["episode_id"]] == c["part"]
+    # the sample corpus's shape (issue 30): six tasks of 6-7 episodes at 0.1 -> one test episode each,
+    # the fewest that keeps every task in test (the old threshold rule gave 0.167 after 4 corrections)
+    eps = _episodes({"pour": 7, "a": 6, "b": 6, "c": 7, "d": 7, "e": 7, "f": 6})
+    for seed in range(10):
+        doc = sp.build_split(eps, _config(test_ratio=0.1, seed=seed), "0" * 64)
+        assert [doc["tasks"][t]["test"]["episodes"] for t in "abcdef"] == [1] * 6, seed
+        assert doc["ratios"]["test_of_in_distribution"]["episodes"] == pytest.approx(6 / 39)
+        assert doc["corrections"] == []
+    # many tasks: the overall ratio is what was asked, to the episode
+    eps = _episodes({"pour": 3, **{f"t{i}": 13 + i % 5 for i in range(12)}})
+    doc = sp.build_split(eps, _config(test_ratio=0.1, seed=2), "0" * 64)
+    n_in = len(eps) - 3
+    assert len(doc["parts"]["test"]["episodes"]) == round(0.1 * n_in)
 
 
-def test_all_below_threshold_moves_largest_u_to_train():
+def test_test_counts_shares_the_aim_by_largest_remainder_within_bounds():
+    assert sp.test_counts({"a": 10, "b": 10, "c": 10}, 0.1) == {"a": 1, "b": 1, "c": 1}
+    assert sp.test_counts({"a": 25, "b": 5}, 0.2) == {"a": 5, "b": 1}
+    assert sp.test_counts({"a": 3, "b": 1}, 0.999) == {"a": 2, "b": 0}   # a task keeps a train episode
+    assert sp.test_counts({"a": 2, "b": 2, "c": 2}, 0.01) == {"a": 1, "b": 1, "c": 1}
+    assert sum(sp.test_counts({f"t{i}": 7 + i for i in range(9)}, 0.25).values()) == round(0.25 * 99)
+
+
+def test_all_below_threshold_keeps_the_largest_u_in_train():
     eps = _episodes({"pour": 1, "grasp": 3})
     doc = sp.build_split(eps, _config(test_ratio=0.999), "0" * 64)
     grasp = sorted((sp.episode_uniform(0, e["episode_id"]), e["episode_id"])
                    for e in eps if e["task"] == "grasp")
     assert doc["parts"]["train"]["episodes"] == [grasp[-1][1]]
-    assert doc["corrections"][0]["part"] == "train"
 
 
 def test_single_episode_task_goes_to_train_with_warning():
@@ -222,3 +240,24 @@ def test_cli_split_and_list_tasks(tmp_path, capsys):
 def test_missing_dataset_is_a_clear_error(tmp_path):
     with pytest.raises(sp.SplitError, match="no dataset.json"):
         sp.make_split(tmp_path / "nope", ["pour"])
+
+
+def test_validate_judges_the_test_share_against_the_split_rule_not_the_bare_ratio():
+    from htdata.validate.report import Check
+    from htdata.validate.splits import _check_ratio_against_rule
+
+    # the sample corpus's shape: 6 of 39 in test is the rule's own answer to 0.1 (issue 30)
+    eps = _episodes({"pour": 7, "a": 6, "b": 6, "c": 7, "d": 7, "e": 7, "f": 6})
+    doc = sp.build_split(eps, _config(test_ratio=0.1), "0" * 64)
+    n = {p: len(doc["parts"][p]["episodes"]) for p in sp.PARTS}
+    check = Check("splits", 10)
+    _check_ratio_against_rule(doc, "main", n, doc["ratios"]["test_of_in_distribution"]["episodes"], check)
+    assert check.warnings == []
+    # a split holding far more test than its rule gives still warns, naming the rule's share
+    far = sp.build_split(eps, _config(test_ratio=0.1), "0" * 64)
+    moved = [e for e in far["parts"]["train"]["episodes"]][:6]
+    far["parts"]["test"]["episodes"] += moved
+    n = {"train": n["train"] - 6, "test": n["test"] + 6, "ood": n["ood"]}
+    _check_ratio_against_rule(far, "main", n, n["test"] / (n["train"] + n["test"]), check)
+    [warning] = check.warnings
+    assert warning["what"] == "split_ratio_far" and warning["expected"] == round(6 / 39, 4)

@@ -289,6 +289,18 @@ def test_missing_manifest_is_reported_not_raised(tmp_path):
     assert report["checks"]["content"]["status"] == "skipped"
 
 
+
+def test_validate_on_a_folder_that_is_no_dataset_writes_nothing_and_prints_one_line(tmp_path, capsys):
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    (folder / "a.txt").write_text("not a dataset")
+    assert cli_main(["validate", str(folder)]) == 1
+    out, err = capsys.readouterr()
+    assert out == "" and err.splitlines() == [
+        f"htdata validate: FAIL manifest_missing: {folder / 'dataset.json'}: no dataset.json (not a committed dataset)"]
+    assert sorted(p.name for p in folder.iterdir()) == ["a.txt"]      # no reports/ written into it
+
+
 # -- content faults -------------------------------------------------------------------------------
 
 def test_nan_tactile_frame_is_caught_only_by_content(ds):

@@ -269,6 +269,22 @@ def test_split_again_with_nothing_new_makes_no_version(tmp_path):
     assert again.doc == first.doc and again.path == first.path
 
 
+def test_commands_that_change_nothing_commit_nothing_and_say_so(tmp_path, capsys):
+    from htdata.cli import main as cli_main
+
+    root = versioned(tmp_path / "ds")
+    split = ["split", str(root), "--ood-task", "pour", "--name", "main"]
+    assert cli_main(split) == 0 and list_versions(root) == [1, 2]
+    capsys.readouterr()
+    for again in (split, split + ["--force"]):     # same name and params, with or without --force
+        assert cli_main(again) == 0
+        assert capsys.readouterr().out.startswith("nothing changed: version 2 stays current")
+    n = {e["episode_id"]: e["num_frames"] for e in DatasetReader(root).episodes}["ep_1"]
+    assert cli_main(["trim", str(root), "ep_1", "--frames", f"0:{n}"]) == 0   # keeps every frame
+    assert "nothing changed: version 2 stays current" in capsys.readouterr().out
+    assert list_versions(root) == [1, 2]
+
+
 def test_a_write_built_on_a_stale_parent_is_refused(tmp_path):
     root = versioned(tmp_path / "ds")
     stale = open_snapshot(root)

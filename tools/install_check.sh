@@ -5,7 +5,9 @@
 # outside the checkout and with HTDATA_ROOT unset, runs
 #   htdata layouts -> sample (tiny) -> ingest (shipped pipelines by name) -> split -> validate --deep
 # with the data core alone (no extras: torch must not come in), and checks that the torch datasets
-# then name the extra to install.
+# then name the extra to install; then runs every README example as written from an empty folder
+# (tools/readme_examples.sh: the publish example to memory://, s3:// without s3fs is one line),
+# and the export example again once the [export] extra is installed.
 # and checks that schemas/pipelines/configs resolve inside the installed package and
 # that the entry point of HandTouch's bench section is registered.
 # KEEP=1 keeps the temp dir; PYTHON picks the interpreter (default python3).
@@ -82,5 +84,14 @@ if "$BIN/python" -c "import htdata.read.torchdata" 2>"$TMP/torch.err"; then
   echo "install-check: FAILED: htdata.read.torchdata imported without torch"; exit 1
 fi
 grep -q "htdata\[torch\]" "$TMP/torch.err" || { cat "$TMP/torch.err"; echo "install-check: FAILED: no hint"; exit 1; }
+
+step "the README's examples, each as written, from an empty folder (tools/readme_examples.sh)"
+mkdir "$TMP/readme"
+( cd "$TMP/readme" && HTDATA_CACHE="$TMP/cache" "$ROOT/tools/readme_examples.sh" "$BIN" )
+
+step "pip install the wheel's [export] extra (pyarrow), then the README's export example"
+logged pip-export "$BIN/python" -m pip install "$WHEEL[export]"
+( cd "$TMP/readme" && "$BIN/htdata" export lerobot data/dataset data/lerobot >/dev/null 2>&1 ) \
+  || { echo "install-check: FAILED: htdata export lerobot data/dataset data/lerobot with [export]"; exit 1; }
 
 step "ok"

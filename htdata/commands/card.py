@@ -8,6 +8,7 @@ from pathlib import Path
 
 from htdata.commands.version_arg import version_arg
 from htdata.inspect import card
+from htdata.commands.outputs import output_path
 
 
 EPILOG = """\
@@ -37,6 +38,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
+        if Path(args.out).suffix.lower() == ".html":   # (a wrong suffix is write_card's error, made nowhere)
+            output_path(args.out, "card")
         page, md = card.write_card(args.dataset, args.out, version=args.version, title=args.title,
                                    description=args.description, license=args.license)
     except (ValueError, FileNotFoundError, KeyError, OSError) as exc:

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from htdata.commands.version_arg import version_arg
 from htdata.export.lerobot import LeRobotExportConfig, export_lerobot
+from htdata.commands.outputs import output_path
 
 EPILOG = """\
 What is written (LeRobot v3.0: meta/info.json, meta/stats.json, meta/tasks.parquet,
@@ -86,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
 
-    cfg = LeRobotExportConfig(dataset=args.dataset, out=args.out, version=args.version, split=args.split,
+    cfg = LeRobotExportConfig(dataset=args.dataset, out=output_path(args.out, "export"), version=args.version, split=args.split,
                               part=args.part, fps=args.fps, maps=args.maps, crf=args.crf, force=args.force)
     bar = tqdm(total=0, unit="frame", desc="export", disable=args.quiet, file=sys.stderr)
     try:

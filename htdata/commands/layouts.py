@@ -35,6 +35,7 @@ from htdata.glove.layoutsuggest import layout_id_from_name, layout_json_text, su
 from htdata.glove.rasterise import Rasteriser
 from htdata.ingest.recordingscan import scan_recordings
 from htdata.store.fsutil import write_bytes_atomic
+from htdata.commands.outputs import output_path
 
 # BGR colours per part id (0 = background), for `htdata layouts render`.
 _PART_BGR = np.array([[0, 0, 0], [60, 60, 230], [60, 200, 60], [230, 140, 40], [200, 60, 200],
@@ -162,7 +163,7 @@ def suggest(args: argparse.Namespace) -> int:
     layout_id = args.layout_id or layout_id_from_name(out.stem)
     doc, summary = suggest_layout([s.activity for s in scanned], hands[0], layout_id,
                                   all(s.integral for s in scanned), recordings, args.max_value)
-    write_bytes_atomic(out, layout_json_text(doc).encode())
+    write_bytes_atomic(output_path(out, "layouts suggest"), layout_json_text(doc).encode())
     print(f"{summary['moving']} moving cell(s) in {summary['recordings']} recording hand(s), {summary['frames']} "
           f"frames (median noise {summary['noise']:.4g}, moving = range > {summary['threshold']:.4g}); "
           f"{len(doc['blocks'])} block(s), "
@@ -241,7 +242,7 @@ def run(args: argparse.Namespace) -> int:
         elif action == "suggest":
             return suggest(args)
         elif action == "render":
-            render_layout_png(load_layout(args.layout, dirs), Path(args.out))
+            render_layout_png(load_layout(args.layout, dirs), output_path(args.out, "layouts render"))
             print(f"wrote {args.out}")
     except (ValueError, OSError) as e:   # OSError covers LayoutNotFound (a FileNotFoundError)
         print(f"htdata layouts: error: {e}", file=sys.stderr)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from htdata.curate import merge
 from htdata.store.lock import DatasetLocked
+from htdata.commands.outputs import output_path
 
 
 EPILOG = """\
@@ -34,7 +35,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        report = merge.merge(args.a, args.b, args.out, f"htdata merge {args.a} {args.b} {args.out}")
+        report = merge.merge(args.a, args.b, output_path(args.out, "merge"), f"htdata merge {args.a} {args.b} {args.out}")
     except (merge.MergeConflict, DatasetLocked, FileNotFoundError, ValueError) as exc:
         print(f"htdata merge: error: {exc}", file=sys.stderr)
         return 2

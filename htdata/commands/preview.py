@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from htdata.inspect import preview
+from htdata.commands.outputs import output_path
 
 
 EPILOG = """\
@@ -45,7 +46,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         used, vmax = preview.contrast_scale(args.dataset, args.contrast)
-        out = preview.write_preview(args.dataset, args.out, episode=args.episode, frames=args.frames,
+        out = preview.write_preview(args.dataset, output_path(args.out, "preview"), episode=args.episode, frames=args.frames,
                                      contrast=used, pick=args.pick)
     except (ValueError, FileNotFoundError, OSError) as exc:
         print(f"htdata preview: error: {exc}", file=sys.stderr)

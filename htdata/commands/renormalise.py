@@ -68,5 +68,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"version {manifest['version']} (parent {manifest['parent']}): {manifest['counts']['episodes']} "
               f"episodes, {manifest['counts']['samples']} frames; the parent stays readable until htdata gc")
     elif not plan.changes and not args.dry_run:
-        print("nothing to do: every episode already has these calibrations (--force recomputes anyway)")
+        print(f"nothing changed: version {plan.parent} stays current (every episode already has these "
+              f"calibrations; --force recomputes anyway)")
     return 0

@@ -45,6 +45,8 @@ def run(args: argparse.Namespace) -> int:
 def report(edit: curate_edit.Edit, manifest: dict | None, dry_run: bool) -> None:
     for line in edit.lines(dry_run):
         print(line)
+    if manifest is None and not dry_run:     # as ingest and split: an identical version is not committed
+        print(f"nothing changed: version {edit.parent} stays current")
     if manifest is not None:
         print(f"version {manifest['version']} (parent {manifest['parent']}): {manifest['counts']['episodes']} "
               f"episodes, {manifest['counts']['samples']} frames; the parent stays readable until htdata gc")

@@ -10,6 +10,7 @@ from pathlib import Path
 from htdata.commands.version_arg import version_arg
 from htdata.glove.health import CLASSES
 from htdata.inspect import stats
+from htdata.commands.outputs import output_path
 
 
 EPILOG = """\
@@ -49,7 +50,8 @@ def run(args: argparse.Namespace) -> int:
     cache = None if args.no_cache else "default"
     try:
         summary = stats.dataset_stats(args.dataset, version=args.version, by=args.by, cache_dir=cache)
-        health_png = (stats.write_health_map(args.dataset, args.health, args.version, cache_dir=cache)
+        health_png = (stats.write_health_map(args.dataset, output_path(args.health, "stats"), args.version,
+                                             cache_dir=cache)
                       if args.health is not None else None)
     except (ValueError, FileNotFoundError, KeyError, OSError) as exc:
         print(f"htdata stats: error: {exc}", file=sys.stderr)

@@ -13,6 +13,7 @@ from pathlib import Path
 from htdata.curate import edit as curate_edit
 from htdata.commands.rm import report
 from htdata.store.lock import DatasetLocked
+from htdata.store.versions import current_version
 from htdata.curate import idle
 
 
@@ -88,7 +89,8 @@ def run_idle(args: argparse.Namespace) -> int:
     for cut in cuts:
         print(cut.line(args.dry_run))
     if edit is None:
-        print("no idle head or tail to trim: no new version written")
+        print(f"nothing changed: version {current_version(args.dataset)} stays current "
+              f"(no idle head or tail to trim)")
         return 0
     report(edit, manifest, args.dry_run)
     return 0

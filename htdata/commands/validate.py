@@ -9,6 +9,7 @@ from pathlib import Path
 from htdata.commands.version_arg import version_arg
 from htdata import validate
 from htdata.format.table import VALIDATE_REPORT
+from htdata.commands.outputs import output_path
 
 
 EPILOG = """\
@@ -25,7 +26,8 @@ Checks, each a section of the report with every failure named by shard / sample 
   splits     (--split NAME) parts disjoint and complete, OOD tasks only in ood, no identical
              frame in two parts
 The report is written to DATASET/reports/validate.json. Exit 0 when every check passes
-(warnings allowed), 1 otherwise.
+(warnings allowed), 1 otherwise. A folder that is not a dataset (no dataset.json) gets one
+FAIL line and nothing is written into it.
 
 Examples:
   htdata validate data/dataset
@@ -58,13 +60,27 @@ def run(args: argparse.Namespace) -> int:
         print(f"htdata validate: error: {exc}", file=sys.stderr)
         return 2
     out = args.json or Path(args.dataset) / VALIDATE_REPORT
+    missing = _no_dataset(report)
+    if missing is not None:      # not a dataset (or no such version): its one line, and nothing written into it
+        print(f"htdata validate: FAIL manifest_missing: {missing['message']}", file=sys.stderr)
+        if args.json is not None:
+            validate.write_report(report, output_path(args.json, "validate"))
+        return 1
     print(validate.format_report(report))
     if args.json is None and not Path(args.dataset).is_dir():
         print(f"htdata validate: {args.dataset} is not a directory: no report written", file=sys.stderr)
         return 1
     try:
-        validate.write_report(report, out)
+        validate.write_report(report, output_path(out, "validate") if args.json is not None else out)
         print(f"report: {out}")
     except OSError as exc:
         print(f"htdata validate: cannot write report {out}: {exc}", file=sys.stderr)
     return 0 if report["ok"] else 1
+
+
+def _no_dataset(report: dict) -> dict | None:
+    """The manifest_missing failure when it is the report's only finding (nothing else could be checked)."""
+    failures = report["checks"]["structure"]["failures"]
+    if len(failures) == 1 and failures[0]["what"] == "manifest_missing":
+        return failures[0]
+    return None

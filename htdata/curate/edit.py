@@ -163,5 +163,8 @@ def trim_episode(root, episode: str, frames: str, dry_run: bool, command: str) -
             raise ValueError(f"trim takes one episode; {episode!r} matches {len(ids)}: {', '.join(ids[:5])}")
         eid = ids[0]
         n = next(int(e["num_frames"]) for e in snap.episodes if e["episode_id"] == eid)
-        edit, plan = plan_edit(snap, [], {eid: parse_frames(frames, n, eid)})
+        kept = parse_frames(frames, n, eid)
+        if kept == range(n):     # keeps every frame: the version would be identical, so none is written
+            return Edit(parent=snap.version), None
+        edit, plan = plan_edit(snap, [], {eid: kept})
         return edit, None if dry_run else apply_edit(snap, plan, command)

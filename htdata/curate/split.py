@@ -7,23 +7,21 @@ Assignment rule (written into every split file as "rule"):
 
 1. Episodes of the ``--ood-task`` tasks go whole to ``ood``.
 2. Every other episode gets ``u = first 8 bytes of sha256(f"{seed}:{episode_id}")
-   / 2**64``, uniform in [0, 1). It goes to ``test`` iff ``u < test_ratio``,
-   else to ``train``. The decision depends only on the episode itself, so
-   adding episodes later never moves an existing one (this is the stability
-   guarantee, tested in tests/test_split.py).
-3. Corrections, only for a task with >= 2 episodes whose threshold
-   assignment left a part empty: if no episode is below the threshold the
-   episode with the smallest ``u`` goes to test; if every episode is below
-   it, the one with the largest ``u`` goes to train. Each correction is
-   listed in the file's ``corrections``. Only corrected episodes can move
-   when episodes are added (e.g. the task later gets an episode below the
-   threshold, so its correction is no longer needed). No rule can be both
-   fully stable and give every task a train and a test episode: for three
-   episodes of one task, each pair alone would need one test and one train
-   episode, which no fixed labelling of the three satisfies.
+   / 2**64``, uniform in [0, 1): its place in its task's queue for test.
+3. Stratified by task from the start (``splitrule.test_counts``): the split
+   aims at ``round(test_ratio * N)`` test episodes of the N in-distribution
+   ones, shared among the tasks by largest remainder of ``test_ratio * n``;
+   every task with n >= 2 episodes gets at least one test and one train
+   episode, which can lift the total above the aim (six tasks of 6-7
+   episodes at 0.1: 6 of 39). A task's test episodes are its smallest-u ones.
 4. A task with a single episode puts it in ``train`` (a test episode with no
    training episode of its task would measure OOD, not held-out episodes),
    with a warning.
+5. Stability: re-running ``htdata split`` with the same name and params
+   UPDATES the split of the current version: every episode it held keeps its
+   part (tests/test_split.py), and only new episodes are assigned, filling
+   each task up to its share. Recomputing from scratch (``--force`` with
+   other params, or another name) may place episodes differently.
 
 A split records the sha256 of the dataset.json it was made from, so
 `htdata validate --split` can tell a split made for another commit.
@@ -38,7 +36,8 @@ from pathlib import Path
 
 # The rule and the split files are names of this module too (`htdata split`'s one face).
 from htdata.curate.splitrule import (NAME_PATTERN, RULE, SplitConfig, SplitError,  # noqa: F401
-                                     assign_episodes, build_split, check_ood_tasks, episode_uniform)
+                                     assign_episodes, build_split, check_ood_tasks, episode_uniform,
+                                     test_counts)
 from htdata.curate.splitversions import SplitResult, write_versioned_split
 from htdata.format.table import EPISODES_FILE, MANIFEST_FILE
 from htdata.store.fsutil import write_json_atomic
@@ -143,9 +142,13 @@ def format_summary(doc: dict, path: Path) -> str:
     lines = [f"wrote {path}"]
     for part in PARTS:
         lines.append(f"  {part:<5} {len(p[part]['episodes']):>6} episodes {p[part]['frames']:>9} frames")
+    n_test, n_in = len(p["test"]["episodes"]), len(p["test"]["episodes"]) + len(p["train"]["episodes"])
+    aim = round(doc["params"]["test_ratio"] * n_in)
+    why = (f"; {n_test} test episodes rather than {aim}: every task of 2+ episodes keeps one"
+           if n_test > aim else "")
     lines.append(f"  test / (train+test): {r['test_of_in_distribution']['episodes']:.3f} of episodes, "
                  f"{r['test_of_in_distribution']['frames']:.3f} of frames "
-                 f"(asked {doc['params']['test_ratio']})")
+                 f"(asked {doc['params']['test_ratio']}{why})")
     for c in doc["corrections"]:
         lines.append(f"  correction: {c['episode_id']} -> {c['part']} ({c['reason']})")
     return "\n".join(lines)

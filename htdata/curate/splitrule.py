@@ -18,11 +18,12 @@ NAME_PATTERN = re.compile(r"^[A-Za-z0-9_-]+$")
 
 RULE = (
     "ood: episodes of params.ood_tasks; other episodes: "
-    "u = int(sha256(f'{seed}:{episode_id}')[:8 bytes], big-endian) / 2**64, "
-    "test iff u < test_ratio else train; per task with >= 2 episodes, if no "
-    "episode is test the smallest-u one is moved to test, if all are test the "
-    "largest-u one is moved to train (listed in corrections); a single-episode "
-    "task goes to train"
+    "u = int(sha256(f'{seed}:{episode_id}')[:8 bytes], big-endian) / 2**64; "
+    "T = round(test_ratio * in-distribution episodes) test episodes shared among the tasks by largest "
+    "remainder of test_ratio * n, each task with n >= 2 episodes getting at least 1 and at most n - 1 "
+    "(so T grows to the number of such tasks when that is larger); a task's test episodes are its "
+    "smallest-u ones; a single-episode task goes to train; episodes of an earlier split of this name "
+    "keep their part and only new episodes fill a task up to its share"
 )
 
 
@@ -80,9 +81,41 @@ def check_ood_tasks(known_tasks: list[str], ood_tasks: list[str]) -> None:
         )
 
 
-def assign_episodes(episodes: list[dict], ood_tasks: list[str], test_ratio: float,
-                    seed: int) -> tuple[dict[str, str], list[dict], list[str]]:
-    """episode records (episode_id, task) -> ({episode_id: part}, corrections, warnings)."""
+def test_counts(sizes: dict[str, int], test_ratio: float) -> dict[str, int]:
+    """{task: in-distribution episodes} -> {task: test episodes} under RULE.
+
+    The total aims at round(test_ratio * all episodes), shared by largest
+    remainder of test_ratio * n; every task with >= 2 episodes keeps at least
+    one test and one train episode, which can push the total above the aim
+    (six tasks of six episodes at 0.1: 6 of 36, not 4). Deterministic: ties go
+    by task name.
+    """
+    quota = {t: test_ratio * n for t, n in sizes.items()}
+    low = {t: 1 if n >= 2 else 0 for t, n in sizes.items()}
+    high = {t: max(n - 1, 0) for t, n in sizes.items()}
+    counts = {t: min(max(int(quota[t]), low[t]), high[t]) for t in sizes}
+    aim = round(test_ratio * sum(sizes.values()))
+    while sum(counts.values()) < aim:
+        room = [t for t in sorted(sizes) if counts[t] < high[t]]
+        if not room:
+            break
+        counts[max(room, key=lambda t: quota[t] - counts[t])] += 1   # max keeps the first of ties
+    while sum(counts.values()) > aim:
+        room = [t for t in sorted(sizes) if counts[t] > low[t]]
+        if not room:
+            break
+        counts[min(room, key=lambda t: quota[t] - counts[t])] -= 1
+    return counts
+
+
+def assign_episodes(episodes: list[dict], ood_tasks: list[str], test_ratio: float, seed: int,
+                    fixed: dict[str, str] | None = None) -> tuple[dict[str, str], list[str]]:
+    """episode records (episode_id, task) -> ({episode_id: part}, warnings).
+
+    `fixed`: the parts of an earlier split of this name; those episodes keep
+    them and the task's other episodes (smallest u first) fill its test share.
+    """
+    fixed = fixed or {}
     ood = set(ood_tasks)
     by_task: dict[str, list[tuple[float, str]]] = defaultdict(list)
     assignment: dict[str, str] = {}
@@ -93,50 +126,38 @@ def assign_episodes(episodes: list[dict], ood_tasks: list[str], test_ratio: floa
         if ep["task"] in ood:
             assignment[eid] = "ood"
             continue
-        u = episode_uniform(seed, eid)
-        assignment[eid] = "test" if u < test_ratio else "train"
-        by_task[ep["task"]].append((u, eid))
+        assignment[eid] = "train"
+        by_task[ep["task"]].append((episode_uniform(seed, eid), eid))
 
-    corrections: list[dict] = []
+    counts = test_counts({t: len(m) for t, m in by_task.items()}, test_ratio)
     warnings: list[str] = []
     for task in sorted(by_task):
-        members = sorted(by_task[task])
-        if len(members) == 1:
-            u, eid = members[0]
-            if assignment[eid] != "train":
-                assignment[eid] = "train"
-                corrections.append({"episode_id": eid, "task": task, "part": "train",
-                                    "reason": "single-episode task goes to train"})
-            warnings.append(f"task {task!r} has a single episode ({eid}): it goes to train, "
+        kept = {e: fixed[e] for _, e in by_task[task] if fixed.get(e) in ("train", "test")}
+        free = [e for _, e in sorted(by_task[task]) if e not in kept]
+        n_test = min(max(counts[task] - sum(p == "test" for p in kept.values()), 0), len(free))
+        if n_test == len(free) and free and "train" not in kept.values():
+            n_test -= 1     # a task keeps a train episode
+        assignment.update(kept)
+        assignment.update({e: "test" for e in free[:n_test]})
+        if len(by_task[task]) == 1 and not kept:
+            warnings.append(f"task {task!r} has a single episode ({free[0]}): it goes to train, "
                             f"so this task has no test episode")
-            continue
-        n_test = sum(assignment[e] == "test" for _, e in members)
-        if n_test == 0:
-            eid = members[0][1]
-            assignment[eid] = "test"
-            corrections.append({"episode_id": eid, "task": task, "part": "test",
-                                "reason": f"no episode of {len(members)} had u < {test_ratio}; "
-                                          f"smallest u moved to test"})
-        elif n_test == len(members):
-            eid = members[-1][1]
-            assignment[eid] = "train"
-            corrections.append({"episode_id": eid, "task": task, "part": "train",
-                                "reason": f"all {len(members)} episodes had u < {test_ratio}; "
-                                          f"largest u moved to train"})
-    return assignment, corrections, warnings
+    return assignment, warnings
 
 
 def build_split(episodes: list[dict], config: SplitConfig, manifest_sha256: str | None = None,
-                episodes_sha256: str | None = None) -> dict:
+                episodes_sha256: str | None = None, fixed: dict[str, str] | None = None) -> dict:
     """Pure part of `make_split`: the split document for these episode records.
+
+    `fixed`: episode -> part of the earlier split of this name (an update: they keep their parts).
 
     A split of a versioned dataset (format_version 2) names the episode file
     it describes (`episodes_sha256`); an unversioned one (v1) its manifest.
     """
     config.validate()
     check_ood_tasks([ep["task"] for ep in episodes], config.ood_tasks)
-    assignment, corrections, warnings = assign_episodes(
-        episodes, config.ood_tasks, float(config.test_ratio), int(config.seed))
+    assignment, warnings = assign_episodes(
+        episodes, config.ood_tasks, float(config.test_ratio), int(config.seed), fixed)
 
     parts, tasks, ratios = count_parts(assignment, episodes)
     doc = {
@@ -151,7 +172,7 @@ def build_split(episodes: list[dict], config: SplitConfig, manifest_sha256: str 
         "parts": parts,
         "ratios": ratios,
         "tasks": tasks,
-        "corrections": corrections,
+        "corrections": [],   # the stratified rule corrects nothing; splits made by the older threshold rule list theirs
         "warnings": warnings,
     }
     validate_json(doc, "split", where=f"split {doc['name']!r}")

@@ -21,7 +21,7 @@ from htdata.curate.splitrule import SplitError, build_split
 from htdata.resources import validate_json
 from htdata.store.lock import WriterLock
 from htdata.store.snapshot import commit_parts, open_snapshot
-from htdata.store.splitfiles import PARTS, assignment_of, carried_splits, count_parts, parent_split_docs
+from htdata.store.splitfiles import PARTS, assignment_of, carried_splits, parent_split_docs
 
 
 @dataclass
@@ -32,22 +32,13 @@ class SplitResult:
     version: int | None
     gained: dict[str, list[str]] = field(default_factory=dict)
     lost: dict[str, list[str]] = field(default_factory=dict)
+    changed: bool = True      # False: the split would be identical, nothing was committed
 
 
-def keep_parts(previous: dict, fresh: dict, episodes: list[dict]) -> dict:
-    """`fresh` (the rule applied to every episode) with every episode `previous` placed kept in its part.
-
-    Only episodes new to the split take the rule's part, so no episode moves
-    because others were appended. The rule's corrections that would move an
-    old episode are dropped; the previous corrections of surviving episodes stay.
-    """
-    old = assignment_of(previous)
+def kept_parts(previous: dict, episodes: list[dict]) -> dict[str, str]:
+    """The parts `previous` gave the surviving `episodes`: an update keeps them (splitrule.assign_episodes)."""
     ids = {e["episode_id"] for e in episodes}
-    assignment = {**assignment_of(fresh), **{e: p for e, p in old.items() if e in ids}}
-    parts, tasks, ratios = count_parts(assignment, episodes)
-    corrections = [c for c in previous["corrections"] if c["episode_id"] in ids]
-    corrections += [c for c in fresh["corrections"] if c["episode_id"] not in old]
-    return {**fresh, "parts": parts, "tasks": tasks, "ratios": ratios, "corrections": corrections}
+    return {e: p for e, p in assignment_of(previous).items() if e in ids}
 
 
 def write_versioned_split(root, config, command: str) -> SplitResult:
@@ -62,19 +53,22 @@ def write_versioned_split(root, config, command: str) -> SplitResult:
     with WriterLock(root, command):
         snap = open_snapshot(root)
         previous = parent_split_docs(snap).get(name)
-        doc = build_split(snap.episodes, config, episodes_sha256=snap.manifest["episodes_sha256"])
+        sha = snap.manifest["episodes_sha256"]
+        doc = build_split(snap.episodes, config, episodes_sha256=sha)
         if previous is not None and previous["params"] != doc["params"]:
             if not config.force:
                 raise SplitError(f"split {name!r} exists with other params {previous['params']}; pass --force "
                                  f"to recompute it (version {snap.version} keeps the old one) or choose another --name")
-        elif previous is not None:
-            doc = keep_parts(previous, doc, snap.episodes)
+        elif previous is not None:    # an update: its episodes keep their parts, new ones fill each task's share
+            doc = build_split(snap.episodes, config, episodes_sha256=sha, fixed=kept_parts(previous, snap.episodes))
+            ids = {e["episode_id"] for e in snap.episodes}
+            doc["corrections"] = [c for c in previous["corrections"] if c["episode_id"] in ids]
             if (assignment_of(doc) == assignment_of(previous) and not previous.get("carried")
                     and previous.get("episodes_sha256") == doc["episodes_sha256"]):
                 # nothing to change: no new version (re-running `htdata split` is idempotent)
                 return SplitResult(doc=previous, path=root / snap.manifest["splits"][name]["file"],
                                    version=snap.version, gained={p: [] for p in PARTS},
-                                   lost={p: [] for p in PARTS})
+                                   lost={p: [] for p in PARTS}, changed=False)
         validate_json(doc, "split", where=f"split {name!r}")
         data = (json.dumps(doc, indent=2) + "\n").encode()
 

@@ -114,7 +114,8 @@ def _about(card: Card, s: dict, reader, title: str | None, description: str | No
               "One sample per glove frame (glove only: no camera, so no rgb.jpg member).")
     card.table(["member", "format", "what"], sample_format(manifest.get("codec", {}), rgb))
     card.heading("How to load")
-    card.text("pip install htdata, then in Python: import htdata; ds = htdata.open(\"PATH\"); "
+    card.text("Install htdata from its source folder (no package index serves it): pip install . in the "
+              "htdata checkout; then in Python: import htdata; ds = htdata.open(\"PATH\"); "
               "sample = ds.decoded(0). For LeRobot: htdata export lerobot PATH OUT.")
 
 
@@ -158,10 +159,10 @@ def build_card(root, version: int | None = None, title: str | None = None, descr
               f"contact per glove and hand from its calibration (the rule of each glove is "
               f"in the Gloves table; 'old contact' = any taxel above {s['contact_threshold']}).")
     with DatasetReader(root, version=version) as reader:
-        _about(card, s, reader, title, description, license)
+        _about(card, s, reader, title, description, license)   # the values are said once, in the opening line
         card.heading("What the numbers mean")
         rules = s.get("contact_rules") or ["-"]
-        card.text(f"Values: {s['values']}. Contact (htdata/glove/contact.py, from each glove hand's calibration): "
+        card.text("Contact (htdata/glove/contact.py, from each glove hand's calibration): "
                   + ("a frame with " + rules[0] if len(rules) == 1 else
                      "per glove, the rule in the Gloves table (" + "; ".join(rules) + ")") + ".")
         _counts(card, s)

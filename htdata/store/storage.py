@@ -13,6 +13,12 @@ import posixpath
 from pathlib import Path
 from typing import IO
 
+from htdata.errors import BackendMissing
+
+# fsspec protocols whose backend is a separate package -> (package, htdata extra that installs it)
+BACKENDS = {"s3": ("s3fs", "s3"), "s3a": ("s3fs", "s3"), "gs": ("gcsfs", "gcs"), "gcs": ("gcsfs", "gcs"),
+            "az": ("adlfs", "azure"), "abfs": ("adlfs", "azure"), "abfss": ("adlfs", "azure")}
+
 
 def is_url(location: str | os.PathLike) -> bool:
     """True when `location` has a protocol other than plain local files."""
@@ -33,10 +39,23 @@ def join(root: str | os.PathLike, *parts: str) -> str:
 
 
 def url_to_fs(location: str):
-    """(fsspec filesystem, path inside it) for a URL."""
+    """(fsspec filesystem, path inside it) for a URL; a missing backend raises BackendMissing (one line)."""
     import fsspec
 
-    return fsspec.core.url_to_fs(location)
+    try:
+        return fsspec.core.url_to_fs(location)
+    except ImportError as exc:
+        raise BackendMissing(missing_backend_message(location, exc)) from None
+
+
+def missing_backend_message(location: str, exc: ImportError) -> str:
+    """`location`: what to install for its protocol (fsspec's own hint for protocols not in BACKENDS)."""
+    protocol = os.fspath(location).split("://", 1)[0].lower()
+    if protocol in BACKENDS:
+        package, extra = BACKENDS[protocol]
+        return (f"{location}: {protocol}:// needs the {package} package, which is not installed: "
+                f"pip install {package} (or htdata's extra: pip install '.[{extra}]' in the htdata checkout)")
+    return f"{location}: {protocol}:// needs a package that is not installed: {exc}"
 
 
 def open_binary(location: str | os.PathLike) -> IO[bytes]:

@@ -13,6 +13,7 @@ import hashlib
 import json
 from collections import defaultdict
 
+from htdata.curate.splitrule import test_counts
 from htdata.format.table import HANDS, MANIFEST_FILE, RGB_MEMBER, raw_member, tactile_member
 from htdata.resources import validate_json
 from htdata.format.shardio import sample_key
@@ -150,11 +151,24 @@ def _check_counts(doc: dict, name: str, by_id: dict[str, dict], check: Check) ->
             if abs(stated - val) > 1e-9:
                 check.fail("split_ratio", f"split {name}: {ratio}.{unit} states {stated:.6f}",
                            expected=round(val, 6), found=stated)
+    _check_ratio_against_rule(doc, name, n, achieved["test_of_in_distribution"]["episodes"], check)
+
+
+def _check_ratio_against_rule(doc: dict, name: str, n: dict[str, int], got: float, check: Check) -> None:
+    """Warn when test is far from what the split's rule gives for its tasks, not from the bare ratio asked.
+
+    The rule (htdata/curate/splitrule.py) keeps a test episode in every task of 2+ episodes, so on a
+    few small tasks it holds more than test_ratio on purpose; that is no reason to warn.
+    """
     asked = doc["params"]["test_ratio"]
-    got = achieved["test_of_in_distribution"]["episodes"]
-    if abs(got - asked) > max(0.05, 1.0 / max(n["train"] + n["test"], 1)):
-        check.warn("split_ratio_far", f"split {name}: test holds {got:.3f} of in-distribution episodes, "
-                   f"asked {asked}", expected=asked, found=round(got, 4))
+    sizes = {task: c.get("train", {}).get("episodes", 0) + c.get("test", {}).get("episodes", 0)
+             for task, c in doc["tasks"].items()}
+    n_in = max(n["train"] + n["test"], 1)
+    expected = sum(test_counts({t: k for t, k in sizes.items() if k}, asked).values()) / n_in
+    if abs(got - expected) > max(0.05, 1.0 / n_in):
+        check.warn("split_ratio_far", f"split {name}: test holds {got:.3f} of in-distribution episodes; "
+                   f"its rule gives {expected:.3f} for these tasks (asked {asked})",
+                   expected=round(expected, 4), found=round(got, 4))
 
 
 def _check_duplicate_frames(ds: Loaded, part_of: dict[str, list[str]], hashes: dict[int, str],
