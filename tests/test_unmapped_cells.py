@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from htdata.glove.activity import MOVING_K, CellActivity, moving_cells, unmapped_moving
+from htdata.glove.activity import MOVING_K, WANDER_K, CellActivity, moving_cells, unmapped_moving
 from htdata.glove.layouts import parse_layout
 from htdata.store.manifest import load_episodes
 from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
@@ -89,9 +89,10 @@ def test_resting_noise_never_moves_a_press_does():
     x[5000:5010, 3, 3] += 100                                          # one brief, weak press
     act = CellActivity((4, 4))
     act.add(x)
-    found = moving_cells(act, np.ones((4, 4), bool), act.noise(), step=1)
+    found = moving_cells(act, np.ones((4, 4), bool), None, step=1)
     assert found.cells.tolist() == [[3, 3]]
-    assert found.threshold == pytest.approx(MOVING_K * act.noise())
+    assert found.threshold == pytest.approx(MOVING_K * act.noise() + WANDER_K * act.wander())
+    assert 0 < act.wander() < 6.0          # white noise: block means (std 3 / 4) over 1125 blocks span ~4
 
 
 def test_quantised_flicker_below_four_steps_stays_quiet_and_nan_cells_never_move():
@@ -101,7 +102,7 @@ def test_quantised_flicker_below_four_steps_stays_quiet_and_nan_cells_never_move
     x[50, 1, 1] = 5                        # one spike of 5 counts on an otherwise constant cell
     act = CellActivity((2, 2))
     act.add(x)
-    found = moving_cells(act, np.ones((2, 2), bool), noise=0.0, step=1)
+    found = moving_cells(act, np.ones((2, 2), bool), None, step=1)
     assert found.cells.tolist() == [[1, 1]] and found.threshold == 4.0
 
 
