@@ -241,3 +241,57 @@ def test_suggest_from_npy_needs_a_hand_and_something_that_moves(tmp_path, capsys
     assert main(["layouts", "suggest", str(npy), str(tmp_path / "x.json"), "--hand", "left"]) == 1
     assert "no cell moves" in capsys.readouterr().err
     assert not (tmp_path / "x.json").exists()
+
+
+# --------------------------------------------------------------------------- the sample raw-count glove (slow wander)
+
+
+@pytest.fixture(scope="module")
+def rawglove():
+    from htdata.sample.rawglove import corpus_clips
+
+    return corpus_clips(0)
+
+
+def test_slow_rest_wander_is_not_movement_on_the_sample_raw_glove(rawglove):
+    from htdata.glove.activity import moving_threshold
+    from htdata.sample.rawglove import draft_layout_doc, unmapped_truth
+
+    units, clips = rawglove
+    draft = parse_layout(draft_layout_doc("right"), "draft")      # thumb tip forgotten, the gaps not declared
+    old_false = 0
+    for clip in clips:
+        act = CellActivity(draft.grid)
+        act.add(clip.counts["right"])
+        found = unmapped_moving(act, draft)
+        truth = unmapped_truth(clip, "right", units["right"], draft)
+        hit = np.zeros(draft.grid, bool)
+        hit[tuple(found.cells.T)] = True
+        explained = truth["pressed"] | truth["ghost"] | truth["loud"]
+        assert not (hit & ~explained).any(), f"{clip.name}: resting gap cells called moving"
+        assert (hit & truth["pressed"]).sum() >= 0.8 * truth["pressed"].sum()
+        assert found.wander > 1.0 and found.threshold > MOVING_K * found.noise
+        # today's rule (fast noise only) calls the gaps' slow wander movement
+        old = draft.unmapped_mask & (act.range > moving_threshold(found.noise, 1))
+        old_false += int((old & ~explained).sum())
+    assert old_false > 20
+
+
+def test_suggest_finds_the_true_sensor_areas_of_the_sample_raw_glove(rawglove):
+    from htdata.glove.layoutsuggest import suggest_layout
+    from htdata.sample.rawglove import glove_layout
+
+    _, clips = rawglove
+    acts = []
+    for clip in clips:
+        acts.append(CellActivity((32, 32)))
+        acts[-1].add(clip.counts["right"])
+    doc, summary = suggest_layout(acts, "right", "suggested", True, [c.name for c in clips])
+    boxes = sorted((b["rows"][0], b["rows"][1], b["cols"][0], b["cols"][1]) for b in doc["blocks"])
+    # every finger column (3 segments), the thumb (2) and the four palm blocks: the nine true sensor areas
+    assert boxes == [(0, 11, 1, 4), (0, 11, 7, 10), (0, 11, 13, 16), (0, 11, 19, 22), (4, 12, 26, 29),
+                     (14, 20, 1, 10), (14, 20, 12, 23), (22, 30, 1, 10), (22, 30, 12, 23)]
+    truth = glove_layout("right")
+    lay = parse_layout(doc, "suggested")
+    assert np.array_equal(lay.live_mask, truth.live_mask)
+    assert summary["left_out"] and summary["wander"] > 1.0       # ghost rows and loud cells: not blocks
