@@ -57,7 +57,13 @@ paired rows once more before normalising it, `fit_episode`):
   by the raw row's position in the episode (the line through the first / last
   two knots continued beyond the first / last centre). Stored as knots (`baseline` is then (K,H,W), `knot_rows`
   their row positions); `apply` needs the rows' positions (`rows=`).
-For these three, the noise spread of `noise_k` is measured on the quietest span.
+For these three, the noise spread of `noise_k` is measured on the WHOLE
+episode's resting frames (`quiet_frames` of each `drift_window_s` window), as
+1.4826 x the median distance of a taxel's resting values from its baseline
+(`restlevel.rest_spread`): a rest level that wanders by a few counts over a
+clip widens the floor by as much, where the quietest second alone (a median
+robust spread of 0.74 counts on a real glove that wanders ~5) left 7-9% of
+resting pixels lit (issue 27).
 
 Noise floor: with `noise_k` > 0 (or noise_floor > 0), the per-taxel floor is
 never below the glove's quantisation step (`value.step / max_value`, the
@@ -71,12 +77,15 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from htdata.glove.restlevel import load_taxel_calibration, nan_quiet, quiet_frames
+from htdata.glove.restlevel import load_taxel_calibration, nan_quiet, quiet_frames, rest_spread, windowed_quiet
 
 CONVENTIONS = ("inverted", "direct")
 BASELINES = ("none", "first_frame", "rest_window", "quietest", "percentile", "drift")
 # baselines fitted on the whole episode (`fit_episode`), not on its first chunk
 EPISODE_BASELINES = ("quietest", "percentile", "drift")
+# A raw-count glove (direct, value.max > 1) without a [normalise.<id>] table: "none" would read its rest level
+# (~557 of 1023 on a knit glove) as 0.55 pressure everywhere (issue 27). Measured in `make bench`, "raw-count glove".
+RAW_COUNT_DEFAULTS = {"baseline": "quietest", "noise_k": 3.0}
 
 
 @dataclass
@@ -143,8 +152,10 @@ class NormaliseConfig:
 
     @classmethod
     def from_layout_value(cls, value: dict) -> "NormaliseConfig":
-        """Default config from a layout's `value` block ({"convention", "max"})."""
-        return cls(convention=value["convention"], max_value=float(value["max"])).validate()
+        """Default config from a layout's `value` block ({"convention", "max"}): RAW_COUNT_DEFAULTS for raw
+        counts (direct, max > 1: the values rest far above 0), else no baseline."""
+        extra = RAW_COUNT_DEFAULTS if value["convention"] == "direct" and float(value["max"]) > 1 else {}
+        return cls(convention=value["convention"], max_value=float(value["max"]), **extra).validate()
 
     def to_dict(self) -> dict:
         """The settings; the activity-baseline fields only when they differ from their defaults, so the
@@ -271,10 +282,12 @@ class Normaliser:
                 base = np.nanpercentile(unit, self.cfg.baseline_percentile, axis=0)
             else:
                 base, self.knot_rows = self._drift_knots(unit, rows, fps)
-            q_base = np.nanmedian(quiet, axis=0)
-            spread = np.float32(1.4826) * np.nanmedian(np.abs(quiet - q_base), axis=0)
         self.baseline = np.clip(np.nan_to_num(base, nan=0.0), 0.0, 1.0).astype(np.float32)
         if self.cfg.noise_k > 0:
+            level = np.nanmean(unit[:, self.live_mask], axis=1) if self.live_mask.any() else np.zeros(T)
+            rest = np.flatnonzero(windowed_quiet(level, round(self.cfg.drift_window_s * fps)))
+            at = self.baseline_at(rows[rest]) if self.cfg.baseline == "drift" else self.baseline
+            spread = rest_spread(unit[rest] - at)
             self.floor = np.maximum(np.float32(self.cfg.noise_floor)
                                     + np.float32(self.cfg.noise_k) * np.nan_to_num(spread, nan=0.0),
                                     self.min_floor).astype(np.float32)
