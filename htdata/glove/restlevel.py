@@ -32,15 +32,21 @@ def windowed_quiet(level: np.ndarray, window: int) -> np.ndarray:
     Per window, not over the episode: a rest level that drifts by a few counts over minutes would leave
     every frame after the drift out of an episode-wide choice.
     """
-    T = len(level)
-    out = np.zeros(T, bool)
+    out = np.zeros(len(level), bool)
+    for a, b in windows(len(level), window):
+        out[a:b] |= quiet_frames(level[a:b])
+    return out
+
+
+def windows(T: int, window: int):
+    """(start, stop) of consecutive windows of `window` (>= 2) frames over T; a short tail (under half a
+    window) is the last full window instead."""
     w = max(2, int(window))
     for a in range(0, T, w):
         b = min(T, a + w)
         if b - a < max(2, w // 2) and a > 0:
             a = max(0, b - w)
-        out[a:b] |= quiet_frames(level[a:b])
-    return out
+        yield a, b
 
 
 def rest_spread(residual: np.ndarray) -> np.ndarray:
