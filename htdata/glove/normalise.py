@@ -25,11 +25,9 @@ constant one in unit values; values up to the floor read 0.
 A layout of raw counts (direct, value.max > 1) without a [normalise.<id>]
 table gets RAW_COUNT_DEFAULTS (quietest + noise_k 3), not baseline "none".
 
-Streaming: the baseline (and floor) is fitted once on the first chunk
-(`fit_baseline`), then `apply` is called chunk by chunk with the same result
-as on the whole. `fitted()` / `restore()` carry the fitted arrays into the
-episode record and back (htdata.glove.calibration), so the stored raw rows can be
-renormalised later without the first chunk.
+Streaming: fitted once (`fit_baseline`: first chunk; `fit_episode`), then `apply` chunk by chunk, same
+as on the whole. `fitted()` / `restore()` carry the fitted arrays into the episode record and back
+(htdata.glove.calibration): stored raw rows can be renormalised later.
 
 The formula, in full (raw-count gloves, "direct": rest ~550, full scale 1023):
 
@@ -60,13 +58,12 @@ paired rows once more before normalising it, `fit_episode`):
 For these three, the spread of `noise_k` is measured on the WHOLE episode's
 resting frames (`quiet_frames` of each `drift_window_s` window): 1.4826 x the
 median distance of a taxel's resting values from its baseline
-(`restlevel.rest_spread`), so rest wander widens the floor; the quietest
-second alone left 7-9% of a real glove's resting pixels lit (issue 27).
+(`restlevel.rest_spread`), plus half a quantisation step, so rest wander
+widens the floor; the quietest second alone left 7-9% of a real glove's
+resting pixels lit (issue 27).
 
-Noise floor: with `noise_k` > 0 (or noise_floor > 0), the per-taxel floor is
-never below the glove's quantisation step (`value.step / max_value`, the
-layout's step, one count): a taxel whose counts did not move in the rest
-window (spread 0) would otherwise have floor 0 and flicker at one count.
+A floor (noise_k or noise_floor > 0) is never below the layout's step (`value.step / max_value`): a
+taxel still in its rest window (spread 0) would otherwise flicker at one count.
 """
 
 from __future__ import annotations
@@ -289,9 +286,9 @@ class Normaliser:
         if self.cfg.noise_k > 0:
             rest = np.flatnonzero(windowed_quiet(self.live_level(unit), round(self.cfg.drift_window_s * fps)))
             at = self.baseline_at(rows[rest]) if self.cfg.baseline == "drift" else self.baseline
-            spread = rest_spread(unit[rest] - at)
-            self.floor = np.maximum(np.float32(self.cfg.noise_floor)
-                                    + np.float32(self.cfg.noise_k) * np.nan_to_num(spread, nan=0.0),
+            # + half a step: counts come in whole steps, so the median distance is only known to a step
+            spread = np.float32(self.cfg.noise_k) * np.nan_to_num(rest_spread(unit[rest] - at), nan=0.0)
+            self.floor = np.maximum(np.float32(self.cfg.noise_floor) + spread + self.min_floor / 2,
                                     self.min_floor).astype(np.float32)
         return self.baseline
 
