@@ -56,7 +56,8 @@ paired rows once more before normalising it, `fit_episode`):
   two knots continued beyond the first / last centre). Stored as knots (`baseline` is then (K,H,W), `knot_rows`
   their row positions); `apply` needs the rows' positions (`rows=`).
 For these three, the spread of `noise_k` is measured on the WHOLE episode's
-resting frames (`quiet_frames` of each `drift_window_s` window): 1.4826 x the
+resting frames (`restlevel.resting_frames`: quiet in their `drift_window_s`
+window and near the episode's low): 1.4826 x the
 median distance of a taxel's resting values from its baseline
 (`restlevel.rest_spread`), plus half a quantisation step, so rest wander
 widens the floor; the quietest second alone left 7-9% of a real glove's
@@ -72,7 +73,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from htdata.glove.restlevel import (load_taxel_calibration, nan_quiet, quiet_frames, rest_spread, windowed_quiet,
+from htdata.glove.restlevel import (load_taxel_calibration, nan_quiet, quiet_frames, rest_spread, resting_frames,
                                     windows)
 
 CONVENTIONS = ("inverted", "direct")
@@ -284,7 +285,7 @@ class Normaliser:
                 base, self.knot_rows = self._drift_knots(unit, rows, fps)
         self.baseline = np.clip(np.nan_to_num(base, nan=0.0), 0.0, 1.0).astype(np.float32)
         if self.cfg.noise_k > 0:
-            rest = np.flatnonzero(windowed_quiet(self.live_level(unit), round(self.cfg.drift_window_s * fps)))
+            rest = np.flatnonzero(resting_frames(self.live_level(unit), round(self.cfg.drift_window_s * fps)))
             at = self.baseline_at(rows[rest]) if self.cfg.baseline == "drift" else self.baseline
             # + half a step: counts come in whole steps, so the median distance is only known to a step
             spread = np.float32(self.cfg.noise_k) * np.nan_to_num(rest_spread(unit[rest] - at), nan=0.0)

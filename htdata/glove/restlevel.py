@@ -38,6 +38,20 @@ def windowed_quiet(level: np.ndarray, window: int) -> np.ndarray:
     return out
 
 
+REST_MARGIN = 0.01   # unit values: a frame whose mean sits this far above the episode's low is not at rest
+
+
+def resting_frames(level: np.ndarray, window: int) -> np.ndarray:
+    """(T,) bool: the episode's resting frames for its noise floor: `windowed_quiet`, and within REST_MARGIN
+    of the episode's low (its 5th percentile): a window gripped throughout has no rest to offer (a grip
+    raises the mean live value of a knit glove by 0.15-0.3, a rest level drifting over minutes by < 0.005)."""
+    quiet = windowed_quiet(level, window)
+    finite = np.isfinite(level)
+    if not finite.any():
+        return quiet
+    return quiet & (np.where(finite, level, np.inf) <= np.percentile(level[finite], 5) + REST_MARGIN)
+
+
 def windows(T: int, window: int):
     """(start, stop) of consecutive windows of `window` (>= 2) frames over T; a short tail (under half a
     window) is the last full window instead."""
