@@ -273,6 +273,13 @@ def test_out_of_range_warnings_reach_stderr(tmp_path, capsys):
     from htdata.read.reader import DatasetReader
     with DatasetReader(tmp_path / "ds") as reader:
         assert sorted(e["baseline"] for e in reader.manifest["calibrations"].values()) == ["none", "quietest"]
+    # and validate fails it, naming the setting (the right hand, on its default, passes)
+    from htdata.validate import validate_dataset
+    report = validate_dataset(tmp_path / "ds")
+    failures = [f for f in report["checks"]["sensors"]["failures"] if f["what"] == "rest_level"]
+    assert not report["ok"] and len(failures) == 5 and {f["hand"] for f in failures} == {"left"}
+    assert "rest level 5" in failures[0]["message"] and "of 1023" in failures[0]["message"]
+    assert "[normalise.rawknit_left_32x32] baseline = \"quietest\"" in failures[0]["message"]
 
 
 def test_taxel_calibration_file_formula_and_errors(tmp_path):
