@@ -9,10 +9,10 @@ whose every decoded map is all zero. The accumulator also collects the
 contact-area and pressure histograms of the report's stats.
 `check_taxel_health` warns about episode hands with many faulty taxels
 (htdata/glove/health.py), from the stats cache or, with --deep, computed.
-`check_rest_level` FAILS ("rest_level") an episode hand calibrated with
-baseline "none" whose covered pixels never read below REST_FAIL_LEVEL: a
-raw-count glove whose rest level (~557 of 1023) is read as pressure in every
-frame; the message names the setting to change.
+`check_rest_level` FAILS ("rest_level") an episode hand of raw counts
+(direct, max_value > 1) calibrated with baseline "none" whose covered pixels
+never read below REST_FAIL_LEVEL: its rest level (~557 of 1023 on a knit
+glove) is read as pressure in every frame; the message names the setting.
 
 Accumulator: {hand_key(episode, hand): {"frames", "region_means", "max",
 "saturated", "covered"}, "_contact_area": [fractions], "_pressure_hist": counts}.
@@ -111,12 +111,14 @@ def check_sensors(sensor: dict, check: Check, region_names: dict[int, str] | Non
 
 
 def check_rest_level(sensor: dict, episodes: list[dict], calibrations: dict, check: Check) -> None:
-    """Fail episode hands with baseline "none" that read >= REST_FAIL_LEVEL in their quietest decoded frame."""
+    """Fail raw-count episode hands with baseline "none" that read >= REST_FAIL_LEVEL in their quietest frame."""
     by_id = {ep["episode_id"]: ep for ep in episodes}
     for name in sorted(k for k in sensor if not k.startswith("_")):
         eid, hand = name.rsplit(":", 1)
         cal = calibrations.get((by_id.get(eid, {}).get("calibration") or {}).get(hand, ""), {})
-        if cal.get("baseline") != "none" or cal.get("taxel_calibration_sha256") or not sensor[name]["region_means"]:
+        raw_counts = cal.get("convention") == "direct" and float(cal.get("max_value", 1.0)) > 1.0
+        if not raw_counts or cal.get("baseline") != "none" or cal.get("taxel_calibration_sha256") \
+                or not sensor[name]["region_means"]:
             continue
         with np.errstate(invalid="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)      # a frame with no region: skipped
