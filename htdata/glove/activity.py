@@ -18,13 +18,16 @@ units, before any normalisation (`CellActivity.add`):
               second difference also ignores smooth pressing and releasing.
 - wander    = the cell's SLOW rest wander: the range of its means over
               blocks of WANDER_BLOCK frames (fast noise averages out) taken
-              over the QUIET blocks only, those whose mean over the reference
-              cells stays near its lowest (`htdata.glove.restlevel.quiet_frames`):
-              a press raises that mean, so presses are left out.
+              over its QUIET blocks only: up to its 10th percentile +
+              WANDER_QUIET_K robust spreads of its lower half. A press only
+              raises a cell, so its presses are left out even when it is held
+              for most of the recording (the lower half still rests).
 - the GLOVE's noise and wander = the medians of the cell values over
   reference cells: the layout's live cells (ingest, check, health), or every
   cell with finite values when there is no layout yet (suggest). Most cells
-  rest most of the time, so the medians are the resting values.
+  rest most of the time, so the medians are the resting values; a cell's
+  own wander is never its threshold (a forgotten sensor pressed now and then
+  would set its own bar).
 
 Real knit gloves need both: their cells wander slowly at rest (a median 5
 counts over a clip, p90 6-7) with a fast noise of only 0.15 counts, so a
@@ -57,13 +60,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from htdata.glove.restlevel import quiet_frames
-
 MOVING_K = 12.0          # x the glove's fast (second-difference) noise
 WANDER_K = 3.0           # x the glove's slow rest wander (range of quiet block means)
 MOVING_MIN_STEPS = 4.0   # x the quantisation step: the least a cell must move
 WANDER_BLOCK = 16        # frames per block mean (half a second at 30 fps)
-WANDER_QUIET_K = 6.0     # a cell's block is quiet up to its median + this many robust spreads
+WANDER_QUIET_K = 6.0     # a cell's block is quiet up to its p10 + this many robust spreads of its lower half
 _NOISE_FROM_ABS_DIFF2 = math.sqrt(math.pi / 12.0)
 
 
