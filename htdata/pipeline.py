@@ -49,7 +49,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from htdata.glove.layouts import nearest_hint
-from htdata.glove.normalise import NormaliseConfig
+from htdata.glove.normalise import NOISE_K_BASELINES, NormaliseConfig
 from htdata.settings import apply_settings, parse_setting  # noqa: F401  (parse_setting: an old name of this module)
 from htdata.resources import PIPELINES_DIR, validate_json
 from htdata.source.adapters import ADAPTERS
@@ -345,6 +345,8 @@ class PipelineConfig:
         cfg = self.normalise[layout.layout_id]
         given = self.normalise_given.get(layout.layout_id, tuple(cfg.to_dict()))
         out = dataclasses.replace(base, **{k: getattr(cfg, k) for k in given})
+        if "noise_k" not in given and out.baseline not in NOISE_K_BASELINES:
+            out = dataclasses.replace(out, noise_k=0.0)    # a raw-count default floor, under a baseline without one
         if out.taxel_calibration:
             out = self._taxel_calibration(out)
         return out.validate()

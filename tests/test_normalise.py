@@ -126,3 +126,29 @@ def test_validate_rejects(kwargs, match):
 def test_from_layout_value():
     cfg = NormaliseConfig.from_layout_value({"convention": "inverted", "max": 3072})
     assert cfg.convention == "inverted" and cfg.max_value == 3072.0
+    assert cfg.baseline == "none" and cfg.noise_k == 0            # OpenTouch-style: as before
+    assert NormaliseConfig.from_layout_value({"convention": "direct", "max": 1.0}).baseline == "none"
+    raw = NormaliseConfig.from_layout_value({"convention": "direct", "max": 1023, "step": 1})
+    assert raw.baseline == "quietest" and raw.noise_k == 3.0       # raw counts rest far above 0
+
+
+def test_noise_floor_is_estimated_from_the_whole_episode_rest_not_one_window():
+    # a taxel glove resting 10 s: the quietest second is flat (spread 0), the rest level wanders +-4 counts
+    rng = np.random.default_rng(4)
+    T = 300
+    t = np.arange(T)
+    wander = 4.0 * np.sin(2 * np.pi * t / 200.0)[:, None, None] * rng.uniform(0.5, 1.0, (1, 4, 4))
+    raw = np.round(550 + wander + rng.normal(0, 0.3, (T, 4, 4))).astype(np.float32)
+    raw[240:270, 2, 2] += 60                                      # one press
+    lay = SimpleNamespace(layout_id="test_4x4", live_mask=np.ones((4, 4), bool), value={"step": 1})
+    n = Normaliser(NormaliseConfig(convention="direct", max_value=1023, baseline="quietest", noise_k=3), lay)
+    n.fit_episode(raw, fps=30.0)
+    v, _ = n.apply(raw)
+    rest = np.ones(v.shape, bool)
+    rest[240:270, 2, 2] = False
+    assert (v[rest] > 0).mean() < 0.02                            # the wander reads 0
+    assert (v[245:265, 2, 2] > 0).all()                           # the press survives the floor
+    # one window's spread (the quietest second) would leave the wander lit: the floor is wider than that
+    quiet = raw[n.quietest_span(raw / 1023, 30.0)] / 1023
+    one_window = 3 * 1.4826 * np.median(np.abs(quiet - np.median(quiet, axis=0)), axis=0)
+    assert (n.floor > one_window + 1.5 / 1023).mean() > 0.5

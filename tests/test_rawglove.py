@@ -44,6 +44,23 @@ def test_counts_look_like_the_real_glove(corpus):
         assert np.ptp(raw[:, r, c]) == 0
 
 
+def test_every_cell_wanders_slowly_at_rest_like_the_real_glove(corpus):
+    from htdata.glove.activity import CellActivity
+
+    units, clips = corpus
+    clip = _clip(clips, "rest")
+    lay = glove_layout("left")
+    gaps = ~np.asarray(lay.live_mask) & ~np.asarray(lay.unmapped_mask)   # the gaps (listed as unused cells)
+    gaps[units["left"].faults.crosstalk_rows, :] = False
+    quiet = gaps & (units["left"].noise < 2)
+    act = CellActivity(lay.grid)
+    act.add(clip.counts["left"])
+    # a gap cell carries no sensor, yet its rest level wanders several counts over a clip, far more than its
+    # frame-to-frame noise (the real glove: median 5, p90 6-7 counts, fast noise 0.15)
+    assert 5 <= float(np.median(act.range[quiet])) <= 10
+    assert float(np.median(act.cell_wander()[quiet])) >= 3 * float(np.median(act.cell_noise[quiet]))
+
+
 def test_clip_starts_and_determinism(corpus):
     _, clips = corpus
     rest, mid = _clip(clips, "rest"), _clip(clips, "mid_grasp")
@@ -82,6 +99,27 @@ def test_quietest_span_keeps_the_grip_of_a_clip_starting_mid_grasp(corpus):
     assert recall_quiet > 0.9 and prec_quiet > 0.9 and rest_quiet < 0.05
     recall_pct, _, _ = _rates(normalise_clip(mid, "right", config_for("percentile", True)), mid, "right")
     assert recall_pct > 0.9
+
+
+def test_default_settings_of_a_raw_count_glove_keep_the_rest_dark_and_the_grip(corpus):
+    from htdata.benchmarks.rawglove import held_grip
+    from htdata.pipeline import load_pipeline
+
+    _, clips = corpus
+    cfg = load_pipeline("native").normalise_for(glove_layout("right"))      # no [normalise.<id>] table
+    assert cfg.baseline == "quietest" and cfg.noise_k == 3
+    rest = [0, 0]
+    grip = [0, 0]
+    for clip in clips:
+        for hand in clip.counts:
+            values = normalise_clip(clip, hand, cfg)
+            pressure = clip.pressure[hand][:, glove_layout(hand).live_mask]
+            c = score(values, pressure)
+            rest = [rest[0] + c["rest_above_0"], rest[1] + c["rest"]]
+            if clip.start == "mid_grasp":
+                grip = [a + b for a, b in zip(grip, held_grip(values, pressure, clip.fps))]
+    assert rest[0] / rest[1] <= 0.02                 # rest leakage (a floor from one window: 7-8%)
+    assert grip[1] and grip[0] / grip[1] >= 0.9      # a grip held at the clip start survives
 
 
 def test_quietest_span_is_in_seconds():
@@ -221,11 +259,27 @@ def test_out_of_range_warnings_reach_stderr(tmp_path, capsys):
     write_rawglove(tmp_path / "rg")
     # max_value set to the range above rest (472) instead of full scale (1023): every frame is out of range
     rc = ingest_cli("--pipeline", "native", "--layouts", tmp_path / "rg" / "layouts",
-                    "--set", "normalise.rawknit_right_32x32.max_value=472", tmp_path / "rg", tmp_path / "ds")
+                    "--set", "normalise.rawknit_right_32x32.max_value=472",
+                    "--set", "normalise.rawknit_left_32x32.baseline=none", tmp_path / "rg", tmp_path / "ds")
     assert rc == 0
     err = capsys.readouterr().err
     assert "episode nat-rawknit_00_pinch_pick_rest: warning: right hand: 240 of 240 frames" in err
     assert "outside [0, 472]" in err and "FULL-SCALE" in err
+    # baseline "none" on a raw-count glove reads its rest as pressure: one line per episode names the setting
+    line = next(x for x in err.splitlines() if "nat-rawknit_00_pinch_pick_rest" in x and "covered pixels" in x)
+    assert "left hand (layout rawknit_left_32x32): rest level 5" in line and "of 1023" in line
+    assert "read >= 0.5" in line and "[normalise.rawknit_left_32x32] baseline = \"quietest\"" in line
+    assert "right hand (layout rawknit_right_32x32): rest level" not in err     # its default: quietest
+    from htdata.read.reader import DatasetReader
+    with DatasetReader(tmp_path / "ds") as reader:
+        assert sorted(e["baseline"] for e in reader.manifest["calibrations"].values()) == ["none", "quietest"]
+    # and validate fails it, naming the setting (the right hand, on its default, passes)
+    from htdata.validate import validate_dataset
+    report = validate_dataset(tmp_path / "ds")
+    failures = [f for f in report["checks"]["sensors"]["failures"] if f["what"] == "rest_level"]
+    assert not report["ok"] and len(failures) == 5 and {f["hand"] for f in failures} == {"left"}
+    assert "rest level 5" in failures[0]["message"] and "of 1023" in failures[0]["message"]
+    assert "[normalise.rawknit_left_32x32] baseline = \"quietest\"" in failures[0]["message"]
 
 
 def test_taxel_calibration_file_formula_and_errors(tmp_path):

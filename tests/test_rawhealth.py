@@ -6,8 +6,10 @@ import warnings
 import numpy as np
 import pytest
 
+from htdata.glove.layouts import parse_layout
 from htdata.glove.rawhealth import DRIFT_MIN_FRAMES, classify_raw
-from htdata.sample.rawglove import GloveUnit, corpus_clips, glove_layout, make_clip
+from htdata.sample.rawglove import (GloveUnit, corpus_clips, draft_layout_doc, glove_layout, make_clip,
+                                    unmapped_truth)
 
 LAYOUT = glove_layout("right")
 
@@ -15,9 +17,18 @@ LAYOUT = glove_layout("right")
 @pytest.fixture(scope="module")
 def glove():
     unit = GloveUnit.make("right", 7)
-    # a pressed clip (so neighbours of dead cells are exercised), 20 s at 30 fps: long enough for drift
+    # a pressed clip (so neighbours of dead cells are exercised), 20 s at 30 fps
     clip = make_clip("h", "power_grasp", 600, "rest", 7, {"right": unit})
     return unit, clip.counts["right"].astype(np.float32)
+
+
+def _long(raw: np.ndarray) -> np.ndarray:
+    """A clip long enough to tell drift (DRIFT_MIN_FRAMES): the 20 s clip, then the hand resting on (its last
+    second repeated with the glove's noise and wander re-drawn by a shuffle of that second's rows)."""
+    rng = np.random.default_rng(5)
+    tail = raw[-30:]
+    rest = tail[rng.integers(0, 30, DRIFT_MIN_FRAMES - len(raw) + 30)]
+    return np.concatenate([raw, rest])
 
 
 def _found(health, name):
@@ -38,13 +49,33 @@ def test_each_planted_fault_is_its_class(glove):
 
 def test_a_drifting_taxel_is_flagged(glove):
     _, raw = glove
-    raw = raw.copy()
+    raw = _long(raw)
     r, c = 20, 14                                  # a palm taxel: its rest creeps 30 counts over the episode
     raw[:, r, c] += np.linspace(0, 30, len(raw)).round()
     h = classify_raw(raw, LAYOUT)
     assert h["drift_assessed"] and (r, c) in _found(h, "drifting")
     short = classify_raw(raw[:DRIFT_MIN_FRAMES - 1], LAYOUT)
     assert not short["drift_assessed"] and not short["cells"]["drifting"]
+
+
+def test_drift_is_read_from_quiet_frames_and_not_told_on_short_clips(glove):
+    from htdata.inspect.healthmap import _legend
+
+    _, raw = glove
+    raw = _long(raw)
+    # a taxel pressed through 60% of the last quarter while the rest of the glove rests: a grip, not drift
+    r, c = 20, 14
+    T, q = len(raw), len(raw) // 4
+    raw[T - int(0.6 * q):, r, c] += 120
+    h = classify_raw(raw, LAYOUT)
+    assert h["drift_assessed"] and (r, c) not in _found(h, "drifting")
+    # a 20 s manipulation clip whose grip changes: drift is not assessed, and the legend says so
+    short = raw[:600].copy()
+    short[300:, r, c] += 40
+    h = classify_raw(short, LAYOUT)
+    assert not h["drift_assessed"] and not h["cells"]["drifting"]
+    text = " ".join(t for _, t in _legend({"raw"}, drift_told=False))
+    assert "drifting: NOT ASSESSED" in text and str(DRIFT_MIN_FRAMES) in text
 
 
 def test_clean_counts_flag_nothing():
@@ -66,15 +97,26 @@ def test_a_crosstalk_row_is_found():
     assert rows and rows <= set(unit.faults.crosstalk_rows)
 
 
-def test_unmapped_cells_that_move_are_counted():
-    _, clips = corpus_clips(0)
-    raw = clips[1].counts["right"].astype(np.float32)
-    quiet = classify_raw(raw, LAYOUT)
-    raw = raw.copy()
-    raw[:, 13, 5] += np.where(np.arange(len(raw)) % 60 < 30, 0, 80)   # a gap cell (row 13) that responds
-    moved = classify_raw(raw, LAYOUT)
-    assert moved["unmapped_cells"] == quiet["unmapped_cells"] > 0
-    assert [13, 5] in moved["unmapped_moving_cells"] and [13, 5] not in quiet["unmapped_moving_cells"]
+def test_unmapped_cells_move_by_the_one_rule_and_unused_cells_are_honoured():
+    units, clips = corpus_clips(0)
+    clip, unit = clips[1], units["right"]
+    raw = clip.counts["right"].astype(np.float32)
+    draft = parse_layout(draft_layout_doc("right"), "draft")        # thumb tip forgotten, gaps not declared
+    h = classify_raw(raw, draft)
+    truth = unmapped_truth(clip, "right", unit, draft)
+    found = np.zeros(truth["pressed"].shape, bool)
+    found[tuple(np.asarray(h["unmapped_moving_cells"]).T)] = True
+    assert h["unmapped_cells"] == int(draft.unmapped_mask.sum())
+    # the forgotten thumb tip moves; every other moving cell is a ghost row or a loud cell, never the gaps'
+    # slow rest wander
+    assert (found & truth["pressed"]).sum() >= 0.8 * truth["pressed"].sum() > 0
+    assert not (found & ~(truth["pressed"] | truth["ghost"] | truth["loud"])).any()
+    # the shipped layout lists the gaps in unused_cells: health counts none of them, moving or not
+    moved = raw.copy()
+    moved[:, 13, 5] += np.where(np.arange(len(raw)) % 60 < 30, 0, 80)   # a gap cell (row 13) that responds
+    shipped = classify_raw(moved, LAYOUT)
+    assert shipped["unmapped_cells"] == 0 and shipped["unmapped_moving"] == 0
+    assert [13, 5] in classify_raw(moved, draft)["unmapped_moving_cells"]
 
 
 def test_inverted_gloves_are_read_in_the_pressure_direction(glove):
@@ -93,7 +135,9 @@ def test_health_map_draws_unexercised_and_unmapped_cells_and_states_thresholds(g
     unit, raw = glove
     raw = raw.copy()
     raw[:, 13, 5] += np.where(np.arange(len(raw)) % 60 < 30, 0, 80)
-    h = classify_raw(raw, LAYOUT)
+    draft = parse_layout({**draft_layout_doc("right", forget=()), "layout_id": LAYOUT.layout_id}, "draft")
+    h = classify_raw(raw, draft)
+    assert [13, 5] in h["unmapped_moving_cells"]
     g = Glove(LAYOUT, load_canonical())
     per_episode = [{"hands": {"right": {"layout": LAYOUT.layout_id, "health": h}}}]
     classes = taxel_classes(per_episode, LAYOUT.layout_id, "right", g)

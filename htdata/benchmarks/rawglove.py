@@ -14,12 +14,19 @@ one count), on clips that start at rest and clips that start mid-grasp:
   in between (REST_TRUTH..TRUTH_LEVEL: a blob's faint tail) count for neither;
 - frame contact precision / recall: each hand-frame by its contact rule (htdata/glove/contact.py) against
   truth = at least the rule's area of taxels with true pressure >= TRUTH_LEVEL;
+- held grip kept (clips that start mid-grasp): over the clip's first second, the share of taxel-frames
+  with true pressure >= TRUTH_LEVEL that read above 0 (a baseline fitted on a held grip erases it);
 - cost: microseconds per two-hand frame of fitting + normalising (in memory).
+Row "default": the settings a raw-count layout gets with no [normalise.<id>] table
+(NormaliseConfig.from_layout_value: RAW_COUNT_DEFAULTS). The noise floor of the episode baselines
+(quietest, percentile, drift) is estimated from the whole episode's resting frames; rest_window's from
+its 10-frame window (it is fitted on the first chunk, before the episode is read).
 Rows "file": the per-glove calibration file (`taxel_calibration`: the generator's true per-taxel offsets
 and gains, measured once), alone and under a quietest-span baseline with the noise floor.
 
 Plus a long drifting recording (10 minutes, 3 in --quick), right hand:
-rest pixels > 0 over its last 30 s, for each baseline.
+rest pixels > 0 over its last 30 s and contact recall over all of it, for each baseline. Plus the moving-cell rule and `layouts suggest`
+against the truth (htdata/benchmarks/rawglovecells.py).
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ from htdata.glove.normalise import NormaliseConfig, Normaliser
 from htdata.sample.rawglove import (FPS, FULL_SCALE, TRUTH_LEVEL, GloveUnit, RawGloveClip, corpus_clips,
                                     glove_layout, make_clip)
 from htdata.glove.contact import rule_for
+from htdata.benchmarks.rawglovecells import moving_cell_rows, suggest_rows
 from htdata.benchmarks.tables import table
 
 REST_TRUTH = 1e-3
@@ -43,6 +51,8 @@ NOISE_K = 3.0
 
 
 def config_for(baseline: str, floor: bool) -> NormaliseConfig:
+    if baseline == "default":        # no [normalise.<id>] table: the layout's own defaults
+        return NormaliseConfig.from_layout_value(glove_layout("right").value)
     extra = dict(BASELINE_OPTIONS)[baseline]
     return NormaliseConfig(convention="direct", max_value=FULL_SCALE, baseline=baseline,
                            noise_k=NOISE_K if floor else 0.0, **extra).validate()
@@ -87,6 +97,13 @@ def _share(a: int, b: int) -> float | None:
     return a / b if b else None
 
 
+def held_grip(values: np.ndarray, pressure: np.ndarray, fps: float) -> tuple[int, int]:
+    """(kept, held): over the first second, true-contact taxel-frames that read above 0, and all of them."""
+    n = int(round(fps))
+    held = pressure[:n] >= TRUTH_LEVEL
+    return int((held & (values[:n] > 0)).sum()), int(held.sum())
+
+
 def contact_rule(cfg: NormaliseConfig):
     """The frame contact rule htdata.glove.contact gives this calibration on the sample glove."""
 
@@ -100,8 +117,9 @@ CALIBRATION_FILE_ROWS = (("file", "none", False), ("file + quietest", "quietest"
 
 def clip_rows(clips: list[RawGloveClip], units: dict[str, GloveUnit] | None = None) -> list[dict]:
     """One row per (baseline option or calibration-file row, noise floor, clip start): see the module docstring."""
-    plans = [(b, b, floor, False) for b, _ in BASELINE_OPTIONS for floor in (False, True)
-             if not floor or b in FLOORED]
+    plans = [("default", "default", True, False)]
+    plans += [(b, b, floor, False) for b, _ in BASELINE_OPTIONS for floor in (False, True)
+              if not floor or b in FLOORED]
     if units:
         plans += [(label, b, floor, True) for label, b, floor in CALIBRATION_FILE_ROWS]
     rows = []
@@ -111,7 +129,7 @@ def clip_rows(clips: list[RawGloveClip], units: dict[str, GloveUnit] | None = No
             total = {"rest": 0, "rest_above_0": 0, "tp": 0, "fp": 0, "fn": 0}
             rule = contact_rule(cfg)
             frames_hit = {"tp": 0, "fp": 0, "fn": 0}
-            frames, seconds = 0, 0.0
+            frames, seconds, grip = 0, 0.0, [0, 0]
             for clip in (c for c in clips if c.start == start):
                 t0 = time.perf_counter()
                 values = {h: normalise_clip(clip, h, cfg, units[h] if with_file else None)
@@ -122,11 +140,13 @@ def clip_rows(clips: list[RawGloveClip], units: dict[str, GloveUnit] | None = No
                     pressure = clip.pressure[h][:, glove_layout(h).live_mask]
                     c = score(v, pressure)
                     total = {k: total[k] + c[k] for k in total}
+                    grip = [a + b for a, b in zip(grip, held_grip(v, pressure, clip.fps))]
                     pred, truth = rule.frames(v), (pressure >= TRUTH_LEVEL).sum(axis=1) >= rule.min_taxels
                     frames_hit["tp"] += int((pred & truth).sum())
                     frames_hit["fp"] += int((pred & ~truth).sum())
                     frames_hit["fn"] += int((~pred & truth).sum())
-            rows.append({"baseline": label, "noise_floor": f"noise_k={NOISE_K:g}" if floor else "none",
+            rows.append({"baseline": label, "noise_floor": f"noise_k={cfg.noise_k:g}" if cfg.noise_k else "none",
+                         "held_grip_kept": _share(*grip) if start == "mid_grasp" else None,
                          "clips": start, "frames": frames, **_ratios(total),
                          "us_per_frame": 1e6 * seconds / max(frames, 1), "contact_rule": rule.describe(),
                          "frame_precision": _share(frames_hit["tp"], frames_hit["tp"] + frames_hit["fp"]),
@@ -147,7 +167,9 @@ def drift_rows(minutes: float, seed: int) -> dict:
             continue
         values = normalise_clip(clip, "right", config_for(baseline, True))
         c = score(values[tail], clip.pressure["right"][tail][:, live])
-        out.append({"baseline": baseline, "rest_pixels_above_0_last_30s": _ratios(c)["rest_pixels_above_0"]})
+        whole = _ratios(score(values, clip.pressure["right"][:, live]))   # a floor widened by drift costs recall
+        out.append({"baseline": baseline, "rest_pixels_above_0_last_30s": _ratios(c)["rest_pixels_above_0"],
+                    "recall": whole["recall"]})
     return {"minutes": minutes, "frames": n, "rows": out}
 
 
@@ -156,7 +178,8 @@ def rawglove_rows(quick: bool, seed: int) -> dict:
     if quick:
         clips = [c for c in clips if c.n_frames <= 270][:3] + [c for c in clips if c.start == "mid_grasp"][:1]
     return {"clips": clip_rows(clips, units), "drift": drift_rows(3.0 if quick else 10.0, seed),
-            "truth_level": TRUTH_LEVEL, "noise_k": NOISE_K}
+            "truth_level": TRUTH_LEVEL, "noise_k": NOISE_K, "default": config_for("default", True).to_dict(),
+            "moving_cells": moving_cell_rows(clips, units), "suggest": suggest_rows(clips, units)}
 
 
 def rawglove_markdown(d: dict) -> list[str]:
@@ -168,7 +191,7 @@ def rawglove_markdown(d: dict) -> list[str]:
                                 ("frames", "frames"), ("rest_pixels_above_0", "rest pixels > 0"),
                                 ("precision", "precision"), ("recall", "recall"),
                                 ("frame_precision", "frame contact precision"), ("frame_recall", "frame contact recall"),
-                                ("us_per_frame", "us/frame")])
+                                ("held_grip_kept", "held grip kept"), ("us_per_frame", "us/frame")])
     lines += ["Frame contact: the hand's contact rule (htdata/glove/contact.py) against truth = at least that many "
               "taxels with true pressure >= the truth level; with a noise floor: " +
               next((r["contact_rule"] for r in d["clips"] if r["noise_floor"] != "none"), "-") +
@@ -176,5 +199,26 @@ def rawglove_markdown(d: dict) -> list[str]:
     dr = d["drift"]
     lines += ["", f"Drifting recording: {dr['minutes']:g} minutes ({dr['frames']} frames), right hand, "
                   f"noise_k = {d['noise_k']:g}: rest pixels > 0 over the last 30 s.", ""]
-    lines += table(dr["rows"], [("baseline", "baseline"), ("rest_pixels_above_0_last_30s", "rest pixels > 0")])
+    lines += table(dr["rows"], [("baseline", "baseline"), ("rest_pixels_above_0_last_30s", "rest pixels > 0"),
+                                ("recall", "recall (whole recording)")])
+    return lines + [""] + cells_markdown(d)
+
+
+def cells_markdown(d: dict) -> list[str]:
+    """The moving-cell and suggest tables (htdata/benchmarks/rawglovecells.py)."""
+    if "moving_cells" not in d:
+        return []
+    dash = lambda rows: [{k: ("-" if v is None else v) for k, v in r.items()} for r in rows]   # noqa: E731
+    lines = ["Moving cells: unmapped cells of a first-draft layout (the thumb tip forgotten, no unused cells) that "
+             "move, against truth = a responding sensor pressed >= the truth level, over every clip and hand. "
+             "False ones split into cross-talk rows / loud cells (they do move) and resting cells.", ""]
+    lines += table(dash(d["moving_cells"]), [("rule", "rule"), ("pressed", "pressed cells"), ("found", "found"),
+                                            ("precision", "precision"), ("recall", "recall"),
+                                            ("false_ghost_or_loud", "false: ghost / loud"),
+                                            ("false_resting", "false: resting")])
+    lines += ["", "`htdata layouts suggest` from every clip of a hand against the true sensor areas.", ""]
+    lines += table(dash(d["suggest"]), [("hand", "hand"), ("blocks", "blocks"), ("true_areas", "true areas"),
+                                       ("exact_areas", "exactly a true area"), ("precision", "cell precision"),
+                                       ("recall", "cell recall"), ("recall_of_pressed", "recall of pressed cells"),
+                                       ("left_out", "moving cells left out")])
     return lines + [""]

@@ -20,7 +20,7 @@ setting without copying its file (value parsed as TOML, else text; checked
 like the file; with several pipelines, prefix the pipeline name to aim at
 one); the dataset's manifest records the effective settings. Cells outside
 every block of a layout whose raw values move (range above 12 x the glove's
-frame-to-frame noise: htdata/glove/activity.py) are listed per episode and hand on
+frame-to-frame noise + 3 x its slow rest wander: htdata/glove/activity.py) are listed per episode and hand on
 stderr, in the episode record (`unmapped_moving`) and in the report: add
 them to a block or list them in the layout's `unused_cells`.
 """

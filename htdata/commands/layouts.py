@@ -15,8 +15,8 @@ then the shipped schemas/layouts/ (htdata.glove.layouts.layout_dirs).
 A RECORDING is a source folder read with --pipeline's adapter (default
 native: a recording folder, or a folder of them) or a .npy of raw rows
 (T,H,W). A cell MOVES when its raw range over a recording exceeds
-max(12 x the glove's frame-to-frame noise, 4 x value.step)
-(docs/LAYOUTS.md). `check --against` exits 1 when a cell outside every
+max(12 x the glove's frame-to-frame noise + 3 x its slow rest wander,
+4 x value.step) (htdata/glove/activity.py, docs/LAYOUTS.md). `check --against` exits 1 when a cell outside every
 block (and not in unused_cells / bend_cells) moves.
 """
 
@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata.format.table import CANVAS
-from htdata.glove.activity import unmapped_moving
+from htdata.glove.activity import rule_text, unmapped_moving
 from htdata.glove.layouts import LAYOUTS_ENV, Layout, list_layouts, load_canonical, load_layout
 from htdata.glove.layoutsuggest import layout_id_from_name, layout_json_text, suggest_layout
 from htdata.glove.rasterise import Rasteriser
@@ -126,22 +126,31 @@ def check_against(layout: Layout, recordings: list[str], pipeline: str) -> int:
                              f"{s.activity.grid[1]}, layout {layout.layout_id} is {layout.grid[0]}x{layout.grid[1]}")
         found = unmapped_moving(s.activity, layout)
         head = (f"{s.recording} [{s.episode_id}] {s.hand} hand: {found.frames} frames, noise {found.noise:.4g}, "
-                f"moving = range > {found.threshold:.4g}")
+                f"wander {found.wander:.4g}, moving = range > {found.threshold:.4g}")
         if not len(found):
             print(f"{head}: no cell outside the blocks moves")
             continue
         findings.update(map(tuple, found.cells.tolist()))
         print(f"{head}: {len(found)} cell(s) outside every block move:")
-        print(f"    {'cell':>9s} {'range':>9s} {'min':>9s} {'max':>9s} {'noise':>8s}")
+        print(f"    {'cell':>9s} {'range':>9s} {'min':>9s} {'max':>9s} {'noise':>8s} {'wander':>8s}")
+        wander = s.activity.cell_wander()
         for (r, c), v in zip(found.cells.tolist(), found.ranges):
             print(f"    {f'[{r}, {c}]':>9s} {v:9.4g} {s.activity.lo[r, c]:9.4g} {s.activity.hi[r, c]:9.4g} "
-                  f"{s.activity.cell_noise[r, c]:8.3g}")
+                  f"{s.activity.cell_noise[r, c]:8.3g} {wander[r, c]:8.3g}")
     if findings:
         print(f"FINDING: {len(findings)} distinct cell(s) outside every block move in {len(scanned)} recording "
               f"hand(s) and are not drawn: add them to a block, or list them in unused_cells of "
               f"{layout.path or layout.layout_id}")
         return 1
     return 0
+
+
+def _cells(cells: list, limit: int = 12) -> str:
+    """": [r, c], ... (N more)" for the first `limit` cells, "" for none."""
+    if not cells:
+        return ""
+    more = f", ... {len(cells) - limit} more" if len(cells) > limit else ""
+    return ": " + ", ".join(f"[{r}, {c}]" for r, c in cells[:limit]) + more
 
 
 def suggest(args: argparse.Namespace) -> int:
@@ -165,9 +174,10 @@ def suggest(args: argparse.Namespace) -> int:
                                   all(s.integral for s in scanned), recordings, args.max_value)
     write_bytes_atomic(output_path(out, "layouts suggest"), layout_json_text(doc).encode())
     print(f"{summary['moving']} moving cell(s) in {summary['recordings']} recording hand(s), {summary['frames']} "
-          f"frames (median noise {summary['noise']:.4g}, moving = range > {summary['threshold']:.4g}); "
+          f"frames (median noise {summary['noise']:.4g}, wander {summary['wander']:.4g}, moving = range > {summary['threshold']:.4g}); "
           f"{len(doc['blocks'])} block(s), "
-          f"{summary['inside_blocks_not_moving']} cell(s) inside them did not move:")
+          f"{summary['inside_blocks_not_moving']} cell(s) inside them did not move; {len(summary['left_out'])} "
+          f"moving cell(s) in lines or alone left out (cross-talk, noisy cells){_cells(summary['left_out'])}:")
     for b in doc["blocks"]:
         turn = f", rotate {b['rotate']}" if b.get("rotate") else ""
         print(f"    {b['name']:10s} rows {b['rows'][0]}-{b['rows'][1]} cols {b['cols'][0]}-{b['cols'][1]} "
@@ -189,7 +199,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     p = sub.add_parser("check", help="validate a layout and print its coverage; with --against, list the cells "
                                      "outside every block that move in recordings")
     p.epilog = ("example: htdata layouts check my_glove.json --against /raw/rec_01 /raw/rec_02\n"
-                "A cell moves when its raw range in a recording > max(12 x the glove's noise, 4 x value.step) "
+                f"A cell moves when its raw {rule_text()} in a recording "
                 "(htdata/glove/activity.py); cells in unused_cells or bend_cells are never listed.")
     p.formatter_class = argparse.RawDescriptionHelpFormatter
     p.add_argument("file", metavar="LAYOUT", help="path to a layout JSON (or a layout id)")

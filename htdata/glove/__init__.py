@@ -2,7 +2,7 @@
 
     canonical.py    the canonical hand: places, regions, parts of the 224x224 frame
     layouts.py      glove layouts (schemas/layouts/*.json): blocks of raw cells -> canvas places
-    activity.py     which raw cells move (noise from second differences): live cells a layout leaves out
+    activity.py     which raw cells move (fast noise + slow rest wander): live cells a layout leaves out
     layoutsuggest.py a starting layout from the cells that move in recordings (`htdata layouts suggest`)
     normalise.py    glove units -> [0,1] (baselines, noise floor, full scale)
     restlevel.py    quiet (resting) frames; the per-glove calibration file

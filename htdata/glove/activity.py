@@ -10,45 +10,67 @@ Activity is accumulated over chunks of raw rows (T,H,W), in the glove's own
 units, before any normalisation (`CellActivity.add`):
 
 - range     = max - min of the cell's finite values over the recording;
-- noise     = the cell's frame-to-frame noise from second differences,
+- noise     = the cell's FAST (frame-to-frame) noise from second differences,
               mean |x[t] - 2 x[t-1] + x[t-2]| * sqrt(pi / 12) (for white
               Gaussian noise of std s the second difference has std
               sqrt(6) s and mean absolute value s * sqrt(12 / pi), so this is
               s); differences ignore per-taxel offsets and slow drift, and a
-              second difference also ignores smooth pressing and releasing
-              (only the sharp corners of a press add to it).
-- the GLOVE's noise = the median of the cell noise over reference cells: the
-  layout's live cells (ingest, check), or every cell with finite values when
-  there is no layout yet (suggest). Most cells rest most of the time, so the
-  median is the resting noise.
+              second difference also ignores smooth pressing and releasing.
+- wander    = the cell's SLOW rest wander: the range of its means over
+              blocks of WANDER_BLOCK frames (fast noise averages out) taken
+              over its QUIET blocks only: up to its 10th percentile +
+              WANDER_QUIET_K robust spreads of its lower half. A press only
+              raises a cell, so its presses are left out even when it is held
+              for most of the recording (the lower half still rests).
+- the GLOVE's noise and wander = the medians of the cell values over
+  reference cells: the layout's live cells (ingest, check, health), or every
+  cell with finite values when there is no layout yet (suggest). Most cells
+  rest most of the time, so the medians are the resting values; a cell's
+  own wander is never its threshold (a forgotten sensor pressed now and then
+  would set its own bar).
 
+Real knit gloves need both: their cells wander slowly at rest (a median 5
+counts over a clip, p90 6-7) with a fast noise of only 0.15 counts, so a
+threshold from the fast noise alone (12 x 0.15 = 1.8 counts) called every
+cell of the grid moving (issue 27), while pressed cells move 25-120 counts.
 The rule: a cell MOVES when its range > threshold, where
 
-    threshold = max(MOVING_K * glove noise, MOVING_MIN_STEPS * value.step)
+    threshold = max(MOVING_K * glove noise + WANDER_K * glove wander,
+                    MOVING_MIN_STEPS * value.step)
 
 (`value.step` = the layout's quantisation step, 0 when the layout does not
-state it). MOVING_K = 12: the range of white noise over 18,000 frames (10
-minutes at 30 fps) is about 9 noise stds, so resting noise stays below it,
-while a pressed knit-glove cell moves by hundreds of counts over a noise of
-a few. MOVING_MIN_STEPS = 4 keeps a cell flickering between a few adjacent
-quantisation levels quiet when the measured noise is below one step. On
-noiseless data (threshold 0) any change moves.
+state it): a resting cell's range is its slow wander plus its fast noise's
+range. MOVING_K = 12: the range of white noise over 18,000 frames (10
+minutes at 30 fps) is about 9 noise stds. WANDER_K = 3: the glove's median
+wander measured on quiet blocks is short of a whole clip's and a cell's
+wander varies (p90 / median ~1.4 on the real glove), so three medians clear
+the resting cells (real glove: 3 x 5 + 1.8 = 17 counts, below the 25 of a
+light press). MOVING_MIN_STEPS = 4 keeps a cell flickering between a few
+adjacent quantisation levels quiet. On noiseless data (threshold 0) any
+change moves. All three constants live here; ingest (`unmapped_moving`),
+`htdata layouts check --against`, `htdata layouts suggest` and raw-row health
+(htdata/glove/rawhealth.py) all use `moving_cells`.
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-MOVING_K = 12.0
-MOVING_MIN_STEPS = 4.0
+MOVING_K = 12.0          # x the glove's fast (second-difference) noise
+WANDER_K = 3.0           # x the glove's slow rest wander (range of quiet block means)
+MOVING_MIN_STEPS = 4.0   # x the quantisation step: the least a cell must move
+WANDER_BLOCK = 16        # frames per block mean (half a second at 30 fps)
+WANDER_QUIET_K = 6.0     # a cell's block is quiet up to its p10 + this many robust spreads of its lower half
 _NOISE_FROM_ABS_DIFF2 = math.sqrt(math.pi / 12.0)
 
 
 class CellActivity:
-    """Streaming per-cell statistics of raw rows: finite count, min, max, mean |second difference|."""
+    """Streaming per-cell statistics of raw rows: finite count, min, max, mean |second difference|,
+    and the means of consecutive blocks of WANDER_BLOCK rows (for the slow wander)."""
 
     def __init__(self, grid: tuple[int, int]):
         self.grid = tuple(int(v) for v in grid)
@@ -59,6 +81,8 @@ class CellActivity:
         self.abs_diff = np.zeros(self.grid, np.float64)
         self.diffs = np.zeros(self.grid, np.int64)
         self._tail = np.zeros((0, *self.grid), np.float32)   # the last two rows seen (differences span chunks)
+        self._blocks: list[np.ndarray] = []                   # (H,W) mean of each full block of rows
+        self._open = np.zeros((0, *self.grid), np.float32)   # rows of the block not yet full
 
     def add(self, rows: np.ndarray) -> None:
         """Fold in consecutive raw rows (T,H,W) (any float or int dtype; NaN/Inf cells are skipped)."""
@@ -79,6 +103,17 @@ class CellActivity:
         self.abs_diff += np.where(ok, d, 0.0).sum(axis=0, dtype=np.float64)
         self.diffs += ok.sum(axis=0)
         self._tail = seq[-2:].copy()
+        self._add_blocks(x)
+
+    def _add_blocks(self, x: np.ndarray) -> None:
+        rows = np.concatenate([self._open, x]) if len(self._open) else x
+        full = len(rows) // WANDER_BLOCK * WANDER_BLOCK
+        if full:
+            with np.errstate(invalid="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)      # a cell never finite in a block: NaN
+                means = np.nanmean(rows[:full].reshape(-1, WANDER_BLOCK, *self.grid), axis=1)
+            self._blocks.extend(means)
+        self._open = rows[full:].copy()
 
     @property
     def range(self) -> np.ndarray:
@@ -97,10 +132,37 @@ class CellActivity:
         sel = np.isfinite(n) if reference is None else (np.asarray(reference, bool) & np.isfinite(n))
         return float(np.median(n[sel])) if sel.any() else 0.0
 
+    def cell_wander(self) -> np.ndarray:
+        """(H,W) range of each cell's block means over its quiet blocks (NaN without two; module docstring)."""
+        if len(self._blocks) < 2:
+            return np.full(self.grid, np.nan)
+        b = np.stack(self._blocks).reshape(len(self._blocks), -1)
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)     # a cell never finite: NaN
+            # rest = the cell's lower half (a press only raises a cell: held for most of a clip, it still
+            # leaves the lower half to rest); quiet = up to its 10th percentile + K robust spreads of that half
+            mid = np.nanmedian(b, axis=0)
+            low = np.where(b <= mid, b, np.nan)
+            spread = 1.4826 * np.nanmedian(np.abs(low - np.nanmedian(low, axis=0)), axis=0)
+            quiet = np.where(b <= np.nanpercentile(b, 10, axis=0) + WANDER_QUIET_K * spread, b, np.nan)
+            out = np.nanmax(quiet, axis=0) - np.nanmin(quiet, axis=0)
+        return out.reshape(self.grid)
 
-def moving_threshold(noise: float, step: float | None) -> float:
+    def wander(self, reference: np.ndarray | None = None) -> float:
+        """The glove's slow rest wander: median cell wander over `reference` cells (every cell when None)."""
+        w = self.cell_wander()
+        sel = np.isfinite(w) if reference is None else (np.asarray(reference, bool) & np.isfinite(w))
+        return float(np.median(w[sel])) if sel.any() else 0.0
+
+
+def moving_threshold(noise: float, step: float | None, wander: float = 0.0) -> float:
     """Range above which a cell moves (module docstring), in raw units."""
-    return max(MOVING_K * float(noise), MOVING_MIN_STEPS * float(step or 0.0))
+    return max(MOVING_K * float(noise) + WANDER_K * float(wander), MOVING_MIN_STEPS * float(step or 0.0))
+
+
+def rule_text() -> str:
+    """The rule in words, with its constants (stderr lines, layout notes, the health legend)."""
+    return f"range > max({MOVING_K:g} x fast noise + {WANDER_K:g} x rest wander, {MOVING_MIN_STEPS:g} x step)"
 
 
 @dataclass(frozen=True)
@@ -112,6 +174,7 @@ class MovingCells:
     noise: float
     threshold: float
     frames: int
+    wander: float = 0.0
 
     def __len__(self) -> int:
         return len(self.cells)
@@ -120,24 +183,27 @@ class MovingCells:
         """The episode record's / report's entry (schemas/episode.schema.json `unmapped_moving`)."""
         return {"count": len(self), "cells": self.cells.tolist(),
                 "range": [round(float(v), 4) for v in self.ranges],
-                "noise": round(self.noise, 6), "threshold": round(self.threshold, 6), "frames": self.frames}
+                "noise": round(self.noise, 6), "wander": round(self.wander, 6), "threshold": round(self.threshold, 6), "frames": self.frames}
 
 
-def moving_cells(activity: CellActivity, mask: np.ndarray, noise: float, step: float | None) -> MovingCells:
-    """The cells of `mask` that move (range > moving_threshold(noise, step)), largest range first."""
-    thr = moving_threshold(noise, step)
+def moving_cells(activity: CellActivity, mask: np.ndarray, reference: np.ndarray | None,
+                 step: float | None) -> MovingCells:
+    """The cells of `mask` that move, measured against the `reference` cells' noise and wander (None: every
+    cell), largest range first."""
+    noise, wander = activity.noise(reference), activity.wander(reference)
+    thr = moving_threshold(noise, step, wander)
     rng = activity.range
     hit = np.asarray(mask, bool) & (rng > thr)
     cells = np.argwhere(hit)
     ranges = rng[hit]     # row-major, like argwhere
     order = np.lexsort((cells[:, 1], cells[:, 0], -ranges)) if len(cells) else np.zeros(0, np.int64)
     return MovingCells(cells=cells[order].astype(np.int64), ranges=ranges[order].astype(np.float64),
-                       noise=float(noise), threshold=thr, frames=activity.frames)
+                       noise=float(noise), threshold=thr, frames=activity.frames, wander=float(wander))
 
 
 def unmapped_moving(activity: CellActivity, layout) -> MovingCells:
     """Cells outside every block (not bend, not unused) that move, measured against the layout's live cells."""
-    return moving_cells(activity, layout.unmapped_mask, activity.noise(layout.live_mask), layout.value.get("step"))
+    return moving_cells(activity, layout.unmapped_mask, layout.live_mask, layout.value.get("step"))
 
 
 def describe_cells(cells, ranges, limit: int = 12) -> str:
@@ -150,6 +216,6 @@ def describe_cells(cells, ranges, limit: int = 12) -> str:
 def unmapped_warning(where: str, hand: str, layout_id: str, entry: dict) -> str:
     """One stderr line for an episode hand's unmapped moving cells (an episode record's entry)."""
     return (f"warning: {where}: {hand} hand (layout {layout_id}): {entry['count']} cell(s) outside every block "
-            f"move (range > {entry['threshold']:.4g} raw units = max({MOVING_K:g} x noise {entry['noise']:.4g}, "
-            f"{MOVING_MIN_STEPS:g} x step)) and are not drawn: {describe_cells(entry['cells'], entry['range'])}; "
+            f"move (range > {entry['threshold']:.4g} raw units = max({MOVING_K:g} x noise {entry['noise']:.4g} + "
+            f"{WANDER_K:g} x wander {entry.get('wander', 0.0):.4g}, {MOVING_MIN_STEPS:g} x step)) and are not drawn: {describe_cells(entry['cells'], entry['range'])}; "
             f"add them to a block, or list them in the layout's unused_cells")

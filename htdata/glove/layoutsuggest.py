@@ -1,8 +1,12 @@
 """A starting layout from recordings: blocks around the cells that move (`htdata layouts suggest`).
 
 The cells whose raw values move in any recording (htdata.glove.activity's rule,
-each recording against its own noise over the whole grid) are grouped into 4-connected components; each component's
-bounding box becomes a block (boxes that overlap are merged until none do).
+each recording against its own noise and wander over the whole grid) that lie
+in a 2x2 square of moving cells (`sensor_areas`: a cross-talk line or a lone
+noisy cell is no sensor area, and would join every block it touches) are
+grouped into 4-connected components; each component's bounding box becomes a
+block (boxes that overlap are merged until none do). The moving cells left
+out are counted in the summary and the layout's notes.
 Blocks are given DISTINCT PLACEHOLDER places, largest block first: the
 `palm` group when it fits, then the largest free place it fits (rotated by
 90 when it only fits that way). The places and orientations are guesses by
@@ -22,7 +26,7 @@ import re
 
 import numpy as np
 
-from htdata.glove.activity import CellActivity, moving_cells
+from htdata.glove.activity import CellActivity, moving_cells, rule_text
 from htdata.glove.layouts import load_canonical, parse_layout
 
 
@@ -63,6 +67,14 @@ def cell_boxes(mask: np.ndarray) -> list[tuple[int, int, int, int]]:
             if merged:
                 break
     return sorted(boxes)
+
+
+def sensor_areas(mask: np.ndarray) -> np.ndarray:
+    """The moving cells that lie in some 2x2 square of moving cells: a sensor area is a patch, while a cross-talk
+    line (one cell thick) or a lone noisy cell would join the blocks it touches into one box."""
+    from scipy import ndimage
+
+    return ndimage.binary_opening(np.asarray(mask, bool), structure=np.ones((2, 2), bool))
 
 
 def _assign_places(boxes: list[tuple[int, int, int, int]]) -> list[tuple[str, int]]:
@@ -108,19 +120,26 @@ def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, in
         raise ValueError(f"recordings have different grids: {sorted({a.grid for a in activities})}")
     step = 1.0 if integral else None
     mask = np.zeros(grid, bool)
-    noises, thresholds = [], []
+    noises, wanders, thresholds = [], [], []
     for a in activities:
-        found = moving_cells(a, np.ones(grid, bool), a.noise(), step)
+        found = moving_cells(a, np.ones(grid, bool), None, step)
         mask[found.cells[:, 0], found.cells[:, 1]] = True
         noises.append(found.noise)
+        wanders.append(found.wander)
         thresholds.append(found.threshold)
-    noise, threshold = float(np.median(noises)), float(np.median(thresholds))
+    noise, wander, threshold = float(np.median(noises)), float(np.median(wanders)), float(np.median(thresholds))
     frames = sum(a.frames for a in activities)
-    moving = int(mask.sum())
+    moving = int(mask.sum())     # every moving cell; the blocks are drawn around sensor_areas(mask)
     if not moving:
         raise ValueError(f"no cell moves in {', '.join(sources)} (noise {noise:.4g}, threshold "
                          f"{threshold:.4g} raw units over {frames} frames): press the glove while recording")
-    boxes = cell_boxes(mask)
+    core = sensor_areas(mask)
+    if not core.any():
+        raise ValueError(f"the {moving} moving cell(s) in {', '.join(sources)} form no area of at least 2x2 cells "
+                         f"(lines and single cells: cross-talk or noise, not a sensor area): press the glove "
+                         f"while recording")
+    lines = np.argwhere(mask & ~core)
+    boxes = cell_boxes(core)
     targets = _assign_places(boxes)
     top = float(max_value) if max_value is not None else max(float(a.hi[a.count > 0].max()) for a in activities)
     value = {"convention": "direct", "max": int(top) if integral and top == int(top) else top}
@@ -136,15 +155,17 @@ def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, in
     doc = {"layout_id": layout_id, "hand": hand, "grid": list(grid), "value": value, "blocks": blocks,
            "dead_cells": [], "bend_cells": [],
            "source": f"htdata layouts suggest from {', '.join(sources)} ({frames} frames)",
-           "notes": (f"STARTING POINT, edit it: {moving} moving cells (range in a recording > max(12 x its noise, "
-                     f"4 steps); median noise {noise:.4g}, threshold {threshold:.4g} raw units) grouped into {len(blocks)} block(s). Places were "
+           "notes": (f"STARTING POINT, edit it: {moving} moving cells ({rule_text()} in a recording; "
+                     f"median noise {noise:.4g}, wander {wander:.4g}, threshold {threshold:.4g} raw units) grouped into {len(blocks)} block(s); {len(lines)} moving cell(s) in "
+                     f"lines or alone (cross-talk, noisy cells) left out of the blocks. Places were "
                      f"assigned by size, not anatomy: set each block's place and orientation (rotate, flip_x, "
                      f"flip_y; docs/LAYOUTS.md), split blocks that span several places, mark sensorless cells "
                      f"inside blocks as dead_cells and non-pressure cells as bend_cells, and set value.max to "
                      f"the glove's full-scale raw value (here: the largest value seen, {top:g}).")}
     parse_layout(doc, f"suggested layout {layout_id}")   # always a loadable starting point
-    summary = {"moving": moving, "noise": noise, "threshold": threshold, "frames": frames,
+    summary = {"moving": moving, "noise": noise, "wander": wander, "threshold": threshold, "frames": frames,
+               "left_out": lines.tolist(),
                "recordings": len(activities),
                "inside_blocks_not_moving": int(sum((r1 - r0 + 1) * (c1 - c0 + 1) for r0, r1, c0, c1 in boxes)
-                                               - moving)}
+                                               - core.sum())}
     return doc, summary

@@ -18,18 +18,16 @@ taxels only) are counted per frame by `out_of_range`; what happens to them
 (clip, drop the frame, fail) is the pipeline's `[normalise] out_of_range`
 policy, applied by the ingest (htdata.ingest.episode).
 
-Noise floor: a per-taxel baseline alone leaves raw-count gloves (e.g. 10-bit
-counts ~490..1022) showing small non-zero values on every taxel while the
-hands rest: sensor noise around the baseline reads as contact everywhere.
-`noise_k` sets a per-taxel floor of k robust standard deviations
-(1.4826 * MAD) of the rest window (needs baseline = "rest_window"), and
-`noise_floor` a constant one in unit values; values up to the floor read 0.
+Noise floor: a baseline alone leaves raw-count gloves lit at rest (noise and
+wander around it read as contact). `noise_k` sets a per-taxel floor of k
+robust spreads (rest window, or the episode's rest: below), `noise_floor` a
+constant one in unit values; values up to the floor read 0.
+A layout of raw counts (direct, value.max > 1) without a [normalise.<id>]
+table gets RAW_COUNT_DEFAULTS (quietest + noise_k 3), not baseline "none".
 
-Streaming: the baseline (and floor) is fitted once on the first chunk
-(`fit_baseline`), then `apply` is called chunk by chunk with the same result
-as on the whole. `fitted()` / `restore()` carry the fitted arrays into the
-episode record and back (htdata.glove.calibration), so the stored raw rows can be
-renormalised later without the first chunk.
+Streaming: fitted once (`fit_baseline`: first chunk; `fit_episode`), then `apply` chunk by chunk, same
+as on the whole. `fitted()` / `restore()` carry the fitted arrays into the episode record and back
+(htdata.glove.calibration): stored raw rows can be renormalised later.
 
 The formula, in full (raw-count gloves, "direct": rest ~550, full scale 1023):
 
@@ -57,12 +55,16 @@ paired rows once more before normalising it, `fit_episode`):
   by the raw row's position in the episode (the line through the first / last
   two knots continued beyond the first / last centre). Stored as knots (`baseline` is then (K,H,W), `knot_rows`
   their row positions); `apply` needs the rows' positions (`rows=`).
-For these three, the noise spread of `noise_k` is measured on the quietest span.
+For these three, the spread of `noise_k` is measured on the WHOLE episode's
+resting frames (`restlevel.resting_frames`: quiet in their `drift_window_s`
+window and near the episode's low): 1.4826 x the
+median distance of a taxel's resting values from its baseline
+(`restlevel.rest_spread`), plus half a quantisation step, so rest wander
+widens the floor; the quietest second alone left 7-9% of a real glove's
+resting pixels lit (issue 27).
 
-Noise floor: with `noise_k` > 0 (or noise_floor > 0), the per-taxel floor is
-never below the glove's quantisation step (`value.step / max_value`, the
-layout's step, one count): a taxel whose counts did not move in the rest
-window (spread 0) would otherwise have floor 0 and flicker at one count.
+A floor (noise_k or noise_floor > 0) is never below the layout's step (`value.step / max_value`): a
+taxel still in its rest window (spread 0) would otherwise flicker at one count.
 """
 
 from __future__ import annotations
@@ -71,12 +73,17 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from htdata.glove.restlevel import load_taxel_calibration, nan_quiet, quiet_frames
+from htdata.glove.restlevel import (load_taxel_calibration, nan_quiet, quiet_frames, rest_spread, resting_frames,
+                                    windows)
 
 CONVENTIONS = ("inverted", "direct")
 BASELINES = ("none", "first_frame", "rest_window", "quietest", "percentile", "drift")
 # baselines fitted on the whole episode (`fit_episode`), not on its first chunk
 EPISODE_BASELINES = ("quietest", "percentile", "drift")
+# A raw-count glove (direct, value.max > 1) without a [normalise.<id>] table: "none" would read its rest level
+# (~557 of 1023 on a knit glove) as 0.55 pressure everywhere (issue 27). Measured in `make bench`, "raw-count glove".
+RAW_COUNT_DEFAULTS = {"baseline": "quietest", "noise_k": 3.0}
+NOISE_K_BASELINES = ("rest_window", *EPISODE_BASELINES)   # the baselines a noise_k floor is measured against
 
 
 @dataclass
@@ -129,7 +136,7 @@ class NormaliseConfig:
                 raise ValueError(f"{where}: {name} must be a finite number >= 0, got {value!r}")
         if self.noise_floor >= 1:
             raise ValueError(f"{where}: noise_floor must be < 1 (unit values), got {self.noise_floor!r}")
-        if self.noise_k > 0 and self.baseline not in ("rest_window", *EPISODE_BASELINES):
+        if self.noise_k > 0 and self.baseline not in NOISE_K_BASELINES:
             raise ValueError(f"{where}: noise_k needs baseline = \"rest_window\" (the floor is k x the rest "
                              f"window's spread) or one of {EPISODE_BASELINES}, got baseline = {self.baseline!r}")
         for name, lo, hi in (("rest_seconds", 0.0, None), ("baseline_percentile", 0.0, 100.0),
@@ -143,8 +150,10 @@ class NormaliseConfig:
 
     @classmethod
     def from_layout_value(cls, value: dict) -> "NormaliseConfig":
-        """Default config from a layout's `value` block ({"convention", "max"})."""
-        return cls(convention=value["convention"], max_value=float(value["max"])).validate()
+        """Default config from a layout's `value` block ({"convention", "max"}): RAW_COUNT_DEFAULTS for raw
+        counts (direct, max > 1: the values rest far above 0), else no baseline."""
+        extra = RAW_COUNT_DEFAULTS if value["convention"] == "direct" and float(value["max"]) > 1 else {}
+        return cls(convention=value["convention"], max_value=float(value["max"]), **extra).validate()
 
     def to_dict(self) -> dict:
         """The settings; the activity-baseline fields only when they differ from their defaults, so the
@@ -238,12 +247,15 @@ class Normaliser:
                                     self.min_floor).astype(np.float32)
         return self.baseline
 
+    def live_level(self, unit: np.ndarray) -> np.ndarray:
+        """(T,) mean live value of each frame (zeros without live taxels)."""
+        return np.nanmean(unit[:, self.live_mask], axis=1) if self.live_mask.any() else np.zeros(len(unit))
+
     def quietest_span(self, unit: np.ndarray, fps: float) -> slice:
         """The `rest_seconds` span (>= 2 frames) of (T,H,W) unit values whose mean live value is lowest."""
         T = unit.shape[0]
         n = min(T, max(2, int(round(self.cfg.rest_seconds * fps))))
-        level = np.nanmean(unit[:, self.live_mask], axis=1) if self.live_mask.any() else np.zeros(T)
-        level = np.where(np.isfinite(level), level, np.inf)    # a damaged frame is never "quiet"
+        level = np.nan_to_num(self.live_level(unit), nan=np.inf, neginf=np.inf)   # a damaged frame: never quiet
         run = np.convolve(level, np.ones(n), mode="valid")    # sum over each span of n frames
         start = int(np.argmin(run)) if np.isfinite(run).any() else 0
         return slice(start, start + n)
@@ -271,27 +283,21 @@ class Normaliser:
                 base = np.nanpercentile(unit, self.cfg.baseline_percentile, axis=0)
             else:
                 base, self.knot_rows = self._drift_knots(unit, rows, fps)
-            q_base = np.nanmedian(quiet, axis=0)
-            spread = np.float32(1.4826) * np.nanmedian(np.abs(quiet - q_base), axis=0)
         self.baseline = np.clip(np.nan_to_num(base, nan=0.0), 0.0, 1.0).astype(np.float32)
         if self.cfg.noise_k > 0:
-            self.floor = np.maximum(np.float32(self.cfg.noise_floor)
-                                    + np.float32(self.cfg.noise_k) * np.nan_to_num(spread, nan=0.0),
+            rest = np.flatnonzero(resting_frames(self.live_level(unit), round(self.cfg.drift_window_s * fps)))
+            at = self.baseline_at(rows[rest]) if self.cfg.baseline == "drift" else self.baseline
+            # + half a step: counts come in whole steps, so the median distance is only known to a step
+            spread = np.float32(self.cfg.noise_k) * np.nan_to_num(rest_spread(unit[rest] - at), nan=0.0)
+            self.floor = np.maximum(np.float32(self.cfg.noise_floor) + spread + self.min_floor / 2,
                                     self.min_floor).astype(np.float32)
         return self.baseline
 
     def _drift_knots(self, unit: np.ndarray, rows: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
         """((K,H,W) rest level per window of drift_window_s: median of its quiet frames, (K,) centre rows)."""
-        T = unit.shape[0]
-        w = max(2, int(round(self.cfg.drift_window_s * fps)))
-        level = np.nanmean(unit[:, self.live_mask], axis=1) if self.live_mask.any() else np.zeros(T)
-        knots, centres = [], []
-        for a in range(0, T, w):
-            b = min(T, a + w)
-            if b - a < max(2, w // 2) and knots:   # a short tail joins the previous window
-                a = max(0, b - w)
-            seg = level[a:b]
-            quiet = np.flatnonzero(quiet_frames(seg)) + a
+        level, knots, centres = self.live_level(unit), [], []
+        for a, b in windows(unit.shape[0], round(self.cfg.drift_window_s * fps)):
+            quiet = np.flatnonzero(quiet_frames(level[a:b])) + a
             knots.append(np.nanmedian(unit[quiet], axis=0))
             centres.append(float(np.mean(rows[a:b])))
         return np.stack(knots), np.asarray(centres, np.float32)

@@ -22,22 +22,33 @@ gets at most one class, in this order:
 - noisy: its high-frequency level (75th percentile of |second difference|)
   above NOISY_MIN_STEPS steps and NOISY_RATIO x its neighbours' median;
 - drifting: its rest level moves by more than DRIFT_SHARE of full scale
-  between the first and last quarter of the episode (median over the
-  quarter's frames among the episode's resting ones, `htdata.glove.restlevel.quiet_frames`; needs
-  DRIFT_MIN_FRAMES frames and resting frames in both quarters);
+  between the first and last quarter of the episode. The rest level of a
+  quarter is read from quiet frames only: the quarter's resting frames
+  (`htdata.glove.restlevel.quiet_frames`; a quarter whose resting mean sits
+  DRIFT_GRIP_LEVEL above the episode's low is gripped throughout and leaves
+  drift untold), and of those the taxel's own lower values (its
+  DRIFT_REST_PCT percentile there), so a grip held or changed inside a
+  quarter is not taken for drift. Only assessed on episodes of at least
+  DRIFT_MIN_FRAMES frames (60 s at 30 fps): over a 5-30 s manipulation clip
+  a rest level moving by 10 counts is a grip change or slow wander, not a
+  sensor drifting (issue 27). Shorter episodes say so ("drift_assessed":
+  false, and the health map's legend);
 - crosstalk: lights up (rise > CROSSTALK_RISE of full scale) along a raw
   row / column with nothing pressed beside the line (health._crosstalk).
 
 Not faults, reported beside them: "unexercised" = never rose and never
-exercised (an idle finger); "unmapped" = cells outside every block (and not
-dead or bend cells) whose rise reaches DEAD_RISE: a live cell the layout
-does not place: p99 - p5 >= UNMAPPED_RISE ("unmapped_moving", with their raw-grid cells).
+exercised (an idle finger); "unmapped" = the layout's unmapped cells
+(outside every block, not bend cells, not `unused_cells`) that MOVE by the
+one moving-cell rule of htdata/glove/activity.py (the rule ingest and
+`htdata layouts check --against` use): a live cell the layout does not place
+("unmapped_moving", with their raw-grid cells).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from htdata.glove.activity import CellActivity, moving_cells, rule_text
 from htdata.glove.health import CLASSES, MIN_FRAMES, TaxelGrid, _crosstalk, _exercised, _neighbour_median
 from htdata.glove.restlevel import nanpercentile_columns, quiet_frames
 from htdata.glove import health
@@ -50,19 +61,21 @@ PRESSED_RISE = 0.05          # a neighbour "pressed" for the dead test (51 count
 NOISY_MIN_STEPS = 16          # 75th pct of |2nd difference|: ~1.2 x 2.45 x std, so a taxel of std > ~5 steps
 NOISY_RATIO = 4.0
 DRIFT_SHARE = 0.01           # rest level moving more than this (10 counts of 1023) over the episode
-DRIFT_MIN_FRAMES = 300       # 10 s at 30 fps
+DRIFT_MIN_FRAMES = 1800      # 60 s at 30 fps: shorter clips cannot tell drift from wander and grip changes
+DRIFT_GRIP_LEVEL = 0.01      # a quarter whose quiet mean sits this far above the episode's low is gripped
+DRIFT_REST_PCT = 25          # a taxel's rest level in a quarter: this percentile of its quiet frames
 CROSSTALK_RISE = 0.02
-UNMAPPED_RISE = 0.02         # an unmapped cell "moves" when p99 - p5 reaches this (20 counts of 1023)
 DEFAULT_STEP_SHARE = 1e-3    # step when the layout gives none
 
 THRESHOLDS = {"saturated": f"rest >= {SATURATED_REST:.0%} of full scale",
               "stuck": f"constant (<= {STUCK_STEPS} step) and > {STUCK_SHARE:.0%} of full scale off the glove's rest",
               "dead": f"never rises {DEAD_RISE:.0%} of full scale while its neighbours rise {PRESSED_RISE:.0%}",
               "noisy": f"high-frequency level > {NOISY_MIN_STEPS} steps and {NOISY_RATIO:g}x its neighbours'",
-              "drifting": f"rest level moves > {DRIFT_SHARE:.0%} of full scale (first vs last quarter)",
+              "drifting": f"rest level (quiet frames) moves > {DRIFT_SHARE:.0%} of full scale, first vs last quarter "
+                          f"of clips >= {DRIFT_MIN_FRAMES} frames",
               "crosstalk": f"a raw row/column rises > {CROSSTALK_RISE:.0%} of full scale with nothing pressed beside it",
               "unexercised": f"never rose {DEAD_RISE:.0%} of full scale, neighbours never pressed",
-              "unmapped": f"outside every block, p99 - p5 >= {UNMAPPED_RISE:.0%} of full scale"}
+              "unmapped": f"outside every block and unused_cells, {rule_text()}"}
 
 
 def pressure_units(raw: np.ndarray, value: dict) -> np.ndarray:
@@ -79,13 +92,16 @@ def _drifting(u: np.ndarray) -> tuple[np.ndarray, bool]:
     if T < DRIFT_MIN_FRAMES:
         return np.zeros(u.shape[1], bool), False
     q = T // 4
-    rest = quiet_frames(np.nanmean(u, axis=1))     # resting frames of the whole episode (a grip is not rest)
+    level = np.nanmean(u, axis=1)
+    floor = np.nanpercentile(level, 5)
     ends = []
     for part in (slice(0, q), slice(T - q, T)):
-        quiet = np.flatnonzero(rest[part])
-        if quiet.size < 5:
+        # the quarter's own resting frames (a whole-episode choice would drop a quarter the drift has raised),
+        # and only when they are at rest: a quarter gripped throughout has no rest level to compare
+        quiet = np.flatnonzero(quiet_frames(level[part]))
+        if quiet.size < 5 or np.nanmedian(level[part][quiet]) > floor + DRIFT_GRIP_LEVEL:
             return np.zeros(u.shape[1], bool), False
-        ends.append(np.nanmedian(u[part][quiet], axis=0))
+        ends.append(nanpercentile_columns(u[part][quiet], DRIFT_REST_PCT))   # a taxel pressed there: its lows
     return np.abs(ends[1] - ends[0]) > DRIFT_SHARE, True
 
 
@@ -133,7 +149,7 @@ def classify_raw(raw: np.ndarray, layout, taxels: TaxelGrid | None = None) -> di
         hit = np.flatnonzero(label == k)
         out["counts"][name] = int(hit.size)
         out["cells"][name] = taxels.cells[hit].tolist()
-    _unmapped(u_all, layout, out)
+    _unmapped(grid, layout, out)
     return out
 
 
@@ -144,21 +160,14 @@ def _exercised_raw(rise: np.ndarray, taxels: TaxelGrid, ignore: np.ndarray) -> n
     return _exercised(rise * (health.PRESSED_LEVEL / PRESSED_RISE), taxels, ignore)
 
 
-def _unmapped(u_all: np.ndarray, layout, out: dict) -> None:
-    """Cells outside every block (not bend cells): how many, and which move (p99 - p5 >= UNMAPPED_RISE)."""
-    H, W = u_all.shape[1:]
-    inside = np.zeros((H, W), bool)
-    for b in layout.blocks:
-        inside[b.rows[0]:b.rows[1] + 1, b.cols[0]:b.cols[1] + 1] = True
-    for r, c in np.asarray(layout.bend_cells, np.int64).reshape(-1, 2):
-        inside[r, c] = True
-    cells = np.argwhere(~inside)
-    out["unmapped_cells"] = int(len(cells))
-    if not len(cells):
+def _unmapped(raw: np.ndarray, layout, out: dict) -> None:
+    """The layout's unmapped cells (not bend, not unused): how many, and which move by the one moving-cell rule."""
+    mask = np.asarray(layout.unmapped_mask, bool)
+    out["unmapped_cells"] = int(mask.sum())
+    if not mask.any():
         return
-    v = u_all[:, cells[:, 0], cells[:, 1]]
-    with np.errstate(invalid="ignore"):
-        rise = nanpercentile_columns(v, 99) - nanpercentile_columns(v, 5)
-    moving = np.nan_to_num(rise, nan=0.0) >= UNMAPPED_RISE
-    out["unmapped_moving"] = int(moving.sum())
-    out["unmapped_moving_cells"] = cells[moving].tolist()
+    activity = CellActivity(raw.shape[1:])
+    activity.add(raw)
+    found = moving_cells(activity, mask, layout.live_mask, layout.value.get("step"))
+    out["unmapped_moving"] = len(found)
+    out["unmapped_moving_cells"] = sorted(found.cells.tolist())

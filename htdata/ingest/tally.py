@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from htdata.glove.activity import CellActivity, unmapped_moving
+from htdata.glove.restlevel import rest_level_warning
 from htdata.glove.calibration import calibration_id, fit_record
 from htdata.glove.health import record_entry
 from htdata.glove.layouts import Layout
@@ -112,6 +113,12 @@ class EpisodeTally:
     def finish(self, streams) -> None:
         ref = self.ref
         self.notes = list(streams.notes) + list(self.sync.report.get("warnings", [])) + self._out_of_range_notes()
+        for h in self.hands:     # a raw-count glove's rest read as pressure (baseline "none"): say so
+            if h in self.activity and h in self.normalisers and self.activity[h].frames:
+                a = self.activity[h]
+                line = rest_level_warning(h, self.layouts[h], self.normalisers[h].cfg, a.lo, a.hi)
+                if line:
+                    self.notes.append(line)
         for h, n in sorted(self.raw_rows_dropped.items()):
             self.notes.append(f"{h} hand: {n} glove rows more than {self.raw_span_ms[h]:g} ms from every video "
                               f"frame (after the last, before the first, or in a gap) dropped: no sample stores them")

@@ -117,7 +117,8 @@ def render_health_map(per_episode: list[dict], gloves: dict[str, Glove], pairs: 
     if not pairs:
         raise ValueError("no glove with tactile frames: nothing to draw")
     bases = {b for lid, hand in pairs for h in _healths(per_episode, lid, hand) for b in [h.get("basis", "maps")]}
-    legend = _legend(bases)
+    healths = [h for lid, hand in pairs for h in _healths(per_episode, lid, hand) if h.get("basis") == "raw"]
+    legend = _legend(bases, drift_told=any(h.get("drift_assessed") for h in healths) or not healths)
     width = PAD + len(pairs) * 2 * (CANVAS + PAD)
     img = np.empty((TITLE_H + CANVAS + PAD + LEGEND_LINE * len(legend) + PAD, max(width, 720), 3), np.uint8)
     img[:] = BACKGROUND
@@ -139,14 +140,19 @@ def render_health_map(per_episode: list[dict], gloves: dict[str, Glove], pairs: 
     return img
 
 
-def _legend(bases: set) -> list[tuple[tuple, str]]:
-    """(colour, "class: threshold") lines; thresholds in glove units when the health came from raw rows."""
+def _legend(bases: set, drift_told: bool = True) -> list[tuple[tuple, str]]:
+    """(colour, "class: threshold") lines; thresholds in glove units when the health came from raw rows.
+    `drift_told` False: no raw-row episode was long enough to tell drift, and the drifting line says so."""
 
     raw = "raw" in bases
     table = rawhealth.THRESHOLDS if raw else health.THRESHOLDS
     unit = "from the raw rows, shares of full scale" if raw else "from normalised values"
     lines = [(HEALTHY, f"healthy: none of the below ({unit}{'; some gloves from maps' if len(bases) > 1 else ''})")]
     lines += [(CLASS_COLOURS[c], f"{c}: {table[c]}") for c in CLASSES]
+    if raw and not drift_told:
+        k = 1 + CLASSES.index("drifting")
+        lines[k] = (lines[k][0], f"drifting: NOT ASSESSED, every clip is shorter than "
+                                 f"{rawhealth.DRIFT_MIN_FRAMES} frames (too short to tell drift from wander)")
     lines += [(UNEXERCISED, f"unexercised (not a fault): {table['unexercised']}")]
     lines += [(HAND_GREY, "no sensor: canonical hand outside the glove's coverage")]
     if raw:

@@ -9,12 +9,18 @@ whose every decoded map is all zero. The accumulator also collects the
 contact-area and pressure histograms of the report's stats.
 `check_taxel_health` warns about episode hands with many faulty taxels
 (htdata/glove/health.py), from the stats cache or, with --deep, computed.
+`check_rest_level` FAILS ("rest_level") an episode hand of raw counts
+(direct, max_value > 1) calibrated with baseline "none" whose covered pixels
+never read below REST_FAIL_LEVEL: its rest level (~557 of 1023 on a knit
+glove) is read as pressure in every frame; the message names the setting.
 
 Accumulator: {hand_key(episode, hand): {"frames", "region_means", "max",
 "saturated", "covered"}, "_contact_area": [fractions], "_pressure_hist": counts}.
 """
 
 from __future__ import annotations
+
+import warnings
 
 import numpy as np
 
@@ -28,6 +34,7 @@ CONTACT_THRESHOLD = 0.02      # a pixel above this counts towards contact area
 SATURATION_LEVEL = 0.999      # half precision: 1.0 is exact, 0.999 leaves round-off room
 SATURATED_WARN_FRACTION = 0.05
 HIST_BINS = 20
+REST_FAIL_LEVEL = 0.1         # with baseline "none": the quietest frame's mean covered value at or above this
 
 
 def hand_key(episode_id: str, hand: str) -> str:
@@ -101,6 +108,30 @@ def check_sensors(sensor: dict, check: Check, region_names: dict[int, str] | Non
                        **where, found=round(frac, 4))
         if len(acc["region_means"]) >= 2:
             _check_regions(np.stack(acc["region_means"]), eid, hand, where, check, region_names or {})
+
+
+def check_rest_level(sensor: dict, episodes: list[dict], calibrations: dict, check: Check) -> None:
+    """Fail raw-count episode hands with baseline "none" that read >= REST_FAIL_LEVEL in their quietest frame."""
+    by_id = {ep["episode_id"]: ep for ep in episodes}
+    for name in sorted(k for k in sensor if not k.startswith("_")):
+        eid, hand = name.rsplit(":", 1)
+        cal = calibrations.get((by_id.get(eid, {}).get("calibration") or {}).get(hand, ""), {})
+        raw_counts = cal.get("convention") == "direct" and float(cal.get("max_value", 1.0)) > 1.0
+        if not raw_counts or cal.get("baseline") != "none" or cal.get("taxel_calibration_sha256") \
+                or not sensor[name]["region_means"]:
+            continue
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)      # a frame with no region: skipped
+            rest = float(np.nanmin(np.nanmean(np.stack(sensor[name]["region_means"])[:, 1:], axis=1)))
+        if rest >= REST_FAIL_LEVEL:
+            lid, top = cal.get("layout", "?"), float(cal.get("max_value", 1.0))
+            raw = rest * top / float(cal.get("scale", 1.0))
+            raw = top - raw if cal.get("convention") == "inverted" else raw
+            check.fail("rest_level", f"episode {eid}: {hand} hand (layout {lid}): rest level {raw:.4g} of {top:g}: "
+                       f"covered pixels read >= {rest:.2f} even in the quietest frame with baseline = \"none\" "
+                       f"(the rest is read as pressure); set a baseline "
+                       f"([normalise.{lid}] baseline = \"quietest\", noise_k = 3) and renormalise",
+                       episode=eid, hand=hand, found=round(rest, 4))
 
 
 def check_taxel_health(root, version: int | None, check: Check, compute: bool = False) -> None:

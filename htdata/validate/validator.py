@@ -12,7 +12,7 @@ from htdata.validate.content import decode_mask, layout_maps
 from htdata.validate.report import CHECKS, Check
 from htdata.validate.served import RenderedCheck, check_served_maps, served_rows
 from htdata.validate.geometry import coverage_geometries
-from htdata.validate.sensors import check_sensors, check_taxel_health, hand_key, merge_sensor
+from htdata.validate.sensors import check_rest_level, check_sensors, check_taxel_health, hand_key, merge_sensor
 from htdata.validate.shards import run_jobs, shard_jobs
 from htdata.validate.splits import check_splits
 from htdata.validate.stats import dataset_stats
@@ -98,6 +98,7 @@ def _check_dataset(ds: Loaded, cfg: ValidateConfig, checks: dict[str, Check], pa
                                                                 sensor))
     check_time(ds, ts, checks["time"])
     check_sensors(sensor, checks["sensors"], _region_names(ds))
+    check_rest_level(sensor, ds.episodes, ds.manifest.get("calibrations", {}), checks["sensors"])
     check_taxel_health(ds.root, ds.manifest.get("version"), checks["sensors"], compute=cfg.deep)
     if cfg.split is not None:
         check_splits(ds, cfg.split, hashes, checks["splits"])
