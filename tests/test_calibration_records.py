@@ -141,3 +141,25 @@ def test_deep_validate_rederives_the_taxels_when_the_fit_digest_is_resealed_too(
     eid = htdata.open(copy).episodes[0]["episode_id"]
     assert list(failed) == ["taxels_sha256"] and len(failed["taxels_sha256"]) == 1
     assert eid in failed["taxels_sha256"][0] and "left" in failed["taxels_sha256"][0]
+
+
+def test_trim_and_renormalise_keep_the_taxel_digests_true(raw_dataset, tmp_path):
+    """A trimmed episode's digest covers its kept frames; a renormalised one, its new calibration."""
+    from htdata.curate.edit import trim_episode
+
+    copy = shutil.copytree(raw_dataset, tmp_path / "ds")
+    eid = htdata.open(copy).episodes[0]["episode_id"]
+    before = htdata.open(copy).episodes[0]["taxels_sha256"]
+    trim_episode(copy, eid, "2:6", dry_run=False, command="trim")
+    after = htdata.open(copy)
+    assert after.episode_range(eid)[1] == 4
+    assert set(after.episodes[after.episode_position(eid)]["taxels_sha256"]) == {"left", "right"}
+    assert after.episodes[after.episode_position(eid)]["taxels_sha256"] != before
+    report = validate_dataset(copy, deep=True)
+    assert report["ok"], _failures(report)
+    assert report["checks"]["content"]["checked"]["taxel_digests"] == 4
+    assert cli(["renormalise", str(copy), "--pipeline", "touchanything",
+                "--set", f"normalise.{LEFT}.baseline=rest_window", "--set", f"normalise.{LEFT}.rest_frames=2"]) == 0
+    report = validate_dataset(copy, deep=True)
+    assert report["ok"], _failures(report)
+    assert report["checks"]["content"]["checked"]["taxel_digests"] == 4

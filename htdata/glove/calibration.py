@@ -35,6 +35,7 @@ import json
 
 import numpy as np
 
+from htdata.errors import RecordMismatch
 from htdata.glove.normalise import NormaliseConfig, Normaliser
 
 
@@ -184,3 +185,11 @@ def record_errors(calibrations: dict, episodes: list[dict], manifest_where: str,
                               f"{got.get(hand)} differs from the recorded {recorded.get(hand)}: the fitted arrays "
                               f"were changed after ingest")
     return errors
+
+
+def refuse_mismatched(calibrations: dict, episodes: list[dict], manifest_where: str, episodes_where: str) -> None:
+    """RecordMismatch naming the first record `record_errors` finds (a reader opening a version)."""
+    errors = record_errors(calibrations, episodes, manifest_where, episodes_where)
+    if errors:
+        more = f" (+{len(errors) - 1} more: htdata validate lists them)" if len(errors) > 1 else ""
+        raise RecordMismatch(errors[0] + more)

@@ -30,19 +30,17 @@ from typing import NamedTuple
 
 import numpy as np
 
-from htdata.errors import HtdataError, RecordMismatch
-from htdata.glove.calibration import record_errors
+from htdata.errors import HtdataError
 from htdata.store import storage
 from htdata.format.codec import decode_png_u8
 from htdata.format.mapstorage import maps_stored
 from htdata.format.table import (HANDS, INDEX_DTYPE, JSON_MEMBER, LAYOUTS_DIR, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
                                  SPLITS_DIR, decode_sample, raw_member, tactile_member)
 from htdata.store.manifest import load_episodes, load_index, load_manifest
-from htdata.store.versions import manifest_path
 from htdata.format.shardio import BLOCK, describe_header, header_matches, padded, sample_key
 from htdata.store.remote import load_cached_index
 from htdata.store.gcrecord import collected_error
-from htdata.read.rawstream import RawMapRenderer
+from htdata.read.rawstream import RawMapRenderer, check_records
 
 class SplitRejected(HtdataError, ValueError):
     """A split whose file no longer matches its version's manifest, or whose parts overlap."""
@@ -88,7 +86,7 @@ class DatasetReader:
         if len(self.episodes) != self.manifest["counts"]["episodes"]:
             raise ValueError(f"{self.root}: episodes.jsonl has {len(self.episodes)} records, "
                              f"manifest counts {self.manifest['counts']['episodes']}")
-        self._check_records()
+        check_records(self)     # calibration ids and fit digests recomputed (htdata.read.rawstream)
         self._episode_pos = {ep["episode_id"]: i for i, ep in enumerate(self.episodes)}
         self._episode_ids = [ep["episode_id"] for ep in self.episodes]
         self._shard_names = [s["name"] for s in self.manifest["shards"]]
@@ -99,16 +97,6 @@ class DatasetReader:
         self._maps: dict[str, np.ndarray] = {}
         # a version that does not store its maps: decoded samples get them rendered from the raw rows
         self._renderer = None if maps_stored(self.manifest) else RawMapRenderer(self)
-
-    def _check_records(self) -> None:
-        """Refuse a version whose calibration ids or fit digests do not match their content (served maps
-        would follow an edited record): RecordMismatch naming the file and the first such record."""
-        errors = record_errors(self.manifest.get("calibrations", {}), self.episodes,
-                               str(manifest_path(self.root, self.version)),
-                               storage.join(self.root, self.manifest.get("episodes_file", "episodes.jsonl")))
-        if errors:
-            more = f" (+{len(errors) - 1} more; htdata validate lists them)" if len(errors) > 1 else ""
-            raise RecordMismatch(errors[0] + more)
 
     @contextmanager
     def _collected_guard(self, where: str | None = None):
