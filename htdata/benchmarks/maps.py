@@ -18,9 +18,11 @@ Imports inside functions: torch (optional) is loaded by `htdata.read.torchdata` 
 
 from __future__ import annotations
 
+import os
 import statistics
 import tarfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +33,8 @@ from htdata.benchmarks.tables import fmt, table
 from htdata.format.table import HANDS, JSON_MEMBER, SHARDS_DIR, tactile_member
 from htdata.ingest.episode import EpisodeStream
 from htdata.format.mapstorage import resolve_map_storage
+from htdata.glove.layouts import LAYOUTS_ENV
+from htdata.sample.rawglove import write_rawglove
 from htdata.pipeline import TactileConfig
 from htdata.read.reader import DatasetReader
 
@@ -175,13 +179,52 @@ def pick_default(rows: list[dict]) -> tuple[str, str]:
     return "stored", why
 
 
+@contextmanager
+def _layouts_on_path(folder: Path):
+    """$HTDATA_LAYOUTS = `folder` for the block (the raw-count glove's layouts ship beside its recordings)."""
+    old = os.environ.get(LAYOUTS_ENV)
+    os.environ[LAYOUTS_ENV] = str(folder)
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop(LAYOUTS_ENV, None)
+        else:
+            os.environ[LAYOUTS_ENV] = old
+
+
+def glove_only_row(work: Path, reps: int) -> dict:
+    """A glove-only recording (the raw-count glove: no video, so nothing but tactile to decode) ingested with
+    maps stored and with maps = "raw", 1 worker, alternating `reps` times (medians): the EXR encode's
+    whole cost, with no RGB decode to hide it. Bytes per frame for both."""
+    src = work / "rawglove_src"
+    if not (src / "truth.json").exists():
+        write_rawglove(src)
+    runs: dict[str, list[dict]] = {"stored": [], "raw": []}
+    with _layouts_on_path(src / "layouts"):
+        for _ in range(max(1, reps)):
+            for choice in runs:
+                runs[choice].append(ingest_run([("native", src)], work / f"glove_only_{choice}", 1,
+                                               (f"tactile.maps={choice}",)))
+        sizes = {c: bytes_per_frame(work / f"glove_only_{c}") for c in runs}
+    med = {c: {k: statistics.median(r[k] for r in rs) for k in ("frames_per_s", "worker_s")} for c, rs in runs.items()}
+    return {"recording": "raw-count glove, no video (htdata/sample/rawglove.py)", "frames": runs["raw"][0]["frames"],
+            "reps": max(1, reps), "frames_per_s_stored": med["stored"]["frames_per_s"],
+            "frames_per_s_raw": med["raw"]["frames_per_s"],
+            "speed_ratio": med["stored"]["frames_per_s"] / med["raw"]["frames_per_s"],
+            "worker_s_stored": med["stored"]["worker_s"], "worker_s_raw": med["raw"]["worker_s"],
+            "encode_s_stored": statistics.median(r["stages_s"]["encode"] for r in runs["stored"]),
+            "rasterise_s_stored": statistics.median(r["stages_s"]["rasterise"] for r in runs["stored"]),
+            "bytes_per_frame_stored": sizes["stored"]["total"], "bytes_per_frame_raw": sizes["raw"]["total"]}
+
+
 def maps_rows(corpus: Path, work: Path, adapters: tuple[str, ...], quick: bool) -> dict:
     rows = [adapter_row(name, corpus / name, work, 60 if quick else 400, 1 if quick else 3) for name in adapters]
     default, why = pick_default(rows)
     t = TactileConfig()   # what "auto" (the default) resolves to for a new dataset of the shipped pipelines
     return {"rows": rows, "rule": RULE, "default": default, "why": why, "pipeline_setting": t.maps,
             "pipeline_default": resolve_map_storage(t.maps, None),
-            "frames_at_scale": FRAMES_AT_SCALE}
+            "frames_at_scale": FRAMES_AT_SCALE, "glove_only": glove_only_row(work, 1 if quick else 3)}
 
 
 def maps_markdown(d: dict) -> list[str]:
@@ -201,6 +244,17 @@ def maps_markdown(d: dict) -> list[str]:
                                ("max_abs_difference", "max |rendered - ingest's map|"),
                                ("stored_over_rendered_difference", "max |stored - rendered|"),
                                ("stored_pixel_type", "stored EXR pixels")])
+    if "glove_only" in d:
+        lines += ["Glove-only recording, maps stored vs maps = \"raw\" (1 worker, alternating runs, medians; "
+                  "target: stored >= 0.8x the raw speed):", ""]
+        lines += table([d["glove_only"]], [("recording", "recording"), ("frames", "frames"),
+                                           ("frames_per_s_stored", "frames/s, stored"),
+                                           ("frames_per_s_raw", "frames/s, raw"), ("speed_ratio", "stored / raw"),
+                                           ("worker_s_stored", "in-worker s, stored"), ("worker_s_raw", "in-worker s, raw"),
+                                           ("encode_s_stored", "encode wait s, stored"),
+                                           ("rasterise_s_stored", "rasterise s, stored"),
+                                           ("bytes_per_frame_stored", "B/frame, stored"),
+                                           ("bytes_per_frame_raw", "B/frame, raw")])
     same = "equals" if d["default"] == d["pipeline_default"] else "DIFFERS FROM"
     lines += ["Exact = every map rendered from raw rows equals, bit for bit, the float32 map the ingest computes "
               "before any codec (the same episodes through EpisodeStream); max |stored - rendered| is the stored "
