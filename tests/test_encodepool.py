@@ -27,7 +27,7 @@ def _sample(i: int) -> dict:
             "tactile": {"right": m, **({"left": m[::-1].copy()} if i % 3 else {})}, "bend": {}, "raw": {}}
 
 
-@pytest.mark.parametrize("threads, depth", [(1, 1), (2, 3), (4, 16)])
+@pytest.mark.parametrize("threads, depth", [(0, 1), (1, 1), (2, 3), (4, 16)])
 def test_the_pool_gives_the_inline_bytes_in_frame_order(threads, depth):
     settings = CodecSettings()
     samples = [_sample(i) for i in range(25)]
@@ -54,16 +54,12 @@ def test_a_failed_encode_names_its_frame():
 def test_an_ingest_is_byte_identical_to_one_encoded_inline(tmp_path, monkeypatch):
     sources = [("native", make_native(tmp_path / "nat")), ("touchanything", make_touchanything(tmp_path / "ta"))]
     args = [a for name, src in sources for a in ("--pipeline", f"{name}={src}")]
+    assert encodepool.THREADS >= 1
     assert ingest_cli(*args, tmp_path / "threads") == 0
 
-    class Inline(EncodePool):      # encode on the calling thread, one at a time
-        def put(self, key, sample, source_frame):
-            return [(key, encode_sample(sample, self.settings, key))]
-
-    monkeypatch.setattr("htdata.ingest.unit.EncodePool", Inline)
+    monkeypatch.setattr(encodepool, "THREADS", 0)      # inline, on the calling thread ($HTDATA_ENCODE_THREADS=0)
     assert ingest_cli(*args, tmp_path / "inline") == 0
     a, b = (sorted((tmp_path / d / "shards").glob("*.tar")) for d in ("threads", "inline"))
     assert [p.name for p in a] == [p.name for p in b] and a
     assert all(x.read_bytes() == y.read_bytes() for x, y in zip(a, b))
-    assert encodepool.THREADS >= 2
     shutil.rmtree(tmp_path / "inline")

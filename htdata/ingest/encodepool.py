@@ -15,22 +15,26 @@ it (frame_errors), as the inline encode did.
 
 from __future__ import annotations
 
+import os
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 
 from htdata.format.table import CodecSettings, encode_sample
 from htdata.ingest.episode import frame_errors
 
-THREADS = 2
+# $HTDATA_ENCODE_THREADS: 0 encodes inline on the calling thread (profiling; the bench's before/after)
+THREADS = int(os.environ.get("HTDATA_ENCODE_THREADS", "2"))
 DEPTH = 8
 
 
 class EncodePool:
     """`with EncodePool(settings, ref) as pool:` then `pool.put(...)` per frame and `pool.drain()` at the end."""
 
-    def __init__(self, settings: CodecSettings, ref, threads: int = THREADS, depth: int = DEPTH):
+    def __init__(self, settings: CodecSettings, ref, threads: int | None = None, depth: int = DEPTH):
+        threads = THREADS if threads is None else threads
         self.settings, self.ref, self.depth = settings, ref, max(1, depth)
-        self._pool = ThreadPoolExecutor(max_workers=max(1, threads), thread_name_prefix="htdata-encode")
+        self._pool = (ThreadPoolExecutor(max_workers=threads, thread_name_prefix="htdata-encode")
+                      if threads > 0 else None)
         self._pending: deque[tuple[str, int, Future]] = deque()
 
     def __enter__(self) -> "EncodePool":
@@ -40,10 +44,14 @@ class EncodePool:
         for _, _, fut in self._pending:
             fut.cancel()
         self._pending.clear()
-        self._pool.shutdown(wait=True)
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
 
     def put(self, key: str, sample: dict, source_frame: int) -> list[tuple[str, dict[str, bytes]]]:
         """Queue one frame's sample; return the (key, members) done, oldest first, once the queue is full."""
+        if self._pool is None:
+            with frame_errors(self.ref, source_frame):
+                return [(key, encode_sample(sample, self.settings, key))]
         self._pending.append((key, source_frame, self._pool.submit(encode_sample, sample, self.settings, key)))
         done = []
         while len(self._pending) > self.depth:
