@@ -55,3 +55,6 @@ def test_the_pick_is_exact_then_within_the_byte_budget_then_fastest_then_smalles
     assert pick_layout(rows, [1 / 255])[0]["layout"] == "half_fast"
     assert pick_layout(rows, [None])[0]["layout"] == "float_zip_window"     # no stated step: exact only
     assert pick_layout([rows[0]], [None]) == (None, "no variant is exact for every glove")
+    # a half row whose sample maps happened to round exactly is still half: not exact for a 1/3072 glove
+    lucky = _row("half_lucky", "half", 0.1, 1000, 0.0)
+    assert pick_layout(rows + [lucky], [1 / 3072])[0]["layout"] == "float_zip_window"
