@@ -122,7 +122,7 @@ class RgbConfig:
 
 
 # [tactile] maps when a pipeline does not say: resolved per ingest (htdata/format/mapstorage.py
-# resolve_map_storage); `make bench` section "maps" states the rule its new-dataset choice follows
+# resolve_map_storage): the parent's choice on append, "stored" for a new dataset
 DEFAULT_MAPS = "auto"
 
 
@@ -135,7 +135,7 @@ class TactileConfig:
     chunk_frames: int = 64   # tactile frames read/normalised/rasterised per step (memory bound)
     # "stored": tactile_<hand>.exr members; "raw": none, readers render maps from the raw rows
     # (htdata/format/mapstorage.py): only exact, so only with keep_raw and nearest raster mode;
-    # "auto": the parent version's choice on append, else "raw" where exact, else "stored"
+    # "auto": the parent version's choice on append, else "stored" (raw is an explicit opt-in)
     maps: str = DEFAULT_MAPS
 
     def validate(self, where: str) -> "TactileConfig":

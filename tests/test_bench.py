@@ -123,6 +123,11 @@ def test_quick_bench_content_is_consistent(quick_run):
         assert s["frames"] > 0 and s["bound_frames_per_s"] > 0 and len(s["overhead_pct_reps"]) == s["reps"] == 1
         assert s["overhead_pct"] == pytest.approx(100 * (1 - s["ratio_to_bound"]))
     assert "revision" not in r["ingest"]            # quick runs skip the revision rows
+    # the default stores maps; the comparison row is the maps = "raw" opt-in
+    assert {s["adapter"] for s in r["ingest"]["maps_raw"]["summary"]} == {"opentouch", "touchanything", "native"}
+    glove = r["maps"]["glove_only"]
+    assert glove["frames"] > 0 and glove["bytes_per_frame_stored"] > glove["bytes_per_frame_raw"] > 0
+    assert glove["speed_ratio"] == pytest.approx(glove["frames_per_s_stored"] / glove["frames_per_s_raw"])
     scaling = r["scaling"]
     assert {s["adapter"] for s in scaling["summary"]} == {"opentouch", "touchanything", "native"}
     for s in scaling["summary"]:
@@ -160,6 +165,16 @@ def test_defaults_are_computed_from_the_measured_tables(quick_run):
              and all(row["max_error"] < step / 2 for step in steps.values())}
     smallest = min((row for row in c["rows"] if row["codec"] in keeps), key=lambda row: row["bytes_per_frame"])
     assert c["default"] == smallest["codec"] == c["code_default"], c["reason"]
+    # the stored-map layout: exact for every glove, within the byte budget, fastest (with the tie), smallest
+    from htdata.benchmarks.maplayouts import BYTES_BUDGET, TIE
+    from htdata.glove.codecrule import ANALYTIC_MAX_ERROR
+    exact = [row for row in c["layouts"]
+             if all(max(row["max_error"], ANALYTIC_MAX_ERROR[row["pixel"]]) < step / 2 for step in steps.values())]
+    cheap = [row for row in exact if row["bytes_per_map"] <= BYTES_BUDGET * min(x["bytes_per_map"] for x in exact)]
+    fast = [row for row in cheap if row["encode_ms"] <= (1 + TIE) * min(x["encode_ms"] for x in cheap)]
+    assert c["layout_default"] == min(fast, key=lambda row: row["bytes_per_map"])["layout"], c["layout_reason"]
+    assert {row["compression"] for row in c["layouts"]} == {"rle", "zips", "zip", "piz"}
+    assert {row["writer"] for row in c["layouts"]} == {"OpenEXR", "OpenImageIO"}
     assert c["per_glove"] == {"opentouch_right_16x16": "exr_float_zip", "touchanything_left_21x21": "exr_half_zip",
                               "touchanything_right_21x21": "exr_half_zip"}
     exact = {row["mode"] for row in r["raster"]["rows"]} - {row["mode"] for row in r["raster"]["rows"]

@@ -10,7 +10,10 @@ float32 unless asked for "half"; writers must get (H,W,C), never (H,W).
 
 from __future__ import annotations
 
+import io
+
 import numpy as np
+import OpenEXR
 import pytest
 
 from htdata.format.codec import decode_tactile, encode_tactile
@@ -69,3 +72,40 @@ def test_our_decoder_reads_an_oiio_written_exr(tmp_path):
     out.close()
     ours = decode_tactile(path.read_bytes(), where=str(path))
     np.testing.assert_array_equal(ours, tactile.astype(np.float16).astype(np.float32))
+
+
+@pytest.mark.parametrize("pixel_type", [np.float16, np.float32])
+@pytest.mark.parametrize("which", ["sparse", "empty", "corner"])
+def test_a_data_window_reads_back_as_the_full_canvas_everywhere(tmp_path, pixel_type, which):
+    """A map stored with only its covered pixels' data window (display window 224x224): OpenEXR placed by
+    dataWindow, OpenImageIO's display-window read and our decoder all give the whole canvas back."""
+    from htdata.format.codec import covered_window, encode_exr
+
+    tactile = {"sparse": _maps()[0], "empty": np.zeros(MAP_SHAPE, np.float32),
+               "corner": np.pad(np.full((3, 5), 0.75, np.float32), ((221, 0), (0, 219)))}[which]
+    data = encode_exr(tactile, "zip", pixel_type, window=True)
+    assert len(data) < len(encode_exr(tactile, "zip", pixel_type)) or which == "empty"
+    want = tactile.astype(pixel_type).astype(np.float32)
+    f = OpenEXR.File(io.BytesIO(data))
+    (x0, y0), (x1, y1) = (tuple(int(v) for v in c) for c in f.header()["dataWindow"])
+    assert (x0, y0, x1, y1) == covered_window(tactile)
+    assert [list(map(int, c)) for c in f.header()["displayWindow"]] == [[0, 0], [223, 223]]
+    canvas = np.zeros(MAP_SHAPE, np.float32)
+    canvas[y0:y1 + 1, x0:x1 + 1] = f.channels()["Y"].pixels
+    np.testing.assert_array_equal(canvas, want)
+    path = tmp_path / "w.exr"
+    path.write_bytes(data)
+    buf = oiio.ImageBuf(str(path))
+    assert (buf.spec().full_width, buf.spec().full_height) == (224, 224)
+    pixels = np.asarray(buf.get_pixels(oiio.FLOAT, oiio.ROI(0, 224, 0, 224, 0, 1, 0, 1)))[..., 0]
+    np.testing.assert_array_equal(pixels, want)
+    np.testing.assert_array_equal(decode_tactile(data, "w.exr"), want)
+
+
+def test_a_data_window_outside_the_display_window_is_refused():
+    buf = io.BytesIO()
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+              "dataWindow": ((200, 200), (239, 239)), "displayWindow": ((0, 0), (223, 223))},
+             {"Y": np.zeros((40, 40), np.float16)}).write(buf)
+    with pytest.raises(ValueError, match="data window .* not inside its display window"):
+        decode_tactile(buf.getvalue(), "odd.exr")

@@ -198,9 +198,9 @@ def test_a_version_without_the_record_stores_its_maps():
         maps_stored({"codec": {"tactile": {"maps": "sometimes"}}})
 
 
-def test_auto_keeps_the_parents_choice_on_append_and_is_raw_for_a_new_dataset(pair, tmp_path):
+def test_auto_keeps_the_parents_choice_on_append_and_stores_maps_in_a_new_dataset(pair, tmp_path):
     """The default "auto": an append to a dataset that stores its maps stores them too (nothing refused),
-    one that does not stays without; a new dataset is "raw" only where rendering is exact."""
+    one that does not stays without; a new dataset stores its maps, raw rows kept or not."""
     stored, rendered = pair
     corpus = Path(stored).parent / "raw"
     for parent, kind in ((stored, "stored"), (rendered, "raw")):
@@ -215,7 +215,7 @@ def test_auto_keeps_the_parents_choice_on_append_and_is_raw_for_a_new_dataset(pa
         assert any(n.endswith(".exr") for n in names) == (kind == "stored")
     new = tmp_path / "new"
     assert ingest_cli("--pipeline", f"native={corpus / 'native'}", new) == 0
-    assert map_storage(DatasetReader(new).manifest) == "raw"
+    assert map_storage(DatasetReader(new).manifest) == "stored"
     no_raw = tmp_path / "no_raw"
     assert ingest_cli("--pipeline", f"native={corpus / 'native'}", "--set", "tactile.keep_raw=false", no_raw) == 0
     assert map_storage(DatasetReader(no_raw).manifest) == "stored"

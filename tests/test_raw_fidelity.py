@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 from pathlib import Path
@@ -363,7 +364,20 @@ def test_validate_checks_the_maps_the_loaders_serve(native_counts):
     for cal in manifest["calibrations"].values():     # a calibration record that no longer fits the maps
         cal["max_value"] = float(cal["max_value"]) * 2
     rewrite_manifest(root, manifest)
+    bad = validate_dataset(root, deep=True)            # its id no longer hashes its content: refused first
+    assert [f["what"] for f in bad["checks"]["structure"]["failures"]] == ["calibration_record"]
+    # the same edit under a consistent id (episodes re-pointed, sha256 re-sealed): the stored-vs-rendered
+    # cross-check is what catches it
+    (old, cal), = manifest["calibrations"].items()
+    new = calibration_id(cal["layout"], NormaliseConfig(**{k: v for k, v in cal.items()
+                                                          if k in NormaliseConfig.__dataclass_fields__}))
+    manifest["calibrations"] = {new: cal}
+    episodes = root / manifest["episodes_file"]
+    episodes.write_text(episodes.read_text().replace(old, new))
+    manifest["episodes_sha256"] = hashlib.sha256(episodes.read_bytes()).hexdigest()
+    rewrite_manifest(root, manifest)
     bad = validate_dataset(root, deep=True)
     content = bad["checks"]["content"]
     assert not bad["ok"] and content["failure_counts"].get("served_map", 0) > 0
-    assert "calibration record and the stored maps disagree" in content["failures"][0]["message"]
+    assert content["failure_counts"].get("taxels_sha256", 0) == 1          # and the ingest's taxel digest
+    assert any("calibration record and the stored maps disagree" in f["message"] for f in content["failures"])

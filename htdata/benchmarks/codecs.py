@@ -17,6 +17,7 @@ import numpy as np
 
 from htdata.benchmarks.sources import discover, episode_maps
 from htdata.format.codec import check_tactile_values, decode_exr, decode_png16, encode_exr, encode_png16
+from htdata.benchmarks.maplayouts import RULE as LAYOUT_RULE, layout_rows, pick_layout
 from htdata.glove.codecrule import RULE, GloveStep, glove_step, pick_codec, resolve_codec
 from htdata.format.table import MAP_SHAPE
 from htdata.glove.layouts import Layout, load_layout
@@ -30,6 +31,8 @@ def _exr_codec(compression: str, pixel_type) -> tuple[Callable, Callable]:
 
     return encode, decode_exr
 
+
+LAYOUT_MAPS = 96      # maps the layout table encodes (x 20 variants x 3 passes)
 
 TACTILE_CODECS: dict[str, tuple[Callable[[np.ndarray], bytes], Callable[[bytes], np.ndarray]]] = {
     "exr_half_zip": _exr_codec("zip", np.float16),
@@ -144,4 +147,17 @@ def codec_rows(maps_by_layout: dict[str, np.ndarray], compression: str | None = 
               + ("the same" if chosen and code.codec == chosen["codec"] else "DIFFERENT"))
     return {"maps": int(len(all_maps)), "zero_fraction": float(np.mean(all_maps == 0)), "rows": rows,
             "margins": margins, "default": chosen["codec"] if chosen else None, "code_default": code.codec,
-            "per_glove": per_glove, "reason": reason, "codecs": list(TACTILE_CODECS)}
+            "per_glove": per_glove, "reason": reason, "codecs": list(TACTILE_CODECS),
+            **layout_section(all_maps, gloves, code.codec)}
+
+
+def layout_section(all_maps: np.ndarray, gloves: dict[str, GloveStep], ingest_codec: str) -> dict:
+    """The stored-map layout table (maplayouts.py) on up to LAYOUT_MAPS of the maps, its pick for the
+    dataset's gloves and for each glove alone, and what the ingest writes (`ingest_codec`, full canvas,
+    the OpenEXR binding, in encodepool's threads)."""
+    take = np.linspace(0, len(all_maps) - 1, num=min(LAYOUT_MAPS, len(all_maps))).round().astype(int)
+    rows = layout_rows(all_maps[np.unique(take)])
+    chosen, why = pick_layout(rows, [g.step for g in gloves.values()])
+    return {"layouts": rows, "layout_rule": LAYOUT_RULE, "layout_default": chosen["layout"] if chosen else None,
+            "layout_reason": why, "ingest_layout": ingest_codec,
+            "layout_per_glove": {lid: (pick_layout(rows, [g.step])[0] or {}).get("layout") for lid, g in gloves.items()}}

@@ -58,7 +58,24 @@ def _codecs(c: dict) -> list[str]:
                                   ("step_over_max_error", "step / max error"),
                                   ("levels_recoverable", "levels recoverable")])
     lines += [f"**Default: {c['default']}** (computed from the tables above) — {c['reason']}.", ""]
-    return lines
+    return lines + _layouts(c)
+
+
+def _layouts(c: dict) -> list[str]:
+    """The stored-map layout table (htdata/benchmarks/maplayouts.py), when the run measured it."""
+    if "layouts" not in c:
+        return []
+    lines = ["Stored-map layouts at the bound: compression, a data window around the covered pixels (display "
+             "window 224x224), half where exact, OpenImageIO's writer beside the OpenEXR binding; encode ms = "
+             "median of alternating passes, one thread; the threads column is wall ms per map with 2 threads:", ""]
+    lines += table(c["layouts"], [("layout", "layout"), ("writer", "writer"), ("bytes_per_map", "bytes/map"),
+                                  ("encode_ms", "encode ms"), ("encode_ms_threads", "encode ms, 2 threads"),
+                                  ("max_error", "max error")])
+    same = "the same" if c["layout_default"] == c["ingest_layout"] else "DIFFERENT"
+    per = ", ".join(f"{k} -> {v}" for k, v in c["layout_per_glove"].items())
+    return lines + [f"**Stored-map layout: {c['layout_default']}** (computed from the table above) — rule: "
+                    f"{c['layout_rule']}. Measured: {c['layout_reason']}. Per glove alone: {per}. The ingest "
+                    f"writes {c['ingest_layout']} (full canvas, OpenEXR binding, encoded in 2 threads): {same}.", ""]
 
 
 def _rgb(r: dict) -> list[str]:
@@ -85,7 +102,8 @@ def _ingest(g: dict) -> list[str]:
     lines = [f"One worker, each adapter's ingest and its bare bound run back to back {reps} time(s); ratios are "
              f"the median of the pairs. overhead % = the share of our in-worker time the bound does not spend "
              f"(1 - bound/ours); time over bound % = ours/bound - 1. Shipped pipelines, default settings "
-             f"(`[tactile] maps` \"auto\": a new dataset stores no maps, so neither side encodes EXR).", ""]
+             f"(`[tactile] maps` \"auto\": a new dataset stores its maps, EXR encoded by the ingest, in 2 "
+             f"threads, and by the bound, inline).", ""]
     lines += table(g["summary"], [("adapter", "adapter"), ("frames", "frames"), ("units", "units"),
                                   ("frames_per_s_1w", "frames/s 1 worker"),
                                   ("in_worker_frames_per_s", "in-worker frames/s"),
@@ -113,10 +131,10 @@ def _ingest(g: dict) -> list[str]:
                    [("adapter", "adapter"), ("frames", "frames"), ("decode_s", "decode s"), ("resize_s", "resize s"),
                     ("jpeg_s", "jpeg s"), ("exr_s", "exr s"), ("frames_per_s", "frames/s")])
     lines += _targets_ingest(g)
-    stored = g.get("maps_stored")
+    stored = g.get("maps_raw") or g.get("maps_stored")     # maps_stored: results.json of an older run
     if stored:
-        lines += ["The same with `--set tactile.maps=stored` (each hand's map encoded as EXR by the ingest and by "
-                  "the bound; the setting before `[tactile] maps` existed):", ""]
+        lines += [("The same with `--set tactile.maps=raw` (the opt-in: no map stored, neither side encodes EXR):"
+                   if "maps_raw" in g else "The same with `--set tactile.maps=stored`:"), ""]
         lines += table(stored["summary"], [("adapter", "adapter"), ("frames", "frames"),
                                            ("in_worker_frames_per_s", "in-worker frames/s"),
                                            ("bound_frames_per_s", "bare bound frames/s"),

@@ -99,7 +99,7 @@ def bare_bound(cfg: PipelineConfig, adapter, refs: list) -> dict:
     rgb = cfg.rgb
     pixel_type = cfg.codec_settings().tactile_pixel_type
     # maps encoded only where the ingest stores them (a new dataset: "auto" resolved as the ingest does)
-    stores_maps = resolve_map_storage(cfg.tactile.maps, cfg.tactile.keep_raw, cfg.tactile.raster_mode, None) == "stored"
+    stores_maps = resolve_map_storage(cfg.tactile.maps, None) == "stored"
     t["maps_stored"] = stores_maps
     for ref in refs:
         em = episode_maps(cfg, adapter, ref)

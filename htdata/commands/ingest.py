@@ -54,9 +54,9 @@ Defaults: one worker per CPU, the process pool, 1 retry.
 Examples:
   htdata ingest --pipeline opentouch data/raw/opentouch data/dataset
   htdata ingest --pipeline opentouch=data/raw/opentouch --pipeline touchanything=data/raw/touchanything data/dataset
-  # maps stored as tactile_<hand>.exr too (default "auto": a new dataset stores none where htdata's readers
-  # render them exactly, ~25% fewer bytes/frame; an append keeps the dataset's choice)
-  htdata ingest --pipeline opentouch --set tactile.maps=stored data/raw/opentouch data/dataset_exr
+  # no tactile_<hand>.exr maps, only raw rows htdata's readers render them from (~25% fewer bytes/frame;
+  # default "auto": a new dataset stores its maps, an append keeps the dataset's choice)
+  htdata ingest --pipeline opentouch --set tactile.maps=raw data/raw/opentouch data/dataset_raw
 """
 
 

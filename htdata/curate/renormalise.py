@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.glove.calibration import (calibration_id, episode_calibrations, episode_normaliser, fit_record)
+from htdata.glove.calibration import (calibration_id, episode_calibrations, episode_normaliser, fit_digests, fit_record,
+                                      taxel_digest)
 from htdata.format.codec import MEMBER_CODECS
 from htdata.curate.edit import resolve_episodes
 from htdata.format.table import (JSON_MEMBER, SIZE_FIELDS, CodecSettings, bend_member, decode_member, raw_member,
@@ -220,8 +221,12 @@ class Recalibration:
         record["taxel_health"] = health
         record["calibration"] = calibration
         record.pop("calibration_fit", None)
+        record.pop("calibration_fit_sha256", None)
         if fits:
             record["calibration_fit"] = fits
+            record["calibration_fit_sha256"] = fit_digests(fits)
+        record["taxels_sha256"] = {**record.get("taxels_sha256", {}),
+                                   **{hand: taxel_digest(series) for hand, (_, _, _, series) in state.items()}}
         changed = ", ".join(f"{h} {old or '(none)'} -> {new}" for h, (old, new) in self.plan.changes[eid].items())
         record["notes"] = list(record.get("notes", [])) + [
             f"renormalised from stored raw rows (version {self.snap.version}): calibration {changed}"]

@@ -6,7 +6,9 @@ only the samples kept, and the parent's shards stay as they are for the
 versions that list them. A sample's members are copied as stored; only a
 trimmed episode's json member is rewritten, because its key and frame index
 are renumbered so frames stay 0..n-1, and `htdata renormalise` passes a
-`rewrite` that re-encodes the maps of the episodes it recalibrates.
+`rewrite` that re-encodes the maps of the episodes it recalibrates. A trimmed
+episode's `taxels_sha256` (htdata/glove/calibration.py) is re-derived from the
+kept samples' raw rows, so `validate --deep` still proves its maps.
 """
 
 from __future__ import annotations
@@ -17,7 +19,9 @@ from pathlib import Path
 from typing import Protocol
 
 from htdata.format.codec import encode_json
-from htdata.format.table import JSON_MEMBER, SHARDS_DIR
+from htdata.format.table import JSON_MEMBER, SHARDS_DIR, raw_member
+from htdata.glove.calibration import taxel_digest
+from htdata.read.rawstream import RawMapRenderer, apply_paired
 from htdata.store.manifest import UnitResult
 from htdata.faults import crash_point
 from htdata.store.parts import SHARD_NAME_RE, Part, part_from_unit, unit_of_shard
@@ -70,6 +74,7 @@ def repack_unit(reader: DatasetReader, kept: list[KeptEpisode], unit: int, sampl
             eid = ep.record["episode_id"]
             first, n = reader.episode_range(eid)
             renumber = ep.frames != range(0, n)
+            digests = TaxelRecount(reader, eid) if renumber and ep.record.get("taxels_sha256") else None
             for new_frame, frame in enumerate(ep.frames):
                 if not 0 <= frame < n:
                     raise ValueError(f"episode {eid!r}: frame {frame} outside 0..{n - 1}")
@@ -79,13 +84,39 @@ def repack_unit(reader: DatasetReader, kept: list[KeptEpisode], unit: int, sampl
                     meta = json.loads(members[JSON_MEMBER])
                     meta.update({"key": key, "frame_index": new_frame})
                     members = {**members, JSON_MEMBER: encode_json(meta)}
+                if renumber and digests is not None:
+                    digests.add(members)
                 if rewrite is not None:
                     members = rewrite.members(eid, frame, members)
                 writer.add_sample(key, members)
                 crash_point("repack_sample_written")
             record = {**ep.record, "num_frames": len(ep.frames)}
+            if renumber and digests is not None:
+                record = digests.finish(record)
             records.append(rewrite.record(record) if rewrite is not None else record)
     return part_from_unit(UnitResult(unit=unit, shards=writer.shards, samples=writer.samples, episodes=records))
+
+
+class TaxelRecount:
+    """The taxel digests of a trimmed episode's kept frames, from their raw rows under its calibration."""
+
+    def __init__(self, reader: DatasetReader, episode_id: str):
+        self.renderer, self.pos = RawMapRenderer(reader), reader.episode_position(episode_id)
+        self.where = f"episode {episode_id!r}"
+        self.live: dict[str, list] = {h: [] for h in reader.episodes[self.pos]["taxels_sha256"]}
+
+    def add(self, members: dict[str, bytes]) -> None:
+        for hand, blocks in self.live.items():
+            if raw_member(hand) in members:
+                normaliser, _ = self.renderer.parts_for(self.pos, hand)
+                values, _ = apply_paired(normaliser, members, hand, self.where)
+                blocks.append(values[:, normaliser.live_mask])
+
+    def finish(self, record: dict) -> dict:
+        """The record with the kept frames' digests (none where no raw rows are stored to derive them)."""
+        digests = {h: taxel_digest(b) for h, b in self.live.items() if b}
+        record = {k: v for k, v in record.items() if k != "taxels_sha256"}
+        return {**record, "taxels_sha256": digests} if digests else record
 
 
 def samples_per_shard_of(part: Part) -> int:

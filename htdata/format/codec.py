@@ -39,6 +39,7 @@ EXR_CHANNEL = "Y"
 _EXR_COMPRESSIONS = {
     "zip": OpenEXR.ZIP_COMPRESSION,
     "zips": OpenEXR.ZIPS_COMPRESSION,
+    "rle": OpenEXR.RLE_COMPRESSION,
     "piz": OpenEXR.PIZ_COMPRESSION,
     "htj2k256": OpenEXR.HTJ2K256_COMPRESSION,
     "dwab": OpenEXR.DWAB_COMPRESSION,
@@ -94,8 +95,21 @@ def to_half(values: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.float16)
 
 
-def encode_exr(tactile_map: np.ndarray, compression: str = "zip", pixel_type=np.float16) -> bytes:
-    """Raw EXR writer (no value rule): one channel "Y" of `pixel_type`."""
+def covered_window(tactile_map: np.ndarray) -> tuple[int, int, int, int]:
+    """(x0, y0, x1, y1), inclusive: the smallest box holding every non-zero pixel ((0,0,0,0) for an empty map)."""
+    rows, cols = np.flatnonzero(tactile_map.any(axis=1)), np.flatnonzero(tactile_map.any(axis=0))
+    if rows.size == 0:
+        return 0, 0, 0, 0
+    return int(cols[0]), int(rows[0]), int(cols[-1]), int(rows[-1])
+
+
+def encode_exr(tactile_map: np.ndarray, compression: str = "zip", pixel_type=np.float16,
+               window: bool = False) -> bytes:
+    """Raw EXR writer (no value rule): one channel "Y" of `pixel_type`.
+
+    `window`: store only the data window around the non-zero pixels (the display window stays the
+    map's full shape; readers place the window in it, pixels outside read 0). The bench measures it.
+    """
     if compression not in _EXR_COMPRESSIONS:
         raise ValueError(f"unknown EXR compression {compression!r}; known: {sorted(_EXR_COMPRESSIONS)}")
     header = {"compression": _EXR_COMPRESSIONS[compression], "type": OpenEXR.scanlineimage}
@@ -103,23 +117,40 @@ def encode_exr(tactile_map: np.ndarray, compression: str = "zip", pixel_type=np.
         pixels = to_half(tactile_map)
     else:
         pixels = np.ascontiguousarray(tactile_map, dtype=pixel_type)
+    if window:
+        x0, y0, x1, y1 = covered_window(pixels)
+        h, w = pixels.shape
+        header["dataWindow"], header["displayWindow"] = ((x0, y0), (x1, y1)), ((0, 0), (w - 1, h - 1))
+        pixels = np.ascontiguousarray(pixels[y0:y1 + 1, x0:x1 + 1])   # the binding reads a view as if contiguous
     buf = io.BytesIO()
     OpenEXR.File(header, {EXR_CHANNEL: pixels}).write(buf)
     return buf.getvalue()
 
 
 def decode_exr_pixels(data: bytes, where: str = "EXR") -> np.ndarray:
-    """Channel "Y" of an in-memory EXR in its stored pixel type (float16 or float32 for dataset maps).
+    """Channel "Y" of an in-memory EXR in its stored pixel type (float16 or float32 for dataset maps),
+    the display window's full canvas: the data window's pixels placed in it by their coordinates, 0 elsewhere.
 
     OpenEXR's own exceptions name no file: they are re-raised as ValueError naming `where`.
     """
     try:
-        channels = OpenEXR.File(io.BytesIO(data)).channels()
+        f = OpenEXR.File(io.BytesIO(data))
+        channels, header = f.channels(), f.header()
     except Exception as exc:
         raise ValueError(f"{where}: undecodable EXR ({len(data)} bytes): {exc}") from exc
     if EXR_CHANNEL not in channels:
         raise ValueError(f"{where}: EXR has no channel {EXR_CHANNEL!r} (channels: {sorted(channels)})")
-    return np.asarray(channels[EXR_CHANNEL].pixels)
+    pixels = np.asarray(channels[EXR_CHANNEL].pixels)
+    (x0, y0), (x1, y1) = (tuple(int(v) for v in corner) for corner in header["dataWindow"])
+    (dx0, dy0), (dx1, dy1) = (tuple(int(v) for v in corner) for corner in header["displayWindow"])
+    if (x0, y0, x1, y1) == (dx0, dy0, dx1, dy1):
+        return pixels
+    if not (dx0 <= x0 <= x1 <= dx1 and dy0 <= y0 <= y1 <= dy1):
+        raise ValueError(f"{where}: EXR data window {(x0, y0, x1, y1)} is not inside its display window "
+                         f"{(dx0, dy0, dx1, dy1)}")
+    canvas = np.zeros((dy1 - dy0 + 1, dx1 - dx0 + 1), pixels.dtype)
+    canvas[y0 - dy0:y1 - dy0 + 1, x0 - dx0:x1 - dx0 + 1] = pixels
+    return canvas
 
 
 def decode_exr(data: bytes, where: str = "EXR") -> np.ndarray:

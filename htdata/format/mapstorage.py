@@ -8,7 +8,8 @@ beside the raster mode, in codec.tactile.maps:
   member's raw_row / raw_paired, and htdata's readers render the map from the
   paired row under the episode's calibration (htdata.read.rawstream), exact in
   nearest raster mode. Saves the map bytes (~30% of a sample).
-A version without the record (every dataset written before the setting) stores its maps.
+A version without the record (every dataset written before the setting) stores its maps; so does a new
+dataset unless its pipeline says `maps = "raw"` (`resolve_map_storage`).
 
 A hand is present in a sample when its map or its raw rows are stored: raw
 rows ride only in samples with a map (htdata.ingest.fullrate), so this one
@@ -26,20 +27,21 @@ MAP_SETTINGS = ("auto",) + MAP_STORAGE   # [tactile] maps in a pipeline
 UNRECORDED = "stored"             # what a version without the record holds (written before the setting)
 
 
-def resolve_map_storage(setting: str, keep_raw: bool, raster_mode: str, parent_manifest: dict | None) -> str:
+def resolve_map_storage(setting: str, parent_manifest: dict | None) -> str:
     """The storage an ingest uses for `[tactile] maps = setting`.
 
     "auto" (the default): an append keeps the parent version's choice (one kind per version); a new
-    dataset stores no maps when readers can render them exactly (raw rows kept, nearest raster):
-    `make bench` section "maps" measured that this saves ~25% of the bytes and reads faster, its rule
-    picks "raw"; otherwise "stored". "stored" / "raw" are taken as given (an append whose parent
-    holds the other kind is refused by the commit's compatibility check, naming the setting).
+    dataset stores its maps: the published format is 224x224 maps a reader without htdata opens with
+    tar + OpenEXR (tests/test_maps_thirdparty.py). "raw" saves ~25% of the bytes, so it stays an
+    explicit opt-in for datasets read only through htdata. "stored" / "raw" are taken as given (an
+    append whose parent holds the other kind is refused by the commit's compatibility check, naming
+    the setting).
     """
     if setting != "auto":
         return setting
     if parent_manifest is not None:
         return map_storage(parent_manifest)
-    return "raw" if keep_raw and raster_mode == "nearest" else "stored"
+    return "stored"
 
 
 def map_storage(manifest: dict) -> str:

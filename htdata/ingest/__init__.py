@@ -6,6 +6,7 @@ htdata/commands/ingest.py).
     chunk.py    one chunk of glove rows: read, check, normalise, out-of-range policy, raw rows per frame
     episode.py  `EpisodeStream`: one episode as a stream of canonical frames, then its tally (shared with the benchmarks)
     unit.py     one work unit: encode (format.encode_sample) + spool + shards + done record; error policy
+    encodepool.py  samples encoded in threads (the EXR binding and cv2 release the GIL), frame order kept
     workdir.py  the output directory while ingesting: unit records, leftovers, resume
     commit.py   compatibility with the parent; parent parts + unit records -> a new version
     run.py      `ingest()`: lock -> plan -> executor (executors.py) -> report -> commit

@@ -107,8 +107,7 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         # the codec rule needs the run's gloves: resolved after discovery, before anything is fingerprinted
         sources = resolve_sources(sources, refs, parent.manifest["codec"]["tactile"] if parent else None)
         sources = [dataclasses.replace(s, pipeline=s.pipeline.with_maps(resolve_map_storage(
-            s.pipeline.tactile.maps, s.pipeline.tactile.keep_raw, s.pipeline.tactile.raster_mode,
-            parent.manifest if parent else None))) for s in sources]
+            s.pipeline.tactile.maps, parent.manifest if parent else None))) for s in sources]
         check_compatible(parent, sources)
         # pipeline (CLI) order, then episode id: the order units are numbered in
         pairs = [(r, s) for s, rs in zip(sources, refs) for r in sorted(rs, key=lambda r: r.episode_id)]

@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from htdata.glove.activity import CellActivity, unmapped_moving
+from htdata.glove.calibration import calibration_id, fit_digests, fit_record, taxel_digest
 from htdata.glove.restlevel import rest_level_warning
-from htdata.glove.calibration import calibration_id, fit_record
 from htdata.glove.health import record_entry
 from htdata.glove.layouts import Layout
 from htdata.source.sync import SyncResult
@@ -177,6 +177,9 @@ class EpisodeTally:
         fits = {h: fit_record(self.normalisers[h]) for h in hands}
         if any(fits.values()):
             record["calibration_fit"] = {h: f for h, f in fits.items() if f}
+            record["calibration_fit_sha256"] = fit_digests(record["calibration_fit"])
+        # what every map of the hand is rasterised from: validate --deep re-derives it from the raw rows
+        record["taxels_sha256"] = {h: taxel_digest(self.live_series.get(h, [])) for h in hands}
         return record
 
 

@@ -1,8 +1,9 @@
 """One work unit (in a worker process, a Ray task or inline): its episodes -> shards + a done record.
 
 For each episode, `EpisodeStream` yields the kept frames; each is encoded
-with `htdata.format.table.encode_sample` (codec settings from the pipeline) and
-spooled to a temp file. Only a fully successful episode is replayed into
+with `htdata.format.table.encode_sample` (codec settings from the pipeline; in
+threads, results in frame order: htdata/ingest/encodepool.py) and spooled to
+a temp file. Only a fully successful episode is replayed into
 the unit's shards, so a bad episode never leaves half its frames behind.
 
 Error policy (webdataset's `handler=` idea): `run_unit` hands any exception
@@ -34,9 +35,10 @@ from htdata.source.adapters import get_adapter
 from htdata.glove.calibration import episode_calibrations
 from htdata.errors import EpisodeError
 from htdata.ingest.executors import parent_alive, report_progress
-from htdata.format.table import SHARDS_DIR, CodecSettings, encode_sample
+from htdata.format.table import SHARDS_DIR, CodecSettings
+from htdata.ingest.encodepool import EncodePool
 from htdata.store.fsutil import write_bytes_atomic
-from htdata.ingest.episode import EpisodeStream, EpisodeTally, frame_errors
+from htdata.ingest.episode import EpisodeStream, EpisodeTally
 from htdata.ingest.timing import StageClock
 from htdata.ingest.workdir import clear_unit_files, dumps, spool_path, unit_record_path
 from htdata.glove.layouts import Layout
@@ -84,12 +86,20 @@ def spool_episode(ref, cfg: PipelineConfig, adapter, spool: Spool, clock: StageC
     # "raw" (resolved by the driver): no map rendered or stored; readers render them from the raw rows
     stream = EpisodeStream(ref, cfg, adapter, clock, with_maps=cfg.tactile.maps != "raw")
     spool.start()
-    for frame in stream:
-        with frame_errors(ref, frame.source_frame):
+    # encoded in threads while this one makes the next frames (encodepool.py); "encode" = the time
+    # this thread waits for them, so the stages still add up to the wall time
+    with EncodePool(settings, ref) as pool:
+        for frame in stream:
             with clock.stage("encode"):
-                members = encode_sample(frame.sample(), settings, where=frame.key)
+                done = pool.put(frame.key, frame.sample(), frame.source_frame)
             with clock.stage("write"):
-                spool.add(frame.key, members)
+                for key, members in done:
+                    spool.add(key, members)
+        with clock.stage("encode"):
+            done = pool.drain()
+        with clock.stage("write"):
+            for key, members in done:
+                spool.add(key, members)
     return stream.finished_tally()
 
 

@@ -19,13 +19,26 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.glove.calibration import episode_normaliser
+from htdata.glove.calibration import episode_normaliser, refuse_mismatched
+from htdata.store import storage
+from htdata.store.versions import version_manifest_file
 from htdata.format.mapstorage import maps_stored
 from htdata.format.codec import check_finite_maps
-from htdata.format.table import JSON_MEMBER, decode_member, raw_member
+from htdata.format.table import JSON_MEMBER, MANIFEST_FILE, decode_member, raw_member
 from htdata.store.confine import inside
 from htdata.glove.layouts import load_layout
 from htdata.glove.rasterise import Rasteriser
+
+
+def check_records(reader) -> None:
+    """Refuse (RecordMismatch, one line naming the file and record) a version whose calibration ids or
+    calibration_fit digests do not match their content: every map rendered here, and every map
+    `htdata renormalise` writes, would follow the edited record (htdata.glove.calibration.record_errors)."""
+    refuse_mismatched(reader.manifest.get("calibrations", {}), reader.episodes,
+                      storage.join(reader.root, MANIFEST_FILE if reader.version is None
+                                   else version_manifest_file(reader.version)),
+                      storage.join(reader.root, reader.manifest.get("episodes_file", "episodes.jsonl")))
+
 
 # `reader` below is a htdata.read.reader.DatasetReader, not imported: the reader renders the maps of a
 # version that does not store them with RawMapRenderer, so it imports this module.

@@ -41,7 +41,7 @@ from htdata.store.manifest import load_episodes, load_index, load_manifest
 from htdata.format.shardio import BLOCK, describe_header, header_matches, padded, sample_key
 from htdata.store.remote import load_cached_index
 from htdata.store.gcrecord import collected_error
-from htdata.read.rawstream import RawMapRenderer
+from htdata.read.rawstream import RawMapRenderer, check_records
 
 MAX_OPEN_SHARDS = 128   # an LRU of open shard files; one-episode units make many small shards
 _SIZE_POS = tuple(INDEX_DTYPE.names.index(SIZE_FIELDS[s]) for s in MEMBER_ORDER)
@@ -83,6 +83,7 @@ class DatasetReader:
         if len(self.episodes) != self.manifest["counts"]["episodes"]:
             raise ValueError(f"{self.root}: episodes.jsonl has {len(self.episodes)} records, "
                              f"manifest counts {self.manifest['counts']['episodes']}")
+        check_records(self)     # calibration ids and fit digests recomputed (htdata.read.rawstream)
         self._episode_pos = {ep["episode_id"]: i for i, ep in enumerate(self.episodes)}
         self._episode_ids = [ep["episode_id"] for ep in self.episodes]
         self._shard_names = [s["name"] for s in self.manifest["shards"]]

@@ -20,6 +20,11 @@ module each:
   datasets serve it (rendered from the raw rows under the
   recorded calibration, their default) equals the stored map within the
   stored pixel type's rounding: one truth for what a map is.
+- calibration records (`calibrations.py`; structure, and content with --deep):
+  every calibration id recomputed from its settings, every episode's
+  `calibration_fit` against its digest (a reader refuses such a version too);
+  with --deep every episode hand's taxels re-derived from the raw rows
+  against the ingest's `taxels_sha256`.
 - time (`timestamps.py`): RGB timestamps strictly increasing per episode;
   tactile timestamps never decrease (a repeated tactile timestamp means one
   glove frame was paired with two RGB frames, which nearest-neighbour sync

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from htdata.validate.content import decode_mask, layout_maps
 from htdata.validate.report import CHECKS, Check
+from htdata.validate.calibrations import check_calibration_records, check_taxel_digests, has_taxel_digests
 from htdata.validate.served import RenderedCheck, check_served_maps, served_rows
 from htdata.validate.geometry import coverage_geometries
 from htdata.validate.sensors import check_rest_level, check_sensors, check_taxel_health, hand_key, merge_sensor
@@ -93,13 +94,19 @@ def _check_dataset(ds: Loaded, cfg: ValidateConfig, checks: dict[str, Check], pa
         merge_timestamps(ts, res["timestamps"], res["timestamps"]["row"])
         hashes.update(dict(res["hashes"]))
         merge_sensor(sensor, res["sensor"])
-    check_served_maps(ds.root, ds.manifest.get("version"), served_rows(decode, ds.index["episode"], cfg.seed),
-                      checks["content"], rendered=RenderedCheck(decode, _hand_geometries(ds, coverage, region_map),
-                                                                sensor))
+    # a version whose calibration records do not match their ids is refused by every reader: nothing is served
+    readable = check_calibration_records(ds.root, ds.manifest, ds.episodes, checks["structure"])
+    if readable and cfg.deep and has_taxel_digests(ds.episodes):
+        check_taxel_digests(ds.root, ds.manifest.get("version"), checks["content"])
+    if readable:
+        check_served_maps(ds.root, ds.manifest.get("version"), served_rows(decode, ds.index["episode"], cfg.seed),
+                          checks["content"], rendered=RenderedCheck(decode, _hand_geometries(ds, coverage, region_map),
+                                                                    sensor))
     check_time(ds, ts, checks["time"])
     check_sensors(sensor, checks["sensors"], _region_names(ds))
     check_rest_level(sensor, ds.episodes, ds.manifest.get("calibrations", {}), checks["sensors"])
-    check_taxel_health(ds.root, ds.manifest.get("version"), checks["sensors"], compute=cfg.deep)
+    if readable:
+        check_taxel_health(ds.root, ds.manifest.get("version"), checks["sensors"], compute=cfg.deep)
     if cfg.split is not None:
         check_splits(ds, cfg.split, hashes, checks["splits"])
     return dataset_stats(ds, sensor)

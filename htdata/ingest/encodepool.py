@@ -1,0 +1,67 @@
+"""Sample encoding off the main thread, results in frame order.
+
+`encode_sample` is mostly EXR (the OpenEXR binding) and JPEG (cv2): both
+release the GIL while they work (the codec bench's "2 threads" column
+measures it: ~2x the maps per second on 2 cores), so while the worker's main
+thread reads, normalises and rasterises the next frames, `THREADS`
+threads encode the previous ones. The bytes are the same as inline: each
+sample is encoded by the same call, and results are handed back in the
+order the frames came. At most `DEPTH` samples wait (each ~0.5 MB of maps +
+RGB), so memory stays bounded.
+
+A failure is raised by `put` / `drain` for the frame it belongs to, naming
+it (frame_errors), as the inline encode did.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
+
+from htdata.format.table import CodecSettings, encode_sample
+from htdata.ingest.episode import frame_errors
+
+# $HTDATA_ENCODE_THREADS: 0 encodes inline on the calling thread (profiling; the bench's before/after)
+THREADS = int(os.environ.get("HTDATA_ENCODE_THREADS", "2"))
+DEPTH = 8
+
+
+class EncodePool:
+    """`with EncodePool(settings, ref) as pool:` then `pool.put(...)` per frame and `pool.drain()` at the end."""
+
+    def __init__(self, settings: CodecSettings, ref, threads: int | None = None, depth: int = DEPTH):
+        threads = THREADS if threads is None else threads
+        self.settings, self.ref, self.depth = settings, ref, max(1, depth)
+        self._pool = (ThreadPoolExecutor(max_workers=threads, thread_name_prefix="htdata-encode")
+                      if threads > 0 else None)
+        self._pending: deque[tuple[str, int, Future]] = deque()
+
+    def __enter__(self) -> "EncodePool":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for _, _, fut in self._pending:
+            fut.cancel()
+        self._pending.clear()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+
+    def put(self, key: str, sample: dict, source_frame: int) -> list[tuple[str, dict[str, bytes]]]:
+        """Queue one frame's sample; return the (key, members) done, oldest first, once the queue is full."""
+        if self._pool is None:
+            with frame_errors(self.ref, source_frame):
+                return [(key, encode_sample(sample, self.settings, key))]
+        self._pending.append((key, source_frame, self._pool.submit(encode_sample, sample, self.settings, key)))
+        done = []
+        while len(self._pending) > self.depth:
+            done.append(self._next())
+        return done
+
+    def drain(self) -> list[tuple[str, dict[str, bytes]]]:
+        return [self._next() for _ in range(len(self._pending))]
+
+    def _next(self) -> tuple[str, dict[str, bytes]]:
+        key, source_frame, fut = self._pending.popleft()
+        with frame_errors(self.ref, source_frame):
+            return key, fut.result()

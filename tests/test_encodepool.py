@@ -1,0 +1,65 @@
+"""Samples encoded in threads (htdata/ingest/encodepool.py): the same bytes as inline, in frame order,
+a failure named with its frame; and a whole ingest byte-identical to one encoded inline."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from htdata.errors import EpisodeError
+from htdata.format.table import CodecSettings, encode_sample
+from htdata.ingest import encodepool
+from htdata.ingest.encodepool import EncodePool
+from tests.factories import ingest_cli, make_native, make_touchanything
+
+REF = SimpleNamespace(episode_id="ep", source_ref="src/rec.npz")
+
+
+def _sample(i: int) -> dict:
+    rng = np.random.default_rng(i)
+    m = np.zeros((224, 224), np.float32)
+    m[10 * (i % 10):10 * (i % 10) + 50, 40:120] = rng.random((50, 80), dtype=np.float32)
+    return {"meta": {"key": f"ep__{i:06d}", "i": i}, "rgb": rng.integers(0, 255, (224, 224, 3), np.uint8),
+            "tactile": {"right": m, **({"left": m[::-1].copy()} if i % 3 else {})}, "bend": {}, "raw": {}}
+
+
+@pytest.mark.parametrize("threads, depth", [(0, 1), (1, 1), (2, 3), (4, 16)])
+def test_the_pool_gives_the_inline_bytes_in_frame_order(threads, depth):
+    settings = CodecSettings()
+    samples = [_sample(i) for i in range(25)]
+    got = []
+    with EncodePool(settings, REF, threads=threads, depth=depth) as pool:
+        for i, s in enumerate(samples):
+            got += pool.put(f"ep__{i:06d}", s, i)
+            assert len(got) >= i + 1 - depth          # bounded: never more than `depth` waiting
+        got += pool.drain()
+    assert [k for k, _ in got] == [f"ep__{i:06d}" for i in range(25)]
+    assert [m for _, m in got] == [encode_sample(s, settings, f"ep__{i:06d}") for i, s in enumerate(samples)]
+
+
+def test_a_failed_encode_names_its_frame():
+    bad = _sample(7)
+    bad["tactile"]["right"][3, 4] = np.nan
+    with pytest.raises(EpisodeError, match=r"rec\.npz \[ep\] frame 107: .*non-finite"):
+        with EncodePool(CodecSettings(), REF, threads=2, depth=2) as pool:
+            for i in range(12):
+                pool.put(f"ep__{i:06d}", bad if i == 7 else _sample(i), 100 + i)
+            pool.drain()
+
+
+def test_an_ingest_is_byte_identical_to_one_encoded_inline(tmp_path, monkeypatch):
+    sources = [("native", make_native(tmp_path / "nat")), ("touchanything", make_touchanything(tmp_path / "ta"))]
+    args = [a for name, src in sources for a in ("--pipeline", f"{name}={src}")]
+    assert encodepool.THREADS >= 1
+    assert ingest_cli(*args, tmp_path / "threads") == 0
+
+    monkeypatch.setattr(encodepool, "THREADS", 0)      # inline, on the calling thread ($HTDATA_ENCODE_THREADS=0)
+    assert ingest_cli(*args, tmp_path / "inline") == 0
+    a, b = (sorted((tmp_path / d / "shards").glob("*.tar")) for d in ("threads", "inline"))
+    assert [p.name for p in a] == [p.name for p in b] and a
+    assert all(x.read_bytes() == y.read_bytes() for x, y in zip(a, b))
+    shutil.rmtree(tmp_path / "inline")
