@@ -39,7 +39,8 @@ def part_mask(regions: torch.Tensor, chosen: torch.Tensor) -> torch.Tensor:
     if regions.dim() != 3:
         raise ValueError(f"regions must be (B,H,W), got {tuple(regions.shape)}")
     ids = regions.long()
-    if ids.numel() and (int(ids.max()) > NUM_PARTS or int(ids.min()) < 0):
+    # checked on the CPU only: on an accelerator reading min / max back would stop it every step
+    if ids.device.type == "cpu" and ids.numel() and (int(ids.max()) > NUM_PARTS or int(ids.min()) < 0):
         raise ValueError(f"regions hold part ids outside 0..{NUM_PARTS}: "
                          f"[{int(ids.min())}, {int(ids.max())}]")
     b, h, w = ids.shape

@@ -102,7 +102,7 @@ def test_resume_from_checkpoint_matches_an_uninterrupted_run(dataset_root, tmp_p
 
     cfg = tiny_config(dataset_root, tmp_path / "b", **over)
     data = load_data(cfg)
-    crashing = TrainData(data.frames, data.windows, data.eval_frames, data.eval_source)
+    crashing = TrainData(data.frames, data.windows, data.eval_frames, data.eval_source, constants=data.constants)
     crashing.frames = FailAfter(data.frames, limit=4 * (12 + 9))   # dies in stage 2, step 9
     with pytest.raises(RuntimeError, match="simulated crash"):
         train(cfg, crashing)
