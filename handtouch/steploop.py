@@ -94,6 +94,21 @@ class StepTimes:
             self.device_s = (self.device_s or 0.0) + sum(a.elapsed_time(b) for a, b in self._events) / 1000.0
             self._events.clear()
 
+    def snapshot(self) -> tuple[float, float, float, float]:
+        """(wall, data wait, host, device) seconds so far (collects the CUDA events)."""
+        self.collect()
+        return self.wall_s, self.data_wait_s, self.host_s, self.device_s or 0.0
+
+    def shares_since(self, before: tuple[float, float, float, float]) -> dict:
+        """Shares of the wall time since `before` (a snapshot): data wait, host and (CUDA) device busy."""
+        now = self.snapshot()
+        wall = now[0] - before[0]
+        out = {"data_wait_share": (now[1] - before[1]) / wall if wall > 0 else 0.0,
+               "host_share": (now[2] - before[2]) / wall if wall > 0 else 0.0}
+        if self.device_s is not None:
+            out["device_busy_share"] = (now[3] - before[3]) / wall if wall > 0 else 0.0
+        return out
+
     def as_dict(self) -> dict:
         self.collect()
         out = {"steps": self.steps, "wall_s": self.wall_s, "data_wait_s": self.data_wait_s, "host_s": self.host_s,
@@ -170,6 +185,7 @@ def train_steps(run: StageRun, loader: Iterable, start: int,
     last: dict[str, float] = {}
     step = start
     t_window = t_step = time.perf_counter()
+    at_window = times.snapshot()
     for step, batch in zip(range(start, total), _timed(loader, times)):
         t_host = time.perf_counter()
         ev = times.start_device(env.device)
@@ -197,11 +213,12 @@ def train_steps(run: StageRun, loader: Iterable, start: int,
             last = mean_across_ranks(means, env)
             elapsed = time.perf_counter() - t_window
             sps = steps_in_window / max(elapsed, 1e-9)
+            shares = times.shares_since(at_window)
             if env.is_main:
                 run.write({"stage": n, "step": done_steps, "lr": opt.param_groups[0]["lr"], **last,
                            "steps_per_s": sps, "samples_per_s": sps * cfg.batch_size * env.world_size,
-                           "eta_s": (total - done_steps) / max(sps, 1e-9)})
-            t_window = time.perf_counter()
+                           "eta_s": (total - done_steps) / max(sps, 1e-9), **shares})
+            t_window, at_window = time.perf_counter(), times.snapshot()
         if done_steps % cfg.checkpoint_every == 0 and done_steps < total:
             checkpoint(done_steps)
         t_step = time.perf_counter()   # checkpoints and logs are not a step's time
