@@ -32,6 +32,7 @@ from htdata.read.torchitems import ItemConstants, expand_batch
 
 from .config import TrainConfig
 from .distributed import DistEnv, mean_across_ranks
+from .progress import Rate
 from .stages import Stage, StepInfo
 
 
@@ -131,6 +132,7 @@ class StageRun:
     write: Callable[[dict], None]             # a log record (rank 0)
     constants: ItemConstants | None = None    # on the device, for constants="once" batches
     times: StepTimes = field(default_factory=StepTimes)
+    progress: Callable[[dict], None] | None = None   # every step: handtouch.progress.Rate's report (no sync)
 
 
 class _Window:
@@ -186,6 +188,7 @@ def train_steps(run: StageRun, loader: Iterable, start: int,
     step = start
     t_window = t_step = time.perf_counter()
     at_window = times.snapshot()
+    rate = Rate(start)
     for step, batch in zip(range(start, total), _timed(loader, times)):
         t_host = time.perf_counter()
         ev = times.start_device(env.device)
@@ -207,6 +210,8 @@ def train_steps(run: StageRun, loader: Iterable, start: int,
         times.steps += 1
         t_step = now
         done_steps = step + 1
+        if run.progress is not None:
+            run.progress(rate.report(f"stage {n}", done_steps, total, cfg.batch_size * env.world_size))
         if done_steps % cfg.log_every == 0 or done_steps == total:
             steps_in_window = window.steps
             means = window.read(n)          # the one host sync of the window

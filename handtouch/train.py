@@ -147,7 +147,8 @@ def _stage_loader(stage: Stage, cfg: TrainConfig, data: TrainData, env: DistEnv,
 
 
 def run_stage(stage: Stage, model: HandTouch, cfg: TrainConfig, data: TrainData, env: DistEnv,
-              out: Path, logger: JsonlLog, heldout: dict | None = None) -> dict:
+              out: Path, logger: JsonlLog, heldout: dict | None = None,
+              on_progress: Callable[[dict], None] | None = None) -> dict:
     """Train one stage (resuming / skipping from OUT/stageN.pt); returns the stage summary."""
     n, steps = stage.number, stage.cfg.steps
     ckpt_path = out / f"stage{n}.pt"
@@ -185,7 +186,8 @@ def run_stage(stage: Stage, model: HandTouch, cfg: TrainConfig, data: TrainData,
     step_loss = wrap(StageLoss(stage, model), env)
     if cfg.compile:
         step_loss = torch.compile(step_loss)
-    run = StageRun(stage, step_loss, opt, params, cfg, env, logger.write, _constants(data, loader.dataset, env.device))
+    run = StageRun(stage, step_loss, opt, params, cfg, env, logger.write, _constants(data, loader.dataset, env.device),
+                   progress=on_progress if env.is_main else None)
     t_start = time.perf_counter()
     last, step = train_steps(run, loader, start, checkpoint)
     seconds = time.perf_counter() - t_start
@@ -252,17 +254,20 @@ def _seed_everything(seed: int) -> None:
 
 
 def train(cfg: TrainConfig, data: TrainData | None = None,
-          on_record: Callable[[dict], None] | None = None) -> dict:
+          on_record: Callable[[dict], None] | None = None,
+          on_progress: Callable[[dict], None] | None = None) -> dict:
     """Run the configured stages; returns (and on rank 0 writes) OUT/metrics.json's content.
 
-    Every log record goes to OUT/log.jsonl and to `on_record` (default: logging at INFO).
+    Every log record goes to OUT/log.jsonl and to `on_record` (default: logging at INFO);
+    `on_progress` gets every step's position and rate (handtouch.progress.Rate; rank 0).
     """
     cfg.validate()
     with torch_threads(cfg.threads):      # cfg.threads is this training run's budget only
-        return _train(cfg, data, on_record)
+        return _train(cfg, data, on_record, on_progress)
 
 
-def _train(cfg: TrainConfig, data: TrainData | None, on_record: Callable[[dict], None] | None) -> dict:
+def _train(cfg: TrainConfig, data: TrainData | None, on_record: Callable[[dict], None] | None,
+           on_progress: Callable[[dict], None] | None = None) -> dict:
     env = init_distributed(cfg.device)
     try:
         cfg.check_codebook_load(env.world_size)
@@ -286,7 +291,7 @@ def _train(cfg: TrainConfig, data: TrainData | None, on_record: Callable[[dict],
                    if env.is_main else None)
         summaries = {}
         for stage in build_stages(cfg):
-            summaries[str(stage.number)] = run_stage(stage, model, cfg, data, env, out, logger, heldout)
+            summaries[str(stage.number)] = run_stage(stage, model, cfg, data, env, out, logger, heldout, on_progress)
         metrics = {"model": model.name, "encoder": cfg.model.encoder, "world_size": env.world_size,
                    "device": str(env.device), "rgb_encoder": dataclasses.asdict(model.rgb_encoder.info),
                    "stages": summaries, "heldout_source": data.eval_source}

@@ -67,3 +67,20 @@ def test_gpu_check_settings_are_stage1_of_the_full_config(tmp_path):
     assert cfg.stages == [1] and cfg.batch_size == 128 and cfg.workers == 16 and cfg.bf16 and not cfg.compile
     assert cfg.model.dim == 384 and cfg.model.depth == 8 and cfg.model.codebook_size == 2048   # full.toml's model
     assert cfg.stage1.steps == 300 and cfg.device == "cuda" and cfg.split == gpucheck.SPLIT
+
+
+def test_heartbeat_names_the_phase_and_the_latest_progress():
+    from handtouch.progress import Heartbeat, Rate
+
+    lines = []
+    beat = Heartbeat(every_s=0.05, emit=lines.append)
+    with beat:
+        beat.phase("train_vit")
+        beat.report(Rate().report("stage 1", 3, 10, 8))
+        import time
+        time.sleep(0.3)
+        beat.phase("eval_handtouch-vit")
+        time.sleep(0.2)
+    assert any(line.startswith("smoke: train_vit ") and "stage 1 step 3/10" in line and "samples/s" in line
+               and "ETA" in line for line in lines)
+    assert lines[-1].startswith("smoke: eval_handtouch-vit ") and "step" not in lines[-1]

@@ -21,7 +21,9 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Subset
 
+from htdata.format.mapstorage import maps_stored
 from htdata.read import keys
+from htdata.read.reader import DatasetReader
 from htdata.read.torchdata import TactileFrameDataset
 
 
@@ -57,6 +59,8 @@ def dataloader_rows(root: Path, workers: tuple[int, int] = (1, 2), reps: int = 2
     lo, hi = workers
     rows = []
     for kind, source, options in VARIANTS:
+        if source == "stored" and not maps_stored(DatasetReader(root).manifest):
+            continue   # a maps = "raw" version has no EXR to decode
         rates: dict[int, list[float]] = {lo: [], hi: []}
         for rep in range(reps):
             for w in (lo, hi):
