@@ -74,6 +74,9 @@ SPLIT_NAME = "smoke"
 RECON_RATIO = 0.7
 # 64 codes in the smoke config; a collapsed codebook scores ~1. Healthy runs use 15-30.
 PERPLEXITY_FLOOR = 4.0
+# The held-out (ood) RGB-to-tactile check: required once it beats all zeros with margin on 3 seeds
+# (docs/HANDTOUCH.md, "Held-out RGB-to-tactile"); reported until then.
+OOD_RGB_REQUIRED = False
 HEARTBEAT_S = 5.0     # a progress line at least this often (the issue asked for <= 10 s)
 
 
@@ -324,7 +327,7 @@ def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
     perplexity = timer.run("checks", codebook_perplexity, models[handtouch], prepared["test"])
     checks = learning_checks(stage1_rmse, zeros_rmse, results[handtouch]["test"]["retrieval"], perplexity)
     checks.append(rgb_check(results, handtouch, "test"))
-    checks.append(rgb_check(results, handtouch, "ood", required=False))
+    checks.append(rgb_check(results, handtouch, "ood", required=OOD_RGB_REQUIRED))
     control = timer.run("rgb_control", misalignment_control, args, probes, pre_cfg, models[handtouch], prepared)
     checks += control_checks(control["probe"], "test")
     checks += model_control_checks(control["model"], "test")
