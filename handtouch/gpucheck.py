@@ -243,7 +243,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(_json_safe(result), indent=2))
-        print(f"gpu-check: wrote {args.json}")
+        args.json.with_suffix(".md").write_text(f"{device}, {os.cpu_count()} CPUs, torch {torch.__version__}; "
+                                                f"stage 1 of configs/full.toml, bf16, {args.steps} steps\n\n"
+                                                + table(rows) + "\n")
+        print(f"gpu-check: wrote {args.json} and {args.json.with_suffix('.md')}")
     return 0
 
 
