@@ -19,6 +19,10 @@ numpy, scipy, h5py, OpenEXR, opencv-contrib-python-headless, av, jsonschema,
 tqdm, psutil, fsspec); it checks them first and names what is missing. Exits
 2 where there is no CUDA device, 3 where a dependency is missing. Results go
 to `--json`, default $OUT/gpucheck.json when $OUT is set.
+
+Imports inside functions: the script must say "no GPU" or "missing dependency" on a machine
+that lacks them, so the trainer and htdata (which import torch, OpenEXR, cv2 ...) are
+imported only after those checks.
 """
 
 from __future__ import annotations
