@@ -9,7 +9,7 @@ OOD    ?= palm_push
 JOBS   ?= 2
 
 .PHONY: setup demo sample ingest split validate preview train-smoke compare task-transfer test install-check bench \
-        lerobot-check lerobot-load export-lerobot clean
+        lerobot-check lerobot-load export-lerobot gpu-check clean
 
 setup: $(VENV)/.installed
 
@@ -70,6 +70,18 @@ install-check:
 
 bench: setup
 	$(HTDATA) bench --out bench
+
+# HandTouch stage 1 (configs/full.toml, bf16) on a CUDA GPU at batch 32 / 8 workers and 128 / 16:
+# samples/s, data-wait share, GPU busy share. No `setup`: it runs on a machine that already has
+# torch (a CUDA build) and the dependencies of pyproject.toml, with the checkout on PYTHONPATH
+# (GPU_PY=python3 by default). Builds the medium sample dataset under GPU_WORK first (reused after),
+# unless GPU_CHECK_ARGS="--dataset DIR". JSON: $$OUT/gpucheck.json if OUT is set.
+# Exits 2 without a GPU, 3 with a dependency missing (named).
+GPU_PY         ?= python3
+GPU_WORK       ?= /tmp/ht_gpucheck
+GPU_CHECK_ARGS ?= --compile
+gpu-check:
+	PYTHONPATH=$(CURDIR)$${PYTHONPATH:+:$$PYTHONPATH} $(GPU_PY) -m handtouch.gpucheck --work $(GPU_WORK) $(GPU_CHECK_ARGS)
 
 # LeRobot v3.0 export of the sample dataset (pyarrow comes with make setup's [export] extra).
 export-lerobot: split

@@ -6,6 +6,10 @@ point group "htdata.bench_sections" (pyproject.toml: training =
 ctx.dataset (an ingested sample dataset), ctx.work (scratch folder), ctx.quick and
 ctx.seed. It returns JSON-able results; "markdown" is rendered verbatim in REPORT.md.
 
+Each row splits a step (handtouch.steploop.StepTimes): data wait (here the
+in-process decode: workers 0), host (the step's Python and, on a CPU, its
+compute) and, on CUDA, device busy time from CUDA events.
+
 Both runs use the shipped smoke config (`handtouch.resources.config_file`), the same
 steps and seed. DataLoader workers are 0 so both decode in the training process and
 the ratio compares the model step, not worker scheduling on 2 shared cores.
@@ -48,7 +52,11 @@ def stage1_run(dataset: Path, out: Path, steps: int, bf16: bool, seed: int = 0,
     cfg = load_train_config(config_file(CONFIG), [f"{k}={_toml(v)}" for k, v in overrides.items()])
     metrics = train(cfg)
     stage = metrics["stages"]["1"]
-    return {"precision": "bf16 autocast" if bf16 else "fp32", "steps": int(stage["steps"]),
+    timing = stage.get("timing") or {}
+    per_step = {f"{k[:-2]}_ms_per_step": 1000.0 * timing[k] / max(timing.get("steps", 0), 1)
+                for k in ("wall_s", "data_wait_s", "host_s", "device_s") if k in timing}
+    return {**per_step, "data_wait_share": float(timing.get("data_wait_share", float("nan"))),
+            "precision": "bf16 autocast" if bf16 else "fp32", "steps": int(stage["steps"]),
             "batch_size": cfg.batch_size, "seconds": float(stage["seconds"]),
             "steps_per_s": float(stage["steps_per_s"]), "samples_per_s": float(stage["samples_per_s"]),
             "final_loss": float(stage["final"].get("loss", float("nan"))),
@@ -69,10 +77,14 @@ def training_rows(dataset: Path, work: Path, steps: int, seed: int = 0, batch_si
 
 
 COLUMNS = (("precision", "precision"), ("steps", "steps"), ("batch_size", "batch"), ("steps_per_s", "steps/s"),
-           ("samples_per_s", "samples/s"), ("final_loss", "final loss"), ("recon_rmse", "recon RMSE"))
+           ("samples_per_s", "samples/s"), ("wall_ms_per_step", "ms/step"), ("data_wait_ms_per_step", "data wait ms"),
+           ("host_ms_per_step", "host ms"), ("device_ms_per_step", "device ms"), ("final_loss", "final loss"),
+           ("recon_rmse", "recon RMSE"))
 
 
 def _cell(v: Any) -> str:
+    if v is None:
+        return "-"
     if isinstance(v, float):
         return "n/a" if not math.isfinite(v) else f"{v:.3g}"
     return str(v)
@@ -80,7 +92,9 @@ def _cell(v: Any) -> str:
 
 def render_markdown(result: dict) -> str:
     """The section's REPORT.md body: one row per precision, then the ratios in words."""
-    lines = [f"Stage 1 of the `{CONFIG}` config, fp32 vs bf16 autocast, same steps and seed.", "",
+    lines = [f"Stage 1 of the `{CONFIG}` config, fp32 vs bf16 autocast, same steps and seed. Per step: "
+             "data wait (in-process decode, workers 0), host (the step's Python and, on a CPU, its compute), "
+             "device (CUDA events; - on a CPU).", "",
              "| " + " | ".join(h for _, h in COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
     lines += ["| " + " | ".join(_cell(r.get(k)) for k, _ in COLUMNS) + " |" for r in result["rows"]]
     lines += ["", f"bf16 / fp32 speed: {result['bf16_speedup']:.2f}x; recon RMSE ratio "

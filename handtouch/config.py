@@ -223,6 +223,8 @@ class TrainConfig:
     bf16: bool = False
     workers: int = 2
     threads: int = 0              # torch intra-op threads of the training process; 0 = torch's default
+    prefetch: int = 2             # batches each DataLoader worker keeps ready (prefetch_factor)
+    compile: bool = False         # torch.compile the step's loss module (measured: docs/HANDTOUCH.md, "Feeding a GPU")
     batch_size: int = 32
     eval_batch_size: int = 16
     log_every: int = 10
@@ -249,8 +251,8 @@ class TrainConfig:
             raise ValueError("rgb_encoder is empty: use 'random:SEED' (smoke) or a local .pt2/.pt file")
         if self.device != "auto" and not (self.device == "cpu" or self.device.startswith("cuda")):
             raise ValueError(f"device must be auto, cpu or cuda[:N], got {self.device!r}")
-        if self.workers < 0 or self.threads < 0 or self.batch_size < 1 or self.eval_batch_size < 1:
-            raise ValueError("workers >= 0, threads >= 0, batch_size >= 1, eval_batch_size >= 1 required")
+        if self.workers < 0 or self.threads < 0 or self.batch_size < 1 or self.eval_batch_size < 1 or self.prefetch < 1:
+            raise ValueError("workers >= 0, threads >= 0, batch_size >= 1, eval_batch_size >= 1, prefetch >= 1 required")
         if self.log_every < 1 or self.checkpoint_every < 1:
             raise ValueError("log_every and checkpoint_every must be >= 1")
         if not self.stages or any(s not in (1, 2, 3) for s in self.stages) or self.stages != sorted(set(self.stages)):

@@ -22,6 +22,15 @@ def p_full(g: float, p_min: float, p_max: float) -> float:
     return p_min + (p_max - p_min) / (1.0 + math.exp(-CURRICULUM_STEEPNESS * (g - 0.5)))
 
 
+def to_device(t: torch.Tensor, device: torch.device | str) -> torch.Tensor:
+    """A CPU-drawn tensor on `device`: pinned and non_blocking on CUDA (a copy from pageable memory
+    waits for the device's queue first: a host sync every step)."""
+    device = torch.device(device)
+    if device.type == "cuda":
+        return t.pin_memory().to(device, non_blocking=True)
+    return t.to(device)
+
+
 def choose_parts(batch: int, max_parts: int, generator: torch.Generator | None = None,
                  device: torch.device | str = "cpu") -> torch.Tensor:
     """(B, 7) bool: column p is True when part p is masked; column 0 (outside) never is."""
@@ -31,7 +40,7 @@ def choose_parts(batch: int, max_parts: int, generator: torch.Generator | None =
     scores = torch.rand(batch, NUM_PARTS, generator=generator)
     rank = scores.argsort(dim=1).argsort(dim=1)          # a random permutation per sample
     chosen = rank < k
-    return torch.cat([torch.zeros(batch, 1, dtype=torch.bool), chosen], dim=1).to(device)
+    return to_device(torch.cat([torch.zeros(batch, 1, dtype=torch.bool), chosen], dim=1), device)
 
 
 def part_mask(regions: torch.Tensor, chosen: torch.Tensor) -> torch.Tensor:
@@ -39,11 +48,12 @@ def part_mask(regions: torch.Tensor, chosen: torch.Tensor) -> torch.Tensor:
     if regions.dim() != 3:
         raise ValueError(f"regions must be (B,H,W), got {tuple(regions.shape)}")
     ids = regions.long()
-    if ids.numel() and (int(ids.max()) > NUM_PARTS or int(ids.min()) < 0):
+    # checked on the CPU only: on an accelerator reading min / max back would stop it every step
+    if ids.device.type == "cpu" and ids.numel() and (int(ids.max()) > NUM_PARTS or int(ids.min()) < 0):
         raise ValueError(f"regions hold part ids outside 0..{NUM_PARTS}: "
                          f"[{int(ids.min())}, {int(ids.max())}]")
     b, h, w = ids.shape
-    hidden = torch.gather(chosen.to(ids.device), 1, ids.reshape(b, -1)).reshape(b, 1, h, w)
+    hidden = torch.gather(to_device(chosen, ids.device), 1, ids.reshape(b, -1)).reshape(b, 1, h, w)
     return hidden.float()
 
 
@@ -54,5 +64,6 @@ def sample_masks(regions: torch.Tensor, g: float, p_min: float, p_max: float, ma
     complete = torch.rand(b, generator=generator) < p_full(g, p_min, p_max)
     regional = part_mask(regions, choose_parts(b, max_parts, generator))
     full = torch.ones_like(regional)
-    mask = torch.where(complete.view(b, 1, 1, 1).to(regional.device), full, regional)
-    return mask, complete.to(regional.device)
+    complete = to_device(complete, regional.device)
+    mask = torch.where(complete.view(b, 1, 1, 1), full, regional)
+    return mask, complete

@@ -227,10 +227,11 @@ class HandTouch(nn.Module):
         the tokens themselves, indices 0, no VQ loss and NaN statistics (not applicable)."""
         if self.cfg.quantised:
             return self.vq(tokens)
-        zero, nan = tokens.new_zeros((), dtype=torch.float32), torch.tensor(float("nan"))
+        # made on the tokens' device: a host tensor copied there each step would stop the host
+        zero, nan = tokens.new_zeros((), dtype=torch.float32), tokens.new_full((), float("nan"), dtype=torch.float32)
         indices = torch.zeros(tokens.shape[:2], dtype=torch.long, device=tokens.device)
         return tokens.float(), indices, {"codebook": zero, "commit": zero}, \
-            {"perplexity": nan, "usage": nan, "restarts": torch.tensor(0.0)}
+            {"perplexity": nan, "usage": nan, "restarts": zero}
 
     def quantise_decode(self, tokens: torch.Tensor, coverage: torch.Tensor):
         """tokens -> VQ -> map * coverage; returns (map, indices, vq losses, vq stats)."""

@@ -33,6 +33,7 @@ import io
 import json
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -45,6 +46,7 @@ from htdata.store.fsutil import write_bytes_atomic
 
 from .bench.metrics import MapMetrics
 from .distributed import torch_threads
+from .progress import Rate
 from .rgb_encoder import TactileGridRGB, load_rgb_encoder, to_unit_float
 from htdata.read.torchdata import TactileFrameDataset
 from .bench.evaluate import iterate_batches, subsample
@@ -175,7 +177,8 @@ def _lr(step: int, cfg: RGBPretrainConfig) -> float:
     return lr_at(step, cfg.steps, cfg.lr, cfg.warmup_steps)
 
 
-def train_probe(items: ProbeItems, pairing: str, cfg: RGBPretrainConfig) -> TactileGridRGB:
+def train_probe(items: ProbeItems, pairing: str, cfg: RGBPretrainConfig,
+                progress: Callable[[dict], None] | None = None) -> TactileGridRGB:
     """Train a TactileGridRGB on `items` with their RGB paired by `pairing`; returns it in eval mode."""
     src = partners(items.episode, items.frame, items.fps, pairing, cfg.shift_seconds, cfg.seed)
     keep = np.flatnonzero(src >= 0)
@@ -186,11 +189,14 @@ def train_probe(items: ProbeItems, pairing: str, cfg: RGBPretrainConfig) -> Tact
         torch.manual_seed(cfg.seed)
         model = TactileGridRGB(**cfg.arch)
     with torch_threads(cfg.threads):
-        return _fit(model, rgb, cells, weight, hand, cfg)
+        return _fit(model, rgb, cells, weight, hand, cfg, progress, f"{pairing} probe")
 
 
-def _fit(model: TactileGridRGB, rgb, cells, weight, hand, cfg: RGBPretrainConfig) -> TactileGridRGB:
-    """cfg.steps of AdamW on seeded random batches of the paired tensors, augmented."""
+def _fit(model: TactileGridRGB, rgb, cells, weight, hand, cfg: RGBPretrainConfig,
+         progress: Callable[[dict], None] | None = None, what: str = "probe") -> TactileGridRGB:
+    """cfg.steps of AdamW on seeded random batches of the paired tensors, augmented; `progress`
+    gets each step's position and rate (handtouch.progress.Rate)."""
+    rate = Rate()
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     g = torch.Generator().manual_seed(cfg.seed)
     model.train()
@@ -211,6 +217,8 @@ def _fit(model: TactileGridRGB, rgb, cells, weight, hand, cfg: RGBPretrainConfig
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
+        if progress is not None:
+            progress(rate.report(what, step + 1, cfg.steps, cfg.batch_size))
     return model.eval()
 
 
@@ -233,8 +241,9 @@ def cache_key(dataset_root, split: str | None, part: str, cfg: RGBPretrainConfig
 
 
 def ensure_probes(dataset_root, split: str | None, out_dir, cfg: RGBPretrainConfig | None = None,
-                  part: str = "train", pairings=PAIRINGS) -> dict[str, Path]:
-    """Train (or reuse) one probe per pairing -> {pairing: path of its encoder file}."""
+                  part: str = "train", pairings=PAIRINGS,
+                  progress: Callable[[dict], None] | None = None) -> dict[str, Path]:
+    """Train (or reuse) one probe per pairing -> {pairing: path of its encoder file} (`progress`: train_probe)."""
     cfg = (cfg or RGBPretrainConfig()).validate()
     folder = Path(out_dir) / cache_key(dataset_root, split, part, cfg)
     paths = {p: folder / f"{p}.pt" for p in pairings}
@@ -243,7 +252,7 @@ def ensure_probes(dataset_root, split: str | None, out_dir, cfg: RGBPretrainConf
         items = load_items(dataset_root, split, part, cfg)
         for p in missing:
             log.info("rgb pretrain: training the %s probe on %d items", p, len(items.hand))
-            save_probe(train_probe(items, p, cfg), paths[p],
+            save_probe(train_probe(items, p, cfg, progress), paths[p],
                        {"pairing": p, "dataset": str(dataset_root), "split": split, "part": part,
                         "config": dataclasses.asdict(cfg)})
     return paths

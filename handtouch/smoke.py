@@ -54,6 +54,7 @@ from handtouch.bench.metrics import MapMetrics
 from handtouch.bench.report import render_predictions, write_results
 from handtouch.bench.verdicts import ZEROS
 from handtouch.config import ENCODERS as MODEL_ENCODERS
+from handtouch.progress import Heartbeat
 from handtouch.resources import config_file
 from handtouch.rgb_pretrain import (PAIRINGS, RGBPretrainConfig, control_checks, control_scores, ensure_probes,
                                     episode_fps, load_items, model_control_checks, paired_rgb2tactile)
@@ -73,6 +74,10 @@ SPLIT_NAME = "smoke"
 RECON_RATIO = 0.7
 # 64 codes in the smoke config; a collapsed codebook scores ~1. Healthy runs use 15-30.
 PERPLEXITY_FLOOR = 4.0
+# The held-out (ood) RGB-to-tactile check: required once it beats all zeros with margin on 3 seeds
+# (docs/HANDTOUCH.md, "Held-out RGB-to-tactile"); reported until then.
+OOD_RGB_REQUIRED = False
+HEARTBEAT_S = 5.0     # a progress line at least this often (the issue asked for <= 10 s)
 
 
 def _htdata(*args: str) -> None:
@@ -111,7 +116,8 @@ def toml_str(value: str) -> str:
     return json.dumps(str(value))   # a JSON string is a valid TOML basic string
 
 
-def train_encoder(config: Path, encoder: str, dataset: Path, out_dir: Path, extra: list[str]):
+def train_encoder(config: Path, encoder: str, dataset: Path, out_dir: Path, extra: list[str],
+                  on_progress=None):
     """Train one model with the smoke config (only the encoder differs).
 
     -> (final model, stage-1 model, train metrics); both models in eval mode.
@@ -123,7 +129,7 @@ def train_encoder(config: Path, encoder: str, dataset: Path, out_dir: Path, extr
     cfg = load_train_config(config, overrides)
     if 1 not in cfg.stages:
         raise SystemExit("smoke: the config must run stage 1 (the reconstruction check uses its checkpoint)")
-    metrics = train(cfg)
+    metrics = train(cfg, on_progress=on_progress)
     out = Path(cfg.out_dir)
     ckpts = {s: out / f"stage{s}.pt" for s in (1, max(cfg.stages))}    # the trainer's stage checkpoints
     for path in ckpts.values():
@@ -254,13 +260,16 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 
 class PhaseTimer:
-    """Wall seconds per named phase, in run order."""
+    """Wall seconds per named phase, in run order; each phase named to the heartbeat as it starts."""
 
-    def __init__(self):
+    def __init__(self, heartbeat: Heartbeat | None = None):
         self.seconds: dict[str, float] = {}
         self.t0 = time.perf_counter()
+        self.heartbeat = heartbeat
 
     def run(self, name: str, fn, *args, **kwargs):
+        if self.heartbeat is not None:
+            self.heartbeat.phase(name)
         t = time.perf_counter()
         try:
             return fn(*args, **kwargs)
@@ -273,6 +282,12 @@ class PhaseTimer:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
+    with Heartbeat(HEARTBEAT_S) as heartbeat:   # a line every HEARTBEAT_S seconds, whatever runs
+        return _run(args, heartbeat)
+
+
+def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
+    """Long because it is the smoke's script, phase after phase, as the module docstring lists them."""
     torch.manual_seed(args.seed)
 
     # Evaluation runs under the training thread budget too: with 2 threads next to any other
@@ -280,7 +295,7 @@ def main(argv=None) -> int:
     threads = load_train_config(args.config, args.set).threads
     if threads:
         torch.set_num_threads(threads)
-    timer = PhaseTimer()
+    timer = PhaseTimer(heartbeat)
     timer.run("data_sample", ensure_raw, args.raw, args.seed)
     timer.run("data_ingest", ensure_dataset, args.raw, args.dataset, args.workers)
     timer.run("data_split", make_split, args.dataset, args.ood_task, args.seed)
@@ -290,7 +305,8 @@ def main(argv=None) -> int:
     prepared = timer.run("eval_prepare", prepare, parts, cfg=EvalConfig(max_items=args.max_items, seed=args.seed))
     pre_cfg = RGBPretrainConfig(seed=args.seed)
     # probes train on RGBPretrainConfig.threads (2): nothing else runs meanwhile
-    probes = timer.run("rgb_pretrain", ensure_probes, args.dataset, SPLIT_NAME, args.out / "rgb_encoder", pre_cfg)
+    probes = timer.run("rgb_pretrain", ensure_probes, args.dataset, SPLIT_NAME, args.out / "rgb_encoder", pre_cfg,
+                       progress=heartbeat.report)
     # the aligned probe is the frozen RGB encoder, and its coarse contact map is the RGB prior of
     # hidden pixels (docs/HANDTOUCH.md, "RGB prior"); a user's --set rgb_encoder=FILE comes later and wins
     # (with --set model.rgb_prior=false unless FILE has a readout)
@@ -299,7 +315,7 @@ def main(argv=None) -> int:
     for enc in args.encoders:
         print(f"smoke: training encoder={enc}", flush=True)
         model, stage1, metrics = timer.run(f"train_{enc}", train_encoder, args.config, enc, args.dataset,
-                                           args.out / "train" / enc, sets)
+                                           args.out / "train" / enc, sets, heartbeat.report)
         models[model.name], stage1_models[model.name], train_metrics[model.name] = model, stage1, metrics
     handtouch = next(iter(models))
 
@@ -311,7 +327,7 @@ def main(argv=None) -> int:
     perplexity = timer.run("checks", codebook_perplexity, models[handtouch], prepared["test"])
     checks = learning_checks(stage1_rmse, zeros_rmse, results[handtouch]["test"]["retrieval"], perplexity)
     checks.append(rgb_check(results, handtouch, "test"))
-    checks.append(rgb_check(results, handtouch, "ood", required=False))
+    checks.append(rgb_check(results, handtouch, "ood", required=OOD_RGB_REQUIRED))
     control = timer.run("rgb_control", misalignment_control, args, probes, pre_cfg, models[handtouch], prepared)
     checks += control_checks(control["probe"], "test")
     checks += model_control_checks(control["model"], "test")

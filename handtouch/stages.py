@@ -58,6 +58,7 @@ class Stage(ABC):
     number: ClassVar[int]
     data: ClassVar[str]           # FRAMES or WINDOWS
     items: ClassVar[str]          # what one item is, for error messages
+    reads_rgb: ClassVar[bool] = True   # False: its items need no RGB frame (none is decoded or sent)
 
     def __init__(self, cfg: StageConfig, weights: LossConfig | None = None):
         self.cfg = cfg
@@ -118,6 +119,7 @@ class Stage(ABC):
 
 class Reconstruction(Stage):
     number, data, items = 1, FRAMES, "frame"
+    reads_rgb = False
 
     def forward(self, model: HandTouch, batch: dict) -> Losses:
         cov = batch[keys.COVERAGE]
@@ -142,12 +144,13 @@ class MaskedFusion(Stage):
         self.seed = seed
 
     def prepare(self, batch: dict, at: StepInfo) -> dict:
-        """Add this step's curriculum mask (regional or complete), drawn on the CPU."""
+        """Add this step's curriculum mask (regional or complete): the draws on the CPU (its
+        generator), the mask built where the regions are (no copy back to the host)."""
         m = self.masking
         g = at.step / max(at.steps - 1, 1) if m.curriculum else 0.5   # 0.5: P_full's midpoint
-        mask, _ = sample_masks(batch[keys.REGIONS].cpu(), g, m.p_min, m.p_max, m.max_parts,
+        mask, _ = sample_masks(batch[keys.REGIONS], g, m.p_min, m.p_max, m.max_parts,
                                mask_generator(self.seed, self.number, at.step, at.rank))
-        return {**batch, MASK: mask.to(batch[keys.REGIONS].device)}
+        return {**batch, MASK: mask}
 
     def forward(self, model: HandTouch, batch: dict) -> Losses:
         mask = batch.get(MASK)

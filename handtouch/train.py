@@ -30,7 +30,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import torch.nn as nn
 from torch.utils.data import DataLoader, Dataset
 
 from htdata.read import keys
@@ -38,13 +37,14 @@ from htdata.store.fsutil import write_json_atomic
 
 from .checkpoint import CHECKPOINT_FORMAT, read_checkpoint, rng_state, save_checkpoint, set_rng_state  # noqa: F401
 from .config import WINDOW, TrainConfig, load_train_config, model_config_from_dict
-from .distributed import (DistEnv, StepBatchSampler, barrier, init_distributed, mean_across_ranks, shutdown,
+from .distributed import (DistEnv, StepBatchSampler, barrier, init_distributed, shutdown,
                           torch_threads, wrap)
 from .model import HandTouch, covered, masked_mse
 from .resources import config_file
 from .rgb_encoder import load_rgb_encoder
-from .stages import FRAMES, WINDOWS, Stage, StageLoss, StepInfo, build_stages
-from htdata.read.torchdata import TactileFrameDataset, TactileWindowDataset
+from .stages import FRAMES, WINDOWS, Stage, StageLoss, build_stages
+from .steploop import StageRun, lr_at, make_optimizer, to_device, train_steps  # noqa: F401  (lr_at: a name of this module)
+from htdata.read.torchdata import ItemConstants, TactileFrameDataset, TactileWindowDataset
 
 log = logging.getLogger("handtouch.train")
 
@@ -55,28 +55,39 @@ class TrainData:
     windows: Dataset | None    # stages.WINDOWS items (TactileWindowDataset keys); None if no stage reads them
     eval_frames: Dataset       # source of the held-out batch
     eval_source: str           # what eval_frames is, for metrics.json
+    tactile_frames: Dataset | None = None   # frames without RGB, for stages that read none (Stage.reads_rgb)
+    constants: ItemConstants | None = None  # per-layout constants of constants="once" items (wrapped datasets)
 
-    def items(self, kind: str) -> Dataset | None:
-        """The dataset a stage reads (Stage.data: stages.FRAMES or stages.WINDOWS)."""
+    def items(self, kind: str, rgb: bool = True) -> Dataset | None:
+        """The dataset a stage reads (Stage.data: stages.FRAMES or stages.WINDOWS; rgb: Stage.reads_rgb)."""
         if kind not in (FRAMES, WINDOWS):
             raise ValueError(f"unknown stage data kind {kind!r}; known: {FRAMES!r}, {WINDOWS!r}")
+        if kind == FRAMES and not rgb and self.tactile_frames is not None:
+            return self.tactile_frames
         return self.frames if kind == FRAMES else self.windows
 
 
 def load_data(cfg: TrainConfig) -> TrainData:
-    """The committed dataset at cfg.data_root through htdata.read.torchdata."""
+    """The committed dataset at cfg.data_root through htdata.read.torchdata.
+
+    Training frames carry per-layout constants once (constants="once": expanded on the
+    device); stage 1 reads frames without RGB (no JPEG decoded, ~1/3 fewer bytes moved).
+    """
 
     split = cfg.split or None
     train_part = cfg.train_part if split else None
-    frames = TactileFrameDataset(cfg.data_root, split=split, part=train_part)
+    frames = TactileFrameDataset(cfg.data_root, split=split, part=train_part, constants="once")
+    tactile = TactileFrameDataset(cfg.data_root, split=split, part=train_part, constants="once",
+                                  members=(keys.TACTILE,))
     windows = (TactileWindowDataset(cfg.data_root, window=WINDOW, split=split, part=train_part)
                if any(s.data == WINDOWS for s in build_stages(cfg)) else None)
     if split:
         eval_frames = TactileFrameDataset(cfg.data_root, split=split, part=cfg.eval_part)
         source = f"part {cfg.eval_part!r} of split {split!r}"
     else:
-        eval_frames, source = frames, "training data (no split configured: not held out)"
-    return TrainData(frames, windows, eval_frames, source)
+        eval_frames = TactileFrameDataset(cfg.data_root)   # items with their constants: a batch as-is
+        source = "training data (no split configured: not held out)"
+    return TrainData(frames, windows, eval_frames, source, tactile, frames.constants())
 
 
 def build_model(cfg: TrainConfig) -> HandTouch:
@@ -99,18 +110,6 @@ def load_model(checkpoint_path: str | Path, device: str = "cpu") -> HandTouch:
 
 
 # ---- one stage -----------------------------------------------------------------------
-def lr_at(step: int, total: int, base: float, warmup: int) -> float:
-    """Linear warmup then cosine decay to 10% of base."""
-    if warmup and step < warmup:
-        return base * (step + 1) / warmup
-    span = max(total - warmup, 1)
-    return base * (0.1 + 0.45 * (1 + math.cos(math.pi * min(step - warmup, span) / span)))
-
-
-def _to_device(batch: dict, device: torch.device) -> dict:
-    return {k: v.to(device, non_blocking=True) if torch.is_tensor(v) else v for k, v in batch.items()}
-
-
 class JsonlLog:
     """Training records: appended to OUT/log.jsonl (when `path` is set), then handed to
     `emit` if given (the CLI prints them), else logged at INFO on "handtouch.train"."""
@@ -130,14 +129,10 @@ class JsonlLog:
             log.info("%s", line)
 
 
-def _autocast(cfg: TrainConfig, device: torch.device):
-    return torch.autocast(device_type=device.type, dtype=torch.bfloat16, enabled=cfg.bf16)
-
-
 def _stage_loader(stage: Stage, cfg: TrainConfig, data: TrainData, env: DistEnv, start: int) -> DataLoader:
     """Batches of the stage's dataset kind for steps [start, steps) of this rank."""
     n = stage.number
-    dataset = data.items(stage.data)
+    dataset = data.items(stage.data, stage.reads_rgb)
     if dataset is None:
         raise ValueError(f"stage {n} needs {stage.data} data (TrainData.{stage.data} is None)")
     try:
@@ -147,62 +142,13 @@ def _stage_loader(stage: Stage, cfg: TrainConfig, data: TrainData, env: DistEnv,
         raise ValueError(f"stage {n} ({stage.items} items from {cfg.data_root}): {e}") from None
     return DataLoader(dataset, batch_sampler=sampler, num_workers=cfg.workers,
                       generator=torch.Generator().manual_seed(cfg.seed),  # keep global RNG untouched
-                      persistent_workers=False, pin_memory=env.device.type == "cuda")
-
-
-@dataclass
-class _StageRun:
-    """The pieces one stage's step loop works with."""
-    stage: Stage
-    step_loss: nn.Module          # StageLoss(stage, model), DDP-wrapped under torchrun
-    opt: torch.optim.Optimizer
-    params: list[torch.nn.Parameter]
-    cfg: TrainConfig
-    env: DistEnv
-    logger: JsonlLog
-
-
-def _train_steps(run: _StageRun, loader: DataLoader, start: int,
-                 checkpoint: Callable[[int], None]) -> tuple[dict[str, float], int]:
-    """Steps [start, steps): the generic loop. -> (last logged mean losses, last step index)."""
-    stage, cfg, env, opt = run.stage, run.cfg, run.env, run.opt
-    n, total = stage.number, stage.cfg.steps
-    window: dict[str, float] = {}
-    window_steps, t_window = 0, time.perf_counter()
-    last: dict[str, float] = {}
-    step = start
-    for step, batch in zip(range(start, total), loader):
-        batch = _to_device(batch, env.device)
-        for group in opt.param_groups:
-            group["lr"] = lr_at(step, total, stage.cfg.lr, stage.cfg.warmup_steps)
-        batch = stage.prepare(batch, StepInfo(step, total, env.rank))
-        with _autocast(cfg, env.device):
-            loss, loss_dict = run.step_loss(batch)
-        if not torch.isfinite(loss):
-            raise FloatingPointError(f"stage {n} step {step}: non-finite loss {float(loss)}")
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(run.params, stage.cfg.grad_clip)
-        opt.step()
-        for k, v in {"loss": loss, **loss_dict}.items():
-            window[k] = window.get(k, 0.0) + float(v.detach())
-        window_steps += 1
-        done_steps = step + 1
-        if done_steps % cfg.log_every == 0 or done_steps == total:
-            elapsed = time.perf_counter() - t_window
-            last = mean_across_ranks({k: v / window_steps for k, v in window.items()}, env)
-            sps = window_steps / max(elapsed, 1e-9)
-            if env.is_main:
-                run.logger.write({"stage": n, "step": done_steps, "lr": opt.param_groups[0]["lr"], **last,
-                                  "steps_per_s": sps, "samples_per_s": sps * cfg.batch_size * env.world_size})
-            window, window_steps, t_window = {}, 0, time.perf_counter()
-        if done_steps % cfg.checkpoint_every == 0 and done_steps < total:
-            checkpoint(done_steps)
-    return last, step
+                      persistent_workers=False, pin_memory=env.device.type == "cuda",
+                      prefetch_factor=cfg.prefetch if cfg.workers else None)
 
 
 def run_stage(stage: Stage, model: HandTouch, cfg: TrainConfig, data: TrainData, env: DistEnv,
-              out: Path, logger: JsonlLog, heldout: dict | None = None) -> dict:
+              out: Path, logger: JsonlLog, heldout: dict | None = None,
+              on_progress: Callable[[dict], None] | None = None) -> dict:
     """Train one stage (resuming / skipping from OUT/stageN.pt); returns the stage summary."""
     n, steps = stage.number, stage.cfg.steps
     ckpt_path = out / f"stage{n}.pt"
@@ -216,7 +162,7 @@ def run_stage(stage: Stage, model: HandTouch, cfg: TrainConfig, data: TrainData,
     stage.configure(model)
     model.train()
     params = [p for p in model.parameters() if p.requires_grad]
-    opt = torch.optim.AdamW(params, lr=stage.cfg.lr, weight_decay=stage.cfg.weight_decay)
+    opt = make_optimizer(params, stage.cfg.lr, stage.cfg.weight_decay, env.device)
     start = 0
     if state is not None:
         model.load_state_dict(state["model"])
@@ -237,12 +183,16 @@ def run_stage(stage: Stage, model: HandTouch, cfg: TrainConfig, data: TrainData,
                 "summary": summary or {}})
         barrier(env)
 
-    run = _StageRun(stage, wrap(StageLoss(stage, model), env), opt, params, cfg, env, logger)
+    step_loss = wrap(StageLoss(stage, model), env)
+    if cfg.compile:
+        step_loss = torch.compile(step_loss)
+    run = StageRun(stage, step_loss, opt, params, cfg, env, logger.write, _constants(data, loader.dataset, env.device),
+                   progress=on_progress if env.is_main else None)
     t_start = time.perf_counter()
-    last, step = _train_steps(run, loader, start, checkpoint)
+    last, step = train_steps(run, loader, start, checkpoint)
     seconds = time.perf_counter() - t_start
     ran = steps - start
-    summary = {"steps": steps, "resumed_from": start, "final": last, "seconds": seconds,
+    summary = {"steps": steps, "resumed_from": start, "final": last, "seconds": seconds, "timing": run.times.as_dict(),
                "steps_per_s": ran / max(seconds, 1e-9),
                "samples_per_s": ran * cfg.batch_size * env.world_size / max(seconds, 1e-9)}
     if ran and step + 1 != steps:
@@ -252,6 +202,14 @@ def run_stage(stage: Stage, model: HandTouch, cfg: TrainConfig, data: TrainData,
         model.train()
     checkpoint(steps, True, summary)
     return summary
+
+
+def _constants(data: TrainData, dataset: Dataset, device: torch.device) -> ItemConstants | None:
+    """Per-layout constants on the device, once per stage: TrainData's, else the dataset's (None: items carry them)."""
+    if data.constants is not None:
+        return data.constants.to(device)
+    constants = getattr(dataset, "constants", None)
+    return constants().to(device) if constants is not None else None
 
 
 # ---- evaluation on the held-out batch -------------------------------------------------
@@ -273,7 +231,7 @@ def evaluate_heldout(model: HandTouch, batch: dict, device: torch.device) -> dic
     where the VQ neither all-reduces usage nor restarts (and broadcasts) codes.
     """
     model.eval()
-    batch = _to_device(batch, device)
+    batch = to_device(batch, device)
     cov = batch[keys.COVERAGE]
     target = covered(batch[keys.TACTILE], cov)
     pred, _, _, stats = model.quantise_decode(model.encode(target), cov)
@@ -296,17 +254,20 @@ def _seed_everything(seed: int) -> None:
 
 
 def train(cfg: TrainConfig, data: TrainData | None = None,
-          on_record: Callable[[dict], None] | None = None) -> dict:
+          on_record: Callable[[dict], None] | None = None,
+          on_progress: Callable[[dict], None] | None = None) -> dict:
     """Run the configured stages; returns (and on rank 0 writes) OUT/metrics.json's content.
 
-    Every log record goes to OUT/log.jsonl and to `on_record` (default: logging at INFO).
+    Every log record goes to OUT/log.jsonl and to `on_record` (default: logging at INFO);
+    `on_progress` gets every step's position and rate (handtouch.progress.Rate; rank 0).
     """
     cfg.validate()
     with torch_threads(cfg.threads):      # cfg.threads is this training run's budget only
-        return _train(cfg, data, on_record)
+        return _train(cfg, data, on_record, on_progress)
 
 
-def _train(cfg: TrainConfig, data: TrainData | None, on_record: Callable[[dict], None] | None) -> dict:
+def _train(cfg: TrainConfig, data: TrainData | None, on_record: Callable[[dict], None] | None,
+           on_progress: Callable[[dict], None] | None = None) -> dict:
     env = init_distributed(cfg.device)
     try:
         cfg.check_codebook_load(env.world_size)
@@ -330,7 +291,7 @@ def _train(cfg: TrainConfig, data: TrainData | None, on_record: Callable[[dict],
                    if env.is_main else None)
         summaries = {}
         for stage in build_stages(cfg):
-            summaries[str(stage.number)] = run_stage(stage, model, cfg, data, env, out, logger, heldout)
+            summaries[str(stage.number)] = run_stage(stage, model, cfg, data, env, out, logger, heldout, on_progress)
         metrics = {"model": model.name, "encoder": cfg.model.encoder, "world_size": env.world_size,
                    "device": str(env.device), "rgb_encoder": dataclasses.asdict(model.rgb_encoder.info),
                    "stages": summaries, "heldout_source": data.eval_source}

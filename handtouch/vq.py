@@ -3,7 +3,10 @@
 z_e (B,N,D) -> W_in -> z (d) -> nearest code of a shared codebook (K,d) -> W_out -> (B,N,D).
 Loss = ||z_q - sg[z]||^2 + beta ||sg[z_q] - z||^2, straight-through gradient.
 Everything runs in float32, also under bf16 autocast: distances and argmin in
-bf16 pick wrong codes.
+bf16 pick wrong codes. Nothing here reads a value back to the host (no .item(),
+no boolean-mask indexing, no bincount, which sizes its output from the data):
+usage, restarts and statistics stay tensors on the device, so a training step
+on a GPU never waits for it.
 """
 
 from __future__ import annotations
@@ -45,12 +48,13 @@ class FactorisedVQ(nn.Module):
     def _quantise(self, z_e: torch.Tensor):
         b, n, _ = z_e.shape
         z = self.w_in(z_e).reshape(b * n, -1)
-        restarts = 0
+        restarts = torch.zeros((), device=z.device)
         if self.training:
             restarts = self._restart_dead_codes(z.detach())
         indices = self.nearest(z.detach())
         z_q = F.embedding(indices, self.codebook)
-        counts = torch.bincount(indices, minlength=self.codebook_size).float()
+        counts = torch.zeros(self.codebook_size, device=z.device).index_add_(
+            0, indices, torch.ones(indices.shape[0], device=z.device))
         if self.training and _distributed():   # identical usage (hence restarts) on every rank;
             dist.all_reduce(counts)              # eval may run on one rank only: no collective there
         if self.training:
@@ -67,7 +71,7 @@ class FactorisedVQ(nn.Module):
         stats = {
             "perplexity": torch.exp(entropy).detach(),
             "usage": (counts > 0).float().mean().detach(),
-            "restarts": torch.tensor(float(restarts)),
+            "restarts": restarts,
         }
         return z_out, indices.reshape(b, n), losses, stats
 
@@ -79,21 +83,22 @@ class FactorisedVQ(nn.Module):
         return d2.argmin(dim=1)
 
     @torch.no_grad()
-    def _restart_dead_codes(self, z: torch.Tensor) -> int:
-        """Re-initialise codes whose usage EMA < threshold from random batch features + noise.
+    def _restart_dead_codes(self, z: torch.Tensor) -> torch.Tensor:
+        """Re-initialise codes whose usage EMA < threshold from random batch features + noise;
+        -> the number restarted (a 0-d float tensor on z's device).
 
+        Vectorised: a candidate is drawn for every code and `torch.where` keeps it for the dead
+        ones only, so the host never learns how many died (asking would stop the device).
         Rank 0 draws the replacements and broadcasts the codebook, so ranks stay identical.
         """
         dead = self.usage < self.dead_threshold
-        n_dead = int(dead.sum())
-        if n_dead == 0:
-            return 0
-        pick = torch.randint(0, z.shape[0], (n_dead,), device=z.device)
-        fresh = z[pick] + self.restart_noise * torch.randn(n_dead, z.shape[1], device=z.device)
-        self.codebook.data[dead] = fresh.to(self.codebook.dtype)
+        k, d = self.codebook.shape
+        pick = torch.randint(0, z.shape[0], (k,), device=z.device)
+        fresh = z[pick] + self.restart_noise * torch.randn(k, d, device=z.device)
+        self.codebook.data.copy_(torch.where(dead[:, None], fresh.to(self.codebook.dtype), self.codebook.data))
         # Grace period: a restarted code gets log(2) / -log(decay) unused steps before it counts as dead.
-        self.usage[dead] = 2.0 * self.dead_threshold
+        self.usage.copy_(torch.where(dead, torch.full_like(self.usage, 2.0 * self.dead_threshold), self.usage))
         if _distributed():
             dist.broadcast(self.codebook.data, src=0)
             dist.broadcast(self.usage, src=0)
-        return n_dead
+        return dead.sum().float()

@@ -261,3 +261,21 @@ def test_unknown_camera():
     with pytest.raises(ValueError, match="unknown camera"):
         world.render(0.0, (64, 48), camera="wrist_left")
     assert world.render(0.0, (64, 48), camera="wrist_right").shape == (48, 64, 3)
+
+
+def test_the_camera_shows_the_support_hand_contact_the_glove_feels(ot_layout):
+    """A support hand that feels contact is drawn closed on a pad; one that feels none, half open in the air."""
+    from htdata.sample.render import SUPPORT_PAD_RGB
+    from htdata.sample.world import PHASE_CONTACT, SUPPORT_CLOSURE_IDLE, SUPPORT_CLOSURE_TOUCH
+
+    touching = World(EpisodeSpec("lateral_key_turn", "Home", seed=2, n_frames=60, hands=("left", "right")))
+    idle = World(EpisodeSpec("pinch_pick", "Home", seed=2, n_frames=60, hands=("left", "right")))
+    s_touch, s_idle = touching.state("left"), idle.state("left")
+    mid = int(np.flatnonzero(s_touch.phase == PHASE_CONTACT).mean())
+    assert touching.contact_grids(ot_layout, "left")[mid].max() > 0.1      # the glove feels the support
+    assert idle.contact_grids(ot_layout, "left").max() == 0
+    assert s_touch.closure[mid].max() > SUPPORT_CLOSURE_IDLE + 0.2 and s_idle.closure.max() <= SUPPORT_CLOSURE_IDLE
+    assert SUPPORT_CLOSURE_TOUCH > SUPPORT_CLOSURE_IDLE
+    pad = np.all(np.abs(next(touching.render_frames(np.array([0.0]), (224, 224))).astype(int)
+                        - np.array(SUPPORT_PAD_RGB)) <= 2, axis=2)
+    assert pad.sum() > 200 and len(touching.support_pads()) == 1 and idle.support_pads() == []

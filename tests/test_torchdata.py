@@ -277,3 +277,52 @@ def test_datasets_read_an_older_version(tmp_path):
     assert len(old) == 5 + 8 + 1 and old.reader.version == 1
     assert len(TactileWindowDataset(root, window=2, version=1)) > len(TactileWindowDataset(root, window=2))
     assert len(list(TactileStream(root, version=1))) == len(old)
+
+
+# ---- what an item carries (htdata/read/torchitems.py) ------------------------------------
+def test_tactile_only_items_equal_the_tactile_of_full_items(dataset):
+    full = TactileFrameDataset(dataset)
+    tactile = TactileFrameDataset(dataset, members=("tactile",))
+    rgb_only = TactileFrameDataset(dataset, members=("rgb",))
+    assert len(tactile) == len(full) == len(rgb_only)
+    for i in range(len(full)):
+        a, t, r = full[i], tactile[i], rgb_only[i]
+        assert "rgb" not in t and "tactile" not in r
+        assert torch.equal(t["tactile"], a["tactile"]) and torch.equal(r["rgb"], a["rgb"])
+        assert int(t["index"]) == int(a["index"]) and int(t["hand"]) == int(a["hand"])
+    # windows and streams honour the same choice
+    win_full, win_t = TactileWindowDataset(dataset, window=2), TactileWindowDataset(dataset, window=2,
+                                                                                     members=("tactile",))
+    assert "rgb" not in win_t[0] and torch.equal(win_t[0]["tactile"], win_full[0]["tactile"])
+    stream_t = list(TactileStream(dataset, members=("tactile",)))
+    assert [torch.equal(s["tactile"], full[i]["tactile"]) for i, s in enumerate(stream_t)] == [True] * len(full)
+    stream_r = list(TactileStream(dataset, members=("rgb",)))
+    assert [torch.equal(s["rgb"], full[i]["rgb"]) for i, s in enumerate(stream_r)] == [True] * len(full)
+    with pytest.raises(ValueError, match="members"):
+        TactileFrameDataset(dataset, members=("depth",))
+    with pytest.raises(ValueError, match="constants"):
+        TactileFrameDataset(dataset, constants="never")
+
+
+def test_constants_sent_once_give_the_same_batches(dataset):
+    from htdata.read.torchdata import expand_batch
+
+    full = TactileFrameDataset(dataset)
+    once = TactileFrameDataset(dataset, constants="once")
+    item = once[0]
+    assert set(item) == {"tactile", "rgb", "ids"} and item["ids"].shape == (8,) and item["ids"].dtype == torch.int64
+    constants = once.constants()
+    assert constants.coverage.dtype == torch.uint8 and constants.coverage.shape[1:] == (1, 224, 224)
+    a_batches = list(DataLoader(full, batch_size=4, num_workers=0))
+    b_batches = list(DataLoader(once, batch_size=4, num_workers=2))
+    assert len(a_batches) == len(b_batches)
+    for a, b in zip(a_batches, b_batches):
+        b = expand_batch(b, constants)
+        assert set(a) == set(b)
+        for k in a:
+            assert a[k].dtype == b[k].dtype and torch.equal(a[k], b[k]), k
+    stream = list(DataLoader(TactileStream(dataset, constants="once", members=("tactile",)), batch_size=5))
+    frames = list(DataLoader(TactileFrameDataset(dataset, members=("tactile",)), batch_size=5))
+    for a, b in zip(frames, stream):
+        b = expand_batch(b, constants)
+        assert all(torch.equal(a[k], b[k]) for k in a)

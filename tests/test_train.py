@@ -102,7 +102,7 @@ def test_resume_from_checkpoint_matches_an_uninterrupted_run(dataset_root, tmp_p
 
     cfg = tiny_config(dataset_root, tmp_path / "b", **over)
     data = load_data(cfg)
-    crashing = TrainData(data.frames, data.windows, data.eval_frames, data.eval_source)
+    crashing = TrainData(data.frames, data.windows, data.eval_frames, data.eval_source, constants=data.constants)
     crashing.frames = FailAfter(data.frames, limit=4 * (12 + 9))   # dies in stage 2, step 9
     with pytest.raises(RuntimeError, match="simulated crash"):
         train(cfg, crashing)
@@ -285,7 +285,11 @@ def test_training_bench_section_plugin(dataset_root, tmp_path):
     assert all(r["steps"] == 2 and r["steps_per_s"] > 0 and 0 < r["recon_rmse"] < 1 for r in result["rows"])
     assert result["bf16_speedup"] == pytest.approx(result["rows"][1]["steps_per_s"] / result["rows"][0]["steps_per_s"])
     assert not result["warmup_run"] and Path(result["config"]).name == "smoke.toml"
+    for r in result["rows"]:    # the per-step breakdown: data wait + host = the step on a CPU
+        assert r["data_wait_ms_per_step"] > 0 and r["host_ms_per_step"] > 0 and "device_ms_per_step" not in r
+        assert r["data_wait_ms_per_step"] + r["host_ms_per_step"] == pytest.approx(r["wall_ms_per_step"], rel=0.05)
     md = result["markdown"]
+    assert "| data wait ms |" in md
     assert md.count("\n| fp32 |") == 1 and "| bf16 autocast |" in md and "bf16 / fp32 speed:" in md
 
 

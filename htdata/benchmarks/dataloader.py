@@ -5,8 +5,11 @@ epoch first (worker start-up, imports, file handles), then one timed epoch
 of shuffled items (seeded) in batches. 1 and N workers alternate `reps`
 times; the speed-up is the median of the pairs. Map source is the loaders'
 default ("auto": rendered from raw rows where the version stores them) and,
-for comparison, "stored" (the EXR decoded). Worker processes take the
-DataLoader's default start method on this platform.
+for comparison, "stored" (the EXR decoded); then the items a tactile-only
+step asks for (`members=("tactile",)`, `constants="once"`: no JPEG decoded,
+per-layout constants not sent). `ipc_bytes_per_item` is what one item moves
+from a worker to the training process (the tensors' bytes). Worker processes
+take the DataLoader's default start method on this platform.
 """
 
 from __future__ import annotations
@@ -18,19 +21,32 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Subset
 
+from htdata.format.mapstorage import maps_stored
 from htdata.read import keys
+from htdata.read.reader import DatasetReader
 from htdata.read.torchdata import TactileFrameDataset
 
 
-def _epoch_rate(root: Path, workers: int, map_source: str, items: int, batch_size: int, seed: int) -> float:
-    dataset = TactileFrameDataset(root, map_source=map_source)
+# (row label, map source, dataset keywords): full items as the trainer read them before #28, then tactile-only
+VARIANTS = (("full", "auto", {}), ("full", "stored", {}),
+            ("tactile", "auto", {"members": (keys.TACTILE,), "constants": "once"}))
+
+
+def ipc_bytes(item: dict) -> int:
+    """Bytes of the tensors of one item: what a DataLoader worker hands the training process."""
+    return sum(v.numel() * v.element_size() for v in item.values() if torch.is_tensor(v))
+
+
+def _epoch_rate(root: Path, workers: int, map_source: str, items: int, batch_size: int, seed: int,
+                options: dict | None = None) -> float:
+    dataset = TactileFrameDataset(root, map_source=map_source, **(options or {}))
     pick = np.random.default_rng(seed).permutation(len(dataset))[:items].tolist()
     loader = DataLoader(Subset(dataset, pick), batch_size=batch_size, shuffle=True, num_workers=workers,
                         persistent_workers=workers > 0, generator=torch.Generator().manual_seed(seed))
     for _ in loader:        # warm-up epoch: workers started, files opened
         pass
     t0 = time.perf_counter()
-    n = sum(len(batch[keys.INDEX]) for batch in loader)
+    n = sum(len(batch[keys.TACTILE]) for batch in loader)
     seconds = time.perf_counter() - t0
     del loader
     return n / seconds
@@ -38,16 +54,21 @@ def _epoch_rate(root: Path, workers: int, map_source: str, items: int, batch_siz
 
 def dataloader_rows(root: Path, workers: tuple[int, int] = (1, 2), reps: int = 2, items: int = 2000,
                     batch_size: int = 32, seed: int = 0) -> list[dict]:
-    """Per map source: items/s at workers[0] and workers[1] (alternated), and the median speed-up."""
+    """Per variant (VARIANTS): items/s at workers[0] and workers[1] (alternated), the median speed-up,
+    and the bytes one item moves between processes."""
     lo, hi = workers
     rows = []
-    for source in ("auto", "stored"):
+    for kind, source, options in VARIANTS:
+        if source == "stored" and not maps_stored(DatasetReader(root).manifest):
+            continue   # a maps = "raw" version has no EXR to decode
         rates: dict[int, list[float]] = {lo: [], hi: []}
         for rep in range(reps):
             for w in (lo, hi):
-                rates[w].append(_epoch_rate(root, w, source, items, batch_size, seed + rep))
+                rates[w].append(_epoch_rate(root, w, source, items, batch_size, seed + rep, options))
         ratios = [b / a for a, b in zip(rates[lo], rates[hi])]
-        rows.append({"map_source": source, "items": min(items, len(TactileFrameDataset(root))), "batch_size": batch_size,
+        dataset = TactileFrameDataset(root, map_source=source, **options)
+        rows.append({"item": kind, "map_source": source, "ipc_bytes_per_item": ipc_bytes(dataset[0]),
+                     "items": min(items, len(dataset)), "batch_size": batch_size,
                      "workers_lo": lo, "workers_hi": hi, "reps": reps,
                      "items_per_s_lo": float(np.median(rates[lo])), "items_per_s_hi": float(np.median(rates[hi])),
                      "scaling": float(np.median(ratios)), "scaling_reps": ratios})

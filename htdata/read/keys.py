@@ -18,5 +18,8 @@ FRAME = "frame"          # int64: frame index within the episode
 INDEX = "index"          # int64: global sample index
 T_NS = "t_ns"            # (window,) int64 recorded glove timestamps (htdata.read.torchglove windows)
 HAS_RGB = "has_rgb"      # bool: the item's RGB is real (frames="tactile" items of glove-only samples: zeros)
+LAYOUT = "layout"        # int64: position of the item's glove layout in ItemConstants.layouts
+IDS = "ids"              # (8,) int64, constants="once" items: the ids below packed in one tensor
+ID_FIELDS = (HAND, TASK, SCENE, EPISODE, FRAME, INDEX, HAS_RGB, LAYOUT)
 
 HAND_IDS = {"left": 0, "right": 1}

@@ -23,6 +23,12 @@ data: `make bench`, section "maps from raw rows"); otherwise, and with
 `map_source="stored"`, the stored EXR is decoded (values rounded to half,
 <= 2.4e-4 away). `map_source="raw"` insists on raw rows.
 
+What an item carries (htdata/read/torchitems.py): `members=("tactile",)`
+skips the RGB decode (stage-1 tokeniser training), `members=("rgb",)` the
+map; `constants="once"` (frame datasets and streams) ships per-layout
+constants once (`dataset.constants()`, rebuilt on the device by
+`expand_batch`) and packs the ids into one `ids` tensor.
+
 Every dataset takes `version=N` to read a committed older version (default:
 the current one). Each dataset holds a DatasetReader whose file handles open lazily per
 process, so DataLoader workers (fork or spawn) each open their own files.
@@ -37,7 +43,6 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 
-import cv2
 import numpy as np
 
 try:
@@ -47,18 +52,19 @@ except ModuleNotFoundError as exc:   # the data core installs without torch
 from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
 from htdata.read import keys
-from htdata.format.table import (CANVAS, HANDS, JSON_MEMBER, MEMBER_ORDER, RGB_MEMBER, SIZE_FIELDS, decode_member, raw_member,
-                           tactile_member)
+from htdata.format.table import CANVAS, HANDS, RGB_MEMBER, SIZE_FIELDS
 from htdata.read.keys import HAND_IDS
 from htdata.format.mapstorage import has_hand, hand_present
-from htdata.read.rawstream import MAP_SOURCES, RawMapRenderer, serves_maps_from_raw  # noqa: F401  (MAP_SOURCES: a name of this module)
-from htdata.read.reader import DatasetReader, SampleRow
+from htdata.read.rawstream import MAP_SOURCES  # noqa: F401  (a name of this module)
+from htdata.read.reader import DatasetReader
+from htdata.read.torchitems import MEMBERS, ItemBuilder, ItemConstants, expand_batch  # noqa: F401  (names of this module)
+
+_ItemBuilder = ItemBuilder   # the name torchglove and older code import
 
 HAND_NAMES = HANDS   # hand id -> name (HAND_IDS inverted: left=0, right=1)
 
 
 FRAME_KINDS = ("paired", "tactile")
-_RGB_POS = MEMBER_ORDER.index(RGB_MEMBER)   # in SampleRow.sizes
 
 
 def _tactile_present(rows: np.ndarray, hand: str, frames: str = "paired") -> np.ndarray:
@@ -84,120 +90,6 @@ def _check_hands(hands) -> tuple[str, ...]:
     if not hands or any(h not in HAND_IDS for h in hands) or len(set(hands)) != len(hands):
         raise ValueError(f"hands must be a non-empty subset of ('left', 'right'), got {hands}")
     return hands
-
-
-def _long(value: int) -> torch.Tensor:
-    # 0-d int64 via numpy: ~3x cheaper than torch.tensor(value) per call.
-    return torch.from_numpy(np.array(value, dtype=np.int64))
-
-
-class _ItemBuilder:
-    """Decodes (sample, hand) into item tensors with the fewest copies and no torch kernels.
-
-    Items are assembled in numpy and wrapped with torch.from_numpy: torch ops
-    such as stack / div run on torch's OpenMP pool, whose threads spin against
-    other processes on a shared machine (measured: torch.stack of three
-    (1,224,224) maps took 6-19 ms instead of 0.02 ms). The json member is not
-    read: every id an item carries comes from index.npy and episodes.jsonl.
-    """
-
-    def __init__(self, root, rgb_float: bool, version: int | None = None, map_source: str = "auto"):
-        self.reader = DatasetReader(root, version=version)
-        self.rgb_float = rgb_float
-        self.from_raw = serves_maps_from_raw(self.reader.manifest, map_source, where=str(self.reader.root))
-        self.strict_raw = map_source == "raw"
-        self.renderer = RawMapRenderer(self.reader) if self.from_raw else None
-        self._task_ids = {t: i for i, t in enumerate(self.reader.manifest["tasks"])}
-        self._scene_ids = {s: i for i, s in enumerate(self.reader.manifest["scenes"])}
-        self._coverage: dict[str, torch.Tensor] = {}
-        self._regions: torch.Tensor | None = None
-
-    def coverage(self, layout_id: str) -> torch.Tensor:
-        if layout_id not in self._coverage:
-            cov = self.reader.coverage(layout_id).astype(np.float32)
-            self._coverage[layout_id] = torch.from_numpy(cov)[None]
-        return self._coverage[layout_id]
-
-    def regions(self) -> torch.Tensor:
-        if self._regions is None:
-            self._regions = torch.from_numpy(np.ascontiguousarray(self.reader.region_map))
-        return self._regions
-
-    def empty_rgb(self, n: int) -> np.ndarray:
-        """(n,3,224,224) rgb buffer (u8, or f32 with rgb_float) to decode into."""
-        return np.empty((n, 3, CANVAS, CANVAS), np.float32 if self.rgb_float else np.uint8)
-
-    def put_rgb(self, out: np.ndarray, rgb_hwc: np.ndarray) -> None:
-        """HWC uint8 -> CHW in `out` (scaled to [0,1] when out is float).
-
-        cv2.split writes straight into the three planes (~4x faster than a
-        numpy transpose copy); the pointer check guards against a binding that
-        allocated new planes instead.
-        """
-        planes = out if out.dtype == np.uint8 else np.empty(out.shape, np.uint8)
-        written = cv2.split(rgb_hwc, [planes[0], planes[1], planes[2]])
-        if any(w.ctypes.data != p.ctypes.data for w, p in zip(written, planes)):
-            planes[...] = rgb_hwc.transpose(2, 0, 1)
-        if planes is not out:
-            np.divide(planes, np.float32(255.0), out=out, dtype=np.float32)
-
-    def suffixes(self, hands) -> tuple[str, ...]:
-        """Members an item of these hands reads."""
-        maps = tuple(tactile_member(h) for h in hands)
-        return (RGB_MEMBER, JSON_MEMBER, *maps, *(raw_member(h) for h in hands)) if self.from_raw else (RGB_MEMBER, *maps)
-
-    def tactile_map(self, members: dict[str, bytes], hand: str, episode: int, where: str) -> np.ndarray:
-        if self.from_raw and raw_member(hand) in members:
-            return self.renderer.render(episode, hand, members, where)
-        if self.strict_raw:
-            raise KeyError(f"{where} has no raw {hand} rows (map_source='raw')")
-        suffix = tactile_member(hand)
-        if suffix not in members:
-            raise KeyError(f"{where} has no {hand} tactile map")
-        return decode_member(suffix, members[suffix], where)
-
-    def decode_into(self, members: dict[str, bytes], hands, where: str, rgb_out, episode: int) -> list[np.ndarray]:
-        """Decode the JPEG once into each hand's rgb buffer (zeros when the sample has none); each hand's map."""
-        if RGB_MEMBER in members:
-            rgb = decode_member(RGB_MEMBER, members[RGB_MEMBER], where)
-        else:
-            rgb = np.zeros((CANVAS, CANVAS, 3), np.uint8)
-        maps = []
-        for k, (hand, r_out) in enumerate(zip(hands, rgb_out)):
-            maps.append(self.tactile_map(members, hand, episode, where))
-            if k == 0:
-                self.put_rgb(r_out, rgb)
-            else:
-                r_out[...] = rgb_out[0]   # each item owns its rgb: a plain copy of the first
-        return maps
-
-    def read_frame(self, index: int, hand: str, rgb_out: np.ndarray) -> tuple[SampleRow, np.ndarray]:
-        """Read + decode sample `index` for `hand`: rgb into `rgb_out` (3,224,224); returns (row, map)."""
-        reader = self.reader
-        row, key, members = reader.read_sample(index, suffixes=self.suffixes((hand,)))
-        return row, self.decode_into(members, (hand,), f"{reader.root}: {key}", [rgb_out], row.episode)[0]
-
-    def ids(self, row: SampleRow, index: int, hand: str) -> dict:
-        ep = self.reader.episodes[row.episode]
-        return {
-            keys.COVERAGE: self.coverage(ep["layouts"][hand]),
-            keys.REGIONS: self.regions(),
-            keys.HAND: _long(HAND_IDS[hand]),
-            keys.TASK: _long(self._task_ids[ep["task"]]),
-            keys.SCENE: _long(self._scene_ids[ep["scene"]]),
-            keys.EPISODE: _long(row.episode),
-            keys.FRAME: _long(row.frame),
-            keys.INDEX: _long(index),
-            keys.HAS_RGB: torch.from_numpy(np.array(row.sizes[_RGB_POS] > 0)),
-        }
-
-    def frame_item(self, index: int, hand: str) -> dict:
-        rgb = self.empty_rgb(1)[0]
-        row, tactile = self.read_frame(index, hand, rgb)
-        item = self.ids(row, index, hand)
-        item[keys.TACTILE] = torch.from_numpy(tactile[None])   # decoded map is a fresh array: no copy
-        item[keys.RGB] = torch.from_numpy(rgb)
-        return item
 
 
 def _frame_items(reader: DatasetReader, indices: np.ndarray, hands: tuple[str, ...],
@@ -237,15 +129,19 @@ class _ItemDataset(Dataset):
     def __len__(self) -> int:
         return len(self.items)
 
+    def constants(self) -> ItemConstants:
+        """Per-layout constants for batches of constants="once" items (`expand_batch`)."""
+        return self._builder.constants()
+
 
 class TactileFrameDataset(_ItemDataset):
     """One item per (frame, hand present) of the selected split part."""
 
     def __init__(self, root, split: str | None = None, part: str | None = None,
                  hands=HANDS, rgb_float: bool = False, version: int | None = None, frames: str = "paired",
-                 map_source: str = "auto"):
+                 map_source: str = "auto", members=MEMBERS, constants: str = "item"):
         self.hands = _check_hands(hands)
-        self._builder = _ItemBuilder(root, rgb_float, version, map_source)
+        self._builder = _ItemBuilder(root, rgb_float, version, map_source, members, constants)
         reader = self._builder.reader
         self.items = _frame_items(reader, reader.sample_indices(split, part), self.hands, _check_frames(frames))
 
@@ -263,12 +159,12 @@ class TactileWindowDataset(_ItemDataset):
 
     def __init__(self, root, window: int = 3, split: str | None = None, part: str | None = None,
                  hands=HANDS, rgb_float: bool = False, version: int | None = None, frames: str = "paired",
-                 map_source: str = "auto"):
+                 map_source: str = "auto", members=MEMBERS):
         if window < 1:
             raise ValueError(f"window must be >= 1, got {window}")
         self.window = window
         self.hands = _check_hands(hands)
-        self._builder = _ItemBuilder(root, rgb_float, version, map_source)
+        self._builder = _ItemBuilder(root, rgb_float, version, map_source, members)
         reader = self._builder.reader
         ends = []
         for ep_pos in reader.episode_positions(split, part):
@@ -290,13 +186,13 @@ class TactileWindowDataset(_ItemDataset):
         end, hand_id = self.items[i].tolist()
         hand = HAND_NAMES[hand_id]
         builder, w = self._builder, self.window
-        tactile = np.empty((w, 1, CANVAS, CANVAS), np.float32)
+        tactile = np.empty((w, 1, CANVAS, CANVAS), np.float32) if builder.wants_tactile else None
         rgb = builder.empty_rgb(w)   # frames decode straight into the stacked buffers
         for k, j in enumerate(range(end - w + 1, end + 1)):
-            row, tactile[k, 0] = builder.read_frame(j, hand, rgb[k])
-        out = builder.ids(row, end, hand)
-        out[keys.TACTILE] = torch.from_numpy(tactile)
-        out[keys.RGB] = torch.from_numpy(rgb)
+            row, t_map = builder.read_frame(j, hand, None if rgb is None else rgb[k])
+            if tactile is not None:
+                tactile[k, 0] = t_map
+        out = builder.put_members(builder.ids(row, end, hand), tactile, rgb)
         out[keys.FRAME] = torch.from_numpy(np.arange(row.frame - w + 1, row.frame + 1, dtype=np.int64))
         out[keys.INDEX] = torch.from_numpy(np.arange(end - w + 1, end + 1, dtype=np.int64))
         return out
@@ -325,10 +221,10 @@ class TactileStream(IterableDataset):
     def __init__(self, root, split: str | None = None, part: str | None = None,
                  hands=HANDS, rgb_float: bool = False,
                  shuffle_seed: int | None = None, version: int | None = None, frames: str = "paired",
-                 map_source: str = "auto"):
+                 map_source: str = "auto", members=MEMBERS, constants: str = "item"):
         self.hands = _check_hands(hands)
         self.frames = _check_frames(frames)
-        self._builder = _ItemBuilder(root, rgb_float, version, map_source)
+        self._builder = _ItemBuilder(root, rgb_float, version, map_source, members, constants)
         reader = self._builder.reader
         selected = np.zeros(len(reader), bool)
         selected[reader.sample_indices(split, part)] = True
@@ -339,6 +235,10 @@ class TactileStream(IterableDataset):
     @property
     def reader(self) -> DatasetReader:
         return self._builder.reader
+
+    def constants(self) -> ItemConstants:
+        """Per-layout constants for batches of constants="once" items (`expand_batch`)."""
+        return self._builder.constants()
 
     def set_epoch(self, epoch: int) -> None:
         self.epoch = int(epoch)
@@ -372,14 +272,15 @@ class TactileStream(IterableDataset):
         for index, members in reader.iter_samples(shards, suffixes=wanted):
             if not self._selected[index]:
                 continue
-            hands = [h for h in HAND_NAMES if h in self.hands and has_hand(members, h)]
-            if not hands or (self.frames == "paired" and RGB_MEMBER not in members):
+            present = ((lambda h: has_hand(members, h)) if builder.wants_tactile else   # maps not read: the index says
+                       (lambda h: bool(hand_present(reader.index[index:index + 1], h)[0])))
+            hands = [h for h in HAND_NAMES if h in self.hands and present(h)]
+            paired = reader.index[index][SIZE_FIELDS[RGB_MEMBER]] > 0   # the JPEG may not be read (members)
+            if not hands or (self.frames == "paired" and not paired):
                 continue
             row = reader.row(index)
             rgb = builder.empty_rgb(len(hands))   # JPEG decoded once for both hands
             maps = builder.decode_into(members, hands, f"{reader.root}: {reader.key(index)}", rgb, row.episode)
             for k, hand in enumerate(hands):
-                item = builder.ids(row, index, hand)
-                item[keys.TACTILE] = torch.from_numpy(maps[k][None])
-                item[keys.RGB] = torch.from_numpy(rgb[k])
-                yield item
+                yield builder.put_members(builder.ids(row, index, hand), None if maps[k] is None else maps[k][None],
+                                          None if rgb is None else rgb[k])

@@ -111,6 +111,19 @@ def draw_object(img, shape, xy, scale, rgb, view: View) -> None:
         raise ValueError(f"unknown object shape {shape!r}")
 
 
+SUPPORT_PAD_RGB = (105, 95, 88)     # what a support hand presses on (drawn under its palm)
+
+
+def draw_support_pad(img, xy, view: View) -> None:
+    """The surface a supporting hand steadies itself on: a block a little wider than the palm, so its
+    edges show around the palm pressed on it (the camera sees the contact the glove feels)."""
+    c = np.asarray(xy, dtype=np.float64)
+    hw, hh = PALM_W * 0.75, PALM_H * 0.7
+    p0, p1 = view.px(c - [hw, hh]), view.px(c + [hw, hh])
+    cv2.rectangle(img, p0, p1, SUPPORT_PAD_RGB, -1)
+    cv2.rectangle(img, p0, p1, tuple(int(v * 0.6) for v in SUPPORT_PAD_RGB), 2)
+
+
 def draw_hand(img, hand: str, xy, closure, view: View) -> None:
     """Palm rectangle + five jointed finger polylines, closure-driven."""
     c = np.asarray(xy, dtype=np.float64)

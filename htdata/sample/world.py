@@ -23,11 +23,15 @@ import numpy as np
 from htdata.format.table import HANDS
 from htdata.sample.glove import contact_grids
 from htdata.sample.hand import anchor_point
-from htdata.sample.render import background, camera_view, draw_hand, draw_object
+from htdata.sample.render import background, camera_view, draw_hand, draw_object, draw_support_pad
 from htdata.sample.state import HandState
 from htdata.sample.tasks import TASKS, scene_style, stable_hash
 
 PHASE_APPROACH, PHASE_CONTACT, PHASE_RELEASE = 0, 1, 2
+# A support hand that feels contact (the task's support profile) closes on the pad it presses;
+# one that feels nothing hangs half open in the air. The RGB-to-tactile held-out check failed
+# while both looked alike (docs/HANDTOUCH.md, "Held-out RGB-to-tactile").
+SUPPORT_CLOSURE_TOUCH, SUPPORT_CLOSURE_IDLE = 0.65, 0.3
 
 
 @dataclass
@@ -111,7 +115,7 @@ class World:
             closure = np.array(self.task.closure)
             offset = anchor_point(self.task.anchor, closure, hand)
             target = self.object_xy - offset
-        else:  # support hand steadies things beside the object
+        else:  # support hand steadies things beside the object (on its pad when it feels contact)
             target = self.object_xy + np.array([side * 0.30, 0.18])
         return _HandPlan(
             a=a, b=min(b, 0.9), ramp=rng.uniform(0.05, 0.10), peak=rng.uniform(0.6, 1.0),
@@ -137,7 +141,7 @@ class World:
         pre = 0.08
         shape = _smoothstep((u - p.a + pre) / (p.ramp + pre)) * _smoothstep((p.b + pre - u) / (p.ramp + pre))
         role = "dominant" if hand == self.dominant else "support"
-        target_closure = np.array(self.task.closure if role == "dominant" else (0.3,) * 5)
+        target_closure = np.array(self.task.closure if role == "dominant" else (self._support_closure(),) * 5)
         closure = np.clip(shape[:, None] * target_closure[None, :], 0.0, 1.0)
         # Reach: in during approach, out during release, tremor on top.
         reach = _smoothstep(u / max(p.a, 1e-6)) * _smoothstep((1.0 - u) / max(1.0 - p.b, 1e-6))
@@ -150,6 +154,15 @@ class World:
         return HandState(self.spec.task, hand, role, t, phase.astype(np.int8),
                          force.astype(np.float32), closure.astype(np.float32),
                          xy.astype(np.float32), p.jitter_key)
+
+    def _support_closure(self) -> float:
+        return SUPPORT_CLOSURE_TOUCH if self.task.support else SUPPORT_CLOSURE_IDLE
+
+    def support_pads(self) -> list[np.ndarray]:
+        """Where the support hands that feel contact press (their palm centre while touching)."""
+        if not self.task.support:
+            return []
+        return [p.target_xy for h, p in self.plans.items() if h != self.dominant]
 
     def object_position(self, times_s: np.ndarray) -> np.ndarray:
         """(T,2) object centre: carried objects follow the dominant hand while held."""
@@ -181,6 +194,11 @@ class World:
         # Objects held at the fingertips stay visible in front of the hand; pressed,
         # pushed or fist-gripped objects are hidden under it.
         in_front = self.task.anchor in ("pinch", "tripod", "lateral", "hook")
+        pads = self.support_pads()
+        if pads:   # static scenery, under the hands (on a copy: the background is cached)
+            bg = bg.copy()
+            for pad in pads:
+                draw_support_pad(bg, pad, view)
         for i in range(len(times)):
             img = bg.copy()
             if not in_front:
