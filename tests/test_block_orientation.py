@@ -142,6 +142,7 @@ def test_layouts_render_shows_the_first_cell_where_the_rotation_puts_it(tmp_path
     import cv2
 
     from htdata.cli import main
+    from htdata.commands.layouts import RENDER_BAND
 
     doc = _layout(False, rotate, False, False).to_dict()
     doc["layout_id"] = "oriented"
@@ -149,7 +150,7 @@ def test_layouts_render_shows_the_first_cell_where_the_rotation_puts_it(tmp_path
     path.write_text(json.dumps(doc))
     png = tmp_path / "o.png"
     assert main(["layouts", "render", str(path), str(png)]) == 0
-    img = cv2.imread(str(png))
+    img = cv2.imread(str(png))[RENDER_BAND:]   # the title and legend band sits above the panels
     x0, y0, x1, y1 = load_canonical().places[PLACE]
     off = 2 * (224 + 4)              # right panel starts after the regions panel and a 4 px separator (scale 2)
     ys = {"top": y0 + 2, "bottom": y1 - 3}[corner.split("_")[0]]

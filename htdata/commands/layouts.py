@@ -16,7 +16,7 @@ A RECORDING is a source folder read with --pipeline's adapter (default
 native: a recording folder, or a folder of them) or a .npy of raw rows
 (T,H,W). A cell MOVES when its raw range over a recording exceeds
 max(12 x the glove's frame-to-frame noise + 3 x its slow rest wander,
-4 x value.step) (htdata/glove/activity.py, docs/LAYOUTS.md). `check --against` exits 1 when a cell outside every
+4 x value.step) (docs/LAYOUTS.md). `check --against` exits 1 when a cell outside every
 block (and not in unused_cells / bend_cells) moves.
 """
 
@@ -200,7 +200,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                                      "outside every block that move in recordings")
     p.epilog = ("example: htdata layouts check my_glove.json --against /raw/rec_01 /raw/rec_02\n"
                 f"A cell moves when its raw {rule_text()} in a recording "
-                "(htdata/glove/activity.py); cells in unused_cells or bend_cells are never listed.")
+                "(docs/LAYOUTS.md); cells in unused_cells or bend_cells are never listed.")
     p.formatter_class = argparse.RawDescriptionHelpFormatter
     p.add_argument("file", metavar="LAYOUT", help="path to a layout JSON (or a layout id)")
     p.add_argument("--against", nargs="+", default=[], metavar="RECORDING",

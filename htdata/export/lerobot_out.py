@@ -13,7 +13,7 @@ import json
 from pathlib import Path
 
 from htdata.errors import HtdataError
-from htdata.format.table import MANIFEST_FILE, WORK_DIR
+from htdata.format.table import MANIFEST_FILE
 from htdata.store.fsutil import write_bytes_atomic
 from htdata.store.versions import VERSIONS_DIR
 
@@ -25,7 +25,8 @@ class ExportTargetRefused(HtdataError, ValueError):
 
 
 def _is_dataset(folder: Path) -> bool:
-    return (folder / MANIFEST_FILE).exists() or (folder / VERSIONS_DIR).is_dir() or (folder / WORK_DIR).is_dir()
+    # Committed records only: a bare `.work` is also any tool's scratch folder (`htdata bench --out` has one).
+    return (folder / MANIFEST_FILE).exists() or (folder / VERSIONS_DIR).is_dir()
 
 
 def check_out(out: Path, dataset: Path, force: bool) -> None:
