@@ -79,7 +79,7 @@ bench: setup
 # Exits 2 without a GPU, 3 with a dependency missing (named).
 GPU_PY         ?= python3
 GPU_WORK       ?= /tmp/ht_gpucheck
-GPU_CHECK_ARGS ?= --compile
+GPU_CHECK_ARGS ?= --compile --profile 20
 gpu-check:
 	PYTHONPATH=$(CURDIR)$${PYTHONPATH:+:$$PYTHONPATH} $(GPU_PY) -m handtouch.gpucheck --work $(GPU_WORK) $(GPU_CHECK_ARGS)
 

@@ -9,6 +9,12 @@ data, the host's share and the GPU's busy share (CUDA events around each step),
 peak GPU memory. Rates are the median of the log windows after the first
 (worker start-up, cuDNN autotuning and allocator warm-up stay out).
 
+"GPU span" (CUDA events around each step) is an upper bound on busy time: the span from
+the step's first launch to its last kernel's end, gaps included. `--profile
+N` measures the real thing on N steps near the end of each setting with
+torch.profiler: the GPU kernel milliseconds per step, their share of the
+step's wall time, and the kernels that take most of it.
+
 Data: `--dataset` (a committed htdata dataset with split `main`), else one is
 built under `--work`: `htdata sample --scale medium` (~9k frames), ingest with
 one worker per core, `htdata split --ood-task palm_push --name main`. It is
@@ -115,9 +121,38 @@ def setting_config(dataset: Path, out: Path, batch: int, workers: int, steps: in
     return load_train_config(config_file("full"), [f"{k}={json.dumps(v)}" for k, v in over.items()] + list(extra))
 
 
+class KernelProfile:
+    """torch.profiler over `active` steps near the end of a run: GPU kernel time per step, top kernels."""
+
+    def __init__(self, steps: int, active: int):
+        from torch.profiler import ProfilerActivity, profile, schedule
+
+        self.active = active
+        wait = max(steps - active - 10, 1)     # the run's last steps, after the warm windows
+        self.prof = profile(activities=[ProfilerActivity.CPU, ProfilerActivity.CUDA],
+                            schedule=schedule(wait=wait, warmup=3, active=active, repeat=1))
+        self.t_steps: list[float] = []
+
+    def on_progress(self, _status: dict) -> None:
+        self.t_steps.append(time.perf_counter())
+        self.prof.step()
+
+    def summary(self) -> dict:
+        from torch.autograd import DeviceType
+
+        kernels = [e for e in self.prof.key_averages()
+                   if e.device_type == DeviceType.CUDA and not e.is_user_annotation]
+        total_us = sum(e.self_device_time_total for e in kernels)
+        top = sorted(kernels, key=lambda e: e.self_device_time_total, reverse=True)[:6]
+        return {"profiled_steps": self.active, "kernel_ms_per_step": total_us / 1000.0 / self.active,
+                "kernels_per_step": sum(e.count for e in kernels) / self.active,
+                "top_kernels": [{"name": e.key[:90], "share": e.self_device_time_total / max(total_us, 1)}
+                                for e in top]}
+
+
 def run_setting(dataset: Path, work: Path, batch: int, workers: int, steps: int, compile_: bool,
-                device: str = "cuda", extra: list[str] = ()) -> dict:
-    """Stage 1 of configs/full.toml for `steps` steps; one row of the table."""
+                device: str = "cuda", extra: list[str] = (), profile_steps: int = 0) -> dict:
+    """Stage 1 of configs/full.toml for `steps` steps; one row of the table (+ a kernel profile)."""
     import torch
 
     from .train import train
@@ -131,8 +166,13 @@ def run_setting(dataset: Path, work: Path, batch: int, workers: int, steps: int,
     records: list[dict] = []
     if cuda:
         torch.cuda.reset_peak_memory_stats()
+    prof = KernelProfile(steps, profile_steps) if profile_steps and cuda else None
     t0 = time.perf_counter()
-    metrics = train(cfg, on_record=records.append)
+    if prof is None:
+        metrics = train(cfg, on_record=records.append)
+    else:
+        with prof.prof:
+            metrics = train(cfg, on_record=records.append, on_progress=prof.on_progress)
     wall = time.perf_counter() - t0
     windows = [r for r in records if r.get("stage") == 1 and "samples_per_s" in r][1:] or \
         [r for r in records if r.get("stage") == 1 and "samples_per_s" in r]
@@ -148,7 +188,21 @@ def run_setting(dataset: Path, work: Path, batch: int, workers: int, steps: int,
             "gpu_busy_share": med("device_busy_share"), "whole_stage_samples_per_s": stage["samples_per_s"],
             "timing": stage.get("timing"), "final_loss": stage["final"].get("loss"),
             "peak_gpu_mem_gb": torch.cuda.max_memory_allocated() / 2 ** 30 if cuda else float("nan"),
-            "wall_s": wall}
+            "wall_s": wall, **({"profile": prof.summary()} if prof is not None else {})}
+
+
+def profile_lines(row: dict) -> list[str]:
+    """The kernel profile of one row, in words ([] without one)."""
+    prof = row.get("profile")
+    if not prof:
+        return []
+    step_ms = 1000.0 / row["steps_per_s"] if row.get("steps_per_s") else float("nan")
+    lines = [f"batch {row['batch']}{' compiled' if row['compile'] else ''}: GPU kernels "
+             f"{prof['kernel_ms_per_step']:.1f} ms per step ({prof['kernels_per_step']:.0f} kernels) of a "
+             f"{step_ms:.1f} ms step = {prof['kernel_ms_per_step'] / step_ms:.0%} busy "
+             f"(torch.profiler, {prof['profiled_steps']} steps; the profiler slows the host a little)"]
+    lines += [f"    {k['share']:5.1%}  {k['name']}" for k in prof["top_kernels"]]
+    return lines
 
 
 def _fmt(v, spec: str) -> str:
@@ -156,7 +210,7 @@ def _fmt(v, spec: str) -> str:
 
 
 def table(rows: list[dict]) -> str:
-    head = "| batch | workers | compile | samples/s | steps/s | data wait | host | GPU busy | GPU mem GB | wall s |"
+    head = "| batch | workers | compile | samples/s | steps/s | data wait | host | GPU span | GPU mem GB | wall s |"
     lines = [head, "|" + "---|" * 10]
     for r in rows:
         if "error" in r:
@@ -199,6 +253,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--skip-after-s", type=float, default=330.0,
                         help="start no further setting after this many seconds in all (default 330)")
     parser.add_argument("--device", default="cuda", help="cuda (default), or cpu to try the script itself")
+    parser.add_argument("--profile", type=int, default=0, metavar="N",
+                        help="also profile N steps near the end of each setting (GPU kernel time per step)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="more config overrides, e.g. --set model.depth=2")
     args = parser.parse_args(argv)
@@ -234,7 +290,8 @@ def main(argv: list[str] | None = None) -> int:
                          "error": f"skipped: {args.skip_after_s:.0f} s spent (--skip-after-s)"})
         else:
             try:
-                rows.append(run_setting(dataset, args.work, batch, workers, args.steps, comp, args.device, args.set))
+                rows.append(run_setting(dataset, args.work, batch, workers, args.steps, comp, args.device, args.set,
+                                        args.profile))
             except Exception as e:   # noqa: BLE001  (a compile that fails on this machine is a result, not a crash)
                 if not comp:
                     raise
@@ -242,6 +299,8 @@ def main(argv: list[str] | None = None) -> int:
                              "error": f"torch.compile failed: {type(e).__name__}: {str(e).splitlines()[0][:200]}"})
         print(table(rows[-1:]).splitlines()[-1], flush=True)
     print(table(rows), flush=True)
+    kernels = [line for r in rows for line in profile_lines(r)]
+    print("\n".join(kernels), flush=True)
     result = {"device": device, "cpus": os.cpu_count(), "torch": torch.__version__, "dataset": str(dataset),
               "dataset_build_s": build_s, "rows": rows}
     if args.json:
@@ -249,7 +308,7 @@ def main(argv: list[str] | None = None) -> int:
         args.json.write_text(json.dumps(_json_safe(result), indent=2))
         args.json.with_suffix(".md").write_text(f"{device}, {os.cpu_count()} CPUs, torch {torch.__version__}; "
                                                 f"stage 1 of configs/full.toml, bf16, {args.steps} steps\n\n"
-                                                + table(rows) + "\n")
+                                                + table(rows) + "\n\n" + "\n".join(kernels) + "\n")
         print(f"gpu-check: wrote {args.json} and {args.json.with_suffix('.md')}")
     return 0
 

@@ -256,3 +256,21 @@ def test_scale_estimate_arithmetic():
     assert row["core_hours"] == pytest.approx(10.0) and row["driver_serial_hours"] == pytest.approx(0.1)
     assert row["wall_hours"] == pytest.approx(0.1 + 10.0 / 64)
     assert row["speedup_on_cores"] == pytest.approx(10.1 / (0.1 + 10.0 / 64))
+
+
+def test_gpu_check_results_beside_the_report_get_their_own_section():
+    """`make gpu-check` runs elsewhere: its JSON is shown with its machine, the span and the kernel share apart."""
+    from htdata.benchmarks.report import render_report
+
+    row = {"batch": 128, "workers": 16, "compile": False, "samples_per_s": 2972.4, "steps_per_s": 23.2,
+           "data_wait_share": 0.001, "host_share": 0.99, "gpu_busy_share": 1.0,
+           "profile": {"kernel_ms_per_step": 32.3, "kernels_per_step": 1156, "profiled_steps": 20, "top_kernels": []}}
+    skipped = {"batch": 128, "workers": 16, "compile": True, "error": "skipped: 330 s spent (--skip-after-s)"}
+    results = {"command": "htdata bench", "quick": True, "seconds": 1.0, "created": "today", "plugins": {},
+               "errors": {}, "gpu_check": {"file": "gpucheck.json", "device": "NVIDIA H100 80GB HBM3", "cpus": 16,
+                                           "torch": "2.11.0+cu130", "rows": [row, skipped]}}
+    md = render_report(results)
+    section = md.split("## GPU: HandTouch stage 1")[1]
+    assert "NVIDIA H100 80GB HBM3 with 16 CPU cores" in section
+    assert "| 128 | 16 | no | 2972 | 23.2 | 0% | 99% | 100% | 32.3 | 75% |" in section   # 32.3 of 43.1 ms
+    assert "skipped: 330 s spent" in section

@@ -325,6 +325,30 @@ def _discovered(name: str, results: dict) -> list[str]:
     return lines + [markdown.rstrip(), ""]
 
 
+def _gpu_check(g: dict) -> list[str]:
+    """`make gpu-check`'s JSON (another machine, another time): its table and kernel profile."""
+    lines = ["## GPU: HandTouch stage 1 fed by the real loader (`make gpu-check`)", "",
+             f"Measured apart from this run, on {g.get('device')} with {g.get('cpus')} CPU cores, torch "
+             f"{g.get('torch')}; read from `{g['file']}` beside this report. Stage 1 of configs/full.toml, "
+             "bf16, the medium sample corpus; rates are medians of the log windows after the first. "
+             "'GPU span' (CUDA events around each step) bounds busy time from above; the kernel lines "
+             "(torch.profiler) measure it.", "",
+             "| batch | workers | compile | samples/s | steps/s | data wait | host | GPU span | GPU kernels ms/step | "
+             "kernel share of the step |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in g.get("rows", []):
+        if "error" in r:
+            lines.append(f"| {r['batch']} | {r['workers']} | {'yes' if r['compile'] else 'no'} | {r['error']} |")
+            continue
+        prof = r.get("profile") or {}
+        kms = prof.get("kernel_ms_per_step")
+        step_ms = 1000.0 / r["steps_per_s"] if r.get("steps_per_s") else None
+        lines.append(f"| {r['batch']} | {r['workers']} | {'yes' if r['compile'] else 'no'} | "
+                     f"{r['samples_per_s']:.0f} | {r['steps_per_s']:.1f} | {r['data_wait_share']:.0%} | "
+                     f"{r['host_share']:.0%} | {r['gpu_busy_share']:.0%} | "
+                     + (f"{kms:.1f} | {kms / step_ms:.0%} |" if kms is not None and step_ms else "- | - |"))
+    return lines + [""]
+
+
 def render_report(results: dict) -> str:
     lines = ["# htdata bench", "",
              f"`{results['command']}` ({'quick' if results['quick'] else 'full'} run, "
@@ -339,4 +363,6 @@ def render_report(results: dict) -> str:
             lines += [f"Not measured: {results.get('errors', {}).get(key, 'section skipped')}", ""]
     for name in results.get("plugins", {}):
         lines += _discovered(name, results)
+    if "gpu_check" in results:
+        lines += _gpu_check(results["gpu_check"])
     return "\n".join(lines).rstrip() + "\n"

@@ -58,7 +58,11 @@ SECTION_GROUP = "htdata.bench_sections"
 BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "scaling", "rss", "loader", "index", "validate", "append",
                     "stats", "lag", "raw", "maps", "export", "rawglove")
 # Top-level keys of results.json that are not sections: no section may take these names.
-RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds")
+RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds",
+                 "gpu_check")
+# `make gpu-check` runs on a machine with a GPU, apart from this run: its JSON, left in OUT, is shown
+# in REPORT.md under its own heading with the machine it ran on (never mixed into this run's ratios).
+GPU_CHECK_FILE = "gpucheck.json"
 
 
 @dataclass
@@ -342,6 +346,9 @@ def run_bench(cfg: BenchConfig, command: str = "htdata bench",
         results["timings_s"][name] = time.perf_counter() - t0
     results["machine"]["loadavg_1m_end"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     results["seconds"] = time.perf_counter() - t_start
+    gpu = cfg.out / GPU_CHECK_FILE
+    if gpu.is_file():
+        results["gpu_check"] = {"file": GPU_CHECK_FILE, **json.loads(gpu.read_text())}
     results = finite_json(results)
     write_bytes_atomic(cfg.out / "results.json", (json.dumps(results, indent=2, allow_nan=False) + "\n").encode())
     write_bytes_atomic(cfg.out / "REPORT.md", render_report(results).encode())
