@@ -3,8 +3,8 @@
 `encode_sample` is mostly EXR (the OpenEXR binding) and JPEG (cv2): both
 release the GIL while they work (the codec bench's "2 threads" column
 measures it: ~2x the maps per second on 2 cores), so while the worker's main
-thread reads, normalises and rasterises the next frames, `THREADS`
-threads encode the previous ones. The bytes are the same as inline: each
+thread reads, normalises and rasterises the next frames, `encode_threads()`
+threads encode the previous ones (none where a worker has no spare core). The bytes are the same as inline: each
 sample is encoded by the same call, and results are handed back in the
 order the frames came. At most `DEPTH` samples wait (each ~0.5 MB of maps +
 RGB), so memory stays bounded.
@@ -22,16 +22,24 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from htdata.format.table import CodecSettings, encode_sample
 from htdata.ingest.episode import frame_errors
 
-# $HTDATA_ENCODE_THREADS: 0 encodes inline on the calling thread (profiling; the bench's before/after)
-THREADS = int(os.environ.get("HTDATA_ENCODE_THREADS", "2"))
+# $HTDATA_ENCODE_THREADS: 0 encodes inline on the calling thread. A pool worker gets it from its share of
+# the cores (executors.limit_threads): threads only pay where a core is spare; with as many workers as
+# cores they cost ~6% (ingest of the medium OpenTouch corpus, 2 workers on 2 cores, inline vs 2 threads).
+THREADS_ENV = "HTDATA_ENCODE_THREADS"
+DEFAULT_THREADS = 2
 DEPTH = 8
+
+
+def encode_threads() -> int:
+    """Encode threads for this process: $HTDATA_ENCODE_THREADS, else DEFAULT_THREADS."""
+    return max(0, int(os.environ.get(THREADS_ENV, DEFAULT_THREADS)))
 
 
 class EncodePool:
     """`with EncodePool(settings, ref) as pool:` then `pool.put(...)` per frame and `pool.drain()` at the end."""
 
     def __init__(self, settings: CodecSettings, ref, threads: int | None = None, depth: int = DEPTH):
-        threads = THREADS if threads is None else threads
+        threads = encode_threads() if threads is None else threads
         self.settings, self.ref, self.depth = settings, ref, max(1, depth)
         self._pool = (ThreadPoolExecutor(max_workers=threads, thread_name_prefix="htdata-encode")
                       if threads > 0 else None)

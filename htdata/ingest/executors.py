@@ -36,6 +36,8 @@ import sys
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any, Callable, Iterable, Iterator
 
+from htdata.ingest.encodepool import THREADS_ENV
+
 EXECUTORS = ("process", "ray")
 
 
@@ -74,11 +76,13 @@ def limit_threads(threads: int) -> None:
 
     OpenCV and an already imported torch are set directly; the OpenMP/BLAS
     variables only reach libraries loaded after this call, and a value the
-    user exported is kept.
+    user exported is kept. The sample encoder (encodepool) gets `threads`
+    threads, or none (inline) when the worker's share is one core.
     """
     n = max(1, int(threads))
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, str(n))
+    os.environ.setdefault(THREADS_ENV, str(n if n > 1 else 0))   # sample encoding: threads only on spare cores
     try:
         import cv2
     except ImportError:  # pragma: no cover - cv2 is a dependency of htdata
