@@ -39,16 +39,11 @@ def test_glove_rows_long_after_the_video_are_dropped_with_a_count_not_piled_into
 
     import numpy as np
 
-    from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
-    from tests.factories import COLOURS, FRAME_NS
+    from tests.factories import FRAME_NS
 
     t_video = np.arange(9, dtype=np.int64) * FRAME_NS                  # a 0.3 s video ...
     t_glove = np.arange(0, 200 * 10**9, 10_000_000, dtype=np.int64)     # ... beside 200 s of 100 Hz glove
-    values = np.full((t_glove.size, 16, 16), 1536.0, np.float32)
-    write_native_recording(tmp_path / "raw" / "rec", NativeRecording(
-        task="grasp_cup", scene="lab", video_storage="jpeg", video_timestamps_ns=t_video,
-        video_frames=[np.full((40, 40, 3), COLOURS[0], np.uint8)] * 9,
-        hands={"right": NativeHand("opentouch_right_16x16", values, t_glove)}))
+    _flat_right_glove_recording(tmp_path / "raw" / "rec", t_video, t_glove)
     out = tmp_path / "ds"
     assert ingest_cli("--pipeline", small_pipeline(tmp_path, "native"), tmp_path / "raw", out) == 0
     reader = DatasetReader(out)
@@ -169,8 +164,7 @@ def test_glove_rows_per_sample_are_bounded_by_count(tmp_path, capsys, how):
     import numpy as np
 
     from htdata.ingest.fullrate import raw_row_cap
-    from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
-    from tests.factories import COLOURS, FRAME_NS
+    from tests.factories import FRAME_NS
 
     t_video = np.arange(9, dtype=np.int64) * FRAME_NS
     t_glove = np.arange(0, 9 * FRAME_NS, 10_000_000, dtype=np.int64)               # 100 Hz beside the video
@@ -178,11 +172,7 @@ def test_glove_rows_per_sample_are_bounded_by_count(tmp_path, capsys, how):
     start = t_video[-1] + 1_000_000
     burst = start + np.arange(extra, dtype=np.int64) * 100 if how == "packed" else np.full(extra, start)
     t_all = np.concatenate([t_glove, burst])
-    values = np.full((t_all.size, 16, 16), 1536.0, np.float32)
-    write_native_recording(tmp_path / "raw" / "rec", NativeRecording(
-        task="grasp_cup", scene="lab", video_storage="jpeg", video_timestamps_ns=t_video,
-        video_frames=[np.full((40, 40, 3), COLOURS[0], np.uint8)] * 9,
-        hands={"right": NativeHand("opentouch_right_16x16", values, t_all)}))
+    _flat_right_glove_recording(tmp_path / "raw" / "rec", t_video, t_all)
     out = tmp_path / "ds"
     capsys.readouterr()
     assert ingest_cli("--pipeline", small_pipeline(tmp_path, "native"), tmp_path / "raw", out) == 0
@@ -197,3 +187,17 @@ def test_glove_rows_per_sample_are_bounded_by_count(tmp_path, capsys, how):
     report = json.loads((out / "reports" / "ingest.json").read_text())
     assert report["raw_rows_capped"] == {"nat-rec": {"right": capped}}
     assert f"{capped} glove rows dropped over the {cap} rows one sample may store" in err
+
+
+def _flat_right_glove_recording(folder, t_video, t_glove):
+    """A native recording: 9 one-colour JPEG frames at `t_video`, a right OpenTouch glove resting at `t_glove`."""
+    import numpy as np
+
+    from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+    from tests.factories import COLOURS
+
+    values = np.full((t_glove.size, 16, 16), 1536.0, np.float32)
+    write_native_recording(folder, NativeRecording(
+        task="grasp_cup", scene="lab", video_storage="jpeg", video_timestamps_ns=t_video,
+        video_frames=[np.full((40, 40, 3), COLOURS[0], np.uint8)] * 9,
+        hands={"right": NativeHand("opentouch_right_16x16", values, t_glove)}))
