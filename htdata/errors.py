@@ -15,6 +15,23 @@ class HtdataError(Exception):
     """Base class of every error htdata raises on purpose."""
 
 
+# The three kinds of mistake a user can make, each also a ValueError so `except ValueError`
+# written before they existed still catches them. Programming errors stay built-in.
+class ConfigError(HtdataError, ValueError):
+    """A setting the user wrote is invalid: a pipeline TOML, a `--set`, a layout file, a trainer
+    config. The one-line message names the setting (and the file when there is one)."""
+
+
+class ArgumentError(HtdataError, ValueError):
+    """An argument a caller passed does not fit what it names: an unknown split or part, a sample
+    index out of range, a version that does not exist, options that exclude each other."""
+
+
+class DatasetError(HtdataError, ValueError):
+    """A dataset (or a member of it) is not what its records say: a damaged or foreign file, bytes
+    that do not decode, records that disagree. The message names the dataset file or record."""
+
+
 class LayoutNotFound(HtdataError, FileNotFoundError):
     """A glove layout id or file that is on no search path; the message is one line
     naming where it looked and the layouts that exist (htdata.glove.layouts.resolve_layout)."""
