@@ -59,7 +59,7 @@ from handtouch.resources import config_file
 from handtouch.rgb_pretrain import (PAIRINGS, RGBPretrainConfig, control_checks, control_scores, ensure_probes,
                                     episode_fps, load_items, model_control_checks, paired_rgb2tactile)
 from htdata.read import keys
-from htdata.sample.corpus import FORMATS as SAMPLE_FORMATS
+from htdata.synthetic.corpus import FORMATS as SAMPLE_FORMATS
 from htdata.format.table import MANIFEST_FILE
 from htdata.resources import PIPELINES_DIR
 from htdata.store.manifest import load_manifest

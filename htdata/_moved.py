@@ -42,7 +42,7 @@ MOVED = {
     "htdata.storage": "htdata.store.storage", "htdata.remote": "htdata.store.remote",
     "htdata.split": "htdata.curate.split", "htdata.splitversions": "htdata.curate.splitversions",
     "htdata.merge": "htdata.curate.merge", "htdata.gc": "htdata.curate.gc",
-    "htdata.repack": "htdata.curate.repack", "htdata.renormalise": "htdata.curate.renormalise",
+    "htdata.repack": "htdata.write.repack", "htdata.renormalise": "htdata.curate.renormalise",
     "htdata.reader": "htdata.read.reader", "htdata.torchdata": "htdata.read.torchdata",
     "htdata.torchglove": "htdata.read.torchglove", "htdata.rawstream": "htdata.read.rawstream",
     "htdata.keys": "htdata.read.keys",
@@ -50,12 +50,20 @@ MOVED = {
     "htdata.healthmap": "htdata.inspect.healthmap", "htdata.idle": "htdata.curate.idle",
     "htdata.card": "htdata.inspect.card", "htdata.preview": "htdata.inspect.preview",
     "htdata.executors": "htdata.ingest.executors", "htdata.bench": "htdata.benchmarks.suite",
+    # round four (the house pass): the writers' shared layer, ingest's configuration, the synthetic corpus
+    "htdata.curate.repack": "htdata.write.repack", "htdata.pipeline": "htdata.ingest.pipeline",
+    "htdata.sample": "htdata.synthetic",
 }
-# Packages that kept their names: an attribute they no longer have is looked up in this module.
+# Modules that kept their names: an attribute they no longer have is looked up in this module (or these).
 MOVED_NAMES = {
     "htdata.format": "htdata.format.table",   # the format was one module: its names are the table's now
     "htdata.curate": "htdata.curate.edit",    # `htdata.curate` was one module: rm / trim are edit.py now
+    # the adapter contract's helpers, each in a module of its own now
+    "htdata.source.adapters.base": ("htdata.source.adapters.discovery", "htdata.source.adapters.sourcetree",
+                                    "htdata.source.adapters.params", "htdata.source.adapters.streamchecks"),
 }
+# old name -> new name, for names that were renamed as they moved (looked up before the name itself)
+RENAMED = {("htdata.source.adapters.base", "check_adapter_params"): "check_declared_params"}
 
 
 def new_name(fullname: str) -> str | None:
@@ -69,15 +77,18 @@ def new_name(fullname: str) -> str | None:
 def moved_name(package: str, name: str):
     """`package.name` from the module it moved to (MOVED_NAMES), with a DeprecationWarning.
 
-    For a package's module-level `__getattr__`: AttributeError, as Python expects, when
-    the old module never had that name either.
+    For a module-level `__getattr__`: AttributeError, as Python expects, when the old module
+    never had that name either.
     """
-    target = importlib.import_module(MOVED_NAMES[package])
-    if name.startswith("__") or not hasattr(target, name):
-        raise AttributeError(f"module {package!r} has no attribute {name!r}")
-    warnings.warn(f"{package}.{name} is deprecated: it moved to {target.__name__}.{name}",
-                  DeprecationWarning, stacklevel=3)
-    return getattr(target, name)
+    targets = MOVED_NAMES[package]
+    new = RENAMED.get((package, name), name)
+    for target in (targets,) if isinstance(targets, str) else targets:
+        module = importlib.import_module(target)
+        if not name.startswith("__") and hasattr(module, new):
+            warnings.warn(f"{package}.{name} is deprecated: it moved to {module.__name__}.{new}",
+                          DeprecationWarning, stacklevel=3)
+            return getattr(module, new)
+    raise AttributeError(f"module {package!r} has no attribute {name!r}")
 
 
 class _Alias(importlib.abc.Loader):

@@ -39,7 +39,7 @@ from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, UnitResult,
 from htdata.store.parts import part_from_unit
 from htdata.store.snapshot import commit_parts, current_snapshot
 from htdata.resources import PIPELINES_DIR
-from htdata.sample.formats import (NativeHand, NativeRecording, OpenTouchClip, TouchAnythingEpisode,
+from htdata.synthetic.formats import (NativeHand, NativeRecording, OpenTouchClip, TouchAnythingEpisode,
                                    write_native_recording, write_opentouch_annotations,
                                    write_opentouch_scene, write_touchanything_episode)
 from htdata.format.shardio import ShardWriter, sample_key
@@ -243,7 +243,7 @@ TRAIN_EPISODES = episode_table(("ep_a", "pour", "kitchen", "R", 6), ("ep_b", "po
 
 
 # --------------------------------------------------------------------------- raw recordings + the ingest CLI
-# Tiny raw corpora in the three source formats (htdata.sample.formats), for the ingest, Ray and
+# Tiny raw corpora in the three source formats (htdata.synthetic.formats), for the ingest, Ray and
 # benchmark tests: 3 OpenTouch clips (39 frames), 2 TouchAnything episodes (11), 1 native (9).
 
 PERIOD = 33_333_333
@@ -365,12 +365,12 @@ RAWGLOVE_PIPELINE = ('name = "rawknit"\n[adapter]\nname = "native"\n[adapter.par
 
 
 def ingest_rawglove(tmp: Path, clips: int = 2) -> Path:
-    """The sample raw-count glove (htdata.sample.rawglove: glove only, no RGB, faint 32x32 counts), its first
+    """The sample raw-count glove (htdata.synthetic.rawglove: glove only, no RGB, faint 32x32 counts), its first
     `clips` clips ingested with a pipeline named "rawknit" (not its adapter's name) that sets the quietest
     baseline and a noise floor (so the calibrated contact rule applies); returns the dataset path."""
     import shutil
 
-    from htdata.sample.rawglove import write_rawglove
+    from htdata.synthetic.rawglove import write_rawglove
 
     raw = tmp / "rawglove"
     write_rawglove(raw)

@@ -9,7 +9,7 @@ import av
 import numpy as np
 
 from htdata.source.adapters.video import configure_decoder_threads, iter_video_rgb
-from htdata.sample.formats import write_h264
+from htdata.synthetic.formats import write_h264
 
 
 def _video(path, n=12):

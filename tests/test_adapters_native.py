@@ -1,4 +1,4 @@
-"""htdata-native adapter against fixtures written by htdata.sample.formats."""
+"""htdata-native adapter against fixtures written by htdata.synthetic.formats."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 
 from htdata.source.adapters import ADAPTERS, get_adapter
 from htdata.errors import EpisodeError
-from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 
 VIDEO_T0 = 5_000_000_000
 FRAME_NS = 33_333_333

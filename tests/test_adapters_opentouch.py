@@ -1,4 +1,4 @@
-"""OpenTouch-style adapter against fixtures written by htdata.sample.formats."""
+"""OpenTouch-style adapter against fixtures written by htdata.synthetic.formats."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 
 from htdata.source.adapters import get_adapter
 from htdata.errors import EpisodeError
-from htdata.sample.formats import OpenTouchClip, write_opentouch_annotations, write_opentouch_scene
+from htdata.synthetic.formats import OpenTouchClip, write_opentouch_annotations, write_opentouch_scene
 
 RED = (255, 0, 0)
 

@@ -1,4 +1,4 @@
-"""TouchAnything-style adapter against fixtures written by htdata.sample.formats."""
+"""TouchAnything-style adapter against fixtures written by htdata.synthetic.formats."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 from htdata.source.adapters import get_adapter
 from htdata.source.adapters.npzrows import NpzRowError, NpzRows
 from htdata.errors import EpisodeError
-from htdata.sample.formats import TouchAnythingEpisode, write_touchanything_episode, write_touchanything_split
+from htdata.synthetic.formats import TouchAnythingEpisode, write_touchanything_episode, write_touchanything_split
 
 EPOCH = 1_774_000_000.0  # 2026, like the release's trajectory ids
 RED = (255, 0, 0)

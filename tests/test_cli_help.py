@@ -7,7 +7,7 @@ import re
 import pytest
 
 from htdata.cli import COMMANDS, GROUPS, main as cli
-from htdata.pipeline import load_pipeline, resolve_pipeline_path, shipped_pipelines
+from htdata.ingest.pipeline import load_pipeline, resolve_pipeline_path, shipped_pipelines
 from htdata.commands.version_arg import parse_version
 from tests.factories import SPLIT_EPISODES, commit_split, write_synthetic_dataset
 from tests.tactile_factories import LEFT, RIGHT, clean_series, write_taxel_dataset

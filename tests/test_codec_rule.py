@@ -18,7 +18,7 @@ from htdata.glove.codecrule import (ANALYTIC_MAX_ERROR, SIZE_ORDER, CodecChoice,
 from htdata.format.table import CodecSettings, decode_sample, encode_sample
 from htdata.glove.layouts import load_layout
 from htdata.glove.normalise import NormaliseConfig
-from htdata.pipeline import PipelineConfig, load_pipeline
+from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 from htdata.glove.rasterise import Rasteriser
 
 OT, TA_L, TA_R = "opentouch_right_16x16", "touchanything_left_21x21", "touchanything_right_21x21"

@@ -12,7 +12,7 @@ from htdata.cli import main as cli
 from htdata.format.table import RGB_MEMBER, raw_member, tactile_member
 from htdata.store.manifest import load_episodes
 from htdata.read.reader import DatasetReader
-from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from htdata.read.torchdata import TactileFrameDataset, TactileStream, TactileWindowDataset
 from tests.factories import COLOURS, PERIOD, ingest_cli, small_pipeline
 

@@ -21,7 +21,7 @@ from htdata.format.codec import decode_rgb  # noqa: E402
 from htdata.format.table import RGB_MEMBER  # noqa: E402
 from htdata.read.rawstream import paired_row  # noqa: E402
 from htdata.read.reader import DatasetReader  # noqa: E402
-from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording  # noqa: E402
+from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording  # noqa: E402
 from tests.factories import PERIOD, commit_split, ingest_cli, small_pipeline  # noqa: E402
 
 LONG = "rec_" + "a_very_long_recording_name_from_the_field_" * 3 + "end"   # 133 characters

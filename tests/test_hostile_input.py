@@ -26,7 +26,7 @@ from htdata.source.adapters.npzrows import NpzRowError, NpzRows, check_npy_file
 from htdata.source.adapters.video import VideoError, iter_video_rgb
 from htdata.glove.layouts import load_layout
 from htdata.store.manifest import load_episodes
-from htdata.sample.formats import TouchAnythingEpisode, write_touchanything_episode
+from htdata.synthetic.formats import TouchAnythingEpisode, write_touchanything_episode
 from tests.factories import ingest_cli, make_native, make_opentouch, make_touchanything
 
 
@@ -322,7 +322,7 @@ def test_damaged_h264_fails_its_episode_naming_file_and_frame(tmp_path, capsys):
 
 
 def test_clean_textured_h264_decodes_every_frame(tmp_path):
-    from htdata.sample.formats.media import write_h264
+    from htdata.synthetic.formats.media import write_h264
 
     path = tmp_path / "clean.mp4"
     write_h264(path, textured_frames(8))
@@ -332,7 +332,7 @@ def test_clean_textured_h264_decodes_every_frame(tmp_path):
 def test_0xff_run_in_key_frame_concealed_by_decoder_is_caught(tmp_path):
     # FFmpeg returns no error for this damage (it conceals it and outputs a smeared picture):
     # only the frame's corrupt flag tells, and it must fail the read naming the frame.
-    from htdata.sample.formats.media import write_h264
+    from htdata.synthetic.formats.media import write_h264
 
     path = tmp_path / "ego.mp4"
     write_h264(path, textured_frames(8))

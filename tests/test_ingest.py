@@ -1,6 +1,6 @@
 """End-to-end ingest on tiny raw fixtures in all three source formats.
 
-Fixtures are written with htdata.sample.formats (the source layouts), then
+Fixtures are written with htdata.synthetic.formats (the source layouts), then
 ingested through the real CLI (in-process, or in a subprocess for crash tests).
 """
 
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from htdata.ingest import parse_sources
-from htdata.sample.formats import write_opentouch_annotations, write_opentouch_scene
+from htdata.synthetic.formats import write_opentouch_annotations, write_opentouch_scene
 from tests.factories import (COLOURS, ingest_cli, make_native, make_opentouch, make_touchanything, ot_clip,
                              small_pipeline, temp_leftovers)
 

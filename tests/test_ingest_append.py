@@ -14,7 +14,7 @@ import psutil
 import pytest
 
 from htdata.read.reader import DatasetReader
-from htdata.sample.formats import write_opentouch_annotations, write_opentouch_scene
+from htdata.synthetic.formats import write_opentouch_annotations, write_opentouch_scene
 from htdata.store.versions import list_versions
 from tests.factories import (COLOURS, ingest_cli, make_native, make_opentouch, make_touchanything, ot_clip,
                              small_pipeline, temp_leftovers)
@@ -201,7 +201,7 @@ def test_touchanything_append_after_native(tmp_path):
 
 @pytest.mark.parametrize("n_chars", [80, 180])
 def test_long_episode_ids_ingest(tmp_path, n_chars):
-    from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+    from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 
     raw = tmp_path / "raw"
     t = np.arange(6, dtype=np.int64) * 33_333_333

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from htdata.glove.layouts import LAYOUTS_ENV, parse_layout
-from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from tests.factories import COLOURS, PERIOD, ingest_cli, small_pipeline
 
 GLOVE = {"left": "my_glove_left_32x32", "right": "my_glove_right_32x32"}

@@ -12,7 +12,7 @@ import pytest
 from htdata.source.adapters import get_adapter
 from htdata.source.adapters.opentouch import detect_id_column, load_annotations, sniff_delimiter
 from htdata.store.manifest import load_episodes, load_manifest
-from htdata.sample.formats import write_opentouch_scene
+from htdata.synthetic.formats import write_opentouch_scene
 from tests.factories import COLOURS, ingest_cli, ot_clip
 
 

@@ -175,14 +175,14 @@ def test_ingest_estimate_declined_keeps_clocks(tmp_path):
                                               ("sync.min_confidence=1.5", "min_confidence"),
                                               ("sync.lag=true", "lag"), ("sync.lag_ms=3", "lag_ms")])
 def test_pipeline_refuses_bad_lag_settings(setting, message):
-    from htdata.pipeline import load_pipeline
+    from htdata.ingest.pipeline import load_pipeline
 
     with pytest.raises(ValueError, match=message):
         load_pipeline("native").with_overrides([setting])
 
 
 def test_pipeline_lag_defaults_keep_the_settings_document():
-    from htdata.pipeline import load_pipeline
+    from htdata.ingest.pipeline import load_pipeline
 
     cfg = load_pipeline("native")
     assert cfg.to_dict()["sync"] == {"max_skew_ms": 20.0, "policy": "nearest"}

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from htdata.pipeline import PIPELINES_DIR, load_pipeline
+from htdata.ingest.pipeline import PIPELINES_DIR, load_pipeline
 from tests.factories import ingest_cli
 from tests.test_unmapped_cells import draft_layout, knit_counts, write_glove_only
 

@@ -17,9 +17,9 @@ import pytest
 from htdata.cli import main as cli
 from htdata.format.mapstorage import map_storage, maps_stored
 from htdata.format.table import HANDS, SHARDS_DIR, tactile_member
-from htdata.pipeline import load_pipeline
+from htdata.ingest.pipeline import load_pipeline
 from htdata.read.reader import DatasetReader
-from htdata.sample.corpus import CorpusConfig, write_corpus
+from htdata.synthetic.corpus import CorpusConfig, write_corpus
 from htdata.validate.validator import validate_dataset
 from tests.factories import ingest_cli, rewrite_manifest
 

@@ -24,6 +24,8 @@ def test_the_shim_is_removed_by_the_version_it_promised():
 @pytest.mark.parametrize("package, name, target", [
     ("htdata.format", "SHARDS_DIR", "htdata.format.table"),
     ("htdata.curate", "plan_edit", "htdata.curate.edit"),
+    ("htdata.source.adapters.base", "walk_source", "htdata.source.adapters.sourcetree"),
+    ("htdata.source.adapters.base", "sanitise_id", "htdata.source.adapters.discovery"),
 ])
 def test_an_old_name_of_a_package_warns_and_is_the_same_object(package, name, target):
     module = importlib.import_module(package)
@@ -44,7 +46,29 @@ def test_an_old_module_name_warns():
     assert any(w.category is DeprecationWarning and "htdata.read.keys" in str(w.message) for w in caught)
 
 
-@pytest.mark.parametrize("package", ["htdata.format", "htdata.curate"])
+def test_a_name_renamed_as_it_moved_warns_with_its_new_name():
+    base = importlib.import_module("htdata.source.adapters.base")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        value = base.check_adapter_params
+    assert value is importlib.import_module("htdata.source.adapters.params").check_declared_params
+    assert "htdata.source.adapters.params.check_declared_params" in str(caught[0].message)
+
+
+@pytest.mark.parametrize("old, new", [("htdata.pipeline", "htdata.ingest.pipeline"),
+                                      ("htdata.curate.repack", "htdata.write.repack"),
+                                      ("htdata.sample.corpus", "htdata.synthetic.corpus"),
+                                      ("htdata.repack", "htdata.write.repack")])
+def test_the_house_pass_moves_warn_and_name_the_new_module(old, new):
+    sys.modules.pop(old, None)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        module = importlib.import_module(old)
+    assert module is importlib.import_module(new)
+    assert any(w.category is DeprecationWarning and new in str(w.message) for w in caught)
+
+
+@pytest.mark.parametrize("package", ["htdata.format", "htdata.curate", "htdata.source.adapters.base"])
 def test_a_name_that_never_existed_is_an_attribute_error(package):
     module = importlib.import_module(package)
     with pytest.raises(AttributeError, match="no_such_name"):

@@ -16,7 +16,7 @@ import pytest
 
 from htdata.glove.layouts import load_layout
 from htdata.store.manifest import load_episodes
-from htdata.sample.formats import (NativeHand, NativeRecording, TouchAnythingEpisode, write_native_recording,
+from htdata.synthetic.formats import (NativeHand, NativeRecording, TouchAnythingEpisode, write_native_recording,
                                    write_opentouch_annotations, write_opentouch_scene, write_touchanything_episode)
 from tests.factories import COLOURS, PERIOD, ingest_cli, ot_clip
 

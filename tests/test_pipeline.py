@@ -2,7 +2,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from htdata.pipeline import PipelineConfig, load_pipeline
+from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 from htdata.resources import PIPELINES_DIR
 
 
@@ -160,7 +160,7 @@ def test_with_overrides_parses_values_and_validates():
 
 
 def test_set_values_parse_as_toml_but_dates_stay_text():
-    from htdata.pipeline import parse_setting
+    from htdata.ingest.pipeline import parse_setting
 
     assert parse_setting("sync.max_skew_ms=20") == ("sync.max_skew_ms", 20)
     assert parse_setting("tactile.keep_raw=false") == ("tactile.keep_raw", False)
@@ -172,7 +172,7 @@ def test_set_values_parse_as_toml_but_dates_stay_text():
 
 def test_a_partial_normalise_table_keeps_the_layout_units():
     from htdata.glove.layouts import load_layout
-    from htdata.pipeline import load_pipeline
+    from htdata.ingest.pipeline import load_pipeline
 
     cfg = load_pipeline("native").with_overrides(["normalise.opentouch_right_16x16.noise_floor=0.01"])
     n = cfg.normalise_for(load_layout("opentouch_right_16x16"))

@@ -17,7 +17,7 @@ from htdata.glove.layouts import load_layout
 from htdata.store.manifest import load_episodes, load_index, load_manifest
 from htdata.glove.normalise import NormaliseConfig, Normaliser
 from htdata.read.reader import DatasetReader
-from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from tests.factories import COLOURS, PERIOD, ingest_cli, make_opentouch, small_pipeline
 
 LAYOUT = "opentouch_right_16x16"

@@ -8,7 +8,7 @@ import pytest
 from htdata.benchmarks.rawglove import config_for, normalise_clip, score
 from htdata.glove.calibration import calibration_id, episode_normaliser, fit_record
 from htdata.glove.normalise import NormaliseConfig, Normaliser
-from htdata.sample.rawglove import (FULL_SCALE, REST, SATURATE, TRUTH_LEVEL, GloveUnit, corpus_clips, glove_layout,
+from htdata.synthetic.rawglove import (FULL_SCALE, REST, SATURATE, TRUTH_LEVEL, GloveUnit, corpus_clips, glove_layout,
                                     make_clip, write_rawglove)
 
 
@@ -103,7 +103,7 @@ def test_quietest_span_keeps_the_grip_of_a_clip_starting_mid_grasp(corpus):
 
 def test_default_settings_of_a_raw_count_glove_keep_the_rest_dark_and_the_grip(corpus):
     from htdata.benchmarks.rawglove import held_grip
-    from htdata.pipeline import load_pipeline
+    from htdata.ingest.pipeline import load_pipeline
 
     _, clips = corpus
     cfg = load_pipeline("native").normalise_for(glove_layout("right"))      # no [normalise.<id>] table

@@ -8,7 +8,7 @@ import pytest
 
 from htdata.glove.layouts import parse_layout
 from htdata.glove.rawhealth import DRIFT_MIN_FRAMES, classify_raw
-from htdata.sample.rawglove import (GloveUnit, corpus_clips, draft_layout_doc, glove_layout, make_clip,
+from htdata.synthetic.rawglove import (GloveUnit, corpus_clips, draft_layout_doc, glove_layout, make_clip,
                                     unmapped_truth)
 
 LAYOUT = glove_layout("right")

@@ -16,7 +16,7 @@ import numpy as np
 
 from tests.factories import (COLOURS, PERIOD, ingest_cli, small_pipeline, temp_leftovers)
 from htdata.format.table import MANIFEST_FILE
-from htdata.sample.formats import (OpenTouchClip, TouchAnythingEpisode, write_opentouch_annotations,
+from htdata.synthetic.formats import (OpenTouchClip, TouchAnythingEpisode, write_opentouch_annotations,
                                    write_opentouch_scene, write_touchanything_episode)
 
 

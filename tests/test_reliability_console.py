@@ -5,7 +5,7 @@ appending, and the last row of a conflicting label table silently won."""
 
 import pytest
 
-from htdata.sample.formats import write_opentouch_annotations
+from htdata.synthetic.formats import write_opentouch_annotations
 from tests.factories import ingest_cli, make_native, make_opentouch, small_pipeline
 from tests.test_out_of_range import opentouch_raw, ta_episode
 

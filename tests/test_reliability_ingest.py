@@ -193,7 +193,7 @@ def _flat_right_glove_recording(folder, t_video, t_glove):
     """A native recording: 9 one-colour JPEG frames at `t_video`, a right OpenTouch glove resting at `t_glove`."""
     import numpy as np
 
-    from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+    from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
     from tests.factories import COLOURS
 
     values = np.full((t_glove.size, 16, 16), 1536.0, np.float32)

@@ -20,7 +20,7 @@ import pytest
 
 import htdata
 from htdata.cli import main
-from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from htdata.store.manifest import load_manifest
 from tests.factories import COLOURS, PERIOD, ingest_cli, make_native
 

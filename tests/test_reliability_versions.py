@@ -14,7 +14,7 @@ import pytest
 
 from htdata.errors import HtdataError
 from htdata.read.reader import DatasetReader
-from htdata.sample.formats import write_opentouch_scene
+from htdata.synthetic.formats import write_opentouch_scene
 from htdata.store.versions import list_versions
 from tests.factories import COLOURS, ingest_cli, make_opentouch, ot_clip, small_pipeline, write_synthetic_dataset
 

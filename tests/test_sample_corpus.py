@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from htdata.cli import main as htdata_main
-from htdata.sample.corpus import COMPLETE_MARKER, CorpusConfig, corpus_complete, plan_corpus, write_corpus
-from htdata.sample.tasks import TASKS
+from htdata.synthetic.corpus import COMPLETE_MARKER, CorpusConfig, corpus_complete, plan_corpus, write_corpus
+from htdata.synthetic.tasks import TASKS
 
 OT_KEYS = {"camera_poses", "labels", "rgb_images_jpeg", "right_hand_landmarks", "right_palm_pos",
            "right_wrist_pos", "right_pressure", "timestamps"}
@@ -43,7 +43,7 @@ def _video_frames(path: Path) -> list[np.ndarray]:
 
 def test_formats_are_registered_adapters_with_a_writer_and_plans():
     from htdata.source.adapters import ADAPTERS
-    from htdata.sample import corpus
+    from htdata.synthetic import corpus
 
     assert corpus.FORMATS == ("opentouch", "touchanything", "native")
     assert list(corpus.FORMATS) == [name for name in ADAPTERS if name in corpus.FORMATS]   # registry order
@@ -289,7 +289,7 @@ def test_reuse_keeps_a_finished_corpus_of_the_same_seed_and_rewrites_anything_el
 
 
 def test_a_corpus_cut_short_has_no_marker_and_is_written_again(tmp_path, monkeypatch):
-    from htdata.sample import corpus
+    from htdata.synthetic import corpus
 
     out = tmp_path / "raw"
     assert htdata_main(["sample", str(out), "--scale", "tiny", "--formats", "native", "--quiet"]) == 0

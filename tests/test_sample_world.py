@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from htdata.glove.layouts import load_canonical, load_layout
-from htdata.sample.glove import contact_grid, contact_grids, place_intensity
-from htdata.sample.render import camera_view, draw_hand
-from htdata.sample.tasks import PLACE_NAMES, TASKS
-from htdata.sample.world import PHASE_APPROACH, PHASE_CONTACT, PHASE_RELEASE, EpisodeSpec, World
+from htdata.synthetic.glove import contact_grid, contact_grids, place_intensity
+from htdata.synthetic.render import camera_view, draw_hand
+from htdata.synthetic.tasks import PLACE_NAMES, TASKS
+from htdata.synthetic.world import PHASE_APPROACH, PHASE_CONTACT, PHASE_RELEASE, EpisodeSpec, World
 
 OT = "opentouch_right_16x16"
 
@@ -265,8 +265,8 @@ def test_unknown_camera():
 
 def test_the_camera_shows_the_support_hand_contact_the_glove_feels(ot_layout):
     """A support hand that feels contact is drawn closed on a pad; one that feels none, half open in the air."""
-    from htdata.sample.render import SUPPORT_PAD_RGB
-    from htdata.sample.world import PHASE_CONTACT, SUPPORT_CLOSURE_IDLE, SUPPORT_CLOSURE_TOUCH
+    from htdata.synthetic.render import SUPPORT_PAD_RGB
+    from htdata.synthetic.world import PHASE_CONTACT, SUPPORT_CLOSURE_IDLE, SUPPORT_CLOSURE_TOUCH
 
     touching = World(EpisodeSpec("lateral_key_turn", "Home", seed=2, n_frames=60, hands=("left", "right")))
     idle = World(EpisodeSpec("pinch_pick", "Home", seed=2, n_frames=60, hands=("left", "right")))

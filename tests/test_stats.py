@@ -195,7 +195,7 @@ RAW_FRAMES = 45
 def raw_ds(tmp_path_factory):
     """A native recording (100 Hz OpenTouch-layout glove, 30 Hz video: several raw rows per sample) ingested
     with raw rows; values are integer firmware counts with a moving press, so every level is known."""
-    from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+    from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
     from tests.factories import PERIOD, ingest_cli
 
     root = tmp_path_factory.mktemp("rawstats")

@@ -20,7 +20,7 @@ import pytest
 from htdata.glove.activity import MOVING_K, WANDER_K, CellActivity, moving_cells, unmapped_moving
 from htdata.glove.layouts import parse_layout
 from htdata.store.manifest import load_episodes
-from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from tests.factories import ingest_cli
 
 GRID = (16, 16)
@@ -248,14 +248,14 @@ def test_suggest_from_npy_needs_a_hand_and_something_that_moves(tmp_path, capsys
 
 @pytest.fixture(scope="module")
 def rawglove():
-    from htdata.sample.rawglove import corpus_clips
+    from htdata.synthetic.rawglove import corpus_clips
 
     return corpus_clips(0)
 
 
 def test_slow_rest_wander_is_not_movement_on_the_sample_raw_glove(rawglove):
     from htdata.glove.activity import moving_threshold
-    from htdata.sample.rawglove import draft_layout_doc, unmapped_truth
+    from htdata.synthetic.rawglove import draft_layout_doc, unmapped_truth
 
     units, clips = rawglove
     draft = parse_layout(draft_layout_doc("right"), "draft")      # thumb tip forgotten, the gaps not declared
@@ -279,7 +279,7 @@ def test_slow_rest_wander_is_not_movement_on_the_sample_raw_glove(rawglove):
 
 def test_suggest_finds_the_true_sensor_areas_of_the_sample_raw_glove(rawglove):
     from htdata.glove.layoutsuggest import suggest_layout
-    from htdata.sample.rawglove import glove_layout
+    from htdata.synthetic.rawglove import glove_layout
 
     _, clips = rawglove
     acts = []

@@ -21,7 +21,7 @@ from htdata.benchmarks.maplayouts import RULE as LAYOUT_RULE, layout_rows, pick_
 from htdata.glove.codecrule import RULE, GloveStep, glove_step, pick_codec, resolve_codec
 from htdata.format.table import MAP_SHAPE
 from htdata.glove.layouts import Layout, load_layout
-from htdata.pipeline import TactileConfig
+from htdata.ingest.pipeline import TactileConfig
 
 # Candidates of the codec rule (EXR: what the dataset member can store) and, for comparison, other formats.
 def _exr_codec(compression: str, pixel_type) -> tuple[Callable, Callable]:

@@ -1,6 +1,6 @@
 """The tactile-video lag estimator (htdata/source/lag.py): error against known lags, cost per episode minute.
 
-Episodes of the sample world (htdata.sample.world: every task, its contact
+Episodes of the sample world (htdata.synthetic.world: every task, its contact
 visible in the RGB) are written as native recordings whose glove clock runs
 `lag` off the video clock while recording.json claims the clocks agree
 (clock_offset_ns 0): `write_shifted_native`, also used by tests/test_lag.py.
@@ -22,14 +22,14 @@ import numpy as np
 
 from htdata.benchmarks.tables import fmt as _fmt, table
 from htdata.glove.layouts import load_layout
-from htdata.sample.corpus import native_raw
-from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
-from htdata.sample.world import EpisodeSpec, World
+from htdata.synthetic.corpus import native_raw
+from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
+from htdata.synthetic.world import EpisodeSpec, World
 from htdata.benchmarks.sources import discover
 from htdata.source.lag import _contact_series, _rgb_series, estimate_lag
 from htdata.glove.normalise import Normaliser
 from htdata.source.lag import estimate_episode_lag
-from htdata.sample.tasks import TASKS
+from htdata.synthetic.tasks import TASKS
 
 SHIFTS_MS = (-200.0, -50.0, 0.0, 100.0)
 FPS = 30.0

@@ -34,8 +34,8 @@ from htdata.format.table import HANDS, JSON_MEMBER, SHARDS_DIR, tactile_member
 from htdata.ingest.episode import EpisodeStream
 from htdata.format.mapstorage import resolve_map_storage
 from htdata.glove.layouts import LAYOUTS_ENV
-from htdata.sample.rawglove import write_rawglove
-from htdata.pipeline import TactileConfig
+from htdata.synthetic.rawglove import write_rawglove
+from htdata.ingest.pipeline import TactileConfig
 from htdata.read.reader import DatasetReader
 
 KINDS = (("rgb", "rgb jpg"), ("maps", "tactile maps"), ("raw", "raw rows"), ("bend", "bend"), ("json", "json"),
@@ -208,7 +208,7 @@ def glove_only_row(work: Path, reps: int) -> dict:
                                                (f"tactile.maps={choice}",)))
         sizes = {c: bytes_per_frame(work / f"glove_only_{c}") for c in runs}
     med = {c: {k: statistics.median(r[k] for r in rs) for k in ("frames_per_s", "worker_s")} for c, rs in runs.items()}
-    return {"recording": "raw-count glove, no video (htdata/sample/rawglove.py)", "frames": runs["raw"][0]["frames"],
+    return {"recording": "raw-count glove, no video (htdata/synthetic/rawglove.py)", "frames": runs["raw"][0]["frames"],
             "reps": max(1, reps), "frames_per_s_stored": med["stored"]["frames_per_s"],
             "frames_per_s_raw": med["raw"]["frames_per_s"],
             "speed_ratio": med["stored"]["frames_per_s"] / med["raw"]["frames_per_s"],

@@ -8,7 +8,7 @@ import numpy as np
 
 from htdata.glove.layouts import list_layouts, load_layout
 from htdata.glove.rasterise import MODES, Rasteriser
-from htdata.pipeline import TactileConfig
+from htdata.ingest.pipeline import TactileConfig
 
 
 def raster_benchmark(layout_id: str, mode: str, frames: int = 256, seed: int = 0) -> dict:

@@ -1,6 +1,6 @@
 """`make bench` section "raw-count glove": baselines and noise floors scored against the generator's truth.
 
-The glove is the sample world's raw-count knit glove (htdata/sample/rawglove.py:
+The glove is the sample world's raw-count knit glove (htdata/synthetic/rawglove.py:
 10-bit counts, rest ~550 with per-taxel offsets and gains, noise, drift,
 faults, cross-talk rows). For every baseline option (none / first_frame /
 rest_window (first 10 frames) / quietest (1 s span) / percentile (p5) / drift
@@ -36,7 +36,7 @@ import time
 import numpy as np
 
 from htdata.glove.normalise import NormaliseConfig, Normaliser
-from htdata.sample.rawglove import (FPS, FULL_SCALE, TRUTH_LEVEL, GloveUnit, RawGloveClip, corpus_clips,
+from htdata.synthetic.rawglove import (FPS, FULL_SCALE, TRUTH_LEVEL, GloveUnit, RawGloveClip, corpus_clips,
                                     glove_layout, make_clip)
 from htdata.glove.contact import rule_for
 from htdata.benchmarks.rawglovecells import moving_cell_rows, suggest_rows
@@ -183,7 +183,7 @@ def rawglove_rows(quick: bool, seed: int) -> dict:
 
 
 def rawglove_markdown(d: dict) -> list[str]:
-    lines = [f"Sample raw-count glove (htdata/sample/rawglove.py), both hands. Rest pixels > 0: share of live "
+    lines = [f"Sample raw-count glove (htdata/synthetic/rawglove.py), both hands. Rest pixels > 0: share of live "
              f"taxel-frames with true pressure 0 reading above 0. Precision / recall per taxel: predicted = value "
              f"> 0, truth = true pressure >= {d['truth_level']}. Cost: fit + normalise, in memory.", ""]
     rows = [{k: ("-" if v is None else v) for k, v in r.items()} for r in d["clips"]]   # no prediction: no precision

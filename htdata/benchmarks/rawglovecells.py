@@ -1,6 +1,6 @@
 """`make bench` section "raw-count glove", moving cells: the one moving-cell rule scored against the generator's truth.
 
-On the sample raw-count glove (htdata/sample/rawglove.py: every cell, taxel
+On the sample raw-count glove (htdata/synthetic/rawglove.py: every cell, taxel
 and gap, wanders slowly at rest), each clip and hand is measured against a
 FIRST-DRAFT layout that forgets a sensor area (`draft_layout_doc`: the
 thumb tip) and declares no unused cells, so the unmapped cells are the gaps
@@ -29,7 +29,7 @@ import numpy as np
 from htdata.glove.activity import CellActivity, moving_threshold, unmapped_moving
 from htdata.glove.layouts import parse_layout
 from htdata.glove.layoutsuggest import cell_boxes, suggest_layout
-from htdata.sample.rawglove import GloveUnit, RawGloveClip, draft_layout_doc, glove_layout, unmapped_truth
+from htdata.synthetic.rawglove import GloveUnit, RawGloveClip, draft_layout_doc, glove_layout, unmapped_truth
 
 
 def _rates(tp: int, fp: int, fn: int) -> tuple[float | None, float | None]:

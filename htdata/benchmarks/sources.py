@@ -24,7 +24,7 @@ from htdata.ingest import Source
 from htdata.ingest.episode import EpisodeStream
 from htdata.ingest.plan import resolve_layouts
 from htdata.format.mapstorage import resolve_map_storage
-from htdata.pipeline import PipelineConfig, load_pipeline
+from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 from htdata.source.rgb import to_square_224
 
 

@@ -30,8 +30,8 @@ from importlib import metadata
 from pathlib import Path
 
 from htdata.store.fsutil import write_bytes_atomic
-from htdata.sample.corpus import FORMATS
-from htdata.sample.corpus import SCALES, CorpusConfig, corpus_complete, write_corpus
+from htdata.synthetic.corpus import FORMATS
+from htdata.synthetic.corpus import SCALES, CorpusConfig, corpus_complete, write_corpus
 from htdata.benchmarks.machine import machine_info
 from htdata.benchmarks.report import render_report
 from htdata.benchmarks.ingest import ingest_run

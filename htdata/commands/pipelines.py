@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from htdata.pipeline import resolve_pipeline_path, shipped_pipelines
+from htdata.ingest.pipeline import resolve_pipeline_path, shipped_pipelines
 
 EPILOG = """\
 A pipeline is a TOML file that says how to read one source format (adapter), pair its clocks

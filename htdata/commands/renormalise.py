@@ -18,7 +18,7 @@ from pathlib import Path
 from htdata.curate import renormalise
 from htdata.curate.edit import NoSuchEpisode
 from htdata.store.lock import DatasetLocked
-from htdata.pipeline import load_pipeline
+from htdata.ingest.pipeline import load_pipeline
 
 
 EPILOG = """\
@@ -57,8 +57,8 @@ def run(args: argparse.Namespace) -> int:
         pipeline = load_pipeline(args.pipeline)
         if args.settings:
             pipeline = pipeline.with_overrides(args.settings)
-        plan, manifest = renormalise.renormalise(args.dataset, pipeline, args.episodes, args.dry_run, args.force,
-                                                 command)
+        plan, manifest = renormalise.renormalise(args.dataset, pipeline.normalise_settings(), args.episodes,
+                                                 args.dry_run, args.force, command)
     except (NoSuchEpisode, DatasetLocked, FileNotFoundError, ValueError) as exc:
         print(f"htdata renormalise: error: {exc}", file=sys.stderr)
         return 2

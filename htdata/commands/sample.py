@@ -1,4 +1,4 @@
-"""`htdata sample OUT`: write the synthetic raw corpus in the source formats (htdata/sample/corpus.py)."""
+"""`htdata sample OUT`: write the synthetic raw corpus in the source formats (htdata/synthetic/corpus.py)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import json
 import sys
 import time
 
-from htdata.sample.corpus import COMPLETE_MARKER, FORMATS, SCALES, CorpusConfig, corpus_complete, plan_corpus, write_corpus
-from htdata.sample.rawglove import CLIPS, write_rawglove
+from htdata.synthetic.corpus import COMPLETE_MARKER, FORMATS, SCALES, CorpusConfig, corpus_complete, plan_corpus, write_corpus
+from htdata.synthetic.rawglove import CLIPS, write_rawglove
 
 EPILOG = """\
 Layout written under OUT:

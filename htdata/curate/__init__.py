@@ -5,13 +5,15 @@
     splitversions.py  commit a split as a new version
     edit.py           `htdata rm` / `htdata trim`: plan, then re-pack the touched units
     idle.py           `htdata trim --idle`: the idle head and tail of each episode
-    repack.py         copy samples of committed shards into new shards, byte for byte
     merge.py          `htdata merge`: several datasets into one
     gc.py             `htdata gc`: delete what no kept version lists
     renormalise.py    `htdata renormalise`: new normalisation from the stored raw rows
 
-May import: the store, reading, inspection (the stats cache), the glove model, the format,
-htdata.pipeline and the base modules. Never ingest, validate, the benchmarks or the commands.
+Re-packing (copying committed samples into new shards) is htdata/write/repack.py, shared with ingest.
+
+May import: the writers' shared layer (htdata.write), the store, reading, inspection (the stats cache),
+the glove model, the format and the base modules. Never ingest (its sibling), validate, the
+benchmarks or the commands.
 
 Imports inside functions: `__getattr__` hands on the names of the old one-module
 `htdata.curate` (now edit.py), with a DeprecationWarning, until htdata/_moved.py's

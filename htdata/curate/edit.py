@@ -6,7 +6,7 @@ and only then write; `--dry-run` prints the plan and writes nothing. A work
 unit none of whose episodes is touched is reused as is; a unit all of whose
 episodes are removed is dropped from the new version's list (its shards
 stay on disk for the versions that list them, until `htdata gc`); any other
-touched unit is re-packed into a new unit (htdata/curate/repack.py). Splits carry
+touched unit is re-packed into a new unit (htdata/write/repack.py). Splits carry
 over: a removed episode leaves its part, the rest keep theirs.
 
 An id or glob that matches no episode is an error listing near matches:
@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from htdata.store.lock import WriterLock
 from htdata.store.parts import Part
 from htdata.read.reader import DatasetReader
-from htdata.curate.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
+from htdata.write.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
 from htdata.store.snapshot import Snapshot, commit_parts, open_snapshot
 
 

@@ -38,7 +38,7 @@ from htdata.store.fsutil import sha256_file, write_bytes_atomic
 from htdata.store.lock import LOCK_FILE, WriterLock
 from htdata.store.parts import Part
 from htdata.read.reader import DatasetReader
-from htdata.curate.repack import KeptEpisode, repack_unit, samples_per_shard_of
+from htdata.write.repack import KeptEpisode, repack_unit, samples_per_shard_of
 from htdata.format.shardio import shard_name
 from htdata.store.snapshot import Snapshot, commit_parts, open_snapshot
 from htdata.store.manifest import load_manifest

@@ -14,7 +14,7 @@ fit slightly differently than a fresh ingest would). An unchanged
 calibration is skipped, unless `force`: then the recorded fitted arrays are
 restored and the maps come out byte for byte as stored (the test of the
 whole path). Work units holding a changed episode are re-packed into new
-units (htdata/curate/repack.py); everything else is reused; `dry_run` plans only.
+units (htdata/write/repack.py); everything else is reused; `dry_run` plans only.
 """
 
 from __future__ import annotations
@@ -35,12 +35,12 @@ from htdata.glove.layouts import Layout, load_layout
 from htdata.store.confine import inside
 from htdata.store.lock import WriterLock
 from htdata.glove.normalise import Normaliser
-from htdata.pipeline import PipelineConfig
+from htdata.glove.normalisesettings import NormaliseSettings
 from htdata.glove.rasterise import Rasteriser
 from htdata.format.mapstorage import has_hand, hand_present, maps_stored
 from htdata.read.rawstream import apply_paired, paired_row, paired_source_row
 from htdata.read.reader import DatasetReader
-from htdata.curate.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
+from htdata.write.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
 from htdata.store.snapshot import Snapshot, commit_parts, open_snapshot
 
 
@@ -68,14 +68,14 @@ def dataset_layouts(snap: Snapshot) -> dict[str, Layout]:
             for lid, entry in snap.manifest["layouts"].items()}
 
 
-def plan_renormalise(snap: Snapshot, pipeline: PipelineConfig, patterns: list[str] | None = None,
+def plan_renormalise(snap: Snapshot, normalising: NormaliseSettings, patterns: list[str] | None = None,
                      force: bool = False) -> RenormalisePlan:
     """Which episode hands get a new calibration; refuses episodes stored without raw rows (naming them)."""
     layouts = dataset_layouts(snap)
     chosen = set(resolve_episodes(snap.episode_ids(), patterns) if patterns else snap.episode_ids())
     # A [normalise.<id>] (or --set normalise.<id>.*) no chosen episode uses would change nothing: a typo.
     scope = f"dataset {snap.root} version {snap.version}" + (f" (episodes {', '.join(patterns)})" if patterns else "")
-    pipeline.check_layout_names({lid for ep in snap.episodes if ep["episode_id"] in chosen
+    normalising.check_layout_names({lid for ep in snap.episodes if ep["episode_id"] in chosen
                                  for lid in ep["layouts"].values()}, None, scope)
     plan = RenormalisePlan(parent=snap.version)
     no_raw = []
@@ -84,11 +84,11 @@ def plan_renormalise(snap: Snapshot, pipeline: PipelineConfig, patterns: list[st
         hands = {}
         for hand in ep["hands"] if eid in chosen else ():
             layout = layouts[ep["layouts"][hand]]
-            new = calibration_id(layout.layout_id, pipeline.normalise_for(layout))
+            new = calibration_id(layout.layout_id, normalising.normalise_for(layout))
             old = (ep.get("calibration") or {}).get(hand)
             if new != old or force:
                 hands[hand] = (old, new)
-                plan.calibrations.update(episode_calibrations(pipeline, {hand: layout}))
+                plan.calibrations.update(episode_calibrations(normalising, {hand: layout}))
         if not hands:
             plan.unchanged += 1
             continue
@@ -110,8 +110,8 @@ def plan_renormalise(snap: Snapshot, pipeline: PipelineConfig, patterns: list[st
 class Recalibration:
     """The SampleRewrite of a renormalise: new maps (and bend vectors) for the changed episode hands."""
 
-    def __init__(self, reader: DatasetReader, snap: Snapshot, pipeline: PipelineConfig, plan: RenormalisePlan):
-        self.reader, self.snap, self.pipeline, self.plan = reader, snap, pipeline, plan
+    def __init__(self, reader: DatasetReader, snap: Snapshot, normalising: NormaliseSettings, plan: RenormalisePlan):
+        self.reader, self.snap, self.normalising, self.plan = reader, snap, normalising, plan
         self.layouts = dataset_layouts(snap)
         codec = snap.manifest["codec"]["tactile"]
         self.raster_mode = codec.get("raster_mode", "nearest")
@@ -130,7 +130,7 @@ class Recalibration:
             if new == (ep.get("calibration") or {}).get(hand):   # forced: restore what the ingest fitted
                 normaliser = episode_normaliser(self.snap.manifest, ep, hand, layout)
             else:
-                normaliser = Normaliser(self.pipeline.normalise_for(layout), layout)
+                normaliser = Normaliser(self.normalising.normalise_for(layout), layout)
                 if normaliser.cfg.per_episode:      # chosen by activity: fitted on every paired row
                     normaliser.fit_episode(*self._paired_rows(eid, hand))
                 else:
@@ -144,7 +144,7 @@ class Recalibration:
         first, n = self.reader.episode_range(eid)
         rows = []
         for i in range(first, first + n):
-            if len(rows) == self.pipeline.tactile.chunk_frames:
+            if len(rows) == self.normalising.fit_frames:
                 break
             members = self.reader.sample(i, (JSON_MEMBER, tactile_member(hand), raw_member(hand)))
             if has_hand(members, hand):   # RGB-only samples hold no rows
@@ -233,16 +233,16 @@ class Recalibration:
         return record
 
 
-def renormalise(root, pipeline: PipelineConfig, patterns: list[str] | None, dry_run: bool, force: bool,
+def renormalise(root, normalising: NormaliseSettings, patterns: list[str] | None, dry_run: bool, force: bool,
                 command: str) -> tuple[RenormalisePlan, dict | None]:
-    """Plan (and unless `dry_run`, write) a version whose maps follow `pipeline`'s calibrations."""
+    """Plan (and unless `dry_run`, write) a version whose maps follow the calibrations of `normalising` (a pipeline's NormaliseSettings)."""
     with WriterLock(root, command):
         snap = open_snapshot(root)
-        plan = plan_renormalise(snap, pipeline, patterns, force)
+        plan = plan_renormalise(snap, normalising, patterns, force)
         if dry_run or not plan.changes:
             return plan, None
         reader = DatasetReader(snap.root, version=snap.version)
-        rewrite = Recalibration(reader, snap, pipeline, plan)
+        rewrite = Recalibration(reader, snap, normalising, plan)
         first = unit = snap.next_unit()
         clear_uncommitted(snap.root, unit)
         parts = []

@@ -5,6 +5,7 @@
     activity.py     which raw cells move (fast noise + slow rest wander): live cells a layout leaves out
     layoutsuggest.py a starting layout from the cells that move in recordings (`htdata layouts suggest`)
     normalise.py    glove units -> [0,1] (baselines, noise floor, full scale)
+    normalisesettings.py  a pipeline's [normalise.<layout>] tables over each layout's value block
     restlevel.py    quiet (resting) frames; the per-glove calibration file
     contact.py      when a hand is in contact, from its calibration
     rawhealth.py    taxel health from the raw rows, in glove units

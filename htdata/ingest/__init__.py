@@ -1,8 +1,10 @@
 """Ingest: raw recordings -> a committed, sharded dataset (the `htdata ingest` command is
 htdata/commands/ingest.py).
 
+    pipeline.py ingest pipelines as data: pipelines/*.toml -> PipelineConfig (checked, with --set overrides)
     plan.py     sources, discovery, layouts resolved once per episode, one work unit per episode
     append.py   against the current version: reuse / relabel / re-ingest / keep; the parent's parts
+                (reused units are re-packed by htdata/write/repack.py, shared with curate)
     chunk.py    one chunk of glove rows: read, check, normalise, out-of-range policy, raw rows per frame
     episode.py  `EpisodeStream`: one episode as a stream of canonical frames, then its tally (shared with the benchmarks)
     unit.py     one work unit: encode (format.encode_sample) + spool + shards + done record; error policy
@@ -14,10 +16,14 @@ htdata/commands/ingest.py).
     sourcesums.py  source files' sha256; SHA256SUMS lists beside the recordings; --verify-sources
     recordingscan.py  raw recordings read for cell activity (`htdata layouts check --against` / `suggest`)
 
+May import: the writers' shared layer (htdata.write), reading, the store, sources, the glove
+model, the format and the base modules. Never curate (its sibling), validate, the benchmarks
+or the commands.
+
 Python use:
 
     from htdata.ingest import Source, ingest
-    from htdata.pipeline import load_pipeline
+    from htdata.ingest.pipeline import load_pipeline
     report = ingest([Source(load_pipeline("opentouch"), Path("/raw/ot"))], Path("OUT"), workers=2)
 """
 

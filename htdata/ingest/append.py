@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from htdata.store.parts import Part
-from htdata.curate.repack import KeptEpisode, repack_unit, samples_per_shard_of
+from htdata.write.repack import KeptEpisode, repack_unit, samples_per_shard_of
 from htdata.store.snapshot import Snapshot
 from htdata.read.reader import DatasetReader
 

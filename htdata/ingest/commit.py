@@ -19,7 +19,7 @@ from htdata.glove.codecrule import codec_block
 from htdata.glove.layouts import load_canonical, parse_layout
 from htdata.ingest.episode import rasteriser_for
 from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, write_layout_files
-from htdata.pipeline import PipelineConfig
+from htdata.ingest.pipeline import PipelineConfig
 from htdata.format.shardio import SampleRecord, ShardRecord
 from htdata.ingest.append import parent_parts
 from htdata.store.parts import part_from_unit

@@ -44,7 +44,7 @@ from htdata.ingest.tally import EpisodeTally
 from htdata.ingest.timing import StageClock
 from htdata.glove.layouts import Layout, load_layout
 from htdata.glove.normalise import Normaliser
-from htdata.pipeline import PipelineConfig
+from htdata.ingest.pipeline import PipelineConfig
 from htdata.glove.rasterise import Rasteriser
 from htdata.source.rgb import to_square_224
 from htdata.format.shardio import sample_key

@@ -42,18 +42,18 @@ against schemas/pipeline.schema.json, so a new key is one edit in one file.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from htdata.glove.layouts import nearest_hint
-from htdata.glove.normalise import NOISE_K_BASELINES, NormaliseConfig
+from htdata.glove.normalise import NormaliseConfig
+from htdata.glove.normalisesettings import NormaliseSettings
 from htdata.settings import apply_settings, parse_setting  # noqa: F401  (parse_setting: an old name of this module)
 from htdata.resources import PIPELINES_DIR, validate_json
 from htdata.source.adapters import ADAPTERS
-from htdata.source.adapters.base import check_adapter_params as check
+from htdata.source.adapters.params import check_declared_params
 from htdata.source.lag import LAG_MODES
 from htdata.glove.codecrule import CodecChoice
 from htdata.format.table import CodecSettings
@@ -221,7 +221,7 @@ def check_adapter_params(adapter: str, params: dict, where: str) -> None:
 
     if adapter not in ADAPTERS:
         raise ValueError(f"{where}: unknown adapter {adapter!r}; known: {sorted(ADAPTERS)}")
-    check(adapter, tuple(getattr(ADAPTERS[adapter], "PARAMS", ())), params, where)
+    check_declared_params(adapter, tuple(getattr(ADAPTERS[adapter], "PARAMS", ())), params, where)
 
 
 @dataclass
@@ -273,35 +273,17 @@ class PipelineConfig:
         check_adapter_params(self.adapter.name, self.adapter.params, where)
         return self
 
+    def normalise_settings(self) -> NormaliseSettings:
+        """What normalising needs of this pipeline (htdata.glove.normalisesettings), e.g. for `htdata renormalise`."""
+        return NormaliseSettings(name=self.name, path=self.path, normalise=self.normalise,
+                                 normalise_given=self.normalise_given, layouts=self.layouts,
+                                 shared_layouts=self.shared_layouts, settings=self.settings,
+                                 fit_frames=self.tactile.chunk_frames)
+
     def check_layout_names(self, used_ids: set[str], used_hands: set[str] | None, scope: str,
                            why: str = "") -> None:
-        """Refuse layout ids this pipeline names that no recording of `scope` uses.
-
-        A `[normalise.<id>]` table (from the file or `--set normalise.<id>.*`) whose id no recording uses,
-        or a `[layouts]` entry for a hand no recording has (`used_hands`; None skips that check), is an
-        error naming the ids in use and the nearest one: a typo would otherwise leave the glove on its
-        layout's defaults without a word. Ids in `shared_layouts` are exempt. `why` is appended (e.g. the
-        recordings that could not be planned).
-        """
-        shared = set(self.shared_layouts)
-        problems = []
-        if used_hands is not None:
-            for hand, name in sorted(self.layouts.items()):
-                lid = Path(name).stem if name.endswith(".json") else name
-                if hand not in used_hands and lid not in shared:
-                    problems.append(f"[layouts] {hand} = {name!r}: no recording of {scope} has a {hand} hand "
-                                    f"(hands in use: {', '.join(sorted(used_hands)) or 'none'})")
-        in_use = ", ".join(sorted(used_ids)) or "none"
-        for lid in sorted(self.normalise):
-            if lid in used_ids or lid in shared:
-                continue
-            given = [s for s in self.settings if s.partition("=")[0].startswith(f"normalise.{lid}.")]
-            how = f"--set {given[0]}" if given else f"[normalise.{lid}]"
-            problems.append(f"{how} names layout {lid!r}, which no recording of {scope} uses (layouts in use: "
-                            f"{in_use}{nearest_hint(lid, used_ids)})")
-        if problems:
-            raise ValueError(f"{self.path or self.name}: {'; '.join(problems)}. Fix the id, or list it in the "
-                             f"pipeline's shared_layouts = [...] when it is meant for other sources{why}")
+        """Refuse layout ids this pipeline names that no recording of `scope` uses (NormaliseSettings)."""
+        self.normalise_settings().check_layout_names(used_ids, used_hands, scope, why)
 
     def codec_choice(self):
         """The resolved tactile codec (htdata.glove.codecrule.CodecChoice); the ingest resolves it first."""
@@ -338,31 +320,8 @@ class PipelineConfig:
                              tactile_pixel_type=self.codec_choice().pixel_type)
 
     def normalise_for(self, layout) -> NormaliseConfig:
-        """The pipeline's config for this layout over the layout's own value block."""
-        base = NormaliseConfig.from_layout_value(layout.value)
-        if layout.layout_id not in self.normalise:
-            return base
-        cfg = self.normalise[layout.layout_id]
-        given = self.normalise_given.get(layout.layout_id, tuple(cfg.to_dict()))
-        out = dataclasses.replace(base, **{k: getattr(cfg, k) for k in given})
-        if "noise_k" not in given and out.baseline not in NOISE_K_BASELINES:
-            out = dataclasses.replace(out, noise_k=0.0)    # a raw-count default floor, under a baseline without one
-        if out.taxel_calibration:
-            out = self._taxel_calibration(out)
-        return out.validate()
-
-    def _taxel_calibration(self, cfg: NormaliseConfig) -> NormaliseConfig:
-        """Resolve the calibration file (relative to the pipeline file, else the working folder) + its sha256."""
-        import hashlib
-
-        p = Path(cfg.taxel_calibration)
-        if not p.is_absolute() and self.path and (Path(self.path).parent / p).is_file():
-            p = Path(self.path).parent / p
-        if not p.is_file():
-            raise ValueError(f"{self.path or self.name}: taxel_calibration file {cfg.taxel_calibration!r} not found "
-                             f"(relative to the pipeline file or the working folder)")
-        return dataclasses.replace(cfg, taxel_calibration=str(p.resolve()),
-                                   taxel_calibration_sha256=hashlib.sha256(p.read_bytes()).hexdigest())
+        """The pipeline's config for this layout over the layout's own value block (NormaliseSettings)."""
+        return self.normalise_settings().normalise_for(layout)
 
     def to_dict(self) -> dict:
         """Plain dict (the TOML content with defaults filled in); recorded in the manifest."""

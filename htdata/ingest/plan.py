@@ -30,7 +30,7 @@ from htdata.errors import EpisodeError
 from htdata.store.fsutil import sha256_file
 from htdata.format.table import HANDS
 from htdata.glove.layouts import load_layout
-from htdata.pipeline import PipelineConfig, load_pipeline
+from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 from htdata.ingest.append import labels_of
 
 

@@ -17,8 +17,8 @@ import numpy as np
 from htdata.glove.activity import CellActivity
 from htdata.errors import EpisodeError
 from htdata.source.adapters import get_adapter
-from htdata.source.adapters.base import ANY_GRID
-from htdata.pipeline import PipelineConfig, load_pipeline
+from htdata.source.adapters.streamchecks import ANY_GRID
+from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 
 CHUNK_ROWS = 512
 

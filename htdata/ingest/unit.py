@@ -42,7 +42,7 @@ from htdata.ingest.episode import EpisodeStream, EpisodeTally
 from htdata.ingest.timing import StageClock
 from htdata.ingest.workdir import clear_unit_files, dumps, spool_path, unit_record_path
 from htdata.glove.layouts import Layout
-from htdata.pipeline import PipelineConfig
+from htdata.ingest.pipeline import PipelineConfig
 from htdata.format.shardio import ShardWriter
 
 

@@ -3,7 +3,7 @@
 `plan_corpus(cfg)` decides every episode (cheap, no I/O) so tests can check
 coverage (tasks x scenes x formats) without writing; `write_corpus(cfg)`
 renders each planned episode from its `World` and hands it to the format
-writers in `htdata.sample.formats`, reproducing each source's quirks:
+writers in `htdata.synthetic.formats`, reproducing each source's quirks:
 
 - OpenTouch: one HDF5 per scene, demo ids padded differently per file,
   inverted units 0..3072 with sensor noise, BGR-swapped JPEGs, annotations.csv.
@@ -26,7 +26,7 @@ import numpy as np
 from htdata.source.adapters import ADAPTERS
 from htdata.store.fsutil import write_json_atomic
 from htdata.glove.layouts import load_layout
-from htdata.sample.formats import (
+from htdata.synthetic.formats import (
     NativeHand,
     NativeRecording,
     OpenTouchClip,
@@ -37,8 +37,8 @@ from htdata.sample.formats import (
     write_touchanything_episode,
     write_touchanything_split,
 )
-from htdata.sample.tasks import TASKS, scene_style, stable_hash
-from htdata.sample.world import EpisodeSpec, World
+from htdata.synthetic.tasks import TASKS, scene_style, stable_hash
+from htdata.synthetic.world import EpisodeSpec, World
 
 SCALES = ("tiny", "small", "medium")
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from htdata.sample.state import HandState
-from htdata.sample.tasks import FINGERS, GROUPS, PLACE_NAMES, stable_hash
+from htdata.synthetic.state import HandState
+from htdata.synthetic.tasks import FINGERS, GROUPS, PLACE_NAMES, stable_hash
 
 
 def _block(block) -> tuple[str, str, tuple[int, int], tuple[int, int]]:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from htdata.sample.tasks import FINGERS
+from htdata.synthetic.tasks import FINGERS
 
 PALM_W, PALM_H = 0.15, 0.15
 # Finger base x (fraction of palm half-width, radial side positive), segment lengths.

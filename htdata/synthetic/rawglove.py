@@ -49,9 +49,9 @@ from pathlib import Path
 import numpy as np
 
 from htdata.glove.layouts import parse_layout
-from htdata.sample.tasks import stable_hash
-from htdata.sample.world import EpisodeSpec, World
-from htdata.sample.formats import NativeHand, NativeRecording, write_native_recording
+from htdata.synthetic.tasks import stable_hash
+from htdata.synthetic.world import EpisodeSpec, World
+from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 
 GRID = (32, 32)
 FULL_SCALE = 1023.0        # layout value.max: full-scale raw (10-bit ADC)
@@ -104,7 +104,7 @@ def layout_doc(hand: str) -> dict:
     return {"layout_id": LAYOUT_IDS[hand], "hand": hand, "grid": list(GRID),
             "value": {"convention": "direct", "max": FULL_SCALE, "step": 1},
             "blocks": blocks, "dead_cells": [], "bend_cells": [], "unused_cells": unused,
-            "source": "htdata sample raw-count glove (htdata/sample/rawglove.py): synthetic",
+            "source": "htdata sample raw-count glove (htdata/synthetic/rawglove.py): synthetic",
             "notes": "10-bit counts, rest ~550 with per-taxel offsets and gains, full scale 1023, step 1 count."}
 
 

@@ -13,9 +13,9 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from htdata.sample.hand import PALM_H, PALM_W, finger_points
-from htdata.sample.state import HandState
-from htdata.sample.tasks import SCENE_STYLES, scene_style, stable_hash
+from htdata.synthetic.hand import PALM_H, PALM_W, finger_points
+from htdata.synthetic.state import HandState
+from htdata.synthetic.tasks import SCENE_STYLES, scene_style, stable_hash
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from htdata.sample.tasks import TASKS
+from htdata.synthetic.tasks import TASKS
 
 
 @dataclass

@@ -21,11 +21,11 @@ from typing import Iterator
 import numpy as np
 
 from htdata.format.table import HANDS
-from htdata.sample.glove import contact_grids
-from htdata.sample.hand import anchor_point
-from htdata.sample.render import background, camera_view, draw_hand, draw_object, draw_support_pad
-from htdata.sample.state import HandState
-from htdata.sample.tasks import TASKS, scene_style, stable_hash
+from htdata.synthetic.glove import contact_grids
+from htdata.synthetic.hand import anchor_point
+from htdata.synthetic.render import background, camera_view, draw_hand, draw_object, draw_support_pad
+from htdata.synthetic.state import HandState
+from htdata.synthetic.tasks import TASKS, scene_style, stable_hash
 
 PHASE_APPROACH, PHASE_CONTACT, PHASE_RELEASE = 0, 1, 2
 # A support hand that feels contact (the task's support profile) closes on the pad it presses;

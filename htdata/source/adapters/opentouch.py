@@ -44,10 +44,11 @@ from typing import Iterator
 
 import numpy as np
 
-from htdata.source.adapters.base import (
-    AdapterParam, EpisodeRef, EpisodeStreams, FileDiscovery, check_tactile_shape, fingerprint_files, param_values,
-    sanitise_id, walk_source,
-)
+from htdata.source.adapters.base import EpisodeRef, EpisodeStreams, FileDiscovery
+from htdata.source.adapters.discovery import fingerprint_files, sanitise_id
+from htdata.source.adapters.params import AdapterParam, param_values
+from htdata.source.adapters.sourcetree import walk_source
+from htdata.source.adapters.streamchecks import check_tactile_shape
 from htdata.errors import EpisodeError
 from htdata.source.adapters.hdf5safe import check_hdf5_size, in_file
 from htdata.source.rgb import CHANNEL_ORDERS, to_rgb

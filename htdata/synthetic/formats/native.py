@@ -9,7 +9,7 @@ from typing import Iterable
 
 import numpy as np
 
-from htdata.sample.formats.media import check_rgb_frame, write_h264
+from htdata.synthetic.formats.media import check_rgb_frame, write_h264
 from htdata.resources import validate_json
 
 

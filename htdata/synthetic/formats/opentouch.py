@@ -9,7 +9,7 @@ from typing import Iterable
 
 import numpy as np
 
-from htdata.sample.formats.media import encode_jpeg, seed_of
+from htdata.synthetic.formats.media import encode_jpeg, seed_of
 
 
 @dataclass

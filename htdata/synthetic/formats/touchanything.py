@@ -9,7 +9,7 @@ from typing import Iterable, Iterator
 
 import numpy as np
 
-from htdata.sample.formats.media import seed_of, write_h264, write_json_lines
+from htdata.synthetic.formats.media import seed_of, write_h264, write_json_lines
 
 
 TA_GRID = 21

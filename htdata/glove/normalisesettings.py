@@ -1,0 +1,95 @@
+"""A pipeline's normalisation settings, apart from the rest of the pipeline: the `[normalise.<layout>]`
+tables over each layout's value block, and the rule that every table names a layout in use.
+
+The ingest builds them from its pipeline (htdata.ingest.pipeline.PipelineConfig.normalise_settings);
+`htdata renormalise` needs nothing else of a pipeline, so curation reads these without importing
+ingest's configuration.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from htdata.errors import ConfigError
+from htdata.glove.layouts import nearest_hint
+from htdata.glove.normalise import NOISE_K_BASELINES, NormaliseConfig
+
+
+@dataclass(frozen=True)
+class NormaliseSettings:
+    """Args:
+        name: the pipeline's name (named in calibration origins and errors).
+        path: the pipeline file it came from ("" when built in code); relative calibration files resolve beside it.
+        normalise: layout id -> its `[normalise.<id>]` table.
+        normalise_given: layout id -> the keys that table sets (the rest come from the layout's value block).
+        layouts: hand -> layout id or layout JSON path (the pipeline's `[layouts]`).
+        shared_layouts: layout ids meant for other sources, exempt from `check_layout_names`.
+        settings: the `--set` items applied, to name them in errors.
+        fit_frames: frames a fixed baseline is fitted on (the first chunk of an episode: `[tactile] chunk_frames`).
+    """
+    name: str
+    path: str = ""
+    normalise: dict[str, NormaliseConfig] = field(default_factory=dict)
+    normalise_given: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    layouts: dict[str, str] = field(default_factory=dict)
+    shared_layouts: list[str] = field(default_factory=list)
+    settings: tuple[str, ...] = ()
+    fit_frames: int = 64   # [tactile] chunk_frames' default
+
+    def normalise_for(self, layout) -> NormaliseConfig:
+        """The config for `layout` (a glove.layouts.Layout): its `[normalise.<id>]` table over its value block."""
+        base = NormaliseConfig.from_layout_value(layout.value)
+        if layout.layout_id not in self.normalise:
+            return base
+        cfg = self.normalise[layout.layout_id]
+        given = self.normalise_given.get(layout.layout_id, tuple(cfg.to_dict()))
+        out = dataclasses.replace(base, **{k: getattr(cfg, k) for k in given})
+        if "noise_k" not in given and out.baseline not in NOISE_K_BASELINES:
+            out = dataclasses.replace(out, noise_k=0.0)    # a raw-count default floor, under a baseline without one
+        if out.taxel_calibration:
+            out = self._taxel_calibration(out)
+        return out.validate()
+
+    def _taxel_calibration(self, cfg: NormaliseConfig) -> NormaliseConfig:
+        """Resolve the calibration file (relative to the pipeline file, else the working folder) + its sha256."""
+        p = Path(cfg.taxel_calibration)
+        if not p.is_absolute() and self.path and (Path(self.path).parent / p).is_file():
+            p = Path(self.path).parent / p
+        if not p.is_file():
+            raise ConfigError(f"{self.path or self.name}: taxel_calibration file {cfg.taxel_calibration!r} not "
+                              f"found (relative to the pipeline file or the working folder)")
+        return dataclasses.replace(cfg, taxel_calibration=str(p.resolve()),
+                                   taxel_calibration_sha256=hashlib.sha256(p.read_bytes()).hexdigest())
+
+    def check_layout_names(self, used_ids: set[str], used_hands: set[str] | None, scope: str,
+                           why: str = "") -> None:
+        """Refuse layout ids these settings name that no recording of `scope` uses.
+
+        A `[normalise.<id>]` table (from the file or `--set normalise.<id>.*`) whose id no recording uses,
+        or a `[layouts]` entry for a hand no recording has (`used_hands`; None skips that check), is an
+        error naming the ids in use and the nearest one: a typo would otherwise leave the glove on its
+        layout's defaults without a word. Ids in `shared_layouts` are exempt. `why` is appended (e.g. the
+        recordings that could not be planned).
+        """
+        shared = set(self.shared_layouts)
+        problems = []
+        if used_hands is not None:
+            for hand, name in sorted(self.layouts.items()):
+                lid = Path(name).stem if name.endswith(".json") else name
+                if hand not in used_hands and lid not in shared:
+                    problems.append(f"[layouts] {hand} = {name!r}: no recording of {scope} has a {hand} hand "
+                                    f"(hands in use: {', '.join(sorted(used_hands)) or 'none'})")
+        in_use = ", ".join(sorted(used_ids)) or "none"
+        for lid in sorted(self.normalise):
+            if lid in used_ids or lid in shared:
+                continue
+            given = [s for s in self.settings if s.partition("=")[0].startswith(f"normalise.{lid}.")]
+            how = f"--set {given[0]}" if given else f"[normalise.{lid}]"
+            problems.append(f"{how} names layout {lid!r}, which no recording of {scope} uses (layouts in use: "
+                            f"{in_use}{nearest_hint(lid, used_ids)})")
+        if problems:
+            raise ConfigError(f"{self.path or self.name}: {'; '.join(problems)}. Fix the id, or list it in the "
+                              f"pipeline's shared_layouts = [...] when it is meant for other sources{why}")

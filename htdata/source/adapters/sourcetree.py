@@ -1,0 +1,79 @@
+"""The source tree: which files an adapter may read, and paths a recording names inside its folder.
+
+Rules (the same for every adapter): a source file must be a regular file
+(a FIFO, socket or device would block or never end: refused with a
+message); a symlink is resolved and accepted only when its target lies
+inside the source root (a link to another tree could ingest someone
+else's data silently). Directory symlinks: one pointing outside the root
+is refused (reported, not skipped); one pointing inside leads to folders
+the walk reaches anyway at their real path, so their recordings are
+ingested once, under that real path (stable source_ref, no loop, no
+episode found twice).
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from pathlib import Path
+
+from htdata.errors import EpisodeError
+
+
+def _inside(path: Path, root: Path) -> bool:
+    return os.path.commonpath([str(path), str(root)]) == str(root)
+
+
+def check_source_file(path: Path | str, root: Path | str | None) -> Path:
+    """Raise EpisodeError (naming `path`) unless it is a regular file whose real path is inside `root`.
+
+    `root=None` checks only the file type (e.g. when an opened episode
+    re-checks a file that discovery already placed). Returns the path.
+    Never opens the file, so a FIFO cannot block here.
+    """
+    path = Path(path)
+    try:
+        st = os.stat(path)   # follows symlinks: the type of what would be read
+    except OSError as exc:
+        raise EpisodeError(None, None, f"source file cannot be read: {exc.strerror or exc}", file=path) from exc
+    real = path.resolve()
+    outside = root is not None and not _inside(real, Path(root).resolve())
+    if outside:
+        what = "directory symlink" if stat.S_ISDIR(st.st_mode) else "symlink" if path.is_symlink() else "path"
+        raise EpisodeError(None, None, f"{what} leaves the source tree {root} (-> {real}): refused", file=path)
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("FIFO" if stat.S_ISFIFO(st.st_mode) else "socket" if stat.S_ISSOCK(st.st_mode)
+                else "directory" if stat.S_ISDIR(st.st_mode) else "device or special file")
+        raise EpisodeError(None, None, f"not a regular file ({kind}): refused", file=path)
+    return path
+
+
+def walk_source(root: Path | str, match) -> list[Path]:
+    """Sorted paths under `root` whose name satisfies `match(name)`, following the tree rules above.
+
+    Real folders are walked; a directory symlink that leaves the tree is
+    listed itself so that `discover_all` reports it (via
+    `check_source_file`) instead of skipping it silently; one inside the
+    tree is not descended (its target is walked at its real path). Matched
+    files are listed whatever their type: the check that refuses FIFOs and
+    outside links runs per file in `discover_all`.
+    """
+    root = Path(root)
+    real_root = root.resolve()
+    out: list[Path] = []
+    for folder, dirs, files in os.walk(root):   # os.walk never descends into directory symlinks
+        here = Path(folder)
+        for name in dirs:
+            path = here / name
+            if path.is_symlink() and not _inside(path.resolve(), real_root):
+                out.append(path)             # refused later, with a message
+        out += [here / name for name in files if match(name)]
+    return sorted(out)
+
+
+def relpath_inside(folder: Path, rel: str, where: str) -> Path:
+    """Resolve `rel` under `folder`, refusing paths that escape it."""
+    path = (folder / rel).resolve()
+    if os.path.commonpath([path, folder.resolve()]) != str(folder.resolve()):
+        raise ValueError(f"{where}: path {rel!r} leaves the recording folder")
+    return path

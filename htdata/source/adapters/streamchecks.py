@@ -1,0 +1,66 @@
+"""What an opened episode checks while it streams: the tactile grid against the hand's layout, the
+note for streams of different lengths, and the episode-video iterator whose failures name the frame.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from htdata.errors import EpisodeError
+from htdata.glove.layouts import load_layout
+from htdata.source.adapters.video import VideoError, iter_video_rgb
+
+
+ANY_GRID = "*"   # a ref.layout_files value: read the hand's rows whatever their grid (check_tactile_shape)
+
+
+def check_tactile_shape(ref: EpisodeRef, hand: str, shape: tuple[int, ...], file: Path | str) -> None:
+    """Raise EpisodeError unless `shape` is (M, H, W) with (H, W) = the hand's layout grid.
+
+    The layout is the one planning resolved (`ref.layout_files`, pipeline
+    override applied), else the adapter's own `ref.layouts` entry; parsed
+    layouts are cached per file version by `htdata.glove.layouts.load_layout`.
+    A `layout_files` entry ANY_GRID skips the check: the caller reads rows no
+    layout describes yet (`htdata layouts suggest`).
+    """
+
+    if ref.layout_files.get(hand) == ANY_GRID:
+        return
+    layout_id = ref.layout_files.get(hand) or ref.layouts[hand]
+    try:
+        grid = tuple(load_layout(layout_id).grid)
+    except (FileNotFoundError, ValueError, KeyError) as exc:
+        raise EpisodeError(ref, None, f"{hand} hand layout {layout_id!r} cannot be loaded: {exc}", file=file) from exc
+    if len(shape) != 3 or tuple(shape[1:]) != grid:
+        raise EpisodeError(ref, None, f"{hand} tactile grid shape {tuple(shape)} does not match layout "
+                           f"{layout_id!r} grid {grid} (expected (M, {grid[0]}, {grid[1]}))", file=file)
+
+
+def file_frame_mismatch_note(what_a: str, n_a: int, what_b: str, n_b: int) -> str | None:
+    """Note text for a length mismatch aligned on the shortest stream (None when equal)."""
+    if n_a == n_b:
+        return None
+    more, less, d = (what_a, what_b, n_a - n_b) if n_a > n_b else (what_b, what_a, n_b - n_a)
+    return f"{more} has {d} frame{'s' if d != 1 else ''} more than {less}: aligned on shortest ({min(n_a, n_b)})"
+
+
+def iter_episode_video(ref: EpisodeRef, video: Path, n_frames: int) -> Iterator[tuple[int, np.ndarray]]:
+    """(index, RGB frame) for the first `n_frames` frames of `video` (the aligned length).
+
+    A decode error or a video shorter than promised becomes an EpisodeError
+    naming the file, the episode and the frame.
+    """
+    count = 0
+    try:
+        for frame in iter_video_rgb(video):
+            if count >= n_frames:
+                break
+            yield count, frame
+            count += 1
+    except VideoError as exc:
+        raise EpisodeError(ref, exc.frame, str(exc), file=video) from exc
+    if count < n_frames:
+        raise EpisodeError(ref, count, f"video decoded only {count} of {n_frames} frames", file=video)
