@@ -12,7 +12,7 @@ DeprecationWarning naming its new place:
   `htdata.curate.rm_episodes`): the package's `__getattr__` calls `moved_name`.
 
 `REMOVED_IN` is the one place that says when all of it goes;
-tests/test_moved.py fails once htdata's version reaches it, so the shim cannot
+tests/project/test_moved.py fails once htdata's version reaches it, so the shim cannot
 outlive its promise unnoticed.
 """
 

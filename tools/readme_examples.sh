@@ -52,7 +52,7 @@ assert len(far) == len(near) and far.sample(0) == near.sample(0)
 print("readme-examples: ok: htdata publish data/dataset memory://bucket/my-dataset (read back)")
 EOF
 if "$BIN/python" -c "import s3fs" 2>/dev/null; then
-  ok "s3fs is installed here: the missing-backend line is checked by tests/test_remote.py"
+  ok "s3fs is installed here: the missing-backend line is checked by tests/store/test_remote.py"
 else
   if "$HT" publish data/dataset s3://bucket/my-dataset 2>s3.err; then echo "readme-examples: FAILED: s3:// without s3fs exited 0"; exit 1; fi
   [ "$(wc -l <s3.err)" -eq 1 ] && grep -q "pip install s3fs" s3.err \

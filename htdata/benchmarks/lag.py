@@ -3,7 +3,7 @@
 Episodes of the sample world (htdata.synthetic.world: every task, its contact
 visible in the RGB) are written as native recordings whose glove clock runs
 `lag` off the video clock while recording.json claims the clocks agree
-(clock_offset_ns 0): `write_shifted_native`, also used by tests/test_lag.py.
+(clock_offset_ns 0): `write_shifted_native`, also used by tests/source/test_lag.py.
 Each is estimated through the native adapter exactly as an ingest with
 `[sync] lag = "estimate"` does (`estimate_episode_lag`: a second pass that
 decodes the video and reads every tactile row), and timed; the estimator

@@ -3,7 +3,7 @@
 The codec table (codecs.py) picks the pixel type; this one asks what else the member's layout could
 cost less with, for the maps the ingest stores by default (issue 26): compression RLE / ZIPS / ZIP /
 PIZ; a data window around the covered pixels (display window 224x224, readers place the window:
-htdata/format/codec.py, tests/test_exr_interop.py); half pixels where the exactness rule allows them;
+htdata/format/codec.py, tests/format/test_exr_interop.py); half pixels where the exactness rule allows them;
 OpenImageIO's writer beside the OpenEXR binding; and, per OpenEXR variant, the maps per second with
 the encode in 2 threads (the binding releases the GIL: htdata/ingest/encodepool.py uses it).
 

@@ -19,7 +19,7 @@ Assignment rule (written into every split file as "rule"):
    with a warning.
 5. Stability: re-running ``htdata split`` with the same name and params
    UPDATES the split of the current version: every episode it held keeps its
-   part (tests/test_split.py), and only new episodes are assigned, filling
+   part (tests/curate/test_split.py), and only new episodes are assigned, filling
    each task up to its share. Recomputing from scratch (``--force`` with
    other params, or another name) may place episodes differently.
 

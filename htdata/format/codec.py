@@ -8,7 +8,7 @@ FLOAT is exact; HALF is NOT lossless (max error 2**-12, below). The decoder
 reads either. RGB frames are JPEG (lossy). Everything works in memory
 (BytesIO), so tar members need no temp files.
 
-float16 facts that matter for [0,1] maps (checked in tests/test_codec.py):
+float16 facts that matter for [0,1] maps (checked in tests/format/test_codec.py):
 - 0.0 and 1.0 are exact; spacing just below 1.0 is 2**-11, so the round-trip
   error on [0,1] is at most 2**-12 ~= 2.44e-4 (round to nearest).
 - The smallest positive subnormal is 2**-24 ~= 5.96e-8; anything below half
@@ -86,7 +86,7 @@ def to_half(values: np.ndarray) -> np.ndarray:
     of the EXR encode); cv2 uses the CPU's F16C instructions (~0.05 ms). Both
     round to nearest even, keep subnormals, -0.0, NaN, and overflow to +-Inf
     (checked exhaustively over [0,1] and on random float32 bit patterns;
-    tests/test_codec_half.py keeps the edge cases). cv2 takes 2-D float32
+    tests/format/test_codec_half.py keeps the edge cases). cv2 takes 2-D float32
     only; anything else goes through numpy.
     """
     arr = np.asarray(values)

@@ -32,7 +32,7 @@ def resolve_map_storage(setting: str, parent_manifest: dict | None) -> str:
 
     "auto" (the default): an append keeps the parent version's choice (one kind per version); a new
     dataset stores its maps: the published format is 224x224 maps a reader without htdata opens with
-    tar + OpenEXR (tests/test_maps_thirdparty.py). "raw" saves ~25% of the bytes, so it stays an
+    tar + OpenEXR (tests/format/test_maps_thirdparty.py). "raw" saves ~25% of the bytes, so it stays an
     explicit opt-in for datasets read only through htdata. "stored" / "raw" are taken as given (an
     append whose parent holds the other kind is refused by the commit's compatibility check, naming
     the setting).

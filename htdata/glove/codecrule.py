@@ -24,7 +24,7 @@ sizes). An existing dataset keeps its codec on append (`resolve_codec` with
 
 Two callers share `pick_codec`: the ingest, with the analytic max errors
 below (`resolve_codec`), and the bench, with the errors and sizes measured on
-real maps (htdata/benchmarks/codecs.py); tests/test_codec.py checks that
+real maps (htdata/benchmarks/codecs.py); tests/format/test_codec.py checks that
 both pick the same codec on the sample corpus.
 """
 
@@ -40,7 +40,7 @@ PIXEL_TYPES = ("half", "float")
 # spacing 2**-11 just below 1.0 (htdata/format/codec.py); float32 maps stored as float32 are exact.
 ANALYTIC_MAX_ERROR = {"half": 2.0 ** -12, "float": 0.0}
 # Smallest first at one compression: half stores 2 bytes per pixel, float 4 (checked on the
-# sample corpus's maps by tests/test_codec.py, measured by the bench's codec table).
+# sample corpus's maps by tests/format/test_codec.py, measured by the bench's codec table).
 SIZE_ORDER = ("half", "float")
 RULE = ("smallest EXR codec (at the pipeline's compression) whose max error is below half of every "
         "glove's quantisation step in map units (value.step / max_value x scale); a glove without a "

@@ -137,7 +137,7 @@ def nanpercentile_columns(x: np.ndarray, q):
     numpy falls back to apply_along_axis (one Python call per column) as soon as one value is NaN;
     here every column is sorted at once (NaN last) and interpolated between the two order
     statistics around q * (n - 1), n = the column's finite count. A column without a finite value
-    gives NaN. Equal to numpy's result up to float round-off (tests/test_rawhealth.py).
+    gives NaN. Equal to numpy's result up to float round-off (tests/glove/test_rawhealth.py).
     """
     x = np.asarray(x, np.float64)
     scalar = np.ndim(q) == 0

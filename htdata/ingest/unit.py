@@ -16,7 +16,7 @@ episodes used (`layout_entry`): the commit writes them into the dataset,
 with each coverage map made from its document, so a layout file edited
 during the run cannot slip in.
 
-Test hooks (fault injection, used by tests/test_ingest.py):
+Test hooks (fault injection, used by tests/ingest/test_ingest.py):
 HTDATA_TEST_FAULT_UNIT=U and HTDATA_TEST_FAULT=crash|hang make unit U
 `os._exit(137)` or sleep forever right after its first episode reached the
 shard writer (a temp shard exists, no unit record yet).

@@ -1,0 +1,271 @@
+"""Layering rules of docs/DESIGN.md, checked on the source (import graph, module and function size).
+
+Every import counts, at module level or inside a function (a function-level import hides a
+circle, it does not remove it):
+- htdata never imports handtouch (the data toolkit must not depend on the trainer).
+- No import cycle among htdata's / handtouch's modules.
+- htdata's packages are layered in data-path order (LAYERS): a module imports only its own
+  package or a lower layer, never an upper one.
+- An import of the project's own modules inside a function only where the module's docstring
+  says why ("Imports inside functions:"), e.g. the CLI loading a command only when it runs.
+- Core modules do not parse arguments: argparse lives in htdata/commands/ (and the CLI table).
+- Modules stay under ~400 lines, functions under ~80, unless the docstring says why ("Long because").
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+PACKAGES = ("htdata", "handtouch")
+MAX_MODULE_LINES = 400
+MAX_FUNCTION_LINES = 80
+LONG_REASON = "Long because"
+
+
+def modules(package: str) -> dict[str, Path]:
+    out = {}
+    for path in sorted((ROOT / package).rglob("*.py")):
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = path
+    return out
+
+
+ALL = {**modules("htdata"), **modules("handtouch")}
+
+
+def imported_names(tree: ast.AST, module: str, top_level_only: bool) -> set[str]:
+    """Absolute module names imported by `tree` (relative imports resolved against `module`)."""
+    nodes = tree.body if top_level_only else list(ast.walk(tree))
+    names = set()
+    for node in nodes:
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                pkg = module.split(".")
+                if not ALL[module].name == "__init__.py":
+                    pkg = pkg[:-1]
+                pkg = pkg[:len(pkg) - (node.level - 1)]
+                base = ".".join(pkg + ([base] if base else []))
+            names.add(base)
+            names.update(f"{base}.{a.name}" for a in node.names)   # `from pkg import submodule`
+    return names
+
+
+def parsed(module: str) -> ast.Module:
+    return ast.parse(ALL[module].read_text(), filename=str(ALL[module]))
+
+
+def test_htdata_never_imports_handtouch():
+    offenders = {m: sorted(n for n in imported_names(parsed(m), m, top_level_only=False)
+                           if n == "handtouch" or n.startswith("handtouch."))
+                 for m in ALL if m.split(".")[0] == "htdata"}
+    offenders = {m: names for m, names in offenders.items() if names}
+    assert not offenders, f"htdata modules importing handtouch: {offenders}"
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                return stack[stack.index(nxt):] + [nxt]
+            if nxt not in state:
+                found = visit(nxt)
+                if found:
+                    return found
+        stack.pop()
+        state[node] = 2
+        return None
+
+    for node in sorted(graph):
+        if node not in state:
+            found = visit(node)
+            if found:
+                return found
+    return None
+
+
+def import_graph(top_level_only: bool) -> dict[str, set[str]]:
+    graph = {}
+    for m in ALL:
+        targets = {n for n in imported_names(parsed(m), m, top_level_only) if n in ALL and n != m}
+        # A package importing its own submodules (re-exports) is not a cycle of ideas.
+        graph[m] = {t for t in targets if not (ALL[m].name == "__init__.py" and t.startswith(m + "."))}
+    return graph
+
+
+def test_no_import_cycle_at_any_level():
+    cycle = find_cycle(import_graph(top_level_only=False))
+    assert cycle is None, f"import cycle: {' -> '.join(cycle)}"
+
+
+# htdata's packages in data-path order, lowest first: a module may import its own package and
+# the layers below it. The root modules are placed one by one. Packages sharing a floor are
+# siblings: neither imports the other (the two writers of new versions, over what they share).
+LAYERS = (
+    ("htdata", "htdata._moved", "htdata.errors", "htdata.faults", "htdata.resources", "htdata.settings"),
+    ("htdata.format",),
+    ("htdata.glove",),
+    ("htdata.source",),
+    ("htdata.store",),
+    ("htdata.read",),
+    ("htdata.inspect",),
+    ("htdata.export",),
+    ("htdata.write",),
+    ("htdata.curate", "htdata.ingest"),
+    ("htdata.validate",),
+    ("htdata.synthetic",),
+    ("htdata.benchmarks",),
+    ("htdata.commands",),
+    ("htdata.cli",),
+)
+LAZY_REASON = "Imports inside functions:"
+
+
+def place_of(module: str) -> tuple[int, str]:
+    """(floor, the LAYERS member holding `module`)."""
+    parts = module.split(".")
+    for depth in (2, 1):
+        name = ".".join(parts[:depth])
+        for rank, members in enumerate(LAYERS):
+            if name in members:
+                return rank, name
+    raise AssertionError(f"{module}: in no layer of tests/project/test_layering.py LAYERS; place its package there")
+
+
+def layer_of(module: str) -> int:
+    return place_of(module)[0]
+
+
+def crosses_up(module: str, target: str) -> bool:
+    """Does `module` importing `target` break the layering: a higher floor, or a sibling on its own floor?"""
+    (floor, member), (target_floor, target_member) = place_of(module), place_of(target)
+    if target_floor != floor:
+        return target_floor > floor
+    return floor > 0 and target_member != member   # the root modules of floor 0 are one package
+
+
+def function_level_imports(module: str) -> set[str]:
+    return imported_names(parsed(module), module, top_level_only=False) - imported_names(
+        parsed(module), module, top_level_only=True)
+
+
+def test_every_htdata_module_has_a_layer():
+    for m in ALL:
+        if m.startswith("htdata"):
+            layer_of(m)
+
+
+def upward_imports(graph: dict[str, set[str]], lazy: dict[str, set[str]]) -> list[str]:
+    """Edges module -> target whose target sits in a higher layer or is a sibling, except `lazy` ones (documented)."""
+    upward = []
+    for m, targets in graph.items():
+        if not m.startswith("htdata"):
+            continue
+        for t in targets:
+            if t.startswith("htdata") and crosses_up(m, t) and t not in lazy.get(m, set()):
+                upward.append(f"{m} -> {t}")
+    return sorted(upward)
+
+
+def documented_lazy_imports() -> dict[str, set[str]]:
+    return {m: function_level_imports(m) for m in ALL if LAZY_REASON in (ast.get_docstring(parsed(m)) or "")}
+
+
+def test_no_upward_import():
+    upward = upward_imports(import_graph(top_level_only=False), documented_lazy_imports())
+    assert not upward, f"imports of an upper layer (LAYERS): {upward}"
+
+
+def test_upward_check_catches_a_planted_import():
+    """The check can fail: a store module importing the reader, or glove importing a source, is upward."""
+    graph = {"htdata.store.snapshot": {"htdata.read.reader", "htdata.format.table"},
+             "htdata.glove.layouts": {"htdata.source.adapters.base"},
+             "htdata.read.reader": {"htdata.store.snapshot"}}
+    assert upward_imports(graph, {}) == ["htdata.glove.layouts -> htdata.source.adapters.base",
+                                         "htdata.store.snapshot -> htdata.read.reader"]
+    assert upward_imports(graph, {"htdata.store.snapshot": {"htdata.read.reader"}}) == [
+        "htdata.glove.layouts -> htdata.source.adapters.base"]
+
+
+def test_the_writers_layer_and_the_two_writers_are_checked():
+    """write/ sits below both writers: it may not import either; the writers may not import each other."""
+    graph = {"htdata.write.repack": {"htdata.curate.edit", "htdata.read.reader"},
+             "htdata.ingest.append": {"htdata.write.repack", "htdata.curate.merge"},
+             "htdata.curate.renormalise": {"htdata.write.repack", "htdata.ingest.pipeline"},
+             "htdata.read.reader": {"htdata.write.repack"},
+             "htdata.errors": {"htdata.faults"}}
+    assert upward_imports(graph, {}) == ["htdata.curate.renormalise -> htdata.ingest.pipeline",
+                                         "htdata.ingest.append -> htdata.curate.merge",
+                                         "htdata.read.reader -> htdata.write.repack",
+                                         "htdata.write.repack -> htdata.curate.edit"]
+
+
+def test_function_level_imports_of_own_modules_say_why():
+    offenders = []
+    for m in ALL:
+        own = {n for n in function_level_imports(m) if n in ALL}
+        if own and LAZY_REASON not in (ast.get_docstring(parsed(m)) or ""):
+            offenders.append(f"{m}: {sorted(own)}")
+    assert not offenders, (f"imports of the project's own modules inside functions, with no reason in the "
+                           f"module docstring ({LAZY_REASON!r}): {offenders}")
+
+
+def test_find_cycle_finds_one():
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b"}, "b": set()}) is None
+
+
+def test_argparse_only_in_commands():
+    allowed = ("htdata.cli", "htdata.commands")
+    offenders = [m for m in ALL if m.startswith("htdata") and not m.startswith(allowed)
+                 and "argparse" in imported_names(parsed(m), m, top_level_only=False)]
+    assert not offenders, f"core modules parsing arguments (move the CLI to htdata/commands/): {offenders}"
+
+
+@pytest.mark.parametrize("module", sorted(ALL))
+def test_module_and_function_size(module):
+    text = ALL[module].read_text()
+    tree = ast.parse(text)
+    doc = ast.get_docstring(tree) or ""
+    lines = len(text.splitlines())
+    assert lines <= MAX_MODULE_LINES or LONG_REASON in doc, (
+        f"{ALL[module]}: {lines} lines; split it by idea or say why in its docstring ({LONG_REASON} ...)")
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            length = node.end_lineno - node.lineno + 1
+            fdoc = ast.get_docstring(node) or ""
+            assert length <= MAX_FUNCTION_LINES or LONG_REASON in fdoc, (
+                f"{ALL[module]}:{node.lineno} {node.name}: {length} lines; split it or say why "
+                f"in its docstring ({LONG_REASON} ...)")
+
+
+TEST_ROOT = ROOT / "tests"
+TEST_DIRS_BESIDE_PACKAGES = {"project", "factories", "handtouch"}
+
+
+def test_tests_mirror_the_packages_and_share_builders_only_through_factories():
+    """tests/<package>/ per htdata package (docs/DESIGN.md "Tests"); no test imports another test module."""
+    packages = {p.name for p in (ROOT / "htdata").iterdir() if (p / "__init__.py").is_file()}
+    dirs = {p.name for p in TEST_ROOT.iterdir() if p.is_dir() and (p / "__init__.py").is_file()}
+    assert dirs - packages - TEST_DIRS_BESIDE_PACKAGES == set(), "test folders that mirror no package"
+    assert not list(TEST_ROOT.glob("test_*.py")), "tests at the top of tests/: put them in tests/<package>/"
+    offenders = []
+    for path in sorted(TEST_ROOT.rglob("test_*.py")):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[-1].startswith("test_"):
+                offenders.append(f"{path.relative_to(ROOT)}: from {node.module} import ...")
+    assert not offenders, f"builders shared through test modules (move them to tests/factories/): {offenders}"
