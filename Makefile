@@ -8,7 +8,7 @@ SEED   ?= 0
 OOD    ?= palm_push
 JOBS   ?= 2
 
-.PHONY: setup demo sample ingest split validate preview train-smoke compare task-transfer test install-check bench \
+.PHONY: setup demo sample ingest split validate preview train-smoke compare task-transfer test lint fix install-check bench \
         lerobot-check lerobot-load export-lerobot gpu-check clean
 
 setup: $(VENV)/.installed
@@ -59,6 +59,13 @@ task-transfer: ingest
 
 demo: preview train-smoke
 	@echo "demo done: $(DATA)/dataset, $(DATA)/preview.png, runs/smoke/results.md"
+
+# Lint: ruff's error rules and import order (pyproject.toml [tool.ruff]); `make fix` applies its fixes.
+lint: setup
+	$(VENV)/bin/ruff check htdata handtouch tests tools setup.py
+
+fix: setup
+	$(VENV)/bin/ruff check --fix htdata handtouch tests tools setup.py
 
 test: setup
 	$(PY) -m pytest -q -n $(JOBS) --dist loadfile

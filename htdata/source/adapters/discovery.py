@@ -25,8 +25,10 @@ def discovery_failure(path: Path, exc: BaseException) -> EpisodeError:
     return EpisodeError(None, None, f"{type(exc).__name__}: {exc}", file=path)
 
 
-def discover_all(adapter: FileDiscovery, root: Path | str, params: dict) -> tuple[list[EpisodeRef], list[EpisodeError]]:
-    """(refs sorted naturally by episode id, one EpisodeError per file or episode that failed).
+def discover_all(adapter, root: Path | str, params: dict) -> tuple[list, list[EpisodeError]]:
+    """(EpisodeRefs sorted naturally by episode id, one EpisodeError per file or episode that failed).
+
+    `adapter` is a base.FileDiscovery (not imported: the contract calls this module).
 
     A file that raises while being read becomes a failure and every other
     file is still discovered; an episode id already produced by an earlier
@@ -34,7 +36,7 @@ def discover_all(adapter: FileDiscovery, root: Path | str, params: dict) -> tupl
     """
     root = Path(root)
     context = adapter.discovery_context(root, params)
-    refs: list[EpisodeRef] = []
+    refs = []
     failures: list[EpisodeError] = []
     seen: dict[str, str] = {}
     for path in adapter.discovery_files(root, params):

@@ -10,6 +10,7 @@ from typing import Iterator
 import numpy as np
 
 from htdata.errors import EpisodeError
+from htdata.source.adapters.base import EpisodeRef
 from htdata.glove.layouts import load_layout
 from htdata.source.adapters.video import VideoError, iter_video_rgb
 
