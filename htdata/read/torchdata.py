@@ -57,7 +57,7 @@ from htdata.format.table import CANVAS, HANDS, RGB_MEMBER, SIZE_FIELDS
 from htdata.read.keys import HAND_IDS
 from htdata.format.mapstorage import has_hand, hand_present
 from htdata._moved import renamed_keyword
-from htdata.read.rawstream import MAP_SOURCE_WORDS, MAPS_FROM  # noqa: F401  (MAPS_FROM: a name of this module)
+from htdata.read.rawstream import MAP_SOURCE_WORDS
 from htdata.read.reader import DatasetReader
 from htdata.read.torchitems import MEMBERS, ItemBuilder, ItemConstants, expand_batch  # noqa: F401  (names of this module)
 
