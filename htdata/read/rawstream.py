@@ -130,21 +130,28 @@ MAP_SOURCE_WORDS = {"auto": "best"}      # the deprecated `map_source=` values -
 
 @dataclass(frozen=True)
 class MapServing:
-    """Where the loaders take a version's maps from: THE rule, shared by the torch datasets and
-    `htdata validate` (which checks that rendered and stored maps agree)."""
-    rendered: bool       # rendered from the paired raw rows (else the stored EXR is decoded)
-    raw_required: bool   # maps_from="raw": a sample without raw rows is an error, never decoded
+    """Where the loaders take a version's maps from: THE rule (`choose`), shared by the torch datasets and
+    `htdata validate` (which checks that rendered and stored maps agree).
+
+    Args:
+        rendered: maps are rendered from the paired raw rows (else the stored EXR is decoded).
+        raw_required: maps_from="raw": a sample without raw rows is an error, never decoded.
+    """
+    rendered: bool
+    raw_required: bool
 
     @classmethod
     def choose(cls, manifest: dict, maps_from: str = "best", where: str = "") -> "MapServing":
         """How the loaders serve the maps of the version whose manifest is `manifest`.
 
+        "best" (the default): rendered from raw rows when they render the stored maps exactly (format 3,
+        nearest raster) or when the version stores no maps, else the stored EXR decoded; "stored": the
+        stored EXR (an error on a version that stores no maps); "raw": always rendered, and a sample
+        without raw rows is an error.
+
         Args:
             manifest: the version's manifest.
-            maps_from: "best" (the default): rendered from raw rows when they render the stored maps
-                exactly (format 3, nearest raster) or when the version stores no maps, else the stored EXR;
-                "stored": the stored EXR (an error on a version that stores no maps); "raw": always
-                rendered, and a sample without raw rows is an error.
+            maps_from: "best", "stored" or "raw" (MAPS_FROM).
             where: the dataset named by the errors.
 
         Raises:
