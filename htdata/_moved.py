@@ -9,7 +9,9 @@ DeprecationWarning naming its new place:
   module at its new place (the same module object, so monkeypatching and
   isinstance checks agree);
 - old names of a package that kept its name (`from htdata.format import SHARDS_DIR`,
-  `htdata.curate.rm_episodes`): the package's `__getattr__` calls `moved_name`.
+  `htdata.curate.rm_episodes`): the package's `__getattr__` calls `moved_name`;
+- old keyword arguments (`TactileFrameDataset(root, map_source="auto")`): the function is
+  wrapped by `renamed_keyword`, which hands the value on under its new name.
 
 `REMOVED_IN` is the one place that says when all of it goes;
 tests/project/test_moved.py fails once htdata's version reaches it, so the shim cannot
@@ -18,6 +20,7 @@ outlive its promise unnoticed.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import importlib.abc
 import importlib.util
@@ -89,6 +92,36 @@ def moved_name(package: str, name: str):
                           DeprecationWarning, stacklevel=3)
             return getattr(module, new)
     raise AttributeError(f"module {package!r} has no attribute {name!r}")
+
+
+def renamed_keyword(old: str, new: str, values: dict | None = None):
+    """Decorator: the wrapped function still takes `old=` (deprecated), handed on as `new=` with a DeprecationWarning.
+
+    Args:
+        old: the keyword's old name.
+        new: its name now (a parameter of the wrapped function).
+        values: old values that have new words ({"auto": "best"}); any other value is handed on as given.
+
+    A call giving both names is a TypeError, as Python's own for a keyword given twice.
+    """
+    words = dict(values or {})
+
+    def wrap(fn):
+        name = fn.__qualname__.removesuffix(".__init__")
+
+        @functools.wraps(fn)
+        def call(*args, **kwargs):
+            if old in kwargs:
+                if new in kwargs:
+                    raise TypeError(f"{name}() got both {old}= and {new}= (the old and the new name of one argument)")
+                value = kwargs.pop(old)
+                kwargs[new] = words.get(value, value) if isinstance(value, str) else value
+                warnings.warn(f"{name}({old}={value!r}) is deprecated: write {new}={kwargs[new]!r} "
+                              f"({old}= goes in htdata {'.'.join(map(str, REMOVED_IN))})",
+                              DeprecationWarning, stacklevel=2)
+            return fn(*args, **kwargs)
+        return call
+    return wrap
 
 
 class _Alias(importlib.abc.Loader):

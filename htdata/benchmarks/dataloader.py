@@ -3,8 +3,8 @@
 Steady state, as training sees it: `persistent_workers=True`, one untimed
 epoch first (worker start-up, imports, file handles), then one timed epoch
 of shuffled items (seeded) in batches. 1 and N workers alternate `reps`
-times; the speed-up is the median of the pairs. Map source is the loaders'
-default ("auto": rendered from raw rows where the version stores them) and,
+times; the speed-up is the median of the pairs. Maps come from the loaders'
+default (`maps_from="best"`: rendered from raw rows where they render exactly) and,
 for comparison, "stored" (the EXR decoded); then the items a tactile-only
 step asks for (`members=("tactile",)`, `constants="once"`: no JPEG decoded,
 per-layout constants not sent). `ipc_bytes_per_item` is what one item moves
@@ -21,15 +21,15 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Subset
 
-from htdata.format.mapstorage import maps_stored
+from htdata.format.mapstorage import MapStorage
 from htdata.read import keys
 from htdata.read.reader import DatasetReader
 from htdata.read.torchdata import TactileFrameDataset
 
 
-# (row label, map source, dataset keywords): full items as the trainer read them before #28, then tactile-only
-VARIANTS = (("full", "auto", {}), ("full", "stored", {}),
-            ("tactile", "auto", {"members": (keys.TACTILE,), "constants": "once"}))
+# (row label, maps_from, dataset keywords): full items as the trainer read them before #28, then tactile-only
+VARIANTS = (("full", "best", {}), ("full", "stored", {}),
+            ("tactile", "best", {"members": (keys.TACTILE,), "constants": "once"}))
 
 
 def ipc_bytes(item: dict) -> int:
@@ -37,9 +37,9 @@ def ipc_bytes(item: dict) -> int:
     return sum(v.numel() * v.element_size() for v in item.values() if torch.is_tensor(v))
 
 
-def _epoch_rate(root: Path, workers: int, map_source: str, items: int, batch_size: int, seed: int,
+def _epoch_rate(root: Path, workers: int, maps_from: str, items: int, batch_size: int, seed: int,
                 options: dict | None = None) -> float:
-    dataset = TactileFrameDataset(root, map_source=map_source, **(options or {}))
+    dataset = TactileFrameDataset(root, maps_from=maps_from, **(options or {}))
     pick = np.random.default_rng(seed).permutation(len(dataset))[:items].tolist()
     loader = DataLoader(Subset(dataset, pick), batch_size=batch_size, shuffle=True, num_workers=workers,
                         persistent_workers=workers > 0, generator=torch.Generator().manual_seed(seed))
@@ -58,16 +58,17 @@ def dataloader_rows(root: Path, workers: tuple[int, int] = (1, 2), reps: int = 2
     and the bytes one item moves between processes."""
     lo, hi = workers
     rows = []
+    stores_maps = MapStorage.of(DatasetReader(root).manifest).stores_maps
     for kind, source, options in VARIANTS:
-        if source == "stored" and not maps_stored(DatasetReader(root).manifest):
-            continue   # a maps = "raw" version has no EXR to decode
+        if source == "stored" and not stores_maps:
+            continue   # a version without maps has no EXR to decode
         rates: dict[int, list[float]] = {lo: [], hi: []}
         for rep in range(reps):
             for w in (lo, hi):
                 rates[w].append(_epoch_rate(root, w, source, items, batch_size, seed + rep, options))
         ratios = [b / a for a, b in zip(rates[lo], rates[hi])]
-        dataset = TactileFrameDataset(root, map_source=source, **options)
-        rows.append({"item": kind, "map_source": source, "ipc_bytes_per_item": ipc_bytes(dataset[0]),
+        dataset = TactileFrameDataset(root, maps_from=source, **options)
+        rows.append({"item": kind, "maps_from": source, "ipc_bytes_per_item": ipc_bytes(dataset[0]),
                      "items": min(items, len(dataset)), "batch_size": batch_size,
                      "workers_lo": lo, "workers_hi": hi, "reps": reps,
                      "items_per_s_lo": float(np.median(rates[lo])), "items_per_s_hi": float(np.median(rates[hi])),

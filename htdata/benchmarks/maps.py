@@ -4,7 +4,7 @@ Per adapter of the sample corpus, the same episodes ingested with `maps = "store
 (1 worker). Bytes: every member of every shard, by kind (rgb jpg, tactile maps, raw rows, bend, json, the
 tar headers and padding = shard bytes minus member bytes) per frame, for both, and the total per frame and
 at 10M frames. Read speed, side by side, alternating A/B runs (medians): TactileFrameDataset items/s
-(map_source="stored" on the stored dataset: the EXR decoded; the default on the other: rendered) and
+(maps_from="stored" on the stored dataset: the EXR decoded; the default on the other: rendered) and
 DatasetReader.decoded samples/s. Exactness: every rendered map against the float32 map the ingest computes before the codec
 (`ingest_map_difference`), and the stored maps against the rendered ones (the codec's rounding).
 Ingest: frames/s and encode-stage seconds of the two ingests (one run each, so indicative only).
@@ -32,7 +32,6 @@ from htdata.benchmarks.sources import discover
 from htdata.benchmarks.tables import fmt, table
 from htdata.format.table import HANDS, JSON_MEMBER, SHARDS_DIR, tactile_member
 from htdata.ingest.episode import EpisodeStream
-from htdata.format.mapstorage import resolve_map_storage
 from htdata.glove.layouts import LAYOUTS_ENV
 from htdata.synthetic.rawglove import write_rawglove
 from htdata.ingest.pipeline import TactileConfig
@@ -125,7 +124,7 @@ def read_speeds(stored: Path, rendered: Path, limit: int, reps: int) -> dict:
     """Items/s and samples/s, stored maps decoded vs rendered from raw, alternating runs, medians."""
     from htdata.read.torchdata import TactileFrameDataset
 
-    datasets = {"stored": TactileFrameDataset(stored, map_source="stored"), "rendered": TactileFrameDataset(rendered)}
+    datasets = {"stored": TactileFrameDataset(stored, maps_from="stored"), "rendered": TactileFrameDataset(rendered)}
     readers = {"stored": DatasetReader(stored), "rendered": DatasetReader(rendered)}
     items = min(limit, len(datasets["stored"]))
     samples = min(limit, len(readers["stored"]))
@@ -222,8 +221,8 @@ def maps_rows(corpus: Path, work: Path, adapters: tuple[str, ...], quick: bool) 
     rows = [adapter_row(name, corpus / name, work, 60 if quick else 400, 1 if quick else 3) for name in adapters]
     default, why = pick_default(rows)
     t = TactileConfig()   # what "auto" (the default) resolves to for a new dataset of the shipped pipelines
-    return {"rows": rows, "rule": RULE, "default": default, "why": why, "pipeline_setting": t.maps,
-            "pipeline_default": resolve_map_storage(t.maps, None),
+    return {"rows": rows, "rule": RULE, "default": default, "why": why, "pipeline_setting": t.maps.value,
+            "pipeline_default": t.maps.resolved(None).record,
             "frames_at_scale": FRAMES_AT_SCALE, "glove_only": glove_only_row(work, 1 if quick else 3)}
 
 

@@ -104,5 +104,5 @@ def raw_markdown(d: dict) -> list[str]:
     same = ("identical to the stored maps (this dataset stores float maps)" if m["max_abs_difference"] == 0 else
             "exact, the stored maps differing by the map codec's rounding")
     return lines + [f"Rendering from raw rows is {faster} ({m['raw_over_stored']:.2f}x) and, in nearest mode, {same}: "
-                    f"the torch loaders' default `map_source=\"auto\"` renders from raw rows when a dataset has them "
+                    f"the torch loaders' default `maps_from=\"best\"` renders from raw rows when a dataset has them "
                     f"and was rasterised in nearest mode.", ""]

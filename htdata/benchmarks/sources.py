@@ -23,7 +23,6 @@ from htdata.glove.codecrule import resolve_sources
 from htdata.ingest import Source
 from htdata.ingest.episode import EpisodeStream
 from htdata.ingest.plan import resolve_layouts
-from htdata.format.mapstorage import resolve_map_storage
 from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 from htdata.source.rgb import to_square_224
 
@@ -99,7 +98,7 @@ def bare_bound(cfg: PipelineConfig, adapter, refs: list) -> dict:
     rgb = cfg.rgb
     pixel_type = cfg.codec_settings().tactile_pixel_type
     # maps encoded only where the ingest stores them (a new dataset: "auto" resolved as the ingest does)
-    stores_maps = resolve_map_storage(cfg.tactile.maps, None) == "stored"
+    stores_maps = cfg.tactile.maps.resolved(None).stores_maps
     t["maps_stored"] = stores_maps
     for ref in refs:
         em = episode_maps(cfg, adapter, ref)

@@ -30,7 +30,7 @@ import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from htdata.format.mapstorage import with_map_record
+from htdata.format.mapstorage import MapStorage
 from htdata.faults import crash_point
 from htdata.format.table import MANIFEST_FILE, SHARDS_DIR
 from htdata.store.confine import inside
@@ -80,7 +80,7 @@ def check_compatible(a: Snapshot, b: Snapshot) -> None:
                             f"{a.root} vs {mb['canonical']['sha256'][:12]} in {b.root})")
     # the settings must agree; codec.choice only says how each dataset arrived at them (reason texts differ)
     # maps stored or rendered from raw rows (codec.tactile.maps, absent = stored) is one choice per version
-    ca, cb = with_map_record(ma["codec"]), with_map_record(mb["codec"])
+    ca, cb = MapStorage.comparable_codec(ma["codec"]), MapStorage.comparable_codec(mb["codec"])
     keys = sorted({f"{k}.{s}" for k in ("tactile", "rgb") for s in set(ca.get(k, {}))
                    | set(cb.get(k, {})) if ca.get(k, {}).get(s) != cb.get(k, {}).get(s)})
     if keys:

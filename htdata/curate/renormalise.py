@@ -37,7 +37,7 @@ from htdata.store.lock import WriterLock
 from htdata.glove.normalise import Normaliser
 from htdata.glove.normalisesettings import NormaliseSettings
 from htdata.glove.rasterise import Rasteriser
-from htdata.format.mapstorage import has_hand, hand_present, maps_stored
+from htdata.format.mapstorage import MapStorage, has_hand, hand_present
 from htdata.read.rawstream import apply_paired, paired_row, paired_source_row
 from htdata.read.reader import DatasetReader
 from htdata.write.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
@@ -118,7 +118,7 @@ class Recalibration:
         self.settings = CodecSettings(tactile_compression=codec.get("compression", "zip"),
                                       tactile_pixel_type=codec.get("pixel_type", "half"))   # the dataset's maps
         self.records = {ep["episode_id"]: ep for ep in snap.episodes}
-        self.store_maps = maps_stored(snap.manifest)
+        self.store_maps = MapStorage.of(snap.manifest).stores_maps
         # episode -> hand -> (normaliser, rasteriser, [contact sum, max], live-value rows for taxel health)
         self.state: dict[str, dict] = {}
 

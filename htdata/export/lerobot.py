@@ -57,7 +57,7 @@ from htdata.format.table import CANVAS, JSON_MEMBER, RGB_MEMBER, decode_member, 
 from htdata.export.lerobot_out import check_out, write_marker
 from htdata.export.lerobot_meta import CHUNKS_SIZE, DATA_FILE_MB, DATA_PATH, VIDEO_PATH, part_of, write_meta
 from htdata.export.lerobot_stats import FeatureStats, VideoStats
-from htdata.format.mapstorage import maps_stored
+from htdata.format.mapstorage import MapStorage
 from htdata.read.rawstream import RawMapRenderer, paired_row
 from htdata.read.reader import DatasetReader
 from htdata.export.videoencode import VideoWriter
@@ -174,7 +174,7 @@ def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, sam
     last_rgb = np.zeros((CANVAS, CANVAS, 3), np.uint8)
     cache: tuple[int, dict] | None = None            # a resampled episode may repeat a sample
     # a version that stores no maps (htdata/format/mapstorage.py): --maps renders them from the raw rows
-    renderer = None if maps_stored(reader.manifest) else RawMapRenderer(reader)
+    renderer = None if MapStorage.of(reader.manifest).stores_maps else RawMapRenderer(reader)
     first = reader.episode_range(pos)[0]
     for f, (i, t) in enumerate(zip(samples, times)):
         if cache is None or cache[0] != i:

@@ -4,7 +4,7 @@
     table.py      file names of a dataset, canvas, hands, the member table and the index dtype
     codec.py      member codecs (EXR float maps, JPEG RGB, npy raw rows, PNG masks, JSON)
     shardio.py    tar shards: sample keys, the shard writer and member-range reads
-    mapstorage.py maps stored, or rendered from raw rows by the readers ([tactile] maps, codec.tactile.maps)
+    mapstorage.py MapStorage: maps stored, or rendered from raw rows by the readers ([tactile] maps, codec.tactile.maps)
 
 May import: htdata's base modules only. Everything else builds on it.
 

@@ -14,7 +14,7 @@ import json
 from pathlib import Path
 
 from htdata.format.codec import DEFAULT_CODEC_INFO
-from htdata.format.mapstorage import with_map_record
+from htdata.format.mapstorage import MapStorage
 from htdata.glove.codecrule import codec_block
 from htdata.glove.layouts import load_canonical, parse_layout
 from htdata.ingest.episode import rasteriser_for
@@ -31,8 +31,7 @@ def codec_info(cfg: PipelineConfig) -> dict:
     codec = json.loads(json.dumps(DEFAULT_CODEC_INFO))
     codec["tactile"]["compression"] = cfg.tactile.compression
     codec["tactile"]["raster_mode"] = cfg.tactile.raster_mode
-    # htdata/format/mapstorage.py: readers render when "raw" (the driver resolved "auto" before the units ran)
-    codec["tactile"]["maps"] = "raw" if cfg.tactile.maps == "raw" else "stored"
+    codec["tactile"]["maps"] = cfg.tactile.maps.record   # the driver resolved it before the units ran
     codec["rgb"]["quality"] = cfg.rgb.quality
     codec["rgb"]["crop"] = cfg.rgb.crop
     codec["rgb"]["interpolation"] = cfg.rgb.interpolation
@@ -73,7 +72,7 @@ def check_compatible(parent, sources: list) -> None:
     from the parent version's, naming the setting."""
     if parent is None:
         return
-    theirs = with_map_record(parent.manifest["codec"])   # a version without the record stores its maps
+    theirs = MapStorage.comparable_codec(parent.manifest["codec"])   # a version without the record stores its maps
     ours = codec_info(sources[0].pipeline)
     for section in ("tactile", "rgb"):
         for key in sorted(set(theirs.get(section, {})) | set(ours[section])):

@@ -57,7 +57,7 @@ from htdata.source.adapters.params import check_declared_params
 from htdata.source.lag import LAG_MODES
 from htdata.glove.codecrule import CodecChoice
 from htdata.format.table import CodecSettings
-from htdata.format.mapstorage import MAP_SETTINGS
+from htdata.format.mapstorage import MapStorage
 
 
 
@@ -121,11 +121,6 @@ class RgbConfig:
     keep_unpaired: bool = True   # RGB frames without tactile within the skew become RGB-only samples
 
 
-# [tactile] maps when a pipeline does not say: resolved per ingest (htdata/format/mapstorage.py
-# resolve_map_storage): the parent's choice on append, "stored" for a new dataset
-DEFAULT_MAPS = "auto"
-
-
 @dataclass
 class TactileConfig:
     compression: str = "zip"
@@ -133,31 +128,24 @@ class TactileConfig:
     keep_bend: bool = True
     keep_raw: bool = True    # raw_<hand>.npy: every glove row as read (source dtype), full rate
     chunk_frames: int = 64   # tactile frames read/normalised/rasterised per step (memory bound)
-    # "stored": tactile_<hand>.exr members; "raw": none, readers render maps from the raw rows
-    # (htdata/format/mapstorage.py): only exact, so only with keep_raw and nearest raster mode;
-    # "auto": the parent version's choice on append, else "stored" (raw is an explicit opt-in)
-    maps: str = DEFAULT_MAPS
+    # maps stored as EXR or rendered by the readers from the raw rows: htdata/format/mapstorage.py
+    maps: MapStorage = MapStorage.AUTO
+
+    @classmethod
+    def from_dict(cls, data: dict, where: str) -> "TactileConfig":
+        """[tactile] as written (TOML / to_dict): `maps` parsed into a MapStorage (absent: AUTO)."""
+        maps = MapStorage.parse(data["maps"], where) if "maps" in data else MapStorage.AUTO
+        return cls(**{**data, "maps": maps})
 
     def validate(self, where: str) -> "TactileConfig":
-        if self.maps not in MAP_SETTINGS:
-            raise ValueError(f"{where}: [tactile] maps = {self.maps!r}: must be one of "
-                             f"{', '.join(repr(m) for m in MAP_SETTINGS)}{nearest_hint(str(self.maps), MAP_SETTINGS)}")
-        if self.maps == "raw" and not self.keep_raw:
-            raise ValueError(f"{where}: [tactile] maps = \"raw\" needs keep_raw = true: readers render the maps "
-                             f"from the stored raw rows, and keep_raw = false stores none")
-        if self.maps == "raw" and self.raster_mode != "nearest":
-            raise ValueError(f"{where}: [tactile] maps = \"raw\" needs raster_mode = \"nearest\" (got "
-                             f"{self.raster_mode!r}): only a nearest raster renders from raw rows exactly what "
-                             f"the ingest would have stored; keep maps = \"stored\" for {self.raster_mode}")
+        self.maps.check_tactile(self.keep_raw, self.raster_mode, where)
         return self
 
     def to_dict(self) -> dict:
         d = asdict(self)
-        # Left out when "stored" (what every dataset before the setting holds: their episode settings and unit
-        # fingerprints stay equal) or "auto" (an ingest resolves it before anything is fingerprinted or sent
-        # to a worker; a worker reads a missing key as "not raw": htdata.ingest.unit).
-        if d["maps"] in ("auto", "stored"):
-            del d["maps"]
+        del d["maps"]
+        if self.maps.pipeline_value is not None:   # only "raw" is written (MapStorage.pipeline_value)
+            d["maps"] = self.maps.pipeline_value
         return d
 
 
@@ -293,8 +281,8 @@ class PipelineConfig:
                              f"for a dataset yet (htdata.glove.codecrule.resolve_sources / with_codec_choice)")
         return CodecChoice.from_info(self.codec.choice)
 
-    def with_maps(self, maps: str) -> "PipelineConfig":
-        """A copy whose [tactile] maps is `maps` (an ingest resolves "auto" before its units run)."""
+    def with_maps(self, maps: MapStorage) -> "PipelineConfig":
+        """A copy whose [tactile] maps is `maps` (an ingest resolves AUTO before its units run)."""
         import copy
 
         cfg = copy.deepcopy(self)
@@ -362,7 +350,7 @@ class PipelineConfig:
                                           warn_share=float(policy.get("out_of_range_warn_share", 0.01))),
             sync=SyncConfig(**data.get("sync", {})),
             rgb=RgbConfig(**data.get("rgb", {})),
-            tactile=TactileConfig(**data.get("tactile", {})),
+            tactile=TactileConfig.from_dict(data.get("tactile", {}), where),
             codec=CodecConfig(**data.get("codec", {})),
             shards=ShardsConfig(**data.get("shards", {})),
             description=data.get("description", ""),
@@ -387,7 +375,8 @@ class PipelineConfig:
 
     def with_overrides(self, settings: list[str]) -> "PipelineConfig":
         """A copy with `dotted.key=value` settings applied (htdata/settings.py: values read as TOML, else text), validated."""
-        data = apply_settings(self.to_dict(), settings)
+        d = self.to_dict()   # + [tactile] maps as set (to_dict leaves "stored" out: it would come back as "auto")
+        data = apply_settings({**d, "tactile": {**d["tactile"], "maps": self.tactile.maps.value}}, settings)
         where = f"{self.path or self.name} (with --set {' '.join(settings)})"
         cfg = PipelineConfig.from_dict(data, where=where)
         cfg.path = self.path

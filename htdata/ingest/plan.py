@@ -29,6 +29,7 @@ from htdata.source.adapters import get_adapter
 from htdata.errors import EpisodeError
 from htdata.store.fsutil import sha256_file
 from htdata.format.table import HANDS
+from htdata.format.mapstorage import MapStorage
 from htdata.glove.layouts import load_layout
 from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 from htdata.ingest.append import labels_of
@@ -49,6 +50,9 @@ class UnitTask:
     pipeline_path: str
     root: str
     episodes: list          # list[EpisodeRef], planned (layouts resolved)
+    # maps stored or not, resolved by the driver (never AUTO): the pipeline dict leaves "stored" out
+    # (MapStorage.pipeline_value), so the worker is told; not in the fingerprint (the dict says "raw")
+    maps: MapStorage
 
     @property
     def est_frames(self) -> int:
@@ -95,7 +99,8 @@ def check_unique_ids(refs_per_source: list[list]) -> None:
 def plan_units(todo: list[tuple], out: Path, first_unit: int) -> list[UnitTask]:
     """One unit per (ref, Source) to ingest, in the order given, numbered from `first_unit`."""
     return [UnitTask(unit=first_unit + k, out=str(out), pipeline=src.pipeline.to_dict(),
-                     pipeline_path=src.pipeline.path, root=str(src.root), episodes=[ref])
+                     pipeline_path=src.pipeline.path, root=str(src.root), episodes=[ref],
+                     maps=src.pipeline.tactile.maps.decided())
             for k, (ref, src) in enumerate(todo)]
 
 

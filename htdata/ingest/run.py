@@ -17,7 +17,6 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from htdata.format.mapstorage import resolve_map_storage
 from htdata.glove.codecrule import resolve_sources
 from htdata.ingest.executors import make_executor, usable_cores
 from htdata.format.table import INGEST_REPORT, MANIFEST_FILE
@@ -106,8 +105,8 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         check_unique_ids(refs)
         # the codec rule needs the run's gloves: resolved after discovery, before anything is fingerprinted
         sources = resolve_sources(sources, refs, parent.manifest["codec"]["tactile"] if parent else None)
-        sources = [dataclasses.replace(s, pipeline=s.pipeline.with_maps(resolve_map_storage(
-            s.pipeline.tactile.maps, parent.manifest if parent else None))) for s in sources]
+        sources = [dataclasses.replace(s, pipeline=s.pipeline.with_maps(s.pipeline.tactile.maps.resolved(
+            parent.manifest if parent else None))) for s in sources]
         check_compatible(parent, sources)
         # pipeline (CLI) order, then episode id: the order units are numbered in
         pairs = [(r, s) for s, rs in zip(sources, refs) for r in sorted(rs, key=lambda r: r.episode_id)]

@@ -83,8 +83,8 @@ def codec_settings(cfg: PipelineConfig) -> CodecSettings:
 def spool_episode(ref, cfg: PipelineConfig, adapter, spool: Spool, clock: StageClock) -> EpisodeTally:
     """Encode and spool every kept frame of one episode; raise on any failure."""
     settings = codec_settings(cfg)
-    # "raw" (resolved by the driver): no map rendered or stored; readers render them from the raw rows
-    stream = EpisodeStream(ref, cfg, adapter, clock, with_maps=cfg.tactile.maps != "raw")
+    # maps not stored: none rendered here; readers render them from the raw rows
+    stream = EpisodeStream(ref, cfg, adapter, clock, with_maps=cfg.tactile.maps.stores_maps)
     spool.start()
     # encoded in threads while this one makes the next frames (encodepool.py); "encode" = the time
     # this thread waits for them, so the stages still add up to the wall time
@@ -133,6 +133,7 @@ def run_unit(task) -> dict:
     out = Path(task.out)
     clear_unit_files(out, task.unit)  # idempotent: a retried unit starts clean
     cfg = PipelineConfig.from_dict(task.pipeline, where=task.pipeline_path or task.pipeline["name"])
+    cfg = cfg.with_maps(task.maps)   # resolved by the driver, told explicitly (plan.UnitTask.maps)
     adapter = get_adapter(cfg.adapter.name)
     spool = Spool(spool_path(out, task.unit))
     episodes, failures, dropped, layouts, calibrations = [], [], [], {}, {}

@@ -24,6 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from htdata.format.mapstorage import MapStorage
 from htdata.format.table import HANDS, RGB_MEMBER, SIZE_FIELDS
 from htdata.inspect.cardplots import (_count_label, _label_fingers, _y_ticks, bar_chart,  # noqa: F401 (names of card)
                                       histogram_chart, region_heatmap, value_histogram_chart)
@@ -83,7 +84,7 @@ def sample_format(codec: dict, rgb_frames: bool = True) -> list[list[str]]:
     """The member table, from the dataset's own codec record (the EXR pixel type is chosen per dataset);
     no rgb.jpg row for a dataset without video."""
     tactile, rgb = codec.get("tactile", {}), codec.get("rgb", {})
-    stored = tactile.get("maps", "stored") == "stored"   # htdata/format/mapstorage.py
+    stored = MapStorage.from_codec(codec).stores_maps
     return [
         *([["rgb.jpg", f"224x224x3 uint8 JPEG, quality {rgb.get('quality', '?')}", "egocentric camera frame"]]
           if rgb_frames else []),

@@ -1,7 +1,7 @@
 """Reading a committed dataset: the last step before the trainer.
 
     reader.py      DatasetReader: one version's manifest, episodes, index and samples (local or URL)
-    rawstream.py   an episode's raw glove rows at full rate, from the shards
+    rawstream.py   an episode's raw glove rows at full rate, from the shards; MapServing (the loaders' maps_from)
     torchdata.py   torch datasets of frames and windows (maps stored or rendered from raw rows)
     torchglove.py  torch dataset of raw glove rows at the glove's own rate
     keys.py        the keys of the items the torch datasets yield

@@ -1,5 +1,9 @@
 """Read the raw glove rows a format-3 dataset stores: the full-rate stream, and maps rendered from raw.
 
+- `MapServing`: where the loaders take maps from (`maps_from` = "best" |
+  "stored" | "raw"; whether a version stores maps at all is
+  htdata.format.mapstorage.MapStorage).
+
 - `episode_stream(reader, episode, hand)`: every glove row the recording
   held, in time order, deduplicated by source row (a row paired with two
   frames is stored twice), with timestamps and source row numbers; what a
@@ -19,10 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.errors import ArgumentError
 from htdata.glove.calibration import episode_normaliser, refuse_mismatched
 from htdata.store import storage
 from htdata.store.versions import version_manifest_file
-from htdata.format.mapstorage import maps_stored
+from htdata.format.mapstorage import EXACT_RASTER, MapStorage
 from htdata.format.codec import check_finite_maps
 from htdata.format.table import JSON_MEMBER, MANIFEST_FILE, decode_member, raw_member
 from htdata.store.confine import inside
@@ -33,7 +38,11 @@ from htdata.glove.rasterise import Rasteriser
 def check_records(reader) -> None:
     """Refuse (RecordMismatch, one line naming the file and record) a version whose calibration ids or
     calibration_fit digests do not match their content: every map rendered here, and every map
-    `htdata renormalise` writes, would follow the edited record (htdata.glove.calibration.record_errors)."""
+    `htdata renormalise` writes, would follow the edited record (htdata.glove.calibration.record_errors).
+
+    Args:
+        reader: the DatasetReader of the version.
+    """
     refuse_mismatched(reader.manifest.get("calibrations", {}), reader.episodes,
                       storage.join(reader.root, MANIFEST_FILE if reader.version is None
                                    else version_manifest_file(reader.version)),
@@ -46,7 +55,13 @@ def check_records(reader) -> None:
 
 @dataclass
 class RawStream:
-    """One hand's glove rows of one episode, full rate: (M,) times, (M,H,W) rows in the source dtype, (M,) rows."""
+    """One hand's glove rows of one episode, full rate, in time order.
+
+    Args:
+        t_ns: (M,) int64 recorded glove timestamps.
+        rows: (M,H,W) the rows as read, in the source dtype.
+        source_row: (M,) int64 row numbers in the recording.
+    """
     t_ns: np.ndarray
     rows: np.ndarray
     source_row: np.ndarray
@@ -58,8 +73,14 @@ class RawStream:
 def episode_stream(reader, episode: str | int, hand: str) -> RawStream:
     """Every stored raw row of `hand` in `episode`, in time order, each source row once.
 
-    Raises ValueError naming the episode when its samples hold no raw rows
-    (datasets of format < 3, or ingested with keep_raw = false).
+    Args:
+        reader: the DatasetReader of the version.
+        episode: the episode id or its position in episodes.jsonl.
+        hand: "left" or "right".
+
+    Raises:
+        ValueError: naming the episode when its samples hold no raw rows
+            (datasets of format < 3, or ingested with keep_raw = false).
     """
     first, n = reader.episode_range(episode)
     eid = reader.episodes[reader.episode_position(episode)]["episode_id"]
@@ -87,6 +108,11 @@ def paired_row(members: dict[str, bytes], hand: str, where: str) -> np.ndarray:
 
     A single stored row is the paired one (no JSON decode); otherwise
     meta["raw_paired"][hand] names it.
+
+    Args:
+        members: the sample's members (raw_<hand>.npy, + the json member when it holds several rows).
+        hand: "left" or "right".
+        where: the sample, named by errors.
     """
     rows = decode_member(raw_member(hand), members[raw_member(hand)], where)
     if rows.ndim == 3 and rows.shape[0] == 1:
@@ -98,34 +124,64 @@ def paired_row(members: dict[str, bytes], hand: str, where: str) -> np.ndarray:
     return rows[at]
 
 
-MAP_SOURCES = ("auto", "stored", "raw")
+MAPS_FROM = ("best", "stored", "raw")   # the loaders' `maps_from` (not the storage words: MapStorage)
+MAP_SOURCE_WORDS = {"auto": "best"}      # the deprecated `map_source=` values -> maps_from (htdata._moved)
 
 
-def serves_maps_from_raw(manifest: dict, map_source: str = "auto", where: str = "") -> bool:
-    """Whether the loaders serve a version's maps rendered from raw rows (else the stored EXR is decoded).
+@dataclass(frozen=True)
+class MapServing:
+    """Where the loaders take a version's maps from: THE rule (`choose`), shared by the torch datasets and
+    `htdata validate` (which checks that rendered and stored maps agree).
 
-    THE rule, shared by the torch datasets and `htdata validate` (which checks that both agree):
-    "auto" (the loaders' default) renders from raw rows when the version stores them (format 3)
-    and was rasterised in nearest mode, where rendering is a gather of the exact normalised values;
-    "stored" never does; "raw" always does (and a sample without raw rows is an error).
-    A version whose maps are not stored (codec.tactile.maps = "raw") is always served from raw rows;
-    "stored" on it is an error.
+    Args:
+        rendered: maps are rendered from the paired raw rows (else the stored EXR is decoded).
+        raw_required: maps_from="raw": a sample without raw rows is an error, never decoded.
     """
-    if map_source not in MAP_SOURCES:
-        raise ValueError(f"map_source must be one of {MAP_SOURCES}, got {map_source!r}")
-    if not maps_stored(manifest):
-        if map_source == "stored":
-            raise ValueError(f"{where or 'dataset'}: map_source='stored', but this version stores no tactile maps (ingested with [tactile] "
-                             "maps = \"raw\"); its maps are rendered from the raw rows: use map_source='auto' or 'raw'")
-        return True
-    if map_source != "auto":
-        return map_source == "raw"
-    return (manifest["codec"]["tactile"].get("raster_mode") == "nearest"
-            and manifest.get("format_version", 1) >= 3)
+    rendered: bool
+    raw_required: bool
+
+    @classmethod
+    def choose(cls, manifest: dict, maps_from: str = "best", where: str = "") -> "MapServing":
+        """How the loaders serve the maps of the version whose manifest is `manifest`.
+
+        "best" (the default): rendered from raw rows when they render the stored maps exactly (format 3,
+        nearest raster) or when the version stores no maps, else the stored EXR decoded; "stored": the
+        stored EXR (an error on a version that stores no maps); "raw": always rendered, and a sample
+        without raw rows is an error.
+
+        Args:
+            manifest: the version's manifest.
+            maps_from: "best", "stored" or "raw" (MAPS_FROM).
+            where: the dataset named by the errors.
+
+        Raises:
+            ArgumentError: `maps_from` is not one of MAPS_FROM, or is "stored" on a version without maps.
+        """
+        if maps_from not in MAPS_FROM:
+            old = f" (the old map_source={maps_from!r} is {MAP_SOURCE_WORDS[maps_from]!r})" \
+                if maps_from in MAP_SOURCE_WORDS else ""
+            raise ArgumentError(f"maps_from must be one of {MAPS_FROM}, got {maps_from!r}{old}")
+        raw_required = maps_from == "raw"
+        if not MapStorage.of(manifest).stores_maps:
+            if maps_from == "stored":
+                raise ArgumentError(f"{where or 'dataset'}: maps_from='stored', but this version stores no tactile "
+                                    "maps (ingested with [tactile] maps = \"raw\"); its maps are rendered from the "
+                                    "raw rows: use maps_from='best' or 'raw'")
+            return cls(rendered=True, raw_required=raw_required)
+        if maps_from != "best":
+            return cls(rendered=raw_required, raw_required=raw_required)
+        return cls(rendered=(manifest["codec"]["tactile"].get("raster_mode") == EXACT_RASTER
+                             and manifest.get("format_version", 1) >= 3), raw_required=False)
 
 
 def paired_source_row(members: dict[str, bytes], hand: str, where: str) -> int:
-    """The source row number of the raw row paired with a sample's frame (meta raw_row / raw_paired)."""
+    """The source row number of the raw row paired with a sample's frame (meta raw_row / raw_paired).
+
+    Args:
+        members: the sample's members (the json member is read).
+        hand: "left" or "right".
+        where: the sample, named by errors.
+    """
     meta = decode_member(JSON_MEMBER, members[JSON_MEMBER], where)
     rows = (meta.get("raw_row") or {}).get(hand)
     at = (meta.get("raw_paired") or {}).get(hand, 0)
@@ -135,19 +191,37 @@ def paired_source_row(members: dict[str, bytes], hand: str, where: str) -> int:
 
 
 def apply_paired(normaliser, members: dict[str, bytes], hand: str, where: str):
-    """normaliser.apply on a sample's paired raw row (with its source row number when the baseline drifts)."""
+    """normaliser.apply on a sample's paired raw row (with its source row number when the baseline drifts).
+
+    Args:
+        normaliser: the episode hand's Normaliser (its recorded calibration).
+        members: the sample's members (json + raw_<hand>.npy).
+        hand: "left" or "right".
+        where: the sample, named by errors.
+    """
     return apply_paired_many(normaliser, [members], hand, where)
 
 
 def apply_paired_many(normaliser, members_list: list[dict[str, bytes]], hand: str, where: str):
-    """normaliser.apply on the paired raw rows of several samples of one episode hand, in one call."""
+    """normaliser.apply on the paired raw rows of several samples of one episode hand, in one call.
+
+    Args:
+        normaliser: the episode hand's Normaliser (its recorded calibration).
+        members_list: each sample's members (json + raw_<hand>.npy).
+        hand: "left" or "right".
+        where: the samples, named by errors.
+    """
     rows = ([paired_source_row(m, hand, where) for m in members_list]
             if normaliser.cfg.baseline == "drift" else None)
     return normaliser.apply(np.stack([paired_row(m, hand, where) for m in members_list]), rows=rows)
 
 
 class RawMapRenderer:
-    """Maps from the paired raw rows (see the module docstring); one normaliser per episode hand, cached."""
+    """Maps from the paired raw rows (see the module docstring); one normaliser per episode hand, cached.
+
+    Args:
+        reader: the DatasetReader of the version (its manifest's calibrations, layouts, raster mode).
+    """
 
     def __init__(self, reader):
         self.reader = reader
@@ -157,7 +231,12 @@ class RawMapRenderer:
         self._normalisers: dict = {}
 
     def parts_for(self, episode: int, hand: str):
-        """(Normaliser with the episode's calibration, Rasteriser of its layout) for one episode hand."""
+        """(Normaliser with the episode's calibration, Rasteriser of its layout) for one episode hand.
+
+        Args:
+            episode: the episode's position in episodes.jsonl.
+            hand: "left" or "right".
+        """
         key = (episode, hand)
         if key not in self._normalisers:
             ep = self.reader.episodes[episode]
@@ -171,19 +250,39 @@ class RawMapRenderer:
         return self._normalisers[key]
 
     def render(self, episode: int, hand: str, members: dict[str, bytes], where: str = "sample") -> np.ndarray:
-        """(224,224) float32 map from `members` (json + raw_<hand>.npy) of a sample of episode position `episode`."""
+        """(224,224) float32 map of one sample, rendered from its paired raw row.
+
+        Args:
+            episode: the sample's episode position.
+            hand: "left" or "right".
+            members: the sample's members (json + raw_<hand>.npy).
+            where: the sample, named by errors.
+        """
         normaliser, raster = self.parts_for(episode, hand)
         values, _ = apply_paired(normaliser, members, hand, where)
         return check_finite_maps(raster.render(values)[0], f"{where} ({hand})")
 
     def render_many(self, episode: int, hand: str, members_list: list[dict[str, bytes]], where: str = "sample"
                     ) -> np.ndarray:
-        """(n,224,224) float32 maps of n samples of one episode hand: one normalise and one rasterise call."""
+        """(n,224,224) float32 maps of n samples of one episode hand: one normalise and one rasterise call.
+
+        Args:
+            episode: the samples' episode position.
+            hand: "left" or "right".
+            members_list: each sample's members (json + raw_<hand>.npy).
+            where: the samples, named by errors.
+        """
         normaliser, raster = self.parts_for(episode, hand)
         values, _ = apply_paired_many(normaliser, members_list, hand, where)
         return check_finite_maps(raster.render(values), f"{where} ({hand})")
 
     def sample_map(self, index: int, hand: str) -> np.ndarray:
+        """(224,224) float32 map of sample `index`, read and rendered (KeyError when it holds no raw rows).
+
+        Args:
+            index: the global sample index.
+            hand: "left" or "right".
+        """
         row, key, members = self.reader.read_sample(index, (JSON_MEMBER, raw_member(hand)))
         if raw_member(hand) not in members:
             raise KeyError(f"{self.reader.root}: {key} has no raw {hand} rows")

@@ -34,7 +34,7 @@ from htdata.store import storage
 from htdata.store.confine import inside
 from htdata.store.splitfiles import SplitRejected, parse_split_doc  # noqa: F401 (SplitRejected: its old home)
 from htdata.format.codec import decode_png_u8
-from htdata.format.mapstorage import maps_stored
+from htdata.format.mapstorage import MapStorage
 from htdata.format.table import (HANDS, INDEX_DTYPE, JSON_MEMBER, LAYOUTS_DIR, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
                                  SPLITS_DIR, decode_sample, raw_member, tactile_member)
 from htdata.store.manifest import load_episodes, load_index, load_manifest
@@ -93,7 +93,7 @@ class DatasetReader:
         self._pid = os.getpid()
         self._maps: dict[str, np.ndarray] = {}
         # a version that does not store its maps: decoded samples get them rendered from the raw rows
-        self._renderer = None if maps_stored(self.manifest) else RawMapRenderer(self)
+        self._renderer = None if MapStorage.of(self.manifest).stores_maps else RawMapRenderer(self)
 
     @contextmanager
     def _collected_guard(self, where: str | None = None):

@@ -14,14 +14,15 @@ tokeniser training): their RGB is zeros and `has_rgb` is False. RGB-only
 samples (RGB frames without tactile, format 3) are never items: there is
 no map to learn from.
 
-Where maps come from: `map_source="auto"` (default) renders each map from the
-sample's stored raw glove row under its recorded calibration when the
-dataset stores no maps ([tactile] maps = "raw": always rendered, "stored" is
-an error), or has raw rows and was rasterised in nearest mode (a gather of the
-exact normalised values, ~1.4x faster than decoding the EXR on the sample
-data: `make bench`, section "maps from raw rows"); otherwise, and with
-`map_source="stored"`, the stored EXR is decoded (values rounded to half,
-<= 2.4e-4 away). `map_source="raw"` insists on raw rows.
+Where maps come from (`maps_from`, htdata/read/rawstream.py `MapServing`):
+"best" (default) renders each map from the sample's stored raw glove row
+under its recorded calibration when the dataset stores no maps ([tactile]
+maps = "raw": always rendered, "stored" is an error), or has raw rows and was
+rasterised in nearest mode (a gather of the exact normalised values, ~1.4x
+faster than decoding the EXR on the sample data: `make bench`, section "maps
+from raw rows"); otherwise, and with "stored", the stored EXR is decoded
+(values rounded to half, <= 2.4e-4 away). "raw" insists on raw rows. The old
+keyword `map_source=` ("auto" = "best") still works, with a DeprecationWarning.
 
 What an item carries (htdata/read/torchitems.py): `members=("tactile",)`
 skips the RGB decode (stage-1 tokeniser training), `members=("rgb",)` the
@@ -55,7 +56,8 @@ from htdata.read import keys
 from htdata.format.table import CANVAS, HANDS, RGB_MEMBER, SIZE_FIELDS
 from htdata.read.keys import HAND_IDS
 from htdata.format.mapstorage import has_hand, hand_present
-from htdata.read.rawstream import MAP_SOURCES  # noqa: F401  (a name of this module)
+from htdata._moved import renamed_keyword
+from htdata.read.rawstream import MAP_SOURCE_WORDS
 from htdata.read.reader import DatasetReader
 from htdata.read.torchitems import MEMBERS, ItemBuilder, ItemConstants, expand_batch  # noqa: F401  (names of this module)
 
@@ -79,7 +81,13 @@ def _check_frames(frames: str) -> str:
 
 
 def shuffled_indices(n: int, seed: int, epoch: int) -> np.ndarray:
-    """A permutation of range(n) that depends only on (seed, epoch)."""
+    """A permutation of range(n) that depends only on (seed, epoch).
+
+    Args:
+        n: how many positions (>= 0).
+        seed: the run's seed (>= 0).
+        epoch: the epoch (>= 0): each epoch gets its own permutation.
+    """
     if n < 0 or seed < 0 or epoch < 0:
         raise ValueError(f"n, seed and epoch must be >= 0 (got {n}, {seed}, {epoch})")
     return np.random.default_rng([seed, epoch]).permutation(n)
@@ -124,6 +132,7 @@ class _ItemDataset(Dataset):
 
     @property
     def reader(self) -> DatasetReader:
+        """The DatasetReader of the version the items come from."""
         return self._builder.reader
 
     def __len__(self) -> int:
@@ -135,13 +144,27 @@ class _ItemDataset(Dataset):
 
 
 class TactileFrameDataset(_ItemDataset):
-    """One item per (frame, hand present) of the selected split part."""
+    """One item per (frame, hand present) of the selected split part.
 
+    Args:
+        root: the dataset folder or URL.
+        split: the split whose `part` is read (None: every sample).
+        part: the part of `split` ("train", "val", ...).
+        hands: the hands that make items ("left", "right").
+        rgb_float: RGB as float32 in [0,1] instead of uint8.
+        version: the committed version to read (None: the current one).
+        frames: "paired" (samples with the hand's map and an RGB frame) or "tactile" (+ tactile-only).
+        maps_from: "best", "stored" or "raw": where maps come from (module docstring; old name `map_source`).
+        members: what an item carries: a subset of ("tactile", "rgb").
+        constants: "item" (coverage, regions and ids in every item) or "once" (`constants()`, `expand_batch`).
+    """
+
+    @renamed_keyword("map_source", "maps_from", MAP_SOURCE_WORDS)
     def __init__(self, root, split: str | None = None, part: str | None = None,
                  hands=HANDS, rgb_float: bool = False, version: int | None = None, frames: str = "paired",
-                 map_source: str = "auto", members=MEMBERS, constants: str = "item"):
+                 maps_from: str = "best", members=MEMBERS, constants: str = "item"):
         self.hands = _check_hands(hands)
-        self._builder = _ItemBuilder(root, rgb_float, version, map_source, members, constants)
+        self._builder = _ItemBuilder(root, rgb_float, version, maps_from, members, constants)
         reader = self._builder.reader
         self.items = _frame_items(reader, reader.sample_indices(split, part), self.hands, _check_frames(frames))
 
@@ -155,16 +178,29 @@ class TactileWindowDataset(_ItemDataset):
 
     frame / index are stacked (window,); coverage, regions, hand, task, scene,
     episode are the same for every frame of a window and given once.
+
+    Args:
+        root: the dataset folder or URL.
+        window: frames per item (>= 1), consecutive samples of one episode ending at frame T.
+        split: the split whose `part` is read (None: every sample).
+        part: the part of `split` ("train", "val", ...).
+        hands: the hands that make items ("left", "right").
+        rgb_float: RGB as float32 in [0,1] instead of uint8.
+        version: the committed version to read (None: the current one).
+        frames: "paired" (samples with the hand's map and an RGB frame) or "tactile" (+ tactile-only).
+        maps_from: "best", "stored" or "raw": where maps come from (module docstring; old name `map_source`).
+        members: what an item carries: a subset of ("tactile", "rgb").
     """
 
+    @renamed_keyword("map_source", "maps_from", MAP_SOURCE_WORDS)
     def __init__(self, root, window: int = 3, split: str | None = None, part: str | None = None,
                  hands=HANDS, rgb_float: bool = False, version: int | None = None, frames: str = "paired",
-                 map_source: str = "auto", members=MEMBERS):
+                 maps_from: str = "best", members=MEMBERS):
         if window < 1:
             raise ValueError(f"window must be >= 1, got {window}")
         self.window = window
         self.hands = _check_hands(hands)
-        self._builder = _ItemBuilder(root, rgb_float, version, map_source, members)
+        self._builder = _ItemBuilder(root, rgb_float, version, maps_from, members)
         reader = self._builder.reader
         ends = []
         for ep_pos in reader.episode_positions(split, part):
@@ -205,7 +241,15 @@ def _dist_rank_world() -> tuple[int, int]:
 
 
 def shards_for_consumer(n_shards: int, consumer: int, consumers: int, seed: int | None, epoch: int) -> list[int]:
-    """Shards read by one (rank, worker): a deterministic (optionally shuffled) round robin."""
+    """Shards read by one (rank, worker): a deterministic (optionally shuffled) round robin.
+
+    Args:
+        n_shards: shards in the version.
+        consumer: this consumer's position, rank * num_workers + worker.
+        consumers: world size * num_workers.
+        seed: shuffle the shard order with (seed, epoch) (None: file order).
+        epoch: the epoch the order is for.
+    """
     order = np.arange(n_shards) if seed is None else shuffled_indices(n_shards, seed, epoch)
     return [int(s) for s in order[consumer::consumers]]
 
@@ -216,15 +260,29 @@ class TactileStream(IterableDataset):
     Shards are dealt round robin over rank*num_workers+worker consumers. With
     `shuffle_seed` the shard order is permuted per epoch (`set_epoch`). If
     there are fewer shards than consumers, some consumers yield nothing.
+
+    Args:
+        root: the dataset folder or URL.
+        split: the split whose `part` is read (None: every sample).
+        part: the part of `split` ("train", "val", ...).
+        hands: the hands that make items ("left", "right").
+        rgb_float: RGB as float32 in [0,1] instead of uint8.
+        shuffle_seed: permute the shard order per epoch with this seed (None: file order).
+        version: the committed version to read (None: the current one).
+        frames: "paired" (samples with the hand's map and an RGB frame) or "tactile" (+ tactile-only).
+        maps_from: "best", "stored" or "raw": where maps come from (module docstring; old name `map_source`).
+        members: what an item carries: a subset of ("tactile", "rgb").
+        constants: "item" (coverage, regions and ids in every item) or "once" (`constants()`, `expand_batch`).
     """
 
+    @renamed_keyword("map_source", "maps_from", MAP_SOURCE_WORDS)
     def __init__(self, root, split: str | None = None, part: str | None = None,
                  hands=HANDS, rgb_float: bool = False,
                  shuffle_seed: int | None = None, version: int | None = None, frames: str = "paired",
-                 map_source: str = "auto", members=MEMBERS, constants: str = "item"):
+                 maps_from: str = "best", members=MEMBERS, constants: str = "item"):
         self.hands = _check_hands(hands)
         self.frames = _check_frames(frames)
-        self._builder = _ItemBuilder(root, rgb_float, version, map_source, members, constants)
+        self._builder = _ItemBuilder(root, rgb_float, version, maps_from, members, constants)
         reader = self._builder.reader
         selected = np.zeros(len(reader), bool)
         selected[reader.sample_indices(split, part)] = True
@@ -234,6 +292,7 @@ class TactileStream(IterableDataset):
 
     @property
     def reader(self) -> DatasetReader:
+        """The DatasetReader of the version the items come from."""
         return self._builder.reader
 
     def constants(self) -> ItemConstants:
@@ -241,6 +300,7 @@ class TactileStream(IterableDataset):
         return self._builder.constants()
 
     def set_epoch(self, epoch: int) -> None:
+        """Args: epoch: the epoch whose shard order the next iteration reads (with `shuffle_seed`)."""
         self.epoch = int(epoch)
 
     def __len__(self) -> int:
@@ -248,6 +308,7 @@ class TactileStream(IterableDataset):
         return len(_frame_items(self.reader, idx, self.hands, self.frames))
 
     def my_shards(self) -> list[int]:
+        """The shards this process reads (its rank and DataLoader worker), those without a selected sample left out."""
         rank, world = _dist_rank_world()
         info = get_worker_info()
         worker, workers = (info.id, info.num_workers) if info is not None else (0, 1)
@@ -266,7 +327,11 @@ class TactileStream(IterableDataset):
         return self.iter_shards(self.my_shards())
 
     def iter_shards(self, shards: list[int]) -> Iterator[dict]:
-        """Items of the selected samples of `shards`, in order (what __iter__ yields for its shards)."""
+        """Items of the selected samples of `shards`, in order (what __iter__ yields for its shards).
+
+        Args:
+            shards: positions in the manifest's shard list.
+        """
         builder, reader = self._builder, self.reader
         wanted = builder.suffixes(self.hands)
         for index, members in reader.iter_samples(shards, suffixes=wanted):

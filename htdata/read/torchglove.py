@@ -37,7 +37,16 @@ KEEP_STREAMS = 2
 
 
 class GloveRateWindowDataset(_ItemDataset):
-    """See the module docstring."""
+    """See the module docstring.
+
+    Args:
+        root: the dataset folder or URL.
+        window: glove rows per item (>= 1), ending at each sample's paired row.
+        split: the split whose `part` is read (None: every sample).
+        part: the part of `split` ("train", "val", ...).
+        hands: the hands that make items ("left", "right").
+        version: the committed version to read (None: the current one).
+    """
 
     def __init__(self, root, window: int = 4, split: str | None = None, part: str | None = None,
                  hands=HANDS, version: int | None = None):
@@ -45,7 +54,7 @@ class GloveRateWindowDataset(_ItemDataset):
             raise ValueError(f"window must be >= 1, got {window}")
         self.window = window
         self.hands = _check_hands(hands)
-        self._builder = _ItemBuilder(root, rgb_float=False, version=version, map_source="raw")
+        self._builder = _ItemBuilder(root, rgb_float=False, version=version, maps_from="raw")
         reader = self._builder.reader
         items = []   # (sample index, hand id, position of the paired row in the episode stream)
         for pos in reader.episode_positions(split, part):

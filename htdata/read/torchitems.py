@@ -34,7 +34,8 @@ except ModuleNotFoundError as exc:   # the data core installs without torch
 from htdata.format.table import CANVAS, JSON_MEMBER, MEMBER_ORDER, RGB_MEMBER, decode_member, raw_member, tactile_member
 from htdata.read import keys
 from htdata.read.keys import HAND_IDS
-from htdata.read.rawstream import RawMapRenderer, serves_maps_from_raw
+from htdata._moved import renamed_keyword
+from htdata.read.rawstream import MAP_SOURCE_WORDS, MapServing, RawMapRenderer
 from htdata.read.reader import DatasetReader, SampleRow
 
 MEMBERS = (keys.TACTILE, keys.RGB)     # what a dataset can be asked for
@@ -43,6 +44,11 @@ _RGB_POS = MEMBER_ORDER.index(RGB_MEMBER)   # in SampleRow.sizes
 
 
 def check_members(members) -> tuple[str, ...]:
+    """The members as a tuple; ValueError unless a non-empty subset of MEMBERS without repeats.
+
+    Args:
+        members: what an item is asked to carry ("tactile", "rgb").
+    """
     members = tuple(members)
     if not members or any(m not in MEMBERS for m in members) or len(set(members)) != len(members):
         raise ValueError(f"members must be a non-empty subset of {MEMBERS}, got {members}")
@@ -50,6 +56,11 @@ def check_members(members) -> tuple[str, ...]:
 
 
 def check_constants(constants: str) -> str:
+    """`constants`, or ValueError unless one of CONSTANTS.
+
+    Args:
+        constants: "item" (every item carries coverage, regions, ids) or "once" (an `ids` tensor).
+    """
     if constants not in CONSTANTS:
         raise ValueError(f"constants must be one of {CONSTANTS}, got {constants!r}")
     return constants
@@ -62,12 +73,24 @@ def _long(value: int) -> torch.Tensor:
 
 @dataclass
 class ItemConstants:
-    """Per-layout constants of one dataset version, sent once (constants="once")."""
+    """Per-layout constants of one dataset version, sent once (constants="once").
+
+    Args:
+        layouts: layout ids; an item's `layout` id is a position in it.
+        coverage: (L,1,224,224) uint8 0/1, one coverage mask per layout.
+        regions: (224,224) uint8 part ids of the canonical hand.
+    """
     layouts: tuple[str, ...]       # layout id -> position = the `layout` id an item carries
     coverage: torch.Tensor         # (L,1,224,224) uint8 0/1
     regions: torch.Tensor          # (224,224) uint8 part ids
 
     def to(self, device, non_blocking: bool = False) -> "ItemConstants":
+        """A copy on `device`.
+
+        Args:
+            device: a torch device (or its name).
+            non_blocking: passed on to Tensor.to (pinned memory -> GPU without waiting).
+        """
         return ItemConstants(self.layouts, self.coverage.to(device, non_blocking=non_blocking),
                              self.regions.to(device, non_blocking=non_blocking))
 
@@ -76,6 +99,10 @@ def expand_batch(batch: dict, constants: ItemConstants) -> dict:
     """A collated constants="once" batch -> the batch constants="item" gives (same keys, dtypes, values).
 
     Runs where the batch is: move `constants` to the batch's device once (`.to`), not per step.
+
+    Args:
+        batch: a collated batch; one without `ids` (constants="item") is returned as it is.
+        constants: the dataset's `constants()`, on the batch's device.
     """
     if keys.IDS not in batch:
         return batch
@@ -98,17 +125,25 @@ class ItemBuilder:
     other processes on a shared machine (measured: torch.stack of three
     (1,224,224) maps took 6-19 ms instead of 0.02 ms). The json member is not
     read: every id an item carries comes from index.npy and episodes.jsonl.
+
+    Args:
+        root: the dataset folder or URL.
+        rgb_float: RGB as float32 in [0,1] instead of uint8.
+        version: the committed version to read (None: the current one).
+        maps_from: "best", "stored" or "raw" (htdata.read.rawstream.MapServing; old name `map_source`).
+        members: what an item carries: a subset of MEMBERS.
+        constants: "item" or "once" (module docstring).
     """
 
-    def __init__(self, root, rgb_float: bool, version: int | None = None, map_source: str = "auto",
+    @renamed_keyword("map_source", "maps_from", MAP_SOURCE_WORDS)
+    def __init__(self, root, rgb_float: bool, version: int | None = None, maps_from: str = "best",
                  members=MEMBERS, constants: str = "item"):
         self.reader = DatasetReader(root, version=version)
         self.rgb_float = rgb_float
         self.members = check_members(members)
         self.constants_mode = check_constants(constants)
-        self.from_raw = serves_maps_from_raw(self.reader.manifest, map_source, where=str(self.reader.root))
-        self.strict_raw = map_source == "raw"
-        self.renderer = RawMapRenderer(self.reader) if self.from_raw else None
+        self.serving = MapServing.choose(self.reader.manifest, maps_from, where=str(self.reader.root))
+        self.renderer = RawMapRenderer(self.reader) if self.serving.rendered else None
         self._task_ids = {t: i for i, t in enumerate(self.reader.manifest["tasks"])}
         self._scene_ids = {s: i for i, s in enumerate(self.reader.manifest["scenes"])}
         self._layout_ids = {lay: i for i, lay in enumerate(sorted(self.reader.manifest["layouts"]))}
@@ -117,32 +152,44 @@ class ItemBuilder:
 
     @property
     def wants_rgb(self) -> bool:
+        """Whether items carry the RGB frame."""
         return keys.RGB in self.members
 
     @property
     def wants_tactile(self) -> bool:
+        """Whether items carry the tactile map."""
         return keys.TACTILE in self.members
 
     def coverage(self, layout_id: str) -> torch.Tensor:
+        """(1,224,224) float32 coverage of a layout, cached.
+
+        Args:
+            layout_id: a layout of the version (manifest "layouts").
+        """
         if layout_id not in self._coverage:
             cov = self.reader.coverage(layout_id).astype(np.float32)
             self._coverage[layout_id] = torch.from_numpy(cov)[None]
         return self._coverage[layout_id]
 
     def regions(self) -> torch.Tensor:
+        """(224,224) uint8 part ids of the canonical hand, cached."""
         if self._regions is None:
             self._regions = torch.from_numpy(np.ascontiguousarray(self.reader.region_map))
         return self._regions
 
     def constants(self) -> ItemConstants:
-        """Every layout's coverage (uint8) and the region map, for constants="once" batches."""
+        """Every layout's coverage (uint8) and the region map, for constants="once" batches (`expand_batch`)."""
         layouts = tuple(self._layout_ids)
         cov = np.stack([self.reader.coverage(lay) for lay in layouts]) if layouts else \
             np.zeros((0, CANVAS, CANVAS), np.uint8)
         return ItemConstants(layouts, torch.from_numpy(np.ascontiguousarray(cov, np.uint8))[:, None], self.regions())
 
     def empty_rgb(self, n: int) -> np.ndarray | None:
-        """(n,3,224,224) rgb buffer (u8, or f32 with rgb_float) to decode into; None when RGB is not asked for."""
+        """(n,3,224,224) rgb buffer (u8, or f32 with rgb_float) to decode into; None when RGB is not asked for.
+
+        Args:
+            n: frames the buffer holds.
+        """
         if not self.wants_rgb:
             return None
         return np.empty((n, 3, CANVAS, CANVAS), np.float32 if self.rgb_float else np.uint8)
@@ -153,6 +200,10 @@ class ItemBuilder:
         cv2.split writes straight into the three planes (~4x faster than a
         numpy transpose copy); the pointer check guards against a binding that
         allocated new planes instead.
+
+        Args:
+            out: (3,224,224) uint8 or float32 buffer written in place.
+            rgb_hwc: (224,224,3) uint8 decoded JPEG.
         """
         planes = out if out.dtype == np.uint8 else np.empty(out.shape, np.uint8)
         written = cv2.split(rgb_hwc, [planes[0], planes[1], planes[2]])
@@ -162,18 +213,30 @@ class ItemBuilder:
             np.divide(planes, np.float32(255.0), out=out, dtype=np.float32)
 
     def suffixes(self, hands) -> tuple[str, ...]:
-        """Members an item of these hands reads (the JPEG only when RGB is asked for)."""
+        """Members an item of these hands reads (the JPEG only when RGB is asked for).
+
+        Args:
+            hands: the hands whose maps are read.
+        """
         rgb = (RGB_MEMBER,) if self.wants_rgb else ()
         if not self.wants_tactile:
             return rgb
         maps = tuple(tactile_member(h) for h in hands)
-        return (*rgb, JSON_MEMBER, *maps, *(raw_member(h) for h in hands)) if self.from_raw else (*rgb, *maps)
+        return (*rgb, JSON_MEMBER, *maps, *(raw_member(h) for h in hands)) if self.serving.rendered else (*rgb, *maps)
 
     def tactile_map(self, members: dict[str, bytes], hand: str, episode: int, where: str) -> np.ndarray:
-        if self.from_raw and raw_member(hand) in members:
+        """(224,224) float32 map of `hand`: rendered from raw rows or the stored EXR decoded (`serving`).
+
+        Args:
+            members: the sample's members as read (`suffixes`).
+            hand: "left" or "right".
+            episode: the sample's episode position (its calibration renders the map).
+            where: the sample, named by errors.
+        """
+        if self.serving.rendered and raw_member(hand) in members:
             return self.renderer.render(episode, hand, members, where)
-        if self.strict_raw:
-            raise KeyError(f"{where} has no raw {hand} rows (map_source='raw')")
+        if self.serving.raw_required:
+            raise KeyError(f"{where} has no raw {hand} rows (maps_from='raw')")
         suffix = tactile_member(hand)
         if suffix not in members:
             raise KeyError(f"{where} has no {hand} tactile map")
@@ -181,7 +244,15 @@ class ItemBuilder:
 
     def decode_into(self, members: dict[str, bytes], hands, where: str, rgb_out, episode: int) -> list:
         """Decode the JPEG once into each hand's rgb buffer (zeros when the sample has none) when RGB
-        is asked for; each hand's map (None when tactile is not asked for)."""
+        is asked for; each hand's map (None when tactile is not asked for).
+
+        Args:
+            members: the sample's members as read (`suffixes`).
+            hands: the hands to decode, in item order.
+            where: the sample, named by errors.
+            rgb_out: one (3,224,224) buffer per hand, or None when RGB is not asked for.
+            episode: the sample's episode position.
+        """
         maps = [self.tactile_map(members, hand, episode, where) if self.wants_tactile else None
                 for hand in hands]
         if rgb_out is None:
@@ -196,14 +267,26 @@ class ItemBuilder:
         return maps
 
     def read_frame(self, index: int, hand: str, rgb_out: np.ndarray | None) -> tuple[SampleRow, np.ndarray | None]:
-        """Read + decode sample `index` for `hand`: rgb into `rgb_out` (3,224,224) unless None; returns (row, map)."""
+        """Read + decode sample `index` for `hand`: rgb into `rgb_out` (3,224,224) unless None; returns (row, map).
+
+        Args:
+            index: the global sample index.
+            hand: "left" or "right".
+            rgb_out: the buffer the RGB frame is decoded into, or None.
+        """
         reader = self.reader
         row, key, members = reader.read_sample(index, suffixes=self.suffixes((hand,)))
         rgb = None if rgb_out is None else [rgb_out]
         return row, self.decode_into(members, (hand,), f"{reader.root}: {key}", rgb, row.episode)[0]
 
     def ids(self, row: SampleRow, index: int, hand: str) -> dict:
-        """The item's ids (+ coverage and regions with constants="item"; one packed `ids` with "once")."""
+        """The item's ids (+ coverage and regions with constants="item"; one packed `ids` with "once").
+
+        Args:
+            row: the sample's index row (reader.row).
+            index: the global sample index.
+            hand: the item's hand.
+        """
         ep = self.reader.episodes[row.episode]
         layout = ep["layouts"][hand]
         if self.constants_mode == "once":
@@ -224,7 +307,13 @@ class ItemBuilder:
         }
 
     def put_members(self, item: dict, tactile: np.ndarray | None, rgb: np.ndarray | None) -> dict:
-        """Add the asked-for members to an item: tactile (1,224,224), rgb (3,224,224) (stacked for windows)."""
+        """Add the asked-for members to an item: tactile (1,224,224), rgb (3,224,224) (stacked for windows).
+
+        Args:
+            item: the item's ids (`ids`), completed in place.
+            tactile: the map(s), or None when not asked for.
+            rgb: the frame(s), or None when not asked for.
+        """
         if tactile is not None:
             item[keys.TACTILE] = torch.from_numpy(tactile)   # decoded map is a fresh array: no copy
         if rgb is not None:
@@ -232,6 +321,12 @@ class ItemBuilder:
         return item
 
     def frame_item(self, index: int, hand: str) -> dict:
+        """The whole item of one (sample, hand): ids and the asked-for members.
+
+        Args:
+            index: the global sample index.
+            hand: "left" or "right".
+        """
         rgb = self.empty_rgb(1)
         row, tactile = self.read_frame(index, hand, None if rgb is None else rgb[0])
         return self.put_members(self.ids(row, index, hand), None if tactile is None else tactile[None],

@@ -1,7 +1,7 @@
 """Maps as the loaders serve them: rendered from the raw rows when they are, and equal to the stored maps.
 
-The torch datasets' default (`map_source="auto"`, htdata/read/rawstream.py
-`serves_maps_from_raw`) renders a version's maps from its stored raw rows
+The torch datasets' default (`maps_from="best"`, htdata/read/rawstream.py
+`MapServing`) renders a version's maps from its stored raw rows
 under the recorded calibration; the codec rule, the content checks and
 `htdata renormalise` reason about the stored EXR maps. This check keeps the
 two one truth: for the decoded samples (all with --deep, the seeded fraction
@@ -17,9 +17,9 @@ import numpy as np
 
 from dataclasses import dataclass, field
 
-from htdata.format.mapstorage import maps_stored
+from htdata.format.mapstorage import MapStorage
 from htdata.format.table import HANDS, JSON_MEMBER, decode_member, raw_member, tactile_member
-from htdata.read.rawstream import RawMapRenderer, serves_maps_from_raw
+from htdata.read.rawstream import MapServing, RawMapRenderer
 from htdata.read.reader import DatasetReader
 from htdata.validate.content import check_map_values
 from htdata.validate.geometry import CoverageGeometry
@@ -95,11 +95,11 @@ def check_served_maps(root, version: int | None, rows: np.ndarray, check: Check,
     checks stored ones (finite, in [0,1], zero outside coverage, the sensor accumulator).
     """
     reader = DatasetReader(root, version=version)
-    if not maps_stored(reader.manifest):
+    if not MapStorage.of(reader.manifest).stores_maps:
         if rendered is not None:
             _check_rendered(reader, rendered, check, batch)
         return
-    if not serves_maps_from_raw(reader.manifest):
+    if not MapServing.choose(reader.manifest).rendered:
         check.checked["served_maps_stored"] += 1    # the loaders decode the stored maps: one truth already
         return
     renderer = RawMapRenderer(reader)

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from htdata.format.mapstorage import map_member
+from htdata.format.mapstorage import MapStorage
 from htdata.format.table import HANDS, JSON_MEMBER, SHARDS_DIR, tactile_member
 from htdata.store.confine import PathOutsideDataset, inside
 from htdata.store.fsutil import sha256_file
@@ -47,7 +47,7 @@ class ShardJob:
     coverage: dict[str, np.ndarray] = field(default_factory=dict)   # hand_key -> (224,224) bool
     region_map: np.ndarray | None = None
     tactile_pixel_type: str = "half"       # manifest codec.tactile.pixel_type
-    map_members: dict[str, str] | None = None   # hand -> member carrying its map (format.mapstorage.map_member)
+    map_members: dict[str, str] | None = None   # hand -> member carrying its map (MapStorage.map_member)
 
 
 def outside(root, name: str) -> bool:
@@ -70,6 +70,7 @@ def shard_jobs(ds: Loaded, decode: np.ndarray, coverage: dict[str, np.ndarray], 
                 cov_by_hand[hand_key(ep["episode_id"], hand)] = coverage[layout_id]
     jobs = []
     rows = ds.index
+    map_members = {h: MapStorage.of(ds.manifest).map_member(h) for h in HANDS}
     shard_rows_of = group_rows(rows["shard"], len(ds.manifest["shards"]))
     for pos, entry in enumerate(ds.manifest["shards"]):
         if outside(ds.root, entry["name"]):
@@ -84,7 +85,7 @@ def shard_jobs(ds: Loaded, decode: np.ndarray, coverage: dict[str, np.ndarray], 
             episode_ids=ep_ids, decode=decode[ids], content_hash=content_hash,
             coverage={k: v for k, v in cov_by_hand.items() if k in needed}, region_map=region_map,
             tactile_pixel_type=ds.manifest["codec"]["tactile"].get("pixel_type", "half"),
-            map_members={h: map_member(ds.manifest, h) for h in HANDS}))
+            map_members=map_members))
     return jobs
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.format.mapstorage import map_member
+from htdata.format.mapstorage import MapStorage
 from htdata.format.table import (HANDS, INDEX_DTYPE, JSON_MEMBER, RGB_MEMBER, MANIFEST_FILE, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
                            tactile_member)
 from htdata.store.confine import PathOutsideDataset, inside
@@ -260,7 +260,8 @@ def _check_episode_rows(ds: Loaded, ep: dict, pos_rows: np.ndarray, check: Check
                    expected=shard_names, found=sorted(ep["shards"]))
     # RGB-only samples (format 3: RGB frames kept without tactile) hold no map member of any hand (its raw
     # rows when the version does not store maps: htdata/format/mapstorage.py)
-    no_tactile = np.all([rows[SIZE_FIELDS[map_member(ds.manifest, h)]][pos_rows] == 0 for h in HANDS], axis=0)
+    storage = MapStorage.of(ds.manifest)
+    no_tactile = np.all([rows[SIZE_FIELDS[storage.map_member(h)]][pos_rows] == 0 for h in HANDS], axis=0)
     rgb_only = no_tactile & (rows[SIZE_FIELDS[RGB_MEMBER]][pos_rows] > 0)
     declared = sum((ep.get("rgb_only_frames") or {}).values())
     if int(rgb_only.sum()) != declared:
@@ -268,10 +269,10 @@ def _check_episode_rows(ds: Loaded, ep: dict, pos_rows: np.ndarray, check: Check
                    f"the record declares {declared} RGB-only frames", **where,
                    expected=declared, found=int(rgb_only.sum()))
     for hand in HANDS:
-        member = map_member(ds.manifest, hand)
+        member = storage.map_member(hand)
         col = rows[SIZE_FIELDS[member]][pos_rows]
         has = hand in ep["hands"]
-        unstored = rows[SIZE_FIELDS[tactile_member(hand)]][pos_rows] if member != tactile_member(hand) else col[:0]
+        unstored = rows[SIZE_FIELDS[tactile_member(hand)]][pos_rows] if not storage.stores_maps else col[:0]
         if unstored.any():
             r = int(pos_rows[np.flatnonzero(unstored)[0]])
             check.fail("hand_member", f"episode {eid}: index row {r} has a {tactile_member(hand)}, but the version "

@@ -134,8 +134,8 @@ def test_quick_bench_content_is_consistent(quick_run):
         assert (s["workers_lo"], s["workers_hi"]) == (1, 2) and s["scaling"] > 0 and s["fixed_s_hi"] > 0
     assert [e["adapter"] for e in scaling["estimate"]] == [s["adapter"] for s in scaling["summary"]]
     assert all(e["frames"] == 10_000_000 and e["wall_hours"] > 0 for e in scaling["estimate"])
-    assert [(d["item"], d["map_source"], d["workers_hi"]) for d in r["loader"]["dataloader"]] == [
-        ("full", "auto", 2), ("full", "stored", 2), ("tactile", "auto", 2)]
+    assert [(d["item"], d["maps_from"], d["workers_hi"]) for d in r["loader"]["dataloader"]] == [
+        ("full", "best", 2), ("full", "stored", 2), ("tactile", "best", 2)]
     full, tactile = r["loader"]["dataloader"][0], r["loader"]["dataloader"][2]
     assert tactile["ipc_bytes_per_item"] < full["ipc_bytes_per_item"] / 2   # no RGB, no float coverage, no regions
     assert [row["frames"] for row in r["rss"]] == list(BenchConfig.quick_config(out).rss_lengths)

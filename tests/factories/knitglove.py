@@ -20,7 +20,7 @@ def draft_layout(layout_id: str = "knit_right_16x16", unused: list | None = None
            "value": {"convention": "direct", "max": 1023, "step": 1},
            "blocks": [{"name": "index_tip", "place": "index.distal", "rows": [0, 3], "cols": [0, 3]},
                       {"name": "palm", "place": "palm", "rows": [8, 15], "cols": [0, 15]}],
-           "dead_cells": [], "bend_cells": [], "source": "tests/test_unmapped_cells.py"}
+           "dead_cells": [], "bend_cells": [], "source": "tests/factories/knitglove.py"}
     if unused is not None:
         doc["unused_cells"] = unused
     return doc

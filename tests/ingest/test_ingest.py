@@ -400,10 +400,12 @@ def test_progress_events_arrive_per_episode_from_the_process_pool(tmp_path, monk
 
 
 def test_episode_progress_reconciles_missing_late_and_repeated_events():
+    from htdata.format.mapstorage import MapStorage
     from htdata.ingest import EpisodeProgress, UnitTask
 
     def task(unit, n):
-        return UnitTask(unit=unit, out="", pipeline={}, pipeline_path="", root="", episodes=[None] * n)
+        return UnitTask(unit=unit, out="", pipeline={}, pipeline_path="", root="", episodes=[None] * n,
+                        maps=MapStorage.STORED)
 
     tasks = [task(0, 2), task(1, 3), task(2, 1)]
     p = EpisodeProgress(tasks, done_units={2}, enabled=False)

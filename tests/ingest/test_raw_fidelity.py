@@ -256,15 +256,15 @@ def test_loader_maps_from_raw_rows_match_the_stored_maps(native_counts):
     from htdata.read.torchdata import TactileFrameDataset, TactileStream
 
     out, _, _ = native_counts
-    raw, stored = TactileFrameDataset(out), TactileFrameDataset(out, map_source="stored")
-    assert raw._builder.from_raw and not stored._builder.from_raw     # auto: nearest mode + raw rows
+    raw, stored = TactileFrameDataset(out), TactileFrameDataset(out, maps_from="stored")
+    assert raw._builder.serving.rendered and not stored._builder.serving.rendered   # best: nearest mode + raw rows
     diffs = [float((raw[i]["tactile"] - stored[i]["tactile"]).abs().max()) for i in range(len(raw))]
     half = json.loads((out / "dataset.json").read_text())["codec"]["tactile"]["pixel_type"] == "half"
     assert (0 < max(diffs) <= 2.5e-4) if half else max(diffs) == 0.0   # only the map codec's rounding (float: none)
     streamed = torch.stack([x["tactile"] for x in TactileStream(out)])
     assert torch.equal(streamed, torch.stack([raw[i]["tactile"] for i in range(len(raw))]))
-    with pytest.raises(ValueError, match="map_source"):
-        TactileFrameDataset(out, map_source="exr")
+    with pytest.raises(ValueError, match="maps_from"):
+        TactileFrameDataset(out, maps_from="exr")
 
 
 def stuck_taxel_dataset(tmp_path) -> tuple[Path, tuple[int, int]]:
@@ -352,13 +352,13 @@ def test_renormalise_recomputes_taxel_health_and_names_the_frame_on_bad_settings
 
 def test_validate_checks_the_maps_the_loaders_serve(native_counts):
     """Loaders render maps from raw rows (the default); validate fails when those differ from the stored maps."""
-    from htdata.read.rawstream import serves_maps_from_raw
+    from htdata.read.rawstream import MapServing
     from htdata.validate import validate_dataset
     from tests.factories import rewrite_manifest
 
     root = native_counts[0]
     manifest = load_manifest(root)
-    assert serves_maps_from_raw(manifest)
+    assert MapServing.choose(manifest).rendered
     ok = validate_dataset(root, deep=True)
     assert ok["ok"] and ok["checks"]["content"]["checked"]["served_maps"] > 0
     for cal in manifest["calibrations"].values():     # a calibration record that no longer fits the maps

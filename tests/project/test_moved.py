@@ -74,3 +74,19 @@ def test_a_name_that_never_existed_is_an_attribute_error(package):
     with pytest.raises(AttributeError, match="no_such_name"):
         module.no_such_name  # noqa: B018
     assert not hasattr(module, "__wrapped__")   # dunder probes (inspect, pickle) stay AttributeErrors
+
+
+def test_a_renamed_keyword_warns_translates_old_values_and_refuses_both_names():
+    @_moved.renamed_keyword("colour", "color", {"gray": "grey"})
+    def paint(thing, color="red"):
+        """Paint a thing."""
+        return thing, color
+
+    assert paint("door") == ("door", "red") and paint("door", color="blue") == ("door", "blue")
+    with pytest.warns(DeprecationWarning, match=r"paint\(colour='gray'\) is deprecated: write color='grey'"):
+        assert paint("door", colour="gray") == ("door", "grey")
+    with pytest.warns(DeprecationWarning, match="goes in htdata"):
+        assert paint("door", colour="blue") == ("door", "blue")
+    with pytest.raises(TypeError, match="both colour= and color="):
+        paint("door", colour="blue", color="red")
+    assert paint.__doc__ == "Paint a thing." and paint.__name__ == "paint"

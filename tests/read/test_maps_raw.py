@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from htdata.cli import main as cli
-from htdata.format.mapstorage import map_storage, maps_stored
+from htdata.format.mapstorage import MapStorage
+from htdata.errors import ConfigError, DatasetError
 from htdata.format.table import HANDS, SHARDS_DIR, tactile_member
 from htdata.ingest.pipeline import load_pipeline
 from htdata.read.reader import DatasetReader
@@ -44,7 +45,8 @@ def pair(tmp_path_factory) -> tuple[Path, Path]:
 def test_manifest_records_the_choice_and_shards_hold_no_maps(pair):
     stored, rendered = pair
     a, b = DatasetReader(stored), DatasetReader(rendered)
-    assert map_storage(a.manifest) == "stored" and map_storage(b.manifest) == "raw"
+    assert MapStorage.of(a.manifest) is MapStorage.STORED and MapStorage.of(b.manifest) is MapStorage.RAW
+    assert (a.manifest["codec"]["tactile"]["maps"], b.manifest["codec"]["tactile"]["maps"]) == ("stored", "raw")
     assert b.manifest["codec"]["tactile"]["raster_mode"] == "nearest"
     assert b.manifest["counts"]["frames_per_hand"] == a.manifest["counts"]["frames_per_hand"]
     assert a.manifest["counts"]["frames_per_hand"]["left"] > 0
@@ -98,7 +100,7 @@ def test_torch_datasets_serve_the_same_maps(pair):
     assert len(sa) == len(sb) == len(fa)
     assert all(np.array_equal(x["tactile"].numpy(), y["tactile"].numpy()) for x, y in zip(sa, sb))
     with pytest.raises(ValueError, match="stores no tactile maps"):
-        TactileFrameDataset(rendered, map_source="stored")
+        TactileFrameDataset(rendered, maps_from="stored")
 
 
 def test_validate_deep_passes_and_checks_the_rendered_maps(pair):
@@ -192,10 +194,10 @@ def test_a_typo_in_the_value_is_an_error_naming_the_allowed_values(capsys, tmp_p
 
 
 def test_a_version_without_the_record_stores_its_maps():
-    assert maps_stored({"codec": {"tactile": {"raster_mode": "nearest"}}})
-    assert not maps_stored({"codec": {"tactile": {"maps": "raw"}}})
-    with pytest.raises(ValueError, match="not one of"):
-        maps_stored({"codec": {"tactile": {"maps": "sometimes"}}})
+    assert MapStorage.of({"codec": {"tactile": {"raster_mode": "nearest"}}}).stores_maps
+    assert not MapStorage.of({"codec": {"tactile": {"maps": "raw"}}}).stores_maps
+    with pytest.raises(DatasetError, match="not one of"):
+        MapStorage.of({"codec": {"tactile": {"maps": "sometimes"}}})
 
 
 def test_auto_keeps_the_parents_choice_on_append_and_stores_maps_in_a_new_dataset(pair, tmp_path):
@@ -211,14 +213,14 @@ def test_auto_keeps_the_parents_choice_on_append_and_stores_maps_in_a_new_datase
         after = DatasetReader(copy)
         new_shards = [s["name"] for s in after.manifest["shards"] if s["name"] not in old_shards]
         names = [n for s in new_shards for n in tarfile.open(copy / SHARDS_DIR / s).getnames()]
-        assert new_shards and map_storage(after.manifest) == kind
+        assert new_shards and MapStorage.of(after.manifest).record == kind
         assert any(n.endswith(".exr") for n in names) == (kind == "stored")
     new = tmp_path / "new"
     assert ingest_cli("--pipeline", f"native={corpus / 'native'}", new) == 0
-    assert map_storage(DatasetReader(new).manifest) == "stored"
+    assert MapStorage.of(DatasetReader(new).manifest) is MapStorage.STORED
     no_raw = tmp_path / "no_raw"
     assert ingest_cli("--pipeline", f"native={corpus / 'native'}", "--set", "tactile.keep_raw=false", no_raw) == 0
-    assert map_storage(DatasetReader(no_raw).manifest) == "stored"
+    assert MapStorage.of(DatasetReader(no_raw).manifest) is MapStorage.STORED
 
 
 def test_an_explicit_raw_onto_stored_maps_is_refused(pair, tmp_path, capsys):
@@ -229,5 +231,5 @@ def test_an_explicit_raw_onto_stored_maps_is_refused(pair, tmp_path, capsys):
 
 
 def test_auto_can_be_written_out_and_is_the_default():
-    assert load_pipeline("opentouch").tactile.maps == "auto"
-    assert load_pipeline("opentouch").with_overrides(["tactile.maps=auto"]).tactile.maps == "auto"
+    assert load_pipeline("opentouch").tactile.maps is MapStorage.AUTO
+    assert load_pipeline("opentouch").with_overrides(["tactile.maps=auto"]).tactile.maps is MapStorage.AUTO

@@ -326,3 +326,23 @@ def test_constants_sent_once_give_the_same_batches(dataset):
     for a, b in zip(frames, stream):
         b = expand_batch(b, constants)
         assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_the_old_map_source_keyword_warns_and_still_chooses_the_maps(dataset):
+    """`map_source=` (renamed `maps_from=`, htdata/_moved.py renamed_keyword) works until REMOVED_IN, warning."""
+    best = TactileFrameDataset(dataset)
+    for old, new in (("auto", "best"), ("stored", "stored"), ("raw", "raw")):
+        with pytest.warns(DeprecationWarning, match=f"map_source='{old}'.*maps_from='{new}'"):
+            ds = TactileFrameDataset(dataset, map_source=old)
+        assert ds._builder.serving == TactileFrameDataset(dataset, maps_from=new)._builder.serving
+    with pytest.warns(DeprecationWarning, match="map_source"):
+        stream = TactileStream(dataset, map_source="stored")
+    with pytest.warns(DeprecationWarning, match="map_source"):
+        windows = TactileWindowDataset(dataset, window=2, map_source="auto")
+    assert torch.equal(next(iter(stream))["tactile"], best[0]["tactile"])
+    assert np.array_equal(windows.items, TactileWindowDataset(dataset, window=2).items)
+    assert TactileFrameDataset(dataset, maps_from="raw")._builder.serving.raw_required
+    with pytest.raises(TypeError, match="map_source= and maps_from="):
+        TactileFrameDataset(dataset, map_source="auto", maps_from="best")
+    with pytest.raises(ValueError, match="maps_from must be one of .*the old map_source='auto' is 'best'"):
+        TactileFrameDataset(dataset, maps_from="auto")
