@@ -15,6 +15,15 @@ The tree follows the data path (docs/DESIGN.md):
     sample/    the synthetic sample corpus
     benchmarks/, commands/, cli.py: `htdata bench` and the command line
 
+Root modules, below every package:
+
+    errors.py     the exceptions htdata raises on purpose (ConfigError, ArgumentError, DatasetError, EpisodeError ...)
+    faults.py     named crash points for the kill -9 tests of every writer
+    resources.py  where the project's data files (schemas, layouts, pipelines) live
+    pipeline.py   ingest pipelines as data: `pipelines/*.toml` -> PipelineConfig
+    settings.py   `--set [TARGET:]dotted.key=value`: the one parser of every override
+    _moved.py     old module names, importable until they are removed (deprecated)
+
 The front door:
 
     import htdata

@@ -2,6 +2,14 @@
 
 `ADAPTERS` maps the adapter name used in pipeline TOML files to its class;
 `get_adapter(name)` returns a fresh instance.
+
+    base.py           the adapter contract and the helpers adapters share
+    opentouch.py      OpenTouch-style: one HDF5 per scene, clips under `data/demo_NN`
+    touchanything.py  TouchAnything-style: one folder per episode
+    native.py         htdata-native: folders holding recording.json (docs/NATIVE_FORMAT.md)
+    hdf5safe.py       HDF5 a stranger wrote, opened safely (sizes checked, no byte of another file)
+    npzrows.py        forward row reads from one .npy member of an .npz, without loading the array
+    video.py          packet timestamps (no decode) and streaming RGB decode
 """
 
 from __future__ import annotations
