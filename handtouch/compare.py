@@ -32,7 +32,9 @@ from pathlib import Path
 
 import torch
 
-from handtouch.bench.evaluate import CopyLastModel, EvalConfig, ZerosModel, evaluate, prepare
+from handtouch.bench.evaluate import evaluate
+from handtouch.bench.items import EvalConfig, prepare
+from handtouch.bench.references import CopyLastModel, ZerosModel
 from handtouch.bench.report import COLUMNS, FULL_COLUMNS, markdown_table, write_text_atomic
 from handtouch.config import load_train_config
 from htdata.store.fsutil import write_json_atomic

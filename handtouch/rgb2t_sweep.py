@@ -31,7 +31,7 @@ import torch
 from htdata.read import keys
 from htdata.store.fsutil import write_json_atomic
 
-from .bench.evaluate import iterate_batches, load_part, subsample
+from .bench.items import iterate_batches, load_part, subsample
 from .bench.metrics import MapMetrics
 from .config import load_train_config
 from .rgb_encoder import to_unit_float

@@ -49,7 +49,7 @@ from .distributed import torch_threads
 from .progress import Rate
 from .rgb_encoder import TactileGridRGB, load_rgb_encoder, to_unit_float
 from htdata.read.torchdata import TactileFrameDataset
-from .bench.evaluate import iterate_batches, subsample
+from .bench.items import iterate_batches, subsample
 from .train import lr_at
 from htdata.store.manifest import load_manifest
 from htdata.store.manifest import load_episodes
@@ -351,7 +351,7 @@ def _flat(prep) -> dict:
     out = {}
     for k in (keys.TACTILE, keys.COVERAGE, keys.RGB, keys.HAND, keys.EPISODE, keys.FRAME):
         if k not in prep.frames[0]:
-            raise KeyError(f"prepared frames have no {k!r}: prepare them with handtouch.bench.evaluate.prepare")
+            raise KeyError(f"prepared frames have no {k!r}: prepare them with handtouch.bench.items.prepare")
         out[k] = torch.cat([b[k] for b in prep.frames])
     return out
 

@@ -48,9 +48,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from handtouch.bench.evaluate import (CopyLastModel, EvalConfig, PreparedPart, ZerosModel, collect_examples, evaluate,
-                                      load_part, prepare, reconstruct)
+from handtouch.bench.evaluate import evaluate, reconstruct
+from handtouch.bench.examples import collect_examples
+from handtouch.bench.items import EvalConfig, PreparedPart, load_part, prepare
 from handtouch.bench.metrics import MapMetrics
+from handtouch.bench.references import CopyLastModel, ZerosModel
 from handtouch.bench.report import render_predictions, write_results
 from handtouch.bench.verdicts import ZEROS
 from handtouch.config import ENCODERS as MODEL_ENCODERS

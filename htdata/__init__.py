@@ -5,15 +5,24 @@ The tree follows the data path (docs/DESIGN.md):
     source/    read a recording (adapters), pair its clocks (sync, lag), RGB preprocessing
     glove/     layouts, normalisation, calibration, rasterisation, taxel health
     format/    the on-disk format: member table, codecs, tar shards
-    ingest/    recordings -> a committed version (plan, units, commit)
     store/     versions, manifests, parts, snapshots, the writer lock, remote storage
-    read/      DatasetReader and the torch datasets
+    read/      DatasetReader, its version's metadata (DatasetMetadata) and the torch datasets
     inspect/   stats, health maps, previews, the dataset card
     export/    a version in LeRobot's format
-    curate/    split, rm/trim, merge, gc, renormalise: new versions from old
+    write/     what both writers share: repack (committed samples into new shards)
+    ingest/    recordings -> a committed version (pipeline, plan, units, commit)    } the two writers,
+    curate/    split, rm/trim, merge, gc, renormalise: new versions from old      } side by side
     validate/  `htdata validate`
-    sample/    the synthetic sample corpus
+    synthetic/ the synthetic corpus (`htdata sample`)
     benchmarks/, commands/, cli.py: `htdata bench` and the command line
+
+Root modules, below every package:
+
+    errors.py     the exceptions htdata raises on purpose (ConfigError, ArgumentError, DatasetError, EpisodeError ...)
+    faults.py     named crash points for the kill -9 tests of every writer
+    resources.py  where the project's data files (schemas, layouts, pipelines) live
+    settings.py   `--set [TARGET:]dotted.key=value`: the one parser of every override
+    _moved.py     old names and keywords, importable until REMOVED_IN (deprecated, each warns)
 
 The front door:
 

@@ -177,7 +177,7 @@ def _colour(tactile: np.ndarray, coverage: np.ndarray | None = None) -> np.ndarr
 def render_predictions(examples: dict[str, np.ndarray], path: str | Path, title: str = "") -> np.ndarray:
     """Rows: frames; columns: RGB, GT, inpaint (hidden part outlined), rgb2tactile, prediction, |pred-GT|.
 
-    `examples` as returned by evaluate.collect_examples. Writes a PNG, returns the BGR image.
+    `examples` as returned by examples.collect_examples. Writes a PNG, returns the BGR image.
     """
     n = len(examples["gt"])
     if n == 0:

@@ -1,1 +1,28 @@
-"""Benchmarks behind `htdata bench`: each returns rows (dicts); suite.py runs them side by side, report.py renders REPORT.md."""
+"""Benchmarks behind `htdata bench`: each returns rows (dicts); suite.py runs them side by side, report.py renders REPORT.md.
+
+    suite.py       runs the sections side by side (and the `htdata.bench_sections` entry points)
+    report.py      REPORT.md from the sections' rows
+    tables.py      markdown tables of benchmark rows: the one formatter every section uses
+    machine.py     the machine a benchmark ran on: CPUs, RAM, load, library versions
+    timing.py      small timing helpers shared by the sections
+    sources.py     real frames for the benchmarks: sample-corpus episodes read through the adapters
+    ingest.py      ingest throughput per adapter against the bare decode+resize+encode bound; memory vs length
+    scaling.py     ingest worker scaling (1 -> 2 workers), HT-Bench scale on paper from it
+    append.py      appending one episode to datasets of N and 10N episodes: wall time and bytes written
+    revisions.py   the same ingest under another revision of htdata, side by side
+    loader.py      read paths of a committed dataset vs the bare decode bound
+    dataloader.py  TactileFrameDataset through a torch DataLoader at 1 and N workers
+    index.py       index.npy at scale: open time and memory of a 1M / 10M-row index
+    codecs.py      tactile map codecs on real maps, against each glove's quantisation step
+    maplayouts.py  how one EXR map member is written, measured side by side on real maps
+    maps.py        maps stored or rendered from raw rows: bytes against read speed
+    raw.py         what keeping every raw glove row costs, what rendering maps from them gains
+    raster.py      rasterisation mode x glove layout: render speed vs taxel round-trip error
+    rawglove.py    "raw-count glove": baselines and noise floors scored against the generator's truth
+    rawglovecells.py  "raw-count glove", moving cells: the moving-cell rule against the generator's truth
+    lag.py         the tactile-video lag estimator: error against known lags, cost per episode minute
+    rgb.py         RGB: JPEG quality vs bytes vs PSNR, resize method vs time vs error
+    stats.py       `htdata stats` speed against the loader's tactile-only decode rate
+    validation.py  `htdata validate --deep` throughput at 1 and 2 workers
+    export.py      `htdata export lerobot` speed and size against htdata's own shards
+"""

@@ -74,7 +74,21 @@ def _chunk_file(n: int) -> tuple[int, int]:
 
 def export_lerobot(cfg: LeRobotExportConfig, progress: Progress | None = None,
                    on_total: Callable[[int], None] | None = None) -> dict:
-    """Write the export (see the module docstring); returns a summary dict."""
+    """Write the export (see the module docstring): built in a work folder beside OUT, moved into place at the end.
+
+    Args:
+        cfg: what to export and where (dataset, version, split/part, fps, maps, video codec, OUT, --force).
+        progress: called with the number of rows just written (1 per row), for a progress bar.
+        on_total: called once with the number of rows the export will write, before the first.
+
+    Returns:
+        A summary: episodes, frames, fps, resampled, tasks, hands, raw_features, video_keys, bytes, out.
+
+    Raises:
+        ValueError: a setting of `cfg` out of range, or an episode the export cannot place on its time grid.
+        ExportTargetRefused: an OUT the export may not write or replace (htdata/export/lerobot_out.py).
+        FileExistsError: OUT exists and `cfg.force` is not set.
+    """
     import pyarrow as pa
     import pyarrow.parquet as pq
 

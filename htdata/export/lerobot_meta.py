@@ -19,6 +19,7 @@ HTDATA_META = "meta/htdata"
 
 
 def part_of(plan, eid: str) -> str | None:
+    """The split part episode `eid` is exported in (None without a split, or when no part holds it)."""
     for part, ids in plan.parts.items():
         if eid in ids:
             return part
@@ -26,6 +27,22 @@ def part_of(plan, eid: str) -> str | None:
 
 
 def write_meta(reader, plan, cfg, work: Path, feats, stats, vstats, tasks, episode_rows, frames, pa, pq) -> None:
+    """Write meta/: episodes parquet, tasks.parquet, stats.json, info.json and htdata's own meta/htdata.
+
+    Args:
+        reader: the exported version, open.
+        plan: the export's plan (htdata/export/lerobot_plan.py `plan_export`).
+        cfg: the export's settings.
+        work: the export's work folder (meta/ is written under it).
+        feats: the feature table (`features(plan)`).
+        stats: feature name -> `FeatureStats` of the non-video features.
+        vstats: video key -> `VideoStats`.
+        tasks: task string -> task index, in index order.
+        episode_rows: one dict per exported episode: the rows of meta/episodes.
+        frames: rows written in all.
+        pa: the pyarrow module.
+        pq: pyarrow.parquet.
+    """
     meta = work / "meta"
     meta.mkdir(exist_ok=True)
     # episodes: one parquet (a row per episode is small)
@@ -63,7 +80,14 @@ def write_meta(reader, plan, cfg, work: Path, feats, stats, vstats, tasks, episo
 
 
 def write_htdata_meta(reader, plan, cfg, dest: Path) -> None:
-    """What LeRobot has no place for: masks (constant per glove), layouts, split assignment, episode ids."""
+    """What LeRobot has no place for: masks (constant per glove), layouts, split assignment, episode ids.
+
+    Args:
+        reader: the exported version, open.
+        plan: the export's plan.
+        cfg: the export's settings.
+        dest: the folder to create and write (meta/htdata of the work folder).
+    """
     dest.mkdir(parents=True)
     manifest = reader.manifest
     for hand in plan.hands:

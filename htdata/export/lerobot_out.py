@@ -30,7 +30,18 @@ def _is_dataset(folder: Path) -> bool:
 
 
 def check_out(out: Path, dataset: Path, force: bool) -> None:
-    """Refuse an OUT the export must not write or replace (see the module docstring)."""
+    """Refuse an OUT the export must not write or replace (see the module docstring).
+
+    Args:
+        out: where the export is to go.
+        dataset: the dataset exported (OUT may not be inside it or hold it).
+        force: whether a previous export at OUT may be replaced.
+
+    Raises:
+        ExportTargetRefused: OUT is a symlink or a file, inside or holding a dataset, or exists without
+            the marker of a previous export.
+        FileExistsError: OUT exists and `force` is not set.
+    """
     if out.is_symlink():
         raise ExportTargetRefused(f"{out}: is a symlink; give the real folder to export into")
     if out.exists() and not out.is_dir():
@@ -56,6 +67,11 @@ def check_out(out: Path, dataset: Path, force: bool) -> None:
 
 
 def write_marker(work: Path, cfg) -> None:
-    """The marker that lets a later `--force` recognise this folder as an export it wrote."""
+    """The marker that lets a later `--force` recognise this folder as an export it wrote.
+
+    Args:
+        work: the export's work folder (moved to OUT when the export is complete).
+        cfg: the export's settings (the dataset and version are recorded).
+    """
     doc = {"written_by": "htdata export lerobot", "dataset": str(cfg.dataset), "version": cfg.version}
     write_bytes_atomic(work / MARKER, (json.dumps(doc) + "\n").encode())

@@ -28,15 +28,18 @@ SOURCE_KEY = "htdata.frame_index"      # which stored frame a row is: the rows s
 
 
 def raw_key(hand: str) -> str:
+    """The feature name of `hand`'s raw glove rows ("left" / "right")."""
     return f"observation.tactile.{hand}.raw"
 
 
 def map_key(hand: str) -> str:
+    """The video feature name of `hand`'s tactile maps (exported with `maps`)."""
     return f"observation.tactile.{hand}.map"
 
 
 @dataclass
 class LeRobotExportConfig:
+    """What `htdata export lerobot` exports and where: one version (or a split part) of `dataset` into `out`."""
     dataset: str
     out: Path
     version: int | None = None
@@ -50,6 +53,7 @@ class LeRobotExportConfig:
     force: bool = False
 
     def validate(self) -> None:
+        """Raise ValueError naming the option (--part, --fps, crf, gop, codec, OUT) whose value cannot be exported."""
         if self.part is not None and self.split is None:
             raise ValueError("--part needs --split NAME")
         if self.fps is not None and not (self.fps > 0 and float(self.fps).is_integer()):
@@ -99,7 +103,21 @@ class _Plan:
 
 
 def plan_export(reader: DatasetReader, cfg: LeRobotExportConfig) -> _Plan:
-    """Which episodes, in which order, with which features; errors name the episode."""
+    """Which episodes, in which order, with which features; errors name the episode.
+
+    Args:
+        reader: the version to export, open.
+        cfg: the export's settings (split / part select the episodes, fps a resampling rate, maps the map videos).
+
+    Returns:
+        The plan: episode positions in export order, split parts, hands, raw feature slots, layouts,
+        fps (and whether rows are resampled to it), video keys, whether any frame holds RGB.
+
+    Raises:
+        ValueError: no episode selected, a layout without a raw grid, a dataset of format < 3 (no raw
+            rows), or episodes at different frame rates without `cfg.fps`; an unknown split or part
+            raises what the reader raises.
+    """
     split_doc, parts = None, {}
     if cfg.split is None:
         positions = reader.episode_positions()
@@ -161,6 +179,8 @@ def _has_rgb(reader: DatasetReader, pos: int) -> bool:
 
 
 def features(plan: _Plan) -> dict:
+    """meta/info.json's feature table for `plan`: videos, raw glove rows (flat, the grid in "info"),
+    observation.present, the source frame index and LeRobot's bookkeeping columns."""
     video_info = {"video.height": CANVAS, "video.width": CANVAS, "video.codec": "h264", "video.pix_fmt": "yuv420p",
                   "video.is_depth_map": False, "video.fps": plan.fps, "video.channels": 3, "has_audio": False}
     feats: dict = {}

@@ -22,6 +22,7 @@ class FeatureStats:
         self.qsum = None               # frame-weighted sum of per-episode quantiles
 
     def add_episode(self, values: np.ndarray) -> None:
+        """Add one episode's values (N, ...): one row per frame; an empty episode adds nothing."""
         if len(values) == 0:
             return
         x = np.asarray(values, np.float64)
@@ -38,6 +39,7 @@ class FeatureStats:
         self.count += n
 
     def result(self) -> dict | None:
+        """LeRobot's stats of the feature as lists (min, max, mean, std, count, q01..q99); None when empty."""
         if not self.count:
             return None
         mean = self.sum / self.count
@@ -56,11 +58,13 @@ class VideoStats:
         self.frames = 0
 
     def add(self, frame: np.ndarray) -> None:
+        """Add one (H, W, C) uint8 frame."""
         for c in range(self.hist.shape[0]):
             self.hist[c] += np.bincount(frame[..., c].ravel(), minlength=256)
         self.frames += 1
 
     def result(self) -> dict | None:
+        """LeRobot's image stats as (C,1,1) lists in [0,1] units, with the frame count; None without frames."""
         if not self.frames:
             return None
         levels = np.arange(256) / 255.0

@@ -16,6 +16,15 @@ class VideoWriter:
     """One mp4 of 224x224 RGB frames with explicit pts (seconds from the episode's first frame)."""
 
     def __init__(self, path: Path, fps: int, codec: str, crf: int, gop: int):
+        """Open `path` for writing (its folder is created).
+
+        Args:
+            path: the mp4 to write.
+            fps: the stream's nominal rate (the frames' times are their own, `add`'s `t_s`).
+            codec: "libx264" or "libsvtav1".
+            crf: the encoder's constant rate factor (quality).
+            gop: frames between keyframes.
+        """
         import av
 
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -31,6 +40,16 @@ class VideoWriter:
         self._av = av
 
     def add(self, rgb: np.ndarray, t_s: float, where: str) -> None:
+        """Encode one frame.
+
+        Args:
+            rgb: (224, 224, 3) uint8 RGB.
+            t_s: its time in seconds from the episode's first frame.
+            where: names the frame in an error.
+
+        Raises:
+            ValueError: `t_s` does not come after the previous frame's (on the 1/90000 s clock).
+        """
         pts = int(round(t_s / VIDEO_TIME_BASE))
         if pts <= self.last_pts:
             raise ValueError(f"{where}: timestamp {t_s:.6f} s does not come after the previous frame's")
@@ -41,6 +60,7 @@ class VideoWriter:
             self.container.mux(packet)
 
     def close(self) -> None:
+        """Flush the encoder and close the file."""
         for packet in self.stream.encode():
             self.container.mux(packet)
         self.container.close()

@@ -4,7 +4,8 @@
     layouts.py      glove layouts (schemas/layouts/*.json): blocks of raw cells -> canvas places
     activity.py     which raw cells move (fast noise + slow rest wander): live cells a layout leaves out
     layoutsuggest.py a starting layout from the cells that move in recordings (`htdata layouts suggest`)
-    normalise.py    glove units -> [0,1] (baselines, noise floor, full scale)
+    normalise.py    glove units -> [0,1]: the settings and the Normaliser that applies them
+    baselinefit.py  fitting the per-taxel baseline and noise floor (first frames, or the whole episode)
     normalisesettings.py  a pipeline's [normalise.<layout>] tables over each layout's value block
     restlevel.py    quiet (resting) frames; the per-glove calibration file
     contact.py      when a hand is in contact, from its calibration

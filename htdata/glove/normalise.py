@@ -39,32 +39,8 @@ The formula, in full (raw-count gloves, "direct": rest ~550, full scale 1023):
 1022 on a 1023 glove reads 0.46. Setting max_value to that range (472)
 puts every raw value above it (all of them: rest is 550) out of range.
 
-Baselines chosen by activity (episode-wide: the ingest reads the episode's
-paired rows once more before normalising it, `fit_episode`):
-- "quietest": the per-taxel median of the quietest span of `rest_seconds`
-  (default 1 s): the span whose mean live value is lowest (a press raises
-  the value, so the hands are most at rest there), wherever it lies. A clip
-  that starts mid-grasp keeps its grip instead of taking it for rest.
-- "percentile": the per-taxel `baseline_percentile` (default 5) percentile
-  over the whole episode: keeps every press a taxel holds for less than
-  95% of the episode.
-- "drift": a rest level that follows slow drift: per window of
-  `drift_window_s` seconds (default 30), the per-taxel median of the
-  window's quiet frames (those whose mean live value stays near the window's
-  lowest: `quiet_frames`), knots at the window centres, linearly interpolated between them
-  by the raw row's position in the episode (the line through the first / last
-  two knots continued beyond the first / last centre). Stored as knots (`baseline` is then (K,H,W), `knot_rows`
-  their row positions); `apply` needs the rows' positions (`rows=`).
-For these three, the spread of `noise_k` is measured on the WHOLE episode's
-resting frames (`restlevel.resting_frames`: quiet in their `drift_window_s`
-window and near the episode's low): 1.4826 x the
-median distance of a taxel's resting values from its baseline
-(`restlevel.rest_spread`), plus half a quantisation step, so rest wander
-widens the floor; the quietest second alone left 7-9% of a real glove's
-resting pixels lit (issue 27).
-
-A floor (noise_k or noise_floor > 0) is never below the layout's step (`value.step / max_value`): a
-taxel still in its rest window (spread 0) would otherwise flicker at one count.
+Fitting the baseline and noise floor (from the first frames, or on the whole episode for the
+baselines chosen by activity: quietest, percentile, drift) is htdata.glove.baselinefit's job.
 """
 
 from __future__ import annotations
@@ -73,8 +49,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from htdata.glove.restlevel import (load_taxel_calibration, nan_quiet, quiet_frames, rest_spread, resting_frames,
-                                    windows)
+from htdata.errors import ConfigError, DatasetError
+from htdata.glove.baselinefit import drift_baseline_at, fit_first_frames, fit_whole_episode
+from htdata.glove.restlevel import load_taxel_calibration
 
 CONVENTIONS = ("inverted", "direct")
 BASELINES = ("none", "first_frame", "rest_window", "quietest", "percentile", "drift")
@@ -117,35 +94,35 @@ class NormaliseConfig:
 
     def validate(self, where: str = "normalise") -> "NormaliseConfig":
         if self.convention not in CONVENTIONS:
-            raise ValueError(f"{where}: convention must be one of {CONVENTIONS}, got {self.convention!r}")
+            raise ConfigError(f"{where}: convention must be one of {CONVENTIONS}, got {self.convention!r}")
         if not (isinstance(self.max_value, (int, float)) and np.isfinite(self.max_value)
                 and self.max_value > 0):
-            raise ValueError(f"{where}: max_value must be a finite number > 0, got {self.max_value!r}")
+            raise ConfigError(f"{where}: max_value must be a finite number > 0, got {self.max_value!r}")
         if self.baseline not in BASELINES:
-            raise ValueError(f"{where}: baseline must be one of {BASELINES}, got {self.baseline!r}")
+            raise ConfigError(f"{where}: baseline must be one of {BASELINES}, got {self.baseline!r}")
         if not isinstance(self.rest_frames, int) or self.rest_frames < 1:
-            raise ValueError(f"{where}: rest_frames must be an integer >= 1, got {self.rest_frames!r}")
+            raise ConfigError(f"{where}: rest_frames must be an integer >= 1, got {self.rest_frames!r}")
         if not (isinstance(self.scale, (int, float)) and np.isfinite(self.scale) and self.scale > 0):
-            raise ValueError(f"{where}: scale must be a finite number > 0, got {self.scale!r}")
+            raise ConfigError(f"{where}: scale must be a finite number > 0, got {self.scale!r}")
         if not isinstance(self.clip, bool):
-            raise ValueError(f"{where}: clip must be true or false, got {self.clip!r}")
+            raise ConfigError(f"{where}: clip must be true or false, got {self.clip!r}")
         for name in ("noise_floor", "noise_k"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
                     and 0 <= value):
-                raise ValueError(f"{where}: {name} must be a finite number >= 0, got {value!r}")
+                raise ConfigError(f"{where}: {name} must be a finite number >= 0, got {value!r}")
         if self.noise_floor >= 1:
-            raise ValueError(f"{where}: noise_floor must be < 1 (unit values), got {self.noise_floor!r}")
+            raise ConfigError(f"{where}: noise_floor must be < 1 (unit values), got {self.noise_floor!r}")
         if self.noise_k > 0 and self.baseline not in NOISE_K_BASELINES:
-            raise ValueError(f"{where}: noise_k needs baseline = \"rest_window\" (the floor is k x the rest "
-                             f"window's spread) or one of {EPISODE_BASELINES}, got baseline = {self.baseline!r}")
+            raise ConfigError(f"{where}: noise_k needs baseline = \"rest_window\" (the floor is k x the rest "
+                              f"window's spread) or one of {EPISODE_BASELINES}, got baseline = {self.baseline!r}")
         for name, lo, hi in (("rest_seconds", 0.0, None), ("baseline_percentile", 0.0, 100.0),
                              ("drift_window_s", 0.0, None)):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
                     and value > lo and (hi is None or value <= hi)):
-                raise ValueError(f"{where}: {name} must be a finite number > {lo:g}"
-                                 f"{'' if hi is None else f' and <= {hi:g}'}, got {value!r}")
+                raise ConfigError(f"{where}: {name} must be a finite number > {lo:g}"
+                                  f"{'' if hi is None else f' and <= {hi:g}'}, got {value!r}")
         return self
 
     @classmethod
@@ -228,37 +205,10 @@ class Normaliser:
         unit = self.to_unit(self._check(first_chunk))
         if unit.shape[0] == 0:
             raise ValueError(f"layout {self.layout_id}: cannot fit a baseline on zero frames")
-        window = unit[:1] if self.cfg.baseline == "first_frame" else unit[: self.cfg.rest_frames]
-        # Median over finite samples only; a taxel never finite in the window gets baseline 0.
-        finite = np.isfinite(window)
-        filled = np.where(finite, window, np.nan)
-        n_finite = finite.sum(axis=0)
-        base = np.zeros(self.grid, dtype=np.float32)
-        has = n_finite > 0
-        if has.any():
-            base[has] = np.nanmedian(filled[:, has], axis=0)
-        self.baseline = np.clip(base, 0.0, 1.0).astype(np.float32)
-        if self.cfg.noise_k > 0:
-            spread = np.zeros(self.grid, dtype=np.float32)
-            if has.any():
-                mad = np.nanmedian(np.abs(filled[:, has] - base[has]), axis=0)
-                spread[has] = np.float32(1.4826) * mad
-            self.floor = np.maximum(np.float32(self.cfg.noise_floor) + np.float32(self.cfg.noise_k) * spread,
-                                    self.min_floor).astype(np.float32)
+        self.baseline, floor = fit_first_frames(unit, self.cfg, self.min_floor)
+        if floor is not None:
+            self.floor = floor
         return self.baseline
-
-    def live_level(self, unit: np.ndarray) -> np.ndarray:
-        """(T,) mean live value of each frame (zeros without live taxels)."""
-        return np.nanmean(unit[:, self.live_mask], axis=1) if self.live_mask.any() else np.zeros(len(unit))
-
-    def quietest_span(self, unit: np.ndarray, fps: float) -> slice:
-        """The `rest_seconds` span (>= 2 frames) of (T,H,W) unit values whose mean live value is lowest."""
-        T = unit.shape[0]
-        n = min(T, max(2, int(round(self.cfg.rest_seconds * fps))))
-        level = np.nan_to_num(self.live_level(unit), nan=np.inf, neginf=np.inf)   # a damaged frame: never quiet
-        run = np.convolve(level, np.ones(n), mode="valid")    # sum over each span of n frames
-        start = int(np.argmin(run)) if np.isfinite(run).any() else 0
-        return slice(start, start + n)
 
     def fit_episode(self, raw, fps: float, rows=None) -> np.ndarray:
         """Fit baseline="quietest" / "percentile" / "drift" (and the noise floor) on a whole episode's rows.
@@ -275,43 +225,15 @@ class Normaliser:
         if not (np.isfinite(fps) and fps > 0):
             raise ValueError(f"layout {self.layout_id}: fit_episode needs fps > 0, got {fps!r}")
         rows = np.arange(T) if rows is None else np.asarray(rows, np.int64)
-        quiet = unit[self.quietest_span(unit, fps)]
-        with np.errstate(invalid="ignore"), nan_quiet():
-            if self.cfg.baseline == "quietest":
-                base = np.nanmedian(quiet, axis=0)
-            elif self.cfg.baseline == "percentile":
-                base = np.nanpercentile(unit, self.cfg.baseline_percentile, axis=0)
-            else:
-                base, self.knot_rows = self._drift_knots(unit, rows, fps)
-        self.baseline = np.clip(np.nan_to_num(base, nan=0.0), 0.0, 1.0).astype(np.float32)
-        if self.cfg.noise_k > 0:
-            rest = np.flatnonzero(resting_frames(self.live_level(unit), round(self.cfg.drift_window_s * fps)))
-            at = self.baseline_at(rows[rest]) if self.cfg.baseline == "drift" else self.baseline
-            # + half a step: counts come in whole steps, so the median distance is only known to a step
-            spread = np.float32(self.cfg.noise_k) * np.nan_to_num(rest_spread(unit[rest] - at), nan=0.0)
-            self.floor = np.maximum(np.float32(self.cfg.noise_floor) + spread + self.min_floor / 2,
-                                    self.min_floor).astype(np.float32)
+        self.baseline, self.knot_rows, floor = fit_whole_episode(unit, rows, fps, self.cfg, self.live_mask,
+                                                                 self.min_floor)
+        if floor is not None:
+            self.floor = floor
         return self.baseline
 
-    def _drift_knots(self, unit: np.ndarray, rows: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
-        """((K,H,W) rest level per window of drift_window_s: median of its quiet frames, (K,) centre rows)."""
-        level, knots, centres = self.live_level(unit), [], []
-        for a, b in windows(unit.shape[0], round(self.cfg.drift_window_s * fps)):
-            quiet = np.flatnonzero(quiet_frames(level[a:b])) + a
-            knots.append(np.nanmedian(unit[quiet], axis=0))
-            centres.append(float(np.mean(rows[a:b])))
-        return np.stack(knots), np.asarray(centres, np.float32)
-
     def baseline_at(self, rows) -> np.ndarray:
-        """(T,H,W) drift baseline at raw row positions `rows` (linear between knots, constant outside)."""
-        rows = np.asarray(rows, np.float32)
-        knots, at = self.baseline, self.knot_rows
-        if len(at) == 1:
-            return np.broadcast_to(knots[0], (len(rows), *self.grid))
-        k = np.clip(np.searchsorted(at, rows, side="right") - 1, 0, len(at) - 2)
-        # linear between knots and continued past the first / last centre (at most half a window: the ends)
-        frac = ((rows - at[k]) / np.maximum(at[k + 1] - at[k], 1e-6))[:, None, None]
-        return (knots[k] * (1 - frac) + knots[k + 1] * frac).astype(np.float32)
+        """(T,H,W) drift baseline at raw row positions `rows` (linear between knots, continued past the ends)."""
+        return drift_baseline_at(self.baseline, self.knot_rows, rows)
 
     def fitted(self) -> dict[str, np.ndarray]:
         """The per-episode fitted arrays ({} when the config fits nothing): "baseline", "noise_floor"."""
@@ -333,25 +255,25 @@ class Normaliser:
             if name == "knot_rows" or (name == "baseline" and self.cfg.baseline == "drift"):
                 continue     # knots (K,H,W) and their rows (K,): checked below
             if arr.shape != self.grid:
-                raise ValueError(f"layout {self.layout_id}: fitted {name} has shape {arr.shape}, expected {self.grid}")
+                raise DatasetError(f"layout {self.layout_id}: fitted {name} has shape {arr.shape}, expected {self.grid}")
         if self.cfg.fits:
             missing = {"baseline", "noise_floor"} - set(fitted)
             if missing:
-                raise ValueError(f"layout {self.layout_id}: fitted calibration lacks {sorted(missing)}")
+                raise DatasetError(f"layout {self.layout_id}: fitted calibration lacks {sorted(missing)}")
             self.baseline = np.asarray(fitted["baseline"], dtype=np.float32)
             self.floor = np.asarray(fitted["noise_floor"], dtype=np.float32)
             if self.cfg.taxel_calibration_sha256:
                 if "offset" not in fitted or "gain" not in fitted:
-                    raise ValueError(f"layout {self.layout_id}: fitted calibration lacks the taxel calibration "
-                                     f"(offset, gain)")
+                    raise DatasetError(f"layout {self.layout_id}: fitted calibration lacks the taxel calibration "
+                                       f"(offset, gain)")
                 self.offset = np.asarray(fitted["offset"], np.float32)
                 self.gain = np.asarray(fitted["gain"], np.float32)
             if self.cfg.baseline == "drift":
                 knots = self.baseline.reshape(-1, *self.grid)
                 rows = np.asarray(fitted.get("knot_rows", []), np.float32).reshape(-1)
                 if len(rows) != len(knots) or len(rows) == 0:
-                    raise ValueError(f"layout {self.layout_id}: drift baseline has {len(knots)} knots and "
-                                     f"{len(rows)} knot rows")
+                    raise DatasetError(f"layout {self.layout_id}: drift baseline has {len(knots)} knots and "
+                                       f"{len(rows)} knot rows")
                 self.baseline, self.knot_rows = knots, rows
         return self
 

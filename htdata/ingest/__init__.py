@@ -7,6 +7,10 @@ htdata/commands/ingest.py).
                 (reused units are re-packed by htdata/write/repack.py, shared with curate)
     chunk.py    one chunk of glove rows: read, check, normalise, out-of-range policy, raw rows per frame
     episode.py  `EpisodeStream`: one episode as a stream of canonical frames, then its tally (shared with the benchmarks)
+    frame.py    `Frame` (one kept frame, decoded) and `frame_errors` (errors name the episode and frame)
+    rgbframes.py  an episode's RGB frames: the video read once in file order, RGB-only frames kept
+    fullrate.py every recorded frame kept: which sample stores which raw glove row, RGB frames without tactile
+    tally.py    what one episode's ingest learned (`EpisodeTally`), for its record in episodes.jsonl
     unit.py     one work unit: encode (format.encode_sample) + spool + shards + done record; error policy
     encodepool.py  samples encoded in threads (the EXR binding and cv2 release the GIL), frame order kept
     workdir.py  the output directory while ingesting: unit records, leftovers, resume

@@ -20,7 +20,7 @@ from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 
 from htdata.format.table import CodecSettings, encode_sample
-from htdata.ingest.episode import frame_errors
+from htdata.ingest.frame import frame_errors
 
 # $HTDATA_ENCODE_THREADS: 0 encodes inline on the calling thread. A pool worker gets it from its share of
 # the cores (executors.limit_threads): threads only pay where a core is spare; with as many workers as

@@ -24,14 +24,12 @@ and frame: ~0.7 KB a frame for a 169-taxel glove, ~25 MB for an hour at 30 fps).
 
 Error policy: everything raised while a frame is being processed leaves the
 generator as an `EpisodeError` naming file, episode and that frame
-(`frame_errors`); the caller decides what a failed episode means (the
-ingest unit records it and goes on with the next episode).
+(`frame_errors`, htdata/ingest/frame.py with `Frame`). The RGB side (the video
+read once in file order, RGB-only frames) is htdata/ingest/rgbframes.py.
 """
 
 from __future__ import annotations
 
-from contextlib import contextmanager
-from dataclasses import dataclass, field
 from typing import Iterator
 
 import numpy as np
@@ -39,58 +37,18 @@ import numpy as np
 from htdata.errors import EpisodeError
 from htdata.format.table import HANDS
 from htdata.ingest.chunk import frame_raw_rows, read_chunk
-from htdata.ingest.fullrate import FrameQueue, RawRows, RowPlan
+from htdata.ingest.frame import Frame, frame_errors
+from htdata.ingest.fullrate import FrameQueue, RowPlan
+from htdata.ingest.rgbframes import RgbOnlyFrames, rgb_source
 from htdata.ingest.tally import EpisodeTally
 from htdata.ingest.timing import StageClock
 from htdata.glove.layouts import Layout, load_layout
 from htdata.glove.normalise import Normaliser
 from htdata.ingest.pipeline import PipelineConfig
 from htdata.glove.rasterise import Rasteriser
-from htdata.source.rgb import to_square_224
 from htdata.format.shardio import sample_key
 from htdata.source.lag import episode_lag
 from htdata.source.sync import SyncResult, pair
-
-
-@dataclass
-class Frame:
-    """What one kept frame's sample needs, decoded (see htdata.format.table for the sample dict)."""
-    key: str                       # sample key (episode id + frame index)
-    source_frame: int              # RGB frame index in the source
-    meta: dict                     # the sample's JSON member
-    rgb: np.ndarray | None         # (size,size,3) uint8 RGB; None when RGB was not asked for
-    maps: dict[str, np.ndarray]    # hand -> (224,224) float32 in [0,1]
-    bends: dict[str, np.ndarray] = field(default_factory=dict)   # hand -> (K,) float32
-    # hand -> rows gathered while the frame waits (htdata.ingest.fullrate); arrays once `finish_raw` ran
-    raw: dict = field(default_factory=dict)
-
-    def finish_raw(self, grids: dict[str, tuple[int, int]]) -> "Frame":
-        """Turn the gathered raw rows into (R,H,W) arrays in time order and name them in meta."""
-        if self.raw and isinstance(next(iter(self.raw.values())), RawRows):
-            arrays, t_ns, rows, paired = {}, {}, {}, {}
-            for h, rr in self.raw.items():
-                arrays[h], info = rr.finish(grids[h], None)
-                t_ns[h], rows[h], paired[h] = info["t_ns"], info["row"], info["paired"]
-            self.raw = arrays
-            self.meta.update({"raw_t_ns": t_ns, "raw_row": rows, "raw_paired": paired})
-        return self
-
-    def sample(self) -> dict:
-        return {"meta": self.meta, "rgb": self.rgb, "tactile": self.maps, "bend": self.bends, "raw": self.raw}
-
-
-@contextmanager
-def frame_errors(ref, frame: int | None):
-    """Whatever is raised inside names this episode and `frame` (an EpisodeError keeps its own frame)."""
-    try:
-        yield
-    except EpisodeError as exc:
-        named = exc.at_frame(frame)
-        if named is exc:
-            raise
-        raise named from exc
-    except Exception as exc:
-        raise EpisodeError(ref, frame, f"{type(exc).__name__}: {exc}") from exc
 
 
 _RASTERS: dict[tuple[int, str], tuple[Layout, Rasteriser]] = {}
@@ -111,41 +69,6 @@ def planned_layouts(ref, hands: list[str]) -> dict[str, Layout]:
         raise ValueError(f"episode {ref.episode_id}: no resolved layout for hand(s) {missing}; "
                          f"plan the episode first (htdata.ingest.plan.resolve_layouts)")
     return {h: load_layout(ref.layout_files[h]) for h in hands}
-
-
-class RgbFetcher:
-    """Hand out RGB frames by index while reading the video once, in file order.
-
-    Frames wanted later (only when timestamps were out of file order) wait as
-    resized arrays; unwanted frames are skipped without resizing.
-    """
-
-    def __init__(self, ref, frames, wanted: np.ndarray, resize, clock: StageClock):
-        self.ref = ref
-        self.frames = iter(frames)
-        self.wanted = set(int(i) for i in wanted)
-        self.resize = resize
-        self.clock = clock
-        self.pending: dict[int, np.ndarray] = {}
-
-    def get(self, index: int) -> np.ndarray:
-        index = int(index)
-        while index not in self.pending:
-            try:
-                with self.clock.stage("decode"):
-                    i, frame = next(self.frames)
-            except StopIteration:
-                raise EpisodeError(self.ref, index, "RGB stream ended before this frame") from None
-            i = int(i)
-            if i in self.wanted:
-                with self.clock.stage("resize"):
-                    self.pending[i] = self.resize(frame, i)
-        self.wanted.discard(index)
-        return self.pending.pop(index)
-
-    def discard(self, index: int) -> None:
-        self.wanted.discard(int(index))
-        self.pending.pop(int(index), None)
 
 
 def _pair_clocks(ref, cfg: PipelineConfig, streams, hands: list[str], adapter) -> SyncResult:
@@ -208,56 +131,6 @@ def _frame_maps(kept: dict, n: int, rasters: dict, clock: StageClock) -> dict:
         return {h: rasters[h].render(v[n:n + 1])[0] for h, v in kept.items()}
 
 
-def _rgb_source(ref, cfg: PipelineConfig, streams, sync, clock: StageClock, with_rgb: bool):
-    """(RgbFetcher or None, unpaired RGB frames to keep): none of either for a glove-only recording."""
-    if not (with_rgb and streams.has_video):
-        return None, []
-    rgb_cfg = cfg.rgb
-    unpaired = _unpaired_rgb(streams, sync) if rgb_cfg.keep_unpaired else []
-
-    def resize(frame, i):
-        return to_square_224(frame, rgb_cfg.size, rgb_cfg.crop, rgb_cfg.interpolation,
-                             where=f"{ref.source_ref} [{ref.episode_id}] frame {i}")
-
-    wanted = np.concatenate([sync.rgb_index, np.asarray([i for _, i, _ in unpaired], dtype=np.int64)])
-    return RgbFetcher(ref, streams.iter_rgb(), wanted, resize, clock), unpaired
-
-
-def _unpaired_rgb(streams, sync) -> list[tuple[int, int, str]]:
-    """(t_rgb_ns, rgb index, reason) of the RGB frames the pairing dropped, in time order."""
-    ts = np.asarray(streams.rgb_timestamps_ns, dtype=np.int64)
-    # a frame stamped like another has no time of its own (sync kept the first): it stays dropped, counted
-    return sorted((int(ts[i]), int(i), reason) for i, reason in sync.dropped if reason != "duplicate_timestamp")
-
-
-class _RgbOnlyFrames:
-    """RGB frames without tactile, handed out in time order between the paired frames (htdata.ingest.fullrate)."""
-
-    def __init__(self, ref, tally: EpisodeTally, fetcher, unpaired: list[tuple[int, int, str]]):
-        self.ref, self.tally, self.fetcher = ref, tally, fetcher
-        self.unpaired = unpaired
-        self.next = 0
-
-    def before(self, when: tuple[int, int] | None) -> Iterator["Frame"]:
-        """Frames of the sync-dropped RGB frames before (t, index) `when` (all the rest when None)."""
-        while self.next < len(self.unpaired) and (when is None or self.unpaired[self.next][:2] < when):
-            t, i, reason = self.unpaired[self.next]
-            self.next += 1
-            yield self.frame(t, i, reason)
-
-    def frame(self, t_rgb: int, i: int, reason: str) -> "Frame":
-        ref, tally = self.ref, self.tally
-        with frame_errors(ref, i):
-            rgb = self.fetcher.get(i)
-        key = sample_key(ref.episode_id, tally.frames)
-        meta = {"key": key, "episode_id": ref.episode_id, "frame_index": tally.frames, "source_frame": i,
-                "t_rgb_ns": t_rgb, "t_tactile_ns": {}, "sync_offset_ns": {},
-                "hands": {h: False for h in HANDS}, "rgb_only": reason}
-        tally.frames += 1
-        tally.rgb_only[reason] = tally.rgb_only.get(reason, 0) + 1
-        return Frame(key=key, source_frame=i, meta=meta, rgb=rgb, maps={}, bends={}, raw={})
-
-
 def _frame_meta(ref, sync, k: int, rgb_index: int, frame_index: int, hands: list[str]) -> dict:
     """The sample's JSON member for synchronised frame `k` (raw_* fields are added by Frame.finish_raw)."""
     key = sample_key(ref.episode_id, frame_index)
@@ -296,13 +169,13 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
             _fit_episode_baselines(ref, cfg, adapter, streams, sync, normalisers)
         rasters = {h: rasteriser_for(layouts[h], cfg.tactile.raster_mode) for h in hands}
         keep_bend = {h: cfg.tactile.keep_bend and len(layouts[h].bend_cells) > 0 for h in hands}
-        fetcher, unpaired = _rgb_source(ref, cfg, streams, sync, clock, with_rgb)
+        fetcher, unpaired = rgb_source(ref, cfg, streams, sync, clock, with_rgb)
         plans = ({h: RowPlan.build(streams.tactile_timestamps_ns[h], sync.tactile_index[h], sync.t_rgb_ns)
                   for h in hands} if cfg.tactile.keep_raw else {})
         tally.count_row_plans(plans)
         grids = {h: tuple(layouts[h].grid) for h in hands}
         queue = FrameQueue(lambda f: f.finish_raw(grids))
-        emit = _RgbOnlyFrames(ref, tally, fetcher, unpaired)
+        emit = RgbOnlyFrames(ref, tally, fetcher, unpaired)
         total = int(sync.rgb_index.size)
         chunk = cfg.tactile.chunk_frames
         for start in range(0, total, chunk):

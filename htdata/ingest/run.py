@@ -89,10 +89,28 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
            layout_dirs: tuple = (), command: str = "htdata ingest", verify_sources: bool = False) -> dict:
     """Ingest (or resume, or append to) the dataset at `out`; returns the report (also reports/ingest.json).
 
-    Holds the dataset's writer lock throughout. `layout_dirs` are searched for
-    layout ids before $HTDATA_LAYOUTS and the shipped layouts (`--layouts DIR`). Source files of the
-    episodes to ingest are hashed and checked against checksum lists (`verify_sources`: refuse a mismatch
-    or an unlisted file; htdata/ingest/sourcesums.py).
+    Holds the dataset's writer lock throughout. Source files of the episodes to ingest are
+    hashed and checked against checksum lists when asked (htdata/ingest/sourcesums.py).
+
+    Args:
+        sources: the recordings to ingest, each a folder with the pipeline that reads it (`Source`).
+        out: the dataset folder: new (created), a dataset to append to, or an ingest to resume.
+        workers: worker processes of the "process" executor (0: inline, in this process); Ray workers otherwise.
+        executor: "process" or "ray" (htdata/ingest/executors.py).
+        address: the Ray cluster to join (executor "ray" only).
+        retries: how often a failed work unit is run again before it counts as failed.
+        progress: show a progress bar on stderr.
+        layout_dirs: folders searched for layout ids before $HTDATA_LAYOUTS and the shipped layouts (`--layouts`).
+        command: the command line recorded in the lock and the new version.
+        verify_sources: refuse a source file whose sha256 differs from its SHA256SUMS line, or is not listed.
+
+    Returns:
+        The ingest report (episodes ingested, failures, notes, timing, the committed version).
+
+    Raises:
+        ValueError: pipelines or settings that disagree (with each other or with the dataset), an `out`
+            that is not a dataset, a source folder with no recording, or no episode ingested into a new dataset.
+        DatasetLocked: another writer holds the dataset.
     """
     t_start = time.perf_counter()
     check_settings_agree(sources)
@@ -129,24 +147,35 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         if lock.note:
             report["notes"].append(lock.note)
         write_bytes_atomic(out / INGEST_REPORT, dumps(report))   # explains a run that commits nothing too
-        if parent is None and report["episodes_ingested"] == 0:
-            shown = "; ".join(failure_line(f) for f in report["failures"][:3])
-            more = f"; ... {len(report['failures']) - 3} more" if len(report["failures"]) > 3 else ""
-            raise ValueError(f"no episode could be ingested ({len(report['failures'])} failures); see "
-                             f"{out / INGEST_REPORT}: {shown}{more}")
+        if parent is None:
+            check_ingested_something(report, out)
         report["timing"].update(plan_s=t_run - t_start, run_s=t_ran - t_run)
-        if report["episodes_ingested"] or plan.relabelled:
-            manifest = commit(out, sources, records, plan, command)
-            report["version"] = manifest["version"]
-        else:
-            report["version"] = parent.version
-            report["notes"].append(f"nothing changed: version {parent.version} stays current")
-            if parent.version is not None and restore_pointer(out, parent.version):   # a lost or stale pointer
-                report["notes"].append(f"{MANIFEST_FILE} rewritten from version {parent.version}'s file")
+        report["version"] = _commit_or_keep(out, sources, records, plan, parent, command, report)
     report["timing"]["total_s"] = time.perf_counter() - t_start
     report["timing"]["commit_s"] = report["timing"]["total_s"] - (t_ran - t_start)
     write_bytes_atomic(out / INGEST_REPORT, dumps(report))
     return report
+
+
+def check_ingested_something(report: dict, out: Path) -> None:
+    """A new dataset into which no episode could be ingested is an error naming the first failures."""
+    if report["episodes_ingested"] == 0:
+        shown = "; ".join(failure_line(f) for f in report["failures"][:3])
+        more = f"; ... {len(report['failures']) - 3} more" if len(report["failures"]) > 3 else ""
+        raise ValueError(f"no episode could be ingested ({len(report['failures'])} failures); see "
+                         f"{out / INGEST_REPORT}: {shown}{more}")
+
+
+def _commit_or_keep(out: Path, sources, records: list[dict], plan, parent, command: str, report: dict):
+    """Commit a new version when episodes were ingested or relabelled, else keep the parent (its pointer
+    restored when lost or stale, noted in the report); returns the version now current."""
+    if report["episodes_ingested"] or plan.relabelled:
+        return commit(out, sources, records, plan, command)["version"]
+    notes = report["notes"]
+    notes.append(f"nothing changed: version {parent.version} stays current")
+    if parent.version is not None and restore_pointer(out, parent.version):   # a lost or stale pointer
+        notes.append(f"{MANIFEST_FILE} rewritten from version {parent.version}'s file")
+    return parent.version
 
 
 @contextmanager

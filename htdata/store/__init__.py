@@ -10,6 +10,8 @@
     splitfiles.py split documents of a version: read, count, carry to a child version
     snapshot.py  open a version as a snapshot; commit parts as a new version
     history.py   log and diff of versions
+    gcrecord.py  gc tombstones: what `htdata gc` leaves for the readers it may outlive (`VersionCollected`)
+    repair.py    `htdata repair`: dataset.json back in line with the version files
     remote.py    publish a committed dataset to a URL; cache a remote index
 
 May import: htdata's base modules, htdata.format and htdata.glove (calibration records).

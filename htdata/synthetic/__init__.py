@@ -7,5 +7,7 @@
 - `render`: draws the egocentric RGB frames (backdrop, object, hands);
 - `formats`: writers of each source layout (OpenTouch-style HDF5,
   TouchAnything-style folders, htdata-native folders);
-- `corpus`: plans the episodes of a corpus and writes them through `formats`.
+- `corpus`: plans the episodes of a corpus and writes them through `formats`;
+- `state`: the hidden state of one hand over time (what the glove painter and the renderer read);
+- `rawglove`: a raw-count knit glove (two hands, 32x32, float16 counts) with the ground truth behind it.
 """

@@ -45,7 +45,10 @@ module each:
 Shards are checked by workers (`shards.py`: one task per shard, a process
 pool when workers > 1): the main process only merges small per-shard
 results. `validator.validate_dataset` runs it all and returns the report
-(`report.py`: Check objects, text form). Exit status of the command: 0 when
+(`report.py`: Check objects, text form).
+Shared by the checks: `geometry.py` (per-layout covered pixels and their
+regions), `samplejson.py` (one sample's JSON against its schema, index row
+and members); `validator.py` holds `validate_dataset`. Exit status of the command: 0 when
 every check passes (warnings allowed), 1 otherwise.
 """
 

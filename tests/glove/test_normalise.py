@@ -3,6 +3,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from htdata.glove.baselinefit import quietest_span
 from htdata.glove.normalise import NormaliseConfig, Normaliser
 
 
@@ -149,6 +150,6 @@ def test_noise_floor_is_estimated_from_the_whole_episode_rest_not_one_window():
     assert (v[rest] > 0).mean() < 0.02                            # the wander reads 0
     assert (v[245:265, 2, 2] > 0).all()                           # the press survives the floor
     # one window's spread (the quietest second) would leave the wander lit: the floor is wider than that
-    quiet = raw[n.quietest_span(raw / 1023, 30.0)] / 1023
+    quiet = raw[quietest_span(raw / 1023, n.live_mask, n.cfg.rest_seconds, 30.0)] / 1023
     one_window = 3 * 1.4826 * np.median(np.abs(quiet - np.median(quiet, axis=0)), axis=0)
     assert (n.floor > one_window + 1.5 / 1023).mean() > 0.5

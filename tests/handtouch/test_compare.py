@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from handtouch.bench.evaluate import EvalConfig, prepare
+from handtouch.bench.items import EvalConfig, prepare
 from handtouch.compare import ABLATION, BASELINE, DESIGN, OURS, ROWS, compare, parse_args, resolve_rows
 from handtouch.config import load_train_config
 from handtouch.rgb_encoder import TactileGridRGB

@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 import torch
 
-from handtouch.bench.evaluate import (CopyLastModel, EvalConfig, EvalPart, ZerosModel, collect_examples, evaluate,
-                                      part_masks, prepare, subsample)
+from handtouch.bench.evaluate import evaluate
+from handtouch.bench.examples import collect_examples
+from handtouch.bench.items import EvalConfig, EvalPart, part_masks, prepare, subsample
+from handtouch.bench.references import CopyLastModel, ZerosModel
 from handtouch.bench.report import markdown_table, render_predictions, write_results
 
 S = 32          # small canvas: the bench code is size-agnostic, the tests stay fast
@@ -245,7 +247,7 @@ def _strip_seconds(res):
 
 
 def test_prepared_parts_are_reused_with_identical_scores():
-    from handtouch.bench.evaluate import EvalConfig, prepare
+    from handtouch.bench.items import EvalConfig, prepare
 
     data = {"test": _part(), "ood": _part(static=True)}
     prepared = prepare(data, cfg=EvalConfig(max_items=20, seed=3))

@@ -10,11 +10,13 @@ circle, it does not remove it):
   says why ("Imports inside functions:"), e.g. the CLI loading a command only when it runs.
 - Core modules do not parse arguments: argparse lives in htdata/commands/ (and the CLI table).
 - Modules stay under ~400 lines, functions under ~80, unless the docstring says why ("Long because").
+- Each package's `__init__.py` docstring names every module and sub-package in it (one line each).
 """
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -269,3 +271,39 @@ def test_tests_mirror_the_packages_and_share_builders_only_through_factories():
             if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[-1].startswith("test_"):
                 offenders.append(f"{path.relative_to(ROOT)}: from {node.module} import ...")
     assert not offenders, f"builders shared through test modules (move them to tests/factories/): {offenders}"
+
+
+def unnamed_modules(package_dir: Path) -> list[str]:
+    """The modules (`name.py`) and sub-packages (`name/`) of a package its `__init__` docstring does not name.
+
+    Named means `name.py`, `` `name` `` or `name/` appears in the docstring (a list line, or the prose of
+    packages that describe their modules in sentences)."""
+    doc = ast.get_docstring(ast.parse((package_dir / "__init__.py").read_text())) or ""
+    members = [p.stem for p in package_dir.glob("*.py") if p.name != "__init__.py"]
+    members += [d.name for d in package_dir.iterdir() if (d / "__init__.py").is_file()]
+    missing = []
+    for name in sorted(members):
+        n = re.escape(name)
+        if not re.search(rf"(?<![\w./]){n}\.py\b|`{n}`|(?<![\w./`]){n}/", doc):
+            missing.append(name)
+    return missing
+
+
+PACKAGE_DIRS = sorted(ALL[m].parent for m in ALL if ALL[m].name == "__init__.py")
+
+
+@pytest.mark.parametrize("package_dir", PACKAGE_DIRS, ids=lambda p: str(p.relative_to(ROOT)))
+def test_package_docstring_names_every_module(package_dir):
+    missing = unnamed_modules(package_dir)
+    assert not missing, (f"{package_dir.relative_to(ROOT)}/__init__.py: its docstring names no line for "
+                         f"{missing}; add one per module (`name.py  what it does`)")
+
+
+def test_unnamed_modules_finds_a_module_left_out(tmp_path):
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text('"""Pkg.\n\n    alpha.py  one\n    `beta`: two\n"""\n')
+    for name in ("alpha", "beta", "gamma", "alphabet"):
+        (pkg / f"{name}.py").write_text("")
+    (pkg / "sub" / "__init__.py").write_text("")
+    assert unnamed_modules(pkg) == ["alphabet", "gamma", "sub"]

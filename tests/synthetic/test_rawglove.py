@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from htdata.benchmarks.rawglove import config_for, normalise_clip, score
+from htdata.glove.baselinefit import quietest_span
 from htdata.glove.calibration import calibration_id, episode_normaliser, fit_record
 from htdata.glove.normalise import NormaliseConfig, Normaliser
 from htdata.synthetic.rawglove import (FULL_SCALE, REST, SATURATE, TRUTH_LEVEL, GloveUnit, corpus_clips, glove_layout,
@@ -129,9 +130,9 @@ def test_quietest_span_is_in_seconds():
     raw[200:230] -= 1.0                    # the quietest second: frames 200..229
     n = Normaliser(NormaliseConfig(convention="direct", max_value=FULL_SCALE, baseline="quietest",
                                    rest_seconds=1.0), lay)
-    span = n.quietest_span(n.to_unit(raw), fps=30.0)
+    span = quietest_span(n.to_unit(raw), n.live_mask, n.cfg.rest_seconds, fps=30.0)
     assert (span.start, span.stop) == (200, 230)
-    span = n.quietest_span(n.to_unit(raw), fps=10.0)                 # 1 s = 10 frames at 10 fps
+    span = quietest_span(n.to_unit(raw), n.live_mask, n.cfg.rest_seconds, fps=10.0)  # 1 s = 10 frames at 10 fps
     assert span.stop - span.start == 10 and 200 <= span.start <= 220
 
 

@@ -3,15 +3,17 @@
 `ADAPTERS` maps the adapter name used in pipeline TOML files to its class;
 `get_adapter(name)` returns a fresh instance.
 
-    base.py          the contract: EpisodeRef, EpisodeStreams, Adapter, FileDiscovery
-    discovery.py     per-file discovery (one bad file never hides the rest), episode ids, fingerprints
-    sourcetree.py    which files an adapter may read (regular files inside the source root)
-    params.py        declared [adapter.params]: AdapterParam, param_values, check_declared_params
-    streamchecks.py  an opened episode's checks: grid vs layout, length note, episode-video iterator
-    npzrows.py       row reads from an .npz member without loading the archive
-    hdf5safe.py      HDF5 opened so that no byte of another file is read
-    video.py         video probing (pts) and decoding
-    opentouch.py, touchanything.py, native.py   the three adapters
+    base.py           the contract: EpisodeRef, EpisodeStreams, Adapter, FileDiscovery
+    discovery.py      per-file discovery (one bad file never hides the rest), episode ids, fingerprints
+    sourcetree.py     which files an adapter may read (regular files inside the source root)
+    params.py         declared [adapter.params]: AdapterParam, param_values, check_declared_params
+    streamchecks.py   an opened episode's checks: grid vs layout, length note, episode-video iterator
+    opentouch.py      OpenTouch-style: one HDF5 per scene, clips under `data/demo_NN`
+    touchanything.py  TouchAnything-style: one folder per episode
+    native.py         htdata-native: folders holding recording.json (docs/NATIVE_FORMAT.md)
+    hdf5safe.py       HDF5 a stranger wrote, opened safely (sizes checked, no byte of another file)
+    npzrows.py        forward row reads from one .npy member of an .npz, without loading the array
+    video.py          packet timestamps (no decode) and streaming RGB decode
 """
 
 from __future__ import annotations
