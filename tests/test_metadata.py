@@ -20,7 +20,13 @@ from htdata.errors import ArgumentError, DatasetError
 from htdata.format.table import MANIFEST_FILE, SHARDS_DIR
 from htdata.read.metadata import DatasetMetadata
 from htdata.read.reader import DatasetReader
-from tests.factories import MIXED_HANDS_EPISODES, commit_split, default_canonical, rewrite_manifest, write_synthetic_dataset
+from tests.factories import (
+    MIXED_HANDS_EPISODES,
+    commit_split,
+    default_canonical,
+    rewrite_manifest,
+    write_synthetic_dataset,
+)
 
 EPISODES = MIXED_HANDS_EPISODES      # ep_a (R, 5 frames), ep_b (LR, 4), ep_c (L, 1)
 

@@ -31,18 +31,25 @@ from collections import OrderedDict
 from collections.abc import Iterator
 from typing import NamedTuple
 
-import numpy as np
-
 from htdata.errors import ArgumentError, DatasetError
-from htdata.store import storage
-from htdata.store.confine import inside
-from htdata.store.splitfiles import SplitRejected  # noqa: F401 (its old home: `from htdata.read.reader import SplitRejected`)
 from htdata.format.mapstorage import maps_stored
-from htdata.format.table import (HANDS, INDEX_DTYPE, JSON_MEMBER, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
-                                 decode_sample, raw_member, tactile_member)
 from htdata.format.shardio import BLOCK, describe_header, header_matches, padded, sample_key
+from htdata.format.table import (
+    HANDS,
+    INDEX_DTYPE,
+    JSON_MEMBER,
+    MEMBER_ORDER,
+    SHARDS_DIR,
+    SIZE_FIELDS,
+    decode_sample,
+    raw_member,
+    tactile_member,
+)
 from htdata.read.metadata import DatasetMetadata, OutOfRange, collected_guard
 from htdata.read.rawstream import RawMapRenderer, check_records
+from htdata.store import storage
+from htdata.store.confine import inside
+from htdata.store.splitfiles import SplitRejected  # noqa: F401 (its old home: importable from here)
 
 MAX_OPEN_SHARDS = 128   # an LRU of open shard files; one-episode units make many small shards
 _SIZE_POS = tuple(INDEX_DTYPE.names.index(SIZE_FIELDS[s]) for s in MEMBER_ORDER)
