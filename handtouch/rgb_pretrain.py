@@ -51,8 +51,7 @@ from .rgb_encoder import TactileGridRGB, load_rgb_encoder, to_unit_float
 from htdata.read.torchdata import TactileFrameDataset
 from .bench.items import iterate_batches, subsample
 from .train import lr_at
-from htdata.store.manifest import load_manifest
-from htdata.store.manifest import load_episodes
+from htdata.read.metadata import DatasetMetadata
 
 log = logging.getLogger("handtouch.rgb_pretrain")
 PAIRINGS = ("aligned", "shifted", "shuffled")
@@ -234,7 +233,7 @@ def cache_key(dataset_root, split: str | None, part: str, cfg: RGBPretrainConfig
     """Dataset version (its manifest) + the train items + this config -> 16 hex digits."""
 
     items = TactileFrameDataset(str(dataset_root), split=split, part=part).items
-    doc = {"manifest": load_manifest(dataset_root), "split": split, "part": part,
+    doc = {"manifest": DatasetMetadata(dataset_root).manifest, "split": split, "part": part,
            "items": hashlib.sha256(np.ascontiguousarray(items).tobytes()).hexdigest(),
            "config": dataclasses.asdict(cfg), "arch": ARCH}
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:16]
@@ -343,7 +342,7 @@ def model_control_checks(model_scores: dict, part: str = "test", margin: float =
 
 def episode_fps(dataset_root) -> np.ndarray:
     """fps of every episode, by position in episodes.jsonl (the items' `episode` key)."""
-    return np.array([float(ep.get("fps") or 0.0) for ep in load_episodes(dataset_root)])
+    return np.array([float(ep.get("fps") or 0.0) for ep in DatasetMetadata(dataset_root).episodes])
 
 
 def _flat(prep) -> dict:

@@ -64,7 +64,7 @@ from htdata.read import keys
 from htdata.synthetic.corpus import FORMATS as SAMPLE_FORMATS
 from htdata.format.table import MANIFEST_FILE
 from htdata.resources import PIPELINES_DIR
-from htdata.store.manifest import load_manifest
+from htdata.read.metadata import DatasetMetadata
 from handtouch.config import load_train_config
 from handtouch.train import load_model, train
 
@@ -108,7 +108,7 @@ def ensure_dataset(raw: Path, dataset: Path, workers: int) -> None:
 
 
 def make_split(dataset: Path, ood_task: str, seed: int) -> None:
-    tasks = load_manifest(dataset).get("tasks", [])
+    tasks = DatasetMetadata(dataset).tasks
     if ood_task not in tasks:
         raise SystemExit(f"smoke: ood task {ood_task!r} is not in {dataset} (tasks: {tasks})")
     _htdata("split", str(dataset), "--ood-task", ood_task, "--seed", str(seed), "--name", SPLIT_NAME, "--force")

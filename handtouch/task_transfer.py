@@ -31,7 +31,7 @@ import numpy as np
 import torch
 
 from htdata.store.fsutil import write_json_atomic
-from htdata.store.manifest import load_episodes
+from htdata.read.metadata import DatasetMetadata
 from htdata.curate.split import assign_episodes
 
 from .bench.report import write_text_atomic
@@ -60,7 +60,7 @@ def transfer_table(dataset, cfg: RGBPretrainConfig, tasks: list[str] | None = No
     the probes saved as probe_dir/TASK[-PAIRING].pt. controls: also train the misalignment controls
     (rgb_pretrain.PAIRINGS) on the same train items and score each on the seen test items under
     its own pairing -> row["controls"][pairing], the smoke's control on this split."""
-    episodes = load_episodes(dataset)
+    episodes = DatasetMetadata(dataset).episodes
     known = sorted({ep["task"] for ep in episodes})
     tasks = tasks or known
     unknown = sorted(set(tasks) - set(known))

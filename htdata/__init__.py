@@ -28,6 +28,7 @@ The front door:
 
     import htdata
     ds = htdata.open("data/dataset")           # DatasetReader of the current version
+    ds.meta                                    # its records: episodes, splits, coverage (DatasetMetadata)
     ds = htdata.open("data/dataset", version=3)
 
 Imports inside functions: `open` imports the reader when it is called, so that
@@ -42,10 +43,20 @@ _moved.install()
 
 
 def open(path, version=None):  # noqa: A001 (the front door's name, like LeRobot's one class)
-    """Open a committed dataset (local path or fsspec URL) at `version` (the current one when None).
+    """Open a committed dataset (local path or fsspec URL) at one of its versions.
 
-    Returns `htdata.read.torchviews.Dataset`: a `DatasetReader` whose `.torch`
-    builds the torch datasets of the same version (`ds.torch.frames(split="main", part="train")`).
+    Args:
+        path: the dataset root: a local path or an fsspec URL (file://, memory://, s3://...).
+        version: the version to open (`htdata log` lists them); None: the current one.
+
+    Returns:
+        `htdata.read.torchviews.Dataset`: a `DatasetReader` whose `.meta` holds the version's
+        records (DatasetMetadata: episodes, splits, coverage, ...) and whose `.torch` builds the
+        torch datasets of the same version (`ds.torch.frames(split="main", part="train")`).
+
+    Raises:
+        FileNotFoundError: `path` holds no committed dataset.
+        htdata.errors.ArgumentError: `version` is not one of its versions (also a FileNotFoundError).
     """
     # Lazy: `import htdata` must stay cheap (the CLI imports it before parsing arguments).
     from htdata.read.torchviews import Dataset

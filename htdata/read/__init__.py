@@ -1,6 +1,9 @@
 """Reading a committed dataset: the last step before the trainer.
 
-    reader.py      DatasetReader: one version's manifest, episodes, index and samples (local or URL)
+    metadata.py    DatasetMetadata: one version's records (manifest, episodes, index, splits, coverage,
+                   region maps; split -> sample indices), never a shard
+    reader.py      DatasetReader: one version's samples (random access, windows, streaming; local or URL),
+                   built on its DatasetMetadata (`reader.meta`)
     rawstream.py   an episode's raw glove rows at full rate, from the shards; MapServing (the loaders' maps_from)
     torchdata.py   torch datasets of frames and windows (maps stored or rendered from raw rows)
     torchitems.py  what a torch item carries: the members asked for, per-layout constants per item or once

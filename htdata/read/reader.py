@@ -1,4 +1,9 @@
-"""DatasetReader: random access, windows and streaming over a committed dataset.
+"""DatasetReader: random access, windows and streaming over the samples of a committed version.
+
+What the version says about itself (manifest, episodes, index, splits,
+coverage, region maps) is its DatasetMetadata (htdata/read/metadata.py),
+`reader.meta`; the reader answers the same names by handing them on, and
+adds the samples.
 
 Random access never scans: index.npy gives each sample's shard, header
 offset and member sizes, so one seek + one read returns exactly that
@@ -20,35 +25,46 @@ reader drops handles and the index map; they reopen on first use.
 
 from __future__ import annotations
 
-import hashlib
-import json
+import functools
 import os
 from collections import OrderedDict
 from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import NamedTuple
 
-import numpy as np
-
+from htdata.errors import ArgumentError, DatasetError
+from htdata.format.mapstorage import MapStorage
+from htdata.format.shardio import BLOCK, describe_header, header_matches, padded, sample_key
+from htdata.format.table import (
+    HANDS,
+    INDEX_DTYPE,
+    JSON_MEMBER,
+    MEMBER_ORDER,
+    SHARDS_DIR,
+    SIZE_FIELDS,
+    decode_sample,
+    raw_member,
+    tactile_member,
+)
+from htdata.read.metadata import DatasetMetadata, OutOfRange, collected_guard
+from htdata.read.rawstream import RawMapRenderer, check_records
 from htdata.store import storage
 from htdata.store.confine import inside
-from htdata.store.splitfiles import SplitRejected, parse_split_doc  # noqa: F401 (SplitRejected: its old home)
-from htdata.format.codec import decode_png_u8
-from htdata.format.mapstorage import MapStorage
-from htdata.format.table import (HANDS, INDEX_DTYPE, JSON_MEMBER, LAYOUTS_DIR, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
-                                 SPLITS_DIR, decode_sample, raw_member, tactile_member)
-from htdata.store.manifest import load_episodes, load_index, load_manifest
-from htdata.format.shardio import BLOCK, describe_header, header_matches, padded, sample_key
-from htdata.store.remote import load_cached_index
-from htdata.store.gcrecord import collected_error
-from htdata.read.rawstream import RawMapRenderer, check_records
+from htdata.store.splitfiles import SplitRejected  # noqa: F401 (its old home: importable from here)
 
 MAX_OPEN_SHARDS = 128   # an LRU of open shard files; one-episode units make many small shards
 _SIZE_POS = tuple(INDEX_DTYPE.names.index(SIZE_FIELDS[s]) for s in MEMBER_ORDER)
 
 
 class SampleRow(NamedTuple):
-    """One index.npy row as plain ints; `sizes` follows format.MEMBER_ORDER (0 = absent)."""
+    """One index.npy row as plain ints; `sizes` follows format.MEMBER_ORDER (0 = absent).
+
+    Args:
+        shard: the shard's number (position in the manifest's "shards").
+        offset: byte offset of the sample's first tar header in that shard.
+        episode: the episode's position in episodes.jsonl.
+        frame: the frame within the episode.
+        sizes: each member's size in bytes, in MEMBER_ORDER (0: the sample lacks it).
+    """
     shard: int
     offset: int
     episode: int
@@ -57,10 +73,17 @@ class SampleRow(NamedTuple):
 
 
 def member_layout(sizes: tuple[int, ...], wanted=None) -> tuple[list[tuple[str, int, int]], int]:
-    """([(suffix, header offset from the first header, size)], bytes to read).
+    """Where a sample's members lie in its span of the shard, and how many bytes to read.
 
-    Only members present (size > 0) and in `wanted` (all when None) are
-    listed; the read stops at the end of the last listed member.
+    Only members present (size > 0) and in `wanted` are listed; the read
+    stops at the end of the last listed member.
+
+    Args:
+        sizes: member sizes in MEMBER_ORDER (SampleRow.sizes).
+        wanted: suffixes to list ("json", "rgb.jpg", ...); None lists every present member.
+
+    Returns:
+        ([(suffix, header offset from the first header, size)], bytes to read).
     """
     layout, pos, end = [], 0, 0
     for suffix, size in zip(MEMBER_ORDER, sizes):
@@ -72,44 +95,68 @@ def member_layout(sizes: tuple[int, ...], wanted=None) -> tuple[list[tuple[str, 
     return layout, end
 
 
+def _from_meta(name: str):
+    """A DatasetReader method that calls DatasetMetadata's method `name` (same arguments, same docstring)."""
+    method = getattr(DatasetMetadata, name)
+
+    @functools.wraps(method)
+    def call(self, *args, **kwargs):
+        return method(self.meta, *args, **kwargs)
+    return call
+
+
+def _meta_property(name: str) -> property:
+    """A DatasetReader property that reads DatasetMetadata's attribute `name` (same docstring)."""
+    held = getattr(DatasetMetadata, name, None)
+    return property(lambda self: getattr(self.meta, name),
+                    doc=held.__doc__ if isinstance(held, property) else f"`meta.{name}` (DatasetMetadata).")
+
+
 class DatasetReader:
+    """The samples of one committed version: random access, windows, streaming; `meta` holds its records.
+
+    Args:
+        root: the dataset root, a local path or an fsspec URL (file://, memory://, s3://...).
+        validate_manifest: check the manifest against schemas/manifest.schema.json.
+        version: the version to open (`htdata log` lists them); None: the current one.
+
+    Raises:
+        NoSuchVersion (an ArgumentError): `version` is not a committed version of the dataset.
+        DatasetError: the version's records disagree with each other.
+        RecordMismatch: a calibration record no longer matches its id or digest.
+    """
+
     def __init__(self, root: str | os.PathLike, validate_manifest: bool = True, version: int | None = None):
-        """Open the current version of the dataset at `root`, or version `version` (htdata log lists them)."""
-        self.root = os.fspath(root)
-        self.manifest = load_manifest(self.root, validate=validate_manifest, version=version)
-        self.version: int | None = self.manifest.get("version")
-        with self._collected_guard():
-            self.episodes: list[dict] = load_episodes(self.root, self.manifest)
-        if len(self.episodes) != self.manifest["counts"]["episodes"]:
-            raise ValueError(f"{self.root}: episodes.jsonl has {len(self.episodes)} records, "
-                             f"manifest counts {self.manifest['counts']['episodes']}")
+        self.meta = DatasetMetadata(root, version=version, validate_manifest=validate_manifest)
         check_records(self)     # calibration ids and fit digests recomputed (htdata.read.rawstream)
-        self._episode_pos = {ep["episode_id"]: i for i, ep in enumerate(self.episodes)}
-        self._episode_ids = [ep["episode_id"] for ep in self.episodes]
-        self._shard_names = [s["name"] for s in self.manifest["shards"]]
-        self._n = int(self.manifest["counts"]["samples"])
-        self._index: np.ndarray | None = None
+        self._episode_ids = self.meta.episode_ids
+        self._shard_names = self.meta.shard_names
+        self._n = self.meta.num_samples
         self._handles: OrderedDict[int, object] = OrderedDict()
         self._pid = os.getpid()
-        self._maps: dict[str, np.ndarray] = {}
         # a version that does not store its maps: decoded samples get them rendered from the raw rows
         self._renderer = None if MapStorage.of(self.manifest).stores_maps else RawMapRenderer(self)
 
-    @contextmanager
-    def _collected_guard(self, where: str | None = None):
-        """A file of this version that is gone because `htdata gc` collected the version: VersionCollected."""
-        try:
-            yield
-        except FileNotFoundError as exc:
-            gone = collected_error(self.root, getattr(self, "version", None), where or exc.filename)
-            if gone is None:
-                raise
-            raise gone from None
+    # -- the version's records: DatasetMetadata's, handed on ---------------
+    root = _meta_property("root")
+    manifest = _meta_property("manifest")
+    version = _meta_property("version")
+    episodes = _meta_property("episodes")
+    index = _meta_property("index")
+    region_map = _meta_property("region_map")
+    place_map = _meta_property("place_map")
+    episode_position = _from_meta("episode_position")
+    episode_range = _from_meta("episode_range")
+    locate = _from_meta("locate")
+    coverage = _from_meta("coverage")
+    layout = _from_meta("layout")
+    split = _from_meta("split")
+    episode_positions = _from_meta("episode_positions")
+    sample_indices = _from_meta("sample_indices")
 
     # -- pickling / fork safety -------------------------------------------
     def __getstate__(self):
         state = self.__dict__.copy()
-        state["_index"] = None
         state["_handles"] = OrderedDict()
         return state
 
@@ -124,6 +171,7 @@ class DatasetReader:
             self._pid = os.getpid()
 
     def close(self) -> None:
+        """Close the shard files this process opened (a later read reopens them)."""
         if os.getpid() == self._pid:
             for handle in self._handles.values():
                 handle.close()
@@ -135,66 +183,42 @@ class DatasetReader:
     def __exit__(self, *exc):
         self.close()
 
-    # -- index -------------------------------------------------------------
-    @property
-    def index(self) -> np.ndarray:
-        if self._index is None:
-            if storage.is_url(self.root):
-                # Remote: one download into the local cache (keyed by sha256), then mmap.
-                rows = load_cached_index(self.root, self.manifest)
-            else:
-                with self._collected_guard():
-                    rows = load_index(self.root, mmap=True, manifest=self.manifest)
-            if len(rows) != self._n:
-                raise ValueError(f"{self.root}: index has {len(rows)} rows, manifest counts {self._n}")
-            self._index = rows
-        return self._index
-
+    # -- index rows ----------------------------------------------------------
     def __len__(self) -> int:
         return self._n
 
     def row(self, i: int) -> SampleRow:
-        """Index row of sample `i` (negative counts from the end) as plain ints."""
+        """Index row of a sample as plain ints.
+
+        Args:
+            i: global sample index (negative counts from the end).
+
+        Raises:
+            OutOfRange (an ArgumentError and IndexError): `i` outside the version's samples.
+        """
         n = self._n
         if not -n <= i < n:
-            raise IndexError(f"{self.root}: sample {i} out of range (dataset has {n})")
-        values = self.index[int(i) % n].item()   # one tuple: ~10x cheaper than field-by-field
+            raise OutOfRange(f"{self.root}: sample {i} out of range (dataset has {n})")
+        values = self.meta.index[int(i) % n].item()   # one tuple: ~10x cheaper than field-by-field
         return SampleRow(values[0], values[1], values[2], values[3], tuple(values[p] for p in _SIZE_POS))
 
     def _key(self, row: SampleRow) -> str:
         return sample_key(self._episode_ids[row.episode], row.frame)
 
     def key(self, i: int) -> str:
+        """The sample's key in its shard ("EPISODE__FRAME", 6 digits).
+
+        Args:
+            i: global sample index (negative counts from the end).
+        """
         return self._key(self.row(i))
-
-    def episode_position(self, episode: str | int) -> int:
-        if isinstance(episode, (int, np.integer)):
-            if not 0 <= episode < len(self.episodes):
-                raise IndexError(f"{self.root}: episode position {episode} out of range ({len(self.episodes)})")
-            return int(episode)
-        if episode not in self._episode_pos:
-            raise KeyError(f"{self.root}: no episode {episode!r}")
-        return self._episode_pos[episode]
-
-    def episode_range(self, episode: str | int) -> tuple[int, int]:
-        """(first global sample, number of frames) of an episode id or position."""
-        ep = self.episodes[self.episode_position(episode)]
-        return int(ep["first_sample"]), int(ep["num_frames"])
-
-    def locate(self, episode: str | int, frame: int) -> int:
-        """Global sample index of (episode, frame)."""
-        first, n = self.episode_range(episode)
-        if not 0 <= frame < n:
-            raise IndexError(f"{self.root}: episode {self.episodes[self.episode_position(episode)]['episode_id']!r} "
-                             f"has frames 0..{n - 1}, asked for {frame}")
-        return first + int(frame)
 
     # -- bytes -------------------------------------------------------------
     def _shard_path(self, shard: int, confined: bool = False) -> str:
         """shards/NAME of shard `shard`; `confined`: refused when it resolves outside the dataset (a symlink)."""
         if not 0 <= shard < len(self._shard_names):   # a damaged or hostile index row: one line, not IndexError
-            raise ValueError(f"{self.root}: an index row names shard {shard}, but version {self.version} has "
-                             f"{len(self._shard_names)} shards (index.npy damaged?); run `htdata validate`")
+            raise DatasetError(f"{self.root}: an index row names shard {shard}, but version {self.version} has "
+                               f"{len(self._shard_names)} shards (index.npy damaged?); run `htdata validate`")
         rel = f"{SHARDS_DIR}/{self._shard_names[shard]}"
         return inside(self.root, rel, f"shards[{shard}]") if confined else storage.join(self.root, rel)
 
@@ -202,7 +226,7 @@ class DatasetReader:
         self._check_pid()
         handle = self._handles.get(shard)
         if handle is None:
-            with self._collected_guard(self._shard_path(shard)):
+            with collected_guard(self.root, self.version, self._shard_path(shard)):
                 handle = storage.open_binary(self._shard_path(shard, confined=True))
             self._handles[shard] = handle
             if len(self._handles) > MAX_OPEN_SHARDS:
@@ -220,29 +244,46 @@ class DatasetReader:
         f.seek(row.offset)
         span = f.read(size)
         if len(span) != size:
-            raise ValueError(f"{self._shard_path(row.shard)}: truncated at sample {key} "
-                             f"(wanted {size} B at {row.offset}, got {len(span)})")
+            raise DatasetError(f"{self._shard_path(row.shard)}: truncated at sample {key} "
+                               f"(wanted {size} B at {row.offset}, got {len(span)})")
         out = {}
         for suffix, rel, member_size in layout:
             header = span[rel:rel + BLOCK]
             expected = f"{key}.{suffix}"
             if not header_matches(header, expected.encode("utf-8"), member_size):
-                raise ValueError(f"{self._shard_path(row.shard)}: at offset {row.offset + rel} expected member "
-                                 f"{expected} ({member_size} B), found {describe_header(header)}: "
-                                 f"index and shard disagree")
+                raise DatasetError(f"{self._shard_path(row.shard)}: at offset {row.offset + rel} expected member "
+                                   f"{expected} ({member_size} B), found {describe_header(header)}: "
+                                   f"index and shard disagree")
             out[suffix] = span[rel + BLOCK:rel + BLOCK + member_size]
         return out
 
     def sample(self, i: int, suffixes=None) -> dict[str, bytes]:
-        """Raw member bytes of sample `i`, keyed by suffix ("json", "rgb.jpg", ...).
+        """Raw member bytes of a sample, keyed by suffix ("json", "rgb.jpg", ...).
 
-        `suffixes` limits the result to those members (absent ones are skipped);
-        the read then stops after the last one wanted.
+        Args:
+            i: global sample index (negative counts from the end).
+            suffixes: the members wanted (absent ones are skipped; the read stops after the
+                last one wanted); None: every member.
+
+        Raises:
+            OutOfRange (an ArgumentError and IndexError): `i` outside the version's samples.
+            DatasetError: the shard is truncated there, or its tar headers disagree with the index.
         """
         return self.read_sample(i, suffixes)[2]
 
     def read_sample(self, i: int, suffixes=None) -> tuple[SampleRow, str, dict[str, bytes]]:
-        """(index row, key, members) of sample `i`: one index lookup for callers needing all three."""
+        """Index row, key and member bytes of a sample: one index lookup for callers needing all three.
+
+        Args:
+            i: global sample index (negative counts from the end).
+            suffixes: the members wanted, as in `sample`; None: every member.
+
+        Returns:
+            (SampleRow, key, {suffix: bytes}).
+
+        Raises:
+            As `sample`.
+        """
         row = self.row(i)
         key = self._key(row)
         return row, key, self._read_members(self._handle(row.shard), row, key, suffixes)
@@ -250,13 +291,28 @@ class DatasetReader:
     def decode(self, members: dict[str, bytes], where: str = "sample") -> dict:
         """Decode raw members (format.decode_sample): rgb uint8 (224,224,3), tactile/bend per hand, meta.
 
-        "meta" is present only when the json member is (it always is in sample(i)).
+        The maps are the stored ones: for a version that does not store them use `decoded(i)`.
+
+        Args:
+            members: {suffix: bytes}, as `sample` returns; "meta" is in the result only when
+                the json member is (it always is in sample(i)).
+            where: what an error names (e.g. the dataset and the sample's key).
         """
         return decode_sample(members, where)
 
     def decoded(self, i: int, suffixes=None) -> dict:
-        """Sample `i` decoded (its `suffixes` only, when given). A version whose maps are not stored
-        (htdata/format/mapstorage.py) gets each map rendered from the raw rows (+ json) it reads for it."""
+        """A sample decoded: rgb, tactile, bend, raw per hand, meta (docs/FORMAT.md "Reader / torch").
+
+        A version whose maps are not stored (htdata/format/mapstorage.py) gets each map
+        rendered from the raw rows (+ json) it reads for it.
+
+        Args:
+            i: global sample index (negative counts from the end).
+            suffixes: the members to read and decode; None: every member.
+
+        Raises:
+            As `sample`.
+        """
         row, key, members = self.read_sample(i, self._members_to_read(suffixes))
         return self._decode_row(row, members, f"{self.root}: {key}", suffixes)
 
@@ -277,24 +333,48 @@ class DatasetReader:
         return out
 
     def window(self, episode: str | int, frame: int, k: int) -> list[dict]:
-        """Decoded frames T-k..T (k+1 frames) of one episode; never crosses its start."""
+        """Decoded frames T-k..T (k+1 frames) of one episode; never crosses its start.
+
+        Args:
+            episode: an episode id or position.
+            frame: T, the last frame of the window.
+            k: how many frames before T (0: T alone).
+
+        Raises:
+            ArgumentError: k < 0.
+            OutOfRange (an ArgumentError and IndexError): T is not a frame of the episode, or T - k < 0.
+        """
         if k < 0:
-            raise ValueError(f"window size k must be >= 0, got {k}")
+            raise ArgumentError(f"window size k must be >= 0, got {k}")
         end = self.locate(episode, frame)
         if frame - k < 0:
             eid = self.episodes[self.episode_position(episode)]["episode_id"]
-            raise IndexError(f"{self.root}: window of frames {frame - k}..{frame} would cross the start "
+            raise OutOfRange(f"{self.root}: window of frames {frame - k}..{frame} would cross the start "
                              f"of episode {eid!r} (frame 0); need frame >= {k}")
         return [self.decoded(i) for i in range(end - k, end + 1)]
 
     def iter_samples(self, shards: list[int] | None = None, decode: bool = False,
                      suffixes=None) -> Iterator[tuple[int, dict]]:
-        """Stream (global index, members) shard by shard, each shard read front to back.
+        """Stream the samples shard by shard, each shard read front to back.
 
-        `suffixes` limits which members are returned (and decoded), as in sample() and decoded().
+        Args:
+            shards: shard numbers to read, in that order; None: every shard.
+            decode: yield decoded samples (as `decoded`) instead of member bytes.
+            suffixes: the members returned (and decoded), as in `sample`; None: every member.
+
+        Returns:
+            An iterator of (global sample index, members or decoded sample).
+
+        Raises:
+            OutOfRange (an ArgumentError and IndexError): a shard number the version does not have.
+            DatasetError: an index row or a tar header disagrees with the manifest.
         """
-        rows = self.index
-        for shard in (range(len(self._shard_names)) if shards is None else shards):
+        rows = self.meta.index
+        wanted = range(len(self._shard_names)) if shards is None else list(shards)
+        bad = [s for s in wanted if not 0 <= s < len(self._shard_names)]
+        if bad:
+            raise OutOfRange(f"{self.root}: no shard {bad[0]} (version {self.version} has {len(self._shard_names)})")
+        for shard in wanted:
             entry = self.manifest["shards"][shard]
             first, count = int(entry["first_sample"]), int(entry["samples"])
             with storage.open_binary(self._shard_path(shard, confined=True)) as f:
@@ -303,87 +383,9 @@ class DatasetReader:
                     row = SampleRow(values[0], values[1], values[2], values[3],
                                     tuple(values[p] for p in _SIZE_POS))
                     if row.shard != shard:
-                        raise ValueError(f"{self.root}: index row {i} names shard {row.shard}, "
-                                         f"manifest puts it in {shard}")
+                        raise DatasetError(f"{self.root}: index row {i} names shard {row.shard}, "
+                                           f"manifest puts it in {shard}")
                     key = self._key(row)
                     members = self._read_members(f, row, key, self._members_to_read(suffixes) if decode else suffixes)
                     yield i, (self._decode_row(row, members, f"{self.root}: {key}", suffixes) if decode else members)
 
-    # -- layouts / maps ----------------------------------------------------
-    def _png(self, relpath: str) -> np.ndarray:
-        if relpath not in self._maps:
-            path = inside(self.root, relpath)
-            self._maps[relpath] = decode_png_u8(storage.read_bytes(path), path)
-        return self._maps[relpath]
-
-    def coverage(self, layout_id: str) -> np.ndarray:
-        """(224,224) uint8 0/1: where this glove layout has sensors."""
-        layouts = self.manifest["layouts"]
-        if layout_id not in layouts:
-            raise KeyError(f"{self.root}: layout {layout_id!r} not in dataset (has {sorted(layouts)})")
-        return self._png(layouts[layout_id]["coverage"])
-
-    def layout(self, layout_id: str) -> dict:
-        if layout_id not in self.manifest["layouts"]:
-            raise KeyError(f"{self.root}: layout {layout_id!r} not in dataset")
-        return json.loads(storage.read_text(inside(self.root, self.manifest["layouts"][layout_id]["file"])))
-
-    @property
-    def region_map(self) -> np.ndarray:
-        """(224,224) uint8 PART ids (thumb=1..palm=6, 0 outside): the stage-2 masking map."""
-        canonical = self.manifest["canonical"]
-        return self._png(canonical.get("parts", f"{LAYOUTS_DIR}/parts.png"))
-
-    @property
-    def place_map(self) -> np.ndarray:
-        """(224,224) uint8 per-place region ids of the canonical template."""
-        return self._png(self.manifest["canonical"]["regions"])
-
-    # -- splits ------------------------------------------------------------
-    def split(self, name: str) -> dict:
-        """Split NAME of this version: {"parts": {part: {"episodes": [...]}, ...}, ...}.
-
-        A versioned dataset keeps each version's splits with it (manifest "splits"); an
-        unversioned one has DATASET/splits/NAME.json.
-        """
-        if "version" in self.manifest:
-            entry = self.manifest.get("splits", {}).get(name)
-            if entry is None:
-                raise FileNotFoundError(f"{self.root}: version {self.version} has no split named {name!r} "
-                                        f"(splits: {sorted(self.manifest.get('splits', {})) or 'none'}; "
-                                        f"run `htdata split`)")
-            path = inside(self.root, entry["file"], f"splits.{name}.file")
-        else:
-            path = storage.join(self.root, f"{SPLITS_DIR}/{name}.json")
-        if not storage.exists(path):
-            raise FileNotFoundError(f"{path}: no split named {name!r} (run `htdata split`)")
-        data = storage.read_bytes(path)
-        # what `htdata validate` checks that would silently skew a training run, checked once here too
-        if "version" in self.manifest and hashlib.sha256(data).hexdigest() != entry["sha256"]:
-            raise SplitRejected(f"{path}: sha256 differs from version {self.version}'s manifest (edited after "
-                                f"it was committed?); re-make it with `htdata split --name {name}`")
-        return parse_split_doc(data, path, name)
-
-    def episode_positions(self, split: str | None = None, part: str | None = None) -> list[int]:
-        """Episode positions selected by a split part (all episodes when split is None)."""
-        if split is None:
-            if part is not None:
-                raise ValueError("part given without a split")
-            return list(range(len(self.episodes)))
-        parts = self.split(split)["parts"]
-        if part is None:
-            raise ValueError(f"split {split!r}: choose a part from {sorted(parts)}")
-        if part not in parts:
-            raise KeyError(f"split {split!r} has no part {part!r} (parts: {sorted(parts)})")
-        ids = parts[part]["episodes"]
-        missing = [e for e in ids if e not in self._episode_pos]
-        if missing:
-            raise KeyError(f"split {split!r}/{part}: unknown episode(s) {missing[:5]}")
-        return sorted(self._episode_pos[e] for e in ids)
-
-    def sample_indices(self, split: str | None = None, part: str | None = None) -> np.ndarray:
-        """Global sample indices of the selected episodes, in global order."""
-        ranges = [self.episode_range(p) for p in self.episode_positions(split, part)]
-        if not ranges:
-            return np.zeros(0, dtype=np.int64)
-        return np.concatenate([np.arange(a, a + n, dtype=np.int64) for a, n in ranges])

@@ -20,41 +20,86 @@ class Dataset(DatasetReader):
     """What `htdata.open` returns: the reader of one version, plus `.torch` (its torch datasets).
 
     (The plain DatasetReader does not know the torch datasets: they are built on it.)
+    The version's records without its samples are `ds.meta` (htdata.read.metadata.DatasetMetadata).
+
+    Args:
+        root: the dataset root, a local path or an fsspec URL.
+        validate_manifest: check the manifest against its schema.
+        version: the version to open; None: the current one.
     """
 
     @property
     def torch(self) -> "TorchDatasets":
-        """The torch datasets of this version: `ds.torch.frames(split=..., part=...)` (needs htdata[torch])."""
+        """The torch datasets of this version: `ds.torch.frames(split=..., part=...)` (needs htdata[torch]).
+
+        Returns:
+            TorchDatasets over this reader's root and version.
+        """
         return TorchDatasets(self.root, self.version)
 
 
 class TorchDatasets:
-    """Factories of the torch datasets over one version of one dataset."""
+    """Factories of the torch datasets over one version of one dataset.
+
+    Args:
+        root: the dataset root, a local path or an fsspec URL.
+        version: the version every dataset built here reads (None: the current one).
+    """
 
     def __init__(self, root: str, version: int | None):
         self.root = root
         self.version = version
 
     def frames(self, **kwargs):
-        """TactileFrameDataset: one item per (frame, hand present)."""
+        """TactileFrameDataset: one item per (frame, hand present).
+
+        Args:
+            **kwargs: TactileFrameDataset's other arguments (split, part, hands, members, ...).
+
+        Returns:
+            htdata.read.torchdata.TactileFrameDataset over this root and version.
+        """
         from htdata.read.torchdata import TactileFrameDataset
 
         return TactileFrameDataset(self.root, version=self.version, **kwargs)
 
     def windows(self, window: int = 3, **kwargs):
-        """TactileWindowDataset: `window` consecutive frames of one episode per item."""
+        """TactileWindowDataset: `window` consecutive frames of one episode per item.
+
+        Args:
+            window: frames per item (T-window+1..T), never across an episode's start.
+            **kwargs: TactileWindowDataset's other arguments (split, part, hands, members, ...).
+
+        Returns:
+            htdata.read.torchdata.TactileWindowDataset over this root and version.
+        """
         from htdata.read.torchdata import TactileWindowDataset
 
         return TactileWindowDataset(self.root, window=window, version=self.version, **kwargs)
 
     def stream(self, **kwargs):
-        """TactileStream: frames read shard by shard (an IterableDataset for large datasets)."""
+        """TactileStream: frames read shard by shard (an IterableDataset for large datasets).
+
+        Args:
+            **kwargs: TactileStream's other arguments (split, part, hands, shuffle_seed, ...).
+
+        Returns:
+            htdata.read.torchdata.TactileStream over this root and version.
+        """
         from htdata.read.torchdata import TactileStream
 
         return TactileStream(self.root, version=self.version, **kwargs)
 
     def glove_windows(self, window: int = 4, **kwargs):
-        """GloveRateWindowDataset: the last `window` glove rows at the glove's own rate."""
+        """GloveRateWindowDataset: the last `window` glove rows at the glove's own rate.
+
+        Args:
+            window: glove rows per item, ending at the row paired with a frame.
+            **kwargs: GloveRateWindowDataset's other arguments (split, part, hands, ...).
+
+        Returns:
+            htdata.read.torchglove.GloveRateWindowDataset over this root and version.
+        """
         from htdata.read.torchglove import GloveRateWindowDataset
 
         return GloveRateWindowDataset(self.root, window=window, version=self.version, **kwargs)
