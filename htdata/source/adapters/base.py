@@ -24,6 +24,7 @@ from typing import Iterable, Iterator, Protocol, runtime_checkable
 
 import numpy as np
 
+from htdata.errors import ConfigError
 from htdata.source.adapters.video import VideoError, iter_video_rgb
 from htdata.errors import EpisodeError
 from htdata.glove.layouts import load_layout
@@ -385,10 +386,10 @@ def check_adapter_params(adapter: str, declared: tuple[AdapterParam, ...], param
                         for p in declared) or "none"
     for key, value in params.items():
         if key not in known:
-            raise ValueError(f"{where}: adapter.params.{key} is not a param of adapter {adapter!r}; "
+            raise ConfigError(f"{where}: adapter.params.{key} is not a param of adapter {adapter!r}; "
                              f"known params: {listing}")
         spec = known[key]
         ok = isinstance(value, spec.types) and not (isinstance(value, bool) and bool not in spec.types)
         if not ok:
-            raise ValueError(f"{where}: adapter.params.{key} must be {'/'.join(t.__name__ for t in spec.types)} "
+            raise ConfigError(f"{where}: adapter.params.{key} must be {'/'.join(t.__name__ for t in spec.types)} "
                              f"({spec.help}), got {type(value).__name__} {value!r}")
