@@ -12,6 +12,9 @@ import json
 import pytest
 
 from handtouch.config import load_train_config
+from htdata.curate.edit import NoSuchEpisode
+from htdata.curate.merge import MergeConflict
+from htdata.curate.splitrule import SplitError
 from htdata import errors
 from htdata.commands.version_arg import parse_version
 from htdata.errors import ArgumentError, ConfigError, DatasetError, HtdataError, RecordMismatch
@@ -20,7 +23,7 @@ from htdata.inspect.preview import render_contact_sheet
 from htdata.pipeline import load_pipeline
 from htdata.resources import PIPELINES_DIR
 from htdata.settings import parse_setting
-from htdata.store.manifest import parse_manifest
+from htdata.store.manifest import IndexDtypeError, parse_manifest
 from tests.factories import PREVIEW_EPISODES, ingest_cli, write_synthetic_dataset
 
 
@@ -32,6 +35,12 @@ def test_every_class_in_errors_is_an_htdata_error():
     for kind in (ConfigError, ArgumentError, DatasetError):
         assert issubclass(kind, ValueError)
     assert issubclass(RecordMismatch, DatasetError)
+
+
+def test_the_user_errors_defined_beside_their_code_are_htdata_types_too():
+    for kind, base in ((NoSuchEpisode, ArgumentError), (MergeConflict, ArgumentError), (SplitError, ArgumentError),
+                       (IndexDtypeError, DatasetError)):
+        assert issubclass(kind, base) and issubclass(kind, ValueError)
 
 
 def _bad_pipeline(tmp_path):

@@ -27,7 +27,7 @@ from htdata.curate.repack import KeptEpisode, clear_uncommitted, repack_unit, sa
 from htdata.store.snapshot import Snapshot, commit_parts, open_snapshot
 
 
-class NoSuchEpisode(ValueError):
+class NoSuchEpisode(ArgumentError):
     """An episode id or pattern matched nothing."""
 
 

@@ -156,7 +156,7 @@ def load_episodes(root: str | os.PathLike, manifest: dict | None = None) -> list
     return parse_episodes(storage.read_text(path), path)
 
 
-class IndexDtypeError(ValueError):
+class IndexDtypeError(DatasetError):
     """index.npy is readable but its rows are not INDEX_DTYPE (`found`: their dtype)."""
 
     def __init__(self, where: str, found: np.dtype):
