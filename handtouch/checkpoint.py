@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from htdata.errors import ArgumentError
 from htdata.store.fsutil import write_bytes_atomic
 
 CHECKPOINT_FORMAT = 1        # the "format" field of every stage checkpoint
@@ -42,6 +43,6 @@ def save_checkpoint(path: Path, payload: dict) -> None:
 def read_checkpoint(path: Path) -> dict:
     blob = torch.load(path, map_location="cpu", weights_only=True)
     if blob.get("format") != CHECKPOINT_FORMAT:
-        raise ValueError(f"{path}: not a HandTouch checkpoint (format {blob.get('format')!r})")
+        raise ArgumentError(f"{path}: not a HandTouch checkpoint (format {blob.get('format')!r})")
     blob["rng"]["python"] = _to_tuple(blob["rng"]["python"])
     return blob

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from htdata.errors import ConfigError
 from htdata.format.table import CANVAS
 from htdata.settings import apply_settings, parse_setting
 
@@ -108,38 +109,38 @@ class ModelConfig:
 
     def validate(self) -> None:
         if self.encoder not in ENCODERS:
-            raise ValueError(f"model.encoder must be one of {ENCODERS}, got {self.encoder!r}")
+            raise ConfigError(f"model.encoder must be one of {ENCODERS}, got {self.encoder!r}")
         if self.encoder in ("vit", "vit_plain"):
             if self.patch <= 0 or CANVAS % self.patch:
-                raise ValueError(f"model.patch={self.patch} must divide {CANVAS}")
+                raise ConfigError(f"model.patch={self.patch} must divide {CANVAS}")
         up = CANVAS // self.grid
         if up & (up - 1):
-            raise ValueError(f"model.patch={self.patch}: upsampling factor {up} must be a power of two")
+            raise ConfigError(f"model.patch={self.patch}: upsampling factor {up} must be a power of two")
         for name in ("dim", "depth", "heads", "code_dim", "codebook_size", "decoder_channels"):
             if getattr(self, name) <= 0:
-                raise ValueError(f"model.{name} must be > 0, got {getattr(self, name)}")
+                raise ConfigError(f"model.{name} must be > 0, got {getattr(self, name)}")
         for name in ("decoder_depth", "fusion_depth", "temporal_depth", "predictor_depth"):
             if getattr(self, name) < 1:
-                raise ValueError(f"model.{name} must be >= 1, got {getattr(self, name)}")
+                raise ConfigError(f"model.{name} must be >= 1, got {getattr(self, name)}")
         if self.dim % self.heads:
-            raise ValueError(f"model.dim={self.dim} must be divisible by model.heads={self.heads}")
+            raise ConfigError(f"model.dim={self.dim} must be divisible by model.heads={self.heads}")
         if len(self.cnn_widths) != 3 or any(int(w) <= 0 or int(w) % 8 for w in self.cnn_widths):
-            raise ValueError(f"model.cnn_widths must be 3 positive multiples of 8 (GroupNorm(8)), "
+            raise ConfigError(f"model.cnn_widths must be 3 positive multiples of 8 (GroupNorm(8)), "
                              f"got {self.cnn_widths}")
         if len(self.vqvae_widths) != 3 or any(int(w) <= 0 or int(w) % 8 for w in self.vqvae_widths):
-            raise ValueError(f"model.vqvae_widths must be 3 positive multiples of 8 (GroupNorm(8)), "
+            raise ConfigError(f"model.vqvae_widths must be 3 positive multiples of 8 (GroupNorm(8)), "
                              f"got {self.vqvae_widths}")
         if len(self.resnet_widths) != 4 or any(int(w) <= 0 for w in self.resnet_widths):
-            raise ValueError(f"model.resnet_widths must be 4 positive widths, got {self.resnet_widths}")
+            raise ConfigError(f"model.resnet_widths must be 4 positive widths, got {self.resnet_widths}")
         if self.mlp_ratio <= 0:
-            raise ValueError("model.mlp_ratio must be > 0")
+            raise ConfigError("model.mlp_ratio must be > 0")
         if self.vq_beta < 0 or self.vq_dead_threshold < 0 or self.vq_restart_noise < 0:
-            raise ValueError("model.vq_beta, vq_dead_threshold, vq_restart_noise must be >= 0")
+            raise ConfigError("model.vq_beta, vq_dead_threshold, vq_restart_noise must be >= 0")
         for name in ("codebook", "vision", "mask_channel", "rgb_prior", "rgb_skip"):
             if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"model.{name} must be true/false, got {getattr(self, name)!r}")
+                raise ConfigError(f"model.{name} must be true/false, got {getattr(self, name)!r}")
         if not 0.0 < self.vq_usage_decay < 1.0:
-            raise ValueError(f"model.vq_usage_decay must be in (0,1), got {self.vq_usage_decay}")
+            raise ConfigError(f"model.vq_usage_decay must be in (0,1), got {self.vq_usage_decay}")
 
 
 @dataclass
@@ -153,14 +154,14 @@ class StageConfig:
 
     def validate(self, where: str) -> None:
         if self.steps < 0:
-            raise ValueError(f"{where}.steps must be >= 0")
+            raise ConfigError(f"{where}.steps must be >= 0")
         if self.lr <= 0 or self.weight_decay < 0 or self.warmup_steps < 0 or self.grad_clip <= 0:
-            raise ValueError(f"{where}: lr and grad_clip must be > 0, weight_decay/warmup_steps >= 0")
+            raise ConfigError(f"{where}: lr and grad_clip must be > 0, weight_decay/warmup_steps >= 0")
         if not self.trainable:
-            raise ValueError(f"{where}.trainable is empty: name the modules this stage trains")
+            raise ConfigError(f"{where}.trainable is empty: name the modules this stage trains")
         unknown = sorted(set(self.trainable) - set(MODULE_NAMES))
         if unknown:
-            raise ValueError(f"{where}.trainable has unknown modules {unknown}; known: {list(MODULE_NAMES)}")
+            raise ConfigError(f"{where}.trainable has unknown modules {unknown}; known: {list(MODULE_NAMES)}")
 
 
 @dataclass
@@ -175,11 +176,11 @@ class MaskingConfig:
 
     def validate(self) -> None:
         if not 0.0 <= self.p_min <= self.p_max <= 1.0:
-            raise ValueError(f"masking: need 0 <= p_min <= p_max <= 1, got {self.p_min}, {self.p_max}")
+            raise ConfigError(f"masking: need 0 <= p_min <= p_max <= 1, got {self.p_min}, {self.p_max}")
         if not isinstance(self.curriculum, bool):
-            raise ValueError(f"masking.curriculum must be true/false, got {self.curriculum!r}")
+            raise ConfigError(f"masking.curriculum must be true/false, got {self.curriculum!r}")
         if not 1 <= self.max_parts <= 6:
-            raise ValueError(f"masking.max_parts must be in 1..6, got {self.max_parts}")
+            raise ConfigError(f"masking.max_parts must be in 1..6, got {self.max_parts}")
 
 
 @dataclass
@@ -198,12 +199,12 @@ class LossConfig:
 
     def validate(self) -> None:
         if self.lambda_vis < 0 or self.vq_weight < 0 or self.lambda_replay < 0 or self.stage3_replay < 0:
-            raise ValueError("loss.lambda_vis, loss.vq_weight, loss.lambda_replay and loss.stage3_replay "
+            raise ConfigError("loss.lambda_vis, loss.vq_weight, loss.lambda_replay and loss.stage3_replay "
                              "must be >= 0")
         if not isinstance(self.stage3_vq, bool):
-            raise ValueError(f"loss.stage3_vq must be true/false, got {self.stage3_vq!r}")
+            raise ConfigError(f"loss.stage3_vq must be true/false, got {self.stage3_vq!r}")
         if not self.lambda_mask > self.lambda_vis:
-            raise ValueError(f"loss.lambda_mask ({self.lambda_mask}) must exceed lambda_vis ({self.lambda_vis})")
+            raise ConfigError(f"loss.lambda_mask ({self.lambda_mask}) must exceed lambda_vis ({self.lambda_vis})")
 
 
 def _default_stage(trainable: list[str]) -> StageConfig:
@@ -244,19 +245,19 @@ class TrainConfig:
 
     def validate(self) -> None:
         if not self.data_root:
-            raise ValueError("data_root is empty")
+            raise ConfigError("data_root is empty")
         if not self.out_dir:
-            raise ValueError("out_dir is empty")
+            raise ConfigError("out_dir is empty")
         if not self.rgb_encoder:
-            raise ValueError("rgb_encoder is empty: use 'random:SEED' (smoke) or a local .pt2/.pt file")
+            raise ConfigError("rgb_encoder is empty: use 'random:SEED' (smoke) or a local .pt2/.pt file")
         if self.device != "auto" and not (self.device == "cpu" or self.device.startswith("cuda")):
-            raise ValueError(f"device must be auto, cpu or cuda[:N], got {self.device!r}")
+            raise ConfigError(f"device must be auto, cpu or cuda[:N], got {self.device!r}")
         if self.workers < 0 or self.threads < 0 or self.batch_size < 1 or self.eval_batch_size < 1 or self.prefetch < 1:
-            raise ValueError("workers >= 0, threads >= 0, batch_size >= 1, eval_batch_size >= 1, prefetch >= 1 required")
+            raise ConfigError("workers >= 0, threads >= 0, batch_size >= 1, eval_batch_size >= 1, prefetch >= 1 required")
         if self.log_every < 1 or self.checkpoint_every < 1:
-            raise ValueError("log_every and checkpoint_every must be >= 1")
+            raise ConfigError("log_every and checkpoint_every must be >= 1")
         if not self.stages or any(s not in (1, 2, 3) for s in self.stages) or self.stages != sorted(set(self.stages)):
-            raise ValueError(f"stages must be an increasing subset of [1, 2, 3], got {self.stages}")
+            raise ConfigError(f"stages must be an increasing subset of [1, 2, 3], got {self.stages}")
         self.model.validate()
         self.masking.validate()
         self.loss.validate()
@@ -273,7 +274,7 @@ class TrainConfig:
             return
         per_code = self.batch_size * world_size * m.num_tokens / m.codebook_size
         if per_code < 2 * m.vq_dead_threshold:
-            raise ValueError(
+            raise ConfigError(
                 f"batch_size={self.batch_size} x world {world_size} x {m.num_tokens} tokens / "
                 f"codebook_size={m.codebook_size} = {per_code:.2f} uses per code per step, below "
                 f"2 x vq_dead_threshold={m.vq_dead_threshold}: lower the codebook size or threshold")
@@ -282,11 +283,11 @@ class TrainConfig:
 def _build(cls, data: dict[str, Any], where: str):
     """Build dataclass `cls` from a dict, recursing into nested dataclasses; unknown keys fail."""
     if not isinstance(data, dict):
-        raise ValueError(f"{where or '<root>'}: expected a table, got {type(data).__name__}")
+        raise ConfigError(f"{where or '<root>'}: expected a table, got {type(data).__name__}")
     fields = {f.name: f for f in dataclasses.fields(cls)}
     unknown = sorted(set(data) - set(fields))
     if unknown:
-        raise ValueError(f"{where or '<root>'}: unknown keys {unknown}; known: {sorted(fields)}")
+        raise ConfigError(f"{where or '<root>'}: unknown keys {unknown}; known: {sorted(fields)}")
     kwargs = {}
     for name, value in data.items():
         ftype = fields[name].type
@@ -295,7 +296,7 @@ def _build(cls, data: dict[str, Any], where: str):
     try:
         return cls(**kwargs)
     except TypeError as e:   # missing required keys
-        raise ValueError(f"{where or '<root>'}: {e}") from None
+        raise ConfigError(f"{where or '<root>'}: {e}") from None
 
 
 _NESTED = {"ModelConfig": ModelConfig, "StageConfig": StageConfig, "MaskingConfig": MaskingConfig,
@@ -327,11 +328,11 @@ def load_train_config(path: str | Path, overrides: list[str] = ()) -> TrainConfi
         try:
             data = tomllib.load(f)
         except tomllib.TOMLDecodeError as e:
-            raise ValueError(f"{path}: {e}") from None
+            raise ConfigError(f"{path}: {e}") from None
     try:
         return train_config_from_dict(apply_overrides(data, list(overrides)))
     except ValueError as e:
-        raise ValueError(f"{path}: {e}") from None
+        raise ConfigError(f"{path}: {e}") from None
 
 
 def model_config_from_dict(data: dict) -> ModelConfig:

@@ -19,6 +19,8 @@ import torch.nn as nn
 from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import Sampler
 
+from htdata.errors import ConfigError
+
 
 @contextlib.contextmanager
 def torch_threads(n: int | None):
@@ -116,7 +118,7 @@ class StepBatchSampler(Sampler[list[int]]):
                  rank: int = 0, world_size: int = 1):
         global_batch = batch_size * world_size
         if n < global_batch:
-            raise ValueError(f"dataset has {n} samples, fewer than one global batch "
+            raise ConfigError(f"dataset has {n} samples, fewer than one global batch "
                              f"({batch_size} x {world_size} ranks)")
         if not 0 <= rank < world_size or not 0 <= start_step <= stop_step:
             raise ValueError(f"bad sampler arguments rank={rank} world={world_size} "

@@ -32,6 +32,9 @@ from collections.abc import Iterable
 import torch
 import torch.nn as nn
 
+from htdata.errors import ArgumentError
+from htdata.errors import ConfigError
+
 from .config import MODULE_NAMES, WINDOW, ModelConfig
 from .decoder import build_tactile_decoder
 from .encoders import build_tactile_encoder, transformer_stack
@@ -129,7 +132,7 @@ class HandTouch(nn.Module):
         self.predictor = CrossAttentionStack(d, cfg.heads, cfg.mlp_ratio, cfg.predictor_depth)
         self._frozen: set[str] = set()
         if cfg.rgb_prior and cfg.vision and not callable(getattr(rgb_encoder.backbone, "predict", None)):
-            raise ValueError(f"model.rgb_prior needs an RGB encoder with a contact readout (predict, e.g. "
+            raise ConfigError(f"model.rgb_prior needs an RGB encoder with a contact readout (predict, e.g. "
                              f"TactileGridRGB); {rgb_encoder.info.spec!r} has none: set model.rgb_prior=false")
 
     # ---- freezing by module name -------------------------------------------------
@@ -137,7 +140,7 @@ class HandTouch(nn.Module):
         names = list(names)
         unknown = sorted(set(names) - set(MODULE_NAMES))
         if unknown:
-            raise ValueError(f"unknown module names {unknown}; known: {list(MODULE_NAMES)} "
+            raise ArgumentError(f"unknown module names {unknown}; known: {list(MODULE_NAMES)} "
                              "(rgb_encoder is always frozen)")
         return names
 
@@ -217,7 +220,7 @@ class HandTouch(nn.Module):
         vis = self.visual_tokens(rgb)
         if self.cfg.rgb_skip:
             if vis.shape[1] != tokens.shape[1]:
-                raise ValueError(f"model.rgb_skip needs one RGB token per tactile token: the RGB encoder "
+                raise ConfigError(f"model.rgb_skip needs one RGB token per tactile token: the RGB encoder "
                                  f"gives {vis.shape[1]}, the tactile encoder {tokens.shape[1]}")
             tokens = tokens + vis
         return self.fusion(self._with_hand(tokens, hand), vis)[:, 1:]

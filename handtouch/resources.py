@@ -11,6 +11,8 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
+from htdata.errors import ArgumentError
+
 PACKAGE_DATA = "_data"          # handtouch/_data/configs in a wheel (setup.py)
 CHECKOUT_CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
@@ -33,7 +35,7 @@ def config_file(name: str) -> Path:
     """
     filename = name if name.endswith(".toml") else f"{name}.toml"
     if Path(filename).name != filename:
-        raise ValueError(f"config name {name!r} must be a bare name such as 'smoke', not a path")
+        raise ArgumentError(f"config name {name!r} must be a bare name such as 'smoke', not a path")
     for folder in config_dirs():
         path = folder / filename
         if path.is_file():

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from htdata.errors import ArgumentError
 from htdata.read import keys
 from htdata.store.fsutil import write_json_atomic
 
@@ -50,14 +51,14 @@ def seed_stage1(src: Path, cfg, dst: Path) -> None:
     own = model.state_dict()
     unexpected = sorted(k for k in weights if k not in own)
     if unexpected:
-        raise ValueError(f"{src}: keys the configured model does not have: {unexpected[:8]}")
+        raise ArgumentError(f"{src}: keys the configured model does not have: {unexpected[:8]}")
     reshaped = sorted(k for k, v in weights.items() if v.shape != own[k].shape)
     # modules stage 1 does not train (rgb_proj, fusion, ...) only hold their init: one shaped for
     # another RGB encoder is left to the fresh model's init, a stage-1 module must match
     stage1 = tuple(f"{m}." for m in cfg.stage1.trainable)
     trained = [k for k in reshaped if k.startswith(stage1)]
     if trained:
-        raise ValueError(f"{src}: stage-1 weights shaped unlike the configured model's (was stage 1 "
+        raise ArgumentError(f"{src}: stage-1 weights shaped unlike the configured model's (was stage 1 "
                          f"trained with another model config?): {trained[:8]}")
     weights = {k: v for k, v in weights.items() if k not in reshaped}
     missing, _ = model.load_state_dict(weights, strict=False)

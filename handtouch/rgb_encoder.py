@@ -23,6 +23,7 @@ from pathlib import Path
 import torch
 import torch.nn as nn
 
+from htdata.errors import ConfigError
 from htdata.format.table import CANVAS
 
 log = logging.getLogger("handtouch.rgb_encoder")
@@ -159,7 +160,7 @@ def load_rgb_encoder(spec: str) -> RGBEncoder:
         try:
             seed = int(spec.split(":", 1)[1])
         except ValueError:
-            raise ValueError(f"rgb encoder spec {spec!r}: expected random:SEED with an integer seed") from None
+            raise ConfigError(f"rgb encoder spec {spec!r}: expected random:SEED with an integer seed") from None
         log.warning("RGB encoder: RANDOM small conv (seed %d) - smoke runs only, not a pretrained model", seed)
         return RGBEncoder(_random_backbone(seed), RGBEncoderInfo(spec, "random", ""))
     path = Path(spec)
@@ -172,16 +173,16 @@ def load_rgb_encoder(spec: str) -> RGBEncoder:
     elif path.suffix == ".pt":
         blob = torch.load(path, map_location="cpu", weights_only=True)
         if not isinstance(blob, dict) or "arch" not in blob or "state_dict" not in blob:
-            raise ValueError(f"{path}: expected a dict with 'arch' and 'state_dict'")
+            raise ConfigError(f"{path}: expected a dict with 'arch' and 'state_dict'")
         if blob["arch"] not in ARCHS:
-            raise ValueError(f"{path}: unknown arch {blob['arch']!r}; known: {sorted(ARCHS)}")
+            raise ConfigError(f"{path}: unknown arch {blob['arch']!r}; known: {sorted(ARCHS)}")
         try:
             backbone = ARCHS[blob["arch"]](**blob.get("config", {}))
         except TypeError as e:
-            raise ValueError(f"{path}: bad config for arch {blob['arch']!r}: {e}") from None
+            raise ConfigError(f"{path}: bad config for arch {blob['arch']!r}: {e}") from None
         backbone.load_state_dict(blob["state_dict"])
         info = RGBEncoderInfo(spec, "state_dict", digest)
     else:
-        raise ValueError(f"{path}: RGB encoder files must be .pt2 (torch.export) or .pt (state dict)")
+        raise ConfigError(f"{path}: RGB encoder files must be .pt2 (torch.export) or .pt (state dict)")
     log.info("RGB encoder: %s (%s) sha256=%s", path, info.kind, digest)
     return RGBEncoder(backbone, info)

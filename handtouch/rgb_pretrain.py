@@ -41,6 +41,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from htdata.errors import ArgumentError
+from htdata.errors import ConfigError
+from htdata.errors import DatasetError
 from htdata.read import keys
 from htdata.store.fsutil import write_bytes_atomic
 
@@ -85,11 +88,11 @@ class RGBPretrainConfig:
 
     def validate(self) -> "RGBPretrainConfig":
         if self.steps < 1 or self.batch_size < 1 or self.max_items < 2 or self.lr <= 0 or self.threads < 1:
-            raise ValueError("rgb pretrain: steps, batch_size, threads >= 1, max_items >= 2, lr > 0 required")
+            raise ConfigError("rgb pretrain: steps, batch_size, threads >= 1, max_items >= 2, lr > 0 required")
         if self.loss not in ("frame_rmse", "mse") or self.shift_pixels < 0:
-            raise ValueError(f"rgb pretrain: loss must be frame_rmse or mse (got {self.loss!r}), shift_pixels >= 0")
+            raise ConfigError(f"rgb pretrain: loss must be frame_rmse or mse (got {self.loss!r}), shift_pixels >= 0")
         if self.shift_seconds <= 0:
-            raise ValueError(f"rgb pretrain: shift_seconds must be > 0, got {self.shift_seconds}")
+            raise ConfigError(f"rgb pretrain: shift_seconds must be > 0, got {self.shift_seconds}")
         TactileGridRGB(**self.arch)   # unknown / bad arch keys fail here
         return self
 
@@ -120,7 +123,7 @@ def load_items(dataset_root, split: str | None, part: str | None, cfg: RGBPretra
 
     ds = TactileFrameDataset(str(dataset_root), split=split, part=part)
     if len(ds) < 2:
-        raise ValueError(f"{dataset_root}: part {part!r} of split {split!r} has {len(ds)} frames; "
+        raise ArgumentError(f"{dataset_root}: part {part!r} of split {split!r} has {len(ds)} frames; "
                          "the RGB pretraining needs at least 2")
     fps_of = np.array([float(ep.get("fps") or 0.0) for ep in ds.reader.episodes])
     size, grid = cfg.arch["size"], cfg.arch["grid"]
@@ -157,11 +160,11 @@ def partners(episode: np.ndarray, frame: np.ndarray, fps: np.ndarray, pairing: s
                 out[mine] = rng.choice(others, len(mine))
         return out
     if pairing != "shifted":
-        raise ValueError(f"pairing must be one of {PAIRINGS}, got {pairing!r}")
+        raise ArgumentError(f"pairing must be one of {PAIRINGS}, got {pairing!r}")
     for e in np.unique(episode):
         mine = np.flatnonzero(episode == e)
         if not np.isfinite(fps[mine[0]]) or fps[mine[0]] <= 0:
-            raise ValueError(f"episode position {e}: fps {fps[mine[0]]} cannot express a shift in seconds")
+            raise DatasetError(f"episode position {e}: fps {fps[mine[0]]} cannot express a shift in seconds")
         k = math.ceil(shift_seconds * fps[mine[0]] - 1e-9)
         f = frame[mine].astype(np.int64)
         gap = np.abs(f[:, None] - f[None, :])
@@ -182,7 +185,7 @@ def train_probe(items: ProbeItems, pairing: str, cfg: RGBPretrainConfig,
     src = partners(items.episode, items.frame, items.fps, pairing, cfg.shift_seconds, cfg.seed)
     keep = np.flatnonzero(src >= 0)
     if len(keep) < 2:
-        raise ValueError(f"rgb pretrain ({pairing}): {len(keep)} items have a partner frame; need >= 2")
+        raise ArgumentError(f"rgb pretrain ({pairing}): {len(keep)} items have a partner frame; need >= 2")
     rgb, cells, weight, hand = items.rgb[src[keep]], items.cells[keep], items.weight[keep], items.hand[keep]
     with torch.random.fork_rng(devices=[]):      # the caller's RNG stream is left as it was
         torch.manual_seed(cfg.seed)

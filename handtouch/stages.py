@@ -24,6 +24,7 @@ from typing import ClassVar
 import torch
 import torch.nn as nn
 
+from htdata.errors import ArgumentError
 from htdata.read import keys
 
 from .config import MODULE_NAMES, WINDOW, LossConfig, MaskingConfig, StageConfig, TrainConfig
@@ -213,7 +214,7 @@ STAGES: dict[int, type[Stage]] = {s.number: s for s in (Reconstruction, MaskedFu
 def build_stage(n: int, cfg: TrainConfig) -> Stage:
     """Stage n with its settings from a TrainConfig."""
     if n not in STAGES:
-        raise ValueError(f"stage must be one of {sorted(STAGES)}, got {n}")
+        raise ArgumentError(f"stage must be one of {sorted(STAGES)}, got {n}")
     if STAGES[n] is MaskedFusion:
         return MaskedFusion(cfg.stage(n), cfg.loss, cfg.masking, cfg.seed)
     return STAGES[n](cfg.stage(n), cfg.loss)

@@ -32,6 +32,8 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
+from htdata.errors import ArgumentError
+from htdata.errors import ConfigError
 from htdata.read import keys
 from htdata.store.fsutil import write_json_atomic
 
@@ -102,7 +104,7 @@ def load_model(checkpoint_path: str | Path, device: str = "cpu") -> HandTouch:
     blob = read_checkpoint(path)
     rgb = load_rgb_encoder(blob["rgb_encoder"]["spec"])
     if rgb.info.sha256 != blob["rgb_encoder"]["sha256"]:
-        raise ValueError(f"{path}: RGB encoder {rgb.info.spec} has sha256 {rgb.info.sha256}, "
+        raise ArgumentError(f"{path}: RGB encoder {rgb.info.spec} has sha256 {rgb.info.sha256}, "
                          f"the checkpoint was trained with {blob['rgb_encoder']['sha256']}")
     model = HandTouch(model_config_from_dict(blob["model_config"]), rgb)
     model.load_state_dict(blob["model"])
@@ -138,8 +140,8 @@ def _stage_loader(stage: Stage, cfg: TrainConfig, data: TrainData, env: DistEnv,
     try:
         sampler = StepBatchSampler(len(dataset), cfg.batch_size, cfg.seed + n, start, stage.cfg.steps,
                                    env.rank, env.world_size)
-    except ValueError as e:
-        raise ValueError(f"stage {n} ({stage.items} items from {cfg.data_root}): {e}") from None
+    except ConfigError as e:   # too few samples for one batch; a bad call stays a plain ValueError
+        raise ConfigError(f"stage {n} ({stage.items} items from {cfg.data_root}): {e}") from None
     return DataLoader(dataset, batch_sampler=sampler, num_workers=cfg.workers,
                       generator=torch.Generator().manual_seed(cfg.seed),  # keep global RNG untouched
                       persistent_workers=False, pin_memory=env.device.type == "cuda",
@@ -217,7 +219,7 @@ def heldout_batch(dataset: Dataset, size: int, source: str = "held-out data") ->
     """`size` evenly spaced items (deterministic) collated into a batch."""
     n = len(dataset)
     if n == 0:
-        raise ValueError(f"{source} has no items: cannot build the held-out batch")
+        raise ArgumentError(f"{source} has no items: cannot build the held-out batch")
     idx = np.unique(np.linspace(0, n - 1, num=min(size, n)).round().astype(int))
     return torch.utils.data.default_collate([dataset[int(i)] for i in idx])
 

@@ -97,6 +97,6 @@ def _rebuild_episode_error(file, episode_id, frame, message) -> EpisodeError:
     return EpisodeError(None, frame, message, file=file, episode_id=episode_id)
 
 
-class RecordMismatch(HtdataError, ValueError):
+class RecordMismatch(DatasetError):
     """A record that decides served values (a calibration, an episode's fitted arrays) no longer matches
     its content id or digest: the one-line message names the file and the record (htdata.glove.calibration)."""

@@ -63,12 +63,16 @@ def _validator(schema_name: str):
     return jsonschema.Draft202012Validator(load_schema(schema_name))
 
 
-def validate_json(instance, schema_name: str, where: str = "") -> None:
-    """Validate `instance` against a project schema; raise ValueError naming `where`."""
+def validate_json(instance, schema_name: str, where: str = "", error: type[ValueError] = ValueError) -> None:
+    """Validate `instance` against a project schema; raise `error` naming `where`.
+
+    `error` says whose mistake a failure is: ConfigError for a document the user wrote (a pipeline,
+    a layout), DatasetError for a record read from a dataset; the default suits documents our own
+    code built, where a failure is a bug."""
     validator = _validator(schema_name)
     errors = sorted(validator.iter_errors(instance), key=lambda e: list(e.path))
     if errors:
         e = errors[0]
         loc = "/".join(str(p) for p in e.path) or "<root>"
         more = f" (+{len(errors) - 1} more)" if len(errors) > 1 else ""
-        raise ValueError(f"{where or schema_name}: {loc}: {e.message}{more}")
+        raise error(f"{where or schema_name}: {loc}: {e.message}{more}")

@@ -18,13 +18,15 @@ from __future__ import annotations
 import datetime
 import tomllib
 
+from htdata.errors import ConfigError
+
 
 def parse_setting(item: str) -> tuple[str, object]:
     """"a.b.c=value" -> ("a.b.c", value)."""
     key, sep, text = item.partition("=")
     key = key.strip()
     if not sep or not key or any(not p for p in key.split(".")):
-        raise ValueError(f"--set {item!r}: expected dotted.key=value (e.g. adapter.params.annotations=labels.csv)")
+        raise ConfigError(f"--set {item!r}: expected dotted.key=value (e.g. adapter.params.annotations=labels.csv)")
     try:
         value = tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
@@ -43,7 +45,7 @@ def apply_settings(data: dict, settings: list[str]) -> dict:
         for part in parts[:-1]:
             child = node.setdefault(part, {})
             if not isinstance(child, dict):
-                raise ValueError(f"--set {item}: {part!r} is a value, not a table")
+                raise ConfigError(f"--set {item}: {part!r} is a value, not a table")
             node = child
         node[parts[-1]] = value
     return data
@@ -61,7 +63,7 @@ def aim_settings(settings: list[str], targets: list[str]) -> dict[str, list[str]
         target, sep, _ = key.partition(":")
         if sep:
             if target not in targets:
-                raise ValueError(f"--set {item}: no pipeline named {target!r} (pipelines: {sorted(targets)})")
+                raise ConfigError(f"--set {item}: no pipeline named {target!r} (pipelines: {sorted(targets)})")
             aimed.setdefault(target, []).append(item[len(target) + 1:])
         else:
             shared.append(item)

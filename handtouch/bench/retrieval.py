@@ -53,6 +53,7 @@ import numpy as np
 import torch
 
 from handtouch.bench.ssim import map_stats, ssim_query_candidates
+from htdata.errors import ConfigError
 
 TIE_TOL = 1e-10   # scores of one query within this are tied (module doc: why this value)
 
@@ -69,17 +70,17 @@ class RetrievalConfig:
 
     def validate(self) -> "RetrievalConfig":
         if self.num_candidates < 1:
-            raise ValueError(f"num_candidates must be >= 1, got {self.num_candidates}")
+            raise ConfigError(f"num_candidates must be >= 1, got {self.num_candidates}")
         if not 1 <= self.top_k <= self.num_candidates:
-            raise ValueError(f"top_k must be in [1, num_candidates], got {self.top_k}")
+            raise ConfigError(f"top_k must be in [1, num_candidates], got {self.top_k}")
         if self.exclude_radius < 0:
-            raise ValueError(f"exclude_radius must be >= 0, got {self.exclude_radius}")
+            raise ConfigError(f"exclude_radius must be >= 0, got {self.exclude_radius}")
         if self.max_queries is not None and self.max_queries < 1:
-            raise ValueError(f"max_queries must be >= 1 or None, got {self.max_queries}")
+            raise ConfigError(f"max_queries must be >= 1 or None, got {self.max_queries}")
         if not self.tie_tolerance >= 0:
-            raise ValueError(f"tie_tolerance must be >= 0, got {self.tie_tolerance}")
+            raise ConfigError(f"tie_tolerance must be >= 0, got {self.tie_tolerance}")
         if self.shuffle_rounds < 1:
-            raise ValueError(f"shuffle_rounds must be >= 1, got {self.shuffle_rounds}")
+            raise ConfigError(f"shuffle_rounds must be >= 1, got {self.shuffle_rounds}")
         return self
 
 

@@ -16,6 +16,7 @@ from typing import Callable
 import numpy as np
 
 from htdata.benchmarks.sources import discover, episode_maps
+from htdata.errors import ArgumentError
 from htdata.format.codec import check_tactile_values, decode_exr, decode_png16, encode_exr, encode_png16
 from htdata.benchmarks.maplayouts import RULE as LAYOUT_RULE, layout_rows, pick_layout
 from htdata.glove.codecrule import RULE, GloveStep, glove_step, pick_codec, resolve_codec
@@ -101,7 +102,7 @@ def real_maps(corpus: Path, sources: tuple[str, ...], max_maps: int) -> dict[str
                     take = np.linspace(0, len(maps) - 1, num=min(per_ep, len(maps))).round().astype(int)
                     chosen.setdefault(em.layouts[hand], []).append(maps[np.unique(take)])
     if not chosen:
-        raise ValueError(f"{corpus}: no episode of {list(sources)} gave a tactile map")
+        raise ArgumentError(f"{corpus}: no episode of {list(sources)} gave a tactile map")
     return {layout_id: np.concatenate(parts)[:max_maps] for layout_id, parts in sorted(chosen.items())}
 
 

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata.benchmarks.tables import fmt as _fmt, table
+from htdata.errors import ArgumentError
 from htdata.glove.layouts import load_layout
 from htdata.synthetic.corpus import native_raw
 from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
@@ -84,7 +85,7 @@ def planned_episode(folder: Path, pipeline: str = "native"):
 
     cfg, adapter, refs = discover(pipeline, folder)
     if len(refs) != 1:
-        raise ValueError(f"{folder}: expected one recording, found {len(refs)}")
+        raise ArgumentError(f"{folder}: expected one recording, found {len(refs)}")
     return cfg, adapter, refs[0]
 
 

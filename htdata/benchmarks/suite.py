@@ -29,6 +29,7 @@ from dataclasses import asdict, dataclass
 from importlib import metadata
 from pathlib import Path
 
+from htdata.errors import ArgumentError
 from htdata.store.fsutil import write_bytes_atomic
 from htdata.synthetic.corpus import FORMATS
 from htdata.synthetic.corpus import SCALES, CorpusConfig, corpus_complete, write_corpus
@@ -100,29 +101,29 @@ class BenchConfig:
         self.out = Path(self.out)
         for name in ("scale", "scaling_scale"):
             if getattr(self, name) not in SCALES:
-                raise ValueError(f"{name} must be one of {SCALES}, got {getattr(self, name)!r}")
+                raise ArgumentError(f"{name} must be one of {SCALES}, got {getattr(self, name)!r}")
         if min(self.ingest_reps, self.scaling_reps, self.revision_frames) < 1:
-            raise ValueError("ingest_reps, scaling_reps and revision_frames must be >= 1")
+            raise ArgumentError("ingest_reps, scaling_reps and revision_frames must be >= 1")
         positive = {"codec_maps_per_glove": self.codec_maps_per_glove, "rgb_frames": self.rgb_frames,
                     "raster_frames": self.raster_frames, "loader_random": self.loader_random,
                     "loader_windows": self.loader_windows, "dataloader_items": self.dataloader_items}
         bad = {k: v for k, v in positive.items() if not isinstance(v, int) or v < 1}
         if bad:
-            raise ValueError(f"bench sizes must be integers >= 1, got {bad}")
+            raise ArgumentError(f"bench sizes must be integers >= 1, got {bad}")
         if len(set(self.ingest_workers)) < 2 or min(self.ingest_workers) < 1:
-            raise ValueError(f"ingest_workers must name two worker counts >= 1 (1 -> N scaling), "
+            raise ArgumentError(f"ingest_workers must name two worker counts >= 1 (1 -> N scaling), "
                              f"got {self.ingest_workers}")
         if len(self.rss_lengths) < 2 or list(self.rss_lengths) != sorted(set(self.rss_lengths)) or self.rss_lengths[0] < 2:
-            raise ValueError(f"rss_lengths must be >= 2 increasing lengths >= 2 frames, got {self.rss_lengths}")
+            raise ArgumentError(f"rss_lengths must be >= 2 increasing lengths >= 2 frames, got {self.rss_lengths}")
         if len(self.append_sizes) < 2 or min(self.append_sizes) < 1:
-            raise ValueError(f"append_sizes must be >= 2 dataset sizes >= 1, got {self.append_sizes}")
+            raise ArgumentError(f"append_sizes must be >= 2 dataset sizes >= 1, got {self.append_sizes}")
         if not self.index_rows or min(self.index_rows) < 1:
-            raise ValueError(f"index_rows must be positive, got {self.index_rows}")
+            raise ArgumentError(f"index_rows must be positive, got {self.index_rows}")
         if self.sections is not None:
             known = BUILTIN_SECTIONS + tuple(discover_sections())
             unknown = [s for s in self.sections if s not in known]
             if unknown or not self.sections:
-                raise ValueError(f"unknown section(s) {unknown or list(self.sections)}; known: {list(known)}")
+                raise ArgumentError(f"unknown section(s) {unknown or list(self.sections)}; known: {list(known)}")
         return self
 
     @property

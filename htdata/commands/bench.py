@@ -40,11 +40,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"[bench {time.perf_counter() - t_start:6.1f}s] {message}", file=sys.stderr, flush=True)
 
     command = "htdata bench " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["bench"] else "htdata bench"
-    try:
-        results = run_bench(cfg, command=command, log=None if args.quiet else log)
-    except ValueError as exc:
-        print(f"htdata bench: error: {exc}", file=sys.stderr)
-        return 2
+    # a bad option is an ArgumentError: cli.py prints its one line and returns 2
+    results = run_bench(cfg, command=command, log=None if args.quiet else log)
     if results["errors"]:
         for name, msg in results["errors"].items():
             print(f"htdata bench: section {name} failed: {msg}", file=sys.stderr)

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.errors import ArgumentError
 from htdata.format.table import CANVAS
 from htdata.glove.activity import rule_text, unmapped_moving
 from htdata.glove.layouts import LAYOUTS_ENV, Layout, list_layouts, load_canonical, load_layout
@@ -117,12 +118,12 @@ def check_against(layout: Layout, recordings: list[str], pipeline: str) -> int:
     """Print each recording hand's unmapped moving cells with their activity; 1 when any moves."""
     scanned = scan_recordings(recordings, pipeline, layout.hand, layout.path)
     if not scanned:
-        raise ValueError(f"no {layout.hand}-hand rows in {', '.join(recordings)} (layout {layout.layout_id} is "
+        raise ArgumentError(f"no {layout.hand}-hand rows in {', '.join(recordings)} (layout {layout.layout_id} is "
                          f"for the {layout.hand} hand)")
     findings: set[tuple[int, int]] = set()
     for s in scanned:
         if s.activity.grid != tuple(layout.grid):
-            raise ValueError(f"{s.recording} [{s.episode_id}]: {s.hand} rows are {s.activity.grid[0]}x"
+            raise ArgumentError(f"{s.recording} [{s.episode_id}]: {s.hand} rows are {s.activity.grid[0]}x"
                              f"{s.activity.grid[1]}, layout {layout.layout_id} is {layout.grid[0]}x{layout.grid[1]}")
         found = unmapped_moving(s.activity, layout)
         head = (f"{s.recording} [{s.episode_id}] {s.hand} hand: {found.frames} frames, noise {found.noise:.4g}, "
@@ -156,19 +157,19 @@ def _cells(cells: list, limit: int = 12) -> str:
 def suggest(args: argparse.Namespace) -> int:
     """`htdata layouts suggest RECORDING... OUT.json`."""
     if len(args.paths) < 2:
-        raise ValueError("suggest needs at least one RECORDING and the OUT.json to write")
+        raise ArgumentError("suggest needs at least one RECORDING and the OUT.json to write")
     *recordings, out = args.paths
     out = Path(out)
     if out.suffix != ".json":
-        raise ValueError(f"OUT must be a .json file, got {out}")
+        raise ArgumentError(f"OUT must be a .json file, got {out}")
     if out.exists() and not args.force:
-        raise ValueError(f"{out} exists (use --force to overwrite it)")
+        raise ArgumentError(f"{out} exists (use --force to overwrite it)")
     scanned = scan_recordings(recordings, args.pipeline, args.hand)
     hands = sorted({s.hand for s in scanned})
     if not scanned:
-        raise ValueError(f"no {args.hand or ''} tactile rows in {', '.join(recordings)}".replace("  ", " "))
+        raise ArgumentError(f"no {args.hand or ''} tactile rows in {', '.join(recordings)}".replace("  ", " "))
     if len(hands) > 1:
-        raise ValueError(f"the recordings hold both hands ({', '.join(hands)}): choose one with --hand")
+        raise ArgumentError(f"the recordings hold both hands ({', '.join(hands)}): choose one with --hand")
     layout_id = args.layout_id or layout_id_from_name(out.stem)
     doc, summary = suggest_layout([s.activity for s in scanned], hands[0], layout_id,
                                   all(s.integral for s in scanned), recordings, args.max_value)

@@ -5,12 +5,14 @@ from __future__ import annotations
 import argparse
 import re
 
+from htdata.errors import ArgumentError
+
 
 def parse_version(text: str) -> int:
-    """'3' or 'v3' -> 3; anything else is a ValueError naming the text."""
+    """'3' or 'v3' -> 3; anything else is an ArgumentError naming the text."""
     m = re.fullmatch(r"[vV]?(\d+)", str(text).strip())
     if m is None:
-        raise ValueError(f"not a version: {text!r} (write 3 or v3; `htdata log DATASET` lists them)")
+        raise ArgumentError(f"not a version: {text!r} (write 3 or v3; `htdata log DATASET` lists them)")
     return int(m.group(1))
 
 

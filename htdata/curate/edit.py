@@ -19,6 +19,7 @@ import difflib
 import fnmatch
 from dataclasses import dataclass, field
 
+from htdata.errors import ArgumentError
 from htdata.store.lock import WriterLock
 from htdata.store.parts import Part
 from htdata.read.reader import DatasetReader
@@ -26,7 +27,7 @@ from htdata.write.repack import KeptEpisode, clear_uncommitted, repack_unit, sam
 from htdata.store.snapshot import Snapshot, commit_parts, open_snapshot
 
 
-class NoSuchEpisode(ValueError):
+class NoSuchEpisode(ArgumentError):
     """An episode id or pattern matched nothing."""
 
 
@@ -53,9 +54,9 @@ def parse_frames(spec: str, n: int, episode: str) -> range:
         a, b = spec.split(":")
         start, stop = int(a) if a.strip() else 0, int(b) if b.strip() else n
     except ValueError:
-        raise ValueError(f"--frames must be A:B (frames kept, B exclusive), got {spec!r}") from None
+        raise ArgumentError(f"--frames must be A:B (frames kept, B exclusive), got {spec!r}") from None
     if not 0 <= start < stop <= n:
-        raise ValueError(f"episode {episode!r} has frames 0..{n - 1}: --frames {spec} must keep a non-empty "
+        raise ArgumentError(f"episode {episode!r} has frames 0..{n - 1}: --frames {spec} must keep a non-empty "
                          f"range inside 0:{n} (to remove the whole episode use htdata rm)")
     return range(start, stop)
 
@@ -160,7 +161,7 @@ def trim_episode(root, episode: str, frames: str, dry_run: bool, command: str) -
         snap = open_snapshot(root)
         ids = resolve_episodes(snap.episode_ids(), [episode])
         if len(ids) != 1:
-            raise ValueError(f"trim takes one episode; {episode!r} matches {len(ids)}: {', '.join(ids[:5])}")
+            raise ArgumentError(f"trim takes one episode; {episode!r} matches {len(ids)}: {', '.join(ids[:5])}")
         eid = ids[0]
         n = next(int(e["num_frames"]) for e in snap.episodes if e["episode_id"] == eid)
         kept = parse_frames(frames, n, eid)

@@ -31,6 +31,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from htdata.errors import ArgumentError
 from htdata.errors import HtdataError
 from htdata.faults import crash_point
 from htdata.format.table import SHARDS_DIR
@@ -58,7 +59,7 @@ def parse_duration(text: str) -> float:
     """'7d', '36h', '30m', '90s', '0' -> seconds."""
     m = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*([smhd]?)\s*", str(text))
     if not m:
-        raise ValueError(f"--retention {text!r}: expected a duration such as 7d, 36h, 30m, 90s or 0")
+        raise ArgumentError(f"--retention {text!r}: expected a duration such as 7d, 36h, 30m, 90s or 0")
     return float(m.group(1)) * _UNITS[m.group(2) or "s"]
 
 
@@ -113,7 +114,7 @@ class GcPlan:
 def plan_gc(root: Path, keep_versions: int, retention_s: float = DEFAULT_RETENTION_S,
             now: float | None = None) -> GcPlan:
     if keep_versions < 1:
-        raise ValueError(f"--keep-versions must be >= 1 (the current version is always kept), got {keep_versions}")
+        raise ArgumentError(f"--keep-versions must be >= 1 (the current version is always kept), got {keep_versions}")
     now = time.time() if now is None else now
     current = load_manifest(root)
     versions = list_versions(root)
@@ -167,7 +168,7 @@ def unused_stats_entries(root: Path, versions: list) -> list[tuple[str, int]]:
 
 def check_retention(retention_s: float, force: bool) -> None:
     if retention_s < 0:
-        raise ValueError(f"--retention must be >= 0, got {retention_s:g} s")
+        raise ArgumentError(f"--retention must be >= 0, got {retention_s:g} s")
     if retention_s < FORCE_BELOW_S and not force:
         raise RetentionTooShort(
             f"--retention {format_duration(retention_s)} is shorter than {format_duration(FORCE_BELOW_S)}: a reader "

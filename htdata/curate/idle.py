@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from htdata.curate import edit as curate_edit
+from htdata.errors import ArgumentError
 from htdata.glove.contact import THRESHOLD
 from htdata.store.lock import WriterLock
 from htdata.read.reader import DatasetReader
@@ -36,9 +37,9 @@ class IdleConfig:
 
     def validate(self) -> None:
         if self.min_contact is not None and not 0.0 <= self.min_contact < 1.0:
-            raise ValueError(f"--min-contact must be in [0, 1), got {self.min_contact}")
+            raise ArgumentError(f"--min-contact must be in [0, 1), got {self.min_contact}")
         if self.keep_margin_s < 0:
-            raise ValueError(f"--keep-margin must be >= 0 seconds, got {self.keep_margin_s}")
+            raise ArgumentError(f"--keep-margin must be >= 0 seconds, got {self.keep_margin_s}")
 
 
 @dataclass

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from htdata.format.mapstorage import MapStorage
+from htdata.errors import ArgumentError
 from htdata.faults import crash_point
 from htdata.format.table import MANIFEST_FILE, SHARDS_DIR
 from htdata.store.confine import inside
@@ -48,7 +49,7 @@ from htdata.store.versions import content_view, list_versions, version_manifest_
 MERGE_MARKER = ".merge.json"   # written by a merge into an empty OUT, removed after its commit
 
 
-class MergeConflict(ValueError):
+class MergeConflict(ArgumentError):
     """The two datasets cannot be merged as they are."""
 
 

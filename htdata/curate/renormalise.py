@@ -24,6 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.errors import ArgumentError
+from htdata.errors import ConfigError
+from htdata.errors import DatasetError
 from htdata.glove.calibration import (calibration_id, episode_calibrations, episode_normaliser, fit_digests, fit_record,
                                       taxel_digest)
 from htdata.format.codec import MEMBER_CODECS
@@ -98,7 +101,7 @@ def plan_renormalise(snap: Snapshot, normalising: NormaliseSettings, patterns: l
             no_raw.append(eid)
         plan.changes[eid] = hands
     if no_raw:
-        raise ValueError(f"{len(no_raw)} episode(s) have no stored raw glove rows (format < 3, or ingested with "
+        raise ArgumentError(f"{len(no_raw)} episode(s) have no stored raw glove rows (format < 3, or ingested with "
                          f"[tactile] keep_raw = false), so they cannot be renormalised without their sources: "
                          f"{', '.join(no_raw[:5])}{' ...' if len(no_raw) > 5 else ''}; re-ingest them instead")
     for part in snap.parts():
@@ -182,9 +185,9 @@ class Recalibration:
             try:
                 values, finite = apply_paired(normaliser, members, hand, where)
             except ValueError as exc:   # e.g. clip = false and a value outside [0,1] under the new settings
-                raise ValueError(f"{where}: {exc}") from exc
+                raise ConfigError(f"{where}: {exc}") from exc
             if not finite.all():
-                raise ValueError(f"{where}: stored raw row has non-finite live taxels")
+                raise DatasetError(f"{where}: stored raw row has non-finite live taxels")
             live = values[0][normaliser.live_mask]
             series.append(live[None])
             contact[0] += float(live.sum(dtype=np.float64))

@@ -9,6 +9,7 @@ from collections import defaultdict
 from dataclasses import dataclass
 from datetime import datetime, timezone
 
+from htdata.errors import ArgumentError
 from htdata.resources import validate_json
 from htdata.store.splitfiles import count_parts
 
@@ -27,7 +28,7 @@ RULE = (
 )
 
 
-class SplitError(ValueError):
+class SplitError(ArgumentError):
     """A split request that cannot be honoured (message says why and what to do)."""
 
 

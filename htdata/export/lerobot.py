@@ -53,6 +53,7 @@ from typing import Callable
 
 import numpy as np
 
+from htdata.errors import DatasetError
 from htdata.format.table import CANVAS, JSON_MEMBER, RGB_MEMBER, decode_member, raw_member, tactile_member
 from htdata.export.lerobot_out import check_out, write_marker
 from htdata.export.lerobot_meta import CHUNKS_SIZE, DATA_FILE_MB, DATA_PATH, VIDEO_PATH, part_of, write_meta
@@ -205,7 +206,7 @@ def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, sam
             if raw_member(hand) in members:
                 row = paired_row(members, hand, where)
                 if row.shape != plan.slots[k].grid:
-                    raise ValueError(f"{where}: {hand} raw row shaped {row.shape}, "
+                    raise DatasetError(f"{where}: {hand} raw row shaped {row.shape}, "
                                      f"expected {plan.slots[k].grid} (its layout's grid)")
                 # NaN / Inf mark cells without a taxel in some sources: 0 (LeRobot stats and
                 # normalisation would turn one NaN into NaN everywhere); finite values stay exact

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.errors import ArgumentError
+from htdata.errors import DatasetError
 from htdata.store import storage
 from htdata.format.table import CANVAS, HANDS, JSON_MEMBER, RGB_MEMBER, SIZE_FIELDS, decode_member
 from htdata.read.reader import DatasetReader
@@ -55,17 +57,17 @@ class LeRobotExportConfig:
     def validate(self) -> None:
         """Raise ValueError naming the option (--part, --fps, crf, gop, codec, OUT) whose value cannot be exported."""
         if self.part is not None and self.split is None:
-            raise ValueError("--part needs --split NAME")
+            raise ArgumentError("--part needs --split NAME")
         if self.fps is not None and not (self.fps > 0 and float(self.fps).is_integer()):
-            raise ValueError(f"--fps must be a positive whole number (LeRobot's fps is an int), got {self.fps}")
+            raise ArgumentError(f"--fps must be a positive whole number (LeRobot's fps is an int), got {self.fps}")
         if not 0 <= self.crf <= 51:
-            raise ValueError(f"crf must be in 0..51, got {self.crf}")
+            raise ArgumentError(f"crf must be in 0..51, got {self.crf}")
         if self.gop < 1:
-            raise ValueError(f"gop must be >= 1, got {self.gop}")
+            raise ArgumentError(f"gop must be >= 1, got {self.gop}")
         if self.codec not in ("libx264", "libsvtav1"):
-            raise ValueError(f"codec must be libx264 or libsvtav1, got {self.codec!r}")
+            raise ArgumentError(f"codec must be libx264 or libsvtav1, got {self.codec!r}")
         if storage.is_url(str(self.out)):
-            raise ValueError(f"{self.out}: the export writes a local directory")
+            raise ArgumentError(f"{self.out}: the export writes a local directory")
 
 
 # --------------------------------------------------------------------------- the export
@@ -131,7 +133,7 @@ def plan_export(reader: DatasetReader, cfg: LeRobotExportConfig) -> _Plan:
             parts[name] = [reader.episodes[p]["episode_id"] for p in pos]
             positions += pos
     if not positions:
-        raise ValueError(f"{reader.root}: nothing to export (no episodes selected)")
+        raise ArgumentError(f"{reader.root}: nothing to export (no episodes selected)")
     hands = [h for h in HANDS if any(h in reader.episodes[p]["hands"] for p in positions)]
     layout_grids: dict[str, tuple[int, int]] = {}
     layouts: dict[str, list[str]] = {}
@@ -141,7 +143,7 @@ def plan_export(reader: DatasetReader, cfg: LeRobotExportConfig) -> _Plan:
             if layout_id not in layout_grids:
                 grid = reader.layout(layout_id).get("grid")
                 if not grid or len(grid) != 2:
-                    raise ValueError(f"episode {ep['episode_id']!r}: layout {layout_id!r} names no raw grid")
+                    raise DatasetError(f"episode {ep['episode_id']!r}: layout {layout_id!r} names no raw grid")
                 layout_grids[layout_id] = (int(grid[0]), int(grid[1]))
             if layout_id not in layouts.setdefault(hand, []):
                 layouts[hand].append(layout_id)
@@ -153,7 +155,7 @@ def plan_export(reader: DatasetReader, cfg: LeRobotExportConfig) -> _Plan:
             key = raw_key(hand) if len(grids) == 1 else f"{raw_key(hand)}_{g[0]}x{g[1]}"
             slots.append(RawSlot(hand, g, key, key.removeprefix("observation.")))
     if int(reader.manifest.get("format_version", 0)) < 3:
-        raise ValueError(f"{reader.root}: format {reader.manifest.get('format_version')} stores no raw glove rows; "
+        raise ArgumentError(f"{reader.root}: format {reader.manifest.get('format_version')} stores no raw glove rows; "
                          f"the export needs format 3 (re-ingest the sources)")
     if cfg.fps is not None:
         fps, resample = int(cfg.fps), True
@@ -163,7 +165,7 @@ def plan_export(reader: DatasetReader, cfg: LeRobotExportConfig) -> _Plan:
             ep = reader.episodes[p]
             rates.setdefault(int(round(float(ep.get("fps") or 0))), ep["episode_id"])
         if len(rates) != 1 or 0 in rates:
-            raise ValueError(f"episodes have frame rates {sorted(rates)} (e.g. {sorted(rates.items())[:3]}); "
+            raise ArgumentError(f"episodes have frame rates {sorted(rates)} (e.g. {sorted(rates.items())[:3]}); "
                              f"LeRobot has one fps per dataset: pass --fps F to resample")
         fps, resample = next(iter(rates)), False
     # a glove-only selection (no frame holds RGB) has no egocentric feature: no all-black video
@@ -211,12 +213,12 @@ def _episode_schedule(reader: DatasetReader, pos: int, plan: _Plan) -> tuple[lis
     for i in range(first, first + n):
         meta = decode_member(JSON_MEMBER, reader.sample(i, (JSON_MEMBER,))[JSON_MEMBER], f"{reader.root}: {reader.key(i)}")
         if meta.get("t_rgb_ns") is None:
-            raise ValueError(f"{reader.root}: {reader.key(i)}: sample has no t_rgb_ns time")
+            raise DatasetError(f"{reader.root}: {reader.key(i)}: sample has no t_rgb_ns time")
         times.append(int(meta["t_rgb_ns"]))
     t = (np.asarray(times, np.int64) - times[0]) / 1e9
     if np.any(np.diff(t) <= 0):
         k = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
-        raise ValueError(f"episode {eid!r} frame {k}: time does not increase ({t[k - 1]:.6f} s -> {t[k]:.6f} s)")
+        raise DatasetError(f"episode {eid!r} frame {k}: time does not increase ({t[k - 1]:.6f} s -> {t[k]:.6f} s)")
     ticks = np.arange(_ticks(t[-1], plan.fps)) / plan.fps
     right = np.clip(np.searchsorted(t, ticks), 0, n - 1)
     left = np.clip(right - 1, 0, n - 1)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.errors import DatasetError
 from htdata.format.table import CANVAS
 
 VIDEO_TIME_BASE = Fraction(1, 90000)   # mp4's usual clock: 11 us steps, well inside LeRobot's 1e-4 s tolerance
@@ -52,7 +53,7 @@ class VideoWriter:
         """
         pts = int(round(t_s / VIDEO_TIME_BASE))
         if pts <= self.last_pts:
-            raise ValueError(f"{where}: timestamp {t_s:.6f} s does not come after the previous frame's")
+            raise DatasetError(f"{where}: timestamp {t_s:.6f} s does not come after the previous frame's")
         self.last_pts = pts
         frame = self._av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
         frame.pts, frame.time_base = pts, VIDEO_TIME_BASE

@@ -31,6 +31,8 @@ import cv2
 import numpy as np
 import OpenEXR
 
+from htdata.errors import ArgumentError
+from htdata.errors import DatasetError
 from htdata.format.canvas import CANVAS, MAP_SHAPE
 # Resampling round-off tolerated (and clipped) outside [0,1]; see the value rule.
 ROUND_OFF = 1e-3
@@ -111,7 +113,7 @@ def encode_exr(tactile_map: np.ndarray, compression: str = "zip", pixel_type=np.
     map's full shape; readers place the window in it, pixels outside read 0). The bench measures it.
     """
     if compression not in _EXR_COMPRESSIONS:
-        raise ValueError(f"unknown EXR compression {compression!r}; known: {sorted(_EXR_COMPRESSIONS)}")
+        raise ArgumentError(f"unknown EXR compression {compression!r}; known: {sorted(_EXR_COMPRESSIONS)}")
     header = {"compression": _EXR_COMPRESSIONS[compression], "type": OpenEXR.scanlineimage}
     if np.dtype(pixel_type) == np.float16:
         pixels = to_half(tactile_map)
@@ -137,16 +139,16 @@ def decode_exr_pixels(data: bytes, where: str = "EXR") -> np.ndarray:
         f = OpenEXR.File(io.BytesIO(data))
         channels, header = f.channels(), f.header()
     except Exception as exc:
-        raise ValueError(f"{where}: undecodable EXR ({len(data)} bytes): {exc}") from exc
+        raise DatasetError(f"{where}: undecodable EXR ({len(data)} bytes): {exc}") from exc
     if EXR_CHANNEL not in channels:
-        raise ValueError(f"{where}: EXR has no channel {EXR_CHANNEL!r} (channels: {sorted(channels)})")
+        raise DatasetError(f"{where}: EXR has no channel {EXR_CHANNEL!r} (channels: {sorted(channels)})")
     pixels = np.asarray(channels[EXR_CHANNEL].pixels)
     (x0, y0), (x1, y1) = (tuple(int(v) for v in corner) for corner in header["dataWindow"])
     (dx0, dy0), (dx1, dy1) = (tuple(int(v) for v in corner) for corner in header["displayWindow"])
     if (x0, y0, x1, y1) == (dx0, dy0, dx1, dy1):
         return pixels
     if not (dx0 <= x0 <= x1 <= dx1 and dy0 <= y0 <= y1 <= dy1):
-        raise ValueError(f"{where}: EXR data window {(x0, y0, x1, y1)} is not inside its display window "
+        raise DatasetError(f"{where}: EXR data window {(x0, y0, x1, y1)} is not inside its display window "
                          f"{(dx0, dy0, dx1, dy1)}")
     canvas = np.zeros((dy1 - dy0 + 1, dx1 - dx0 + 1), pixels.dtype)
     canvas[y0 - dy0:y1 - dy0 + 1, x0 - dx0:x1 - dx0 + 1] = pixels
@@ -165,7 +167,7 @@ def encode_tactile(tactile_map: np.ndarray, compression: str = "zip", where: str
                    pixel_type: str = "half") -> bytes:
     """Value rule + EXR of `pixel_type` ("half" or "float"), channel "Y" (the dataset format)."""
     if pixel_type not in EXR_PIXEL_TYPES:
-        raise ValueError(f"{where}: unknown EXR pixel type {pixel_type!r}; known: {sorted(EXR_PIXEL_TYPES)}")
+        raise ArgumentError(f"{where}: unknown EXR pixel type {pixel_type!r}; known: {sorted(EXR_PIXEL_TYPES)}")
     return encode_exr(check_tactile_values(tactile_map, where), compression, EXR_PIXEL_TYPES[pixel_type])
 
 
@@ -173,7 +175,7 @@ def decode_tactile(data: bytes, where: str = "tactile map") -> np.ndarray:
     """EXR bytes -> float32 (224,224) map; any decode failure is a ValueError naming `where`."""
     arr = decode_exr(data, where)
     if arr.shape != MAP_SHAPE:
-        raise ValueError(f"{where}: decoded tactile map has shape {arr.shape}, expected {MAP_SHAPE}")
+        raise DatasetError(f"{where}: decoded tactile map has shape {arr.shape}, expected {MAP_SHAPE}")
     return check_finite_maps(arr, where)
 
 
@@ -187,7 +189,7 @@ def check_finite_maps(maps: np.ndarray, where: str) -> np.ndarray:
     bad = np.flatnonzero(~np.isfinite(sums))
     if bad.size:
         which = "" if maps.ndim == 2 else f" (map {int(bad[0])} of {len(sums)} in this batch)"
-        raise ValueError(f"{where}: tactile map holds NaN/Inf values{which}: its raw glove rows are not finite; "
+        raise DatasetError(f"{where}: tactile map holds NaN/Inf values{which}: its raw glove rows are not finite; "
                          f"`htdata validate --deep` lists every such sample")
     return maps
 
@@ -205,7 +207,7 @@ def decode_png16(data: bytes) -> np.ndarray:
     # IMREAD_UNCHANGED: without it cv2 returns uint8.
     arr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     if arr is None or arr.dtype != np.uint16:
-        raise ValueError("not a 16-bit PNG")
+        raise DatasetError("not a 16-bit PNG")
     return arr.astype(np.float32) / 65535.0
 
 
@@ -234,7 +236,7 @@ def decode_rgb(data: bytes, where: str = "rgb frame") -> np.ndarray:
     """JPEG bytes -> (H,W,3) uint8 RGB."""
     bgr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
     if bgr is None:
-        raise ValueError(f"{where}: not a decodable JPEG ({len(data)} bytes)")
+        raise DatasetError(f"{where}: not a decodable JPEG ({len(data)} bytes)")
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
 
 
@@ -252,7 +254,7 @@ def encode_png_u8(image: np.ndarray, where: str) -> bytes:
 def decode_png_u8(data: bytes, where: str) -> np.ndarray:
     arr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     if arr is None or arr.dtype != np.uint8 or arr.ndim != 2:
-        raise ValueError(f"{where}: not a single-channel 8-bit PNG")
+        raise DatasetError(f"{where}: not a single-channel 8-bit PNG")
     return arr
 
 
@@ -288,20 +290,20 @@ _NPY_HEADERS: dict[bytes, tuple[np.dtype, tuple, bool, int]] = {}
 def decode_npy(data: bytes, where: str = "npy") -> np.ndarray:
     """.npy bytes -> array (a writable copy), exactly what np.load would return."""
     if data[:6] != b"\x93NUMPY" or len(data) < 10:
-        raise ValueError(f"{where}: not an .npy member ({len(data)} bytes)")
+        raise DatasetError(f"{where}: not an .npy member ({len(data)} bytes)")
     if data[6] == 1:
         start = 10 + struct.unpack_from("<H", data, 8)[0]
     elif len(data) >= 12:
         start = 12 + struct.unpack_from("<I", data, 8)[0]
     else:
-        raise ValueError(f"{where}: truncated .npy header")
+        raise DatasetError(f"{where}: truncated .npy header")
     header = data[:start]
     meta = _NPY_HEADERS.get(header)
     if meta is None:
         try:
             arr = np.load(io.BytesIO(data), allow_pickle=False)
         except Exception as exc:
-            raise ValueError(f"{where}: unreadable .npy member: {exc}") from exc
+            raise DatasetError(f"{where}: unreadable .npy member: {exc}") from exc
         fortran = arr.ndim > 1 and arr.flags.f_contiguous and not arr.flags.c_contiguous
         if len(_NPY_HEADERS) < _NPY_HEADER_CACHE_MAX:
             _NPY_HEADERS[header] = (arr.dtype, arr.shape, fortran, start)
@@ -309,7 +311,7 @@ def decode_npy(data: bytes, where: str = "npy") -> np.ndarray:
     dtype, shape, fortran, start = meta
     count = int(np.prod(shape, dtype=np.int64))
     if len(data) - start != count * dtype.itemsize:
-        raise ValueError(f"{where}: .npy member holds {len(data) - start} data bytes, "
+        raise DatasetError(f"{where}: .npy member holds {len(data) - start} data bytes, "
                          f"header says {count * dtype.itemsize}")
     return np.frombuffer(data, dtype, count, start).reshape(shape, order="F" if fortran else "C").copy()
 
@@ -323,7 +325,7 @@ def decode_json(data: bytes, where: str = "json") -> dict:
     try:
         return json.loads(data)
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{where}: invalid JSON member: {exc}") from exc
+        raise DatasetError(f"{where}: invalid JSON member: {exc}") from exc
 
 
 # Codec kind (htdata/format/table.py MEMBERS) -> (encode(value, settings, where), decode(data, where));

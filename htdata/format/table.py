@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from htdata.errors import DatasetError
 # CANVAS, HANDS, MAP_SHAPE are names of the table too; they live in canvas.py because the codecs need them.
 from htdata.format.canvas import CANVAS, HANDS, MAP_SHAPE  # noqa: F401
 from htdata.format.codec import MEMBER_CODECS
@@ -159,7 +160,7 @@ def decode_member(suffix: str, data: bytes, where: str):
     """
     m = MEMBER_BY_SUFFIX.get(suffix)
     if m is None:
-        raise ValueError(f"{where}: unknown member {suffix!r} (known: {MEMBER_ORDER})")
+        raise DatasetError(f"{where}: unknown member {suffix!r} (known: {MEMBER_ORDER})")
     return MEMBER_CODECS[m.kind][1](data, f"{where}.{suffix}")
 
 

@@ -35,6 +35,7 @@ import json
 
 import numpy as np
 
+from htdata.errors import DatasetError
 from htdata.errors import RecordMismatch
 from htdata.glove.normalise import NormaliseConfig, Normaliser
 
@@ -78,7 +79,7 @@ def decode_array(text: str, shape: tuple[int, ...], where: str) -> np.ndarray:
     item = 4 * int(np.prod(shape[1:] if shape and shape[0] == -1 else shape))
     if (shape and shape[0] == -1 and (not data or len(data) % max(item, 1))) or \
             (not (shape and shape[0] == -1) and len(data) != item):
-        raise ValueError(f"{where}: {len(data)} bytes, expected {'x'.join(str(v) for v in shape)} float32")
+        raise DatasetError(f"{where}: {len(data)} bytes, expected {'x'.join(str(v) for v in shape)} float32")
     return np.frombuffer(data, dtype="<f4").reshape(shape).astype(np.float32)
 
 
@@ -105,10 +106,10 @@ def episode_normaliser(manifest: dict, episode: dict, hand: str, layout) -> Norm
     where = f"episode {episode.get('episode_id')!r} {hand} hand"
     cal_id = (episode.get("calibration") or {}).get(hand)
     if cal_id is None:
-        raise ValueError(f"{where}: no calibration recorded (datasets of format < 3 have none: re-ingest them)")
+        raise DatasetError(f"{where}: no calibration recorded (datasets of format < 3 have none: re-ingest them)")
     entry = manifest.get("calibrations", {}).get(cal_id)
     if entry is None:
-        raise ValueError(f"{where}: calibration {cal_id} is not in the manifest's calibrations")
+        raise DatasetError(f"{where}: calibration {cal_id} is not in the manifest's calibrations")
     normaliser = Normaliser(config_of(entry), layout)
     fit = (episode.get("calibration_fit") or {}).get(hand, {})
     grid = normaliser.grid

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from htdata.errors import ConfigError
 from htdata.glove.layouts import load_layout
 
 SETTINGS = ("auto", "exr_half", "exr_float")      # pipeline [codec] tactile
@@ -165,7 +166,7 @@ def resolve_sources(sources: list, refs_per_source: list[list], existing: dict |
         return []
     settings = {(s.pipeline.codec.tactile, s.pipeline.tactile.compression) for s in sources}
     if len(settings) > 1:
-        raise ValueError(f"pipelines {[s.pipeline.name for s in sources]} disagree on [codec] tactile / "
+        raise ConfigError(f"pipelines {[s.pipeline.name for s in sources]} disagree on [codec] tactile / "
                          f"[tactile] compression ({sorted(settings)}): a dataset has one codec")
     (setting, compression), = settings
     pairs = [(s.pipeline, load_layout(path)) for s, refs in zip(sources, refs_per_source)
@@ -187,7 +188,7 @@ def resolve_codec(setting: str, compression: str, gloves: list[GloveStep],
     appended to; with "auto" its pixel type is kept (one codec per dataset).
     """
     if setting not in SETTINGS:
-        raise ValueError(f"[codec] tactile must be one of {SETTINGS}, got {setting!r}")
+        raise ConfigError(f"[codec] tactile must be one of {SETTINGS}, got {setting!r}")
     rows = analytic_rows(compression)
     if setting != "auto":
         pixel = setting.split("_", 1)[1]
@@ -207,7 +208,7 @@ def resolve_codec(setting: str, compression: str, gloves: list[GloveStep],
                            f"{picked and codec_name(picked, compression)}); levels NOT kept for: "
                            f"{', '.join(lost) or 'none'}")
     if row is None:
-        raise ValueError(f"no tactile codec keeps every glove's levels: {why}")
+        raise ConfigError(f"no tactile codec keeps every glove's levels: {why}")
     return CodecChoice(picked, compression, "rule", why)
 
 

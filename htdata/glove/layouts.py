@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.errors import ConfigError
 from htdata.errors import LayoutNotFound
 from htdata.format.table import CANONICAL_FILE
 from htdata.glove.canonical import (GROUPS, PART_NAMES, CanonicalHand, Rect, frozen,  # noqa: F401 (names of
@@ -180,15 +181,15 @@ def _cells(raw: list, grid: tuple[int, int], what: str, where: str) -> np.ndarra
     cells = np.asarray(raw, dtype=np.int64).reshape(-1, 2)
     bad = (cells[:, 0] >= grid[0]) | (cells[:, 1] >= grid[1])
     if bad.any():
-        raise ValueError(f"{where}: {what} cell {cells[bad][0].tolist()} is outside the {grid[0]}x{grid[1]} grid")
+        raise ConfigError(f"{where}: {what} cell {cells[bad][0].tolist()} is outside the {grid[0]}x{grid[1]} grid")
     if len({tuple(c) for c in cells.tolist()}) != len(cells):
-        raise ValueError(f"{where}: {what} lists a cell twice")
+        raise ConfigError(f"{where}: {what} lists a cell twice")
     return cells
 
 
 def parse_layout(doc: dict, where: str = "<layout>", canonical: CanonicalHand | None = None) -> Layout:
     """Validate a layout document (schema + geometry) and build a `Layout`."""
-    validate_json(doc, "layout", where)
+    validate_json(doc, "layout", where, ConfigError)
     canon = canonical or load_canonical()
     grid = (int(doc["grid"][0]), int(doc["grid"][1]))
     owner = np.full(grid, -1, np.int64)  # block index of each cell, -1 = none
@@ -200,26 +201,26 @@ def parse_layout(doc: dict, where: str = "<layout>", canonical: CanonicalHand | 
                   rotate=int(spec.get("rotate", 0)), transpose=bool(spec.get("transpose", False)))
         tag = f"{where}: block {b.name!r}"
         if any(x.name == b.name for x in blocks):
-            raise ValueError(f"{tag}: duplicate block name")
+            raise ConfigError(f"{tag}: duplicate block name")
         if b.place not in canon.places and b.place not in canon.groups:
-            raise ValueError(f"{tag}: unknown place {b.place!r} (places: {sorted(canon.places)}; groups: {list(GROUPS)})")
+            raise ConfigError(f"{tag}: unknown place {b.place!r} (places: {sorted(canon.places)}; groups: {list(GROUPS)})")
         if b.rows[0] > b.rows[1] or b.cols[0] > b.cols[1]:
-            raise ValueError(f"{tag}: ranges must be [first, last] with first <= last, got rows {list(b.rows)} cols {list(b.cols)}")
+            raise ConfigError(f"{tag}: ranges must be [first, last] with first <= last, got rows {list(b.rows)} cols {list(b.cols)}")
         if b.rows[1] >= grid[0] or b.cols[1] >= grid[1]:
-            raise ValueError(f"{tag}: rows {list(b.rows)} cols {list(b.cols)} lie outside the {grid[0]}x{grid[1]} grid")
+            raise ConfigError(f"{tag}: rows {list(b.rows)} cols {list(b.cols)} lie outside the {grid[0]}x{grid[1]} grid")
         x0, y0, x1, y1 = canon.target_rect(b.place)
         dh, dw = b.display_shape
         if dh > y1 - y0 or dw > x1 - x0:
             turned = " (as drawn, after transpose/rotate)" if b.display_shape != b.shape else ""
-            raise ValueError(f"{tag}: {dh}x{dw} cells{turned} do not fit the {y1 - y0}x{x1 - x0} px of {b.place!r}")
+            raise ConfigError(f"{tag}: {dh}x{dw} cells{turned} do not fit the {y1 - y0}x{x1 - x0} px of {b.place!r}")
         region = owner[b.rows[0]:b.rows[1] + 1, b.cols[0]:b.cols[1] + 1]
         if (region >= 0).any():
             other = blocks[int(region[region >= 0][0])].name
-            raise ValueError(f"{tag}: overlaps block {other!r} in the raw grid")
+            raise ConfigError(f"{tag}: overlaps block {other!r} in the raw grid")
         # Two blocks drawing on the same pixels would overwrite each other.
         for t, name in targets.items():
             if t == b.place or t.split(".")[0] == b.place or b.place.split(".")[0] == t:
-                raise ValueError(f"{tag}: target {b.place!r} overlaps target {t!r} of block {name!r}")
+                raise ConfigError(f"{tag}: target {b.place!r} overlaps target {t!r} of block {name!r}")
         targets[b.place] = b.name
         region[...] = i
         blocks.append(b)
@@ -228,25 +229,25 @@ def parse_layout(doc: dict, where: str = "<layout>", canonical: CanonicalHand | 
     bend = _cells(doc.get("bend_cells", []), grid, "bend_cells", where)
     if len(dead) and (owner[dead[:, 0], dead[:, 1]] < 0).any():
         c = dead[owner[dead[:, 0], dead[:, 1]] < 0][0].tolist()
-        raise ValueError(f"{where}: dead cell {c} is not inside any block (only cells inside blocks can be dead)")
+        raise ConfigError(f"{where}: dead cell {c} is not inside any block (only cells inside blocks can be dead)")
     live = owner >= 0
     live[dead[:, 0], dead[:, 1]] = False
     if len(bend) and live[bend[:, 0], bend[:, 1]].any():
         c = bend[live[bend[:, 0], bend[:, 1]]][0]
-        raise ValueError(f"{where}: bend cell {c.tolist()} is a live pressure cell of block "
+        raise ConfigError(f"{where}: bend cell {c.tolist()} is a live pressure cell of block "
                          f"{blocks[int(owner[c[0], c[1]])].name!r}")
     for i, b in enumerate(blocks):
         if not live[owner == i].any():
-            raise ValueError(f"{where}: block {b.name!r} has no live cell")
+            raise ConfigError(f"{where}: block {b.name!r} has no live cell")
     unused = _cells(doc.get("unused_cells", []), grid, "unused_cells", where)
     if len(unused) and (owner[unused[:, 0], unused[:, 1]] >= 0).any():
         c = unused[owner[unused[:, 0], unused[:, 1]] >= 0][0]
-        raise ValueError(f"{where}: unused cell {c.tolist()} lies inside block {blocks[int(owner[c[0], c[1]])].name!r} "
+        raise ConfigError(f"{where}: unused cell {c.tolist()} lies inside block {blocks[int(owner[c[0], c[1]])].name!r} "
                          f"(a sensorless cell inside a block is a dead_cell)")
     if len(unused) and len(bend):
         both = {tuple(c) for c in unused.tolist()} & {tuple(c) for c in bend.tolist()}
         if both:
-            raise ValueError(f"{where}: cell {list(sorted(both)[0])} is both a bend cell and an unused cell")
+            raise ConfigError(f"{where}: cell {list(sorted(both)[0])} is both a bend cell and an unused cell")
     return Layout(layout_id=doc["layout_id"], hand=doc["hand"], grid=grid, value=dict(doc["value"]),
                   blocks=tuple(blocks), dead_cells=frozen(dead), bend_cells=frozen(bend),
                   live_mask=frozen(live), source=doc.get("source", ""), notes=doc.get("notes", ""),
@@ -307,7 +308,7 @@ def _load_layout_file(path: str, mtime_ns: int, size: int) -> Layout:
     try:
         doc = json.loads(Path(path).read_text())
     except json.JSONDecodeError as e:
-        raise ValueError(f"{path}: not valid JSON: {e}") from None
+        raise ConfigError(f"{path}: not valid JSON: {e}") from None
     return parse_layout(doc, path)
 
 
@@ -320,7 +321,7 @@ def load_layout(name: str | Path, dirs: tuple | list = (), base: str | Path | No
     st = path.stat()
     layout = _load_layout_file(str(path), st.st_mtime_ns, st.st_size)
     if not is_layout_path(name) and layout.layout_id != str(name):
-        raise ValueError(f"{path}: layout_id {layout.layout_id!r} must equal the file name ({str(name)!r})")
+        raise ConfigError(f"{path}: layout_id {layout.layout_id!r} must equal the file name ({str(name)!r})")
     return layout
 
 

@@ -26,6 +26,7 @@ import re
 
 import numpy as np
 
+from htdata.errors import ArgumentError
 from htdata.glove.activity import CellActivity, moving_cells, rule_text
 from htdata.glove.layouts import load_canonical, parse_layout
 
@@ -101,7 +102,7 @@ def _assign_places(boxes: list[tuple[int, int, int, int]]) -> list[tuple[str, in
                 out[i] = (target, 90)
                 break
         else:
-            raise ValueError(f"a block of {h}x{w} moving cells (rows {boxes[i][0]}-{boxes[i][1]}, cols "
+            raise ArgumentError(f"a block of {h}x{w} moving cells (rows {boxes[i][0]}-{boxes[i][1]}, cols "
                              f"{boxes[i][2]}-{boxes[i][3]}) fits no free place of the canonical hand; "
                              f"write that part of the layout by hand")
         taken.add(out[i][0])
@@ -117,7 +118,7 @@ def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, in
     """
     grid = activities[0].grid
     if any(a.grid != grid for a in activities):
-        raise ValueError(f"recordings have different grids: {sorted({a.grid for a in activities})}")
+        raise ArgumentError(f"recordings have different grids: {sorted({a.grid for a in activities})}")
     step = 1.0 if integral else None
     mask = np.zeros(grid, bool)
     noises, wanders, thresholds = [], [], []
@@ -131,11 +132,11 @@ def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, in
     frames = sum(a.frames for a in activities)
     moving = int(mask.sum())     # every moving cell; the blocks are drawn around sensor_areas(mask)
     if not moving:
-        raise ValueError(f"no cell moves in {', '.join(sources)} (noise {noise:.4g}, threshold "
+        raise ArgumentError(f"no cell moves in {', '.join(sources)} (noise {noise:.4g}, threshold "
                          f"{threshold:.4g} raw units over {frames} frames): press the glove while recording")
     core = sensor_areas(mask)
     if not core.any():
-        raise ValueError(f"the {moving} moving cell(s) in {', '.join(sources)} form no area of at least 2x2 cells "
+        raise ArgumentError(f"the {moving} moving cell(s) in {', '.join(sources)} form no area of at least 2x2 cells "
                          f"(lines and single cells: cross-talk or noise, not a sensor area): press the glove "
                          f"while recording")
     lines = np.argwhere(mask & ~core)

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from htdata.errors import ArgumentError
+from htdata.errors import ConfigError
 from htdata.format.table import CANVAS
 from htdata.glove.layouts import Block, CanonicalHand, Layout, load_canonical, load_layout
 
@@ -115,7 +117,7 @@ def _sample_triplets(block: Block, canon: CanonicalHand, layout: Layout, geom: _
     missing = np.setdiff1d(block_live, uniq)
     if len(missing):
         r, c = divmod(int(missing[0]), layout.grid[1])
-        raise ValueError(f"layout {layout.layout_id}: block {block.name!r}: live cell [{r}, {c}] has no pixel "
+        raise ConfigError(f"layout {layout.layout_id}: block {block.name!r}: live cell [{r}, {c}] has no pixel "
                          f"in place {block.place!r} (place too small or masked by gaps)")
     footprint = _Triplets(own, pix, 1.0 / counts[inverse])
     if mode == "nearest":
@@ -198,7 +200,7 @@ class Rasteriser:
 
     def __init__(self, layout: Layout | str, mode: str = "nearest", canonical: CanonicalHand | None = None):
         if mode not in MODES:
-            raise ValueError(f"Rasteriser: mode must be one of {MODES}, got {mode!r}")
+            raise ArgumentError(f"Rasteriser: mode must be one of {MODES}, got {mode!r}")
         self.layout = layout if isinstance(layout, Layout) else load_layout(layout)
         self.mode = mode
         self.canonical = canonical or load_canonical()

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from htdata.errors import ConfigError
+
 
 def quiet_frames(level: np.ndarray) -> np.ndarray:
     """(n,) bool: frames of a window whose mean live value is near its lowest (rest), not raised by a press.
@@ -118,16 +120,16 @@ def load_taxel_calibration(path: str, grid: tuple[int, int], layout_id: str) -> 
         with np.load(path) as z:
             offset, gain = np.asarray(z["offset"], np.float32), np.asarray(z["gain"], np.float32)
     except (OSError, KeyError, ValueError) as exc:
-        raise ValueError(f"{path}: not a taxel calibration of layout {layout_id} (an .npz with offset and gain "
+        raise ConfigError(f"{path}: not a taxel calibration of layout {layout_id} (an .npz with offset and gain "
                          f"arrays): {exc}") from None
     for name, arr in (("offset", offset), ("gain", gain)):
         if arr.shape != tuple(grid):
-            raise ValueError(f"{path}: {name} has shape {arr.shape}, layout {layout_id} has a {grid[0]}x{grid[1]} "
+            raise ConfigError(f"{path}: {name} has shape {arr.shape}, layout {layout_id} has a {grid[0]}x{grid[1]} "
                              f"grid")
         if not np.isfinite(arr).all():
-            raise ValueError(f"{path}: {name} holds NaN/Inf")
+            raise ConfigError(f"{path}: {name} holds NaN/Inf")
     if (gain <= 0).any():
-        raise ValueError(f"{path}: gain must be > 0 everywhere (a dead taxel: leave it out of the layout)")
+        raise ConfigError(f"{path}: gain must be > 0 everywhere (a dead taxel: leave it out of the layout)")
     return offset, gain
 
 

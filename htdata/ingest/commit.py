@@ -13,6 +13,8 @@ import hashlib
 import json
 from pathlib import Path
 
+from htdata.errors import ConfigError
+from htdata.errors import DatasetError
 from htdata.format.codec import DEFAULT_CODEC_INFO
 from htdata.format.mapstorage import MapStorage
 from htdata.glove.codecrule import codec_block
@@ -53,11 +55,11 @@ def layout_artifacts(records: list[dict], raster_mode: str, canonical) -> list[L
         for lid, entry in r["layouts"].items():
             first = found.setdefault(lid, entry)
             if first["document"] != entry["document"]:
-                raise ValueError(f"layout {lid!r} differs between work units {found_unit(records, lid)} "
+                raise DatasetError(f"layout {lid!r} differs between work units {found_unit(records, lid)} "
                                  f"(a layout file changed during the ingest?); re-run the ingest")
     missing = [lid for lid in used if lid not in found]
     if missing:
-        raise ValueError(f"layouts {missing} are used by episodes but no unit record carries them")
+        raise DatasetError(f"layouts {missing} are used by episodes but no unit record carries them")
     return [LayoutArtifact(layout_id=lid, document=found[lid]["document"], coverage=rasteriser_for(
         parse_layout(found[lid]["document"], f"layout {lid!r} of the unit records", canonical), raster_mode).coverage)
         for lid in used]
@@ -78,13 +80,13 @@ def check_compatible(parent, sources: list) -> None:
         for key in sorted(set(theirs.get(section, {})) | set(ours[section])):
             a, b = theirs.get(section, {}).get(key), ours[section].get(key)
             if a != b:
-                raise ValueError(f"{parent.root}: the dataset was written with {section}.{key} = {a!r}, pipeline "
+                raise ConfigError(f"{parent.root}: the dataset was written with {section}.{key} = {a!r}, pipeline "
                                  f"{sources[0].pipeline.name!r} asks for {b!r}; a dataset has one codec: use the "
                                  f"dataset's setting or ingest into a new dataset (htdata merge cannot mix them either)")
     canon = load_canonical()
     doc = (json.dumps(canon.to_dict(), indent=2, sort_keys=True) + "\n").encode()
     if hashlib.sha256(doc).hexdigest() != parent.manifest["canonical"]["sha256"]:
-        raise ValueError(f"{parent.root}: the dataset was written with another canonical hand template "
+        raise DatasetError(f"{parent.root}: the dataset was written with another canonical hand template "
                          f"(sha256 {parent.manifest['canonical']['sha256'][:12]}); its maps are not comparable "
                          f"with this htdata's: ingest into a new dataset")
 

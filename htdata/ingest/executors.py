@@ -36,6 +36,7 @@ import sys
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any, Callable, Iterable, Iterator
 
+from htdata.errors import ArgumentError
 from htdata.ingest.encodepool import THREADS_ENV
 
 EXECUTORS = ("process", "ray")
@@ -329,10 +330,10 @@ def make_executor(kind: str, workers: int | None = None, address: str | None = N
                   max_retries: int = 1):
     if kind == "process":
         if address:
-            raise ValueError("--address is only meaningful with --executor ray")
+            raise ArgumentError("--address is only meaningful with --executor ray")
         if workers == 0:
             return InlineExecutor(max_retries=max_retries)
         return ProcessExecutor(workers, max_retries=max_retries)
     if kind == "ray":
         return RayExecutor(address=address, workers=workers, max_retries=max_retries)
-    raise ValueError(f"unknown executor {kind!r}; expected one of {EXECUTORS}")
+    raise ArgumentError(f"unknown executor {kind!r}; expected one of {EXECUTORS}")

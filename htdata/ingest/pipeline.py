@@ -47,6 +47,7 @@ import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from htdata.errors import ConfigError
 from htdata.glove.layouts import nearest_hint
 from htdata.glove.normalise import NormaliseConfig
 from htdata.glove.normalisesettings import NormaliseSettings
@@ -88,17 +89,17 @@ class SyncConfig:
     def validate(self, where: str) -> "SyncConfig":
         if isinstance(self.max_skew_ms, bool) or not (isinstance(self.max_skew_ms, (int, float))
                                                       and 0 <= self.max_skew_ms <= MAX_SYNC_MS):
-            raise ValueError(f"{where}: sync.max_skew_ms must be in [0, {MAX_SYNC_MS}] (one hour), "
+            raise ConfigError(f"{where}: sync.max_skew_ms must be in [0, {MAX_SYNC_MS}] (one hour), "
                              f"got {self.max_skew_ms!r}")
         if isinstance(self.lag, (int, float)) and not isinstance(self.lag, bool) and abs(self.lag) > MAX_SYNC_MS:
-            raise ValueError(f"{where}: sync.lag must be within +-{MAX_SYNC_MS} ms (one hour), got {self.lag!r}")
+            raise ConfigError(f"{where}: sync.lag must be within +-{MAX_SYNC_MS} ms (one hour), got {self.lag!r}")
         if isinstance(self.lag, bool) or not (self.lag in LAG_MODES if isinstance(self.lag, str)
                                               else isinstance(self.lag, (int, float)) and math.isfinite(self.lag)):
-            raise ValueError(f"{where}: sync.lag must be one of {LAG_MODES} or a finite number of ms, got {self.lag!r}")
+            raise ConfigError(f"{where}: sync.lag must be one of {LAG_MODES} or a finite number of ms, got {self.lag!r}")
         if not (isinstance(self.max_lag_ms, (int, float)) and 0 < self.max_lag_ms <= 10_000):
-            raise ValueError(f"{where}: sync.max_lag_ms must be in (0, 10000], got {self.max_lag_ms!r}")
+            raise ConfigError(f"{where}: sync.max_lag_ms must be in (0, 10000], got {self.max_lag_ms!r}")
         if not (isinstance(self.min_confidence, (int, float)) and 0 <= self.min_confidence <= 1):
-            raise ValueError(f"{where}: sync.min_confidence must be in [0, 1], got {self.min_confidence!r}")
+            raise ConfigError(f"{where}: sync.min_confidence must be in [0, 1], got {self.min_confidence!r}")
         return self
 
     def to_dict(self) -> dict:
@@ -177,10 +178,10 @@ class OutOfRangeConfig:
 
     def validate(self, where: str) -> "OutOfRangeConfig":
         if self.policy not in OUT_OF_RANGE_POLICIES:
-            raise ValueError(f"{where}: normalise.out_of_range must be one of {OUT_OF_RANGE_POLICIES}, "
+            raise ConfigError(f"{where}: normalise.out_of_range must be one of {OUT_OF_RANGE_POLICIES}, "
                              f"got {self.policy!r}")
         if not (isinstance(self.warn_share, (int, float)) and 0.0 <= self.warn_share <= 1.0):
-            raise ValueError(f"{where}: normalise.out_of_range_warn_share must be in [0, 1], got {self.warn_share!r}")
+            raise ConfigError(f"{where}: normalise.out_of_range_warn_share must be in [0, 1], got {self.warn_share!r}")
         return self
 
     def to_dict(self) -> dict:
@@ -208,7 +209,7 @@ def check_adapter_params(adapter: str, params: dict, where: str) -> None:
     """`params` against what the adapter declares (`PARAMS`): unknown keys and wrong types are errors."""
 
     if adapter not in ADAPTERS:
-        raise ValueError(f"{where}: unknown adapter {adapter!r}; known: {sorted(ADAPTERS)}")
+        raise ConfigError(f"{where}: unknown adapter {adapter!r}; known: {sorted(ADAPTERS)}")
     check_declared_params(adapter, tuple(getattr(ADAPTERS[adapter], "PARAMS", ())), params, where)
 
 
@@ -246,15 +247,15 @@ class PipelineConfig:
         d = self.to_dict()
         bad = non_finite_numbers(d)
         if bad:
-            raise ValueError(f"{where}: {', '.join(bad)} must be a finite number (NaN/Inf are not settings)")
-        validate_json(d, "pipeline", where)
+            raise ConfigError(f"{where}: {', '.join(bad)} must be a finite number (NaN/Inf are not settings)")
+        validate_json(d, "pipeline", where, ConfigError)
         for layout_id, cfg in self.normalise.items():
             cfg.validate(f"{where}: normalise.{layout_id}")
         self.out_of_range.validate(where)
         named = set(self.normalise) | {Path(v).stem if v.endswith(".json") else v for v in self.layouts.values()}
         for lid in self.shared_layouts:
             if lid not in named:
-                raise ValueError(f"{where}: shared_layouts lists {lid!r}, which no [normalise.<layout>] table or "
+                raise ConfigError(f"{where}: shared_layouts lists {lid!r}, which no [normalise.<layout>] table or "
                                  f"[layouts] entry of this pipeline names{nearest_hint(lid, named)}")
         self.sync.validate(where)
         self.tactile.validate(where)
@@ -336,8 +337,8 @@ class PipelineConfig:
     def from_dict(cls, data: dict, where: str = "pipeline") -> "PipelineConfig":
         bad = non_finite_numbers(data)
         if bad:
-            raise ValueError(f"{where}: {', '.join(bad)} must be a finite number (NaN/Inf are not settings)")
-        validate_json(data, "pipeline", where)
+            raise ConfigError(f"{where}: {', '.join(bad)} must be a finite number (NaN/Inf are not settings)")
+        validate_json(data, "pipeline", where, ConfigError)
         norm = dict(data.get("normalise", {}))
         policy = {k: norm.pop(k) for k in NORMALISE_POLICY_KEYS if k in norm}
         cfg = cls(
@@ -419,5 +420,5 @@ def load_pipeline(name_or_path: str | Path) -> PipelineConfig:
     try:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as e:
-        raise ValueError(f"{path}: invalid TOML: {e}") from e
+        raise ConfigError(f"{path}: invalid TOML: {e}") from e
     return PipelineConfig.from_dict(data, where=str(path))

@@ -25,6 +25,8 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+from htdata.errors import ArgumentError
+from htdata.errors import ConfigError
 from htdata.source.adapters import get_adapter
 from htdata.errors import EpisodeError
 from htdata.store.fsutil import sha256_file
@@ -92,7 +94,7 @@ def check_unique_ids(refs_per_source: list[list]) -> None:
     for refs in refs_per_source:
         for r in refs:
             if r.episode_id in seen:
-                raise ValueError(f"episode id {r.episode_id!r} found twice: {seen[r.episode_id]} and {r.source_ref}")
+                raise ArgumentError(f"episode id {r.episode_id!r} found twice: {seen[r.episode_id]} and {r.source_ref}")
             seen[r.episode_id] = r.source_ref
 
 
@@ -109,32 +111,32 @@ def plan_units(todo: list[tuple], out: Path, first_unit: int) -> list[UnitTask]:
 def parse_sources(pipelines: list[str], paths: list[str]) -> tuple[list[Source], Path]:
     """Accept `--pipeline P=SRC ... OUT` or `--pipeline P [--pipeline Q] SRC [SRC2] OUT`."""
     if not pipelines:
-        raise ValueError("at least one --pipeline is required")
+        raise ArgumentError("at least one --pipeline is required")
     if not paths:
-        raise ValueError("missing OUT (the dataset directory)")
+        raise ArgumentError("missing OUT (the dataset directory)")
     out = Path(paths[-1])
     srcs = paths[:-1]
     with_root = [p for p in pipelines if "=" in p]
     if with_root and len(with_root) != len(pipelines):
-        raise ValueError("either give every --pipeline as PIPELINE=SRC or none")
+        raise ArgumentError("either give every --pipeline as PIPELINE=SRC or none")
     if with_root:
         if srcs:
-            raise ValueError(f"with --pipeline PIPELINE=SRC give only OUT as positional, got {paths}")
+            raise ArgumentError(f"with --pipeline PIPELINE=SRC give only OUT as positional, got {paths}")
         pairs = [p.split("=", 1) for p in pipelines]
     else:
         if len(srcs) != len(pipelines):
-            raise ValueError(f"{len(pipelines)} pipeline(s) need {len(pipelines)} SRC folder(s) before OUT, "
+            raise ArgumentError(f"{len(pipelines)} pipeline(s) need {len(pipelines)} SRC folder(s) before OUT, "
                              f"got {len(srcs)}: {srcs}")
         pairs = list(zip(pipelines, srcs))
     sources = []
     for pipe, root in pairs:
         root_path = Path(root)
         if not root_path.exists():
-            raise ValueError(f"source {root} (for pipeline {pipe}) does not exist")
+            raise ArgumentError(f"source {root} (for pipeline {pipe}) does not exist")
         sources.append(Source(pipeline=load_pipeline(pipe), root=root_path.resolve()))
     names = [s.pipeline.name for s in sources]
     if len(set(names)) != len(names):
-        raise ValueError(f"pipeline names must be distinct, got {names}")
+        raise ConfigError(f"pipeline names must be distinct, got {names}")
     return sources, out.resolve()
 
 
@@ -145,7 +147,7 @@ def check_settings_agree(sources: list[Source]) -> None:
         for name, get in SHARED_SETTINGS.items():
             a, b = get(first), get(s.pipeline)
             if a != b:
-                raise ValueError(f"pipelines {first.name!r} ({first.path}) and {s.pipeline.name!r} ({s.pipeline.path}) "
+                raise ConfigError(f"pipelines {first.name!r} ({first.path}) and {s.pipeline.name!r} ({s.pipeline.path}) "
                                  f"disagree on {name}: {a!r} vs {b!r}; a dataset has one codec and raster "
                                  f"setting: make them equal or ingest into separate datasets")
 
@@ -226,7 +228,7 @@ def check_layout_ids_unique(refs: list) -> None:
             path = r.layout_files[h]
             other = seen.setdefault(lid, path)
             if other != path and sha256_file(Path(other)) != sha256_file(Path(path)):
-                raise ValueError(f"layout id {lid!r} names two different files: {other} and {path} "
+                raise ConfigError(f"layout id {lid!r} names two different files: {other} and {path} "
                                  f"(episode {r.episode_id}); give one of them another layout_id")
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.errors import ArgumentError
 from htdata.glove.activity import CellActivity
 from htdata.errors import EpisodeError
 from htdata.source.adapters import get_adapter
@@ -44,13 +45,13 @@ def _fold(activity: CellActivity, rows: np.ndarray, integral: bool) -> bool:
 
 def _scan_npy(path: Path, hand: str | None) -> list[ScannedHand]:
     if hand is None:
-        raise ValueError(f"{path}: a .npy recording holds one hand's rows: say which (--hand left|right)")
+        raise ArgumentError(f"{path}: a .npy recording holds one hand's rows: say which (--hand left|right)")
     try:
         rows = np.load(path, mmap_mode="r")
     except (OSError, ValueError) as e:
-        raise ValueError(f"{path}: not a readable .npy array: {e}") from None
+        raise ArgumentError(f"{path}: not a readable .npy array: {e}") from None
     if rows.ndim != 3 or not (np.issubdtype(rows.dtype, np.number)):
-        raise ValueError(f"{path}: expected raw rows (T,H,W) of numbers, got {rows.dtype} {rows.shape}")
+        raise ArgumentError(f"{path}: expected raw rows (T,H,W) of numbers, got {rows.dtype} {rows.shape}")
     act, integral = CellActivity(rows.shape[1:]), True
     for a in range(0, len(rows), CHUNK_ROWS):
         integral = _fold(act, rows[a:a + CHUNK_ROWS], integral)
@@ -66,9 +67,9 @@ def _scan_source(path: Path, pipeline, hand: str | None, layout_file: str | None
     refs, bad = adapter.discover_all(path, params)
     if bad:
         e = bad[0]
-        raise ValueError(f"{e.file or path}: {e.message}")
+        raise ArgumentError(f"{e.file or path}: {e.message}")
     if not refs:
-        raise ValueError(f"{path}: no recording found by the {pipeline.adapter.name!r} adapter "
+        raise ArgumentError(f"{path}: no recording found by the {pipeline.adapter.name!r} adapter "
                          f"(pipeline {pipeline.path or pipeline.name})")
     out = []
     for ref in refs:
@@ -88,7 +89,7 @@ def _scan_source(path: Path, pipeline, hand: str | None, layout_file: str | None
                     if act is not None:
                         out.append(ScannedHand(ref.source_ref, ref.episode_id, h, ref.layouts.get(h), act, integral))
         except EpisodeError as e:
-            raise ValueError(f"{e.file or ref.source_ref} [{ref.episode_id}]: {e.message}") from None
+            raise ArgumentError(f"{e.file or ref.source_ref} [{ref.episode_id}]: {e.message}") from None
     return out
 
 
@@ -103,6 +104,6 @@ def scan_recordings(paths: list[str | Path], pipeline="native", hand: str | None
     out: list[ScannedHand] = []
     for p in map(Path, paths):
         if not p.exists():
-            raise ValueError(f"recording {p} does not exist")
+            raise ArgumentError(f"recording {p} does not exist")
         out += _scan_npy(p, hand) if p.suffix == ".npy" else _scan_source(p, cfg, hand, layout_file)
     return out

@@ -17,6 +17,7 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+from htdata.errors import ArgumentError
 from htdata.glove.codecrule import resolve_sources
 from htdata.ingest.executors import make_executor, usable_cores
 from htdata.format.table import INGEST_REPORT, MANIFEST_FILE
@@ -162,8 +163,8 @@ def check_ingested_something(report: dict, out: Path) -> None:
     if report["episodes_ingested"] == 0:
         shown = "; ".join(failure_line(f) for f in report["failures"][:3])
         more = f"; ... {len(report['failures']) - 3} more" if len(report["failures"]) > 3 else ""
-        raise ValueError(f"no episode could be ingested ({len(report['failures'])} failures); see "
-                         f"{out / INGEST_REPORT}: {shown}{more}")
+        raise ArgumentError(f"no episode could be ingested ({len(report['failures'])} failures); see "
+                            f"{out / INGEST_REPORT}: {shown}{more}")
 
 
 def _commit_or_keep(out: Path, sources, records: list[dict], plan, parent, command: str, report: dict):
@@ -195,7 +196,7 @@ def check_found_something(sources, refs: list[list], failures: list[dict]) -> No
     for source, found in zip(sources, refs):
         root = str(source.root).rstrip("/") + "/"
         if not found and not any(str(f.get("file") or f.get("source_ref") or "").startswith(root) for f in failures):
-            raise ValueError(f"{source.root}: no recording found for pipeline {source.pipeline.name!r} (adapter "
+            raise ArgumentError(f"{source.root}: no recording found for pipeline {source.pipeline.name!r} (adapter "
                              f"{source.pipeline.adapter.name!r}); check the folder and the pipeline")
 
 

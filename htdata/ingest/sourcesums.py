@@ -27,6 +27,7 @@ import re
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from htdata.errors import DatasetError
 from htdata.errors import EpisodeError
 from htdata.store.fsutil import sha256_file
 from htdata.ingest.plan import failure_entry
@@ -48,7 +49,7 @@ def read_checksum_lists(root: Path) -> dict[str, tuple[str, str]]:
                 continue
             m = _LINE.fullmatch(line.strip())
             if not m:
-                raise ValueError(f"{lst}:{n}: not a sha256sum line ('<64 hex digits>  <file>'): {line[:80]!r}")
+                raise DatasetError(f"{lst}:{n}: not a sha256sum line ('<64 hex digits>  <file>'): {line[:80]!r}")
             found[str((lst.parent / m.group(2)).resolve())] = (m.group(1).lower(), f"{lst}:{n}")
     return found
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from htdata.errors import ArgumentError
 from htdata.format.table import MANIFEST_FILE, SHARDS_DIR, WORK_DIR
 from htdata.store.fsutil import sha256_file
 from htdata.store.lock import LOCK_FILE
@@ -74,11 +75,11 @@ def check_output(out: Path) -> None:
     """Refuse a non-empty directory that is neither an htdata dataset nor an interrupted first ingest
     (a writer's lock file alone does not count: the lock then names that writer)."""
     if out.exists() and not out.is_dir():
-        raise ValueError(f"{out}: exists and is not a directory")
+        raise ArgumentError(f"{out}: exists and is not a directory")
     content = [p for p in out.iterdir() if p.name != LOCK_FILE] if out.is_dir() else []
     if content and not (out / MANIFEST_FILE).is_file() and not (out / WORK_DIR).is_dir() \
             and not list_versions(out):     # committed version files make it a dataset, pointer or not
-        raise ValueError(f"{out}: directory is not empty and is not an htdata dataset; "
+        raise ArgumentError(f"{out}: directory is not empty and is not an htdata dataset; "
                          f"refusing to write into it (choose an empty or new directory)")
 
 

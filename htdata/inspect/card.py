@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 
 from htdata.format.mapstorage import MapStorage
+from htdata.errors import ArgumentError
 from htdata.format.table import HANDS, RGB_MEMBER, SIZE_FIELDS
 from htdata.inspect.cardplots import (_count_label, _label_fingers, _y_ticks, bar_chart,  # noqa: F401 (names of card)
                                       histogram_chart, region_heatmap, value_histogram_chart)
@@ -319,7 +320,7 @@ def write_card(root, out, version: int | None = None, title: str | None = None, 
     """Write OUT.html (self-contained), OUT.md and OUT_files/*.png; returns (html, md) paths."""
     out = Path(out)
     if out.suffix.lower() != ".html":
-        raise ValueError(f"{out}: the card is written as HTML; give a .html path")
+        raise ArgumentError(f"{out}: the card is written as HTML; give a .html path")
     card = build_card(root, version, title=title, description=description, license=license)
     out.parent.mkdir(parents=True, exist_ok=True)
     files = out.with_name(out.stem + "_files")

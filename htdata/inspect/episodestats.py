@@ -28,6 +28,7 @@ from functools import cached_property
 
 import numpy as np
 
+from htdata.errors import DatasetError
 from htdata.format.codec import decode_exr_pixels
 from htdata.format.table import HANDS, JSON_MEMBER, MAP_SHAPE, SIZE_FIELDS, raw_member, tactile_member
 from htdata.glove.contact import OLD_RULE, THRESHOLD, ContactRule, episode_rule
@@ -105,7 +106,7 @@ def dataset_gloves(reader) -> dict[str, Glove]:
         try:
             layout = parse_layout(reader.layout(layout_id), where, canonical=canonical)
         except (ValueError, KeyError) as exc:
-            raise ValueError(f"{where}: layout {layout_id!r} is not a glove layout the stats can sample "
+            raise DatasetError(f"{where}: layout {layout_id!r} is not a glove layout the stats can sample "
                              f"taxels from: {exc}") from exc
         gloves[layout_id] = Glove(layout, canonical)
     return gloves
@@ -172,7 +173,7 @@ def _read_episode(reader, pos: int, from_raw: list[str], nan_samples: list, drif
             else:
                 value = decode_exr_pixels(data, f"{where}.{wanted[hand]}")  # half as stored: converted once
                 if value.shape != MAP_SHAPE:
-                    raise ValueError(f"{where}.{wanted[hand]}: decoded tactile map has shape {value.shape}, "
+                    raise DatasetError(f"{where}.{wanted[hand]}: decoded tactile map has shape {value.shape}, "
                                      f"expected {MAP_SHAPE}")
                 if not all_finite(value):
                     nan_samples.append({"episode": ep["episode_id"], "frame": i - first, "hand": hand, "key": key,

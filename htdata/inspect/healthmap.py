@@ -21,6 +21,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from htdata.errors import ArgumentError
 from htdata.inspect.episodestats import Glove
 from htdata.format.table import CANVAS
 from htdata.glove.health import CLASSES
@@ -115,7 +116,7 @@ def render_health_map(per_episode: list[dict], gloves: dict[str, Glove], pairs: 
                       ) -> np.ndarray:
     """BGR image: a canonical and a raw-grid panel per (layout_id, hand) in `pairs`, a legend underneath."""
     if not pairs:
-        raise ValueError("no glove with tactile frames: nothing to draw")
+        raise ArgumentError("no glove with tactile frames: nothing to draw")
     bases = {b for lid, hand in pairs for h in _healths(per_episode, lid, hand) for b in [h.get("basis", "maps")]}
     healths = [h for lid, hand in pairs for h in _healths(per_episode, lid, hand) if h.get("basis") == "raw"]
     legend = _legend(bases, drift_told=any(h.get("drift_assessed") for h in healths) or not healths)
@@ -164,7 +165,7 @@ def _legend(bases: set, drift_told: bool = True) -> list[tuple[tuple, str]]:
 def write_health_map(out, per_episode: list[dict], gloves: dict[str, Glove], pairs: list[tuple[str, str]]) -> Path:
     out = Path(out)
     if out.suffix.lower() != ".png":
-        raise ValueError(f"{out}: the health map is written as PNG; give a .png path")
+        raise ArgumentError(f"{out}: the health map is written as PNG; give a .png path")
     out.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(out), render_health_map(per_episode, gloves, pairs)):
         raise OSError(f"{out}: cv2 could not write the PNG")

@@ -33,6 +33,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from htdata.errors import ArgumentError
 from htdata.format.table import CANVAS, HANDS, JSON_MEMBER, RGB_MEMBER, SIZE_FIELDS, decode_member
 from htdata.inspect.outline import region_outline  # noqa: F401  (preview.region_outline stays a name of this module)
 from htdata.inspect.stats import positive_value_quantile
@@ -80,7 +81,7 @@ def frame_positions(num_frames: int, rows: int) -> np.ndarray:
     if num_frames < 1:
         raise ValueError(f"an episode needs at least one frame, got {num_frames}")
     if rows < 1:
-        raise ValueError(f"--frames must be >= 1, got {rows}")
+        raise ArgumentError(f"--frames must be >= 1, got {rows}")
     return np.unique(np.round(np.linspace(0, num_frames - 1, min(rows, num_frames))).astype(np.int64))
 
 
@@ -126,7 +127,7 @@ def contrast_scale(dataset, contrast: str, version: int | None = None) -> tuple[
     """(contrast used, top of the colour scale): "fixed" -> 1.0, "quantile" -> the dataset's
     CONTRAST_QUANTILE of positive taxel values, "auto" -> quantile when that is below AUTO_QUANTILE_BELOW."""
     if contrast not in CONTRASTS:
-        raise ValueError(f"--contrast must be one of {', '.join(CONTRASTS)}, got {contrast!r}")
+        raise ArgumentError(f"--contrast must be one of {', '.join(CONTRASTS)}, got {contrast!r}")
     if contrast == "fixed":
         return "fixed", 1.0
     try:
@@ -249,18 +250,18 @@ def render_contact_sheet(dataset, episode: str | None = None, frames: int = 6, c
     """
 
     if pick not in PICKS:
-        raise ValueError(f"--pick must be one of {', '.join(PICKS)}, got {pick!r}")
+        raise ArgumentError(f"--pick must be one of {', '.join(PICKS)}, got {pick!r}")
     contrast, vmax = contrast_scale(dataset, contrast)
     with DatasetReader(dataset) as reader:
         if not reader.episodes:
-            raise ValueError(f"{dataset}: dataset has no episodes")
+            raise ArgumentError(f"{dataset}: dataset has no episodes")
         if episode is None:
             episode = _default_episode(reader.episodes)
         try:
             pos = reader.episode_position(episode)
         except KeyError:
             known = ", ".join(ep["episode_id"] for ep in reader.episodes[:10])
-            raise ValueError(f"{dataset}: no episode {episode!r} (first episodes: {known})") from None
+            raise ArgumentError(f"{dataset}: no episode {episode!r} (first episodes: {known})") from None
         ep = reader.episodes[pos]
         first, n = reader.episode_range(pos)
         chosen = frame_positions(n, frames)
@@ -322,7 +323,7 @@ def write_preview(dataset, out, episode: str | None = None, frames: int = 6, con
                   pick: str = "contact") -> Path:
     out = Path(out)
     if out.suffix.lower() != ".png":
-        raise ValueError(f"{out}: the preview is written as PNG; give a .png path")
+        raise ArgumentError(f"{out}: the preview is written as PNG; give a .png path")
     sheet = render_contact_sheet(dataset, episode=episode, frames=frames, contrast=contrast, pick=pick)
     out.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(out), sheet):

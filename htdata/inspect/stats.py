@@ -29,6 +29,7 @@ from typing import Callable
 
 import numpy as np
 
+from htdata.errors import ArgumentError
 from htdata.store import storage
 from htdata.inspect.episodestats import (CONTACT_THRESHOLD, HIST_BINS, compute_episode, dataset_gloves, empty_hand,
                                  merge_hand, quantile)
@@ -193,7 +194,7 @@ def _on_grid(values: np.ndarray, glove) -> list:
 def summarise(reader: DatasetReader, per_episode: list[dict], by: str | None = None, gloves=None) -> dict:
     """Dataset numbers from per-episode stats: gloves (per layout and hand, or per `by` group), tasks, scenes."""
     if by is not None and by not in GROUPINGS:
-        raise ValueError(f"--by must be one of {', '.join(GROUPINGS)}, got {by!r}")
+        raise ArgumentError(f"--by must be one of {', '.join(GROUPINGS)}, got {by!r}")
     gloves = gloves if gloves is not None else (dataset_gloves(reader) if reader.episodes else {})
     accs: dict[tuple, dict] = {}
     healths: dict[tuple, dict] = {}
@@ -289,7 +290,7 @@ def stats_benchmark(root) -> dict:
         with DatasetReader(root) as reader:
             n_ep = len(reader.episodes)
             if n_ep < 2:
-                raise ValueError(f"{root}: the stats benchmark needs at least 2 episodes, found {n_ep}")
+                raise ArgumentError(f"{root}: the stats benchmark needs at least 2 episodes, found {n_ep}")
             before = list(range(n_ep - 1))
             frames_before = sum(reader.episode_range(p)[1] for p in before)
             runs = {}

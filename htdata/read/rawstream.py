@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata.errors import ArgumentError
+from htdata.errors import DatasetError
 from htdata.glove.calibration import episode_normaliser, refuse_mismatched
 from htdata.store import storage
 from htdata.store.versions import version_manifest_file
@@ -95,7 +96,7 @@ def episode_stream(reader, episode: str | int, hand: str) -> RawStream:
         rows += meta["raw_row"][hand]
         values.append(arr)
     if not values:
-        raise ValueError(f"episode {eid!r}: no raw {hand} rows stored (format < 3, or keep_raw = false)")
+        raise ArgumentError(f"episode {eid!r}: no raw {hand} rows stored (format < 3, or keep_raw = false)")
     t, r, v = np.asarray(times, np.int64), np.asarray(rows, np.int64), np.concatenate(values)
     order = np.lexsort((r, t))
     t, r, v = t[order], r[order], v[order]
@@ -120,7 +121,7 @@ def paired_row(members: dict[str, bytes], hand: str, where: str) -> np.ndarray:
     meta = decode_member(JSON_MEMBER, members[JSON_MEMBER], where)
     at = (meta.get("raw_paired") or {}).get(hand)
     if rows.ndim != 3 or at is None or not 0 <= at < rows.shape[0]:
-        raise ValueError(f"{where}: meta raw_paired names row {at!r} of raw rows shaped {rows.shape}")
+        raise DatasetError(f"{where}: meta raw_paired names row {at!r} of raw rows shaped {rows.shape}")
     return rows[at]
 
 
@@ -186,7 +187,7 @@ def paired_source_row(members: dict[str, bytes], hand: str, where: str) -> int:
     rows = (meta.get("raw_row") or {}).get(hand)
     at = (meta.get("raw_paired") or {}).get(hand, 0)
     if not rows or not 0 <= at < len(rows):
-        raise ValueError(f"{where}: meta raw_row / raw_paired do not name the paired {hand} row")
+        raise DatasetError(f"{where}: meta raw_row / raw_paired do not name the paired {hand} row")
     return int(rows[at])
 
 

@@ -52,6 +52,7 @@ except ModuleNotFoundError as exc:   # the data core installs without torch
     raise ModuleNotFoundError(f"{__name__} needs torch: pip install 'htdata[torch]' (torch==2.13.0)") from exc
 from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
+from htdata.errors import ArgumentError
 from htdata.read import keys
 from htdata.format.table import CANVAS, HANDS, RGB_MEMBER, SIZE_FIELDS
 from htdata.read.keys import HAND_IDS
@@ -76,7 +77,7 @@ def _tactile_present(rows: np.ndarray, hand: str, frames: str = "paired") -> np.
 
 def _check_frames(frames: str) -> str:
     if frames not in FRAME_KINDS:
-        raise ValueError(f"frames must be one of {FRAME_KINDS}, got {frames!r}")
+        raise ArgumentError(f"frames must be one of {FRAME_KINDS}, got {frames!r}")
     return frames
 
 
@@ -89,14 +90,14 @@ def shuffled_indices(n: int, seed: int, epoch: int) -> np.ndarray:
         epoch: the epoch (>= 0): each epoch gets its own permutation.
     """
     if n < 0 or seed < 0 or epoch < 0:
-        raise ValueError(f"n, seed and epoch must be >= 0 (got {n}, {seed}, {epoch})")
+        raise ArgumentError(f"n, seed and epoch must be >= 0 (got {n}, {seed}, {epoch})")
     return np.random.default_rng([seed, epoch]).permutation(n)
 
 
 def _check_hands(hands) -> tuple[str, ...]:
     hands = tuple(hands)
     if not hands or any(h not in HAND_IDS for h in hands) or len(set(hands)) != len(hands):
-        raise ValueError(f"hands must be a non-empty subset of ('left', 'right'), got {hands}")
+        raise ArgumentError(f"hands must be a non-empty subset of ('left', 'right'), got {hands}")
     return hands
 
 
@@ -119,7 +120,7 @@ def _explain_no_pairs(reader: DatasetReader, rows: np.ndarray, hands: tuple[str,
     """frames="paired" found nothing: if tactile frames are there (a glove-only dataset), say so, not length 0."""
     tactile = sum(int(_tactile_present(rows, h, "tactile").sum()) for h in hands)
     if tactile:
-        raise ValueError(f"{reader.root}: none of the {len(rows)} selected samples pairs an RGB frame with "
+        raise ArgumentError(f"{reader.root}: none of the {len(rows)} selected samples pairs an RGB frame with "
                          f"{'/'.join(hands)} tactile ({tactile} hand frames have tactile only: a glove-only "
                          f"dataset?); pass frames=\"tactile\" for tactile-only items")
 
@@ -197,7 +198,7 @@ class TactileWindowDataset(_ItemDataset):
                  hands=HANDS, rgb_float: bool = False, version: int | None = None, frames: str = "paired",
                  maps_from: str = "best", members=MEMBERS):
         if window < 1:
-            raise ValueError(f"window must be >= 1, got {window}")
+            raise ArgumentError(f"window must be >= 1, got {window}")
         self.window = window
         self.hands = _check_hands(hands)
         self._builder = _ItemBuilder(root, rgb_float, version, maps_from, members)

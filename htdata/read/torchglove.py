@@ -26,6 +26,7 @@ try:
 except ModuleNotFoundError as exc:   # the data core installs without torch
     raise ModuleNotFoundError(f"{__name__} needs torch: pip install 'htdata[torch]' (torch==2.13.0)") from exc
 
+from htdata.errors import ArgumentError
 from htdata.format.codec import check_finite_maps
 from htdata.read import keys
 from htdata.format.table import HANDS, JSON_MEMBER, SIZE_FIELDS, decode_member, raw_member
@@ -51,7 +52,7 @@ class GloveRateWindowDataset(_ItemDataset):
     def __init__(self, root, window: int = 4, split: str | None = None, part: str | None = None,
                  hands=HANDS, version: int | None = None):
         if window < 1:
-            raise ValueError(f"window must be >= 1, got {window}")
+            raise ArgumentError(f"window must be >= 1, got {window}")
         self.window = window
         self.hands = _check_hands(hands)
         self._builder = _ItemBuilder(root, rgb_float=False, version=version, maps_from="raw")

@@ -31,6 +31,7 @@ try:
 except ModuleNotFoundError as exc:   # the data core installs without torch
     raise ModuleNotFoundError(f"{__name__} needs torch: pip install 'htdata[torch]' (torch==2.13.0)") from exc
 
+from htdata.errors import ArgumentError
 from htdata.format.table import CANVAS, JSON_MEMBER, MEMBER_ORDER, RGB_MEMBER, decode_member, raw_member, tactile_member
 from htdata.read import keys
 from htdata.read.keys import HAND_IDS
@@ -51,7 +52,7 @@ def check_members(members) -> tuple[str, ...]:
     """
     members = tuple(members)
     if not members or any(m not in MEMBERS for m in members) or len(set(members)) != len(members):
-        raise ValueError(f"members must be a non-empty subset of {MEMBERS}, got {members}")
+        raise ArgumentError(f"members must be a non-empty subset of {MEMBERS}, got {members}")
     return members
 
 
@@ -62,7 +63,7 @@ def check_constants(constants: str) -> str:
         constants: "item" (every item carries coverage, regions, ids) or "once" (an `ids` tensor).
     """
     if constants not in CONSTANTS:
-        raise ValueError(f"constants must be one of {CONSTANTS}, got {constants!r}")
+        raise ArgumentError(f"constants must be one of {CONSTANTS}, got {constants!r}")
     return constants
 
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from htdata.errors import ArgumentError
+
 CROPS = ("center", "none")
 INTERPOLATIONS = {
     "area": cv2.INTER_AREA,
@@ -34,7 +36,7 @@ def to_rgb(frame, channel_order: str = "rgb", where: str = "rgb frame") -> np.nd
         return arr
     if channel_order == "bgr":
         return arr[:, :, ::-1]
-    raise ValueError(f"{where}: channel_order must be one of {CHANNEL_ORDERS}, got {channel_order!r}")
+    raise ArgumentError(f"{where}: channel_order must be one of {CHANNEL_ORDERS}, got {channel_order!r}")
 
 
 def centre_square(frame: np.ndarray) -> np.ndarray:
@@ -50,11 +52,11 @@ def to_square_224(frame, size: int = 224, crop: str = "center", interpolation: s
     """HxWx3 uint8 -> (size,size,3) uint8, contiguous."""
     arr = _check_frame(frame, where)
     if crop not in CROPS:
-        raise ValueError(f"{where}: crop must be one of {CROPS}, got {crop!r}")
+        raise ArgumentError(f"{where}: crop must be one of {CROPS}, got {crop!r}")
     if interpolation not in INTERPOLATIONS:
-        raise ValueError(f"{where}: interpolation must be one of {sorted(INTERPOLATIONS)}, got {interpolation!r}")
+        raise ArgumentError(f"{where}: interpolation must be one of {sorted(INTERPOLATIONS)}, got {interpolation!r}")
     if not isinstance(size, int) or size < 1:
-        raise ValueError(f"{where}: size must be a positive integer, got {size!r}")
+        raise ArgumentError(f"{where}: size must be a positive integer, got {size!r}")
     if crop == "center":
         arr = centre_square(arr)
     if arr.shape[:2] == (size, size):

@@ -30,6 +30,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from htdata.errors import ArgumentError
+
 log = logging.getLogger(__name__)
 
 SYNC_POLICIES = ("nearest",)
@@ -157,9 +159,9 @@ def pair(rgb_ts, tactile_ts: dict[str, np.ndarray], max_skew_ns: int,
     the stream). A frame failing several hands gets the first hand in sorted order.
     """
     if policy not in SYNC_POLICIES:
-        raise ValueError(f"unknown sync policy {policy!r}; expected one of {SYNC_POLICIES}")
+        raise ArgumentError(f"unknown sync policy {policy!r}; expected one of {SYNC_POLICIES}")
     if max_skew_ns < 0:
-        raise ValueError(f"max_skew_ns must be >= 0, got {max_skew_ns}")
+        raise ArgumentError(f"max_skew_ns must be >= 0, got {max_skew_ns}")
     if not tactile_ts:
         raise ValueError("no tactile stream to pair with")
     shift = np.int64(lag.shift_ns if lag is not None and lag.applied else 0)

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.errors import DatasetError
 from htdata.store import storage
 from htdata.store.confine import check_manifest_paths, inside
 from htdata.format.codec import encode_png_u8
@@ -126,12 +127,12 @@ def parse_manifest(data: str | bytes, where: str, validate: bool = True) -> dict
     """
     manifest = json.loads(data)
     if not isinstance(manifest, dict):
-        raise ValueError(f"{where}: a manifest is a JSON object, found {type(manifest).__name__}")
+        raise DatasetError(f"{where}: a manifest is a JSON object, found {type(manifest).__name__}")
     if manifest.get("format") != FORMAT or manifest.get("format_version") not in READABLE_FORMAT_VERSIONS:
-        raise ValueError(f"{where}: format {manifest.get('format')!r} v{manifest.get('format_version')!r}, "
+        raise DatasetError(f"{where}: format {manifest.get('format')!r} v{manifest.get('format_version')!r}, "
                          f"expected {FORMAT!r} v{' or v'.join(map(str, READABLE_FORMAT_VERSIONS))}")
     if validate:
-        validate_json(manifest, "manifest", where=str(where))
+        validate_json(manifest, "manifest", where=str(where), error=DatasetError)
     check_manifest_paths(manifest, str(where))   # always: a stranger's dataset never names files outside its root
     return manifest
 
@@ -144,7 +145,7 @@ def parse_episodes(text: str, where: str) -> list[dict]:
             try:
                 episodes.append(json.loads(line))
             except json.JSONDecodeError as e:
-                raise ValueError(f"{where}:{lineno}: invalid JSON: {e}") from None
+                raise DatasetError(f"{where}:{lineno}: invalid JSON: {e}") from None
     return episodes
 
 
@@ -155,7 +156,7 @@ def load_episodes(root: str | os.PathLike, manifest: dict | None = None) -> list
     return parse_episodes(storage.read_text(path), path)
 
 
-class IndexDtypeError(ValueError):
+class IndexDtypeError(DatasetError):
     """index.npy is readable but its rows are not INDEX_DTYPE (`found`: their dtype)."""
 
     def __init__(self, where: str, found: np.dtype):
@@ -180,7 +181,7 @@ def parse_index(data: bytes, where: str) -> np.ndarray:
     try:
         rows = np.load(io.BytesIO(data), allow_pickle=False)
     except Exception as e:
-        raise ValueError(f"{where}: unreadable index: {e}") from None
+        raise DatasetError(f"{where}: unreadable index: {e}") from None
     return _check_index_dtype(rows, where)
 
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from htdata.errors import DatasetError
 from htdata.format.table import INDEX_DTYPE, SIZE_FIELDS
 from htdata.format.shardio import key_stem, parse_key
 
@@ -50,7 +51,7 @@ class Assembled:
 def unit_of_shard(name: str) -> int:
     m = SHARD_NAME_RE.match(name)
     if not m:
-        raise ValueError(f"shard name {name!r} is not shard-UUUUUU-KKK.tar")
+        raise DatasetError(f"shard name {name!r} is not shard-UUUUUU-KKK.tar")
     return int(m.group(1))
 
 
@@ -64,7 +65,7 @@ def part_from_unit(unit) -> Part:
     records = {}
     for rec in unit.episodes:
         if rec["episode_id"] in records:
-            raise ValueError(f"{where}: episode {rec['episode_id']!r} appears twice in the dataset")
+            raise DatasetError(f"{where}: episode {rec['episode_id']!r} appears twice in the dataset")
         records[rec["episode_id"]] = {k: v for k, v in rec.items() if k not in COMPUTED_FIELDS}
     rows = np.zeros(len(unit.samples), dtype=INDEX_DTYPE)
     order: list[str] = []
@@ -74,24 +75,24 @@ def part_from_unit(unit) -> Part:
         stem, frame = parse_key(sample.key)
         eid = by_stem.get(stem)
         if eid is None:
-            raise ValueError(f"{where}: sample {sample.key} has no episode record")
+            raise DatasetError(f"{where}: sample {sample.key} has no episode record")
         if eid != current:
             if eid in order:
-                raise ValueError(f"{where}: frames of episode {eid!r} are not contiguous (at {sample.key})")
+                raise DatasetError(f"{where}: frames of episode {eid!r} are not contiguous (at {sample.key})")
             order.append(eid)
             current, expected = eid, 0
         if frame != expected:
-            raise ValueError(f"{where}: episode {eid!r}: expected frame {expected}, got {sample.key}")
+            raise DatasetError(f"{where}: episode {eid!r}: expected frame {expected}, got {sample.key}")
         expected += 1
         if not 0 <= sample.shard < len(unit.shards):
-            raise ValueError(f"{where}: sample {sample.key} names shard {sample.shard} of {len(unit.shards)}")
+            raise DatasetError(f"{where}: sample {sample.key} names shard {sample.shard} of {len(unit.shards)}")
         row = rows[i]
         row["shard"], row["offset"], row["episode"], row["frame"] = sample.shard, sample.offset, len(order) - 1, frame
         for suffix, size in sample.sizes.items():
             row[SIZE_FIELDS[suffix]] = size
     missing = set(records) - set(order)
     if missing:
-        raise ValueError(f"{where}: episode record(s) without samples: {sorted(missing)}")
+        raise DatasetError(f"{where}: episode record(s) without samples: {sorted(missing)}")
     shards = [{"name": s.name, "sha256": s.sha256, "bytes": int(s.bytes), "samples": int(s.samples)}
               for s in unit.shards]
     episodes = [records[e] for e in order]
@@ -104,7 +105,7 @@ def _set_num_frames(episodes: list[dict], rows: np.ndarray, where: str) -> None:
     for pos, ep in enumerate(episodes):
         count = int(counts[pos])
         if "num_frames" in ep and ep["num_frames"] != count:
-            raise ValueError(f"{where}: episode {ep['episode_id']!r}: record says num_frames={ep['num_frames']}, "
+            raise DatasetError(f"{where}: episode {ep['episode_id']!r}: record says num_frames={ep['num_frames']}, "
                              f"shards hold {count} samples")
         ep["num_frames"] = count
 
@@ -131,7 +132,7 @@ def parts_of_version(manifest: dict, episodes: list[dict], index: np.ndarray) ->
                                   for s in shards[start:stop]]))
         start = stop
     if len({p.unit for p in parts}) != len(parts):
-        raise ValueError("shards of one work unit are not contiguous in the manifest")
+        raise DatasetError("shards of one work unit are not contiguous in the manifest")
     return parts
 
 
@@ -141,12 +142,12 @@ def assemble(parts: list[Part]) -> Assembled:
     for p in parts:
         for eid in p.episode_ids:
             if eid in seen:
-                raise ValueError(f"unit {p.unit}: episode {eid!r} appears twice in the dataset "
+                raise DatasetError(f"unit {p.unit}: episode {eid!r} appears twice in the dataset "
                                  f"(also in unit {seen[eid]})")
             seen[eid] = p.unit
     names = [s["name"] for p in parts for s in p.shards]
     if len(set(names)) != len(names):
-        raise ValueError("a shard is listed twice: " + ", ".join(sorted({n for n in names if names.count(n) > 1})))
+        raise DatasetError("a shard is listed twice: " + ", ".join(sorted({n for n in names if names.count(n) > 1})))
     rows = np.concatenate([p.rows for p in parts]) if parts else np.zeros(0, INDEX_DTYPE)
     shard_base = np.cumsum([0] + [len(p.shards) for p in parts])
     ep_base = np.cumsum([0] + [len(p.episodes) for p in parts])
@@ -166,7 +167,7 @@ def _fill_positions(rows: np.ndarray, shards: list[dict], episodes: list[dict]) 
     first = 0
     for pos, entry in enumerate(shards):
         if counts[pos] != entry["samples"]:
-            raise ValueError(f"shard {entry['name']}: records {entry['samples']} samples, index has {counts[pos]}")
+            raise DatasetError(f"shard {entry['name']}: records {entry['samples']} samples, index has {counts[pos]}")
         entry["first_sample"] = first
         first += entry["samples"]
     _set_num_frames(episodes, rows, "assemble")

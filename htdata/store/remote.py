@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.errors import ArgumentError
+from htdata.errors import DatasetError
 from htdata.store import storage
 from htdata.format.table import EPISODES_FILE, INDEX_FILE, LAYOUTS_DIR, MANIFEST_FILE, SHARDS_DIR, SPLITS_DIR
 from htdata.store.confine import inside
@@ -114,7 +116,7 @@ def publish_dataset(local_root: str | os.PathLike, url: str,
     """
     root = Path(local_root)
     if storage.is_url(os.fspath(local_root)):
-        raise ValueError(f"{local_root}: publish reads a LOCAL dataset directory")
+        raise ArgumentError(f"{local_root}: publish reads a LOCAL dataset directory")
     manifest_path = root / MANIFEST_FILE
     if not manifest_path.is_file():
         raise FileNotFoundError(f"{manifest_path}: no manifest: not a committed htdata dataset")
@@ -129,7 +131,7 @@ def publish_dataset(local_root: str | os.PathLike, url: str,
     for n, (rel, expected) in enumerate(plan, 1):
         local = root / rel
         if expected is not None and sha256_file(local) != expected:
-            raise ValueError(f"{local}: sha256 differs from the manifest: the local dataset is damaged "
+            raise DatasetError(f"{local}: sha256 differs from the manifest: the local dataset is damaged "
                              f"(run `htdata validate`); nothing more uploaded")
         written = upload_file(fs, local, f"{base}/{rel}")
         back = remote_sha256(fs, f"{base}/{rel}")
@@ -160,7 +162,7 @@ def cached_index_path(root_url: str, manifest: dict) -> Path:
     """
     sha = manifest.get("index_sha256")
     if not isinstance(sha, str) or len(sha) != 64:
-        raise ValueError(f"{root_url}: manifest has no index_sha256; cannot cache the index")
+        raise DatasetError(f"{root_url}: manifest has no index_sha256; cannot cache the index")
     target = cache_dir() / "index" / sha / INDEX_FILE
     if target.is_file():
         return target
@@ -171,7 +173,7 @@ def cached_index_path(root_url: str, manifest: dict) -> Path:
             h.update(block)
             out.write(block)
         if h.hexdigest() != sha:
-            raise ValueError(f"{src}: downloaded index sha256 {h.hexdigest()[:12]} != manifest {sha[:12]}")
+            raise DatasetError(f"{src}: downloaded index sha256 {h.hexdigest()[:12]} != manifest {sha[:12]}")
     return target
 
 

@@ -22,6 +22,7 @@ from typing import Callable
 import numpy as np
 
 from htdata import __version__
+from htdata.errors import DatasetError
 from htdata.store import storage
 from htdata.format.mapstorage import hand_present
 from htdata.format.table import EPISODES_FILE, FORMAT, FORMAT_VERSION, HANDS, MANIFEST_FILE, SHARDS_DIR
@@ -91,7 +92,7 @@ def _check_shards_on_disk(root: Path, shards: list[dict]) -> None:
         if not path.is_file():
             raise FileNotFoundError(f"{path}: shard listed by a work unit is missing")
         if path.stat().st_size != entry["bytes"]:
-            raise ValueError(f"{path}: size {path.stat().st_size} != recorded {entry['bytes']}")
+            raise DatasetError(f"{path}: size {path.stat().st_size} != recorded {entry['bytes']}")
 
 
 def commit_parts(root: str | os.PathLike, parts: list[Part], fields: dict, parent: Snapshot | None,

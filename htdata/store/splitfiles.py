@@ -131,7 +131,7 @@ def parse_split_doc(data: bytes, path: str, name: str) -> dict:
     except ValueError as exc:
         raise SplitRejected(f"{path}: not valid JSON ({exc})") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("parts"), dict):
-        raise ValueError(f"{path}: split has no 'parts' object")
+        raise SplitRejected(f"{path}: split has no 'parts' object")
     seen: dict[str, str] = {}
     for part, body in sorted(doc["parts"].items()):
         for eid in body.get("episodes", []) if isinstance(body, dict) else []:

@@ -42,6 +42,7 @@ import shutil
 import socket
 from pathlib import Path
 
+from htdata.errors import ArgumentError
 from htdata.errors import HtdataError
 from htdata.store import storage
 from htdata.faults import crash_point
@@ -57,7 +58,7 @@ POSITIONAL_FIELDS = ("first_sample", "shards")
 
 def version_name(n: int) -> str:
     if n < 1:
-        raise ValueError(f"versions are numbered from 1, got {n}")
+        raise ArgumentError(f"versions are numbered from 1, got {n}")
     return f"v{n:06d}"
 
 

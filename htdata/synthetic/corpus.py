@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.errors import ArgumentError
 from htdata.source.adapters import ADAPTERS
 from htdata.store.fsutil import write_json_atomic
 from htdata.glove.layouts import load_layout
@@ -102,13 +103,13 @@ class CorpusConfig:
     def validate(self) -> "CorpusConfig":
         self.out = Path(self.out)
         if self.scale not in SCALES:
-            raise ValueError(f"scale must be one of {SCALES}, got {self.scale!r}")
+            raise ArgumentError(f"scale must be one of {SCALES}, got {self.scale!r}")
         unknown = [f for f in self.formats if f not in FORMATS]
         if unknown or not self.formats:
-            raise ValueError(f"formats must be a non-empty subset of {FORMATS}, got {self.formats}")
+            raise ArgumentError(f"formats must be a non-empty subset of {FORMATS}, got {self.formats}")
         self.formats = tuple(f for f in FORMATS if f in self.formats)
         if not 0 <= int(self.seed) < 2**32:
-            raise ValueError(f"seed must be in [0, 2**32), got {self.seed}")
+            raise ArgumentError(f"seed must be in [0, 2**32), got {self.seed}")
         return self
 
 

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
+from htdata.errors import ArgumentError
 from htdata.validate.content import decode_mask, layout_maps
 from htdata.validate.report import CHECKS, Check
 from htdata.validate.calibrations import check_calibration_records, check_taxel_digests, has_taxel_digests
@@ -33,11 +34,11 @@ class ValidateConfig:
 
     def validate(self) -> None:
         if not (0.0 < self.sample_frac <= 1.0):
-            raise ValueError(f"--sample-frac must be in (0, 1], got {self.sample_frac}")
+            raise ArgumentError(f"--sample-frac must be in (0, 1], got {self.sample_frac}")
         if self.workers is not None and self.workers < 1:
-            raise ValueError(f"--workers must be >= 1, got {self.workers}")
+            raise ArgumentError(f"--workers must be >= 1, got {self.workers}")
         if self.max_listed < 1:
-            raise ValueError(f"max_listed must be >= 1, got {self.max_listed}")
+            raise ArgumentError(f"max_listed must be >= 1, got {self.max_listed}")
 
     def resolved_workers(self, n_shards: int) -> int:
         wanted = self.workers if self.workers is not None else (os.cpu_count() or 1) if self.deep else 1

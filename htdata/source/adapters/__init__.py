@@ -18,6 +18,7 @@
 
 from __future__ import annotations
 
+from htdata.errors import ArgumentError
 from htdata.source.adapters.base import Adapter, EpisodeRef, EpisodeStreams
 from htdata.source.adapters.native import NativeAdapter
 from htdata.source.adapters.opentouch import OpenTouchAdapter
@@ -34,7 +35,7 @@ def get_adapter(name: str) -> Adapter:
     try:
         return ADAPTERS[name]()
     except KeyError:
-        raise ValueError(f"unknown adapter {name!r}; known: {sorted(ADAPTERS)}") from None
+        raise ArgumentError(f"unknown adapter {name!r}; known: {sorted(ADAPTERS)}") from None
 
 
 __all__ = ["ADAPTERS", "Adapter", "EpisodeRef", "EpisodeStreams", "get_adapter"]

@@ -44,6 +44,7 @@ from typing import Iterator
 
 import numpy as np
 
+from htdata.errors import ConfigError
 from htdata.source.adapters.base import EpisodeRef, EpisodeStreams, FileDiscovery
 from htdata.source.adapters.discovery import fingerprint_files, sanitise_id
 from htdata.source.adapters.params import AdapterParam, param_values
@@ -117,9 +118,9 @@ def detect_id_column(fields: list[str], rows: list[dict], path: Path) -> str:
     if "id" in found:
         return "id"
     if not found:
-        raise ValueError(f"{path}: no column of the annotation table holds ids like '<scene>::<demo_id>' "
+        raise ConfigError(f"{path}: no column of the annotation table holds ids like '<scene>::<demo_id>' "
                          f"(columns: {fields}); name it with {FIX_ID_COLUMN}")
-    raise ValueError(f"{path}: several columns hold '<scene>::<demo_id>' ids ({found}); choose one with "
+    raise ConfigError(f"{path}: several columns hold '<scene>::<demo_id>' ids ({found}); choose one with "
                      f"{FIX_ID_COLUMN}")
 
 
@@ -141,7 +142,7 @@ def load_annotations(path: Path, task_field: str, id_column: str | None = None) 
         id_column = detect_id_column(fields, rows, path)
     for col, fix in ((id_column, FIX_ID_COLUMN), (task_field, "--set adapter.params.task_field=COLUMN")):
         if col not in fields:
-            raise ValueError(f"{path}: annotation table has no column {col!r} (columns: {fields}); "
+            raise ConfigError(f"{path}: annotation table has no column {col!r} (columns: {fields}); "
                              f"name the right one with {fix}")
     tasks: dict[str, str] = {}
     line_of: dict[str, int] = {}
@@ -150,7 +151,7 @@ def load_annotations(path: Path, task_field: str, id_column: str | None = None) 
         if key:
             task = (row.get(task_field) or "").strip()
             if key in tasks and tasks[key] != task:   # which one is right only the table's author knows
-                raise ValueError(f"{path}: id {key!r} is labelled twice with different tasks: line "
+                raise ConfigError(f"{path}: id {key!r} is labelled twice with different tasks: line "
                                  f"{line_of[key]} says {tasks[key]!r}, line {lineno} says {task!r}; keep one row")
             tasks[key] = task
             line_of.setdefault(key, lineno)
@@ -288,7 +289,7 @@ class OpenTouchStreams(EpisodeStreams):
         super().__init__(ref)
         self.channel_order = param_values(OpenTouchAdapter.PARAMS, params)["channel_order"]
         if self.channel_order not in CHANNEL_ORDERS:
-            raise ValueError(f"opentouch channel_order must be one of {CHANNEL_ORDERS}, got {self.channel_order!r}")
+            raise ConfigError(f"opentouch channel_order must be one of {CHANNEL_ORDERS}, got {self.channel_order!r}")
         file_text, _, group = ref.source_ref.partition("::")
         self.path = self._check_file(Path(file_text))
         try:

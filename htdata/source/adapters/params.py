@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from htdata.errors import ConfigError
+
 
 @dataclass(frozen=True)
 class AdapterParam:
@@ -24,16 +26,16 @@ def param_values(declared: tuple[AdapterParam, ...], params: dict) -> dict:
 
 
 def check_declared_params(adapter: str, declared: tuple[AdapterParam, ...], params: dict, where: str) -> None:
-    """Raise ValueError naming the key and listing the known params when `params` does not fit `declared`."""
+    """Raise ConfigError naming the key and listing the known params when `params` does not fit `declared`."""
     known = {p.name: p for p in declared}
     listing = ", ".join(f"{p.name} ({'/'.join(t.__name__ for t in p.types)}, default {p.default!r})"
                         for p in declared) or "none"
     for key, value in params.items():
         if key not in known:
-            raise ValueError(f"{where}: adapter.params.{key} is not a param of adapter {adapter!r}; "
+            raise ConfigError(f"{where}: adapter.params.{key} is not a param of adapter {adapter!r}; "
                              f"known params: {listing}")
         spec = known[key]
         ok = isinstance(value, spec.types) and not (isinstance(value, bool) and bool not in spec.types)
         if not ok:
-            raise ValueError(f"{where}: adapter.params.{key} must be {'/'.join(t.__name__ for t in spec.types)} "
+            raise ConfigError(f"{where}: adapter.params.{key} must be {'/'.join(t.__name__ for t in spec.types)} "
                              f"({spec.help}), got {type(value).__name__} {value!r}")

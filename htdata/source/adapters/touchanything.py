@@ -30,6 +30,7 @@ from typing import Iterator
 
 import numpy as np
 
+from htdata.errors import ConfigError
 from htdata.source.adapters.base import EpisodeRef, EpisodeStreams, FileDiscovery
 from htdata.source.adapters.discovery import fingerprint_files, sanitise_id
 from htdata.source.adapters.params import AdapterParam, param_values
@@ -100,7 +101,7 @@ class TouchAnythingAdapter(FileDiscovery):
         params = param_values(self.PARAMS, params)
         video = params["video"]
         if video not in VIDEO_NAMES:
-            raise ValueError(f"touchanything video must be one of {sorted(VIDEO_NAMES)}, got {video!r}")
+            raise ConfigError(f"touchanything video must be one of {sorted(VIDEO_NAMES)}, got {video!r}")
         return TouchAnythingContext(splits=load_split(Path(root)),
                                     layouts={**DEFAULT_LAYOUTS, **params["layouts"]}, video=video)
 
