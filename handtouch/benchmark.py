@@ -23,8 +23,8 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from .resources import config_file
 from .config import load_train_config
+from .resources import config_file
 from .train import train
 
 CONFIG = "smoke"

@@ -32,8 +32,7 @@ from collections.abc import Iterable
 import torch
 import torch.nn as nn
 
-from htdata.errors import ArgumentError
-from htdata.errors import ConfigError
+from htdata.errors import ArgumentError, ConfigError
 
 from .config import MODULE_NAMES, WINDOW, ModelConfig
 from .decoder import build_tactile_decoder

@@ -35,8 +35,8 @@ from htdata.store.fsutil import write_json_atomic
 from .bench.items import iterate_batches, load_part, subsample
 from .bench.metrics import MapMetrics
 from .config import load_train_config
-from .rgb_encoder import to_unit_float
 from .resources import config_file
+from .rgb_encoder import to_unit_float
 from .rgb_pretrain import episode_fps, partners
 from .train import CHECKPOINT_FORMAT, build_model, load_model, read_checkpoint, save_checkpoint, train
 

@@ -41,20 +41,18 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from htdata.errors import ArgumentError
-from htdata.errors import ConfigError
-from htdata.errors import DatasetError
+from htdata.errors import ArgumentError, ConfigError, DatasetError
 from htdata.read import keys
+from htdata.read.metadata import DatasetMetadata
+from htdata.read.torchdata import TactileFrameDataset
 from htdata.store.fsutil import write_bytes_atomic
 
+from .bench.items import iterate_batches, subsample
 from .bench.metrics import MapMetrics
 from .distributed import torch_threads
 from .progress import Rate
 from .rgb_encoder import TactileGridRGB, load_rgb_encoder, to_unit_float
-from htdata.read.torchdata import TactileFrameDataset
-from .bench.items import iterate_batches, subsample
 from .train import lr_at
-from htdata.read.metadata import DatasetMetadata
 
 log = logging.getLogger("handtouch.rgb_pretrain")
 PAIRINGS = ("aligned", "shifted", "shuffled")

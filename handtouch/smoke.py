@@ -56,17 +56,26 @@ from handtouch.bench.references import CopyLastModel, ZerosModel
 from handtouch.bench.report import render_predictions, write_results
 from handtouch.bench.verdicts import ZEROS
 from handtouch.config import ENCODERS as MODEL_ENCODERS
+from handtouch.config import load_train_config
 from handtouch.progress import Heartbeat
 from handtouch.resources import config_file
-from handtouch.rgb_pretrain import (PAIRINGS, RGBPretrainConfig, control_checks, control_scores, ensure_probes,
-                                    episode_fps, load_items, model_control_checks, paired_rgb2tactile)
-from htdata.read import keys
-from htdata.synthetic.corpus import FORMATS as SAMPLE_FORMATS
-from htdata.format.table import MANIFEST_FILE
-from htdata.resources import PIPELINES_DIR
-from htdata.read.metadata import DatasetMetadata
-from handtouch.config import load_train_config
+from handtouch.rgb_pretrain import (
+    PAIRINGS,
+    RGBPretrainConfig,
+    control_checks,
+    control_scores,
+    ensure_probes,
+    episode_fps,
+    load_items,
+    model_control_checks,
+    paired_rgb2tactile,
+)
 from handtouch.train import load_model, train
+from htdata.format.table import MANIFEST_FILE
+from htdata.read import keys
+from htdata.read.metadata import DatasetMetadata
+from htdata.resources import PIPELINES_DIR
+from htdata.synthetic.corpus import FORMATS as SAMPLE_FORMATS
 
 # HandTouch first, then the baseline. ResNet-18 left the default when the 600-step RGB probes
 # pushed the run from nothing to 319 s (train 67 s + eval 18 s of it); `make compare` has it.

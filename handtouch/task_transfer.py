@@ -30,9 +30,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from htdata.store.fsutil import write_json_atomic
-from htdata.read.metadata import DatasetMetadata
 from htdata.curate.split import assign_episodes
+from htdata.read.metadata import DatasetMetadata
+from htdata.store.fsutil import write_json_atomic
 
 from .bench.report import write_text_atomic
 from .config import parse_override

@@ -32,21 +32,19 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
-from htdata.errors import ArgumentError
-from htdata.errors import ConfigError
+from htdata.errors import ArgumentError, ConfigError
 from htdata.read import keys
+from htdata.read.torchdata import ItemConstants, TactileFrameDataset, TactileWindowDataset
 from htdata.store.fsutil import write_json_atomic
 
 from .checkpoint import CHECKPOINT_FORMAT, read_checkpoint, rng_state, save_checkpoint, set_rng_state  # noqa: F401
 from .config import WINDOW, TrainConfig, load_train_config, model_config_from_dict
-from .distributed import (DistEnv, StepBatchSampler, barrier, init_distributed, shutdown,
-                          torch_threads, wrap)
+from .distributed import DistEnv, StepBatchSampler, barrier, init_distributed, shutdown, torch_threads, wrap
 from .model import HandTouch, covered, masked_mse
 from .resources import config_file
 from .rgb_encoder import load_rgb_encoder
 from .stages import FRAMES, WINDOWS, Stage, StageLoss, build_stages
 from .steploop import StageRun, lr_at, make_optimizer, to_device, train_steps  # noqa: F401  (lr_at: a name of this module)
-from htdata.read.torchdata import ItemConstants, TactileFrameDataset, TactileWindowDataset
 
 log = logging.getLogger("handtouch.train")
 

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from htdata.ingest import Source, ingest
 from htdata.ingest.pipeline import load_pipeline
+from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 
 FRAMES = 8           # per recording: small, so the datasets build fast and the append is dominated by overheads
 PERIOD_NS = 33_333_333

@@ -26,7 +26,6 @@ from htdata.read import keys
 from htdata.read.reader import DatasetReader
 from htdata.read.torchdata import TactileFrameDataset
 
-
 # (row label, maps_from, dataset keywords): full items as the trainer read them before #28, then tactile-only
 VARIANTS = (("full", "best", {}), ("full", "stored", {}),
             ("tactile", "best", {"members": (keys.TACTILE,), "constants": "once"}))

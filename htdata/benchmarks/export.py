@@ -12,9 +12,9 @@ import shutil
 import time
 from pathlib import Path
 
-from htdata.read.reader import DatasetReader
-from htdata.export.lerobot import LeRobotExportConfig, export_lerobot
 from htdata.benchmarks.tables import table
+from htdata.export.lerobot import LeRobotExportConfig, export_lerobot
+from htdata.read.reader import DatasetReader
 
 
 def _bytes(paths) -> int:

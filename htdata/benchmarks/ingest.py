@@ -26,10 +26,10 @@ from pathlib import Path
 import numpy as np
 
 from htdata.benchmarks.sources import bare_bound, discover
-from htdata.store.manifest import load_manifest
+from htdata.glove.layouts import load_layout
 from htdata.ingest import Source, ingest
 from htdata.ingest.pipeline import load_pipeline
-from htdata.glove.layouts import load_layout
+from htdata.store.manifest import load_manifest
 from htdata.synthetic.corpus import TA_IMAGE, TA_LAYOUTS, VIDEO_FPS, touchanything_raw
 from htdata.synthetic.formats import TouchAnythingEpisode, write_touchanything_episode
 from htdata.synthetic.world import EpisodeSpec, World

@@ -20,17 +20,17 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.benchmarks.tables import fmt as _fmt, table
+from htdata.benchmarks.sources import discover
+from htdata.benchmarks.tables import fmt as _fmt
+from htdata.benchmarks.tables import table
 from htdata.errors import ArgumentError
 from htdata.glove.layouts import load_layout
+from htdata.glove.normalise import Normaliser
+from htdata.source.lag import _contact_series, _rgb_series, estimate_episode_lag, estimate_lag
 from htdata.synthetic.corpus import native_raw
 from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
-from htdata.synthetic.world import EpisodeSpec, World
-from htdata.benchmarks.sources import discover
-from htdata.source.lag import _contact_series, _rgb_series, estimate_lag
-from htdata.glove.normalise import Normaliser
-from htdata.source.lag import estimate_episode_lag
 from htdata.synthetic.tasks import TASKS
+from htdata.synthetic.world import EpisodeSpec, World
 
 SHIFTS_MS = (-200.0, -50.0, 0.0, 100.0)
 FPS = 30.0

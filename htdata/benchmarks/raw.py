@@ -18,13 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.benchmarks.tables import table
-from htdata.format.table import HANDS, SIZE_FIELDS, raw_member, tactile_member
-from htdata.store.manifest import load_index
-from htdata.read.reader import DatasetReader
 from htdata.benchmarks.ingest import ingest_run
+from htdata.benchmarks.tables import table
 from htdata.format.codec import decode_tactile
+from htdata.format.table import HANDS, SIZE_FIELDS, raw_member, tactile_member
 from htdata.read.rawstream import RawMapRenderer
+from htdata.read.reader import DatasetReader
+from htdata.store.manifest import load_index
 
 TARGET_RATIO = 0.9
 

@@ -35,12 +35,20 @@ import time
 
 import numpy as np
 
-from htdata.glove.normalise import NormaliseConfig, Normaliser
-from htdata.synthetic.rawglove import (FPS, FULL_SCALE, TRUTH_LEVEL, GloveUnit, RawGloveClip, corpus_clips,
-                                    glove_layout, make_clip)
-from htdata.glove.contact import rule_for
 from htdata.benchmarks.rawglovecells import moving_cell_rows, suggest_rows
 from htdata.benchmarks.tables import table
+from htdata.glove.contact import rule_for
+from htdata.glove.normalise import NormaliseConfig, Normaliser
+from htdata.synthetic.rawglove import (
+    FPS,
+    FULL_SCALE,
+    TRUTH_LEVEL,
+    GloveUnit,
+    RawGloveClip,
+    corpus_clips,
+    glove_layout,
+    make_clip,
+)
 
 REST_TRUTH = 1e-3
 BASELINE_OPTIONS = (("none", {}), ("first_frame", {}), ("rest_window", {"rest_frames": 10}),

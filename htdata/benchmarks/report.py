@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from htdata.benchmarks.export import export_markdown
 from htdata.benchmarks.lag import lag_markdown
-from htdata.benchmarks.raw import raw_markdown
 from htdata.benchmarks.maps import maps_markdown
+from htdata.benchmarks.raw import raw_markdown
 from htdata.benchmarks.rawglove import rawglove_markdown
-from htdata.benchmarks.tables import fmt as _fmt, table
+from htdata.benchmarks.tables import fmt as _fmt
+from htdata.benchmarks.tables import table
 from htdata.read.rawstream import MAP_SOURCE_WORDS
 
 HEADINGS = {

@@ -15,8 +15,8 @@ import time
 from pathlib import Path
 
 from htdata.format.table import HANDS, tactile_member
-from htdata.read.reader import DatasetReader
 from htdata.inspect.stats import stats_benchmark
+from htdata.read.reader import DatasetReader
 
 
 def tactile_decode_rate(root: Path) -> dict:

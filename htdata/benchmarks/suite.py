@@ -29,31 +29,29 @@ from dataclasses import asdict, dataclass
 from importlib import metadata
 from pathlib import Path
 
+from htdata.benchmarks.append import append_rows
+from htdata.benchmarks.codecs import codec_rows, real_maps
+from htdata.benchmarks.dataloader import dataloader_rows
+from htdata.benchmarks.export import export_rows
+from htdata.benchmarks.index import index_rows
+from htdata.benchmarks.ingest import adapter_rows, ingest_run, peak_rss_rows, write_long_touchanything
+from htdata.benchmarks.lag import lag_rows
+from htdata.benchmarks.loader import loader_rows
+from htdata.benchmarks.machine import machine_info
+from htdata.benchmarks.maps import maps_rows
+from htdata.benchmarks.raster import raster_rows
+from htdata.benchmarks.raw import raw_rows
+from htdata.benchmarks.rawglove import rawglove_rows
+from htdata.benchmarks.report import render_report
+from htdata.benchmarks.revisions import ROUND_ONE, revision_rows
+from htdata.benchmarks.rgb import rgb_section
+from htdata.benchmarks.scaling import scaling_rows
+from htdata.benchmarks.sources import discover, source_rgb_frames
+from htdata.benchmarks.stats import stats_rows
+from htdata.benchmarks.validation import validate_rows
 from htdata.errors import ArgumentError
 from htdata.store.fsutil import write_bytes_atomic
-from htdata.synthetic.corpus import FORMATS
-from htdata.synthetic.corpus import SCALES, CorpusConfig, corpus_complete, write_corpus
-from htdata.benchmarks.machine import machine_info
-from htdata.benchmarks.report import render_report
-from htdata.benchmarks.ingest import ingest_run
-from htdata.benchmarks.codecs import codec_rows, real_maps
-from htdata.benchmarks.rgb import rgb_section
-from htdata.benchmarks.sources import discover, source_rgb_frames
-from htdata.benchmarks.raster import raster_rows
-from htdata.benchmarks.ingest import adapter_rows, peak_rss_rows, write_long_touchanything
-from htdata.benchmarks.revisions import ROUND_ONE, revision_rows
-from htdata.benchmarks.scaling import scaling_rows
-from htdata.benchmarks.loader import loader_rows
-from htdata.benchmarks.dataloader import dataloader_rows
-from htdata.benchmarks.index import index_rows
-from htdata.benchmarks.validation import validate_rows
-from htdata.benchmarks.append import append_rows
-from htdata.benchmarks.stats import stats_rows
-from htdata.benchmarks.lag import lag_rows
-from htdata.benchmarks.raw import raw_rows
-from htdata.benchmarks.maps import maps_rows
-from htdata.benchmarks.export import export_rows
-from htdata.benchmarks.rawglove import rawglove_rows
+from htdata.synthetic.corpus import FORMATS, SCALES, CorpusConfig, corpus_complete, write_corpus
 
 SECTION_GROUP = "htdata.bench_sections"
 BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "scaling", "rss", "loader", "index", "validate", "append",

@@ -6,10 +6,9 @@ import argparse
 import sys
 from pathlib import Path
 
+from htdata.commands.outputs import output_path
 from htdata.commands.version_arg import version_arg
 from htdata.inspect import card
-from htdata.commands.outputs import output_path
-
 
 EPILOG = """\
 One self-contained HTML page (plus a Markdown twin OUT.md with its images in OUT_files/) that

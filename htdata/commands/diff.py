@@ -10,7 +10,6 @@ from pathlib import Path
 from htdata.commands.version_arg import version_arg
 from htdata.store.history import diff_versions
 
-
 EPILOG = """\
 + added, - removed, ~ changed: same episode id, different record (re-ingested from changed
 inputs, trimmed, relabelled); where an episode is stored (shards, sample offsets) is ignored.

@@ -6,9 +6,9 @@ import argparse
 import sys
 from pathlib import Path
 
+from htdata.commands.outputs import output_path
 from htdata.commands.version_arg import version_arg
 from htdata.export.lerobot import LeRobotExportConfig, export_lerobot
-from htdata.commands.outputs import output_path
 
 EPILOG = """\
 What is written (LeRobot v3.0: meta/info.json, meta/stats.json, meta/tasks.parquet,

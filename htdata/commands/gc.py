@@ -10,7 +10,6 @@ from pathlib import Path
 from htdata.curate import gc
 from htdata.store.lock import DatasetLocked
 
-
 EPILOG = """\
 Every write makes a new version and old versions keep their files; gc frees the disk. It keeps
 the newest K versions (default 1: only the current one) and, whatever K says, every version

@@ -31,14 +31,13 @@ import argparse
 import os
 import sys
 
-from htdata.ingest.executors import UnitFailed
-from htdata.ingest import ingest, parse_sources
-from htdata.ingest.run import failure_line
 from htdata.glove.activity import unmapped_warning
 from htdata.glove.layouts import LAYOUTS_ENV
+from htdata.ingest import ingest, parse_sources
+from htdata.ingest.executors import UnitFailed
+from htdata.ingest.run import failure_line
 from htdata.settings import aim_settings
 from htdata.store.lock import DatasetLocked
-
 
 EPILOG = """\
 A pipeline says how to read one source format: a shipped name (`htdata pipelines list`:

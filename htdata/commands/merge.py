@@ -6,10 +6,9 @@ import argparse
 import sys
 from pathlib import Path
 
+from htdata.commands.outputs import output_path
 from htdata.curate import merge
 from htdata.store.lock import DatasetLocked
-from htdata.commands.outputs import output_path
-
 
 EPILOG = """\
 OUT gets every episode of A and B; nothing is re-encoded (shards are hard-linked when A, B and

@@ -6,9 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from htdata.inspect import preview
 from htdata.commands.outputs import output_path
-
+from htdata.inspect import preview
 
 EPILOG = """\
 A contact sheet of one episode: rows over time (the N frames with the most contact, or with

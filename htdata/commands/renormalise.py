@@ -17,9 +17,8 @@ from pathlib import Path
 
 from htdata.curate import renormalise
 from htdata.curate.edit import NoSuchEpisode
-from htdata.store.lock import DatasetLocked
 from htdata.ingest.pipeline import load_pipeline
-
+from htdata.store.lock import DatasetLocked
 
 EPILOG = """\
 A glove recalibrated after recording needs no sources: every sample stores its raw glove rows,

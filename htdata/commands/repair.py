@@ -9,7 +9,6 @@ from pathlib import Path
 from htdata.store import repair
 from htdata.store.lock import DatasetLocked
 
-
 EPILOG = """\
 A dataset's versions/vN.json files are the record of what was committed; dataset.json is a
 cache of the newest of them. A missing, truncated or stale dataset.json loses nothing (readers

@@ -9,7 +9,6 @@ from pathlib import Path
 from htdata.curate import edit as curate_edit
 from htdata.store.lock import DatasetLocked
 
-
 EPILOG = """\
 Nothing is changed in place: the result is a new version (`htdata log` lists versions, old ones
 stay readable until `htdata gc`), planned first and written only then; --dry-run prints the plan.

@@ -7,7 +7,15 @@ import json
 import sys
 import time
 
-from htdata.synthetic.corpus import COMPLETE_MARKER, FORMATS, SCALES, CorpusConfig, corpus_complete, plan_corpus, write_corpus
+from htdata.synthetic.corpus import (
+    COMPLETE_MARKER,
+    FORMATS,
+    SCALES,
+    CorpusConfig,
+    corpus_complete,
+    plan_corpus,
+    write_corpus,
+)
 from htdata.synthetic.rawglove import CLIPS, write_rawglove
 
 EPILOG = """\

@@ -9,7 +9,6 @@ from pathlib import Path
 from htdata.curate import split
 from htdata.store.lock import DatasetLocked
 
-
 EPILOG = """\
 The episode is the unit: all frames of an episode land in one part (no near-duplicate
 neighbouring frames in both train and test). Parts: ood = every episode of the --ood-task

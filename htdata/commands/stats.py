@@ -7,11 +7,10 @@ import json
 import sys
 from pathlib import Path
 
+from htdata.commands.outputs import output_path
 from htdata.commands.version_arg import version_arg
 from htdata.glove.health import CLASSES
 from htdata.inspect import stats
-from htdata.commands.outputs import output_path
-
 
 EPILOG = """\
 The text output starts with a short summary (what --brief prints alone), then per glove:

@@ -10,12 +10,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from htdata.curate import edit as curate_edit
 from htdata.commands.rm import report
+from htdata.curate import edit as curate_edit
+from htdata.curate import idle
 from htdata.store.lock import DatasetLocked
 from htdata.store.versions import current_version
-from htdata.curate import idle
-
 
 EPILOG = """\
 Nothing is changed in place: the result is a new version (`htdata log` lists versions, old ones

@@ -6,11 +6,10 @@ import argparse
 import sys
 from pathlib import Path
 
-from htdata.commands.version_arg import version_arg
 from htdata import validate
-from htdata.format.table import VALIDATE_REPORT
 from htdata.commands.outputs import output_path
-
+from htdata.commands.version_arg import version_arg
+from htdata.format.table import VALIDATE_REPORT
 
 EPILOG = """\
 Checks, each a section of the report with every failure named by shard / sample / episode / frame:

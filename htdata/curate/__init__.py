@@ -22,6 +22,6 @@ REMOVED_IN, importing edit.py only when asked.
 
 
 def __getattr__(name: str):
-    from htdata._moved import moved_name   # lazy: see the docstring
+    from htdata._moved import moved_name  # lazy: see the docstring
 
     return moved_name(__name__, name)

@@ -20,11 +20,11 @@ import fnmatch
 from dataclasses import dataclass, field
 
 from htdata.errors import ArgumentError
+from htdata.read.reader import DatasetReader
 from htdata.store.lock import WriterLock
 from htdata.store.parts import Part
-from htdata.read.reader import DatasetReader
-from htdata.write.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
 from htdata.store.snapshot import Snapshot, commit_parts, open_snapshot
+from htdata.write.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
 
 
 class NoSuchEpisode(ArgumentError):

@@ -31,18 +31,16 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from htdata.errors import ArgumentError
-from htdata.errors import HtdataError
+from htdata.errors import ArgumentError, HtdataError
 from htdata.faults import crash_point
 from htdata.format.table import SHARDS_DIR
-from htdata.store.lock import WriterLock
-from htdata.store.manifest import load_manifest
-from htdata.inspect.stats import STATS_DIR
-from htdata.store.versions import VERSIONS_DIR, current_version, list_versions, version_dir, version_manifest_file
+from htdata.inspect.stats import STATS_DIR, episode_key
 from htdata.read.reader import DatasetReader
-from htdata.inspect.stats import episode_key
 from htdata.store.fsutil import write_bytes_atomic
 from htdata.store.gcrecord import tombstone_file
+from htdata.store.lock import WriterLock
+from htdata.store.manifest import load_manifest
+from htdata.store.versions import VERSIONS_DIR, current_version, list_versions, version_dir, version_manifest_file
 
 DEFAULT_RETENTION_S = 7 * 86400     # Delta Lake's default; Iceberg uses 3 days
 FORCE_BELOW_S = 3600                # a shorter window may break running readers: needs --force

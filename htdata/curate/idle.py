@@ -24,10 +24,10 @@ import numpy as np
 from htdata.curate import edit as curate_edit
 from htdata.errors import ArgumentError
 from htdata.glove.contact import THRESHOLD
-from htdata.store.lock import WriterLock
-from htdata.read.reader import DatasetReader
-from htdata.store.snapshot import open_snapshot
 from htdata.inspect.stats import default_cache_dir, episode_stats
+from htdata.read.reader import DatasetReader
+from htdata.store.lock import WriterLock
+from htdata.store.snapshot import open_snapshot
 
 
 @dataclass

@@ -30,21 +30,20 @@ import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from htdata.format.mapstorage import MapStorage
 from htdata.errors import ArgumentError
 from htdata.faults import crash_point
+from htdata.format.mapstorage import MapStorage
+from htdata.format.shardio import shard_name
 from htdata.format.table import MANIFEST_FILE, SHARDS_DIR
+from htdata.read.reader import DatasetReader
 from htdata.store.confine import inside
 from htdata.store.fsutil import sha256_file, write_bytes_atomic
 from htdata.store.lock import LOCK_FILE, WriterLock
-from htdata.store.parts import Part
-from htdata.read.reader import DatasetReader
-from htdata.write.repack import KeptEpisode, repack_unit, samples_per_shard_of
-from htdata.format.shardio import shard_name
-from htdata.store.snapshot import Snapshot, commit_parts, open_snapshot
 from htdata.store.manifest import load_manifest
+from htdata.store.parts import Part
+from htdata.store.snapshot import Snapshot, commit_parts, open_snapshot
 from htdata.store.versions import content_view, list_versions, version_manifest_file
-
+from htdata.write.repack import KeptEpisode, repack_unit, samples_per_shard_of
 
 MERGE_MARKER = ".merge.json"   # written by a merge into an empty OUT, removed after its commit
 

@@ -24,27 +24,38 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.errors import ArgumentError
-from htdata.errors import ConfigError
-from htdata.errors import DatasetError
-from htdata.glove.calibration import (calibration_id, episode_calibrations, episode_normaliser, fit_digests, fit_record,
-                                      taxel_digest)
-from htdata.format.codec import MEMBER_CODECS
 from htdata.curate.edit import resolve_episodes
-from htdata.format.table import (JSON_MEMBER, SIZE_FIELDS, CodecSettings, bend_member, decode_member, raw_member,
-                                 tactile_member)
+from htdata.errors import ArgumentError, ConfigError, DatasetError
+from htdata.format.codec import MEMBER_CODECS
+from htdata.format.mapstorage import MapStorage, hand_present, has_hand
+from htdata.format.table import (
+    JSON_MEMBER,
+    SIZE_FIELDS,
+    CodecSettings,
+    bend_member,
+    decode_member,
+    raw_member,
+    tactile_member,
+)
+from htdata.glove.calibration import (
+    calibration_id,
+    episode_calibrations,
+    episode_normaliser,
+    fit_digests,
+    fit_record,
+    taxel_digest,
+)
 from htdata.glove.health import record_entry
 from htdata.glove.layouts import Layout, load_layout
-from htdata.store.confine import inside
-from htdata.store.lock import WriterLock
 from htdata.glove.normalise import Normaliser
 from htdata.glove.normalisesettings import NormaliseSettings
 from htdata.glove.rasterise import Rasteriser
-from htdata.format.mapstorage import MapStorage, has_hand, hand_present
 from htdata.read.rawstream import apply_paired, paired_row, paired_source_row
 from htdata.read.reader import DatasetReader
-from htdata.write.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
+from htdata.store.confine import inside
+from htdata.store.lock import WriterLock
 from htdata.store.snapshot import Snapshot, commit_parts, open_snapshot
+from htdata.write.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
 
 
 @dataclass

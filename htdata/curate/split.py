@@ -35,15 +35,23 @@ from collections import defaultdict
 from pathlib import Path
 
 # The rule and the split files are names of this module too (`htdata split`'s one face).
-from htdata.curate.splitrule import (NAME_PATTERN, RULE, SplitConfig, SplitError,  # noqa: F401
-                                     assign_episodes, build_split, check_ood_tasks, episode_uniform,
-                                     test_counts)
+from htdata.curate.splitrule import (  # noqa: F401
+    NAME_PATTERN,
+    RULE,
+    SplitConfig,
+    SplitError,
+    assign_episodes,
+    build_split,
+    check_ood_tasks,
+    episode_uniform,
+    test_counts,
+)
 from htdata.curate.splitversions import SplitResult, write_versioned_split
 from htdata.format.table import EPISODES_FILE, MANIFEST_FILE
 from htdata.store.fsutil import write_json_atomic
 from htdata.store.manifest import parse_episodes, parse_manifest
-from htdata.store.versions import manifest_path as current_manifest_path
 from htdata.store.splitfiles import PARTS, count_parts, list_splits, split_path  # noqa: F401
+from htdata.store.versions import manifest_path as current_manifest_path
 
 
 def read_dataset_episodes(dataset: Path) -> tuple[bytes, list[dict]]:

@@ -13,7 +13,6 @@ from htdata.errors import ArgumentError
 from htdata.resources import validate_json
 from htdata.store.splitfiles import count_parts
 
-
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9_-]+$")
 
 

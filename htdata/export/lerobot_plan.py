@@ -13,12 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.errors import ArgumentError
-from htdata.errors import DatasetError
-from htdata.store import storage
+from htdata.errors import ArgumentError, DatasetError
 from htdata.format.table import CANVAS, HANDS, JSON_MEMBER, RGB_MEMBER, SIZE_FIELDS, decode_member
 from htdata.read.reader import DatasetReader
-
+from htdata.store import storage
 
 RGB_KEY = "observation.images.egocentric"
 

@@ -19,6 +19,6 @@ the table (which imports the codecs).
 
 
 def __getattr__(name: str):
-    from htdata._moved import moved_name   # lazy: see the docstring
+    from htdata._moved import moved_name  # lazy: see the docstring
 
     return moved_name(__name__, name)

@@ -31,9 +31,9 @@ import cv2
 import numpy as np
 import OpenEXR
 
-from htdata.errors import ArgumentError
-from htdata.errors import DatasetError
+from htdata.errors import ArgumentError, DatasetError
 from htdata.format.canvas import CANVAS, MAP_SHAPE
+
 # Resampling round-off tolerated (and clipped) outside [0,1]; see the value rule.
 ROUND_OFF = 1e-3
 EXR_CHANNEL = "Y"

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from htdata.errors import DatasetError
+
 # CANVAS, HANDS, MAP_SHAPE are names of the table too; they live in canvas.py because the codecs need them.
 from htdata.format.canvas import CANVAS, HANDS, MAP_SHAPE  # noqa: F401
 from htdata.format.codec import MEMBER_CODECS

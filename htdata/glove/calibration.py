@@ -35,8 +35,7 @@ import json
 
 import numpy as np
 
-from htdata.errors import DatasetError
-from htdata.errors import RecordMismatch
+from htdata.errors import DatasetError, RecordMismatch
 from htdata.glove.normalise import NormaliseConfig, Normaliser
 
 

@@ -16,7 +16,6 @@ import numpy as np
 from htdata.format.table import CANONICAL_FILE, CANVAS
 from htdata.resources import LAYOUTS_DIR, validate_json
 
-
 PART_NAMES: dict[int, str] = {1: "thumb", 2: "index", 3: "middle", 4: "ring", 5: "little", 6: "palm"}
 
 

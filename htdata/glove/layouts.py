@@ -27,11 +27,17 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.errors import ConfigError
-from htdata.errors import LayoutNotFound
+from htdata.errors import ConfigError, LayoutNotFound
 from htdata.format.table import CANONICAL_FILE
-from htdata.glove.canonical import (GROUPS, PART_NAMES, CanonicalHand, Rect, frozen,  # noqa: F401 (names of
-                                    load_canonical, parse_canonical)  # this module too)
+from htdata.glove.canonical import (  # noqa: F401 (names of
+    GROUPS,
+    PART_NAMES,
+    CanonicalHand,
+    Rect,
+    frozen,
+    load_canonical,  # this module too)
+    parse_canonical,
+)
 from htdata.resources import LAYOUTS_DIR, validate_json
 
 LAYOUTS_ENV = "HTDATA_LAYOUTS"

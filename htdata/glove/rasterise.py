@@ -19,8 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from htdata.errors import ArgumentError
-from htdata.errors import ConfigError
+from htdata.errors import ArgumentError, ConfigError
 from htdata.format.table import CANVAS
 from htdata.glove.layouts import Block, CanonicalHand, Layout, load_canonical, load_layout
 

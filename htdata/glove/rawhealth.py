@@ -48,10 +48,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from htdata.glove import health
 from htdata.glove.activity import CellActivity, moving_cells, rule_text
 from htdata.glove.health import CLASSES, MIN_FRAMES, TaxelGrid, _crosstalk, _exercised, _neighbour_median
 from htdata.glove.restlevel import nanpercentile_columns, quiet_frames
-from htdata.glove import health
 
 SATURATED_REST = 0.98        # rest level >= this share of full scale
 STUCK_STEPS = 0.5            # p99 - p1 within half a quantisation step: constant (a live taxel flickers a count)

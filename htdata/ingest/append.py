@@ -24,10 +24,10 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from htdata.store.parts import Part
-from htdata.write.repack import KeptEpisode, repack_unit, samples_per_shard_of
-from htdata.store.snapshot import Snapshot
 from htdata.read.reader import DatasetReader
+from htdata.store.parts import Part
+from htdata.store.snapshot import Snapshot
+from htdata.write.repack import KeptEpisode, repack_unit, samples_per_shard_of
 
 # Pipeline sections that do not shape a sample (packing and naming only).
 NOT_SAMPLE_SETTINGS = ("name", "shards")

@@ -13,17 +13,16 @@ import hashlib
 import json
 from pathlib import Path
 
-from htdata.errors import ConfigError
-from htdata.errors import DatasetError
+from htdata.errors import ConfigError, DatasetError
 from htdata.format.codec import DEFAULT_CODEC_INFO
 from htdata.format.mapstorage import MapStorage
+from htdata.format.shardio import SampleRecord, ShardRecord
 from htdata.glove.codecrule import codec_block
 from htdata.glove.layouts import load_canonical, parse_layout
-from htdata.ingest.episode import rasteriser_for
-from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, write_layout_files
-from htdata.ingest.pipeline import PipelineConfig
-from htdata.format.shardio import SampleRecord, ShardRecord
 from htdata.ingest.append import parent_parts
+from htdata.ingest.episode import rasteriser_for
+from htdata.ingest.pipeline import PipelineConfig
+from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, write_layout_files
 from htdata.store.parts import part_from_unit
 from htdata.store.snapshot import commit_parts
 

@@ -35,21 +35,20 @@ from typing import Iterator
 import numpy as np
 
 from htdata.errors import EpisodeError
+from htdata.format.shardio import sample_key
 from htdata.format.table import HANDS
+from htdata.glove.layouts import Layout, load_layout
+from htdata.glove.normalise import Normaliser
+from htdata.glove.rasterise import Rasteriser
 from htdata.ingest.chunk import frame_raw_rows, read_chunk
 from htdata.ingest.frame import Frame, frame_errors
 from htdata.ingest.fullrate import FrameQueue, RowPlan
+from htdata.ingest.pipeline import PipelineConfig
 from htdata.ingest.rgbframes import RgbOnlyFrames, rgb_source
 from htdata.ingest.tally import EpisodeTally
 from htdata.ingest.timing import StageClock
-from htdata.glove.layouts import Layout, load_layout
-from htdata.glove.normalise import Normaliser
-from htdata.ingest.pipeline import PipelineConfig
-from htdata.glove.rasterise import Rasteriser
-from htdata.format.shardio import sample_key
 from htdata.source.lag import episode_lag
 from htdata.source.sync import SyncResult, pair
-
 
 _RASTERS: dict[tuple[int, str], tuple[Layout, Rasteriser]] = {}
 

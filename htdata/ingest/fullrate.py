@@ -40,7 +40,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-
 # Bounded by count too: a sample stores at most `raw_row_cap` unpaired rows per hand, the rows two spans hold
 # at the glove's nominal rate (median interval between its distinct timestamps), never more than a glove at
 # MAX_GLOVE_RATE_HZ makes (rows packed 100 ns apart, or a stuck clock giving 300k rows one timestamp,

@@ -48,18 +48,17 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from htdata.errors import ConfigError
+from htdata.format.mapstorage import MapStorage
+from htdata.format.table import CodecSettings
+from htdata.glove.codecrule import CodecChoice
 from htdata.glove.layouts import nearest_hint
 from htdata.glove.normalise import NormaliseConfig
 from htdata.glove.normalisesettings import NormaliseSettings
-from htdata.settings import apply_settings, parse_setting  # noqa: F401  (parse_setting: an old name of this module)
 from htdata.resources import PIPELINES_DIR, validate_json
+from htdata.settings import apply_settings, parse_setting  # noqa: F401  (parse_setting: an old name of this module)
 from htdata.source.adapters import ADAPTERS
 from htdata.source.adapters.params import check_declared_params
 from htdata.source.lag import LAG_MODES
-from htdata.glove.codecrule import CodecChoice
-from htdata.format.table import CodecSettings
-from htdata.format.mapstorage import MapStorage
-
 
 
 @dataclass

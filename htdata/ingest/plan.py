@@ -25,16 +25,14 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from htdata.errors import ArgumentError
-from htdata.errors import ConfigError
-from htdata.source.adapters import get_adapter
-from htdata.errors import EpisodeError
-from htdata.store.fsutil import sha256_file
-from htdata.format.table import HANDS
+from htdata.errors import ArgumentError, ConfigError, EpisodeError
 from htdata.format.mapstorage import MapStorage
+from htdata.format.table import HANDS
 from htdata.glove.layouts import load_layout
-from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 from htdata.ingest.append import labels_of
+from htdata.ingest.pipeline import PipelineConfig, load_pipeline
+from htdata.source.adapters import get_adapter
+from htdata.store.fsutil import sha256_file
 
 
 @dataclass

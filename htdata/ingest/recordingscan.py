@@ -14,12 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.errors import ArgumentError
+from htdata.errors import ArgumentError, EpisodeError
 from htdata.glove.activity import CellActivity
-from htdata.errors import EpisodeError
+from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 from htdata.source.adapters import get_adapter
 from htdata.source.adapters.streamchecks import ANY_GRID
-from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 
 CHUNK_ROWS = 512
 

@@ -17,9 +17,9 @@ from htdata.errors import EpisodeError
 from htdata.format.shardio import sample_key
 from htdata.format.table import HANDS
 from htdata.ingest.frame import Frame, frame_errors
+from htdata.ingest.pipeline import PipelineConfig
 from htdata.ingest.tally import EpisodeTally
 from htdata.ingest.timing import StageClock
-from htdata.ingest.pipeline import PipelineConfig
 from htdata.source.rgb import to_square_224
 
 

@@ -18,19 +18,24 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from htdata.errors import ArgumentError
-from htdata.glove.codecrule import resolve_sources
-from htdata.ingest.executors import make_executor, usable_cores
 from htdata.format.table import INGEST_REPORT, MANIFEST_FILE
-from htdata.store.fsutil import write_bytes_atomic
+from htdata.glove.codecrule import resolve_sources
 from htdata.ingest.append import kept_unavailable, plan_append
 from htdata.ingest.commit import check_compatible, commit
-from htdata.ingest.plan import (Source, UnitTask, check_settings_agree, check_unique_ids, discover_sources,
-                                plan_units)
+from htdata.ingest.executors import make_executor, usable_cores
+from htdata.ingest.plan import Source, UnitTask, check_settings_agree, check_unique_ids, discover_sources, plan_units
 from htdata.ingest.sourcesums import check_sources
 from htdata.ingest.timing import timing_summary
 from htdata.ingest.unit import run_unit
-from htdata.ingest.workdir import (check_output, clear_unit_files, dumps, load_valid_record, prepare_output,
-                                   remove_strays)
+from htdata.ingest.workdir import (
+    check_output,
+    clear_unit_files,
+    dumps,
+    load_valid_record,
+    prepare_output,
+    remove_strays,
+)
+from htdata.store.fsutil import write_bytes_atomic
 from htdata.store.lock import WriterLock
 from htdata.store.snapshot import current_snapshot
 from htdata.store.versions import restore_pointer

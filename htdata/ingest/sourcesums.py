@@ -27,10 +27,9 @@ import re
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from htdata.errors import DatasetError
-from htdata.errors import EpisodeError
-from htdata.store.fsutil import sha256_file
+from htdata.errors import DatasetError, EpisodeError
 from htdata.ingest.plan import failure_entry
+from htdata.store.fsutil import sha256_file
 
 LIST_NAMES = ("SHA256SUMS",)
 LIST_SUFFIX = ".sha256"

@@ -15,9 +15,9 @@ import numpy as np
 
 from htdata.glove.activity import CellActivity, unmapped_moving
 from htdata.glove.calibration import calibration_id, fit_digests, fit_record, taxel_digest
-from htdata.glove.restlevel import rest_level_warning
 from htdata.glove.health import record_entry
 from htdata.glove.layouts import Layout
+from htdata.glove.restlevel import rest_level_warning
 from htdata.source.sync import SyncResult
 
 

@@ -30,20 +30,19 @@ import pickle
 import time
 from pathlib import Path
 
-
-from htdata.source.adapters import get_adapter
-from htdata.glove.calibration import episode_calibrations
 from htdata.errors import EpisodeError
-from htdata.ingest.executors import parent_alive, report_progress
+from htdata.format.shardio import ShardWriter
 from htdata.format.table import SHARDS_DIR, CodecSettings
+from htdata.glove.calibration import episode_calibrations
+from htdata.glove.layouts import Layout
 from htdata.ingest.encodepool import EncodePool
-from htdata.store.fsutil import write_bytes_atomic
 from htdata.ingest.episode import EpisodeStream, EpisodeTally
+from htdata.ingest.executors import parent_alive, report_progress
+from htdata.ingest.pipeline import PipelineConfig
 from htdata.ingest.timing import StageClock
 from htdata.ingest.workdir import clear_unit_files, dumps, spool_path, unit_record_path
-from htdata.glove.layouts import Layout
-from htdata.ingest.pipeline import PipelineConfig
-from htdata.format.shardio import ShardWriter
+from htdata.source.adapters import get_adapter
+from htdata.store.fsutil import write_bytes_atomic
 
 
 class Spool:

@@ -19,8 +19,8 @@ from htdata.errors import ArgumentError
 from htdata.format.table import MANIFEST_FILE, SHARDS_DIR, WORK_DIR
 from htdata.store.fsutil import sha256_file
 from htdata.store.lock import LOCK_FILE
-from htdata.store.versions import list_versions
 from htdata.store.manifest import load_manifest
+from htdata.store.versions import list_versions
 
 # Keys a unit record must hold to be reused (records of older versions lack some: their units re-run).
 RECORD_KEYS = ("unit", "fingerprint", "shards", "samples", "episodes", "failures", "dropped", "layouts")

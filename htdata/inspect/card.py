@@ -24,17 +24,23 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from htdata.format.mapstorage import MapStorage
 from htdata.errors import ArgumentError
+from htdata.format.mapstorage import MapStorage
 from htdata.format.table import HANDS, RGB_MEMBER, SIZE_FIELDS
-from htdata.inspect.cardplots import (_count_label, _label_fingers, _y_ticks, bar_chart,  # noqa: F401 (names of card)
-                                      histogram_chart, region_heatmap, value_histogram_chart)
-from htdata.inspect.stats import dataset_stats
 from htdata.glove.layouts import parse_canonical
-from htdata.read.reader import DatasetReader
-from htdata.inspect.stats import write_health_map
-from htdata.store import storage
+from htdata.inspect.cardplots import (  # noqa: F401 (names of card)
+    _count_label,
+    _label_fingers,
+    _y_ticks,
+    bar_chart,
+    histogram_chart,
+    region_heatmap,
+    value_histogram_chart,
+)
 from htdata.inspect.preview import render_contact_sheet
+from htdata.inspect.stats import dataset_stats, write_health_map
+from htdata.read.reader import DatasetReader
+from htdata.store import storage
 from htdata.store.fsutil import write_bytes_atomic
 
 PREVIEW_EPISODES = 2

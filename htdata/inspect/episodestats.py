@@ -31,14 +31,14 @@ import numpy as np
 from htdata.errors import DatasetError
 from htdata.format.codec import decode_exr_pixels
 from htdata.format.table import HANDS, JSON_MEMBER, MAP_SHAPE, SIZE_FIELDS, raw_member, tactile_member
+from htdata.glove.calibration import episode_normaliser
 from htdata.glove.contact import OLD_RULE, THRESHOLD, ContactRule, episode_rule
 from htdata.glove.health import TaxelGrid, classify
-from htdata.glove.rawhealth import classify_raw
 from htdata.glove.layouts import CanonicalHand, Layout, parse_canonical, parse_layout
 from htdata.glove.rasterise import Rasteriser
+from htdata.glove.rawhealth import classify_raw
 from htdata.read.rawstream import paired_row, paired_source_row
 from htdata.store import storage
-from htdata.glove.calibration import episode_normaliser
 
 CONTACT_THRESHOLD = THRESHOLD  # the old rule's level (htdata.glove.contact), kept beside the calibrated one
 HIST_BINS = 1000              # fixed bins over (0, 1]: quantiles to 0.001, mergeable by addition

@@ -22,12 +22,11 @@ import cv2
 import numpy as np
 
 from htdata.errors import ArgumentError
-from htdata.inspect.episodestats import Glove
 from htdata.format.table import CANVAS
+from htdata.glove import health, rawhealth
 from htdata.glove.health import CLASSES
+from htdata.inspect.episodestats import Glove
 from htdata.inspect.outline import region_outline
-from htdata.glove import health
-from htdata.glove import rawhealth
 
 PAD = 8
 TITLE_H = 24

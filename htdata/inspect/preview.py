@@ -36,9 +36,8 @@ import numpy as np
 from htdata.errors import ArgumentError
 from htdata.format.table import CANVAS, HANDS, JSON_MEMBER, RGB_MEMBER, SIZE_FIELDS, decode_member
 from htdata.inspect.outline import region_outline  # noqa: F401  (preview.region_outline stays a name of this module)
-from htdata.inspect.stats import positive_value_quantile
+from htdata.inspect.stats import default_cache_dir, episode_stats, positive_value_quantile
 from htdata.read.reader import DatasetReader
-from htdata.inspect.stats import default_cache_dir, episode_stats
 
 PAD = 8
 TITLE_H = 30

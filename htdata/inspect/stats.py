@@ -30,16 +30,23 @@ from typing import Callable
 import numpy as np
 
 from htdata.errors import ArgumentError
-from htdata.store import storage
-from htdata.inspect.episodestats import (CONTACT_THRESHOLD, HIST_BINS, compute_episode, dataset_gloves, empty_hand,
-                                 merge_hand, quantile)
-from htdata.glove.contact import RULE_VERSION, ContactRule
 from htdata.format.table import HANDS
-from htdata.store.fsutil import write_bytes_atomic
+from htdata.glove.contact import RULE_VERSION, ContactRule
 from htdata.glove.health import CLASSES, HEALTH_VERSION, merge_counts
-from htdata.read.reader import DatasetReader
+from htdata.inspect.episodestats import (
+    CONTACT_THRESHOLD,
+    HIST_BINS,
+    compute_episode,
+    dataset_gloves,
+    empty_hand,
+    merge_hand,
+    quantile,
+)
 from htdata.inspect.healthmap import write_health_map as write_png
 from htdata.inspect.scalehint import scale_suggestions
+from htdata.read.reader import DatasetReader
+from htdata.store import storage
+from htdata.store.fsutil import write_bytes_atomic
 
 STATS_DIR = "stats"
 # /2: values from the raw rows where stored (format 3), raw-unit sketches; the key covers the calibration

@@ -23,17 +23,16 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.errors import ArgumentError
-from htdata.errors import DatasetError
-from htdata.glove.calibration import episode_normaliser, refuse_mismatched
-from htdata.store import storage
-from htdata.store.versions import version_manifest_file
-from htdata.format.mapstorage import EXACT_RASTER, MapStorage
+from htdata.errors import ArgumentError, DatasetError
 from htdata.format.codec import check_finite_maps
+from htdata.format.mapstorage import EXACT_RASTER, MapStorage
 from htdata.format.table import JSON_MEMBER, MANIFEST_FILE, decode_member, raw_member
-from htdata.store.confine import inside
+from htdata.glove.calibration import episode_normaliser, refuse_mismatched
 from htdata.glove.layouts import load_layout
 from htdata.glove.rasterise import Rasteriser
+from htdata.store import storage
+from htdata.store.confine import inside
+from htdata.store.versions import version_manifest_file
 
 
 def check_records(reader) -> None:

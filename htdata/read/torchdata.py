@@ -52,12 +52,12 @@ except ModuleNotFoundError as exc:   # the data core installs without torch
     raise ModuleNotFoundError(f"{__name__} needs torch: pip install 'htdata[torch]' (torch==2.13.0)") from exc
 from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
-from htdata.errors import ArgumentError
-from htdata.read import keys
-from htdata.format.table import CANVAS, HANDS, RGB_MEMBER, SIZE_FIELDS
-from htdata.read.keys import HAND_IDS
-from htdata.format.mapstorage import has_hand, hand_present
 from htdata._moved import renamed_keyword
+from htdata.errors import ArgumentError
+from htdata.format.mapstorage import hand_present, has_hand
+from htdata.format.table import CANVAS, HANDS, RGB_MEMBER, SIZE_FIELDS
+from htdata.read import keys
+from htdata.read.keys import HAND_IDS
 from htdata.read.rawstream import MAP_SOURCE_WORDS
 from htdata.read.reader import DatasetReader
 from htdata.read.torchitems import MEMBERS, ItemBuilder, ItemConstants, expand_batch  # noqa: F401  (names of this module)

@@ -28,8 +28,8 @@ except ModuleNotFoundError as exc:   # the data core installs without torch
 
 from htdata.errors import ArgumentError
 from htdata.format.codec import check_finite_maps
-from htdata.read import keys
 from htdata.format.table import HANDS, JSON_MEMBER, SIZE_FIELDS, decode_member, raw_member
+from htdata.read import keys
 from htdata.read.keys import HAND_IDS
 from htdata.read.rawstream import RawStream, episode_stream
 from htdata.read.torchdata import HAND_NAMES, _check_hands, _ItemBuilder, _ItemDataset

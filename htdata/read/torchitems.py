@@ -31,11 +31,11 @@ try:
 except ModuleNotFoundError as exc:   # the data core installs without torch
     raise ModuleNotFoundError(f"{__name__} needs torch: pip install 'htdata[torch]' (torch==2.13.0)") from exc
 
+from htdata._moved import renamed_keyword
 from htdata.errors import ArgumentError
 from htdata.format.table import CANVAS, JSON_MEMBER, MEMBER_ORDER, RGB_MEMBER, decode_member, raw_member, tactile_member
 from htdata.read import keys
 from htdata.read.keys import HAND_IDS
-from htdata._moved import renamed_keyword
 from htdata.read.rawstream import MAP_SOURCE_WORDS, MapServing, RawMapRenderer
 from htdata.read.reader import DatasetReader, SampleRow
 

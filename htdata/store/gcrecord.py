@@ -12,8 +12,8 @@ from __future__ import annotations
 import json
 import os
 
-from htdata.store import storage
 from htdata.errors import HtdataError
+from htdata.store import storage
 
 VERSIONS_DIR = "versions"
 

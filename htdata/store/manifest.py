@@ -23,16 +23,27 @@ from pathlib import Path
 import numpy as np
 
 from htdata.errors import DatasetError
+from htdata.format.codec import encode_png_u8
+from htdata.format.shardio import SampleRecord, ShardRecord
+from htdata.format.table import (
+    CANONICAL_FILE,
+    EPISODES_FILE,
+    FORMAT,
+    INDEX_DTYPE,
+    INDEX_DTYPES,
+    INDEX_FILE,
+    LAYOUTS_DIR,
+    MANIFEST_FILE,
+    PARTS_FILE,
+    READABLE_FORMAT_VERSIONS,
+    REGIONS_FILE,
+)
+from htdata.resources import validate_json
 from htdata.store import storage
 from htdata.store.confine import check_manifest_paths, inside
-from htdata.format.codec import encode_png_u8
-from htdata.format.table import (CANONICAL_FILE, EPISODES_FILE, FORMAT, INDEX_DTYPE, INDEX_FILE, LAYOUTS_DIR,
-                           INDEX_DTYPES, MANIFEST_FILE, PARTS_FILE, READABLE_FORMAT_VERSIONS, REGIONS_FILE)
 from htdata.store.fsutil import write_bytes_atomic
-from htdata.resources import validate_json
-from htdata.format.shardio import SampleRecord, ShardRecord
-from htdata.store.versions import manifest_path
-from htdata.store.versions import DatasetStateError
+from htdata.store.versions import DatasetStateError, manifest_path
+
 
 @dataclass
 class UnitResult:

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from htdata.errors import DatasetError
-from htdata.format.table import INDEX_DTYPE, SIZE_FIELDS
 from htdata.format.shardio import key_stem, parse_key
+from htdata.format.table import INDEX_DTYPE, SIZE_FIELDS
 
 SHARD_NAME_RE = re.compile(r"^shard-(\d{6})-(\d{3})\.tar$")
 # Episode record fields `assemble` computes; a part's records come without them.

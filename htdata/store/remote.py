@@ -29,10 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.errors import ArgumentError
-from htdata.errors import DatasetError
-from htdata.store import storage
+from htdata.errors import ArgumentError, DatasetError
 from htdata.format.table import EPISODES_FILE, INDEX_FILE, LAYOUTS_DIR, MANIFEST_FILE, SHARDS_DIR, SPLITS_DIR
+from htdata.store import storage
 from htdata.store.confine import inside
 from htdata.store.fsutil import atomic_open, sha256_file, sha256_stream
 from htdata.store.manifest import load_index_file, load_manifest

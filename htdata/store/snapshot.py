@@ -23,16 +23,15 @@ import numpy as np
 
 from htdata import __version__
 from htdata.errors import DatasetError
-from htdata.store import storage
 from htdata.format.mapstorage import hand_present
 from htdata.format.table import EPISODES_FILE, FORMAT, FORMAT_VERSION, HANDS, MANIFEST_FILE, SHARDS_DIR
 from htdata.glove.calibration import merge_calibrations
+from htdata.resources import validate_json
+from htdata.store import storage
 from htdata.store.manifest import load_episodes, load_index, load_manifest
 from htdata.store.parts import Part, assemble, parts_of_version, unit_of_shard
-from htdata.resources import validate_json
 from htdata.store.splitfiles import carried_splits
-from htdata.store.versions import change_record, diff_episodes, now_utc, summarise, write_version
-from htdata.store.versions import current_version
+from htdata.store.versions import change_record, current_version, diff_episodes, now_utc, summarise, write_version
 
 SplitMaker = Callable[[list[dict], str], dict[str, bytes]]
 # Manifest fields a new version inherits from its parent unless the writer sets them.

@@ -18,7 +18,6 @@ from htdata.format.table import SPLITS_DIR
 from htdata.store import storage
 from htdata.store.versions import manifest_path, split_file
 
-
 PARTS = ("train", "test", "ood")
 
 

@@ -42,11 +42,10 @@ import shutil
 import socket
 from pathlib import Path
 
-from htdata.errors import ArgumentError
-from htdata.errors import HtdataError
-from htdata.store import storage
+from htdata.errors import ArgumentError, HtdataError
 from htdata.faults import crash_point
 from htdata.format.table import EPISODES_FILE, INDEX_FILE, MANIFEST_FILE, SPLITS_DIR
+from htdata.store import storage
 from htdata.store.fsutil import write_bytes_atomic
 from htdata.store.gcrecord import collected_error
 

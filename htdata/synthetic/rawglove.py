@@ -49,9 +49,9 @@ from pathlib import Path
 import numpy as np
 
 from htdata.glove.layouts import parse_layout
+from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from htdata.synthetic.tasks import stable_hash
 from htdata.synthetic.world import EpisodeSpec, World
-from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 
 GRID = (32, 32)
 FULL_SCALE = 1023.0        # layout value.max: full-scale raw (10-bit ADC)

@@ -25,8 +25,8 @@ import warnings
 import numpy as np
 
 from htdata.glove.health import WARN_SHARE, flagged_share
-from htdata.read.reader import DatasetReader
 from htdata.inspect.stats import cached_episode_stats, episode_stats
+from htdata.read.reader import DatasetReader
 from htdata.validate.geometry import CoverageGeometry
 from htdata.validate.report import Check
 

@@ -13,9 +13,9 @@ no longer matches the maps, or maps written from other rows, fail here.
 
 from __future__ import annotations
 
-import numpy as np
-
 from dataclasses import dataclass, field
+
+import numpy as np
 
 from htdata.format.mapstorage import MapStorage
 from htdata.format.table import HANDS, JSON_MEMBER, decode_member, raw_member, tactile_member

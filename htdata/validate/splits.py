@@ -14,9 +14,9 @@ import json
 from collections import defaultdict
 
 from htdata.curate.splitrule import test_counts
+from htdata.format.shardio import sample_key
 from htdata.format.table import HANDS, MANIFEST_FILE, RGB_MEMBER, raw_member, tactile_member
 from htdata.resources import validate_json
-from htdata.format.shardio import sample_key
 from htdata.store.splitfiles import PARTS, list_splits, split_path
 from htdata.validate.report import Check
 from htdata.validate.structure import Loaded

@@ -19,14 +19,23 @@ from pathlib import Path
 import numpy as np
 
 from htdata.format.mapstorage import MapStorage
-from htdata.format.table import (HANDS, INDEX_DTYPE, JSON_MEMBER, RGB_MEMBER, MANIFEST_FILE, MEMBER_ORDER, SHARDS_DIR, SIZE_FIELDS,
-                           tactile_member)
+from htdata.format.shardio import BLOCK, member_offsets, parse_header, sample_key
+from htdata.format.table import (
+    HANDS,
+    INDEX_DTYPE,
+    JSON_MEMBER,
+    MANIFEST_FILE,
+    MEMBER_ORDER,
+    RGB_MEMBER,
+    SHARDS_DIR,
+    SIZE_FIELDS,
+    tactile_member,
+)
+from htdata.resources import validate_json
 from htdata.store.confine import PathOutsideDataset, inside
 from htdata.store.manifest import IndexDtypeError, load_manifest, parse_episodes, parse_index, parse_manifest
-from htdata.resources import validate_json
-from htdata.format.shardio import BLOCK, member_offsets, parse_header, sample_key
-from htdata.validate.report import Check, Recorder
 from htdata.store.versions import list_versions, manifest_path, version_manifest_file
+from htdata.validate.report import Check, Recorder
 
 
 @dataclass

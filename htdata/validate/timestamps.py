@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from htdata.format.table import HANDS
 from htdata.format.shardio import sample_key
+from htdata.format.table import HANDS
 from htdata.validate.report import Check
 from htdata.validate.structure import Loaded, group_rows
 

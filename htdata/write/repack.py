@@ -18,15 +18,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
+from htdata.faults import crash_point
 from htdata.format.codec import encode_json
+from htdata.format.shardio import ShardWriter, sample_key
 from htdata.format.table import JSON_MEMBER, SHARDS_DIR, raw_member
 from htdata.glove.calibration import taxel_digest
 from htdata.read.rawstream import RawMapRenderer, apply_paired
-from htdata.store.manifest import UnitResult
-from htdata.faults import crash_point
-from htdata.store.parts import SHARD_NAME_RE, Part, part_from_unit, unit_of_shard
 from htdata.read.reader import DatasetReader
-from htdata.format.shardio import ShardWriter, sample_key
+from htdata.store.manifest import UnitResult
+from htdata.store.parts import SHARD_NAME_RE, Part, part_from_unit, unit_of_shard
 
 
 @dataclass

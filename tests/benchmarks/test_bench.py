@@ -15,8 +15,8 @@ import textwrap
 
 import pytest
 
-from htdata.benchmarks.suite import BUILTIN_SECTIONS, BenchConfig, discover_sections, finite_json
 from htdata.benchmarks.report import HEADINGS, render_report
+from htdata.benchmarks.suite import BUILTIN_SECTIONS, BenchConfig, discover_sections, finite_json
 from htdata.cli import main as cli_main
 
 SECTIONS = ("machine",) + BUILTIN_SECTIONS

@@ -6,9 +6,10 @@ import re
 
 import pytest
 
-from htdata.cli import COMMANDS, GROUPS, main as cli
-from htdata.ingest.pipeline import load_pipeline, resolve_pipeline_path, shipped_pipelines
+from htdata.cli import COMMANDS, GROUPS
+from htdata.cli import main as cli
 from htdata.commands.version_arg import parse_version
+from htdata.ingest.pipeline import load_pipeline, resolve_pipeline_path, shipped_pipelines
 from tests.factories import SPLIT_EPISODES, commit_split, write_synthetic_dataset
 from tests.factories.tactile import LEFT, RIGHT, clean_series, write_taxel_dataset
 

@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
+from htdata.cli import main as cli_main
 from htdata.curate import idle
 from htdata.inspect import stats
-from htdata.cli import main as cli_main
 from htdata.read.reader import DatasetReader
 from tests.factories.tactile import LEFT, RIGHT, write_taxel_dataset
 

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from htdata.curate import split as sp
 from htdata.cli import main as cli_main
+from htdata.curate import split as sp
 from htdata.resources import validate_json
 
 
@@ -226,7 +226,7 @@ def test_cli_split_and_list_tasks(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "grasp" in out and "(all scenes)" in out and "2 tasks, 15 episodes" in out
     # grasp scene0 holds episodes 0,3,6,9 -> 4 episodes with 10+0,13,11,14 frames
-    line = next(l for l in out.splitlines() if l.startswith("grasp") and "scene0" in l)
+    line = next(row for row in out.splitlines() if row.startswith("grasp") and "scene0" in row)
     assert line.split()[-2:] == ["4", str(10 + 13 + 11 + 14)]
 
     assert cli_main(["split", str(ds), "--ood-task", "pour", "--name", "x", "--test-ratio", "0.3"]) == 0

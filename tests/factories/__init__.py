@@ -34,16 +34,23 @@ import h5py
 import numpy as np
 
 from htdata.format.codec import DEFAULT_CODEC_INFO, encode_rgb, encode_tactile
+from htdata.format.shardio import ShardWriter, sample_key
 from htdata.format.table import CANVAS, MANIFEST_FILE
+from htdata.resources import PIPELINES_DIR
 from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, write_layout_files
 from htdata.store.parts import part_from_unit
 from htdata.store.snapshot import commit_parts, current_snapshot
-from htdata.resources import PIPELINES_DIR
-from htdata.synthetic.formats import (NativeHand, NativeRecording, OpenTouchClip, TouchAnythingEpisode,
-                                   write_native_recording, write_opentouch_annotations,
-                                   write_opentouch_scene, write_touchanything_episode)
-from htdata.format.shardio import ShardWriter, sample_key
 from htdata.store.versions import version_manifest_file
+from htdata.synthetic.formats import (
+    NativeHand,
+    NativeRecording,
+    OpenTouchClip,
+    TouchAnythingEpisode,
+    write_native_recording,
+    write_opentouch_annotations,
+    write_opentouch_scene,
+    write_touchanything_episode,
+)
 
 DEFAULT_LAYOUT = "test_full"
 FRAME_NS = 33_333_333

@@ -8,8 +8,12 @@ from pathlib import Path
 import numpy as np
 
 from htdata.glove.layouts import load_layout
-from htdata.synthetic.formats import (TouchAnythingEpisode, write_opentouch_annotations, write_opentouch_scene,
-                                      write_touchanything_episode)
+from htdata.synthetic.formats import (
+    TouchAnythingEpisode,
+    write_opentouch_annotations,
+    write_opentouch_scene,
+    write_touchanything_episode,
+)
 from tests.factories import COLOURS, ot_clip
 
 

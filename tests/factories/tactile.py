@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from htdata.format.codec import DEFAULT_CODEC_INFO, encode_exr, encode_rgb, encode_tactile
-from htdata.glove.layouts import load_canonical, load_layout
-from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, UnitResult
-from htdata.glove.rasterise import Rasteriser
 from htdata.format.shardio import ShardWriter, sample_key
+from htdata.glove.layouts import load_canonical, load_layout
+from htdata.glove.rasterise import Rasteriser
+from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, UnitResult
 from tests.factories import commit_dataset
 
 RIGHT = "opentouch_right_16x16"

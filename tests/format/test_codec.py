@@ -27,6 +27,7 @@ def test_exr_half_round_trip_error_and_exact_ends():
 
 def test_exr_is_half_single_y_channel():
     import io
+
     import OpenEXR
 
     f = OpenEXR.File(io.BytesIO(encode_tactile(sparse_map())))

@@ -2,7 +2,6 @@
 
 import json
 
-
 from htdata.format.codec import decode_exr_pixels
 from htdata.read.reader import DatasetReader
 from htdata.validate import validate_dataset

@@ -3,9 +3,20 @@
 import numpy as np
 import pytest
 
-from htdata.format.table import (HANDS, INDEX_DTYPE, MEMBER_ORDER, MEMBERS, SIZE_FIELDS, CodecSettings, LEGACY_INDEX_DTYPE,
-                           bend_member, raw_member,
-                           decode_sample, encode_sample, tactile_member)
+from htdata.format.table import (
+    HANDS,
+    INDEX_DTYPE,
+    LEGACY_INDEX_DTYPE,
+    MEMBER_ORDER,
+    MEMBERS,
+    SIZE_FIELDS,
+    CodecSettings,
+    bend_member,
+    decode_sample,
+    encode_sample,
+    raw_member,
+    tactile_member,
+)
 
 
 def test_member_order_and_index_columns_are_the_published_format():

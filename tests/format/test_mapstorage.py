@@ -13,8 +13,8 @@ import pytest
 
 from htdata.errors import ConfigError, DatasetError
 from htdata.format.mapstorage import MapStorage
-from htdata.ingest.plan import Source, plan_units
 from htdata.ingest.pipeline import TactileConfig, load_pipeline
+from htdata.ingest.plan import Source, plan_units
 from htdata.resources import SCHEMAS_DIR
 
 RAW_PARENT = {"codec": {"tactile": {"raster_mode": "nearest", "maps": "raw"}}}

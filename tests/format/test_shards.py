@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from htdata.benchmarks.index import index_load_benchmark
+from htdata.format.shardio import ShardWriter, member_offsets, parse_key, sample_key
 from htdata.format.table import EPISODES_FILE, INDEX_DTYPE, INDEX_FILE, MANIFEST_FILE
+from htdata.resources import validate_json
 from htdata.store.manifest import UnitResult, load_episodes, load_index, load_manifest
 from htdata.store.parts import assemble, part_from_unit
-from htdata.resources import validate_json
-from htdata.format.shardio import ShardWriter, member_offsets, parse_key, sample_key
 from htdata.store.versions import version_dir, version_manifest_file
 from tests.factories import write_synthetic_dataset
 

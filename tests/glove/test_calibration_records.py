@@ -24,8 +24,8 @@ from htdata.errors import RecordMismatch
 from htdata.format.table import MANIFEST_FILE
 from htdata.glove.calibration import fit_digest
 from htdata.glove.layouts import load_layout
-from htdata.synthetic.formats.touchanything import TouchAnythingEpisode, write_touchanything_episode
 from htdata.store.manifest import load_manifest
+from htdata.synthetic.formats.touchanything import TouchAnythingEpisode, write_touchanything_episode
 from htdata.validate.validator import validate_dataset
 from tests.factories import COLOURS, ingest_cli, rewrite_manifest
 

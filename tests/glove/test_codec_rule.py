@@ -13,13 +13,21 @@ import pytest
 
 from htdata.benchmarks.codecs import codec_rows
 from htdata.format.codec import decode_tactile, encode_tactile
-from htdata.glove.codecrule import (ANALYTIC_MAX_ERROR, SIZE_ORDER, CodecChoice, GloveStep, codec_block, glove_step,
-                              pick_codec, resolve_codec)
 from htdata.format.table import CodecSettings, decode_sample, encode_sample
+from htdata.glove.codecrule import (
+    ANALYTIC_MAX_ERROR,
+    SIZE_ORDER,
+    CodecChoice,
+    GloveStep,
+    codec_block,
+    glove_step,
+    pick_codec,
+    resolve_codec,
+)
 from htdata.glove.layouts import load_layout
 from htdata.glove.normalise import NormaliseConfig
-from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 from htdata.glove.rasterise import Rasteriser
+from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 
 OT, TA_L, TA_R = "opentouch_right_16x16", "touchanything_left_21x21", "touchanything_right_21x21"
 LEVELS = {OT: 3072, TA_L: 255, TA_R: 255}     # source levels over [0, 1] after normalisation

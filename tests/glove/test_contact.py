@@ -4,8 +4,7 @@ import numpy as np
 import pytest
 
 from htdata.glove.contact import MIN_AREA_TAXELS, OLD_RULE, min_area, rule_for
-from htdata.synthetic.rawglove import glove_layout
-from htdata.synthetic.rawglove import FULL_SCALE, corpus_clips, write_rawglove
+from htdata.synthetic.rawglove import FULL_SCALE, corpus_clips, glove_layout, write_rawglove
 
 STEP = {"convention": "direct", "max": FULL_SCALE, "step": 1}
 

@@ -5,11 +5,12 @@ from __future__ import annotations
 import copy
 import json
 import os
+
 import numpy as np
 import pytest
 
-from htdata.glove import layouts as L
 from htdata.format.table import CANVAS
+from htdata.glove import layouts as L
 from htdata.glove.layouts import LAYOUTS_ENV, list_layouts, load_canonical, load_layout, parse_layout
 
 SHIPPED = ["opentouch_right_16x16", "touchanything_left_21x21", "touchanything_right_21x21"]

@@ -16,10 +16,13 @@ import pytest
 
 from htdata.glove.layouts import load_layout
 from htdata.store.manifest import load_episodes
-from htdata.synthetic.formats import (NativeHand, NativeRecording, TouchAnythingEpisode, write_native_recording,
-                                   write_opentouch_annotations, write_opentouch_scene, write_touchanything_episode)
-from tests.factories import COLOURS, PERIOD, ingest_cli, ot_clip
-from tests.factories.outofrange import live_taxels, opentouch_raw, ta_episode
+from htdata.synthetic.formats import (
+    NativeHand,
+    NativeRecording,
+    write_native_recording,
+)
+from tests.factories import COLOURS, PERIOD, ingest_cli
+from tests.factories.outofrange import opentouch_raw, ta_episode
 
 
 def report_of(out: Path) -> dict:

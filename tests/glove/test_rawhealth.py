@@ -8,8 +8,7 @@ import pytest
 
 from htdata.glove.layouts import parse_layout
 from htdata.glove.rawhealth import DRIFT_MIN_FRAMES, classify_raw
-from htdata.synthetic.rawglove import (GloveUnit, corpus_clips, draft_layout_doc, glove_layout, make_clip,
-                                    unmapped_truth)
+from htdata.synthetic.rawglove import GloveUnit, corpus_clips, draft_layout_doc, glove_layout, make_clip, unmapped_truth
 
 LAYOUT = glove_layout("right")
 
@@ -127,10 +126,16 @@ def test_inverted_gloves_are_read_in_the_pressure_direction(glove):
 
 
 def test_health_map_draws_unexercised_and_unmapped_cells_and_states_thresholds(glove):
-    from htdata.inspect.episodestats import Glove
-    from htdata.inspect.healthmap import (UNEXERCISED, UNEXERCISED_INDEX, UNMAPPED_MOVING, _legend, draw_grid_panel,
-                                  taxel_classes)
     from htdata.glove.layouts import load_canonical
+    from htdata.inspect.episodestats import Glove
+    from htdata.inspect.healthmap import (
+        UNEXERCISED,
+        UNEXERCISED_INDEX,
+        UNMAPPED_MOVING,
+        _legend,
+        draw_grid_panel,
+        taxel_classes,
+    )
 
     unit, raw = glove
     raw = raw.copy()

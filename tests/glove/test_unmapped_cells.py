@@ -20,9 +20,8 @@ import pytest
 from htdata.glove.activity import MOVING_K, WANDER_K, CellActivity, moving_cells, unmapped_moving
 from htdata.glove.layouts import parse_layout
 from htdata.store.manifest import load_episodes
-from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from tests.factories import ingest_cli
-from tests.factories.knitglove import GRID, NOISE, REST, draft_layout, knit_counts, write_glove_only
+from tests.factories.knitglove import GRID, NOISE, draft_layout, knit_counts, write_glove_only
 
 THUMB = [(r, c) for r in range(0, 4) for c in range(10, 16)]       # live, forgotten by the draft layout
 

@@ -12,6 +12,7 @@ from handtouch.rgb_pretrain import save_probe
 from tests.factories import TRAIN_EPISODES, write_synthetic_dataset
 from tests.factories.train import TINY, write_toml
 
+
 # Every encoder narrow enough for a few CPU steps; the baselines' widths are the config's.
 @pytest.fixture(scope="module")
 def dataset_root(tmp_path_factory):

@@ -194,13 +194,13 @@ def test_report_table_json_and_png(tmp_path):
     table = (tmp_path / "results.md").read_text()
     verdicts, *sections = table.split("\n## ")[1:]
     assert verdicts.splitlines()[0] == "Verdicts against the references"
-    assert len([l for l in verdicts.splitlines() if l.startswith("|")]) == 2     # references get no verdict row
+    assert len([row for row in verdicts.splitlines() if row.startswith("|")]) == 2     # references get no verdict row
     sections = [table, *sections]
     assert [sec.splitlines()[0] for sec in sections[1:]] == [
         "Covered pixels (f_covered, h_covered)", "Whole canvas (f_full, h_full)", "Retrieval and its chance levels"]
     for sec in sections[1:]:
-        assert len([l for l in sec.splitlines() if l.startswith("|")]) == 2 + 4   # header, rule, 2 models x 2 parts
-    lines = [l for l in sections[1].splitlines() if l.startswith("|")]
+        assert len([row for row in sec.splitlines() if row.startswith("|")]) == 2 + 4   # header, rule, 2 models x 2 parts
+    lines = [row for row in sections[1].splitlines() if row.startswith("|")]
     assert lines[0].startswith("| Model | Retrieval Hit@1 | Retrieval R@5 | Inpaint F-RMSE | F-cIoU | H-RMSE")
     assert "Retrieval" not in sections[2].splitlines()[2]        # whole-canvas table: map metrics only
     full = results["copy-last-ref"]["ood"]["inpaint"]["h_full"]["rmse"]

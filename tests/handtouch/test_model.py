@@ -1,12 +1,11 @@
 import pytest
 import torch
 
-from handtouch.config import MODULE_NAMES, LossConfig, ModelConfig, StageConfig
+from handtouch.config import MODULE_NAMES, LossConfig, StageConfig
 from handtouch.model import HandTouch, masked_mse
 from handtouch.rgb_encoder import SmallConvRGB, load_rgb_encoder
 from handtouch.stages import MASK, STAGES
 from tests.factories.model import STAGE_TRAINABLE, frame_batch, make_stage, tiny_cfg, tiny_model
-
 
 
 def stage_losses(model, n, batch, mask=None, weights=None):

@@ -5,9 +5,17 @@ import numpy as np
 import pytest
 import torch
 
-from handtouch.bench.retrieval import (TIE_TOL, RetrievalConfig, draw_candidates, eligible_candidates,
-                                       expected_top_k_score, retrieval_metrics, retrieval_reference,
-                                       score_retrieval, top_k_split)
+from handtouch.bench.retrieval import (
+    TIE_TOL,
+    RetrievalConfig,
+    draw_candidates,
+    eligible_candidates,
+    expected_top_k_score,
+    retrieval_metrics,
+    retrieval_reference,
+    score_retrieval,
+    top_k_split,
+)
 from handtouch.bench.ssim import ssim
 
 

@@ -8,8 +8,18 @@ import torch
 
 from handtouch.distributed import torch_threads
 from handtouch.rgb_encoder import TactileGridRGB, load_rgb_encoder
-from handtouch.rgb_pretrain import (CONTROL_MARGIN, MODEL_MARGIN, RGBPretrainConfig, control_checks, control_scores,
-                                    ensure_probes, load_items, model_control_checks, partners, save_probe)
+from handtouch.rgb_pretrain import (
+    CONTROL_MARGIN,
+    MODEL_MARGIN,
+    RGBPretrainConfig,
+    control_checks,
+    control_scores,
+    ensure_probes,
+    load_items,
+    model_control_checks,
+    partners,
+    save_probe,
+)
 from htdata.format.table import CANVAS
 from tests import factories
 from tests.factories import commit_split, episode_table, write_synthetic_dataset

@@ -7,15 +7,41 @@ import pytest
 import torch
 from torch.utils.data import Dataset
 
-from handtouch.config import (MODULE_NAMES, StageConfig, TrainConfig, apply_overrides, load_train_config,
-                              parse_override, train_config_from_dict)
+from handtouch.config import (
+    MODULE_NAMES,
+    StageConfig,
+    TrainConfig,
+    apply_overrides,
+    load_train_config,
+    parse_override,
+    train_config_from_dict,
+)
 from handtouch.distributed import StepBatchSampler, init_distributed
 from handtouch.resources import config_file
-from handtouch.stages import (FRAMES, MASK, WINDOWS, MaskedFusion, NextFramePrediction, Reconstruction, StepInfo,
-                              build_stages)
-from handtouch.train import (JsonlLog, TrainData, build_model, load_data, load_model, lr_at, main, read_checkpoint,
-                             run_stage, train)
-from tests.factories import TRAIN_EPISODES as EPISODES, write_synthetic_dataset
+from handtouch.stages import (
+    FRAMES,
+    MASK,
+    WINDOWS,
+    MaskedFusion,
+    NextFramePrediction,
+    Reconstruction,
+    StepInfo,
+    build_stages,
+)
+from handtouch.train import (
+    JsonlLog,
+    TrainData,
+    build_model,
+    load_data,
+    load_model,
+    lr_at,
+    main,
+    read_checkpoint,
+    run_stage,
+    train,
+)
+from tests.factories import TRAIN_EPISODES as EPISODES
+from tests.factories import write_synthetic_dataset
 
 TINY_MODEL = {"encoder": "vit", "patch": 32, "dim": 32, "depth": 1, "heads": 2, "mlp_ratio": 2.0,
               "code_dim": 8, "codebook_size": 16, "vq_usage_decay": 0.9, "decoder_depth": 1,

@@ -18,8 +18,16 @@ import pytest
 
 from htdata.ingest import parse_sources
 from htdata.synthetic.formats import write_opentouch_annotations, write_opentouch_scene
-from tests.factories import (COLOURS, ingest_cli, make_native, make_opentouch, make_touchanything, ot_clip,
-                             small_pipeline, temp_leftovers)
+from tests.factories import (
+    COLOURS,
+    ingest_cli,
+    make_native,
+    make_opentouch,
+    make_touchanything,
+    ot_clip,
+    small_pipeline,
+    temp_leftovers,
+)
 
 
 def read_all(out: Path) -> dict[str, dict[str, bytes]]:

@@ -14,10 +14,18 @@ import psutil
 import pytest
 
 from htdata.read.reader import DatasetReader
-from htdata.synthetic.formats import write_opentouch_annotations, write_opentouch_scene
 from htdata.store.versions import list_versions
-from tests.factories import (COLOURS, ingest_cli, make_native, make_opentouch, make_touchanything, ot_clip,
-                             small_pipeline, temp_leftovers)
+from htdata.synthetic.formats import write_opentouch_annotations, write_opentouch_scene
+from tests.factories import (
+    COLOURS,
+    ingest_cli,
+    make_native,
+    make_opentouch,
+    make_touchanything,
+    ot_clip,
+    small_pipeline,
+    temp_leftovers,
+)
 
 
 def report(out: Path) -> dict:

@@ -10,13 +10,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from htdata.glove.calibration import calibration_id, episode_normaliser
 from htdata.cli import main as cli
 from htdata.format.table import INDEX_FILE, LEGACY_INDEX_DTYPE, MANIFEST_FILE, raw_member, tactile_member
+from htdata.glove.calibration import calibration_id, episode_normaliser
 from htdata.glove.layouts import load_layout
-from htdata.store.manifest import load_episodes, load_index, load_manifest
 from htdata.glove.normalise import NormaliseConfig, Normaliser
 from htdata.read.reader import DatasetReader
+from htdata.store.manifest import load_episodes, load_index, load_manifest
 from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from tests.factories import COLOURS, PERIOD, ingest_cli, make_opentouch, small_pipeline
 

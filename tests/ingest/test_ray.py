@@ -14,10 +14,15 @@ from pathlib import Path
 
 import numpy as np
 
-from tests.factories import (COLOURS, PERIOD, ingest_cli, small_pipeline, temp_leftovers)
 from htdata.format.table import MANIFEST_FILE
-from htdata.synthetic.formats import (OpenTouchClip, TouchAnythingEpisode, write_opentouch_annotations,
-                                   write_opentouch_scene, write_touchanything_episode)
+from htdata.synthetic.formats import (
+    OpenTouchClip,
+    TouchAnythingEpisode,
+    write_opentouch_annotations,
+    write_opentouch_scene,
+    write_touchanything_episode,
+)
+from tests.factories import COLOURS, PERIOD, ingest_cli, small_pipeline, temp_leftovers
 
 
 def make_mixed_sources(root: Path) -> tuple[Path, Path]:

@@ -20,8 +20,8 @@ import pytest
 
 import htdata
 from htdata.cli import main
-from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from htdata.store.manifest import load_manifest
+from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from tests.factories import COLOURS, PERIOD, ingest_cli, make_native
 
 

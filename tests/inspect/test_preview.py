@@ -6,9 +6,11 @@ import cv2
 import numpy as np
 import pytest
 
-from htdata.inspect import preview as pv
 from htdata.cli import main as cli_main
-from tests.factories import PREVIEW_EPISODES as EPISODES, write_synthetic_dataset
+from htdata.inspect import preview as pv
+from tests.factories import PREVIEW_EPISODES as EPISODES
+from tests.factories import write_synthetic_dataset
+
 
 @pytest.fixture(scope="module")
 def ds(tmp_path_factory):

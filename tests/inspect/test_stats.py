@@ -8,10 +8,10 @@ import cv2
 import numpy as np
 import pytest
 
-from htdata.inspect import stats
 from htdata.cli import main as cli_main
-from htdata.inspect.episodestats import HIST_BINS, quantile, value_histogram
 from htdata.glove.layouts import load_layout
+from htdata.inspect import stats
+from htdata.inspect.episodestats import HIST_BINS, quantile, value_histogram
 from htdata.read.reader import DatasetReader
 from tests.factories.tactile import LEFT, RIGHT, clean_series, write_taxel_dataset
 

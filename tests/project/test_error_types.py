@@ -12,15 +12,15 @@ import json
 import pytest
 
 from handtouch.config import load_train_config
+from htdata import errors
+from htdata.commands.version_arg import parse_version
 from htdata.curate.edit import NoSuchEpisode
 from htdata.curate.merge import MergeConflict
 from htdata.curate.splitrule import SplitError
-from htdata import errors
-from htdata.commands.version_arg import parse_version
 from htdata.errors import ArgumentError, ConfigError, DatasetError, HtdataError, RecordMismatch
 from htdata.format.table import MEMBER_ORDER, decode_member
-from htdata.inspect.preview import render_contact_sheet
 from htdata.ingest.pipeline import load_pipeline
+from htdata.inspect.preview import render_contact_sheet
 from htdata.resources import PIPELINES_DIR
 from htdata.settings import parse_setting
 from htdata.store.manifest import IndexDtypeError, parse_manifest

@@ -10,10 +10,10 @@ import pytest
 
 from htdata.cli import main as cli
 from htdata.format.table import RGB_MEMBER, raw_member, tactile_member
-from htdata.store.manifest import load_episodes
 from htdata.read.reader import DatasetReader
-from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from htdata.read.torchdata import TactileFrameDataset, TactileStream, TactileWindowDataset
+from htdata.store.manifest import load_episodes
+from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from tests.factories import COLOURS, PERIOD, ingest_cli, small_pipeline
 
 LAYOUT = "opentouch_right_16x16"

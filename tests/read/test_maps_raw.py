@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from htdata.cli import main as cli
+from htdata.errors import DatasetError
 from htdata.format.mapstorage import MapStorage
-from htdata.errors import ConfigError, DatasetError
 from htdata.format.table import HANDS, SHARDS_DIR, tactile_member
 from htdata.ingest.pipeline import load_pipeline
 from htdata.read.reader import DatasetReader

@@ -9,8 +9,8 @@ from htdata.format.table import INDEX_FILE, MANIFEST_FILE
 from htdata.read.reader import DatasetReader
 from htdata.store.versions import VERSIONS_DIR, version_dir
 from tests.factories import (
-    commit_split,
     MIXED_HANDS_EPISODES,
+    commit_split,
     default_canonical,
     synthetic_members,
     synthetic_tactile,

@@ -3,8 +3,8 @@ after its version was committed (sha256 mismatch). Before issue 18 they trained 
 
 import pytest
 
-from htdata.errors import HtdataError
 from htdata.curate.split import write_split
+from htdata.errors import HtdataError
 from htdata.read.torchdata import TactileFrameDataset
 from tests.factories import commit_split, write_synthetic_dataset
 

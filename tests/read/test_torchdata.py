@@ -12,8 +12,8 @@ from htdata.read.torchdata import (
     shuffled_indices,
 )
 from tests.factories import (
-    commit_split,
     MIXED_HANDS_EPISODES,
+    commit_split,
     default_canonical,
     synthetic_rgb,
     synthetic_tactile,

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from htdata.source.adapters import ADAPTERS, get_adapter
 from htdata.errors import EpisodeError
+from htdata.source.adapters import ADAPTERS, get_adapter
 from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 
 VIDEO_T0 = 5_000_000_000

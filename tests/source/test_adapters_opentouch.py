@@ -8,8 +8,8 @@ import h5py
 import numpy as np
 import pytest
 
-from htdata.source.adapters import get_adapter
 from htdata.errors import EpisodeError
+from htdata.source.adapters import get_adapter
 from htdata.synthetic.formats import OpenTouchClip, write_opentouch_annotations, write_opentouch_scene
 
 RED = (255, 0, 0)

@@ -8,9 +8,9 @@ import zipfile
 import numpy as np
 import pytest
 
+from htdata.errors import EpisodeError
 from htdata.source.adapters import get_adapter
 from htdata.source.adapters.npzrows import NpzRowError, NpzRows
-from htdata.errors import EpisodeError
 from htdata.synthetic.formats import TouchAnythingEpisode, write_touchanything_episode, write_touchanything_split
 
 EPOCH = 1_774_000_000.0  # 2026, like the release's trajectory ids

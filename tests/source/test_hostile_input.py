@@ -21,10 +21,10 @@ import h5py
 import numpy as np
 import pytest
 
+from htdata.glove.layouts import load_layout
 from htdata.source.adapters import get_adapter
 from htdata.source.adapters.npzrows import NpzRowError, NpzRows, check_npy_file
 from htdata.source.adapters.video import VideoError, iter_video_rgb
-from htdata.glove.layouts import load_layout
 from htdata.store.manifest import load_episodes
 from htdata.synthetic.formats import TouchAnythingEpisode, write_touchanything_episode
 from tests.factories import ingest_cli, make_native, make_opentouch, make_touchanything

@@ -14,8 +14,8 @@ import pytest
 
 from htdata.errors import HtdataError
 from htdata.read.reader import DatasetReader
-from htdata.synthetic.formats import write_opentouch_scene
 from htdata.store.versions import list_versions
+from htdata.synthetic.formats import write_opentouch_scene
 from tests.factories import COLOURS, ingest_cli, make_opentouch, ot_clip, small_pipeline, write_synthetic_dataset
 
 EPISODES = [{"episode_id": f"ep_{i}", "task": "pour" if i % 2 else "wipe", "scene": "lab", "hands": ("right",),

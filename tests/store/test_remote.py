@@ -6,10 +6,12 @@ import fsspec
 import numpy as np
 import pytest
 
-from htdata.store import remote
 from htdata.cli import main as cli_main
 from htdata.read.reader import DatasetReader
-from tests.factories import commit_split, MIXED_HANDS_ONE_LAYOUT_EPISODES as EPISODES, write_synthetic_dataset
+from htdata.store import remote
+from tests.factories import MIXED_HANDS_ONE_LAYOUT_EPISODES as EPISODES
+from tests.factories import commit_split, write_synthetic_dataset
+
 
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):

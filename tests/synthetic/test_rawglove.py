@@ -9,8 +9,17 @@ from htdata.benchmarks.rawglove import config_for, normalise_clip, score
 from htdata.glove.baselinefit import quietest_span
 from htdata.glove.calibration import calibration_id, episode_normaliser, fit_record
 from htdata.glove.normalise import NormaliseConfig, Normaliser
-from htdata.synthetic.rawglove import (FULL_SCALE, REST, SATURATE, TRUTH_LEVEL, GloveUnit, corpus_clips, glove_layout,
-                                    make_clip, write_rawglove)
+from htdata.synthetic.rawglove import (
+    FULL_SCALE,
+    REST,
+    SATURATE,
+    TRUTH_LEVEL,
+    GloveUnit,
+    corpus_clips,
+    glove_layout,
+    make_clip,
+    write_rawglove,
+)
 
 
 @pytest.fixture(scope="module")
@@ -224,8 +233,8 @@ def _ingest_rawglove(tmp_path, pipeline_name: str, tables: str):
 
 
 def test_ingest_stats_and_renormalise_with_the_activity_baselines(tmp_path):
-    from htdata.read.reader import DatasetReader
     from htdata.inspect.stats import dataset_stats
+    from htdata.read.reader import DatasetReader
 
     pipe, out = _ingest_rawglove(tmp_path, "rawknit.toml",
                                  '[tactile]\nkeep_raw = true\nmaps = "stored"\n'
@@ -309,8 +318,8 @@ def test_taxel_calibration_file_formula_and_errors(tmp_path):
 
 def test_ingest_with_a_taxel_calibration_file_and_renormalise_from_the_record(tmp_path, capsys):
     from htdata.cli import main
-    from htdata.read.reader import DatasetReader
     from htdata.inspect.stats import dataset_stats
+    from htdata.read.reader import DatasetReader
 
     pipe, out = _ingest_rawglove(tmp_path, "rg/rawknit_cal.toml",   # the calibration path is relative to this file
                                  '[normalise.rawknit_right_32x32]\n'

@@ -13,14 +13,16 @@ import pytest
 
 from htdata.benchmarks.validation import validate_benchmark
 from htdata.cli import main as cli_main
+from htdata.curate.split import make_split, split_path
 from htdata.format.codec import encode_exr
+from htdata.format.shardio import BLOCK, member_header, padded
 from htdata.format.table import EPISODES_FILE, FORMAT_VERSION, INDEX_FILE, MANIFEST_FILE, SHARDS_DIR, SIZE_FIELDS
 from htdata.store.manifest import load_episodes, load_index
-from htdata.format.shardio import BLOCK, member_header, padded
-from htdata.curate.split import make_split, split_path
-from htdata.validate import group_rows, validate_dataset
 from htdata.store.versions import VERSIONS_DIR
-from tests.factories import FRAME_NS, SPLIT_EPISODES as EPISODES, rewrite_manifest, write_synthetic_dataset
+from htdata.validate import group_rows, validate_dataset
+from tests.factories import FRAME_NS, rewrite_manifest, write_synthetic_dataset
+from tests.factories import SPLIT_EPISODES as EPISODES
+
 
 @pytest.fixture(scope="module")
 def pristine(tmp_path_factory) -> Path:

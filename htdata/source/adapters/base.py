@@ -157,6 +157,6 @@ class FileDiscovery(abc.ABC):
 
 
 def __getattr__(name: str):
-    from htdata._moved import moved_name   # lazy: see the docstring
+    from htdata._moved import moved_name  # lazy: see the docstring
 
     return moved_name(__name__, name)

@@ -15,6 +15,7 @@ import numpy as np
 
 from htdata.errors import EpisodeError
 from htdata.source.adapters.base import EpisodeRef
+
 # Deflate (the usual HDF5 filter) expands at most ~1032:1.
 MAX_FILTER_RATIO = 1100
 

@@ -16,17 +16,17 @@ from typing import Iterator
 
 import numpy as np
 
+from htdata.errors import EpisodeError
+from htdata.glove.layouts import is_layout_path
+from htdata.resources import validate_json
 from htdata.source.adapters.base import EpisodeRef, EpisodeStreams, FileDiscovery
 from htdata.source.adapters.discovery import fingerprint_files, sanitise_id
+from htdata.source.adapters.npzrows import NpzRowError, NpzRows, check_npy_file
 from htdata.source.adapters.params import AdapterParam
 from htdata.source.adapters.sourcetree import check_source_file, relpath_inside, walk_source
 from htdata.source.adapters.streamchecks import check_tactile_shape, file_frame_mismatch_note, iter_episode_video
-from htdata.source.adapters.npzrows import NpzRowError, NpzRows, check_npy_file
 from htdata.source.adapters.video import VideoError, probe_video_pts_ns
-from htdata.errors import EpisodeError
-from htdata.glove.layouts import is_layout_path
 from htdata.source.rgb import to_rgb
-from htdata.resources import validate_json
 
 SOURCE = "native"
 RECORDING_JSON = "recording.json"

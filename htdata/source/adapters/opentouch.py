@@ -44,14 +44,13 @@ from typing import Iterator
 
 import numpy as np
 
-from htdata.errors import ConfigError
+from htdata.errors import ConfigError, EpisodeError
 from htdata.source.adapters.base import EpisodeRef, EpisodeStreams, FileDiscovery
 from htdata.source.adapters.discovery import fingerprint_files, sanitise_id
+from htdata.source.adapters.hdf5safe import check_hdf5_size, in_file
 from htdata.source.adapters.params import AdapterParam, param_values
 from htdata.source.adapters.sourcetree import walk_source
 from htdata.source.adapters.streamchecks import check_tactile_shape
-from htdata.errors import EpisodeError
-from htdata.source.adapters.hdf5safe import check_hdf5_size, in_file
 from htdata.source.rgb import CHANNEL_ORDERS, to_rgb
 
 log = logging.getLogger(__name__)

@@ -10,10 +10,9 @@ from typing import Iterator
 import numpy as np
 
 from htdata.errors import EpisodeError
-from htdata.source.adapters.base import EpisodeRef
 from htdata.glove.layouts import load_layout
+from htdata.source.adapters.base import EpisodeRef
 from htdata.source.adapters.video import VideoError, iter_video_rgb
-
 
 ANY_GRID = "*"   # a ref.layout_files value: read the hand's rows whatever their grid (check_tactile_shape)
 

@@ -30,15 +30,14 @@ from typing import Iterator
 
 import numpy as np
 
-from htdata.errors import ConfigError
+from htdata.errors import ConfigError, EpisodeError
 from htdata.source.adapters.base import EpisodeRef, EpisodeStreams, FileDiscovery
 from htdata.source.adapters.discovery import fingerprint_files, sanitise_id
+from htdata.source.adapters.npzrows import NpzRowError, NpzRows
 from htdata.source.adapters.params import AdapterParam, param_values
 from htdata.source.adapters.sourcetree import walk_source
 from htdata.source.adapters.streamchecks import check_tactile_shape, file_frame_mismatch_note, iter_episode_video
-from htdata.source.adapters.npzrows import NpzRowError, NpzRows
 from htdata.source.adapters.video import VideoError, probe_video_pts_ns
-from htdata.errors import EpisodeError
 
 SOURCE = "touchanything"
 GRID = (21, 21)

@@ -19,12 +19,29 @@ episodes stream to disk. One module per source (`opentouch`,
 """
 
 from htdata.synthetic.formats.media import write_h264
-from htdata.synthetic.formats.native import (NATIVE_FORMAT, NATIVE_FORMAT_VERSION, NativeHand, NativeRecording,
-                                          write_native_recording)
-from htdata.synthetic.formats.opentouch import (OPENTOUCH_ANNOTATION_COLUMNS, OPENTOUCH_LABEL_DTYPE, OpenTouchClip,
-                                             write_opentouch_annotations, write_opentouch_scene)
-from htdata.synthetic.formats.touchanything import (TA_FPS, TA_GRID, TA_SPLIT_KEYS, TA_VIDEO_SIZE, TouchAnythingEpisode,
-                                                 write_touchanything_episode, write_touchanything_split)
+from htdata.synthetic.formats.native import (
+                                          NATIVE_FORMAT,
+                                          NATIVE_FORMAT_VERSION,
+                                          NativeHand,
+                                          NativeRecording,
+                                          write_native_recording,
+)
+from htdata.synthetic.formats.opentouch import (
+                                          OPENTOUCH_ANNOTATION_COLUMNS,
+                                          OPENTOUCH_LABEL_DTYPE,
+                                          OpenTouchClip,
+                                          write_opentouch_annotations,
+                                          write_opentouch_scene,
+)
+from htdata.synthetic.formats.touchanything import (
+                                          TA_FPS,
+                                          TA_GRID,
+                                          TA_SPLIT_KEYS,
+                                          TA_VIDEO_SIZE,
+                                          TouchAnythingEpisode,
+                                          write_touchanything_episode,
+                                          write_touchanything_split,
+)
 
 __all__ = [
     "NATIVE_FORMAT", "NATIVE_FORMAT_VERSION", "NativeHand", "NativeRecording", "write_native_recording",

@@ -9,9 +9,8 @@ from typing import Iterable
 
 import numpy as np
 
-from htdata.synthetic.formats.media import check_rgb_frame, write_h264
 from htdata.resources import validate_json
-
+from htdata.synthetic.formats.media import check_rgb_frame, write_h264
 
 NATIVE_FORMAT = "htdata-native"
 NATIVE_FORMAT_VERSION = 1

@@ -11,7 +11,6 @@ import numpy as np
 
 from htdata.synthetic.formats.media import seed_of, write_h264, write_json_lines
 
-
 TA_GRID = 21
 TA_VIDEO_SIZE = (640, 480)  # width, height
 TA_FPS = 30
