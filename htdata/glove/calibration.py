@@ -51,13 +51,17 @@ def calibration_entry(layout_id: str, cfg: NormaliseConfig, origin: str) -> dict
             "fitted_per_episode": bool(cfg.fits)}
 
 
-def episode_calibrations(pipeline, layouts: dict) -> dict[str, dict]:
-    """{id: manifest entry} of the calibrations a pipeline applies to these layouts (hand -> Layout)."""
+def episode_calibrations(normalising, layouts: dict) -> dict[str, dict]:
+    """{id: manifest entry} of the calibrations a pipeline applies to these layouts (hand -> Layout).
+
+    `normalising` is a glove.normalisesettings.NormaliseSettings, or anything with its `name`,
+    `normalise` and `normalise_for` (an ingest passes its PipelineConfig).
+    """
     out = {}
     for layout in layouts.values():
-        cfg = pipeline.normalise_for(layout)
-        origin = (f"pipeline {pipeline.name!r} [normalise.{layout.layout_id}]"
-                  if layout.layout_id in pipeline.normalise else f"layout {layout.layout_id!r} value block")
+        cfg = normalising.normalise_for(layout)
+        origin = (f"pipeline {normalising.name!r} [normalise.{layout.layout_id}]"
+                  if layout.layout_id in normalising.normalise else f"layout {layout.layout_id!r} value block")
         out[calibration_id(layout.layout_id, cfg)] = calibration_entry(layout.layout_id, cfg, origin)
     return out
 

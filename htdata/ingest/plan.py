@@ -37,13 +37,29 @@ from htdata.store.fsutil import sha256_file
 
 @dataclass
 class Source:
+    """One source of an ingest.
+
+    Args:
+        pipeline: how the source's recordings become samples (htdata.ingest.pipeline.load_pipeline).
+        root: the folder holding the recordings.
+    """
     pipeline: PipelineConfig
     root: Path
 
 
 @dataclass
 class UnitTask:
-    """One work unit: picklable, small (episode refs only)."""
+    """One work unit: picklable, small (episode refs only). Built by the plan, run by an executor's worker.
+
+    Args:
+        unit: the unit number (its shard names and its done record carry it).
+        out: the dataset folder being written.
+        pipeline: the pipeline as a dict (PipelineConfig.to_dict()).
+        pipeline_path: the pipeline file (relative paths in it resolve beside it).
+        root: the source folder.
+        episodes: the planned EpisodeRefs (layouts resolved), in order.
+        maps: the resolved MapStorage (never AUTO).
+    """
     unit: int
     out: str
     pipeline: dict          # PipelineConfig.to_dict()
@@ -107,7 +123,18 @@ def plan_units(todo: list[tuple], out: Path, first_unit: int) -> list[UnitTask]:
 # --------------------------------------------------------------------------- sources and settings
 
 def parse_sources(pipelines: list[str], paths: list[str]) -> tuple[list[Source], Path]:
-    """Accept `--pipeline P=SRC ... OUT` or `--pipeline P [--pipeline Q] SRC [SRC2] OUT`."""
+    """The sources and OUT of `htdata ingest`: `--pipeline P=SRC ... OUT` or `--pipeline P [--pipeline Q] SRC [SRC2] OUT`.
+
+    Args:
+        pipelines: the --pipeline values (a pipeline file or shipped name, each with `=SRC` or none with it).
+        paths: the positional arguments: the SRC folders (when the pipelines name none), then OUT.
+
+    Returns:
+        (one Source per pipeline, with its pipeline loaded, the OUT folder).
+
+    Raises:
+        ArgumentError: the two forms mixed, OUT missing, or SRC folders that do not match the pipelines.
+    """
     if not pipelines:
         raise ArgumentError("at least one --pipeline is required")
     if not paths:

@@ -48,6 +48,11 @@ class EpisodeProgress:
     when a unit's result arrives the bar is reconciled to the unit's true
     episode and frame counts, which covers executors that send no events
     (Ray), events that arrive late, and events repeated by a retried unit.
+
+    Args:
+        tasks: every work unit of the ingest.
+        done_units: units already finished (a resumed ingest): counted from the start.
+        enabled: draw the bar (False: count only, e.g. --quiet).
     """
 
     def __init__(self, tasks: list[UnitTask], done_units: set[int], enabled: bool):

@@ -19,7 +19,12 @@ TEXT_WARNINGS = 3
 
 
 class Check:
-    """Failures and warnings of one named check; listing is capped, counting is not."""
+    """Failures and warnings of one named check; listing is capped, counting is not.
+
+    Args:
+        name: the check's name (one of CHECKS).
+        max_listed: failures and warnings listed at most (all are counted).
+    """
 
     def __init__(self, name: str, max_listed: int):
         self.name = name
@@ -109,4 +114,5 @@ def format_report(report: dict) -> str:
 
 
 def write_report(report: dict, path: Path) -> None:
+    """Write `report` (validate_dataset's) as JSON at `path`, atomically (temp + rename)."""
     write_json_atomic(path, report)

@@ -158,7 +158,12 @@ def _load_index(root: Path, manifest: dict, check: Check) -> np.ndarray | None:
 
 
 def group_rows(values: np.ndarray, n_groups: int) -> list[np.ndarray]:
-    """Row positions holding each value 0..n_groups-1 (ascending): O(N log N), not one scan per group."""
+    """Row positions holding each value 0..n_groups-1 (ascending): O(N log N), not one scan per group.
+
+    Args:
+        values: (N,) integer group of each row (e.g. the index's shard column).
+        n_groups: how many groups (values lie in 0..n_groups-1).
+    """
     order = np.argsort(values, kind="stable")
     bounds = np.searchsorted(values[order], np.arange(n_groups + 1))
     return [order[bounds[g]:bounds[g + 1]] for g in range(n_groups)]

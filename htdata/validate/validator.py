@@ -25,6 +25,8 @@ from htdata.validate.timestamps import check_time, empty_timestamps, merge_times
 
 @dataclass
 class ValidateConfig:
+    """The settings of one `htdata validate` run (see `validate_dataset` for each field); `validate()` checks them."""
+
     split: str | None = None
     deep: bool = False
     sample_frac: float = 0.05
@@ -50,7 +52,21 @@ def validate_dataset(path, split: str | None = None, deep: bool = False, sample_
                      version: int | None = None) -> dict:
     """Run every check on a committed dataset's current version (or `version`); returns the report.
 
-    report["ok"] is the verdict.
+    Args:
+        path: the dataset folder.
+        split: also check this split's files and leak rules (None: the splits the version lists).
+        deep: decode every sample (else a `sample_frac` sample of them) and recompute the taxel digests.
+        sample_frac: the share of samples decoded when not `deep`, in (0, 1].
+        seed: which samples that share is.
+        workers: processes for the content checks (None: all cores for `deep`, 1 otherwise).
+        max_listed: failures listed per check (all are counted).
+        version: the committed version to check (None: the current one).
+
+    Returns:
+        The report (docs/FORMAT.md "validate"): report["ok"] is the verdict, report["checks"] each check.
+
+    Raises:
+        ArgumentError: a setting out of range (ValidateConfig.validate).
     """
     cfg = ValidateConfig(split=split, deep=deep, sample_frac=sample_frac, seed=seed, workers=workers,
                          max_listed=max_listed)

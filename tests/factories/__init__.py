@@ -235,6 +235,15 @@ def episode_table(*rows: tuple, glove_layouts: bool = False) -> list[dict]:
 MIXED_HANDS_ROWS = (("ep_a", "pour", "kitchen", "R", 5), ("ep_b", "wipe", "office", "LR", 4),
                     ("ep_c", "pour", "office", "L", 1))
 MIXED_HANDS_EPISODES = episode_table(*MIXED_HANDS_ROWS, glove_layouts=True)
+
+
+def mixed_hands_coverages() -> dict[str, np.ndarray]:
+    """Partial coverages of the two gloves of MIXED_HANDS_EPISODES (glove_r, glove_l): maps hold zeros outside."""
+    right = np.zeros((224, 224), np.uint8)
+    right[20:200, 30:190] = 1
+    left = np.zeros((224, 224), np.uint8)
+    left[40:220, 10:150] = 1
+    return {"glove_r": right, "glove_l": left}
 MIXED_HANDS_ONE_LAYOUT_EPISODES = episode_table(*MIXED_HANDS_ROWS)
 # The preview's contact sheet: an odd frame count, both hands, a one-frame left-only episode.
 PREVIEW_EPISODES = episode_table(("ep_r", "pour", "kitchen", "R", 7), ("ep_lr", "wipe", "office", "LR", 3),

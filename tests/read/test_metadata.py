@@ -24,6 +24,7 @@ from tests.factories import (
     MIXED_HANDS_EPISODES,
     commit_split,
     default_canonical,
+    mixed_hands_coverages,
     rewrite_manifest,
     write_synthetic_dataset,
 )
@@ -31,18 +32,11 @@ from tests.factories import (
 EPISODES = MIXED_HANDS_EPISODES      # ep_a (R, 5 frames), ep_b (LR, 4), ep_c (L, 1)
 
 
-def coverages():
-    right = np.zeros((224, 224), np.uint8)
-    right[20:200, 30:190] = 1
-    left = np.zeros((224, 224), np.uint8)
-    left[40:220, 10:150] = 1
-    return {"glove_r": right, "glove_l": left}
-
 
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
     root = tmp_path_factory.mktemp("meta") / "ds"
-    write_synthetic_dataset(root, EPISODES, seed=3, coverages=coverages(), samples_per_shard=3)
+    write_synthetic_dataset(root, EPISODES, seed=3, coverages=mixed_hands_coverages(), samples_per_shard=3)
     commit_split(root, "main", {"train": ["ep_c", "ep_a"], "val": ["ep_b"]})
     return root
 
@@ -72,7 +66,7 @@ def test_metadata_reports_the_stored_records(dataset):
     assert meta.shard_names == [s["name"] for s in manifest["shards"]] and meta.codec == manifest["codec"]
     assert [meta.episode_range(e) for e in ("ep_a", "ep_b", "ep_c")] == [(0, 5), (5, 4), (9, 1)]
     assert meta.locate("ep_b", 2) == 7 and meta.episode_position(2) == 2
-    for lid, cov in coverages().items():
+    for lid, cov in mixed_hands_coverages().items():
         assert np.array_equal(meta.coverage(lid), cov) and meta.layout(lid)["layout_id"] == lid
     assert np.array_equal(meta.region_map, default_canonical().part_map)
     assert np.array_equal(meta.place_map, default_canonical().region_map)
@@ -95,7 +89,7 @@ def test_metadata_never_opens_a_shard(copy):
         DatasetReader(copy).sample(0)          # the shards are gone for a reader ...
     meta = DatasetMetadata(copy)               # ... and the metadata has all it needs without them
     assert len(meta.index) == 10 and meta.episode_range("ep_b") == (5, 4)
-    assert np.array_equal(meta.coverage("glove_l"), coverages()["glove_l"])
+    assert np.array_equal(meta.coverage("glove_l"), mixed_hands_coverages()["glove_l"])
     assert set(meta.split("main")["parts"]) == {"train", "val"}
     assert list(meta.sample_indices("main", "train")) == [0, 1, 2, 3, 4, 9]
 

@@ -12,6 +12,7 @@ from tests.factories import (
     MIXED_HANDS_EPISODES,
     commit_split,
     default_canonical,
+    mixed_hands_coverages,
     synthetic_members,
     synthetic_tactile,
     write_synthetic_dataset,
@@ -21,24 +22,17 @@ EPISODES = MIXED_HANDS_EPISODES
 SEED = 7
 
 
-def coverages():
-    right = np.zeros((224, 224), np.uint8)
-    right[20:200, 30:190] = 1
-    left = np.zeros((224, 224), np.uint8)
-    left[40:220, 10:150] = 1
-    return {"glove_r": right, "glove_l": left}
-
 
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
     root = tmp_path_factory.mktemp("ds") / "ds"
-    return write_synthetic_dataset(root, EPISODES, seed=SEED, coverages=coverages(),
+    return write_synthetic_dataset(root, EPISODES, seed=SEED, coverages=mixed_hands_coverages(),
                                    samples_per_shard=3, bend_dims=4)
 
 
 def expected(spec_id, frame):
     spec = next(e for e in EPISODES if e["episode_id"] == spec_id)
-    return synthetic_members(spec, frame, SEED, coverages(), bend_dims=4)
+    return synthetic_members(spec, frame, SEED, mixed_hands_coverages(), bend_dims=4)
 
 
 def test_random_access_is_byte_exact(dataset):
@@ -61,10 +55,10 @@ def test_decoded_values(dataset):
     assert d["rgb"].shape == (224, 224, 3) and d["rgb"].dtype == np.uint8
     assert d["meta"]["key"] == "ep_b__000002" and d["meta"]["hands"] == {"left": True, "right": True}
     for hand in ("left", "right"):
-        truth = synthetic_tactile(SEED, "ep_b", 2, hand, coverages()[f"glove_{hand[0]}"])
+        truth = synthetic_tactile(SEED, "ep_b", 2, hand, mixed_hands_coverages()[f"glove_{hand[0]}"])
         assert np.abs(d["tactile"][hand] - truth).max() <= 2.5e-4
         assert d["bend"][hand].shape == (4,) and d["bend"][hand].dtype == np.float32
-    assert d["tactile"]["left"][coverages()["glove_l"] == 0].max() == 0.0
+    assert d["tactile"]["left"][mixed_hands_coverages()["glove_l"] == 0].max() == 0.0
     single = r.decoded(r.locate("ep_a", 0))
     assert set(single["tactile"]) == {"right"}
 
@@ -102,7 +96,7 @@ def test_streaming_matches_random_access(dataset):
 
 def test_coverage_and_region_maps(dataset):
     r = DatasetReader(dataset)
-    assert np.array_equal(r.coverage("glove_r"), coverages()["glove_r"])
+    assert np.array_equal(r.coverage("glove_r"), mixed_hands_coverages()["glove_r"])
     assert np.array_equal(r.region_map, default_canonical().part_map)
     assert set(np.unique(r.region_map)) == {0, 1, 2, 3, 4, 5, 6}
     assert np.array_equal(r.place_map, default_canonical().region_map)
