@@ -126,10 +126,10 @@ class ModelConfig:
             raise ConfigError(f"model.dim={self.dim} must be divisible by model.heads={self.heads}")
         if len(self.cnn_widths) != 3 or any(int(w) <= 0 or int(w) % 8 for w in self.cnn_widths):
             raise ConfigError(f"model.cnn_widths must be 3 positive multiples of 8 (GroupNorm(8)), "
-                             f"got {self.cnn_widths}")
+                              f"got {self.cnn_widths}")
         if len(self.vqvae_widths) != 3 or any(int(w) <= 0 or int(w) % 8 for w in self.vqvae_widths):
             raise ConfigError(f"model.vqvae_widths must be 3 positive multiples of 8 (GroupNorm(8)), "
-                             f"got {self.vqvae_widths}")
+                              f"got {self.vqvae_widths}")
         if len(self.resnet_widths) != 4 or any(int(w) <= 0 for w in self.resnet_widths):
             raise ConfigError(f"model.resnet_widths must be 4 positive widths, got {self.resnet_widths}")
         if self.mlp_ratio <= 0:
@@ -200,7 +200,7 @@ class LossConfig:
     def validate(self) -> None:
         if self.lambda_vis < 0 or self.vq_weight < 0 or self.lambda_replay < 0 or self.stage3_replay < 0:
             raise ConfigError("loss.lambda_vis, loss.vq_weight, loss.lambda_replay and loss.stage3_replay "
-                             "must be >= 0")
+                              "must be >= 0")
         if not isinstance(self.stage3_vq, bool):
             raise ConfigError(f"loss.stage3_vq must be true/false, got {self.stage3_vq!r}")
         if not self.lambda_mask > self.lambda_vis:

@@ -119,7 +119,7 @@ class StepBatchSampler(Sampler[list[int]]):
         global_batch = batch_size * world_size
         if n < global_batch:
             raise ConfigError(f"dataset has {n} samples, fewer than one global batch "
-                             f"({batch_size} x {world_size} ranks)")
+                              f"({batch_size} x {world_size} ranks)")
         if not 0 <= rank < world_size or not 0 <= start_step <= stop_step:
             raise ValueError(f"bad sampler arguments rank={rank} world={world_size} "
                              f"steps=[{start_step}, {stop_step})")

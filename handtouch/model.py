@@ -132,7 +132,7 @@ class HandTouch(nn.Module):
         self._frozen: set[str] = set()
         if cfg.rgb_prior and cfg.vision and not callable(getattr(rgb_encoder.backbone, "predict", None)):
             raise ConfigError(f"model.rgb_prior needs an RGB encoder with a contact readout (predict, e.g. "
-                             f"TactileGridRGB); {rgb_encoder.info.spec!r} has none: set model.rgb_prior=false")
+                              f"TactileGridRGB); {rgb_encoder.info.spec!r} has none: set model.rgb_prior=false")
 
     # ---- freezing by module name -------------------------------------------------
     def _named(self, names: Iterable[str]) -> list[str]:
@@ -140,7 +140,7 @@ class HandTouch(nn.Module):
         unknown = sorted(set(names) - set(MODULE_NAMES))
         if unknown:
             raise ArgumentError(f"unknown module names {unknown}; known: {list(MODULE_NAMES)} "
-                             "(rgb_encoder is always frozen)")
+                                "(rgb_encoder is always frozen)")
         return names
 
     def freeze(self, names: Iterable[str]) -> None:
@@ -220,7 +220,7 @@ class HandTouch(nn.Module):
         if self.cfg.rgb_skip:
             if vis.shape[1] != tokens.shape[1]:
                 raise ConfigError(f"model.rgb_skip needs one RGB token per tactile token: the RGB encoder "
-                                 f"gives {vis.shape[1]}, the tactile encoder {tokens.shape[1]}")
+                                  f"gives {vis.shape[1]}, the tactile encoder {tokens.shape[1]}")
             tokens = tokens + vis
         return self.fusion(self._with_hand(tokens, hand), vis)[:, 1:]
 

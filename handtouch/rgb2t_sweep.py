@@ -59,7 +59,7 @@ def seed_stage1(src: Path, cfg, dst: Path) -> None:
     trained = [k for k in reshaped if k.startswith(stage1)]
     if trained:
         raise ArgumentError(f"{src}: stage-1 weights shaped unlike the configured model's (was stage 1 "
-                         f"trained with another model config?): {trained[:8]}")
+                            f"trained with another model config?): {trained[:8]}")
     weights = {k: v for k, v in weights.items() if k not in reshaped}
     missing, _ = model.load_state_dict(weights, strict=False)
     missing = [k for k in missing if not k.startswith("rgb_encoder.")]

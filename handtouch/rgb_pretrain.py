@@ -122,7 +122,7 @@ def load_items(dataset_root, split: str | None, part: str | None, cfg: RGBPretra
     ds = TactileFrameDataset(str(dataset_root), split=split, part=part)
     if len(ds) < 2:
         raise ArgumentError(f"{dataset_root}: part {part!r} of split {split!r} has {len(ds)} frames; "
-                         "the RGB pretraining needs at least 2")
+                            "the RGB pretraining needs at least 2")
     fps_of = np.array([float(ep.get("fps") or 0.0) for ep in ds.reader.episodes])
     size, grid = cfg.arch["size"], cfg.arch["grid"]
     rgb, cells, weight, hand, episode, frame = [], [], [], [], [], []

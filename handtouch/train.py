@@ -103,7 +103,7 @@ def load_model(checkpoint_path: str | Path, device: str = "cpu") -> HandTouch:
     rgb = load_rgb_encoder(blob["rgb_encoder"]["spec"])
     if rgb.info.sha256 != blob["rgb_encoder"]["sha256"]:
         raise ArgumentError(f"{path}: RGB encoder {rgb.info.spec} has sha256 {rgb.info.sha256}, "
-                         f"the checkpoint was trained with {blob['rgb_encoder']['sha256']}")
+                            f"the checkpoint was trained with {blob['rgb_encoder']['sha256']}")
     model = HandTouch(model_config_from_dict(blob["model_config"]), rgb)
     model.load_state_dict(blob["model"])
     return model.to(device).eval()

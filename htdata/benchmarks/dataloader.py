@@ -23,7 +23,7 @@ from torch.utils.data import DataLoader, Subset
 
 from htdata.format.mapstorage import MapStorage
 from htdata.read import keys
-from htdata.read.reader import DatasetReader
+from htdata.read.metadata import DatasetMetadata
 from htdata.read.torchdata import TactileFrameDataset
 
 # (row label, maps_from, dataset keywords): full items as the trainer read them before #28, then tactile-only
@@ -57,7 +57,7 @@ def dataloader_rows(root: Path, workers: tuple[int, int] = (1, 2), reps: int = 2
     and the bytes one item moves between processes."""
     lo, hi = workers
     rows = []
-    stores_maps = MapStorage.of(DatasetReader(root).manifest).stores_maps
+    stores_maps = MapStorage.of(DatasetMetadata(root).manifest).stores_maps   # the records only: no shard opened
     for kind, source, options in VARIANTS:
         if source == "stored" and not stores_maps:
             continue   # a version without maps has no EXR to decode

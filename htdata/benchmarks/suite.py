@@ -110,7 +110,7 @@ class BenchConfig:
             raise ArgumentError(f"bench sizes must be integers >= 1, got {bad}")
         if len(set(self.ingest_workers)) < 2 or min(self.ingest_workers) < 1:
             raise ArgumentError(f"ingest_workers must name two worker counts >= 1 (1 -> N scaling), "
-                             f"got {self.ingest_workers}")
+                                f"got {self.ingest_workers}")
         if len(self.rss_lengths) < 2 or list(self.rss_lengths) != sorted(set(self.rss_lengths)) or self.rss_lengths[0] < 2:
             raise ArgumentError(f"rss_lengths must be >= 2 increasing lengths >= 2 frames, got {self.rss_lengths}")
         if len(self.append_sizes) < 2 or min(self.append_sizes) < 1:

@@ -119,12 +119,12 @@ def check_against(layout: Layout, recordings: list[str], pipeline: str) -> int:
     scanned = scan_recordings(recordings, pipeline, layout.hand, layout.path)
     if not scanned:
         raise ArgumentError(f"no {layout.hand}-hand rows in {', '.join(recordings)} (layout {layout.layout_id} is "
-                         f"for the {layout.hand} hand)")
+                            f"for the {layout.hand} hand)")
     findings: set[tuple[int, int]] = set()
     for s in scanned:
         if s.activity.grid != tuple(layout.grid):
             raise ArgumentError(f"{s.recording} [{s.episode_id}]: {s.hand} rows are {s.activity.grid[0]}x"
-                             f"{s.activity.grid[1]}, layout {layout.layout_id} is {layout.grid[0]}x{layout.grid[1]}")
+                                f"{s.activity.grid[1]}, layout {layout.layout_id} is {layout.grid[0]}x{layout.grid[1]}")
         found = unmapped_moving(s.activity, layout)
         head = (f"{s.recording} [{s.episode_id}] {s.hand} hand: {found.frames} frames, noise {found.noise:.4g}, "
                 f"wander {found.wander:.4g}, moving = range > {found.threshold:.4g}")

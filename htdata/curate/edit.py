@@ -57,7 +57,7 @@ def parse_frames(spec: str, n: int, episode: str) -> range:
         raise ArgumentError(f"--frames must be A:B (frames kept, B exclusive), got {spec!r}") from None
     if not 0 <= start < stop <= n:
         raise ArgumentError(f"episode {episode!r} has frames 0..{n - 1}: --frames {spec} must keep a non-empty "
-                         f"range inside 0:{n} (to remove the whole episode use htdata rm)")
+                            f"range inside 0:{n} (to remove the whole episode use htdata rm)")
     return range(start, stop)
 
 

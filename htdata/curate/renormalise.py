@@ -113,8 +113,8 @@ def plan_renormalise(snap: Snapshot, normalising: NormaliseSettings, patterns: l
         plan.changes[eid] = hands
     if no_raw:
         raise ArgumentError(f"{len(no_raw)} episode(s) have no stored raw glove rows (format < 3, or ingested with "
-                         f"[tactile] keep_raw = false), so they cannot be renormalised without their sources: "
-                         f"{', '.join(no_raw[:5])}{' ...' if len(no_raw) > 5 else ''}; re-ingest them instead")
+                            f"[tactile] keep_raw = false), so they cannot be renormalised without their sources: "
+                            f"{', '.join(no_raw[:5])}{' ...' if len(no_raw) > 5 else ''}; re-ingest them instead")
     for part in snap.parts():
         if any(e in plan.changes for e in part.episode_ids):
             plan.repacked_units.append(part.unit)

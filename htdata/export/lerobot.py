@@ -219,7 +219,7 @@ def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, sam
                 row = paired_row(members, hand, where)
                 if row.shape != plan.slots[k].grid:
                     raise DatasetError(f"{where}: {hand} raw row shaped {row.shape}, "
-                                     f"expected {plan.slots[k].grid} (its layout's grid)")
+                                       f"expected {plan.slots[k].grid} (its layout's grid)")
                 # NaN / Inf mark cells without a taxel in some sources: 0 (LeRobot stats and
                 # normalisation would turn one NaN into NaN everywhere); finite values stay exact
                 raw[k][f] = np.where(np.isfinite(row), row, 0.0)

@@ -53,7 +53,7 @@ class LeRobotExportConfig:
     force: bool = False
 
     def validate(self) -> None:
-        """Raise ValueError naming the option (--part, --fps, crf, gop, codec, OUT) whose value cannot be exported."""
+        """Raise ArgumentError naming the option (--part, --fps, crf, gop, codec, OUT) that cannot be exported."""
         if self.part is not None and self.split is None:
             raise ArgumentError("--part needs --split NAME")
         if self.fps is not None and not (self.fps > 0 and float(self.fps).is_integer()):
@@ -154,7 +154,7 @@ def plan_export(reader: DatasetReader, cfg: LeRobotExportConfig) -> _Plan:
             slots.append(RawSlot(hand, g, key, key.removeprefix("observation.")))
     if int(reader.manifest.get("format_version", 0)) < 3:
         raise ArgumentError(f"{reader.root}: format {reader.manifest.get('format_version')} stores no raw glove rows; "
-                         f"the export needs format 3 (re-ingest the sources)")
+                            f"the export needs format 3 (re-ingest the sources)")
     if cfg.fps is not None:
         fps, resample = int(cfg.fps), True
     else:
@@ -164,7 +164,7 @@ def plan_export(reader: DatasetReader, cfg: LeRobotExportConfig) -> _Plan:
             rates.setdefault(int(round(float(ep.get("fps") or 0))), ep["episode_id"])
         if len(rates) != 1 or 0 in rates:
             raise ArgumentError(f"episodes have frame rates {sorted(rates)} (e.g. {sorted(rates.items())[:3]}); "
-                             f"LeRobot has one fps per dataset: pass --fps F to resample")
+                                f"LeRobot has one fps per dataset: pass --fps F to resample")
         fps, resample = next(iter(rates)), False
     # a glove-only selection (no frame holds RGB) has no egocentric feature: no all-black video
     rgb = any(_has_rgb(reader, p) for p in positions)

@@ -149,7 +149,7 @@ def decode_exr_pixels(data: bytes, where: str = "EXR") -> np.ndarray:
         return pixels
     if not (dx0 <= x0 <= x1 <= dx1 and dy0 <= y0 <= y1 <= dy1):
         raise DatasetError(f"{where}: EXR data window {(x0, y0, x1, y1)} is not inside its display window "
-                         f"{(dx0, dy0, dx1, dy1)}")
+                           f"{(dx0, dy0, dx1, dy1)}")
     canvas = np.zeros((dy1 - dy0 + 1, dx1 - dx0 + 1), pixels.dtype)
     canvas[y0 - dy0:y1 - dy0 + 1, x0 - dx0:x1 - dx0 + 1] = pixels
     return canvas
@@ -172,7 +172,7 @@ def encode_tactile(tactile_map: np.ndarray, compression: str = "zip", where: str
 
 
 def decode_tactile(data: bytes, where: str = "tactile map") -> np.ndarray:
-    """EXR bytes -> float32 (224,224) map; any decode failure is a ValueError naming `where`."""
+    """EXR bytes -> float32 (224,224) map; any decode failure is a DatasetError (a ValueError) naming `where`."""
     arr = decode_exr(data, where)
     if arr.shape != MAP_SHAPE:
         raise DatasetError(f"{where}: decoded tactile map has shape {arr.shape}, expected {MAP_SHAPE}")
@@ -180,7 +180,7 @@ def decode_tactile(data: bytes, where: str = "tactile map") -> np.ndarray:
 
 
 def check_finite_maps(maps: np.ndarray, where: str) -> np.ndarray:
-    """`maps` ((224,224) or (n,224,224)) when every value is finite; else a ValueError naming `where`.
+    """`maps` ((224,224) or (n,224,224)) when every value is finite; else a DatasetError (a ValueError) naming `where`.
 
     One sum per map (maps are in [0,1], so a finite map never sums to inf): a NaN served
     to a training run poisons its loss silently, so the loaders refuse it here.
@@ -190,7 +190,7 @@ def check_finite_maps(maps: np.ndarray, where: str) -> np.ndarray:
     if bad.size:
         which = "" if maps.ndim == 2 else f" (map {int(bad[0])} of {len(sums)} in this batch)"
         raise DatasetError(f"{where}: tactile map holds NaN/Inf values{which}: its raw glove rows are not finite; "
-                         f"`htdata validate --deep` lists every such sample")
+                           f"`htdata validate --deep` lists every such sample")
     return maps
 
 
@@ -312,7 +312,7 @@ def decode_npy(data: bytes, where: str = "npy") -> np.ndarray:
     count = int(np.prod(shape, dtype=np.int64))
     if len(data) - start != count * dtype.itemsize:
         raise DatasetError(f"{where}: .npy member holds {len(data) - start} data bytes, "
-                         f"header says {count * dtype.itemsize}")
+                           f"header says {count * dtype.itemsize}")
     return np.frombuffer(data, dtype, count, start).reshape(shape, order="F" if fortran else "C").copy()
 
 

@@ -167,7 +167,7 @@ def resolve_sources(sources: list, refs_per_source: list[list], existing: dict |
     settings = {(s.pipeline.codec.tactile, s.pipeline.tactile.compression) for s in sources}
     if len(settings) > 1:
         raise ConfigError(f"pipelines {[s.pipeline.name for s in sources]} disagree on [codec] tactile / "
-                         f"[tactile] compression ({sorted(settings)}): a dataset has one codec")
+                          f"[tactile] compression ({sorted(settings)}): a dataset has one codec")
     (setting, compression), = settings
     pairs = [(s.pipeline, load_layout(path)) for s, refs in zip(sources, refs_per_source)
              for r in refs for path in sorted(set(r.layout_files.values()))]

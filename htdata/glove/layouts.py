@@ -241,7 +241,7 @@ def parse_layout(doc: dict, where: str = "<layout>", canonical: CanonicalHand | 
     if len(bend) and live[bend[:, 0], bend[:, 1]].any():
         c = bend[live[bend[:, 0], bend[:, 1]]][0]
         raise ConfigError(f"{where}: bend cell {c.tolist()} is a live pressure cell of block "
-                         f"{blocks[int(owner[c[0], c[1]])].name!r}")
+                          f"{blocks[int(owner[c[0], c[1]])].name!r}")
     for i, b in enumerate(blocks):
         if not live[owner == i].any():
             raise ConfigError(f"{where}: block {b.name!r} has no live cell")
@@ -249,7 +249,7 @@ def parse_layout(doc: dict, where: str = "<layout>", canonical: CanonicalHand | 
     if len(unused) and (owner[unused[:, 0], unused[:, 1]] >= 0).any():
         c = unused[owner[unused[:, 0], unused[:, 1]] >= 0][0]
         raise ConfigError(f"{where}: unused cell {c.tolist()} lies inside block {blocks[int(owner[c[0], c[1]])].name!r} "
-                         f"(a sensorless cell inside a block is a dead_cell)")
+                          f"(a sensorless cell inside a block is a dead_cell)")
     if len(unused) and len(bend):
         both = {tuple(c) for c in unused.tolist()} & {tuple(c) for c in bend.tolist()}
         if both:

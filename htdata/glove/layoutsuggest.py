@@ -103,8 +103,8 @@ def _assign_places(boxes: list[tuple[int, int, int, int]]) -> list[tuple[str, in
                 break
         else:
             raise ArgumentError(f"a block of {h}x{w} moving cells (rows {boxes[i][0]}-{boxes[i][1]}, cols "
-                             f"{boxes[i][2]}-{boxes[i][3]}) fits no free place of the canonical hand; "
-                             f"write that part of the layout by hand")
+                                f"{boxes[i][2]}-{boxes[i][3]}) fits no free place of the canonical hand; "
+                                f"write that part of the layout by hand")
         taken.add(out[i][0])
     return [out[i] for i in range(len(boxes))]
 
@@ -133,12 +133,12 @@ def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, in
     moving = int(mask.sum())     # every moving cell; the blocks are drawn around sensor_areas(mask)
     if not moving:
         raise ArgumentError(f"no cell moves in {', '.join(sources)} (noise {noise:.4g}, threshold "
-                         f"{threshold:.4g} raw units over {frames} frames): press the glove while recording")
+                            f"{threshold:.4g} raw units over {frames} frames): press the glove while recording")
     core = sensor_areas(mask)
     if not core.any():
         raise ArgumentError(f"the {moving} moving cell(s) in {', '.join(sources)} form no area of at least 2x2 cells "
-                         f"(lines and single cells: cross-talk or noise, not a sensor area): press the glove "
-                         f"while recording")
+                            f"(lines and single cells: cross-talk or noise, not a sensor area): press the glove "
+                            f"while recording")
     lines = np.argwhere(mask & ~core)
     boxes = cell_boxes(core)
     targets = _assign_places(boxes)

@@ -117,7 +117,7 @@ def _sample_triplets(block: Block, canon: CanonicalHand, layout: Layout, geom: _
     if len(missing):
         r, c = divmod(int(missing[0]), layout.grid[1])
         raise ConfigError(f"layout {layout.layout_id}: block {block.name!r}: live cell [{r}, {c}] has no pixel "
-                         f"in place {block.place!r} (place too small or masked by gaps)")
+                          f"in place {block.place!r} (place too small or masked by gaps)")
     footprint = _Triplets(own, pix, 1.0 / counts[inverse])
     if mode == "nearest":
         return footprint

@@ -121,11 +121,11 @@ def load_taxel_calibration(path: str, grid: tuple[int, int], layout_id: str) -> 
             offset, gain = np.asarray(z["offset"], np.float32), np.asarray(z["gain"], np.float32)
     except (OSError, KeyError, ValueError) as exc:
         raise ConfigError(f"{path}: not a taxel calibration of layout {layout_id} (an .npz with offset and gain "
-                         f"arrays): {exc}") from None
+                          f"arrays): {exc}") from None
     for name, arr in (("offset", offset), ("gain", gain)):
         if arr.shape != tuple(grid):
             raise ConfigError(f"{path}: {name} has shape {arr.shape}, layout {layout_id} has a {grid[0]}x{grid[1]} "
-                             f"grid")
+                              f"grid")
         if not np.isfinite(arr).all():
             raise ConfigError(f"{path}: {name} holds NaN/Inf")
     if (gain <= 0).any():

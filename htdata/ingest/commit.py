@@ -55,7 +55,7 @@ def layout_artifacts(records: list[dict], raster_mode: str, canonical) -> list[L
             first = found.setdefault(lid, entry)
             if first["document"] != entry["document"]:
                 raise DatasetError(f"layout {lid!r} differs between work units {found_unit(records, lid)} "
-                                 f"(a layout file changed during the ingest?); re-run the ingest")
+                                   f"(a layout file changed during the ingest?); re-run the ingest")
     missing = [lid for lid in used if lid not in found]
     if missing:
         raise DatasetError(f"layouts {missing} are used by episodes but no unit record carries them")
@@ -80,14 +80,15 @@ def check_compatible(parent, sources: list) -> None:
             a, b = theirs.get(section, {}).get(key), ours[section].get(key)
             if a != b:
                 raise ConfigError(f"{parent.root}: the dataset was written with {section}.{key} = {a!r}, pipeline "
-                                 f"{sources[0].pipeline.name!r} asks for {b!r}; a dataset has one codec: use the "
-                                 f"dataset's setting or ingest into a new dataset (htdata merge cannot mix them either)")
+                                  f"{sources[0].pipeline.name!r} asks for {b!r}; a dataset has one codec: use "
+                                  f"the dataset's setting or ingest into a new dataset (htdata merge cannot mix "
+                                  f"them either)")
     canon = load_canonical()
     doc = (json.dumps(canon.to_dict(), indent=2, sort_keys=True) + "\n").encode()
     if hashlib.sha256(doc).hexdigest() != parent.manifest["canonical"]["sha256"]:
         raise DatasetError(f"{parent.root}: the dataset was written with another canonical hand template "
-                         f"(sha256 {parent.manifest['canonical']['sha256'][:12]}); its maps are not comparable "
-                         f"with this htdata's: ingest into a new dataset")
+                           f"(sha256 {parent.manifest['canonical']['sha256'][:12]}); its maps are not comparable "
+                           f"with this htdata's: ingest into a new dataset")
 
 
 def merged_sources(parent, sources: list) -> list[dict]:

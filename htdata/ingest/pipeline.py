@@ -89,7 +89,7 @@ class SyncConfig:
         if isinstance(self.max_skew_ms, bool) or not (isinstance(self.max_skew_ms, (int, float))
                                                       and 0 <= self.max_skew_ms <= MAX_SYNC_MS):
             raise ConfigError(f"{where}: sync.max_skew_ms must be in [0, {MAX_SYNC_MS}] (one hour), "
-                             f"got {self.max_skew_ms!r}")
+                              f"got {self.max_skew_ms!r}")
         if isinstance(self.lag, (int, float)) and not isinstance(self.lag, bool) and abs(self.lag) > MAX_SYNC_MS:
             raise ConfigError(f"{where}: sync.lag must be within +-{MAX_SYNC_MS} ms (one hour), got {self.lag!r}")
         if isinstance(self.lag, bool) or not (self.lag in LAG_MODES if isinstance(self.lag, str)
@@ -178,7 +178,7 @@ class OutOfRangeConfig:
     def validate(self, where: str) -> "OutOfRangeConfig":
         if self.policy not in OUT_OF_RANGE_POLICIES:
             raise ConfigError(f"{where}: normalise.out_of_range must be one of {OUT_OF_RANGE_POLICIES}, "
-                             f"got {self.policy!r}")
+                              f"got {self.policy!r}")
         if not (isinstance(self.warn_share, (int, float)) and 0.0 <= self.warn_share <= 1.0):
             raise ConfigError(f"{where}: normalise.out_of_range_warn_share must be in [0, 1], got {self.warn_share!r}")
         return self
@@ -255,7 +255,7 @@ class PipelineConfig:
         for lid in self.shared_layouts:
             if lid not in named:
                 raise ConfigError(f"{where}: shared_layouts lists {lid!r}, which no [normalise.<layout>] table or "
-                                 f"[layouts] entry of this pipeline names{nearest_hint(lid, named)}")
+                                  f"[layouts] entry of this pipeline names{nearest_hint(lid, named)}")
         self.sync.validate(where)
         self.tactile.validate(where)
         check_adapter_params(self.adapter.name, self.adapter.params, where)
@@ -278,7 +278,7 @@ class PipelineConfig:
 
         if self.codec.choice is None:
             raise ValueError(f"{self.path or self.name}: [codec] tactile = {self.codec.tactile!r} is not resolved "
-                             f"for a dataset yet (htdata.glove.codecrule.resolve_sources / with_codec_choice)")
+                              f"for a dataset yet (htdata.glove.codecrule.resolve_sources / with_codec_choice)")
         return CodecChoice.from_info(self.codec.choice)
 
     def with_maps(self, maps: MapStorage) -> "PipelineConfig":
@@ -296,7 +296,7 @@ class PipelineConfig:
 
         if choice.compression != self.tactile.compression:
             raise ValueError(f"{self.path or self.name}: codec choice {choice.codec} does not match "
-                             f"[tactile] compression {self.tactile.compression!r}")
+                              f"[tactile] compression {self.tactile.compression!r}")
         cfg = copy.deepcopy(self)
         cfg.codec.choice = choice.info()
         return cfg
@@ -319,7 +319,7 @@ class PipelineConfig:
             "layouts": dict(self.layouts),
             "normalise": {**{k: {kk: vv for kk, vv in _settings(v).items()
                                  if k not in self.normalise_given or kk in self.normalise_given[k]}
-                             for k, v in self.normalise.items()}, **self.out_of_range.to_dict()},
+                              for k, v in self.normalise.items()}, **self.out_of_range.to_dict()},
             "sync": self.sync.to_dict(),
             "rgb": asdict(self.rgb),
             "tactile": self.tactile.to_dict(),

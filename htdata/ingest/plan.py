@@ -151,7 +151,7 @@ def parse_sources(pipelines: list[str], paths: list[str]) -> tuple[list[Source],
     else:
         if len(srcs) != len(pipelines):
             raise ArgumentError(f"{len(pipelines)} pipeline(s) need {len(pipelines)} SRC folder(s) before OUT, "
-                             f"got {len(srcs)}: {srcs}")
+                                f"got {len(srcs)}: {srcs}")
         pairs = list(zip(pipelines, srcs))
     sources = []
     for pipe, root in pairs:
@@ -173,8 +173,8 @@ def check_settings_agree(sources: list[Source]) -> None:
             a, b = get(first), get(s.pipeline)
             if a != b:
                 raise ConfigError(f"pipelines {first.name!r} ({first.path}) and {s.pipeline.name!r} ({s.pipeline.path}) "
-                                 f"disagree on {name}: {a!r} vs {b!r}; a dataset has one codec and raster "
-                                 f"setting: make them equal or ingest into separate datasets")
+                                  f"disagree on {name}: {a!r} vs {b!r}; a dataset has one codec and raster "
+                                  f"setting: make them equal or ingest into separate datasets")
 
 
 # --------------------------------------------------------------------------- layouts, resolved once
@@ -254,7 +254,7 @@ def check_layout_ids_unique(refs: list) -> None:
             other = seen.setdefault(lid, path)
             if other != path and sha256_file(Path(other)) != sha256_file(Path(path)):
                 raise ConfigError(f"layout id {lid!r} names two different files: {other} and {path} "
-                                 f"(episode {r.episode_id}); give one of them another layout_id")
+                                  f"(episode {r.episode_id}); give one of them another layout_id")
 
 
 def failure_entry(stage: str, source: str, exc: EpisodeError, source_ref: str | None = None) -> dict:

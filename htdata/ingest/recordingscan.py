@@ -69,7 +69,7 @@ def _scan_source(path: Path, pipeline, hand: str | None, layout_file: str | None
         raise ArgumentError(f"{e.file or path}: {e.message}")
     if not refs:
         raise ArgumentError(f"{path}: no recording found by the {pipeline.adapter.name!r} adapter "
-                         f"(pipeline {pipeline.path or pipeline.name})")
+                            f"(pipeline {pipeline.path or pipeline.name})")
     out = []
     for ref in refs:
         hands = [h for h in ref.hands if hand is None or h == hand]

@@ -207,7 +207,7 @@ def check_found_something(sources, refs: list[list], failures: list[dict]) -> No
         root = str(source.root).rstrip("/") + "/"
         if not found and not any(str(f.get("file") or f.get("source_ref") or "").startswith(root) for f in failures):
             raise ArgumentError(f"{source.root}: no recording found for pipeline {source.pipeline.name!r} (adapter "
-                             f"{source.pipeline.adapter.name!r}); check the folder and the pipeline")
+                                f"{source.pipeline.adapter.name!r}); check the folder and the pipeline")
 
 
 def run_units(tasks: list[UnitTask], out: Path, runner, progress: bool) -> tuple[list[dict], list[dict]]:

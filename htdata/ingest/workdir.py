@@ -80,7 +80,7 @@ def check_output(out: Path) -> None:
     if content and not (out / MANIFEST_FILE).is_file() and not (out / WORK_DIR).is_dir() \
             and not list_versions(out):     # committed version files make it a dataset, pointer or not
         raise ArgumentError(f"{out}: directory is not empty and is not an htdata dataset; "
-                         f"refusing to write into it (choose an empty or new directory)")
+                            f"refusing to write into it (choose an empty or new directory)")
 
 
 def prepare_output(out: Path) -> None:

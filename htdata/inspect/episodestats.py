@@ -107,7 +107,7 @@ def dataset_gloves(reader) -> dict[str, Glove]:
             layout = parse_layout(reader.layout(layout_id), where, canonical=canonical)
         except (ValueError, KeyError) as exc:
             raise DatasetError(f"{where}: layout {layout_id!r} is not a glove layout the stats can sample "
-                             f"taxels from: {exc}") from exc
+                               f"taxels from: {exc}") from exc
         gloves[layout_id] = Glove(layout, canonical)
     return gloves
 
@@ -174,7 +174,7 @@ def _read_episode(reader, pos: int, from_raw: list[str], nan_samples: list, drif
                 value = decode_exr_pixels(data, f"{where}.{wanted[hand]}")  # half as stored: converted once
                 if value.shape != MAP_SHAPE:
                     raise DatasetError(f"{where}.{wanted[hand]}: decoded tactile map has shape {value.shape}, "
-                                     f"expected {MAP_SHAPE}")
+                                       f"expected {MAP_SHAPE}")
                 if not all_finite(value):
                     nan_samples.append({"episode": ep["episode_id"], "frame": i - first, "hand": hand, "key": key,
                                         "sample": i, "nonfinite_pixels": int((~np.isfinite(value)).sum())})

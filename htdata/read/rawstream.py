@@ -79,7 +79,7 @@ def episode_stream(reader, episode: str | int, hand: str) -> RawStream:
         hand: "left" or "right".
 
     Raises:
-        ValueError: naming the episode when its samples hold no raw rows
+        ArgumentError: naming the episode when its samples hold no raw rows
             (datasets of format < 3, or ingested with keep_raw = false).
     """
     first, n = reader.episode_range(episode)

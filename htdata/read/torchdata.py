@@ -121,8 +121,8 @@ def _explain_no_pairs(reader: DatasetReader, rows: np.ndarray, hands: tuple[str,
     tactile = sum(int(_tactile_present(rows, h, "tactile").sum()) for h in hands)
     if tactile:
         raise ArgumentError(f"{reader.root}: none of the {len(rows)} selected samples pairs an RGB frame with "
-                         f"{'/'.join(hands)} tactile ({tactile} hand frames have tactile only: a glove-only "
-                         f"dataset?); pass frames=\"tactile\" for tactile-only items")
+                            f"{'/'.join(hands)} tactile ({tactile} hand frames have tactile only: a glove-only "
+                            f"dataset?); pass frames=\"tactile\" for tactile-only items")
 
 
 class _ItemDataset(Dataset):

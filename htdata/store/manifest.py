@@ -141,7 +141,7 @@ def parse_manifest(data: str | bytes, where: str, validate: bool = True) -> dict
         raise DatasetError(f"{where}: a manifest is a JSON object, found {type(manifest).__name__}")
     if manifest.get("format") != FORMAT or manifest.get("format_version") not in READABLE_FORMAT_VERSIONS:
         raise DatasetError(f"{where}: format {manifest.get('format')!r} v{manifest.get('format_version')!r}, "
-                         f"expected {FORMAT!r} v{' or v'.join(map(str, READABLE_FORMAT_VERSIONS))}")
+                           f"expected {FORMAT!r} v{' or v'.join(map(str, READABLE_FORMAT_VERSIONS))}")
     if validate:
         validate_json(manifest, "manifest", where=str(where), error=DatasetError)
     check_manifest_paths(manifest, str(where))   # always: a stranger's dataset never names files outside its root

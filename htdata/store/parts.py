@@ -106,7 +106,7 @@ def _set_num_frames(episodes: list[dict], rows: np.ndarray, where: str) -> None:
         count = int(counts[pos])
         if "num_frames" in ep and ep["num_frames"] != count:
             raise DatasetError(f"{where}: episode {ep['episode_id']!r}: record says num_frames={ep['num_frames']}, "
-                             f"shards hold {count} samples")
+                               f"shards hold {count} samples")
         ep["num_frames"] = count
 
 
@@ -143,7 +143,7 @@ def assemble(parts: list[Part]) -> Assembled:
         for eid in p.episode_ids:
             if eid in seen:
                 raise DatasetError(f"unit {p.unit}: episode {eid!r} appears twice in the dataset "
-                                 f"(also in unit {seen[eid]})")
+                                   f"(also in unit {seen[eid]})")
             seen[eid] = p.unit
     names = [s["name"] for p in parts for s in p.shards]
     if len(set(names)) != len(names):

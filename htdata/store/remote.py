@@ -131,7 +131,7 @@ def publish_dataset(local_root: str | os.PathLike, url: str,
         local = root / rel
         if expected is not None and sha256_file(local) != expected:
             raise DatasetError(f"{local}: sha256 differs from the manifest: the local dataset is damaged "
-                             f"(run `htdata validate`); nothing more uploaded")
+                               f"(run `htdata validate`); nothing more uploaded")
         written = upload_file(fs, local, f"{base}/{rel}")
         back = remote_sha256(fs, f"{base}/{rel}")
         if back != written:

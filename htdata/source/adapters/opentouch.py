@@ -118,9 +118,9 @@ def detect_id_column(fields: list[str], rows: list[dict], path: Path) -> str:
         return "id"
     if not found:
         raise ConfigError(f"{path}: no column of the annotation table holds ids like '<scene>::<demo_id>' "
-                         f"(columns: {fields}); name it with {FIX_ID_COLUMN}")
+                          f"(columns: {fields}); name it with {FIX_ID_COLUMN}")
     raise ConfigError(f"{path}: several columns hold '<scene>::<demo_id>' ids ({found}); choose one with "
-                     f"{FIX_ID_COLUMN}")
+                      f"{FIX_ID_COLUMN}")
 
 
 def load_annotations(path: Path, task_field: str, id_column: str | None = None) -> dict[str, str]:
@@ -142,7 +142,7 @@ def load_annotations(path: Path, task_field: str, id_column: str | None = None) 
     for col, fix in ((id_column, FIX_ID_COLUMN), (task_field, "--set adapter.params.task_field=COLUMN")):
         if col not in fields:
             raise ConfigError(f"{path}: annotation table has no column {col!r} (columns: {fields}); "
-                             f"name the right one with {fix}")
+                              f"name the right one with {fix}")
     tasks: dict[str, str] = {}
     line_of: dict[str, int] = {}
     for lineno, row in enumerate(rows, 2):   # line 1 is the header
@@ -151,7 +151,7 @@ def load_annotations(path: Path, task_field: str, id_column: str | None = None) 
             task = (row.get(task_field) or "").strip()
             if key in tasks and tasks[key] != task:   # which one is right only the table's author knows
                 raise ConfigError(f"{path}: id {key!r} is labelled twice with different tasks: line "
-                                 f"{line_of[key]} says {tasks[key]!r}, line {lineno} says {task!r}; keep one row")
+                                  f"{line_of[key]} says {tasks[key]!r}, line {lineno} says {task!r}; keep one row")
             tasks[key] = task
             line_of.setdefault(key, lineno)
     return tasks

@@ -33,9 +33,9 @@ def check_declared_params(adapter: str, declared: tuple[AdapterParam, ...], para
     for key, value in params.items():
         if key not in known:
             raise ConfigError(f"{where}: adapter.params.{key} is not a param of adapter {adapter!r}; "
-                             f"known params: {listing}")
+                              f"known params: {listing}")
         spec = known[key]
         ok = isinstance(value, spec.types) and not (isinstance(value, bool) and bool not in spec.types)
         if not ok:
             raise ConfigError(f"{where}: adapter.params.{key} must be {'/'.join(t.__name__ for t in spec.types)} "
-                             f"({spec.help}), got {type(value).__name__} {value!r}")
+                              f"({spec.help}), got {type(value).__name__} {value!r}")
