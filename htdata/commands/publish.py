@@ -33,6 +33,7 @@ URL directly: htdata.open("s3://bucket/ds"). For LeRobot users, see
 
 Examples:
   htdata publish data/dataset s3://bucket/ds
+  htdata publish data/dataset s3://bucket/ds        # again after an ingest: only the new files go up
   htdata publish data/dataset file:///mnt/share/ds
 """
 

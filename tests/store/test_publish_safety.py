@@ -299,7 +299,42 @@ def _wrong_frame_count(root: Path) -> None:
     _reseal(root, manifest, "episodes_sha256", ("\n".join(lines) + "\n").encode())
 
 
-@pytest.mark.parametrize("damage, named", [(_wrong_offset, "structure check"), (_wrong_frame_count, "structure check")])
+def _miscounted_shard(root: Path) -> None:
+    manifest = json.loads((root / "dataset.json").read_text())
+    manifest["shards"][0]["samples"] += 1     # the manifest re-sealed by hand: no sha256 can tell
+    rewrite_manifest(root, manifest)
+
+
+def _garbled_rgb(root: Path) -> None:
+    """Episode ep_a's first RGB frame (always decoded by the quick check) overwritten with as many bytes of
+    garbage, its shard's sha256 re-sealed: only decoding can tell."""
+    import io
+    import tarfile
+
+    manifest = json.loads((root / "dataset.json").read_text())
+    shard = root / "shards" / manifest["shards"][0]["name"]
+    data = bytearray(shard.read_bytes())
+    with tarfile.open(fileobj=io.BytesIO(bytes(data))) as tar:
+        member = next(m for m in tar.getmembers() if m.name.startswith("ep_a__000000.rgb"))
+    data[member.offset_data:member.offset_data + member.size] = bytes(range(256)) * (member.size // 256) + \
+        b"x" * (member.size % 256)
+    shard.write_bytes(bytes(data))
+    _reseal_shard_everywhere(root, shard.name, hashlib.sha256(bytes(data)).hexdigest())
+
+
+def _reseal_shard_everywhere(root: Path, name: str, sha: str) -> None:
+    """Every version file listing shard `name` made to record `sha` (and dataset.json, the newest's copy)."""
+    for path in sorted((root / "versions").glob("v*.json")):
+        manifest = json.loads(path.read_text())
+        for shard in manifest["shards"]:
+            if shard["name"] == name:
+                shard["sha256"] = sha
+        path.write_text(json.dumps(manifest, indent=2) + "\n")
+    (root / "dataset.json").write_bytes(path.read_bytes())
+
+
+@pytest.mark.parametrize("damage, named", [(_wrong_offset, "structure check"), (_wrong_frame_count, "structure check"),
+                                           (_miscounted_shard, "structure check"), (_garbled_rgb, "content check")])
 def test_a_version_validate_refuses_is_not_published(ds, capsys, damage, named):
     damage(ds)
     url = memory_url()
@@ -340,3 +375,14 @@ def test_a_dataset_written_before_versions_publishes_and_updates_by_its_manifest
     assert remote.publish_dataset(old, url).files == 0                            # the same dataset: up to date
     with pytest.raises(DestinationRefused, match=r"shares no version with this dataset \(it has unversioned"):
         remote.publish_dataset(ds, url)
+
+
+def test_versions_recording_two_sha256_for_one_file_are_refused(ds):
+    name = json.loads((ds / "dataset.json").read_text())["shards"][0]["name"]
+    manifest = json.loads((ds / "dataset.json").read_text())
+    manifest["shards"][0]["sha256"] = "0" * 64        # the newest version only: v1 still records the true one
+    rewrite_manifest(ds, manifest)
+    url = memory_url()
+    with pytest.raises(DatasetError, match=f"{name}: version 2 records sha256 000000000000, an earlier version"):
+        remote.publish_dataset(ds, url)
+    assert remote_tree(url) == {}
