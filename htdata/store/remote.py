@@ -80,7 +80,7 @@ class PublishResult:
     files: int          # files uploaded, dataset.json included when it changed
     bytes: int          # bytes uploaded
     kept: int           # files already at the URL, read back and found right
-    seconds: float
+    seconds: float      # the whole publish: checks, validation, hashing and upload
 
 
 def cache_dir() -> Path:
@@ -175,6 +175,7 @@ def publish_dataset(local_root: str | os.PathLike, url: str,
     """
     if storage.is_url(os.fspath(local_root)):
         raise ArgumentError(f"{local_root}: publish reads a LOCAL dataset directory")
+    t0 = time.perf_counter()   # the whole publish: checks, validation and hashing included
     root = Path(local_root)
     dest = open_destination(url)
     refuse_overlap(root, dest)
@@ -183,7 +184,6 @@ def publish_dataset(local_root: str | os.PathLike, url: str,
     if check is not None:
         check(root, pinned.version)
     sums = verify_sources(pinned)
-    t0 = time.perf_counter()
     with ExitStack() as held:
         if dest.local is not None:   # a local folder may be someone's live dataset: its writers' lock
             held.enter_context(WriterLock(dest.local, f"htdata publish {root} {url}"))
