@@ -12,7 +12,9 @@
     history.py   log and diff of versions
     gcrecord.py  gc tombstones: what `htdata gc` leaves for the readers it may outlive (`VersionCollected`)
     repair.py    `htdata repair`: dataset.json back in line with the version files
-    remote.py    publish a committed dataset to a URL; cache a remote index
+    remote.py    publish a committed dataset to a URL (verified, manifest last); cache a remote index
+    publishplan.py  what a publish uploads: the current version pinned as a reader pins it, and its files
+    destination.py  where a publish may write: never into its dataset, over another dataset or someone's files
 
 May import: htdata's base modules, htdata.format and htdata.glove (calibration records).
 Never ingest, reading, curation, inspection or the commands.

@@ -1,15 +1,30 @@
 """Remote datasets: publish a committed dataset to an fsspec URL; cache a remote index locally.
 
-`htdata publish DATASET URL` (htdata/commands/publish.py) runs `publish_dataset`.
+`htdata publish DATASET URL` (htdata/commands/publish.py) runs `publish_dataset`,
+in this order, and writes nothing at the URL until every check has passed:
 
-Publishing uploads layouts/, shards/ and every committed version (its
-manifest, episode file, index and splits; unversioned datasets: splits/,
-episodes.jsonl and index.npy),
-reads every uploaded file back to check its sha256 against the local file
-(and against the manifest where the manifest records one), and writes
-dataset.json LAST. A previous dataset.json at the URL is deleted first, so
-while an upload runs, or after it failed part way, the URL is never a valid
-dataset (readers refuse a directory without a manifest).
+1. the destination (store/destination.py): a URL naming no folder, a local
+   folder that is, holds or lies inside the dataset (symlinks resolved), a
+   folder of someone's files, another dataset, or a newer copy of this one are
+   refused with one line;
+2. one consistent snapshot (store/publishplan.py): the current version is
+   pinned as a reader pins it; a writer committing meanwhile changes nothing
+   published;
+3. the caller's check of that version (the command runs `htdata validate`'s
+   quick validation and refuses with its first failing check);
+4. the source's checksums: every file is hashed and compared with the sha256
+   its manifest records, before anything is uploaded;
+5. what the destination already holds (an earlier publish of this dataset) is
+   read back and kept when its sha256 is right: an update only adds;
+6. the upload: first the marker `.htdata-publish.json` (the sha256 of each
+   version file being published: a resumed publish knows its own folder by
+   it), then layouts, shards and records, each read back and its sha256
+   checked against the verified source, then the version files after the
+   files they list (a version file on a local disk IS a committed version),
+   and `dataset.json` LAST. Those small files go up whole: under a temp name,
+   read back, renamed. Until the end the URL holds what it held before:
+   nothing (no dataset.json) on a first publish, the previous publish on an
+   update; a rerun after an interruption uploads only what is missing.
 
 Readers on a URL (`DatasetReader("s3://...")`) keep shard reads ranged
 (seek + read on the fsspec file) but fetch index.npy once into a local cache
@@ -23,30 +38,49 @@ import hashlib
 import os
 import posixpath
 import time
+import uuid
 from collections.abc import Callable
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from htdata.errors import ArgumentError, DatasetError
-from htdata.format.table import EPISODES_FILE, INDEX_FILE, LAYOUTS_DIR, MANIFEST_FILE, SHARDS_DIR, SPLITS_DIR
+from htdata.faults import crash_point
+from htdata.format.table import INDEX_FILE, MANIFEST_FILE
 from htdata.store import storage
-from htdata.store.confine import inside
+from htdata.store.destination import (
+    MARKER,
+    TEMP_SUFFIX,
+    Destination,
+    DestinationRefused,
+    check_identity,
+    marker_bytes,
+    open_destination,
+    read_state,
+    refuse_overlap,
+)
 from htdata.store.fsutil import atomic_open, sha256_file, sha256_stream
-from htdata.store.manifest import load_index_file, load_manifest
-from htdata.store.versions import list_versions, version_manifest_file
+from htdata.store.lock import WriterLock
+from htdata.store.manifest import load_index_file
+from htdata.store.publishplan import PinnedDataset, pin_dataset
+from htdata.store.versions import version_manifest_file
 
 CACHE_ENV = "HTDATA_CACHE"
 CHUNK = 1 << 20
+# A caller's check of the pinned version (root, version; 0 = unversioned), raising to refuse the publish.
+VersionCheck = Callable[[Path, int], None]
 
 
 @dataclass
 class PublishResult:
     url: str
-    files: int          # files uploaded, dataset.json included
-    bytes: int
-    seconds: float
+    version: int        # the version published (0: an unversioned dataset)
+    files: int          # files uploaded, dataset.json included when it changed
+    bytes: int          # bytes uploaded
+    kept: int           # files already at the URL, read back and found right
+    seconds: float      # the whole publish: checks, validation, hashing and upload
 
 
 def cache_dir() -> Path:
@@ -56,38 +90,6 @@ def cache_dir() -> Path:
 
 
 # -- publish ----------------------------------------------------------------
-
-def publish_plan(local_root: str | os.PathLike) -> tuple[dict, list[tuple[str, str | None]]]:
-    """(manifest, [(relative path, sha256 the manifest expects or None)]) in upload order.
-
-    Everything but dataset.json: layouts and splits first, then shards in
-    manifest order, then episodes.jsonl and index.npy (which name the shards).
-    Resume state (.work/) and reports are not part of a published dataset.
-    """
-    root = Path(local_root)
-    manifest = load_manifest(root)
-    versions = list_versions(root)
-    # every committed version travels (remote readers can open any of them), current last
-    manifests = [load_manifest(root, version=v) for v in versions if v != manifest.get("version")] + [manifest]
-    plan: list[tuple[str, str | None]] = []
-    for sub in (LAYOUTS_DIR, SPLITS_DIR):
-        folder = root / sub
-        if folder.is_dir():
-            plan += [(f"{sub}/{p.name}", None) for p in sorted(folder.iterdir()) if p.is_file()]
-    for m in manifests:
-        plan += [(f"{SHARDS_DIR}/{s['name']}", s["sha256"]) for s in m["shards"]]
-    for m in manifests:
-        plan.append((m.get("episodes_file", EPISODES_FILE), m.get("episodes_sha256")))
-        plan.append((m.get("index_file", INDEX_FILE), m.get("index_sha256")))
-        plan += [(e["file"], e["sha256"]) for e in m.get("splits", {}).values()]
-    plan += [(version_manifest_file(v), None) for v in versions]
-    plan = list(dict.fromkeys(plan))   # shards shared by versions once, in first-listed order
-    for rel, _ in plan:
-        inside(root, rel)   # a dataset never makes publish read, or write, outside its folder
-        if not (root / rel).is_file():
-            raise FileNotFoundError(f"{root / rel}: listed by the dataset but missing; cannot publish")
-    return manifest, plan
-
 
 def upload_file(fs, local: Path, remote: str) -> str:
     """Copy one local file to `remote` (streamed); return the sha256 of the bytes written."""
@@ -107,46 +109,143 @@ def remote_sha256(fs, remote: str) -> str:
         return sha256_stream(f)
 
 
-def publish_dataset(local_root: str | os.PathLike, url: str,
-                    on_file: Callable[[int, int, str], None] | None = None) -> PublishResult:
-    """Upload a committed local dataset to an fsspec URL, verified, manifest last.
+def upload_whole(fs, data: bytes, remote: str) -> None:
+    """Put `data` at `remote` whole or not at all: a temp name beside it, read back, then renamed."""
+    parent = posixpath.dirname(remote)
+    if parent:
+        fs.makedirs(parent, exist_ok=True)
+    tmp = f"{parent}/.{posixpath.basename(remote)}.{uuid.uuid4().hex[:8]}{TEMP_SUFFIX}"
+    fs.pipe_file(tmp, data)
+    if remote_sha256(fs, tmp) != hashlib.sha256(data).hexdigest():
+        fs.rm(tmp)
+        raise IOError(f"{remote}: read-back sha256 differs from what was uploaded")
+    fs.mv(tmp, remote)
 
-    `on_file(done, total, relative path)` is called after each verified file.
+
+def verify_sources(pinned: PinnedDataset) -> dict[str, str]:
+    """sha256 of every file to publish, checked against its manifest's record; DatasetError on the first
+    mismatch (before anything is uploaded)."""
+    sums = {}
+    for rel, expected in pinned.files:
+        local = pinned.root / rel
+        sums[rel] = sha256_file(local)
+        if expected is not None and sums[rel] != expected:
+            raise DatasetError(f"{local}: sha256 differs from the manifest: the local dataset is damaged "
+                               f"(run `htdata validate {pinned.root}`); nothing was uploaded")
+    return sums
+
+
+def survey(dest: Destination, pinned: PinnedDataset, sums: dict[str, str]) -> list[str]:
+    """The files the destination lacks or holds damaged (read back); refused when a file the records give
+    no sha256 for is there with other bytes (whose would be right cannot be told)."""
+    fs = dest.fs
+    present = {posixpath.relpath(p, dest.base): info.get("size")
+               for p, info in fs.find(dest.base, detail=True).items()} if fs.exists(dest.base) else {}
+    todo = []
+    for rel, expected in pinned.files:
+        if rel in present and present[rel] == (pinned.root / rel).stat().st_size \
+                and remote_sha256(fs, dest.path(rel)) == sums[rel]:
+            continue
+        if rel in present and expected is None:
+            raise DestinationRefused(f"{dest.url}/{rel}: already there with other bytes than this dataset's, and "
+                                     f"no record says which are right; remove it or choose another URL; "
+                                     f"nothing was written")
+        todo.append(rel)
+    return todo
+
+
+def publish_dataset(local_root: str | os.PathLike, url: str,
+                    on_file: Callable[[int, int, str], None] | None = None,
+                    check: VersionCheck | None = None) -> PublishResult:
+    """Publish the current version of a committed local dataset (and every version before it) to `url`.
+
+    The order and what each step refuses are in the module docstring; nothing
+    is written at `url` before every refusal has had its chance.
+
+    Args:
+        local_root: the local dataset folder.
+        url: an fsspec URL (or a local path) naming the destination folder.
+        on_file: called as (done, total, relative path) after each uploaded and verified file.
+        check: called with (root, pinned version) before anything is hashed or uploaded; raises to refuse.
+
+    Raises:
+        ArgumentError: `local_root` is a URL. DestinationRefused: the destination (one line, nothing written).
+        FileNotFoundError: not a committed dataset. DatasetError: the source is damaged.
+        BackendMissing: no fsspec backend for the URL's protocol.
     """
-    root = Path(local_root)
     if storage.is_url(os.fspath(local_root)):
         raise ArgumentError(f"{local_root}: publish reads a LOCAL dataset directory")
-    manifest_path = root / MANIFEST_FILE
-    if not manifest_path.is_file():
-        raise FileNotFoundError(f"{manifest_path}: no manifest: not a committed htdata dataset")
-    _, plan = publish_plan(root)
-    fs, base = storage.url_to_fs(url)
-    base = base.rstrip("/")
-    t0 = time.perf_counter()
-    remote_manifest = f"{base}/{MANIFEST_FILE}"
-    if fs.exists(remote_manifest):
-        fs.rm(remote_manifest)   # the URL stops being a dataset until the new upload is complete
-    total = 0
-    for n, (rel, expected) in enumerate(plan, 1):
-        local = root / rel
-        if expected is not None and sha256_file(local) != expected:
-            raise DatasetError(f"{local}: sha256 differs from the manifest: the local dataset is damaged "
-                               f"(run `htdata validate`); nothing more uploaded")
-        written = upload_file(fs, local, f"{base}/{rel}")
-        back = remote_sha256(fs, f"{base}/{rel}")
+    t0 = time.perf_counter()   # the whole publish: checks, validation and hashing included
+    root = Path(local_root)
+    dest = open_destination(url)
+    refuse_overlap(root, dest)
+    pinned = pin_dataset(root)
+    check_identity(dest, read_state(dest), pinned.version_files, pinned.version)
+    if check is not None:
+        check(root, pinned.version)
+    sums = verify_sources(pinned)
+    with ExitStack() as held:
+        if dest.local is not None:   # a local folder may be someone's live dataset: its writers' lock
+            held.enter_context(WriterLock(dest.local, f"htdata publish {root} {url}"))
+            check_identity(dest, read_state(dest), pinned.version_files, pinned.version)
+        return _upload(dest, pinned, sums, on_file, t0)
+
+
+def _upload(dest: Destination, pinned: PinnedDataset, sums: dict[str, str],
+            on_file: Callable[[int, int, str], None] | None, t0: float) -> PublishResult:
+    """Steps 5 and 6 of the module docstring, after every refusal."""
+    fs = dest.fs
+    state = read_state(dest)
+    new_versions = [n for n in sorted(pinned.version_files) if n and n not in state.versions]
+    todo = survey(dest, pinned, sums)
+    pointer_changes = state.pointer != pinned.pointer
+    marker = marker_bytes(pinned.version_files)
+    if marker_versions_differ(state, pinned):   # first: a resumed publish knows its own earlier attempt by it
+        upload_whole(fs, marker, dest.path(MARKER))
+    progress = _Progress(on_file, len(todo) + len(new_versions) + int(pointer_changes))
+    for rel in todo:
+        local = pinned.root / rel
+        written = upload_file(fs, local, dest.path(rel))
+        if written != sums[rel]:
+            raise DatasetError(f"{local}: changed while being published (sha256 {written[:12]}, verified "
+                               f"{sums[rel][:12]}); {dest.url} still holds what it held before")
+        back = remote_sha256(fs, dest.path(rel))
         if back != written:
-            raise IOError(f"{url}/{rel}: uploaded sha256 {written[:12]} but read back {back[:12]}")
-        total += local.stat().st_size
-        if on_file is not None:
-            on_file(n, len(plan) + 1, rel)
-    # The manifest goes last: only now does the URL hold a valid dataset.
-    written = upload_file(fs, manifest_path, remote_manifest)
-    if remote_sha256(fs, remote_manifest) != written:
-        raise IOError(f"{url}/{MANIFEST_FILE}: read-back sha256 differs from what was uploaded")
-    total += manifest_path.stat().st_size
-    if on_file is not None:
-        on_file(len(plan) + 1, len(plan) + 1, MANIFEST_FILE)
-    return PublishResult(url=url, files=len(plan) + 1, bytes=total, seconds=time.perf_counter() - t0)
+            raise IOError(f"{dest.url}/{rel}: uploaded sha256 {written[:12]} but read back {back[:12]}")
+        progress.done(rel, local.stat().st_size)
+    crash_point("publish_files_uploaded")
+    # Version files after the files they list: on a local disk a version file present IS a committed version.
+    for n in new_versions:
+        upload_whole(fs, pinned.version_files[n], dest.path(version_manifest_file(n)))
+        progress.done(version_manifest_file(n), len(pinned.version_files[n]))
+    if pointer_changes:
+        now = read_state(dest).pointer_version
+        if now is not None and now > pinned.version:   # another publish got there first: never roll it back
+            raise DestinationRefused(f"{dest.url}: moved on to version {now} while this publish of version "
+                                     f"{pinned.version} ran; its dataset.json was left as it is")
+        # The manifest goes last: only now does the URL name the new version.
+        upload_whole(fs, pinned.pointer, dest.path(MANIFEST_FILE))
+        progress.done(MANIFEST_FILE, len(pinned.pointer))
+    kept = len(pinned.files) - len(todo) + len([n for n in pinned.version_files if n]) - len(new_versions)
+    return PublishResult(url=dest.url, version=pinned.version, files=progress.files, bytes=progress.bytes,
+                         kept=kept, seconds=time.perf_counter() - t0)
+
+
+def marker_versions_differ(state, pinned: PinnedDataset) -> bool:
+    """Whether the destination's publish marker lacks (or misstates) a version being published."""
+    return state.marker != {n: hashlib.sha256(data).hexdigest() for n, data in pinned.version_files.items()}
+
+
+class _Progress:
+    """Counts what went up and tells the caller after each file."""
+
+    def __init__(self, on_file: Callable[[int, int, str], None] | None, total: int):
+        self.on_file, self.total, self.files, self.bytes = on_file, total, 0, 0
+
+    def done(self, rel: str, size: int) -> None:
+        self.files, self.bytes = self.files + 1, self.bytes + size
+        if self.on_file is not None:
+            self.on_file(self.files, self.total, rel)
 
 
 # -- index cache for remote readers ----------------------------------------

@@ -38,14 +38,22 @@ def join(root: str | os.PathLike, *parts: str) -> str:
     return os.path.join(_local(root), *parts)
 
 
+# protocols whose backend needs more than a Python package, and what (said when it fails to start)
+NATIVE_NEEDS = {"hdfs": "a Java runtime and Hadoop's libhdfs, loaded by pyarrow (set JAVA_HOME and HADOOP_HOME)",
+                "webhdfs": "a reachable WebHDFS name node"}
+
+
 def url_to_fs(location: str):
-    """(fsspec filesystem, path inside it) for a URL; a missing backend raises BackendMissing (one line)."""
+    """(fsspec filesystem, path inside it) for a URL; a backend that is missing, or fails to start (hdfs://
+    without a JVM), raises BackendMissing (one line)."""
     import fsspec
 
     try:
         return fsspec.core.url_to_fs(location)
     except ImportError as exc:
         raise BackendMissing(missing_backend_message(location, exc)) from None
+    except OSError as exc:   # e.g. pyarrow's HDFS: a multi-line dlopen report when no JVM is found
+        raise BackendMissing(unusable_backend_message(location, exc)) from None
 
 
 def missing_backend_message(location: str, exc: ImportError) -> str:
@@ -56,6 +64,15 @@ def missing_backend_message(location: str, exc: ImportError) -> str:
         return (f"{location}: {protocol}:// needs the {package} package, which is not installed: "
                 f"pip install {package} (or htdata's extra: pip install '.[{extra}]' in the htdata checkout)")
     return f"{location}: {protocol}:// needs a package that is not installed: {exc}"
+
+
+def unusable_backend_message(location: str, exc: OSError) -> str:
+    """`location`: its protocol's filesystem could not start; what it needs, and the error's first line."""
+    protocol = os.fspath(location).split("://", 1)[0].lower()
+    first = next((line.strip() for line in str(exc).splitlines() if line.strip()), type(exc).__name__)
+    need = NATIVE_NEEDS.get(protocol)
+    return (f"{location}: the {protocol}:// filesystem could not start: {first}"
+            + (f"; {protocol}:// needs {need}" if need else ""))
 
 
 def open_binary(location: str | os.PathLike) -> IO[bytes]:

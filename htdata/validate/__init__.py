@@ -48,8 +48,10 @@ results. `validator.validate_dataset` runs it all and returns the report
 (`report.py`: Check objects, text form).
 Shared by the checks: `geometry.py` (per-layout covered pixels and their
 regions), `samplejson.py` (one sample's JSON against its schema, index row
-and members); `validator.py` holds `validate_dataset`. Exit status of the command: 0 when
-every check passes (warnings allowed), 1 otherwise.
+and members); `validator.py` holds `validate_dataset`; `gate.py` runs it as a
+gate (`require_valid`: `htdata publish` refuses a version that fails, naming
+the first failing check). Exit status of the command: 0 when every check
+passes (warnings allowed), 1 otherwise.
 """
 
 from htdata.validate.report import CHECKS, Check, format_report, write_report

@@ -73,26 +73,52 @@ def test_publish_keeps_the_versions_and_their_splits(dataset, tmp_path):
     assert DatasetReader(url, version=1).manifest == DatasetReader(copy, version=1).manifest
 
 
-def test_interrupted_upload_leaves_no_manifest(dataset, monkeypatch):
-    url = fresh_url()
-    remote.publish_dataset(dataset, url)   # a previous, complete upload is at the URL
+def _dropping_after(monkeypatch, n: int) -> None:
+    """Make the n-th file upload fail as a dropped connection would."""
     real = remote.upload_file
     calls = {"n": 0}
 
     def failing_upload(fs, local, target):
         calls["n"] += 1
-        if calls["n"] == 4:
+        if calls["n"] == n:
             raise ConnectionError("network dropped")
         return real(fs, local, target)
 
     monkeypatch.setattr(remote, "upload_file", failing_upload)
-    with pytest.raises(ConnectionError):
-        remote.publish_dataset(dataset, url)
+
+
+def test_interrupted_upload_leaves_no_manifest(dataset, monkeypatch, tmp_path):
+    url = fresh_url()
+    with monkeypatch.context() as m:
+        _dropping_after(m, 4)
+        with pytest.raises(ConnectionError):
+            remote.publish_dataset(dataset, url)       # a first publish, interrupted
     fs, path = fsspec.core.url_to_fs(url)
     assert fs.exists(f"{path}/layouts")             # some files went up ...
     assert not fs.exists(f"{path}/dataset.json")    # ... but the URL is not a dataset
     with pytest.raises(FileNotFoundError, match="no manifest"):
         DatasetReader(url)
+    resumed = remote.publish_dataset(dataset, url)  # the rerun adds only what is missing
+    assert resumed.kept == 3 and DatasetReader(url).version == 2
+
+
+def test_interrupted_update_leaves_the_previous_publish(dataset, monkeypatch, tmp_path):
+    import shutil
+
+    copy = Path(shutil.copytree(dataset, tmp_path / "copy"))
+    url = fresh_url()
+    remote.publish_dataset(copy, url)                  # version 2 is at the URL
+    commit_split(copy, "more", {"train": ["ep_a"], "test": ["ep_b", "ep_c"]})     # version 3
+    fs, path = fsspec.core.url_to_fs(url)
+    pointer = fs.cat_file(f"{path}/dataset.json")
+    with monkeypatch.context() as m:
+        _dropping_after(m, 2)
+        with pytest.raises(ConnectionError):
+            remote.publish_dataset(copy, url)
+    assert fs.cat_file(f"{path}/dataset.json") == pointer    # the URL still holds version 2, readable
+    far = DatasetReader(url)
+    assert far.version == 2 and far.sample(5) == DatasetReader(copy, version=2).sample(5)
+    assert remote.publish_dataset(copy, url).version == 3 and DatasetReader(url).version == 3
 
 
 def test_corrupt_local_shard_is_not_published(dataset, tmp_path):
