@@ -9,7 +9,8 @@ from pathlib import Path
 from htdata import validate
 from htdata.commands.outputs import output_path
 from htdata.commands.version_arg import version_arg
-from htdata.format.table import VALIDATE_REPORT
+from htdata.format.table import REPORTS_DIR, VALIDATE_REPORT
+from htdata.store.writable import symlinked_folder
 
 EPILOG = """\
 Checks, each a section of the report with every failure named by shard / sample / episode / frame:
@@ -51,6 +52,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    refused = symlinked_folder(args.dataset, REPORTS_DIR) if args.json is None else None
+    if refused:      # checked first: the report would be written outside the dataset
+        print(f"htdata validate: error: {refused} (or pass --json REPORT)", file=sys.stderr)
+        return 2
     try:
         report = validate.validate_dataset(args.dataset, split=args.split, deep=args.deep,
                                            sample_frac=args.sample_frac, seed=args.seed, workers=args.workers,

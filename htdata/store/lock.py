@@ -11,6 +11,9 @@ takeover is reported to the caller (`WriterLock.note`). Locks held from
 another host are never broken automatically: only that host can tell
 whether its holder lives (remove the file by hand once you know).
 
+Taking the lock first refuses a dataset whose writers' folders (shards/, .work/, ...) are symlinks
+(htdata/store/writable.py): nothing is written or deleted through one.
+
 Readers take no lock: a version, once committed, never changes.
 """
 
@@ -24,6 +27,8 @@ import socket
 import sys
 import time
 from pathlib import Path
+
+from htdata.store.writable import check_writable_folders
 
 LOCK_FILE = ".lock"
 TAKEOVER_STALE_S = 30.0   # a takeover mutex older than this was left by a writer killed inside it
@@ -151,6 +156,8 @@ class WriterLock:
         return holder if isinstance(holder, dict) else {}
 
     def acquire(self) -> "WriterLock":
+        # every writer takes this lock first: nothing is written or deleted through a symlinked folder
+        check_writable_folders(self.path.parent)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         if self.path.is_dir() or (self.path.exists() and not self.path.is_file()):
             raise DatasetLocked(f"{self.path}: is a directory (or another non-file), not a writer lock; no writer "
