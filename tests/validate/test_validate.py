@@ -14,6 +14,7 @@ import pytest
 from htdata.benchmarks.validation import validate_benchmark
 from htdata.cli import main as cli_main
 from htdata.curate.split import make_split, split_path
+from htdata.errors import ArgumentError
 from htdata.format.codec import encode_exr
 from htdata.format.shardio import BLOCK
 from htdata.format.table import EPISODES_FILE, FORMAT_VERSION, INDEX_FILE, MANIFEST_FILE, SHARDS_DIR
@@ -415,9 +416,23 @@ def test_split_of_another_commit_and_unknown_split(ds):
     assert _failing_checks(report) == {"splits"}
     [fail] = _failures(report, "splits", "split_manifest")
     assert fail["expected"] == "0" * 64 and fail["found"] == _manifest(ds)["episodes_sha256"]
-    report = validate_dataset(ds, split="nope")
-    [fail] = _failures(report, "splits", "split_missing")
+    with pytest.raises(ArgumentError, match=r"version 2 has no split 'nope' \(its splits: s\); nothing validated"):
+        validate_dataset(ds, split="nope")       # a typo is said before validating (issue 35)
+    split_path(ds, "s").unlink()                 # a known split whose file is gone: a failure of the report
+    [fail] = _failures(validate_dataset(ds, split="s"), "splits", "split_missing")
     assert "known splits: s" in fail["message"]
+
+
+def test_validate_split_typo_checks_the_name_first_and_keeps_the_saved_report(ds, capsys):
+    """Issue 35: `validate --split typo` ran the whole validation, then failed, overwriting the saved report."""
+    make_split(ds, ["pour"], name="main")
+    assert cli_main(["validate", str(ds), "--split", "main"]) == 0
+    saved = (ds / "reports" / "validate.json").read_bytes()
+    capsys.readouterr()
+    assert cli_main(["validate", str(ds), "--split", "mian", "--deep"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "has no split 'mian' (its splits: main)" in err[0], err
+    assert (ds / "reports" / "validate.json").read_bytes() == saved
 
 
 def test_split_file_edited_behind_the_manifest_fails_its_sha256(ds):
