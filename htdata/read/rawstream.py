@@ -46,7 +46,8 @@ def check_records(reader) -> None:
     refuse_mismatched(reader.manifest.get("calibrations", {}), reader.episodes,
                       storage.join(reader.root, MANIFEST_FILE if reader.version is None
                                    else version_manifest_file(reader.version)),
-                      storage.join(reader.root, reader.manifest.get("episodes_file", "episodes.jsonl")))
+                      storage.join(reader.root, reader.manifest.get("episodes_file", "episodes.jsonl")),
+                      reader.manifest.get("record_digests", ()))
 
 
 # `reader` below is a htdata.read.reader.DatasetReader, not imported: the reader renders the maps of a
