@@ -126,3 +126,32 @@ def rewrite_members(root: Path, row: int, replacement: dict[str, bytes]) -> None
     (root / manifest["index_file"]).write_bytes(buf.getvalue())
     manifest["index_sha256"] = hashlib.sha256(buf.getvalue()).hexdigest()
     rewrite_manifest(root, manifest)
+
+
+# --------------------------------------------------------------------------- a long glove stream, deflated
+
+def _npy_member(z, name: str, dtype, shape: tuple, blocks) -> None:
+    from numpy.lib import format as npy
+
+    with z.open(name, "w", force_zip64=True) as f:
+        head = io.BytesIO()
+        npy.write_array_header_1_0(head, {"descr": np.dtype(dtype).str, "fortran_order": False, "shape": shape})
+        f.write(head.getvalue())
+        for block in blocks:
+            f.write(block)
+
+
+def write_long_glove(npz: Path, rows: int, t0: int, step_ns: int, value: int = 0, dtype="<u1") -> None:
+    """A native tactile_<hand>.npz of `rows` constant 16x16 rows stamped t0, t0 + step_ns, ... written in
+    blocks (never the whole array in memory): deflated, a few million rows take a few MB."""
+    import zipfile
+
+    chunk = 1 << 16
+    row = np.full((16, 16), value, dtype)
+    full = np.broadcast_to(row, (chunk, 16, 16)).tobytes()
+    with zipfile.ZipFile(npz, "w", zipfile.ZIP_DEFLATED) as z:
+        _npy_member(z, "values.npy", dtype, (rows, 16, 16),
+                    (full[:min(chunk, rows - s) * row.nbytes] for s in range(0, rows, chunk)))
+        _npy_member(z, "timestamps_ns.npy", "<i8", (rows,),
+                    ((t0 + np.arange(s, min(s + chunk, rows), dtype=np.int64) * step_ns).tobytes()
+                     for s in range(0, rows, chunk)))

@@ -193,6 +193,7 @@ class NativeStreams(EpisodeStreams):
         try:
             rows = NpzRows(path, "values")
             self._rows[hand] = rows
+            check_tactile_shape(ref, hand, rows.shape, path)   # by its header, before a timestamp is read
             ts_rows = NpzRows(path, "timestamps_ns")
             try:
                 declared = ts_rows.num_rows
@@ -204,7 +205,6 @@ class NativeStreams(EpisodeStreams):
                 ts_rows.close()
         except NpzRowError as exc:
             raise EpisodeError(ref, exc.row, str(exc), file=path) from exc
-        check_tactile_shape(ref, hand, rows.shape, path)
         if ts.ndim != 1 or not np.issubdtype(ts.dtype, np.integer):
             raise EpisodeError(ref, None, f"timestamps_ns must be 1-D integers, got {ts.dtype} {ts.shape}", file=path)
         n = min(rows.num_rows, ts.size)

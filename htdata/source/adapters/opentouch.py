@@ -50,7 +50,7 @@ from htdata.source.adapters.discovery import fingerprint_files, sanitise_id
 from htdata.source.adapters.hdf5safe import check_hdf5_size, in_file
 from htdata.source.adapters.params import AdapterParam, param_values
 from htdata.source.adapters.sourcetree import walk_source
-from htdata.source.adapters.streamchecks import check_tactile_shape
+from htdata.source.adapters.streamchecks import check_stream_rows, check_tactile_shape
 from htdata.source.rgb import CHANNEL_ORDERS, decode_jpeg_frame, to_rgb
 
 log = logging.getLogger(__name__)
@@ -324,6 +324,7 @@ class OpenTouchStreams(EpisodeStreams):
         try:
             stamps = in_file(ref, g, "timestamps", self.path)
             check_hdf5_size(ref, stamps, self.path)
+            check_stream_rows(ref, "timestamps", int(stamps.shape[0]) if stamps.shape else 1, self.path)
             ts = np.asarray(stamps[()], dtype=np.int64)
             self._jpegs = in_file(ref, g, "rgb_images_jpeg", self.path)
             self._pressure = {}
