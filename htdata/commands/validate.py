@@ -24,8 +24,9 @@ Checks, each a section of the report with every failure named by shard / sample 
              fps deviations are warnings
   sensors    (warnings) regions that never change, saturated values, all-zero hands
   splits     (--split NAME) parts disjoint and complete, OOD tasks only in ood, no identical
-             frame in two parts
-The report is written to DATASET/reports/validate.json. Exit 0 when every check passes
+             frame in two parts (a NAME the version lacks is refused first: nothing validated)
+The report is written to DATASET/reports/validate.json (never through a symlinked reports/:
+refused, pass --json). Exit 0 when every check passes
 (warnings allowed), 1 otherwise. A folder that is not a dataset (no dataset.json) gets one
 FAIL line and nothing is written into it.
 
