@@ -6,6 +6,9 @@ decoder would allocate width x height x 3 bytes before finding the data missing)
 `peak_rss_mb(code)`: run `code` in a fresh interpreter (this checkout on its path) and return
 (its stdout, its peak RSS in MB): memory-sensitive cases run there, so a regression costs that process,
 not the test runner, and the number is the process's own.
+`read_members` / `rewrite_members`: a sample's member bytes read from its shard / replaced by hand, the
+index and manifest re-sealed, so that only content checks can notice.
+`write_long_glove`: a native glove npz of millions of constant rows, written block by block.
 """
 
 from __future__ import annotations
