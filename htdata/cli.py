@@ -104,6 +104,10 @@ def main(argv: list[str] | None = None) -> int:
     args = sub.parse_args(argv[1:])
     try:
         return int(module.run(args) or 0)
+    except KeyboardInterrupt:   # Ctrl-C: one line, no traceback; every write commits whole or not at all
+        how = getattr(module, "INTERRUPTED", "run the command again: a version is committed whole or not at all")
+        print(f"\nhtdata {name}: interrupted (Ctrl-C); {how}", file=sys.stderr)
+        return 130
     except HtdataError as exc:   # a user-caused error no command caught itself: its one line, no traceback
         print(f"htdata {name}: error: {exc}", file=sys.stderr)
         return 2

@@ -58,6 +58,10 @@ Examples:
   htdata ingest --pipeline opentouch --set tactile.maps=raw data/raw/opentouch data/dataset_raw
 """
 
+# what the CLI says after Ctrl-C (htdata/cli.py)
+INTERRUPTED = ("run the same command again to resume: finished work units are kept, and the re-run writes what "
+               "an uninterrupted run would have")
+
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.epilog = EPILOG

@@ -9,7 +9,8 @@ from pathlib import Path
 from htdata import validate
 from htdata.commands.outputs import output_path
 from htdata.commands.version_arg import version_arg
-from htdata.format.table import VALIDATE_REPORT
+from htdata.format.table import REPORTS_DIR, VALIDATE_REPORT
+from htdata.store.writable import symlinked_folder
 
 EPILOG = """\
 Checks, each a section of the report with every failure named by shard / sample / episode / frame:
@@ -23,8 +24,9 @@ Checks, each a section of the report with every failure named by shard / sample 
              fps deviations are warnings
   sensors    (warnings) regions that never change, saturated values, all-zero hands
   splits     (--split NAME) parts disjoint and complete, OOD tasks only in ood, no identical
-             frame in two parts
-The report is written to DATASET/reports/validate.json. Exit 0 when every check passes
+             frame in two parts (a NAME the version lacks is refused first: nothing validated)
+The report is written to DATASET/reports/validate.json (never through a symlinked reports/:
+refused, pass --json). Exit 0 when every check passes
 (warnings allowed), 1 otherwise. A folder that is not a dataset (no dataset.json) gets one
 FAIL line and nothing is written into it.
 
@@ -51,6 +53,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    refused = symlinked_folder(args.dataset, REPORTS_DIR) if args.json is None else None
+    if refused:      # checked first: the report would be written outside the dataset
+        print(f"htdata validate: error: {refused} (or pass --json REPORT)", file=sys.stderr)
+        return 2
     try:
         report = validate.validate_dataset(args.dataset, split=args.split, deep=args.deep,
                                            sample_frac=args.sample_frac, seed=args.seed, workers=args.workers,

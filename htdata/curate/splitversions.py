@@ -35,6 +35,13 @@ class SplitResult:
     changed: bool = True      # False: the split would be identical, nothing was committed
 
 
+def _carried_news(doc: dict) -> bool:
+    """True when a carried split has something to say (episodes that left their part, or unassigned ones):
+    re-making it then commits. Carried unchanged (another split was committed) it has nothing to say."""
+    carried = doc.get("carried") or {}
+    return bool(carried.get("left") or carried.get("unassigned"))
+
+
 def kept_parts(previous: dict, episodes: list[dict]) -> dict[str, str]:
     """The parts `previous` gave the surviving `episodes`: an update keeps them (splitrule.assign_episodes)."""
     ids = {e["episode_id"] for e in episodes}
@@ -63,9 +70,10 @@ def write_versioned_split(root, config, command: str) -> SplitResult:
             doc = build_split(snap.episodes, config, episodes_sha256=sha, fixed=kept_parts(previous, snap.episodes))
             ids = {e["episode_id"] for e in snap.episodes}
             doc["corrections"] = [c for c in previous["corrections"] if c["episode_id"] in ids]
-            if (assignment_of(doc) == assignment_of(previous) and not previous.get("carried")
+            if (assignment_of(doc) == assignment_of(previous) and not _carried_news(previous)
                     and previous.get("episodes_sha256") == doc["episodes_sha256"]):
-                # nothing to change: no new version (re-running `htdata split` is idempotent)
+                # nothing to change: no new version (re-running `htdata split` is idempotent, also after
+                # another split's commit carried this one unchanged into the current version)
                 return SplitResult(doc=previous, path=root / snap.manifest["splits"][name]["file"],
                                    version=snap.version, gained={p: [] for p in PARTS},
                                    lost={p: [] for p in PARTS}, changed=False)

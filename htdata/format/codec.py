@@ -33,6 +33,7 @@ import OpenEXR
 
 from htdata.errors import ArgumentError, DatasetError
 from htdata.format.canvas import CANVAS, MAP_SHAPE
+from htdata.format.imageheader import DeclaredShapeError, check_exr_windows, jpeg_size
 
 # Resampling round-off tolerated (and clipped) outside [0,1]; see the value rule.
 ROUND_OFF = 1e-3
@@ -129,27 +130,26 @@ def encode_exr(tactile_map: np.ndarray, compression: str = "zip", pixel_type=np.
     return buf.getvalue()
 
 
-def decode_exr_pixels(data: bytes, where: str = "EXR") -> np.ndarray:
+def decode_exr_pixels(data: bytes, where: str = "EXR", shape: tuple[int, int] = MAP_SHAPE) -> np.ndarray:
     """Channel "Y" of an in-memory EXR in its stored pixel type (float16 or float32 for dataset maps),
     the display window's full canvas: the data window's pixels placed in it by their coordinates, 0 elsewhere.
 
-    OpenEXR's own exceptions name no file: they are re-raised as ValueError naming `where`.
+    The header's windows are checked first (htdata/format/imageheader.py): a display window that is not
+    `shape`, or a data window outside it, is refused before a pixel is read (a forged 20000x20000 window
+    would cost GBs in the decoder). OpenEXR's own exceptions name no file: they are re-raised as a
+    DatasetError naming `where`.
     """
+    (x0, y0, x1, y1), (dx0, dy0, dx1, dy1) = check_exr_windows(data, shape, where)
     try:
         f = OpenEXR.File(io.BytesIO(data))
-        channels, header = f.channels(), f.header()
+        channels = f.channels()
     except Exception as exc:
         raise DatasetError(f"{where}: undecodable EXR ({len(data)} bytes): {exc}") from exc
     if EXR_CHANNEL not in channels:
         raise DatasetError(f"{where}: EXR has no channel {EXR_CHANNEL!r} (channels: {sorted(channels)})")
     pixels = np.asarray(channels[EXR_CHANNEL].pixels)
-    (x0, y0), (x1, y1) = (tuple(int(v) for v in corner) for corner in header["dataWindow"])
-    (dx0, dy0), (dx1, dy1) = (tuple(int(v) for v in corner) for corner in header["displayWindow"])
     if (x0, y0, x1, y1) == (dx0, dy0, dx1, dy1):
         return pixels
-    if not (dx0 <= x0 <= x1 <= dx1 and dy0 <= y0 <= y1 <= dy1):
-        raise DatasetError(f"{where}: EXR data window {(x0, y0, x1, y1)} is not inside its display window "
-                           f"{(dx0, dy0, dx1, dy1)}")
     canvas = np.zeros((dy1 - dy0 + 1, dx1 - dx0 + 1), pixels.dtype)
     canvas[y0 - dy0:y1 - dy0 + 1, x0 - dx0:x1 - dx0 + 1] = pixels
     return canvas
@@ -233,7 +233,14 @@ def encode_rgb(rgb: np.ndarray, quality: int = 95, where: str = "rgb frame") -> 
 
 
 def decode_rgb(data: bytes, where: str = "rgb frame") -> np.ndarray:
-    """JPEG bytes -> (H,W,3) uint8 RGB."""
+    """JPEG bytes -> (224,224,3) uint8 RGB; a JPEG whose header declares another size is refused
+    undecoded (DeclaredShapeError naming `where`): a 691-byte member declaring 30000x30000 costs nothing."""
+    size = jpeg_size(data)
+    if size is None:
+        raise DatasetError(f"{where}: not a decodable JPEG ({len(data)} bytes)")
+    if size != (CANVAS, CANVAS):
+        raise DeclaredShapeError(f"{where}: JPEG declares {size[1]}x{size[0]} pixels, expected "
+                                 f"{CANVAS}x{CANVAS}: not decoded", size)
     bgr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
     if bgr is None:
         raise DatasetError(f"{where}: not a decodable JPEG ({len(data)} bytes)")

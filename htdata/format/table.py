@@ -52,6 +52,7 @@ REPORTS_DIR = "reports"
 INGEST_REPORT = f"{REPORTS_DIR}/ingest.json"
 VALIDATE_REPORT = f"{REPORTS_DIR}/validate.json"   # default report of `htdata validate`
 WORK_DIR = ".work"                 # resume state and temp files of a running ingest
+STATS_DIR = "stats"                # per-episode stats cache (htdata/inspect/stats.py)
 
 
 @dataclass(frozen=True)

@@ -161,12 +161,44 @@ def taxel_digest(live_rows: list[np.ndarray]) -> str:
     return h.hexdigest()[:16]
 
 
-def record_errors(calibrations: dict, episodes: list[dict], manifest_where: str, episodes_where: str) -> list[str]:
+# The episode digests a version's manifest may say every record of it carries ("record_digests", written by
+# every commit: htdata/store/snapshot.py): a record without one is then an edited record, not one written
+# before the digest existed (the only reason a record may lack it).
+DIGEST_FIELDS = ("calibration_fit_sha256", "taxels_sha256")
+
+
+def carried_digests(episodes: list[dict]) -> list[str]:
+    """The DIGEST_FIELDS every one of `episodes` carries (for each fitted hand / each hand it has): the
+    manifest's "record_digests" of a version holding them."""
+    out = []
+    if all(set(ep.get("calibration_fit") or {}) <= set(ep.get("calibration_fit_sha256") or {}) for ep in episodes):
+        out.append("calibration_fit_sha256")
+    if all(set(ep.get("layouts") or {}) <= set(ep.get("taxels_sha256") or {}) for ep in episodes):
+        out.append("taxels_sha256")
+    return out
+
+
+def _missing_digests(ep: dict, required, episodes_where: str) -> list[str]:
+    """One line per digest the manifest requires that `ep` lacks."""
+    lines, eid = [], ep.get("episode_id")
+    for field, covers in (("calibration_fit_sha256", ep.get("calibration_fit") or {}),
+                          ("taxels_sha256", ep.get("layouts") or {})):
+        missing = sorted(set(covers) - set(ep.get(field) or {})) if field in required else []
+        if missing:
+            lines.append(f"{episodes_where}: episode {eid!r} has no {field} for {', '.join(missing)}, which its "
+                         f"version's manifest says every record carries (record_digests): the record was edited "
+                         f"after it was written")
+    return lines
+
+
+def record_errors(calibrations: dict, episodes: list[dict], manifest_where: str, episodes_where: str,
+                  required=()) -> list[str]:
     """One line per calibration record whose content no longer matches its id or digest (empty: all sound).
 
     Checks each manifest calibration's id against its settings (an edited `max_value` changes every map
     rendered or renormalised under it) and each episode's `calibration_fit` against its recorded
-    `calibration_fit_sha256` (absent in datasets written before the digest: nothing to check).
+    `calibration_fit_sha256`. A digest is absent in datasets written before it existed (nothing to check),
+    unless `required` (the manifest's "record_digests") names it: a record without it is then a failure.
     """
     errors = []
     for cal_id, entry in sorted(calibrations.items()):
@@ -179,6 +211,7 @@ def record_errors(calibrations: dict, episodes: list[dict], manifest_where: str,
             errors.append(f"{manifest_where}: calibration {cal_id} (layout {entry['layout']!r}): its settings hash "
                           f"to {got}, not its id: the record was changed after it was written")
     for ep in episodes:
+        errors += _missing_digests(ep, required, episodes_where)
         recorded = ep.get("calibration_fit_sha256")
         if recorded is None:
             continue
@@ -191,9 +224,10 @@ def record_errors(calibrations: dict, episodes: list[dict], manifest_where: str,
     return errors
 
 
-def refuse_mismatched(calibrations: dict, episodes: list[dict], manifest_where: str, episodes_where: str) -> None:
+def refuse_mismatched(calibrations: dict, episodes: list[dict], manifest_where: str, episodes_where: str,
+                      required=()) -> None:
     """RecordMismatch naming the first record `record_errors` finds (a reader opening a version)."""
-    errors = record_errors(calibrations, episodes, manifest_where, episodes_where)
+    errors = record_errors(calibrations, episodes, manifest_where, episodes_where, required)
     if errors:
         more = f" (+{len(errors) - 1} more: htdata validate lists them)" if len(errors) > 1 else ""
         raise RecordMismatch(errors[0] + more)

@@ -11,6 +11,12 @@ Retries are bounded: an exception raised by the function is retried up to
 `max_retries` times, then re-raised. A worker process that dies (killed,
 os._exit) breaks a local pool: the run stops and a re-run resumes.
 
+Ctrl-C: pool workers ignore SIGINT (a terminal sends it to the whole process
+group: each worker would print its own traceback); the driver's
+KeyboardInterrupt kills them (their unfinished units are redone by the re-run,
+which resumes byte-identical, as after kill -9) and goes on up to the CLI,
+which says it in one line.
+
 Threads: a worker runs `limit_threads(n)` before its first unit, with n =
 usable cores // workers (at least 1): with 2 workers on 2 cores each uses
 one thread in OpenCV (resize, JPEG), torch (if loaded) and OpenMP/BLAS,
@@ -127,6 +133,7 @@ def _init_worker(queue, threads: int, parent_pid: int | None = None, preload: tu
     """Process-pool initializer: die with the parent, thread caps, events go to the driver's queue, and the
     unit function's modules imported now (while the driver still plans), not on the first unit."""
     global _progress_sink
+    signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl-C is the driver's to handle (module docstring)
     if parent_pid is not None:
         die_with_parent(parent_pid)
     limit_threads(threads)
@@ -237,8 +244,16 @@ class ProcessExecutor:
         timeout = 0.2 if on_progress is not None else None
         try:
             yield from self._run(fn, pending, attempts, self._pool, self._queue, sink, timeout)
+        except KeyboardInterrupt:
+            self._kill_workers()     # waiting for their units would make Ctrl-C wait minutes
+            raise
         finally:
             self.close(sink)
+
+    def _kill_workers(self) -> None:
+        processes = getattr(self._pool, "_processes", None) or {}   # CPython's pool: {pid: Process}
+        for proc in list(processes.values()):
+            proc.kill()
 
     def _run(self, fn, pending, attempts, pool, queue, on_progress, timeout):
         running = {}

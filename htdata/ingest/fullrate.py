@@ -40,6 +40,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from htdata.source.sync import strictly_increasing
+
 # Bounded by count too: a sample stores at most `raw_row_cap` unpaired rows per hand, the rows two spans hold
 # at the glove's nominal rate (median interval between its distinct timestamps), never more than a glove at
 # MAX_GLOVE_RATE_HZ makes (rows packed 100 ns apart, or a stuck clock giving 300k rows one timestamp,
@@ -50,6 +52,11 @@ MIN_RAW_SPAN_NS = 1_000_000_000   # a sample stores unpaired rows at most this f
 RAW_SPAN_INTERVALS = 2             # ... or this many frame intervals, when that is longer (slow cameras)
 
 
+# rows of a glove stream planned per step: what the plan holds beyond the stream's own timestamps is the rows it
+# keeps plus one block's temporaries (~15 MB), not ~95 bytes for every row of the stream (issue 35)
+_BLOCK = 1 << 18
+
+
 def raw_span_ns(t_frames: np.ndarray) -> int:
     """How far from its frame time a sample stores unpaired rows (see the module docstring)."""
     d = np.diff(np.unique(np.asarray(t_frames, dtype=np.int64)))
@@ -58,10 +65,22 @@ def raw_span_ns(t_frames: np.ndarray) -> int:
 
 def raw_row_cap(timestamps: np.ndarray, span_ns: int) -> int:
     """Most unpaired rows of one hand a sample stores (see MAX_GLOVE_RATE_HZ)."""
-    d = np.diff(np.unique(np.asarray(timestamps, dtype=np.int64)))
     floor = 1_000_000_000 // MAX_GLOVE_RATE_HZ
-    interval = max(int(np.median(d)) if d.size else floor, floor)
+    median = _median_interval(np.asarray(timestamps, dtype=np.int64))
+    interval = max(median if median is not None else floor, floor)
     return 2 * int(span_ns) // interval + ROW_CAP_SLACK
+
+
+def _median_interval(ts: np.ndarray) -> int | None:
+    """int(np.median(np.diff(np.unique(ts)))), or None for fewer than two distinct stamps; an increasing
+    stream (the usual one) takes one int64 per row for it (np.unique and np.median would copy it twice more)."""
+    d = np.diff(ts) if strictly_increasing(ts) else np.diff(np.unique(ts))
+    if not d.size:
+        return None
+    k = d.size // 2
+    middle = [k - 1, k] if d.size % 2 == 0 else [k]
+    d.partition(middle)                     # in place: np.median's own value, without its copy
+    return int(np.mean(d[middle]))
 
 
 def _cap_per_slot(slot: np.ndarray, distance: np.ndarray, rows: np.ndarray, cap: int) -> np.ndarray:
@@ -87,36 +106,52 @@ class RowPlan:
 
     @classmethod
     def build(cls, timestamps, paired_rows: np.ndarray, t_frames: np.ndarray) -> "RowPlan":
+        """The plan of one hand's stream: its unpaired rows near a frame, `cap` at most per slot (the module
+        docstring). Read a block of rows at a time, each block's rows already capped per slot (the `cap`
+        nearest of all rows are among the `cap` nearest of each block), so memory follows the rows kept."""
         ts = np.asarray(timestamps, dtype=np.int64)
         t_frames = np.asarray(t_frames, dtype=np.int64)
-        unpaired = np.setdiff1d(np.arange(ts.size, dtype=np.int64), np.asarray(paired_rows, dtype=np.int64))
-        t = ts[unpaired]
-        slot = np.clip(np.searchsorted(t_frames, t, side="right") - 1, 0, max(t_frames.size - 1, 0))
+        paired = np.zeros(ts.size, dtype=bool)
+        paired[np.asarray(paired_rows, dtype=np.int64)] = True
         span = raw_span_ns(t_frames)
-        if t_frames.size:   # bounded: no sample holds the rows of minutes of glove without video
-            near = np.abs(t - t_frames[slot]) < span
-            nxt = np.minimum(slot + 1, t_frames.size - 1)     # in a video gap: the end near the next frame
-            to_next = ~near & (nxt > slot) & (t_frames[nxt] - t < span)
-            slot = np.where(to_next, nxt, slot)
-            near |= to_next
-            dropped = int(unpaired.size - np.count_nonzero(near))
-            unpaired, t, slot = unpaired[near], t[near], slot[near]
-        else:
-            dropped = 0
         cap = raw_row_cap(ts, span)
-        capped = 0
+        blocks, dropped, near_total = [], 0, 0
+        for start in range(0, ts.size, _BLOCK):
+            rows = start + np.flatnonzero(~paired[start:start + _BLOCK])
+            rows, t, slot, far = _near_rows(rows, ts[rows], t_frames, span)
+            dropped += far
+            near_total += rows.size
+            if rows.size > cap:     # the block's own cap: what no later block can bring back
+                keep = _cap_per_slot(slot, np.abs(t - t_frames[slot]) if t_frames.size else t, rows, cap)
+                rows, t, slot = rows[keep], t[keep], slot[keep]
+            blocks.append((rows, t, slot))
+        unpaired, t, slot = (np.concatenate(parts) for parts in zip(*blocks)) if blocks else \
+            (np.zeros(0, np.int64),) * 3
         if unpaired.size > cap:
             keep = _cap_per_slot(slot, np.abs(t - t_frames[slot]) if t_frames.size else t, unpaired, cap)
-            capped = int(unpaired.size - np.count_nonzero(keep))
             unpaired, t, slot = unpaired[keep], t[keep], slot[keep]
         order = np.lexsort((unpaired, t, slot))
         return cls(timestamps=ts, rows=unpaired[order], slots=slot[order], dropped=dropped, span_ns=span,
-                   capped=capped, cap=cap)
+                   capped=int(near_total - unpaired.size), cap=cap)
 
     def rows_for(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
         """(rows, slots) of the unpaired rows stored by slots [start, stop)."""
         a, b = np.searchsorted(self.slots, [start, stop], side="left")
         return self.rows[a:b], self.slots[a:b]
+
+
+def _near_rows(rows: np.ndarray, t: np.ndarray, t_frames: np.ndarray, span: int):
+    """(rows, t, slot, count dropped): the rows within `span` of their frame (a row in a video gap goes to the
+    end it is near), each with its slot; rows farther from every frame are only counted (no frame: all kept)."""
+    slot = np.clip(np.searchsorted(t_frames, t, side="right") - 1, 0, max(t_frames.size - 1, 0))
+    if not t_frames.size:
+        return rows, t, slot, 0
+    near = np.abs(t - t_frames[slot]) < span
+    nxt = np.minimum(slot + 1, t_frames.size - 1)     # in a video gap: the end near the next frame
+    to_next = ~near & (nxt > slot) & (t_frames[nxt] - t < span)
+    slot = np.where(to_next, nxt, slot)
+    near |= to_next
+    return rows[near], t[near], slot[near], int(rows.size - np.count_nonzero(near))
 
 
 @dataclass

@@ -33,6 +33,7 @@ from htdata.ingest.workdir import (
     dumps,
     load_valid_record,
     prepare_output,
+    remove_empty_output,
     remove_strays,
 )
 from htdata.store.fsutil import write_bytes_atomic
@@ -126,7 +127,27 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
     t_start = time.perf_counter()
     check_settings_agree(sources)
     check_output(out)
-    with WriterLock(out, command) as lock, _started_executor(executor, workers, address, retries) as runner:
+    existed = out.exists()
+    new = not existed or not any(out.iterdir())
+    try:
+        with WriterLock(out, command) as lock:
+            try:
+                return _ingest(sources, out, lock, workers, executor, address, retries, progress, layout_dirs,
+                               command, verify_sources, t_start)
+            except BaseException:
+                if new:   # a first ingest that failed before writing anything leaves no empty skeleton
+                    remove_empty_output(out)      # (under the lock: no other writer's folders)
+                raise
+    except BaseException:
+        if new and not existed:   # the lock released (or never ours): `out` itself, when nothing is in it
+            remove_empty_output(out, subfolders=False)
+        raise
+
+
+def _ingest(sources, out: Path, lock: WriterLock, workers, executor, address, retries, progress, layout_dirs,
+            command, verify_sources, t_start) -> dict:
+    """`ingest` under the writer lock: the executor started, plan, units, report, commit."""
+    with _started_executor(executor, workers, address, retries) as runner:
         prepare_output(out)
         parent = current_snapshot(out)
         refs, plan_failures = discover_sources(sources, tuple(layout_dirs))

@@ -9,7 +9,9 @@ the unit's shards, so a bad episode never leaves half its frames behind.
 Error policy (webdataset's `handler=` idea): `run_unit` hands any exception
 an episode raises to `on_episode_error`, which turns it into a report
 failure naming file, episode and frame; the unit goes on with its next
-episode. A failure never crosses an episode boundary.
+episode. A failure never crosses an episode boundary. A machine failure (a full
+disk, an I/O error: `is_transient`) is marked "retry": the next run runs the
+unit again instead of reusing its record.
 
 The done record also carries the document of every layout the unit's
 episodes used (`layout_entry`): the commit writes them into the dataset,
@@ -25,6 +27,7 @@ shard writer (a temp shard exists, no unit record yet).
 from __future__ import annotations
 
 import dataclasses
+import errno
 import os
 import pickle
 import time
@@ -102,14 +105,34 @@ def spool_episode(ref, cfg: PipelineConfig, adapter, spool: Spool, clock: StageC
     return stream.finished_tally()
 
 
+# Failures of the machine, not of the recording: a full disk, a quota, an I/O error, no memory. A unit record
+# holding one is not reused by the next run (workdir.load_valid_record): the episode is retried, not replayed.
+TRANSIENT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO, errno.ENOMEM, errno.EMFILE,
+                              errno.ENFILE, errno.EROFS, errno.EAGAIN})
+
+
+def is_transient(exc: BaseException | None) -> bool:
+    """True when `exc`, or an exception it was raised from, is a machine failure (TRANSIENT_ERRNOS, MemoryError)."""
+    seen = 0
+    while exc is not None and seen < 8:
+        if isinstance(exc, MemoryError) or (isinstance(exc, OSError) and exc.errno in TRANSIENT_ERRNOS):
+            return True
+        exc, seen = exc.__cause__ or exc.__context__, seen + 1
+    return False
+
+
 def on_episode_error(ref, exc: BaseException) -> dict:
-    """The error handler: a failed episode becomes one report failure (file, episode, frame, message)."""
+    """The error handler: a failed episode becomes one report failure (file, episode, frame, message);
+    "retry": true marks a machine failure the next run retries (`is_transient`)."""
     if isinstance(exc, EpisodeError):
         file, frame, msg = exc.file, exc.frame, exc.message
     else:
         file, frame, msg = str(ref.source_ref).split("::", 1)[0], None, f"{type(exc).__name__}: {exc}"
-    return {"stage": "ingest", "episode_id": ref.episode_id, "source": ref.source, "source_ref": ref.source_ref,
-            "file": file, "frame": frame, "error": msg}
+    failure = {"stage": "ingest", "episode_id": ref.episode_id, "source": ref.source, "source_ref": ref.source_ref,
+               "file": file, "frame": frame, "error": msg}
+    if is_transient(exc):
+        failure["retry"] = True
+    return failure
 
 
 def layout_entry(layout: Layout) -> dict:

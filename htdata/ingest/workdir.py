@@ -3,7 +3,8 @@
 Crash safety and resume: a finished unit writes DATASET/.work/unit-UUUUUU.json
 atomically (its records, its fingerprint = pipeline + episode ids + input
 fingerprints, its shards' sha256). A re-run skips units whose record,
-fingerprint and shards (sha256) all match, removes temp files and rewrites
+fingerprint and shards (sha256) all match and that recorded no machine failure
+(a full disk, an I/O error: "retry" in the failure), removes temp files and rewrites
 every other unit from scratch. Units of a run are numbered from the current
 version's `next_unit`: shards of committed versions are never touched, and
 the current version stays current (and readable) until the new one is
@@ -64,6 +65,8 @@ def load_valid_record(task) -> dict | None:
         return None
     if not all(k in record for k in RECORD_KEYS) or record["fingerprint"] != task.fingerprint():
         return None
+    if any(f.get("retry") for f in record["failures"]):   # a full disk, an I/O error: run it again
+        return None
     for s in record["shards"]:
         p = out / SHARDS_DIR / s["name"]
         if not p.is_file() or p.stat().st_size != s["bytes"] or sha256_file(p) != s["sha256"]:
@@ -87,6 +90,22 @@ def prepare_output(out: Path) -> None:
     """The work and shard folders (the caller checked the directory and holds its lock)."""
     (out / WORK_DIR).mkdir(parents=True, exist_ok=True)
     (out / SHARDS_DIR).mkdir(parents=True, exist_ok=True)
+
+
+def remove_empty_output(out: Path, subfolders: bool = True) -> None:
+    """Remove the empty work and shard folders `prepare_output` made (the caller holds the lock) when they
+    are all `out` holds, then `out` when it is empty: what a first ingest that failed before writing
+    anything leaves. Anything a run wrote (a report naming its failures, a unit to resume) keeps it all."""
+    skeleton = (out / WORK_DIR, out / SHARDS_DIR) if subfolders else ()
+    try:
+        content = [p for p in out.iterdir() if p.name != LOCK_FILE] if out.is_dir() and not out.is_symlink() else []
+        if all(p in skeleton and p.is_dir() and not p.is_symlink() and not any(p.iterdir()) for p in content):
+            for p in content:
+                p.rmdir()
+            if not subfolders:
+                out.rmdir()
+    except OSError:
+        pass     # not ours to force: an error is already on its way
 
 
 def committed_shards(out: Path) -> set[str]:

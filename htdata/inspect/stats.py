@@ -30,7 +30,7 @@ from typing import Callable
 import numpy as np
 
 from htdata.errors import ArgumentError
-from htdata.format.table import HANDS
+from htdata.format.table import HANDS, STATS_DIR
 from htdata.glove.contact import RULE_VERSION, ContactRule
 from htdata.glove.health import CLASSES, HEALTH_VERSION, merge_counts
 from htdata.inspect.episodestats import (
@@ -47,8 +47,8 @@ from htdata.inspect.scalehint import scale_suggestions
 from htdata.read.reader import DatasetReader
 from htdata.store import storage
 from htdata.store.fsutil import write_bytes_atomic
+from htdata.store.writable import symlinked_folder
 
-STATS_DIR = "stats"
 # /2: values from the raw rows where stored (format 3), raw-unit sketches; the key covers the calibration
 STATS_SCHEMA = (f"htdata-episode-stats/2 health/{HEALTH_VERSION} bins/{HIST_BINS} contact/{CONTACT_THRESHOLD} "
                 f"rule/{RULE_VERSION}")
@@ -98,10 +98,15 @@ def episode_stats(reader: DatasetReader, positions: list[int] | None = None, cac
     """
     positions = list(range(len(reader.episodes))) if positions is None else positions
     cache = Path(cache_dir) if cache_dir is not None else None
+    refused = symlinked_folder(cache.parent, cache.name) if cache is not None else None
+    if refused:      # entries from outside the dataset are not trusted, none is written there
+        cache = None
     keys = {pos: episode_key(reader, pos) for pos in positions}
     paths = {pos: cache / f"{keys[pos]}.json" if cache is not None else None for pos in positions}
     entries = {pos: _read_cached(paths[pos]) for pos in dict.fromkeys(positions)}
     info = {"computed": 0, "cached": sum(e is not None for e in entries.values()), "frames_computed": 0}
+    if refused:
+        info["cache_error"] = refused
     missing = [pos for pos, e in entries.items() if e is None]
     done = len(entries) - len(missing)
     if progress and done:

@@ -46,7 +46,8 @@ def check_records(reader) -> None:
     refuse_mismatched(reader.manifest.get("calibrations", {}), reader.episodes,
                       storage.join(reader.root, MANIFEST_FILE if reader.version is None
                                    else version_manifest_file(reader.version)),
-                      storage.join(reader.root, reader.manifest.get("episodes_file", "episodes.jsonl")))
+                      storage.join(reader.root, reader.manifest.get("episodes_file", "episodes.jsonl")),
+                      reader.manifest.get("record_digests", ()))
 
 
 # `reader` below is a htdata.read.reader.DatasetReader, not imported: the reader renders the maps of a
@@ -103,7 +104,16 @@ def episode_stream(reader, episode: str | int, hand: str) -> RawStream:
     return RawStream(t_ns=t[keep], rows=v[keep], source_row=r[keep])
 
 
-def paired_row(members: dict[str, bytes], hand: str, where: str) -> np.ndarray:
+def _sample_named(members: dict[str, bytes], where: str) -> str:
+    """`where`, naming the sample by its JSON member's key when `where` names a batch (an episode, a group)."""
+    try:
+        key = decode_member(JSON_MEMBER, members[JSON_MEMBER], where).get("key")
+    except (KeyError, ValueError, AttributeError):
+        return where
+    return where if not key or str(key) in where else f"{where}: sample {key}"
+
+
+def paired_row(members: dict[str, bytes], hand: str, where: str, grid: tuple[int, int] | None = None) -> np.ndarray:
     """The raw row paired with a sample's frame, from its members (raw_<hand>.npy, + json when needed).
 
     A single stored row is the paired one (no JSON decode); otherwise
@@ -113,9 +123,14 @@ def paired_row(members: dict[str, bytes], hand: str, where: str) -> np.ndarray:
         members: the sample's members (raw_<hand>.npy, + the json member when it holds several rows).
         hand: "left" or "right".
         where: the sample, named by errors.
+        grid: the layout's (H, W): raw rows of another shape are a DatasetError naming the sample and member.
     """
     rows = decode_member(raw_member(hand), members[raw_member(hand)], where)
-    if rows.ndim == 3 and rows.shape[0] == 1:
+    if rows.ndim != 3 or (grid is not None and tuple(rows.shape[1:]) != tuple(grid)):
+        want = f"(R, {grid[0]}, {grid[1]})" if grid is not None else "(R, H, W)"
+        raise DatasetError(f"{_sample_named(members, where)}.{raw_member(hand)}: raw rows shaped {rows.shape}, "
+                           f"expected {want}")
+    if rows.shape[0] == 1:
         return rows[0]
     meta = decode_member(JSON_MEMBER, members[JSON_MEMBER], where)
     at = (meta.get("raw_paired") or {}).get(hand)
@@ -213,7 +228,8 @@ def apply_paired_many(normaliser, members_list: list[dict[str, bytes]], hand: st
     """
     rows = ([paired_source_row(m, hand, where) for m in members_list]
             if normaliser.cfg.baseline == "drift" else None)
-    return normaliser.apply(np.stack([paired_row(m, hand, where) for m in members_list]), rows=rows)
+    grid = tuple(normaliser.grid)
+    return normaliser.apply(np.stack([paired_row(m, hand, where, grid) for m in members_list]), rows=rows)
 
 
 class RawMapRenderer:

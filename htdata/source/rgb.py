@@ -3,6 +3,11 @@
 The default is a centre crop to the largest square followed by cv2 INTER_AREA
 (the anti-aliased choice for downsampling; cv2 falls back to bilinear when
 upsampling, e.g. a 1x1 frame). crop="none" squashes the whole frame instead.
+
+A source frame is at most MAX_SOURCE_FRAME_PIXELS: a JPEG's size is read from its
+header before it is decoded (`decode_jpeg_frame`), a video's from its stream
+(htdata/source/adapters/video.py), and a larger one is refused (a 691-byte JPEG
+declaring 30000x30000 would otherwise cost 5 GB in the decoder).
 """
 
 from __future__ import annotations
@@ -11,6 +16,7 @@ import cv2
 import numpy as np
 
 from htdata.errors import ArgumentError
+from htdata.format.imageheader import jpeg_size
 
 CROPS = ("center", "none")
 INTERPOLATIONS = {
@@ -20,6 +26,38 @@ INTERPOLATIONS = {
     "nearest": cv2.INTER_NEAREST,
 }
 CHANNEL_ORDERS = ("rgb", "bgr")
+# 16 megapixels (4096x4096, a 5.3K 5312x2988 action camera): 48 MB decoded. Frames are resized to 224x224,
+# so no egocentric camera needs more; a header declaring more is refused before the decoder allocates it.
+MAX_SOURCE_FRAME_PIXELS = 1 << 24
+
+
+def frame_size_error(height: int, width: int) -> str | None:
+    """Why a source frame of `height` x `width` is refused (None: it is not)."""
+    if height < 1 or width < 1:
+        return f"declares {width}x{height} pixels: no image"
+    if height * width > MAX_SOURCE_FRAME_PIXELS:
+        return (f"declares {width}x{height} pixels ({height * width / 1e6:.0f} Mpx), more than a source frame may "
+                f"hold ({MAX_SOURCE_FRAME_PIXELS / 1e6:.1f} Mpx): refused before decoding")
+    return None
+
+
+def decode_jpeg_frame(data) -> np.ndarray:
+    """A source JPEG (bytes or uint8 array) -> HxWx3 uint8 as cv2 decodes it (BGR).
+
+    Its size is read from the header first: no frame header, or one beyond MAX_SOURCE_FRAME_PIXELS, is
+    refused undecoded. Raises ValueError with the reason (the adapter names file and frame).
+    """
+    buf = np.frombuffer(data, np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else np.asarray(data, np.uint8)
+    size = jpeg_size(memoryview(np.ascontiguousarray(buf))) if buf.size else None
+    if size is None:
+        raise ValueError("JPEG does not decode")
+    why = frame_size_error(*size)
+    if why:
+        raise ValueError(f"JPEG {why}")
+    img = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+    if img is None or img.ndim != 3:
+        raise ValueError("JPEG does not decode")
+    return img
 
 
 def _check_frame(frame, where: str) -> np.ndarray:

@@ -85,6 +85,10 @@ def clean_timestamps(ts, name: str) -> tuple[np.ndarray, CleanReport]:
     non-integer stream, naming it.
     """
     arr = _as_timestamps(ts, name)
+    if strictly_increasing(arr):   # the usual stream, and a long one: nothing to clean, no per-row sort or copy
+        _refuse_impossible_gap(arr, name)
+        return np.arange(arr.size), CleanReport(name=name, n_in=int(arr.size), n_out=int(arr.size), reordered=0,
+                                                duplicates=0, duplicate_indices=np.zeros(0, np.int64))
     order = np.argsort(arr, kind="stable")
     reordered = int(np.count_nonzero(order != np.arange(arr.size)))
     sorted_ts = arr[order]
@@ -107,16 +111,35 @@ def clean_timestamps(ts, name: str) -> tuple[np.ndarray, CleanReport]:
     return keep, report
 
 
+# rows compared per step by the checks over a whole stream: their temporaries stay ~2 MB however long it is
+_BLOCK = 1 << 18
+
+
+def _pairs(n: int):
+    """(start, stop) blocks of the n - 1 consecutive pairs (i, i + 1) of n values."""
+    return ((i, min(i + _BLOCK, n - 1)) for i in range(0, max(n - 1, 0), _BLOCK))
+
+
+def strictly_increasing(arr: np.ndarray) -> bool:
+    """True when every timestamp is later than the one before it (no reorder, no duplicate), checked a block
+    at a time (no per-row temporary over a long stream)."""
+    return all(bool(np.all(arr[a + 1:b + 1] > arr[a:b])) for a, b in _pairs(arr.size))
+
+
 def _refuse_impossible_gap(sorted_ts: np.ndarray, name: str) -> None:
     """A gap between two consecutive timestamps longer than MAX_GAP_NS is a broken clock, not a recording."""
     if sorted_ts.size < 2:
         return
-    # differences of sorted int64 taken as uint64: exact even when they overflow int64 (e.g. a last stamp of int64 max)
-    gaps = sorted_ts[1:].view(np.uint64) - sorted_ts[:-1].view(np.uint64)
-    worst = int(np.argmax(gaps))
-    if int(gaps[worst]) > MAX_GAP_NS:
+    worst, gap = 0, -1
+    for a, b in _pairs(sorted_ts.size):
+        # differences of sorted int64 taken as uint64: exact even when they overflow int64 (a last stamp of int64 max)
+        gaps = sorted_ts[a + 1:b + 1].view(np.uint64) - sorted_ts[a:b].view(np.uint64)
+        at = int(np.argmax(gaps))
+        if int(gaps[at]) > gap:
+            worst, gap = a + at, int(gaps[at])
+    if gap > MAX_GAP_NS:
         raise ValueError(f"{name}: timestamps {int(sorted_ts[worst])} and {int(sorted_ts[worst + 1])} ns lie "
-                         f"{int(gaps[worst]) / 86400e9:.3g} days apart (more than {MAX_GAP_NS // 3_600_000_000_000} "
+                         f"{gap / 86400e9:.3g} days apart (more than {MAX_GAP_NS // 3_600_000_000_000} "
                          f"h): a broken clock, no recording has such a gap")
 
 
@@ -174,9 +197,10 @@ def pair(rgb_ts, tactile_ts: dict[str, np.ndarray], max_skew_ns: int,
     hands = sorted(tactile_ts)
     per_hand = {}
     for hand in hands:
-        raw = _as_timestamps(tactile_ts[hand], f"tactile_{hand}") - shift
+        raw = _as_timestamps(tactile_ts[hand], f"tactile_{hand}")
+        raw = raw - shift if shift else raw     # no per-row copy of a long stream when nothing shifts it
         order, rep = clean_timestamps(raw, f"tactile_{hand}")
-        t_tac = raw[order]
+        t_tac = raw if rep.n_out == rep.n_in and not rep.reordered else raw[order]
         pos = nearest(t_tac, t_rgb)
         skew = t_rgb - t_tac[pos]
         bad = np.abs(skew) > max_skew_ns

@@ -4,6 +4,7 @@
     storage.py   local paths and fsspec URLs behind one small API (readers)
     confine.py   the paths a dataset's records name stay inside its root
     lock.py      the one-writer lock
+    writable.py  the folders writers write in are real folders of the dataset, never symlinks out of it
     versions.py  version files: names, paths, write a version, change records
     manifest.py  load / parse dataset.json, episodes.jsonl, index.npy; layout files of a version
     parts.py     a version as parts (one per work unit) and their assembly into one index

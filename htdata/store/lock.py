@@ -11,6 +11,9 @@ takeover is reported to the caller (`WriterLock.note`). Locks held from
 another host are never broken automatically: only that host can tell
 whether its holder lives (remove the file by hand once you know).
 
+Taking the lock first refuses a dataset whose writers' folders (shards/, .work/, ...) are symlinks
+(htdata/store/writable.py): nothing is written or deleted through one.
+
 Readers take no lock: a version, once committed, never changes.
 """
 
@@ -24,6 +27,8 @@ import socket
 import sys
 import time
 from pathlib import Path
+
+from htdata.store.writable import check_writable_folders
 
 LOCK_FILE = ".lock"
 TAKEOVER_STALE_S = 30.0   # a takeover mutex older than this was left by a writer killed inside it
@@ -118,12 +123,17 @@ class WriterLock:
     def _take_over(self, stale: dict) -> None:
         """Remove the lock if it still holds `stale`, under a short mutex so two writers cannot both
         take it over (one could otherwise remove the other's fresh lock)."""
-        mutex = self.path.with_name(f"{LOCK_FILE}.takeover")
+        mutex = self._mutex()
         try:
             fd = os.open(mutex, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         except FileExistsError:
             try:
-                if time.time() - mutex.stat().st_mtime > TAKEOVER_STALE_S:   # its writer died inside
+                if mutex.is_symlink() or not mutex.is_file():
+                    raise DatasetLocked(f"{mutex}: a directory (or another non-file) where the writer lock's "
+                                        f"takeover mutex goes; no writer can take over the stale lock "
+                                        f"{self.path} until it is removed")
+                # its writer died inside (or its time is in the future: not one a live writer wrote just now)
+                if abs(time.time() - mutex.stat().st_mtime) > TAKEOVER_STALE_S:
                     mutex.unlink(missing_ok=True)
             except FileNotFoundError:
                 pass
@@ -151,6 +161,8 @@ class WriterLock:
         return holder if isinstance(holder, dict) else {}
 
     def acquire(self) -> "WriterLock":
+        # every writer takes this lock first: nothing is written or deleted through a symlinked folder
+        check_writable_folders(self.path.parent)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         if self.path.is_dir() or (self.path.exists() and not self.path.is_file()):
             raise DatasetLocked(f"{self.path}: is a directory (or another non-file), not a writer lock; no writer "
@@ -169,7 +181,15 @@ class WriterLock:
             if alive:
                 raise DatasetLocked(f"{self.path.parent}: another writer holds the dataset: {describe(holder)}")
             self._take_over(holder)
+        mutex = self._mutex()
+        if mutex.exists():
+            raise DatasetLocked(f"{mutex}: a takeover of the stale writer lock {self.path} is under way or was left "
+                                f"by a writer killed inside it (removed by the next writer once "
+                                f"{TAKEOVER_STALE_S:.0f} s old); if no writer is running, remove it by hand")
         raise DatasetLocked(f"{self.path.parent}: could not take the writer lock (contended); try again")
+
+    def _mutex(self) -> Path:
+        return self.path.with_name(f"{LOCK_FILE}.takeover")
 
     def release(self) -> None:
         if not self._held:

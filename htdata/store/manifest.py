@@ -187,8 +187,28 @@ def _check_index_dtype(rows: np.ndarray, where: str) -> np.ndarray:
     return converted
 
 
+def _check_index_header(f, size: int, where: str) -> None:
+    """Refuse an index.npy whose header declares more rows than its bytes hold, before np.load maps or
+    allocates them (a header declaring 1e11 rows was a bare mmap ValueError, or a 4 TB allocation)."""
+    from numpy.lib import format as npy
+
+    try:
+        version = npy.read_magic(f)
+        shape, _, dtype = (npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0)(f)
+    except Exception as e:
+        raise DatasetError(f"{where}: unreadable index header: {e}") from None
+    rows = 1
+    for d in shape:
+        rows *= int(d)
+    held = size - f.tell()
+    if rows * dtype.itemsize > held:
+        raise DatasetError(f"{where}: index header declares {rows} rows of {dtype.itemsize} bytes but the file "
+                           f"holds {held} bytes of rows: damaged or forged index, refused")
+
+
 def parse_index(data: bytes, where: str) -> np.ndarray:
     """index.npy bytes -> rows (for callers that hash the bytes they parse)."""
+    _check_index_header(io.BytesIO(data), len(data), where)
     try:
         rows = np.load(io.BytesIO(data), allow_pickle=False)
     except Exception as e:
@@ -211,4 +231,10 @@ def load_index_file(path: str, mmap: bool = True) -> np.ndarray:
     local = storage.local_path(path)
     if local is None:
         return parse_index(storage.read_bytes(path), path)
-    return _check_index_dtype(np.load(local, mmap_mode="r" if mmap else None, allow_pickle=False), path)
+    with open(local, "rb") as f:
+        _check_index_header(f, os.fstat(f.fileno()).st_size, path)
+    try:
+        rows = np.load(local, mmap_mode="r" if mmap else None, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as e:
+        raise DatasetError(f"{path}: unreadable index: {e}") from None
+    return _check_index_dtype(rows, path)

@@ -25,7 +25,7 @@ from htdata import __version__
 from htdata.errors import DatasetError
 from htdata.format.mapstorage import hand_present
 from htdata.format.table import EPISODES_FILE, FORMAT, FORMAT_VERSION, HANDS, MANIFEST_FILE, SHARDS_DIR
-from htdata.glove.calibration import merge_calibrations
+from htdata.glove.calibration import carried_digests, merge_calibrations
 from htdata.resources import validate_json
 from htdata.store import storage
 from htdata.store.manifest import load_episodes, load_index, load_manifest
@@ -140,6 +140,7 @@ def commit_parts(root: str | os.PathLike, parts: list[Part], fields: dict, paren
         "shards": built.shards,
         "episodes_sha256": hashlib.sha256(episodes_bytes).hexdigest(),
         "index_sha256": hashlib.sha256(index_bytes).hexdigest(),
+        "record_digests": carried_digests(built.episodes),   # what a record of this version may not lack
         "parent": parent.version if parent else None,
         "next_unit": max([next_unit or 0, parent.next_unit() if parent else 0]
                          + [unit_of_shard(s["name"]) + 1 for s in built.shards]),

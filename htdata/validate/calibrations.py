@@ -25,7 +25,8 @@ BATCH = 256
 def check_calibration_records(root, manifest: dict, episodes: list[dict], check: Check) -> bool:
     """Fail "calibration_record" once per mismatching record; True when every record is sound."""
     where = str(manifest_path(root, manifest.get("version")))
-    errors = record_errors(manifest.get("calibrations", {}), episodes, where, manifest.get("episodes_file", "episodes"))
+    errors = record_errors(manifest.get("calibrations", {}), episodes, where, manifest.get("episodes_file", "episodes"),
+                           manifest.get("record_digests", ()))
     for line in errors:
         check.fail("calibration_record", line)
     check.checked["calibration_records"] += len(manifest.get("calibrations", {})) + len(episodes)

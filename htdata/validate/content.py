@@ -18,6 +18,7 @@ import numpy as np
 # Maps are checked as stored (half or float pixels, before conversion): decode_exr_pixels; every other
 # member decodes through the member table like every reader.
 from htdata.format.codec import decode_exr_pixels, decode_png_u8
+from htdata.format.imageheader import DeclaredShapeError
 from htdata.format.table import (
     CANVAS,
     HANDS,
@@ -100,6 +101,9 @@ def _check_rgb(rec: Recorder, key: str, where: dict, members: dict[str, bytes]) 
         return
     try:
         rgb = decode_member(RGB_MEMBER, members[RGB_MEMBER], key)
+    except DeclaredShapeError as exc:      # refused by its header, undecoded
+        rec.fail("rgb_shape", str(exc), **where, expected=f"{RGB_SHAPE[:2]}", found=f"{exc.found}")
+        return
     except ValueError as exc:
         rec.fail("rgb_decode", str(exc), **where)
         return
@@ -115,6 +119,9 @@ def _check_tactile(geometry: dict[str, CoverageGeometry], rec: Recorder, key: st
     rec.checked["tactile_maps_decoded"] += 1
     try:
         pixels = decode_exr_pixels(data, name)
+    except DeclaredShapeError as exc:      # refused by its header, undecoded
+        rec.fail("tactile_shape", str(exc), **where, hand=hand, expected=f"{MAP_SHAPE}", found=f"{exc.found}")
+        return
     except ValueError as exc:
         rec.fail("tactile_decode", str(exc), **where, hand=hand)
         return

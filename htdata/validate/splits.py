@@ -14,6 +14,7 @@ import json
 from collections import defaultdict
 
 from htdata.curate.splitrule import test_counts
+from htdata.errors import ArgumentError
 from htdata.format.shardio import sample_key
 from htdata.format.table import HANDS, MANIFEST_FILE, RGB_MEMBER, raw_member, tactile_member
 from htdata.resources import validate_json
@@ -38,6 +39,15 @@ def frame_digest(members: dict[str, bytes]) -> str:
             data = members.get(_RAW_OF[suffix])
         h.update(suffix.encode() + b"\0" + (data or b""))
     return h.hexdigest()
+
+
+def check_split_name(ds: Loaded, name: str) -> None:
+    """ArgumentError (one line) when the version has no split `name`: a typo is said before validating."""
+    known = list_splits(ds.root, ds.manifest)
+    if name not in known:
+        version = ds.manifest.get("version")
+        raise ArgumentError(f"{ds.root}: {'version ' + str(version) if version else 'the dataset'} has no split "
+                            f"{name!r} (its splits: {', '.join(known) or 'none'}); nothing validated")
 
 
 def check_splits(ds: Loaded, name: str, hashes: dict[int, str], check: Check) -> dict | None:

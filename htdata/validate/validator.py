@@ -17,7 +17,7 @@ from htdata.validate.report import CHECKS, Check
 from htdata.validate.sensors import check_rest_level, check_sensors, check_taxel_health, hand_key, merge_sensor
 from htdata.validate.served import RenderedCheck, check_served_maps, served_rows
 from htdata.validate.shards import run_jobs, shard_jobs
-from htdata.validate.splits import check_splits
+from htdata.validate.splits import check_split_name, check_splits
 from htdata.validate.stats import dataset_stats
 from htdata.validate.structure import Loaded, check_index, check_shard_files, load_dataset
 from htdata.validate.timestamps import check_time, empty_timestamps, merge_timestamps
@@ -66,7 +66,8 @@ def validate_dataset(path, split: str | None = None, deep: bool = False, sample_
         The report (docs/FORMAT.md "validate"): report["ok"] is the verdict, report["checks"] each check.
 
     Raises:
-        ArgumentError: a setting out of range (ValidateConfig.validate).
+        ArgumentError: a setting out of range (ValidateConfig.validate), or a `split` the version does not
+            have (checked before any sample is read: a typo runs nothing).
     """
     cfg = ValidateConfig(split=split, deep=deep, sample_frac=sample_frac, seed=seed, workers=workers,
                          max_listed=max_listed)
@@ -78,6 +79,8 @@ def validate_dataset(path, split: str | None = None, deep: bool = False, sample_
               "params": {"split": split, "deep": deep, "sample_frac": sample_frac, "seed": seed,
                          "version": version}}
     ds = load_dataset(root, checks["structure"], version)
+    if ds is not None and split is not None:
+        check_split_name(ds, split)
     stats: dict = {}
     if ds is not None and check_index(ds, checks["structure"]):
         stats = _check_dataset(ds, cfg, checks, report["params"])

@@ -12,6 +12,7 @@ from __future__ import annotations
 import base64
 import hashlib
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -141,6 +142,30 @@ def test_deep_validate_rederives_the_taxels_when_the_fit_digest_is_resealed_too(
     eid = htdata.open(copy).episodes[0]["episode_id"]
     assert list(failed) == ["taxels_sha256"] and len(failed["taxels_sha256"]) == 1
     assert eid in failed["taxels_sha256"][0] and "left" in failed["taxels_sha256"][0]
+
+
+@pytest.mark.parametrize("removed", ["taxels_sha256", "calibration_fit_sha256"])
+def test_a_digest_removed_from_a_record_is_a_failure_not_written_before_digests(raw_dataset, tmp_path, removed):
+    """Issue 35: removing the digest (and re-sealing) made validate --deep skip the episode as if it had been
+    written before digests existed. The manifest's record_digests says every record carries them."""
+    copy = shutil.copytree(raw_dataset, tmp_path / "ds")
+    assert load_manifest(copy)["record_digests"] == ["calibration_fit_sha256", "taxels_sha256"]
+    eid = htdata.open(copy).episodes[0]["episode_id"]
+
+    def drop(records):
+        del records[0][removed]["left"]
+
+    _reseal_episodes(copy, drop)
+    said = rf"episode '{eid}' has no {removed} for left, which its version's manifest says every record carries"
+    with pytest.raises(RecordMismatch, match=said):
+        htdata.open(copy)
+    failed = _failures(validate_dataset(copy, deep=True))
+    assert any(re.search(said, line) for line in failed["calibration_record"]), failed
+    manifest = load_manifest(copy)                  # a version written before record_digests existed
+    del manifest["record_digests"]
+    rewrite_manifest(copy, manifest)
+    if removed == "taxels_sha256":
+        assert validate_dataset(copy, deep=True)["ok"]     # nothing to check: as before
 
 
 def test_trim_and_renormalise_keep_the_taxel_digests_true(raw_dataset, tmp_path):

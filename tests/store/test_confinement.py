@@ -121,9 +121,9 @@ def test_gc_deletes_only_shard_names_never_through_a_symlink(tmp_path):
         p.rename(folder / p.name) if not p.is_symlink() else p.unlink()
     (root / "shards").rmdir()
     (root / "shards").symlink_to(folder)
-    res = htdata("gc", root)
-    assert res.returncode == 0, res.stderr
-    assert (folder / "shard-000097-000.tar").exists() and "is a symlink" in res.stdout
+    res = htdata("gc", root)            # a writer refuses a dataset whose shards/ is a symlink (issue 35 item 6)
+    assert res.returncode == 2 and f"{root / 'shards'} is a symlink (to {folder})" in res.stderr, res.stderr
+    assert (folder / "shard-000097-000.tar").exists()
 
 
 def test_manifest_shard_name_with_a_slash_is_refused(tmp_path):

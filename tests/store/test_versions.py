@@ -285,6 +285,24 @@ def test_commands_that_change_nothing_commit_nothing_and_say_so(tmp_path, capsys
     assert list_versions(root) == [1, 2]
 
 
+def test_a_split_carried_unchanged_by_another_split_is_not_committed_again(tmp_path, capsys):
+    """Issue 35: `htdata split --name main` re-run after another split was committed made a +0/-0 version
+    (make lerobot-check and the smoke each added one): main is carried unchanged, so nothing changes."""
+    from htdata.cli import main as cli_main
+
+    root = versioned(tmp_path / "ds")
+    main = ["split", str(root), "--ood-task", "pour", "--name", "main", "--force"]
+    assert cli_main(main) == 0
+    assert cli_main(["split", str(root), "--ood-task", "pour", "--name", "other", "--seed", "3"]) == 0
+    assert list_versions(root) == [1, 2, 3]
+    capsys.readouterr()
+    assert cli_main(main) == 0
+    assert capsys.readouterr().out.startswith("nothing changed: version 3 stays current")
+    assert list_versions(root) == [1, 2, 3]
+    remove_episodes(root, ["ep_1"], dry_run=False, command="rm")     # main carried with an episode gone:
+    assert cli_main(main) == 0 and list_versions(root) == [1, 2, 3, 4, 5]   # re-made, it says so no more
+
+
 def test_a_write_built_on_a_stale_parent_is_refused(tmp_path):
     root = versioned(tmp_path / "ds")
     stale = open_snapshot(root)

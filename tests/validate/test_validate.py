@@ -14,14 +14,16 @@ import pytest
 from htdata.benchmarks.validation import validate_benchmark
 from htdata.cli import main as cli_main
 from htdata.curate.split import make_split, split_path
+from htdata.errors import ArgumentError
 from htdata.format.codec import encode_exr
-from htdata.format.shardio import BLOCK, member_header, padded
-from htdata.format.table import EPISODES_FILE, FORMAT_VERSION, INDEX_FILE, MANIFEST_FILE, SHARDS_DIR, SIZE_FIELDS
+from htdata.format.shardio import BLOCK
+from htdata.format.table import EPISODES_FILE, FORMAT_VERSION, INDEX_FILE, MANIFEST_FILE, SHARDS_DIR
 from htdata.store.manifest import load_episodes, load_index
 from htdata.store.versions import VERSIONS_DIR
 from htdata.validate import group_rows, validate_dataset
 from tests.factories import FRAME_NS, rewrite_manifest, write_synthetic_dataset
 from tests.factories import SPLIT_EPISODES as EPISODES
+from tests.factories.hostile import read_members, rewrite_members
 
 
 @pytest.fixture(scope="module")
@@ -70,54 +72,6 @@ def _row_of(root: Path, episode_id: str, frame: int) -> int:
     index = _index(root)
     pos = eps.index(episode_id)
     return int(np.flatnonzero((index["episode"] == pos) & (index["frame"] == frame))[0])
-
-
-def _read_members(root: Path, row: int) -> dict[str, bytes]:
-    index = _index(root)
-    r = index[row]
-    shard = _manifest(root)["shards"][int(r["shard"])]["name"]
-    out = {}
-    with open(root / SHARDS_DIR / shard, "rb") as f:
-        header = int(r["offset"])
-        for suffix, col in SIZE_FIELDS.items():
-            size = int(r[col])
-            if size:
-                f.seek(header + BLOCK)
-                out[suffix] = f.read(size)
-                header += BLOCK + padded(size)
-    return out
-
-
-def rewrite_members(root: Path, row: int, replacement: dict[str, bytes]) -> None:
-    """Replace member bytes of one sample, bypassing every writer check, then fix the
-    shard's offsets/sizes in the version's index.npy and the sha256/bytes in its manifest
-    (both copies) so that only the content (or time / split) checks can notice."""
-    manifest = _manifest(root)
-    index = _index(root)
-    shard_pos = int(index[row]["shard"])
-    entry = manifest["shards"][shard_pos]
-    eps = _episode_ids(root)
-    out = bytearray()
-    for r in np.flatnonzero(index["shard"] == shard_pos):
-        members = _read_members(root, int(r))
-        if r == row:
-            members.update(replacement)
-        key = f"{eps[int(index[r]['episode'])]}__{int(index[r]['frame']):06d}"
-        index[r]["offset"] = len(out)
-        for suffix, col in SIZE_FIELDS.items():
-            data = members.get(suffix, b"")
-            index[r][col] = len(data)
-            if data:
-                out += member_header(f"{key}.{suffix}", len(data)) + data + b"\0" * (padded(len(data)) - len(data))
-    out += b"\0" * (2 * BLOCK)
-    (root / SHARDS_DIR / entry["name"]).write_bytes(bytes(out))
-    entry["sha256"] = hashlib.sha256(out).hexdigest()
-    entry["bytes"] = len(out)
-    buf = io.BytesIO()
-    np.save(buf, index, allow_pickle=False)
-    (root / manifest["index_file"]).write_bytes(buf.getvalue())
-    manifest["index_sha256"] = hashlib.sha256(buf.getvalue()).hexdigest()
-    rewrite_manifest(root, manifest)
 
 
 def _failures(report: dict, check: str, what: str) -> list[dict]:
@@ -354,7 +308,7 @@ def test_undecodable_rgb(ds):
 
 def _rewrite_json(root: Path, episode: str, frame: int, **changes) -> None:
     row = _row_of(root, episode, frame)
-    meta = json.loads(_read_members(root, row)["json"])
+    meta = json.loads(read_members(root, row)["json"])
     meta.update(changes)
     rewrite_members(root, row, {"json": json.dumps(meta).encode()})
 
@@ -442,7 +396,7 @@ def test_duplicated_frame_across_parts(ds):
     ood_row = _row_of(ds, "ep_a", 2)             # ood part
     train_ep = next(e for e in doc["parts"]["train"]["episodes"] if e != "ep_b")
     train_row = _row_of(ds, train_ep, 0)
-    source = _read_members(ds, ood_row)
+    source = read_members(ds, ood_row)
     rewrite_members(ds, train_row, {"rgb.jpg": source["rgb.jpg"], "tactile_right.exr": source["tactile_right.exr"]})
     report = validate_dataset(ds, split="s")
     assert _failing_checks(report) == {"splits"}
@@ -462,9 +416,23 @@ def test_split_of_another_commit_and_unknown_split(ds):
     assert _failing_checks(report) == {"splits"}
     [fail] = _failures(report, "splits", "split_manifest")
     assert fail["expected"] == "0" * 64 and fail["found"] == _manifest(ds)["episodes_sha256"]
-    report = validate_dataset(ds, split="nope")
-    [fail] = _failures(report, "splits", "split_missing")
+    with pytest.raises(ArgumentError, match=r"version 2 has no split 'nope' \(its splits: s\); nothing validated"):
+        validate_dataset(ds, split="nope")       # a typo is said before validating (issue 35)
+    split_path(ds, "s").unlink()                 # a known split whose file is gone: a failure of the report
+    [fail] = _failures(validate_dataset(ds, split="s"), "splits", "split_missing")
     assert "known splits: s" in fail["message"]
+
+
+def test_validate_split_typo_checks_the_name_first_and_keeps_the_saved_report(ds, capsys):
+    """Issue 35: `validate --split typo` ran the whole validation, then failed, overwriting the saved report."""
+    make_split(ds, ["pour"], name="main")
+    assert cli_main(["validate", str(ds), "--split", "main"]) == 0
+    saved = (ds / "reports" / "validate.json").read_bytes()
+    capsys.readouterr()
+    assert cli_main(["validate", str(ds), "--split", "mian", "--deep"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "has no split 'mian' (its splits: main)" in err[0], err
+    assert (ds / "reports" / "validate.json").read_bytes() == saved
 
 
 def test_split_file_edited_behind_the_manifest_fails_its_sha256(ds):

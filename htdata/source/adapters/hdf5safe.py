@@ -35,23 +35,23 @@ def check_hdf5_size(ref: EpisodeRef, ds, path: Path) -> None:
                            f"file stores {stored} bytes for it: refused before reading", file=path)
 
 
+MAX_SOFT_LINKS = 16   # soft links followed on the way to one object (HDF5's own limit is similar)
+
+
 def in_file(ref: EpisodeRef, f, name: str, path: Path):
     """The HDF5 object `name` of `f`, refused (one line naming it) when it reads bytes of another file.
 
-    A stranger's scene file may hold an ExternalLink (on the way to the dataset or as it), a dataset
-    stored in external raw files, or a virtual dataset mapping another file: each would ingest bytes
-    from outside the source folder that `source_sha256` never hashed, so none is followed.
+    Every component of the path is resolved link by link: a hard link is followed; a soft link is
+    resolved from the file's root (or its group) and that path checked the same way, component by
+    component, so a soft link to an external link is refused like the external link itself; a dangling
+    soft link, a loop, or a link of another kind is an EpisodeError naming the link. A stranger's scene
+    file may hold an ExternalLink, a dataset stored in external raw files, or a virtual dataset mapping
+    another file: each would ingest bytes from outside the source folder that `source_sha256` never
+    hashed, so none is followed.
     """
     import h5py
 
-    node, parts = f, [p for p in name.split("/") if p]
-    for part in parts:
-        where = f"{node.name.rstrip('/')}/{part}"
-        link = node.get(part, getlink=True)
-        if isinstance(link, h5py.ExternalLink):
-            raise EpisodeError(ref, None, f"{where}: an HDF5 external link to {link.filename}:{link.path}: refused "
-                               f"(an episode reads only its own file)", file=path)
-        node = node[part]
+    node = _resolve(ref, f.file if name.startswith("/") else f, _parts(name), path, [])
     if isinstance(node, h5py.Dataset):
         if node.external:
             raise EpisodeError(ref, None, f"{node.name}: stored in external raw file(s) "
@@ -62,4 +62,42 @@ def in_file(ref: EpisodeRef, f, name: str, path: Path):
             if others:
                 raise EpisodeError(ref, None, f"{node.name}: a virtual dataset mapping {others}: refused (an "
                                    f"episode reads only its own file)", file=path)
+    return node
+
+
+def _parts(name: str) -> list[str]:
+    return [p for p in name.split("/") if p not in ("", ".")]
+
+
+def _resolve(ref: EpisodeRef, node, parts: list[str], path: Path, hops: list[str]):
+    """Walk `parts` from `node`, each link checked before it is followed (see `in_file`)."""
+    import h5py
+
+    for part in parts:
+        where = f"{node.name.rstrip('/')}/{part}"
+        try:
+            link = node.get(part, getlink=True)
+        except (KeyError, TypeError, ValueError, RuntimeError) as exc:
+            raise EpisodeError(ref, None, f"{where}: unreadable HDF5 link ({exc})", file=path) from exc
+        if link is None:
+            raise KeyError(f"{where} not found")
+        if isinstance(link, h5py.ExternalLink):
+            raise EpisodeError(ref, None, f"{' -> '.join([*hops, where])}: an HDF5 external link to {link.filename}:{link.path}: refused "
+                               f"(an episode reads only its own file)", file=path)
+        if isinstance(link, h5py.SoftLink):
+            hops = hops + [where]
+            if len(hops) > MAX_SOFT_LINKS:
+                raise EpisodeError(ref, None, f"{hops[0]}: more than {MAX_SOFT_LINKS} soft links on the way "
+                                   f"(a loop through {link.path}?): refused", file=path)
+            start = node.file if link.path.startswith("/") else node    # relative: to the link's group
+            try:
+                node = _resolve(ref, start, _parts(link.path), path, hops)
+            except KeyError:
+                raise EpisodeError(ref, None, f"{' -> '.join(hops)}: a soft link to {link.path}, which names "
+                                   f"nothing in the file (dangling)", file=path) from None
+            continue
+        if not isinstance(link, h5py.HardLink):
+            raise EpisodeError(ref, None, f"{where}: an HDF5 link of kind {type(link).__name__}: refused (an "
+                               f"episode follows only hard and soft links inside its file)", file=path)
+        node = node[part]
     return node

@@ -26,7 +26,7 @@ from htdata.source.adapters.params import AdapterParam
 from htdata.source.adapters.sourcetree import check_source_file, relpath_inside, walk_source
 from htdata.source.adapters.streamchecks import check_tactile_shape, file_frame_mismatch_note, iter_episode_video
 from htdata.source.adapters.video import VideoError, probe_video_pts_ns
-from htdata.source.rgb import to_rgb
+from htdata.source.rgb import decode_jpeg_frame, to_rgb
 
 SOURCE = "native"
 RECORDING_JSON = "recording.json"
@@ -193,6 +193,7 @@ class NativeStreams(EpisodeStreams):
         try:
             rows = NpzRows(path, "values")
             self._rows[hand] = rows
+            check_tactile_shape(ref, hand, rows.shape, path)   # by its header, before a timestamp is read
             ts_rows = NpzRows(path, "timestamps_ns")
             try:
                 declared = ts_rows.num_rows
@@ -204,7 +205,6 @@ class NativeStreams(EpisodeStreams):
                 ts_rows.close()
         except NpzRowError as exc:
             raise EpisodeError(ref, exc.row, str(exc), file=path) from exc
-        check_tactile_shape(ref, hand, rows.shape, path)
         if ts.ndim != 1 or not np.issubdtype(ts.dtype, np.integer):
             raise EpisodeError(ref, None, f"timestamps_ns must be 1-D integers, got {ts.dtype} {ts.shape}", file=path)
         n = min(rows.num_rows, ts.size)
@@ -232,12 +232,13 @@ class NativeStreams(EpisodeStreams):
         yield from iter_episode_video(self.ref, self._video_file, self._n_rgb)
 
     def _iter_jpegs(self) -> Iterator[tuple[int, np.ndarray]]:
-        import cv2
-
         for i, path in enumerate(self._frames[: self._n_rgb]):
-            img = cv2.imread(str(path), cv2.IMREAD_COLOR)
-            if img is None:
-                raise EpisodeError(self.ref, i, "JPEG does not decode", file=path)
+            try:
+                img = decode_jpeg_frame(self._check_file(path).read_bytes())   # header's size checked first
+            except EpisodeError as exc:       # not a regular file (any more)
+                raise exc.at_frame(i) from exc
+            except (OSError, ValueError) as exc:
+                raise EpisodeError(self.ref, i, str(exc), file=path) from exc
             yield i, np.ascontiguousarray(to_rgb(img, "bgr", where=str(path)))  # cv2 decodes to BGR
 
     def read_tactile(self, hand: str, indices: np.ndarray) -> np.ndarray:

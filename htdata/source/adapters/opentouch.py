@@ -50,8 +50,8 @@ from htdata.source.adapters.discovery import fingerprint_files, sanitise_id
 from htdata.source.adapters.hdf5safe import check_hdf5_size, in_file
 from htdata.source.adapters.params import AdapterParam, param_values
 from htdata.source.adapters.sourcetree import walk_source
-from htdata.source.adapters.streamchecks import check_tactile_shape
-from htdata.source.rgb import CHANNEL_ORDERS, to_rgb
+from htdata.source.adapters.streamchecks import check_stream_rows, check_tactile_shape
+from htdata.source.rgb import CHANNEL_ORDERS, decode_jpeg_frame, to_rgb
 
 log = logging.getLogger(__name__)
 
@@ -267,14 +267,28 @@ class OpenTouchAdapter(FileDiscovery):
 
     @staticmethod
     def _list_clips(f, path: Path) -> list[tuple[str, int, bool]]:
-        if "data" not in f:
-            raise EpisodeError(None, None, "HDF5 has no 'data' group (not an OpenTouch scene file)", file=path)
+        """(demo id, frames, has a left hand) per clip, links resolved inside the file (hdf5safe.in_file).
+
+        A clip whose links cannot be followed (dangling, a loop, leaving the file) is still listed, with 0
+        frames: opening it raises the same one-line EpisodeError naming the link, so it fails alone and
+        the file's other clips are ingested.
+        """
+        try:
+            data = in_file(None, f, "data", path)
+        except KeyError:
+            raise EpisodeError(None, None, "HDF5 has no 'data' group (not an OpenTouch scene file)",
+                               file=path) from None
         clips = []
-        for demo_id in sorted((k for k in f["data"].keys() if k.startswith("demo_")), key=_clip_sort_key):
-            g = f["data"][demo_id]
-            if "right_pressure" not in g:
-                raise EpisodeError(None, None, f"clip data/{demo_id} has no right_pressure", file=path)
-            clips.append((demo_id, int(g["right_pressure"].shape[0]), "left_pressure" in g))
+        for demo_id in sorted((k for k in data.keys() if k.startswith("demo_")), key=_clip_sort_key):
+            try:
+                g = in_file(None, data, demo_id, path)
+                right = in_file(None, g, "right_pressure", path)
+            except KeyError:
+                raise EpisodeError(None, None, f"clip data/{demo_id} has no right_pressure", file=path) from None
+            except EpisodeError:     # named again, per episode, when the clip is opened
+                clips.append((demo_id, 0, False))
+                continue
+            clips.append((demo_id, int(right.shape[0]) if right.shape else 0, "left_pressure" in g))
         return clips
 
     def open(self, ref: EpisodeRef, params: dict) -> "OpenTouchStreams":
@@ -303,12 +317,14 @@ class OpenTouchStreams(EpisodeStreams):
 
     def _setup(self, group: str) -> None:
         ref = self.ref
-        if group not in self._file:
-            raise EpisodeError(ref, None, f"clip {group} not found")
         try:
             g = in_file(ref, self._file, group, self.path)
+        except KeyError:
+            raise EpisodeError(ref, None, f"clip {group} not found") from None
+        try:
             stamps = in_file(ref, g, "timestamps", self.path)
             check_hdf5_size(ref, stamps, self.path)
+            check_stream_rows(ref, "timestamps", int(stamps.shape[0]) if stamps.shape else 1, self.path)
             ts = np.asarray(stamps[()], dtype=np.int64)
             self._jpegs = in_file(ref, g, "rgb_images_jpeg", self.path)
             self._pressure = {}
@@ -335,16 +351,15 @@ class OpenTouchStreams(EpisodeStreams):
         self.tactile_timestamps_ns = {h: ts[:n].copy() for h in self._pressure}
 
     def iter_rgb(self) -> Iterator[tuple[int, np.ndarray]]:
-        import cv2
-
         for i in range(self._n):
             try:
                 buf = np.asarray(self._jpegs[i], dtype=np.uint8)
             except OSError as exc:
                 raise EpisodeError(self.ref, i, f"HDF5 read failed: {exc}") from exc
-            img = cv2.imdecode(buf, cv2.IMREAD_COLOR) if buf.size else None
-            if img is None or img.ndim != 3:
-                raise EpisodeError(self.ref, i, "JPEG does not decode")
+            try:
+                img = decode_jpeg_frame(buf)   # its header's size checked before decoding
+            except ValueError as exc:
+                raise EpisodeError(self.ref, i, str(exc)) from exc
             yield i, np.ascontiguousarray(to_rgb(img, DECODED_ORDER[self.channel_order], where=f"frame {i}"))
 
     def read_tactile(self, hand: str, indices: np.ndarray) -> np.ndarray:

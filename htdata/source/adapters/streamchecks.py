@@ -1,5 +1,6 @@
-"""What an opened episode checks while it streams: the tactile grid against the hand's layout, the
-note for streams of different lengths, and the episode-video iterator whose failures name the frame.
+"""What an opened episode checks while it streams: the tactile grid against the hand's layout and a
+stream's declared length (MAX_STREAM_ROWS), the note for streams of different lengths, and the
+episode-video iterator whose failures name the frame.
 """
 
 from __future__ import annotations
@@ -15,10 +16,23 @@ from htdata.source.adapters.base import EpisodeRef
 from htdata.source.adapters.video import VideoError, iter_video_rgb
 
 ANY_GRID = "*"   # a ref.layout_files value: read the hand's rows whatever their grid (check_tactile_shape)
+# Most rows one stream of an episode may declare: 70 min of a 2 kHz glove, 23 h at 100 Hz. Checked from the
+# header before a timestamp is read: planning holds ~17 bytes per row (timestamps, their pairing), so a
+# forged 54 MB npz of 21M deflated rows would otherwise cost GBs before the per-sample row cap applies.
+MAX_STREAM_ROWS = 1 << 23
+
+
+def check_stream_rows(ref: EpisodeRef, what: str, rows: int, file: Path | str) -> None:
+    """Raise EpisodeError (naming `file`) when a stream declares more than MAX_STREAM_ROWS rows."""
+    if rows > MAX_STREAM_ROWS:
+        raise EpisodeError(ref, None, f"{what} declares {rows} rows, more than one episode's stream may hold "
+                           f"({MAX_STREAM_ROWS}, {MAX_STREAM_ROWS / 2000 / 60:.0f} min at 2 kHz): refused before "
+                           f"reading (split the recording)", file=file)
 
 
 def check_tactile_shape(ref: EpisodeRef, hand: str, shape: tuple[int, ...], file: Path | str) -> None:
-    """Raise EpisodeError unless `shape` is (M, H, W) with (H, W) = the hand's layout grid.
+    """Raise EpisodeError unless `shape` is (M, H, W) with (H, W) = the hand's layout grid and M at most
+    MAX_STREAM_ROWS (`check_stream_rows`: call it with the header's shape, before reading a row).
 
     The layout is the one planning resolved (`ref.layout_files`, pipeline
     override applied), else the adapter's own `ref.layouts` entry; parsed
@@ -27,6 +41,8 @@ def check_tactile_shape(ref: EpisodeRef, hand: str, shape: tuple[int, ...], file
     layout describes yet (`htdata layouts suggest`).
     """
 
+    if len(shape):
+        check_stream_rows(ref, f"{hand} tactile stream", int(shape[0]), file)
     if ref.layout_files.get(hand) == ANY_GRID:
         return
     layout_id = ref.layout_files.get(hand) or ref.layouts[hand]

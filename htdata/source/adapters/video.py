@@ -7,6 +7,8 @@ from typing import Iterator
 
 import numpy as np
 
+from htdata.source.rgb import frame_size_error
+
 
 class VideoError(Exception):
     """A video cannot be opened/decoded (`frame` = first bad frame, or None)."""
@@ -100,6 +102,9 @@ def iter_video_rgb(path: Path | str) -> Iterator[np.ndarray]:
         if not container.streams.video:
             raise VideoError(None, "video has zero frames (no video stream in the container)")
         stream = container.streams.video[0]
+        why = frame_size_error(int(stream.codec_context.height or 1), int(stream.codec_context.width or 1))
+        if why:   # the decoder would allocate every frame at that size
+            raise VideoError(0, f"video stream {why}")
         configure_decoder_threads(stream)
         packets = container.demux(stream)
         while True:
