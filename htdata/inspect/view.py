@@ -248,8 +248,12 @@ def view_episode(dataset, *, episode: str | None = None, version: int | None = N
         if save is not None:
             return ViewResult(plan, str(_save(rec, rr, reader, plan, Path(save), layout)), plan.num_frames)
         if web:
-            grpc = rec.serve_grpc(default_blueprint=layout)
-            rr.serve_web_viewer(web_port=WEB_PORT, connect_to=grpc, open_browser=open_browser)
+            try:
+                grpc = rec.serve_grpc(default_blueprint=layout)
+                rr.serve_web_viewer(web_port=WEB_PORT, connect_to=grpc, open_browser=open_browser)
+            except RuntimeError as exc:   # a port in use, most often
+                raise ViewerFailed(f"the web viewer could not be served ({_first_line(exc)}); write the recording "
+                                   "with --save FILE.rrd instead") from None
             target = f"http://localhost:{WEB_PORT}/?url={grpc}"
         else:
             _spawn(rr, rec, layout)
