@@ -59,6 +59,7 @@ VIEW_EXTRA = "pip install '.[view]'"
 BATCH = 32                     # frames per column batch sent to Rerun (the memory bound, in frames)
 APPLICATION_ID = "htdata"
 WEB_PORT = 9090                # the web viewer's page (Rerun's default port)
+MAP_DRAW_ORDER = 0.0           # the no-sensor overlay is drawn just above its map
 
 
 class ViewerMissing(HtdataError, ImportError):
@@ -142,9 +143,9 @@ def log_static(rec, rr, reader: DatasetReader, plan: ViewPlan) -> dict[str, Regi
         coverage = reader.coverage(plan.episode["layouts"][hand])
         rec.log(map_entity(hand), rr.DepthImage.from_fields(
             format=rr.components.ImageFormat(CANVAS, CANVAS, channel_datatype="F32"), meter=1.0,
-            colormap="inferno", depth_range=(0.0, plan.vmax)), static=True)
-        rec.log(overlay_entity(hand), rr.Image(sensor_overlay(coverage, reader.place_map), color_model="RGBA"),
-                static=True)
+            colormap="inferno", depth_range=(0.0, plan.vmax), draw_order=MAP_DRAW_ORDER), static=True)
+        rec.log(overlay_entity(hand), rr.Image(sensor_overlay(coverage, reader.place_map), color_model="RGBA",
+                                               draw_order=MAP_DRAW_ORDER + 1), static=True)
         regions[hand] = RegionMeans.of(reader.region_map, coverage)
         rec.log(regions_entity(hand), rr.SeriesLines(names=list(regions[hand].names)), static=True)
         if hand in plan.bend_hands:

@@ -125,8 +125,9 @@ def test_every_frame_of_both_hands_is_logged_as_htdata_serves_it(ds, tmp_path):
         want = [s["tactile"]["left"][(parts == p) & (cov > 0)].mean() for p in PART_NAMES
                 if ((parts == p) & (cov > 0)).any()]
         np.testing.assert_allclose(scalars(rows["/regions/left"][f]["Scalars:scalars"]), want, rtol=1e-6)
-    depth = static["/tactile/left/map"]
-    assert depth["DepthImage:depth_range"].values[0].as_py() == [0.0, 1.0]
+    depth, overlay = static["/tactile/left/map"], static["/tactile/left/no_sensor"]
+    assert depth["DepthImage:depth_range"].values[0].as_py() == [0.0, 1.0]      # --contrast fixed: 0..1
+    assert overlay["Image:draw_order"].values[0].as_py() > depth["DepthImage:draw_order"].values[0].as_py()
 
 
 @needs_rerun
