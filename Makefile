@@ -13,12 +13,12 @@ JOBS   ?= 2
 
 setup: $(VENV)/.installed
 
-# Everything: the data core plus the torch datasets, the trainer, the bench, Ray and the tests
+# Everything: the data core plus the torch datasets, the trainer, the bench, Ray, the Rerun viewer and the tests
 # (torch==2.13.0 is pinned in pyproject.toml: the CPU wheel on the machine's disk).
 $(VENV)/.installed: pyproject.toml setup.py
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e ".[torch,train,bench,export,ray,test]"
+	$(PY) -m pip install -q -e ".[torch,train,bench,export,ray,test,view]"
 	touch $@
 
 # Raw sample corpus: written once, reused after (--reuse: a finished corpus of this seed, which

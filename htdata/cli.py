@@ -36,6 +36,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "gc": ("htdata.commands.gc", "delete old versions and shards no kept version lists; --dry-run"),
     "repair": ("htdata.commands.repair", "rewrite dataset.json from the newest version file; --dry-run"),
     "preview": ("htdata.commands.preview", "render a contact sheet: RGB beside left/right tactile maps"),
+    "view": ("htdata.commands.view", "scrub one episode in Rerun: RGB, both hands' maps and contact curves in time"),
     "pipelines": ("htdata.commands.pipelines", "list the shipped ingest pipelines, or print one to copy and edit"),
     "layouts": ("htdata.commands.layouts", "list, check and render hand layouts (register a glove)"),
     "publish": ("htdata.commands.publish", "upload a dataset to an fsspec URL (s3://, gs://, memory://), manifest last"),
@@ -48,7 +49,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 GROUPS: dict[str, tuple[str, ...]] = {
     "build": ("sample", "ingest", "renormalise", "pipelines", "layouts"),
     "curate": ("split", "rm", "trim", "merge", "gc", "repair"),
-    "inspect": ("log", "diff", "stats", "validate", "preview", "card"),
+    "inspect": ("log", "diff", "stats", "validate", "preview", "view", "card"),
     "share": ("publish", "export"),
     "measure": ("bench",),
 }

@@ -5,8 +5,9 @@
 # "A worked example per command" in order (the sample corpus first, as the README says), the
 # publish example to a memory:// URL plus the one line a missing s3fs gives for s3://, and the
 # Python example (htdata.open, decoded(0)'s keys; ds.torch names its extra without torch).
-# `htdata export lerobot` needs the [export] extra: it runs when pyarrow imports, otherwise its
-# one line naming the extra is checked. Exits non-zero at the first example that fails.
+# `htdata export lerobot` needs the [export] extra and `htdata view` the [view] one: each runs when
+# its package imports, otherwise its one line naming the extra is checked. Exits non-zero at the
+# first example that fails.
 set -euo pipefail
 
 BIN="$1"
@@ -30,6 +31,16 @@ run "$HT" stats data/dataset --brief
 run "$HT" validate data/dataset --split main
 if grep -q "split_ratio_far" out.log; then cat out.log; echo "readme-examples: FAILED: validate warns about the split's own defaults"; exit 1; fi
 run "$HT" preview data/dataset preview.png
+if "$BIN/python" -c "import rerun" 2>/dev/null; then
+  run "$HT" view data/dataset --save ep.rrd
+else
+  if "$HT" view data/dataset --save ep.rrd 2>view.err; then
+    echo "readme-examples: FAILED: view without rerun-sdk exited 0"; exit 1
+  fi
+  [ "$(wc -l <view.err)" -eq 1 ] && grep -q "pip install '.\[view\]'" view.err \
+    || { cat view.err; echo "readme-examples: FAILED: view without rerun-sdk is not one line naming '.[view]'"; exit 1; }
+  ok "htdata view without rerun-sdk: $(cat view.err)"
+fi
 run "$HT" card data/dataset card.html --title "My gloves" --license CC-BY-4.0
 # share
 if "$BIN/python" -c "import pyarrow" 2>/dev/null; then

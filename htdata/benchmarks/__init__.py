@@ -25,4 +25,5 @@
     stats.py       `htdata stats` speed against the loader's tactile-only decode rate
     validation.py  `htdata validate --deep` throughput at 1 and 2 workers
     export.py      `htdata export lerobot` speed and size against htdata's own shards
+    view.py        `htdata view --save` seconds and peak memory against episode length
 """

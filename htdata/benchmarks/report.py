@@ -9,6 +9,7 @@ from htdata.benchmarks.raw import raw_markdown
 from htdata.benchmarks.rawglove import rawglove_markdown
 from htdata.benchmarks.tables import fmt as _fmt
 from htdata.benchmarks.tables import table
+from htdata.benchmarks.view import view_markdown
 from htdata.read.rawstream import MAP_SOURCE_WORDS
 
 HEADINGS = {
@@ -29,6 +30,7 @@ HEADINGS = {
     "maps": "## Maps stored or rendered from raw rows: bytes per frame vs read speed",
     "export": "## htdata export lerobot: speed and size vs htdata's shards",
     "rawglove": "## Raw-count glove: baselines, noise floors and contact against the truth",
+    "view": "## htdata view --save: seconds and memory vs episode length",
 }
 TARGET_OVERHEAD_PCT = 15.0  # issue #22: share of our in-worker time the bare bound does not spend
 TARGET_SCALING = 1.9        # 1 -> 2 workers, opentouch and touchanything (#22)
@@ -316,7 +318,7 @@ def _stats(d: dict) -> list[str]:
 RENDERERS = {"machine": _machine, "codecs": _codecs, "rgb": _rgb, "raster": _raster, "ingest": _ingest,
              "scaling": _scaling, "rss": _rss, "loader": _loader, "index": _index, "validate": _validate,
              "append": _append, "stats": _stats, "lag": lag_markdown, "raw": raw_markdown, "maps": maps_markdown,
-             "export": export_markdown, "rawglove": rawglove_markdown}
+             "export": export_markdown, "rawglove": rawglove_markdown, "view": view_markdown}
 
 
 def _discovered(name: str, results: dict) -> list[str]:

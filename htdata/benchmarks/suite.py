@@ -49,13 +49,14 @@ from htdata.benchmarks.scaling import scaling_rows
 from htdata.benchmarks.sources import discover, source_rgb_frames
 from htdata.benchmarks.stats import stats_rows
 from htdata.benchmarks.validation import validate_rows
+from htdata.benchmarks.view import view_rows
 from htdata.errors import ArgumentError
 from htdata.store.fsutil import write_bytes_atomic
 from htdata.synthetic.corpus import FORMATS, SCALES, CorpusConfig, corpus_complete, write_corpus
 
 SECTION_GROUP = "htdata.bench_sections"
 BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "scaling", "rss", "loader", "index", "validate", "append",
-                    "stats", "lag", "raw", "maps", "export", "rawglove")
+                    "stats", "lag", "raw", "maps", "export", "rawglove", "view")
 # Top-level keys of results.json that are not sections: no section may take these names.
 RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds",
                  "gpu_check")
@@ -86,6 +87,7 @@ class BenchConfig:
     index_rows: tuple[int, ...] = (1_000_000, 10_000_000)
     validate_workers: tuple[int, ...] = (1, 2)
     append_sizes: tuple[int, ...] = (20, 200)    # episodes before the one appended (an order of magnitude apart)
+    view_lengths: tuple[int, ...] = (150, 600)   # episodes saved with `htdata view --save` (600: issue #38's target)
     sections: tuple[str, ...] | None = None   # None: every built-in and discovered section
 
     @classmethod
@@ -93,7 +95,7 @@ class BenchConfig:
         return cls(out=out, quick=True, seed=seed, scale="tiny", scaling_scale="tiny", ingest_reps=1,
                    scaling_reps=1, revision=None, codec_maps_per_glove=8, rgb_frames=2,
                    raster_frames=8, rss_lengths=(20, 40), loader_random=20, loader_windows=5, dataloader_items=64,
-                   index_rows=(10_000,), append_sizes=(2, 20))
+                   index_rows=(10_000,), append_sizes=(2, 20), view_lengths=(20, 40))
 
     def validate(self) -> "BenchConfig":
         self.out = Path(self.out)
@@ -287,6 +289,9 @@ class Sections:
 
     def rawglove(self) -> dict:
         return rawglove_rows(self.cfg.quick, self.cfg.seed)
+
+    def view(self) -> dict:
+        return view_rows(self.cfg.work, self.cfg.view_lengths, again=not self.cfg.quick)
 
     def discovered(self, name: str, entry_point: metadata.EntryPoint) -> dict:
         """Load and run one discovered section; its result must be a JSON-able dict."""

@@ -11,6 +11,7 @@ Commands parse arguments, call the core modules and print; core modules
     validate.py     `htdata validate`: the verdict and the JSON report
     stats.py        `htdata stats`: what a dataset holds (+ a health map)
     preview.py      `htdata preview`: a contact sheet of one episode
+    view.py         `htdata view`: one episode in Rerun (RGB, maps, curves on one timeline)
     card.py         `htdata card`: a self-contained dataset card
     log.py          `htdata log`: the versions of a dataset
     diff.py         `htdata diff`: episodes added, removed and changed between two versions

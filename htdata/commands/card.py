@@ -15,7 +15,8 @@ One self-contained HTML page (plus a Markdown twin OUT.md with its images in OUT
 opens offline: what the dataset holds (frames per task and scene, sources, sample format, how
 to load it), how often each hand region is touched, value histograms, taxel health, clock sync
 and lag, split sizes and preview strips of a few episodes. Defaults: the current version; the
-title is the dataset folder's name unless --title is given.
+title is the dataset folder's name unless --title is given. To scrub one episode in time (RGB,
+both maps and region curves on one timeline), use htdata view (Rerun).
 
 Examples:
   htdata card data/dataset card.html

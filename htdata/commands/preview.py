@@ -18,6 +18,8 @@ the colour bar) with the hand's region outlines; grey hatching = where the glove
 a grey panel = a hand the episode does not have; magenta = a non-finite value (damage).
 --contrast quantile stretches the colours to the dataset's 99th percentile so faint contact shows.
 Defaults: the two-handed episode with the most contact, 6 frames, auto contrast.
+To scrub a whole episode in time instead (RGB, both maps and region curves on one timeline):
+htdata view, in Rerun.
 
 Examples:
   htdata preview data/dataset preview.png

@@ -9,43 +9,21 @@ stay on disk for the versions that list them, until `htdata gc`); any other
 touched unit is re-packed into a new unit (htdata/write/repack.py). Splits carry
 over: a removed episode leaves its part, the rest keep theirs.
 
-An id or glob that matches no episode is an error listing near matches:
-never "removed 0" with exit 0, never a removal of something else.
+An id or glob that matches no episode is an error listing near matches
+(htdata/store/episodeids.py, the line every command gives): never "removed 0" with exit 0, never a removal of something else.
 """
 
 from __future__ import annotations
 
-import difflib
-import fnmatch
 from dataclasses import dataclass, field
 
 from htdata.errors import ArgumentError
 from htdata.read.reader import DatasetReader
+from htdata.store.episodeids import NoSuchEpisode, resolve_episodes  # noqa: F401 (NoSuchEpisode: importable from here)
 from htdata.store.lock import WriterLock
 from htdata.store.parts import Part
 from htdata.store.snapshot import Snapshot, commit_parts, open_snapshot
 from htdata.write.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
-
-
-class NoSuchEpisode(ArgumentError):
-    """An episode id or pattern matched nothing."""
-
-
-def resolve_episodes(ids: list[str], patterns: list[str]) -> list[str]:
-    """Episode ids named by exact ids or shell globs (*, ?, [..]), in dataset order."""
-    chosen: set[str] = set()
-    known = set(ids)
-    for pattern in patterns:
-        if any(c in pattern for c in "*?["):
-            hits = fnmatch.filter(ids, pattern)
-        else:
-            hits = [pattern] if pattern in known else []
-        if not hits:
-            near = difflib.get_close_matches(pattern, ids, n=5, cutoff=0.6)
-            hint = f"; did you mean: {', '.join(near)}" if near else ""
-            raise NoSuchEpisode(f"no episode matches {pattern!r} ({len(ids)} episodes){hint}")
-        chosen.update(hits)
-    return [e for e in ids if e in chosen]
 
 
 def parse_frames(spec: str, n: int, episode: str) -> range:

@@ -6,6 +6,8 @@
     healthmap.py     the taxel-health PNG
     outline.py       region outlines drawn over every map picture
     preview.py       `htdata preview`: a contact sheet of frames
+    view.py          `htdata view`: one episode streamed to Rerun (RGB, maps, curves on one timeline)
+    viewlayout.py    what `htdata view` shows: entities, static layers, the blueprint
     card.py          `htdata card`: the dataset card (HTML)
     cardplots.py     the card's charts (bars, ticked histograms, region heat maps)
 

@@ -10,6 +10,7 @@
     parts.py     a version as parts (one per work unit) and their assembly into one index
     splitfiles.py split documents of a version: read, count, carry to a child version
     snapshot.py  open a version as a snapshot; commit parts as a new version
+    episodeids.py episodes named by ids or globs; the one did-you-mean error of a miss
     history.py   log and diff of versions
     gcrecord.py  gc tombstones: what `htdata gc` leaves for the readers it may outlive (`VersionCollected`)
     repair.py    `htdata repair`: dataset.json back in line with the version files
