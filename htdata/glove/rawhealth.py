@@ -171,3 +171,17 @@ def _unmapped(raw: np.ndarray, layout, out: dict) -> None:
     found = moving_cells(activity, mask, layout.live_mask, layout.value.get("step"))
     out["unmapped_moving"] = len(found)
     out["unmapped_moving_cells"] = sorted(found.cells.tolist())
+
+
+def drift_status(summary: dict) -> str | None:
+    """How far drift was assessed in a merged health summary (`health.merge_counts`); None without raw rows."""
+    told, untold = summary.get("drift_assessed", 0), summary.get("drift_not_assessed", 0)
+    if not told and not untold:
+        return None
+    if not told:
+        return (f"not assessed: every episode is shorter than {DRIFT_MIN_FRAMES} frames (too short to tell drift "
+                f"from wander)")
+    if untold:
+        return f"assessed on {told} of {told + untold} episodes (the others are shorter than {DRIFT_MIN_FRAMES} frames)"
+    return "assessed"
+

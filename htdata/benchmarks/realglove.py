@@ -1,0 +1,360 @@
+"""`make bench` section "real glove": the rules measured on real raw-count recordings (issue 34).
+
+The recordings are a folder given by an explicit path (`htdata bench
+--real-glove DIR`; the Makefile passes ../shared/real_glove when it exists):
+`clips/manifest.jsonl` (clip, file, label, fps, frames), `clips/<file>.npz`
+(key `counts`, (T, 2, H, W) raw counts, hand 0 = left) and `layouts/*.json`
+(one layout per hand, found by its "hand"). The toolkit never reads such a
+folder on its own: only this section and the tests that name it do.
+
+The measures, per (clip, hand), with raw counts over the layout's live cells
+(the folder's README defines them; the truth is the raw counts alone):
+
+- pressed: raw minus the cell's own 10th percentile over the clip > PRESSED
+  counts; quiet: < QUIET counts;
+- rest leakage: in the REST_SHARE of frames with the lowest mean raw count,
+  the share of quiet cells whose normalised value is > 0 (and beside it the
+  share of covered canvas pixels > 0 in those frames);
+- held grip kept: the share of pressed (cell, frame) read > 0, over all
+  frames and over the first START_FRAMES frames of the pairs that start
+  mid-grasp (>= MID_GRASP pressed cells on average there, and >= MID_GRASP_GAIN
+  more than in the clip's least-pressed window of START_FRAMES);
+- quiet false contact: the share of quiet (cell, frame) read > 0;
+- contact share: frames with >= CONTACT_CELLS pressed cells, against the
+  share `htdata stats` reports for the hand after a real ingest;
+- trim --idle: frames `htdata trim --idle --dry-run` would cut that hold
+  >= CONTACT_CELLS pressed cells (target: none);
+- moving cells: of the cells the moving-cell rule flags against a layout
+  without its unused cells (`htdata layouts check --against`), the share
+  whose range in that clip is > MOVING_TRUE counts, and the flags on cells
+  ranging < MOVING_STILL counts (target: none);
+- suggest: `htdata layouts suggest` from every clip of a hand, the cell
+  precision and recall against the layout's live cells, and its blocks.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from htdata.benchmarks.tables import table
+from htdata.errors import ArgumentError
+from htdata.glove.activity import CellActivity, unmapped_moving
+from htdata.glove.layouts import Layout, load_layout, parse_layout
+from htdata.glove.layoutsuggest import suggest_layout
+from htdata.glove.normalise import BASELINES, NOISE_K_BASELINES, RAW_COUNT_DEFAULTS, NormaliseConfig, Normaliser
+from htdata.glove.rasterise import Rasteriser
+
+PRESSED = 15.0          # counts above the cell's own 10th percentile: pressed
+QUIET = 5.0             # ... below this: quiet
+TRUTH_PERCENTILE = 10.0
+REST_SHARE = 0.10       # frames with the lowest mean raw count: the hand's rest
+START_FRAMES = 30
+MID_GRASP = 15.0
+MID_GRASP_GAIN = 10.0
+CONTACT_CELLS = 7
+MOVING_TRUE = 20.0
+MOVING_STILL = 10.0
+HANDS = ("left", "right")
+TARGETS = {"rest_leakage_mean": 0.02, "rest_leakage_worst": 0.05, "held_grip_kept": 0.90,
+           "held_grip_kept_start": 0.90, "quiet_false_contact": 0.02, "contact_share_error": 0.10,
+           "moving_precision": 0.90, "suggest_blocks": 9, "suggest_precision": 0.90, "suggest_recall": 0.90}
+NOISE_K = RAW_COUNT_DEFAULTS["noise_k"]
+# every baseline option beside the default (no [normalise] table): floored (as by default) where a floor can be fitted
+BASELINE_ROWS = tuple((b, NOISE_K if b in NOISE_K_BASELINES else 0.0) for b in BASELINES)
+
+
+@dataclass
+class RealClip:
+    clip: int
+    label: str
+    fps: float
+    counts: np.ndarray       # (T, 2, H, W) raw counts as recorded, hand 0 = left
+
+    def hand(self, hand: str) -> np.ndarray:
+        return self.counts[:, HANDS.index(hand)]
+
+
+def load_real_glove(folder: str | Path) -> tuple[list[RealClip], dict[str, Layout]]:
+    """(clips, {hand: layout}) of a real-glove folder (module docstring); ArgumentError names what is missing."""
+    root = Path(folder)
+    manifest = root / "clips" / "manifest.jsonl"
+    if not manifest.is_file():
+        raise ArgumentError(f"{root}: no clips/manifest.jsonl (a real-glove folder holds clips/ and layouts/)")
+    layouts = {}
+    for path in sorted((root / "layouts").glob("*.json")):
+        layout = load_layout(str(path))
+        layouts.setdefault(layout.hand, layout)
+    if set(layouts) != set(HANDS):
+        raise ArgumentError(f"{root}/layouts: need a layout per hand, found {sorted(layouts) or 'none'}")
+    clips = []
+    for line in manifest.read_text().splitlines():
+        if not line.strip():
+            continue
+        entry = json.loads(line)
+        with np.load(root / "clips" / entry["file"]) as z:
+            counts = np.asarray(z["counts"])
+        if counts.ndim != 4 or counts.shape[1] != 2 or counts.shape[2:] != layouts["left"].grid:
+            raise ArgumentError(f"{root}/clips/{entry['file']}: counts {counts.shape}, expected (T, 2, "
+                                f"{layouts['left'].grid[0]}, {layouts['left'].grid[1]})")
+        clips.append(RealClip(int(entry["clip"]), str(entry["label"]), float(entry["fps"]), counts))
+    return clips, layouts
+
+
+@dataclass
+class HandTruth:
+    """What the raw counts alone say about one (clip, hand), over the layout's live cells."""
+    raw: np.ndarray          # (T, L) float32 counts
+    pressed: np.ndarray      # (T, L) bool
+    quiet: np.ndarray        # (T, L) bool
+    rest_frames: np.ndarray  # indices of the hand's lowest-mean frames
+    mid_grasp: bool
+
+    @classmethod
+    def of(cls, raw: np.ndarray, live: np.ndarray) -> "HandTruth":
+        x = np.asarray(raw, np.float32)[:, live]
+        above = x - np.percentile(x, TRUTH_PERCENTILE, axis=0)
+        pressed = above > PRESSED
+        n = pressed.sum(axis=1)
+        k = min(START_FRAMES, len(n))
+        least = np.convolve(n, np.ones(k) / k, mode="valid").min()
+        start = n[:k].mean()
+        rest = np.argsort(x.mean(axis=1), kind="stable")[: max(1, int(round(REST_SHARE * len(x))))]
+        return cls(x, pressed, above < QUIET, rest, bool(start >= MID_GRASP and start >= least + MID_GRASP_GAIN))
+
+    @property
+    def contact(self) -> np.ndarray:
+        """(T,) bool: frames with at least CONTACT_CELLS pressed cells."""
+        return self.pressed.sum(axis=1) >= CONTACT_CELLS
+
+
+def normalised(raw: np.ndarray, layout: Layout, cfg: NormaliseConfig, fps: float) -> np.ndarray:
+    """(T, H, W) values of one hand's raw rows, fitted as the ingest fits them (whole episode, or first chunk)."""
+    norm = Normaliser(cfg, layout)
+    x = np.asarray(raw, np.float32)
+    rows = np.arange(len(x))
+    if cfg.per_episode:
+        norm.fit_episode(x, fps, rows)
+    else:
+        norm.fit_baseline(x[:64])
+    return norm.apply(x, rows=rows)[0]
+
+
+def hand_counts(truth: HandTruth, values: np.ndarray, layout: Layout, raster: Rasteriser) -> dict:
+    """Counts behind the measures of one (clip, hand): numerators and denominators, mergeable by addition."""
+    v = values[:, layout.live_mask] > 0
+    rest = truth.rest_frames
+    maps = raster.render(values[rest])
+    covered = raster.coverage > 0
+    out = {"rest_quiet": int(truth.quiet[rest].sum()), "rest_quiet_lit": int((truth.quiet[rest] & v[rest]).sum()),
+           "rest_pixels": int(covered.sum()) * len(rest), "rest_pixels_lit": int((maps[:, covered] > 0).sum()),
+           "pressed": int(truth.pressed.sum()), "pressed_kept": int((truth.pressed & v).sum()),
+           "quiet": int(truth.quiet.sum()), "quiet_lit": int((truth.quiet & v).sum()),
+           "start_pressed": 0, "start_kept": 0}
+    if truth.mid_grasp:
+        s = slice(0, START_FRAMES)
+        out["start_pressed"] = int(truth.pressed[s].sum())
+        out["start_kept"] = int((truth.pressed[s] & v[s]).sum())
+    return out
+
+
+def _ratio(a: int, b: int) -> float | None:
+    return a / b if b else None
+
+
+def normalise_rows(clips: list[RealClip], layouts: dict[str, Layout]) -> list[dict]:
+    """One row per setting (the default, then every baseline): the README's normalisation measures."""
+    plans = [("default (no [normalise] table)", None)] + [(f"{b}" + (f", noise_k={k:g}" if k else ""), (b, k))
+                                                          for b, k in BASELINE_ROWS]
+    rasters = {h: Rasteriser(layouts[h]) for h in HANDS}
+    truths = {(c.clip, h): HandTruth.of(c.hand(h), layouts[h].live_mask) for c in clips for h in HANDS}
+    rows = []
+    for label, plan in plans:
+        total, leaks, seconds, frames = {}, [], 0.0, 0
+        for clip in clips:
+            for h in HANDS:
+                cfg = NormaliseConfig.from_layout_value(layouts[h].value)
+                if plan is not None:
+                    cfg = dataclasses.replace(cfg, baseline=plan[0], noise_k=plan[1]).validate()
+                t0 = time.perf_counter()
+                values = normalised(clip.hand(h), layouts[h], cfg, clip.fps)
+                seconds += time.perf_counter() - t0
+                frames += len(values)
+                c = hand_counts(truths[(clip.clip, h)], values, layouts[h], rasters[h])
+                total = {k: total.get(k, 0) + n for k, n in c.items()}
+                leaks.append((f"clip {clip.clip} {h}", _ratio(c["rest_quiet_lit"], c["rest_quiet"]) or 0.0))
+        worst = max(leaks, key=lambda x: x[1])
+        rows.append({"setting": label, "rest_leakage_mean": float(np.mean([v for _, v in leaks])),
+                     "rest_leakage_worst": worst[1], "rest_leakage_worst_at": worst[0],
+                     "rest_canvas_lit": _ratio(total["rest_pixels_lit"], total["rest_pixels"]),
+                     "held_grip_kept": _ratio(total["pressed_kept"], total["pressed"]),
+                     "held_grip_kept_start": _ratio(total["start_kept"], total["start_pressed"]),
+                     "quiet_false_contact": _ratio(total["quiet_lit"], total["quiet"]),
+                     "us_per_hand_frame": 1e6 * seconds / max(frames, 1)})
+    return rows
+
+
+def moving_cell_rows(clips: list[RealClip], layouts: dict[str, Layout], short_frames: int = 300) -> list[dict]:
+    """Per hand (all clips, and clips of at most `short_frames`): precision of the moving-cell rule against a
+    layout without its unused cells, and the flags on cells that range < MOVING_STILL counts."""
+    rows = []
+    for h in HANDS:
+        doc = layouts[h].to_dict()
+        doc.pop("unused_cells", None)
+        bare = parse_layout(doc, f"{layouts[h].layout_id} without unused_cells")
+        for which in ("all clips", f"clips <= {short_frames} frames"):
+            flagged = true = still = 0
+            for clip in clips:
+                if which != "all clips" and len(clip.counts) > short_frames:
+                    continue
+                activity = CellActivity(bare.grid)
+                activity.add(clip.hand(h).astype(np.float32))
+                found = unmapped_moving(activity, bare)
+                rng = activity.range[tuple(found.cells.T)] if len(found) else np.zeros(0)
+                flagged += len(found)
+                true += int((rng > MOVING_TRUE).sum())
+                still += int((rng < MOVING_STILL).sum())
+            rows.append({"hand": h, "clips": which, "flagged": flagged, "precision": _ratio(true, flagged),
+                         "flagged_under_10": still})
+    return rows
+
+
+def suggest_rows(clips: list[RealClip], layouts: dict[str, Layout]) -> list[dict]:
+    """Per hand: `layouts suggest` from every clip against the layout's live cells."""
+    rows = []
+    for h in HANDS:
+        activities = []
+        for clip in clips:
+            a = CellActivity(layouts[h].grid)
+            a.add(clip.hand(h).astype(np.float32))
+            activities.append(a)
+        doc, _ = suggest_layout(activities, h, f"suggested_{h}", False, [f"clip {c.clip}" for c in clips],
+                                float(layouts[h].value["max"]))
+        got = parse_layout(doc, f"suggested {h} layout").live_mask
+        truth = layouts[h].live_mask
+        rows.append({"hand": h, "blocks": len(doc["blocks"]), "true_blocks": len(layouts[h].blocks),
+                     "precision": _ratio(int((got & truth).sum()), int(got.sum())),
+                     "recall": _ratio(int((got & truth).sum()), int(truth.sum()))})
+    return rows
+
+
+def write_native_clips(clips: list[RealClip], layouts: dict[str, Layout], root: Path) -> Path:
+    """Glove-only native recordings of the clips under root/recordings (layout files beside them in
+    root/layouts); returns the recordings folder."""
+    rec_dir, lay_dir = root / "recordings", root / "layouts"
+    for d in (rec_dir, lay_dir):
+        shutil.rmtree(d, ignore_errors=True)
+        d.mkdir(parents=True)
+    for h in HANDS:
+        shutil.copyfile(layouts[h].path, lay_dir / Path(layouts[h].path).name)
+    for clip in clips:
+        folder = rec_dir / f"clip_{clip.clip}"
+        folder.mkdir()
+        ts = (np.arange(len(clip.counts)) * (1e9 / clip.fps)).astype(np.int64)
+        hands = {}
+        for h in HANDS:
+            np.savez(folder / f"tactile_{h}.npz", values=clip.hand(h), timestamps_ns=ts)
+            hands[h] = {"layout": layouts[h].layout_id, "file": f"tactile_{h}.npz"}
+        task = "".join(ch if ch.isalnum() else "_" for ch in clip.label.lower()).strip("_")
+        (folder / "recording.json").write_text(json.dumps(
+            {"format": "htdata-native", "format_version": 1, "task": task, "scene": "real_glove", "hands": hands}))
+    return rec_dir
+
+
+def dataset_rows(clips: list[RealClip], layouts: dict[str, Layout], work: Path) -> dict:
+    """A default ingest of the clips (no [normalise] table), then `htdata stats` contact share per hand against
+    the truth, and the pressed frames `htdata trim --idle --dry-run` would cut."""
+    from htdata.curate.idle import IdleConfig, plan_idle
+    from htdata.ingest.pipeline import load_pipeline
+    from htdata.ingest.plan import Source
+    from htdata.ingest.run import ingest
+    from htdata.inspect.stats import episode_stats
+    from htdata.read.reader import DatasetReader
+
+    rec_dir = write_native_clips(clips, layouts, work)
+    out = work / "dataset"
+    shutil.rmtree(out, ignore_errors=True)
+    t0 = time.perf_counter()
+    ingest([Source(load_pipeline("native"), rec_dir)], out, workers=0, progress=False,
+           layout_dirs=(str(work / "layouts"),), command="htdata bench (real glove)")
+    ingest_s = time.perf_counter() - t0
+    by_id = {f"nat-clip_{c.clip}": c for c in clips}
+    shares, cut_pressed, cut_frames = [], 0, 0
+    with DatasetReader(out) as reader:
+        per_episode, _ = episode_stats(reader, cache_dir=None)
+        cuts = {c.episode: c for c in plan_idle(reader, IdleConfig(), cache_dir=None)}
+        for rec, st in zip(reader.episodes, per_episode):
+            clip = by_id[rec["episode_id"]]
+            contact = np.zeros(len(clip.counts), bool)
+            for h in HANDS:
+                truth = HandTruth.of(clip.hand(h), layouts[h].live_mask).contact
+                hs = st["hands"][h]
+                shares.append({"clip": clip.clip, "hand": h, "truth": float(truth.mean()),
+                               "stats": hs["contact_frames"] / max(hs["frames"], 1)})
+                contact |= truth
+            cut = cuts[rec["episode_id"]]
+            if cut.keep is not None:
+                dropped = np.ones(len(clip.counts), bool)
+                dropped[cut.keep.start:cut.keep.stop] = False
+                cut_frames += int(dropped.sum())
+                cut_pressed += int((dropped & contact).sum())
+    errors = {h: max(abs(s["stats"] - s["truth"]) for s in shares if s["hand"] == h) for h in HANDS}
+    return {"ingest_s": ingest_s, "frames": int(sum(len(c.counts) for c in clips)), "contact_share": shares,
+            "contact_share_error": errors, "idle_cut_frames": cut_frames, "idle_cut_pressed_frames": cut_pressed}
+
+
+def realglove_rows(folder: str | Path | None, work: Path, quick: bool = False) -> dict:
+    """The section: every measure on the folder's clips (a note without a folder)."""
+    if folder is None:
+        return {"skipped": "no real-glove folder given (htdata bench --real-glove DIR; the Makefile passes "
+                           "../shared/real_glove when it exists)"}
+    clips, layouts = load_real_glove(folder)
+    if quick:
+        clips = sorted(clips, key=lambda c: len(c.counts))[:3]
+    work.mkdir(parents=True, exist_ok=True)
+    return {"folder": str(folder), "clips": len(clips), "frames": int(sum(len(c.counts) for c in clips)),
+            "targets": TARGETS, "normalise": normalise_rows(clips, layouts),
+            "dataset": dataset_rows(clips, layouts, work), "moving_cells": moving_cell_rows(clips, layouts),
+            "suggest": suggest_rows(clips, layouts)}
+
+
+def realglove_markdown(d: dict) -> list[str]:
+    if "skipped" in d:
+        return [f"Skipped: {d['skipped']}.", ""]
+    dash = lambda rows: [{k: ("-" if v is None else v) for k, v in r.items()} for r in rows]   # noqa: E731
+    t = d["targets"]
+    lines = [f"{d['clips']} real clips ({d['frames']} frames, both hands) from {d['folder']}; measures and targets "
+             f"from its README (htdata/benchmarks/realglove.py). Targets: rest leakage mean <= "
+             f"{t['rest_leakage_mean']:.0%}, worst <= {t['rest_leakage_worst']:.0%}; held grip kept >= "
+             f"{t['held_grip_kept']:.2f} (all frames and the start of mid-grasp clips); quiet false contact <= "
+             f"{t['quiet_false_contact']:.0%}.", ""]
+    lines += table(dash(d["normalise"]), [
+        ("setting", "setting"), ("rest_leakage_mean", "rest leakage mean"), ("rest_leakage_worst", "worst"),
+        ("rest_leakage_worst_at", "worst at"), ("rest_canvas_lit", "rest canvas px > 0"),
+        ("held_grip_kept", "held grip kept"), ("held_grip_kept_start", "kept, start of mid-grasp"),
+        ("quiet_false_contact", "quiet false contact"), ("us_per_hand_frame", "us / hand-frame")])
+    ds = d["dataset"]
+    err = ", ".join(f"{h} {e:.3f}" for h, e in ds["contact_share_error"].items())
+    lines += ["", f"Default ingest of the clips ({ds['frames']} frames, {ds['ingest_s']:.1f} s, inline): `htdata "
+                  f"stats` contact share per (clip, hand) against the truth (frames with >= {CONTACT_CELLS} pressed "
+                  f"cells): worst error {err} (target <= {t['contact_share_error']:.2f}). `htdata trim --idle "
+                  f"--dry-run` would cut {ds['idle_cut_frames']} frames, {ds['idle_cut_pressed_frames']} of them "
+                  f"with >= {CONTACT_CELLS} pressed cells (target 0).", ""]
+    lines += table(ds["contact_share"], [("clip", "clip"), ("hand", "hand"), ("truth", "contact share, truth"),
+                                         ("stats", "htdata stats")])
+    lines += ["", f"Moving cells against the layouts without unused_cells (target precision >= "
+                  f"{t['moving_precision']:.2f}, no flag under {MOVING_STILL:g} counts):", ""]
+    lines += table(dash(d["moving_cells"]), [("hand", "hand"), ("clips", "clips"), ("flagged", "cells flagged"),
+                                             ("precision", f"precision (range > {MOVING_TRUE:g})"),
+                                             ("flagged_under_10", f"flagged, range < {MOVING_STILL:g}")])
+    lines += ["", f"`htdata layouts suggest` from every clip of a hand (target >= {t['suggest_blocks']} blocks, "
+                  f"cell precision and recall >= {t['suggest_precision']:.2f}):", ""]
+    lines += table(dash(d["suggest"]), [("hand", "hand"), ("blocks", "blocks"), ("true_blocks", "layout's blocks"),
+                                        ("precision", "cell precision"), ("recall", "cell recall")])
+    return lines + [""]
