@@ -168,10 +168,11 @@ def _ratio(a: int, b: int) -> float | None:
     return a / b if b else None
 
 
-def normalise_rows(clips: list[RealClip], layouts: dict[str, Layout]) -> list[dict]:
-    """One row per setting (the default, then every baseline): the README's normalisation measures."""
+def normalise_rows(clips: list[RealClip], layouts: dict[str, Layout], baselines: bool = True) -> list[dict]:
+    """One row per setting (the default, then every baseline unless not `baselines`): the README's
+    normalisation measures."""
     plans = [("default (no [normalise] table)", None)] + [(f"{b}" + (f", noise_k={k:g}" if k else ""), (b, k))
-                                                          for b, k in BASELINE_ROWS]
+                                                          for b, k in (BASELINE_ROWS if baselines else ())]
     rasters = {h: Rasteriser(layouts[h]) for h in HANDS}
     truths = {(c.clip, h): HandTruth.of(c.hand(h), layouts[h].live_mask) for c in clips for h in HANDS}
     rows = []
