@@ -59,9 +59,10 @@ from htdata.synthetic.restwander import RestWander
 from htdata.synthetic.tasks import stable_hash
 
 SATURATE = 1020.0          # where cells saturate
-REST = {"left": 557.0, "right": 566.0}   # rest level per hand, counts
+REST = {"left": 557.0, "right": 566.0}   # a resting cell's median per hand, counts ...
+REST_BASE = {"left": 556.5, "right": 563.5}  # ... over this base (the offsets' tail and the wander's bumps add)
 OFFSET_STD = 1.3           # per-cell rest offset, counts ...
-OFFSET_TAIL = (0.03, 12.0)  # ... and this share of cells sits higher by an exponential of this scale
+OFFSET_TAIL = (0.02, 10.0)  # ... and this share of cells sits higher by an exponential of this scale
 GAIN_STD = 0.15            # per-cell gain, relative
 SPAN = 460.0               # counts a full press adds at gain 1 (rest ~560 + 460 -> saturation)
 NOISE_STD = 0.1            # fast noise, counts
@@ -70,7 +71,8 @@ NOISY_FAULT = 18.0         # std of the cells of fault class "noisy"
 DRIFT_PER_MIN = 1.5        # per-cell creep, counts per minute (uniform in +-)
 COMMON_DRIFT = 2.0         # common-mode wander amplitude, counts (period of minutes)
 GAP_WANDER = 0.7           # cells without a sensor wander this share as much (htdata/synthetic/restwander.py)
-CROSSTALK_GAIN = (0.15, 0.8)  # column 31 swings by this share of its row's press change over the last second
+CROSSTALK_GAIN = ((0.02, 0.12), (0.3, 1.0), 0.2)   # column 31 swings by this share of its row's press change
+                                                    # over the last second: most rows little, this share a lot
 TRUTH_LEVEL = 15.0 / SPAN  # true press at or above this is contact (15 counts at gain 1)
 FPS = 30.0
 COUNT_CHUNK = 2048         # frames per noise draw
@@ -130,7 +132,7 @@ class GloveUnit:
     def make(cls, hand: str, seed: int) -> "GloveUnit":
         rng = np.random.default_rng([seed & 0xFFFFFFFF, stable_hash("rawglove-unit"), stable_hash(hand)])
         share, scale = OFFSET_TAIL
-        offset = REST[hand] + rng.normal(0.0, OFFSET_STD, GRID)
+        offset = REST_BASE[hand] + rng.normal(0.0, OFFSET_STD, GRID)
         offset += np.where(rng.random(GRID) < share, rng.exponential(scale, GRID), 0.0)
         gain = np.clip(1.0 + rng.normal(0.0, GAIN_STD, GRID), 0.6, 1.5)
         noise = np.full(GRID, NOISE_STD)
@@ -138,7 +140,9 @@ class GloveUnit:
         creep = rng.uniform(-DRIFT_PER_MIN, DRIFT_PER_MIN, GRID)
         layout = glove_layout(hand)
         wander = np.where(layout.live_mask, 1.0, GAP_WANDER)
-        crosstalk = rng.uniform(*CROSSTALK_GAIN, GRID[0]) * np.where(rng.random(GRID[0]) < 0.8, 1.0, -1.0)
+        weak, strong, share = CROSSTALK_GAIN
+        crosstalk = np.where(rng.random(GRID[0]) < share, rng.uniform(*strong, GRID[0]), rng.uniform(*weak, GRID[0]))
+        crosstalk *= np.where(rng.random(GRID[0]) < 0.8, 1.0, -1.0)
         cells = [tuple(int(v) for v in c) for c in np.argwhere(layout.live_mask)]
         picks = rng.choice(len(cells), size=4 * 3, replace=False)
         faults = {name: [cells[int(i)] for i in picks[k * 3:(k + 1) * 3]] for k, name in enumerate(FAULT_CLASSES)}
