@@ -18,7 +18,7 @@ from htdata.synthetic.rawfacts import (
     hand_facts,
     sample_rows,
 )
-from htdata.synthetic.rawglove import REST, corpus_clips, glove_layout, make_clip, GloveUnit
+from htdata.synthetic.rawglove import REST, GloveUnit, corpus_clips, glove_layout, make_clip
 from htdata.synthetic.rawlayout import FINGER_ROWS, SEGMENT_COLS, sensor_mask
 
 REAL = Path(os.environ.get("HTDATA_REAL_GLOVE", Path(__file__).resolve().parents[2].parent / "shared" / "real_glove"))
