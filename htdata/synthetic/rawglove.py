@@ -53,7 +53,7 @@ import numpy as np
 
 from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from htdata.synthetic.rawgrip import plan_hand, press_field
-from htdata.synthetic.rawlayout import CROSSTALK_COL, GRID, LAYOUT_IDS, glove_layout, layout_doc
+from htdata.synthetic.rawlayout import CROSSTALK_COL, GRID, LAYOUT_IDS, glove_layout, layout_doc, sensor_mask
 from htdata.synthetic.rawlayout import FULL_SCALE as FULL_SCALE  # the glove's names, from one place
 from htdata.synthetic.restwander import RestWander
 from htdata.synthetic.tasks import stable_hash
@@ -70,10 +70,11 @@ LOUD_NOISE = 1.0           # std of the ~3% louder cells
 NOISY_FAULT = 18.0         # std of the cells of fault class "noisy"
 DRIFT_PER_MIN = 1.5        # per-cell creep, counts per minute (uniform in +-)
 COMMON_DRIFT = 2.0         # common-mode wander amplitude, counts (period of minutes)
-GAP_WANDER = 0.7           # cells without a sensor wander this share as much (htdata/synthetic/restwander.py)
+GAP_WANDER = 1.2           # cells without a sensor: their walks scaled so, and no bumps (htdata/synthetic/restwander.py)
 CROSSTALK_GAIN = ((0.02, 0.12), (0.3, 1.0), 0.2)   # column 31 swings by this share of its row's press change
                                                     # over the last second: most rows little, this share a lot
 TRUTH_LEVEL = 15.0 / SPAN  # true press at or above this is contact (15 counts at gain 1)
+TOUCH_LEVEL = 5.0 / SPAN   # a sensor pressed this much is no longer quiet (5 counts): it moves
 FPS = 30.0
 COUNT_CHUNK = 2048         # frames per noise draw
 FAULT_CLASSES = ("dead", "stuck", "saturating", "noisy")
@@ -94,7 +95,7 @@ def draft_layout_doc(hand: str, forget: tuple[str, ...] = DRAFT_FORGETS) -> dict
 
 def unmapped_truth(clip: "RawGloveClip", hand: str, unit: "GloveUnit", layout) -> dict[str, np.ndarray]:
     """(32,32) masks over the unmapped cells of `layout` in one clip: "pressed" (a sensor that responds and is
-    pressed >= TRUTH_LEVEL), "ghost" (moves without a press: the cross-talk column, or a cell that falls beside a
+    pressed >= TOUCH_LEVEL: no longer quiet), "ghost" (moves without a press: the cross-talk column, or a cell that falls beside a
     press) and "loud" (a louder noise than the glove's)."""
     free = np.asarray(layout.unmapped_mask, bool)
     broken = np.zeros(GRID, bool)
@@ -105,7 +106,7 @@ def unmapped_truth(clip: "RawGloveClip", hand: str, unit: "GloveUnit", layout) -
     ghost[:, unit.faults.crosstalk_cols] = True
     for r, c, _ in clip.sinks.get(hand, []):
         ghost[r, c] = True
-    return {"pressed": free & ~broken & (clip.pressure[hand].max(axis=0) >= TRUTH_LEVEL),
+    return {"pressed": free & ~broken & (clip.pressure[hand].max(axis=0) >= TOUCH_LEVEL),
             "ghost": free & ghost, "loud": free & (unit.noise >= LOUD_NOISE)}
 
 
@@ -139,7 +140,7 @@ class GloveUnit:
         noise[rng.random(GRID) < 0.03] = LOUD_NOISE
         creep = rng.uniform(-DRIFT_PER_MIN, DRIFT_PER_MIN, GRID)
         layout = glove_layout(hand)
-        wander = np.where(layout.live_mask, 1.0, GAP_WANDER)
+        wander = np.where(sensor_mask(), 1.0, GAP_WANDER)
         weak, strong, share = CROSSTALK_GAIN
         crosstalk = np.where(rng.random(GRID[0]) < share, rng.uniform(*strong, GRID[0]), rng.uniform(*weak, GRID[0]))
         crosstalk *= np.where(rng.random(GRID[0]) < 0.8, 1.0, -1.0)
@@ -156,7 +157,7 @@ class GloveUnit:
         signal = self.gain[None].astype(np.float32) * press + fall
         cross = self._crosstalk(signal)
         out = np.empty(press.shape, np.float16)
-        wander = RestWander(self.wander, rng)              # each recording starts anywhere in its wander
+        wander = RestWander(self.wander, sensor_mask(), rng)   # each recording starts anywhere in its wander
         for a in range(0, len(press), COUNT_CHUNK):     # chunks: a 10-minute recording stays small in memory
             b = a + COUNT_CHUNK
             out[a:b] = self._counts(signal[a:b], cross[a:b], t_s[a:b], rng, wander)

@@ -6,7 +6,7 @@ frame to the next (most steps are 0 or half a count), its spread is about a
 count (10th-90th percentile ~3 counts), yet it ranges ~1 count over 10 frames,
 ~3 over 30, ~5 over 100, ~7 over 300 and ~9-10 over 900 frames: it wanders
 slowly and now and then bumps up a few counts for a second. Cells without a
-sensor wander about 2/3 as much.
+sensor wander without the bumps: ~4-5 counts over 300 frames, hardly ever 7.
 
 The model: two Ornstein-Uhlenbeck walks (`WALKS`: stationary std, time
 constant) plus bumps (`BUMPS`: events per second per cell, mean height in
@@ -24,10 +24,12 @@ BUMPS = (1.0 / 6.0, 3.0, 10.0, 0.5)    # (rate per s, mean height, highest, time
 
 
 class RestWander:
-    """The wander of a (H,W) grid of cells, drawn chunk after chunk; `scale` (H,W) scales each cell's."""
+    """The wander of a (H,W) grid of cells, drawn chunk after chunk; `scale` (H,W) scales each cell's walks and
+    `bumps` (H,W) its bumps (0: none)."""
 
-    def __init__(self, scale: np.ndarray, rng: np.random.Generator):
+    def __init__(self, scale: np.ndarray, bumps: np.ndarray, rng: np.random.Generator):
         self.scale = np.asarray(scale, np.float32)
+        self.bumps = np.asarray(bumps, np.float32)
         shape = self.scale.shape
         # each recording starts anywhere in its walks, with no bump under way
         self.walks = [rng.normal(0.0, std, shape).astype(np.float32) for std, _ in WALKS]
@@ -44,6 +46,7 @@ class RestWander:
                            zi=(a * self.walks[k])[None])[0]
             self.walks[k] = walk[-1].astype(np.float32)
             out += walk
+        out *= self.scale[None]
         rate, mean, top, tau = BUMPS
         hits = rng.random((T, *shape), dtype=np.float32) < np.float32(rate * dt)
         heights = np.minimum(rng.exponential(mean, int(hits.sum())), top).astype(np.float32)
@@ -55,5 +58,5 @@ class RestWander:
         b0 = np.float32(1.0 / np.sqrt(((n + 1) * a ** n).max()))
         first, self.bump_state[0] = lfilter([b0], np.float32([1.0, -a]), kicks, axis=0, zi=self.bump_state[0])
         bumps, self.bump_state[1] = lfilter([b0], np.float32([1.0, -a]), first, axis=0, zi=self.bump_state[1])
-        out += bumps
-        return out * self.scale[None]
+        out += bumps * self.bumps[None]
+        return out
