@@ -41,10 +41,15 @@ and `fact_failures` lists the pooled numbers outside them.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.ndimage import binary_dilation, label
+
+from htdata.glove.layouts import parse_layout
+from htdata.synthetic.rawglove import corpus_clips, glove_layout
 
 PRESSED = 15.0          # counts over the cell's own 10th percentile: pressed
 CONTACT_CELLS = 7       # pressed cells that make a contact frame
@@ -255,11 +260,6 @@ def folder_rows(folder) -> list[dict]:
     """Rows of a folder of two-hand clips: FOLDER/clips/*.npz (key "counts", (T, 2, H, W), hand 0 = left) and
     FOLDER/layouts/*.json (one layout per hand, by its "hand"). The caller names the folder; nothing here looks
     for one."""
-    import json
-    from pathlib import Path
-
-    from htdata.glove.layouts import parse_layout
-
     folder = Path(folder)
     live = {}
     for path in sorted((folder / "layouts").glob("*.json")):
@@ -276,8 +276,6 @@ def folder_rows(folder) -> list[dict]:
 def sample_rows(seed: int = 0) -> tuple[list[dict], list[dict]]:
     """(rows, truth) of the sample raw-count glove's corpus (`htdata sample --raw-glove`): the measures, and per
     working hand how well "pressed" measured from the counts alone matches the generator's truth."""
-    from htdata.synthetic.rawglove import corpus_clips, glove_layout
-
     _, clips = corpus_clips(seed)
     live = {h: glove_layout(h).live_mask for h in ("left", "right")}
     rows, truth = [], []
