@@ -70,7 +70,7 @@ LOUD_NOISE = 1.0           # std of the ~3% louder cells
 NOISY_FAULT = 18.0         # std of the cells of fault class "noisy"
 DRIFT_PER_MIN = 1.5        # per-cell creep, counts per minute (uniform in +-)
 COMMON_DRIFT = 2.0         # common-mode wander amplitude, counts (period of minutes)
-GAP_WANDER = 1.2           # cells without a sensor: their walks scaled so, and no bumps (htdata/synthetic/restwander.py)
+GAP_WANDER = 1.2           # cells without a sensor: walks x this, no bumps (htdata/synthetic/restwander.py)
 CROSSTALK_GAIN = ((0.02, 0.12), (0.3, 1.0), 0.2)   # column 31 swings by this share of its row's press change
                                                     # over the last second: most rows little, this share a lot
 TRUTH_LEVEL = 15.0 / SPAN  # true press at or above this is contact (15 counts at gain 1)
