@@ -80,7 +80,7 @@ def test_drift_is_read_from_quiet_frames_and_not_told_on_short_clips(glove):
 def test_clean_counts_flag_nothing():
     unit = GloveUnit.make("right", 11)
     unit.faults.cells = {k: [] for k in unit.faults.cells}
-    unit.faults.crosstalk_rows = []
+    unit.faults.crosstalk_cols = []
     unit.noise = np.minimum(unit.noise, 1.2)      # no loud taxels either
     raw = make_clip("c", "power_grasp", 400, "rest", 11, {"right": unit}).counts["right"].astype(np.float32)
     h = classify_raw(raw, LAYOUT)
@@ -112,10 +112,10 @@ def test_unmapped_cells_move_by_the_one_rule_and_unused_cells_are_honoured():
     assert not (found & ~(truth["pressed"] | truth["ghost"] | truth["loud"])).any()
     # the shipped layout lists the gaps in unused_cells: health counts none of them, moving or not
     moved = raw.copy()
-    moved[:, 13, 5] += np.where(np.arange(len(raw)) % 60 < 30, 0, 80)   # a gap cell (row 13) that responds
+    moved[:, 16, 25] += np.where(np.arange(len(raw)) % 60 < 30, 0, 80)  # a gap cell (row 16) that responds
     shipped = classify_raw(moved, LAYOUT)
     assert shipped["unmapped_cells"] == 0 and shipped["unmapped_moving"] == 0
-    assert [13, 5] in classify_raw(moved, draft)["unmapped_moving_cells"]
+    assert [16, 25] in classify_raw(moved, draft)["unmapped_moving_cells"]
 
 
 def test_inverted_gloves_are_read_in_the_pressure_direction(glove):
@@ -139,17 +139,17 @@ def test_health_map_draws_unexercised_and_unmapped_cells_and_states_thresholds(g
 
     unit, raw = glove
     raw = raw.copy()
-    raw[:, 13, 5] += np.where(np.arange(len(raw)) % 60 < 30, 0, 80)
+    raw[:, 16, 25] += np.where(np.arange(len(raw)) % 60 < 30, 0, 80)
     draft = parse_layout({**draft_layout_doc("right", forget=()), "layout_id": LAYOUT.layout_id}, "draft")
     h = classify_raw(raw, draft)
-    assert [13, 5] in h["unmapped_moving_cells"]
+    assert [16, 25] in h["unmapped_moving_cells"]
     g = Glove(LAYOUT, load_canonical())
     per_episode = [{"hands": {"right": {"layout": LAYOUT.layout_id, "health": h}}}]
     classes = taxel_classes(per_episode, LAYOUT.layout_id, "right", g)
     idle = {tuple(c) for c in h["unexercised_cells"]}
     assert idle and all(classes[i] == UNEXERCISED_INDEX for i, c in enumerate(g.taxels.cells.tolist())
                         if tuple(c) in idle)
-    panel = draw_grid_panel(g, classes, {(13, 5)})
+    panel = draw_grid_panel(g, classes, {(16, 25)})
     assert (panel == np.array(UNMAPPED_MOVING, np.uint8)).all(axis=2).any()
     assert (panel == np.array(UNEXERCISED, np.uint8)).all(axis=2).any()
     text = " ".join(t for _, t in _legend({"raw"}))

@@ -28,22 +28,23 @@ def corpus():
 
 
 def _clip(clips, start):
-    return next(c for c in clips if c.start == start and c.task == "power_grasp")
+    return next(c for c in clips if c.start == start and c.task == "pour")
 
 
 def test_counts_look_like_the_real_glove(corpus):
     units, clips = corpus
     clip = _clip(clips, "rest")
     for hand, counts in clip.counts.items():
-        assert counts.dtype == np.float16 and np.array_equal(counts, np.round(counts))   # integer counts
+        assert counts.dtype == np.float16 and not np.array_equal(counts, np.round(counts))   # half counts too
         live = glove_layout(hand).live_mask
         first = counts[:10].astype(np.float32)[:, live]
-        assert abs(float(np.median(first)) - REST) < 10                                  # rest ~550
-        assert np.std(np.median(first, axis=0)) > 10                                     # per-taxel offsets
+        assert abs(float(np.median(first)) - REST[hand]) < 3                             # rest ~557 / ~566
+        offsets = np.median(first, axis=0)
+        assert np.ptp(offsets[offsets < 700]) > 15                                       # per-cell offsets
         assert float(counts.max()) == SATURATE                                           # cells saturate
-        # noise mostly around one count: about a third of the taxels have zero robust spread over 10 frames
+        # hardly any fast noise: a third or more of the taxels have zero robust spread over 10 frames
         mad = np.median(np.abs(first - np.median(first, axis=0)), axis=0)
-        assert 0.2 < float((mad == 0).mean()) < 0.5
+        assert 0.2 < float((mad == 0).mean()) < 0.7
     u = units["right"]
     raw = clip.counts["right"].astype(np.float32)
     (r, c), = u.faults.cells["saturating"][:1]
@@ -61,13 +62,13 @@ def test_every_cell_wanders_slowly_at_rest_like_the_real_glove(corpus):
     clip = _clip(clips, "rest")
     lay = glove_layout("left")
     gaps = ~np.asarray(lay.live_mask) & ~np.asarray(lay.unmapped_mask)   # the gaps (listed as unused cells)
-    gaps[units["left"].faults.crosstalk_rows, :] = False
-    quiet = gaps & (units["left"].noise < 2)
+    gaps[:, units["left"].faults.crosstalk_cols] = False
+    quiet = gaps & (units["left"].noise < 1)
     act = CellActivity(lay.grid)
     act.add(clip.counts["left"])
     # a gap cell carries no sensor, yet its rest level wanders several counts over a clip, far more than its
-    # frame-to-frame noise (the real glove: median 5, p90 6-7 counts, fast noise 0.15)
-    assert 5 <= float(np.median(act.range[quiet])) <= 10
+    # frame-to-frame noise (the real glove: gaps range 4-6 counts over 150-1000 frames, fast noise 0.15)
+    assert 3 <= float(np.median(act.range[quiet])) <= 8
     assert float(np.median(act.cell_wander()[quiet])) >= 3 * float(np.median(act.cell_noise[quiet]))
 
 
@@ -76,7 +77,7 @@ def test_clip_starts_and_determinism(corpus):
     rest, mid = _clip(clips, "rest"), _clip(clips, "mid_grasp")
     assert not rest.truth_contact("right")[0].any()
     assert rest.truth_contact("right").any()
-    assert mid.truth_contact("right")[0].mean() > 0.5          # already gripping in frame 0
+    assert mid.truth_contact("right")[0].sum() >= 15           # already gripping in frame 0
     assert not mid.truth_contact("right")[-1].any()            # and let go before the end
     again = corpus_clips(0)[1]
     assert all(np.array_equal(a.counts[h], b.counts[h]) for a, b in zip(clips, again) for h in a.counts)
@@ -85,9 +86,12 @@ def test_clip_starts_and_determinism(corpus):
 def test_write_rawglove_is_a_glove_only_native_corpus(tmp_path):
     out = write_rawglove(tmp_path / "rg")
     assert out["clips"] == 5
-    rec = json.loads((tmp_path / "rg" / "rawknit_00_pinch_pick_rest" / "recording.json").read_text())
+    rec = json.loads((tmp_path / "rg" / "rawknit_00_slice_rest" / "recording.json").read_text())
     assert "video" not in rec and set(rec["hands"]) == {"left", "right"}
-    with np.load(tmp_path / "rg" / "rawknit_00_pinch_pick_rest" / "tactile_left.npz") as z:
+    truth = json.loads((tmp_path / "rg" / "truth.json").read_text())
+    assert truth["clips"]["rawknit_00_slice_rest"]["working_hand"] == "right"
+    assert truth["faults"]["right"]["crosstalk_cols"] == [31]
+    with np.load(tmp_path / "rg" / "rawknit_00_slice_rest" / "tactile_left.npz") as z:
         assert z["values"].dtype == np.float16 and z["values"].shape[1:] == (32, 32)
     assert sorted(p.name for p in (tmp_path / "rg" / "layouts").iterdir()) == \
         ["rawknit_left_32x32.calibration.npz", "rawknit_left_32x32.json",
@@ -147,19 +151,20 @@ def test_quietest_span_is_in_seconds():
 
 def test_noise_floor_never_below_the_quantisation_step():
     lay = glove_layout("right")
+    step = float(lay.value["step"])                          # the glove's float16 counts: 0.25-count steps
     raw = np.full((40, 32, 32), 550.0, np.float32)          # no spread at all: k x 0 = 0
     n = Normaliser(config_for("rest_window", True), lay)
     n.fit_baseline(raw)
-    assert np.all(n.floor[lay.live_mask] >= np.float32(1.0 / FULL_SCALE))   # step 1 count
-    raw[5, 3, 3] += 1.0                                      # one count of flicker reads 0
+    assert np.all(n.floor[lay.live_mask] >= np.float32(step / FULL_SCALE))   # one step
+    raw[5, 3, 3] += step                                     # one step of flicker reads 0
     v, _ = n.apply(raw)
     assert v[5, 3, 3] == 0
-    raw[5, 3, 3] += 1.0                                      # two counts do not
+    raw[5, 3, 3] += step                                     # two steps do not
     assert n.apply(raw)[0][5, 3, 3] > 0
-    # without a floor (noise_k = 0, noise_floor = 0) nothing changes: one count reads above 0
+    # without a floor (noise_k = 0, noise_floor = 0) nothing changes: one step reads above 0
     plain = Normaliser(config_for("rest_window", False), lay)
     plain.fit_baseline(raw[:10])
-    raw[6, 3, 3] += 1.0
+    raw[6, 3, 3] += step
     assert plain.apply(raw)[0][6, 3, 3] > 0
 
 
@@ -273,10 +278,10 @@ def test_out_of_range_warnings_reach_stderr(tmp_path, capsys):
                     "--set", "normalise.rawknit_left_32x32.baseline=none", tmp_path / "rg", tmp_path / "ds")
     assert rc == 0
     err = capsys.readouterr().err
-    assert "episode nat-rawknit_00_pinch_pick_rest: warning: right hand: 240 of 240 frames" in err
+    assert "episode nat-rawknit_00_slice_rest: warning: right hand: 450 of 450 frames" in err
     assert "outside [0, 472]" in err and "FULL-SCALE" in err
     # baseline "none" on a raw-count glove reads its rest as pressure: one line per episode names the setting
-    line = next(x for x in err.splitlines() if "nat-rawknit_00_pinch_pick_rest" in x and "covered pixels" in x)
+    line = next(x for x in err.splitlines() if "nat-rawknit_00_slice_rest" in x and "covered pixels" in x)
     assert "left hand (layout rawknit_left_32x32): rest level 5" in line and "of 1023" in line
     assert "read >= 0.5" in line and "[normalise.rawknit_left_32x32] baseline = \"quietest\"" in line
     assert "right hand (layout rawknit_right_32x32): rest level" not in err     # its default: quietest
@@ -339,4 +344,6 @@ def test_ingest_with_a_taxel_calibration_file_and_renormalise_from_the_record(tm
     stats = dataset_stats(out, cache_dir=None)
     assert all(g["frames_from_raw"] == g["frames"] for g in stats["gloves"])
     right = next(g for g in stats["gloves"] if g["hand"] == "right")
-    assert 0.4 < right["contact_fraction"] < 0.7
+    clips = corpus_clips(0)[1]                    # truth: frames with >= 7 pressed cells (issue 34's measure)
+    truth = sum(int((c.truth_contact("right").sum(axis=1) >= 7).sum()) for c in clips) / sum(c.n_frames for c in clips)
+    assert abs(right["contact_fraction"] - truth) <= 0.10
