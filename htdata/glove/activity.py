@@ -60,6 +60,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from htdata.glove.restlevel import nanpercentile_columns
+
 MOVING_K = 12.0          # x the glove's fast (second-difference) noise
 WANDER_K = 3.0           # x the glove's slow rest wander (range of quiet block means)
 MOVING_MIN_STEPS = 4.0   # x the quantisation step: the least a cell must move
@@ -133,18 +135,21 @@ class CellActivity:
         return float(np.median(n[sel])) if sel.any() else 0.0
 
     def cell_wander(self) -> np.ndarray:
-        """(H,W) range of each cell's block means over its quiet blocks (NaN without two; module docstring)."""
+        """(H,W) range of each cell's block means over its quiet blocks (NaN without two; module docstring).
+
+        Every cell at once (`nanpercentile_columns`: numpy's nan-percentiles loop over cells in Python).
+        """
         if len(self._blocks) < 2:
             return np.full(self.grid, np.nan)
-        b = np.stack(self._blocks).reshape(len(self._blocks), -1)
+        b = np.stack(self._blocks).reshape(len(self._blocks), -1).astype(np.float64)
         with np.errstate(invalid="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)     # a cell never finite: NaN
             # rest = the cell's lower half (a press only raises a cell: held for most of a clip, it still
             # leaves the lower half to rest); quiet = up to its 10th percentile + K robust spreads of that half
-            mid = np.nanmedian(b, axis=0)
+            mid, p10 = nanpercentile_columns(b, [50, 10])
             low = np.where(b <= mid, b, np.nan)
-            spread = 1.4826 * np.nanmedian(np.abs(low - np.nanmedian(low, axis=0)), axis=0)
-            quiet = np.where(b <= np.nanpercentile(b, 10, axis=0) + WANDER_QUIET_K * spread, b, np.nan)
+            spread = 1.4826 * nanpercentile_columns(np.abs(low - nanpercentile_columns(low, 50)), 50)
+            quiet = np.where(b <= p10 + WANDER_QUIET_K * spread, b, np.nan)
             out = np.nanmax(quiet, axis=0) - np.nanmin(quiet, axis=0)
         return out.reshape(self.grid)
 
