@@ -20,6 +20,7 @@
     raster.py      rasterisation mode x glove layout: render speed vs taxel round-trip error
     rawglove.py    "raw-count glove": baselines and noise floors scored against the generator's truth
     rawglovecells.py  "raw-count glove", moving cells: the moving-cell rule against the generator's truth
+    realglovecells.py  moving cells and suggested blocks on real glove recordings (a folder given explicitly)
     lag.py         the tactile-video lag estimator: error against known lags, cost per episode minute
     rgb.py         RGB: JPEG quality vs bytes vs PSNR, resize method vs time vs error
     stats.py       `htdata stats` speed against the loader's tactile-only decode rate
