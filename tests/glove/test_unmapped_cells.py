@@ -242,7 +242,7 @@ def test_slow_rest_wander_is_not_movement_on_the_sample_raw_glove(rawglove):
 
 
 def test_suggest_finds_the_true_sensor_areas_of_the_sample_raw_glove(rawglove):
-    from htdata.glove.layoutsuggest import cell_boxes, suggest_layout
+    from htdata.glove.layoutsuggest import suggest_layout
     from htdata.synthetic.rawglove import glove_layout
 
     _, clips = rawglove
