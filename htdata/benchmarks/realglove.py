@@ -44,12 +44,19 @@ from pathlib import Path
 import numpy as np
 
 from htdata.benchmarks.tables import table
+from htdata.curate.idle import IdleConfig, plan_idle
 from htdata.errors import ArgumentError
 from htdata.glove.activity import CellActivity, unmapped_moving
 from htdata.glove.layouts import Layout, load_layout, parse_layout
 from htdata.glove.layoutsuggest import suggest_layout
 from htdata.glove.normalise import BASELINES, NOISE_K_BASELINES, RAW_COUNT_DEFAULTS, NormaliseConfig, Normaliser
 from htdata.glove.rasterise import Rasteriser
+from htdata.ingest.pipeline import load_pipeline
+from htdata.ingest.plan import Source
+from htdata.ingest.run import ingest
+from htdata.inspect.stats import episode_stats
+from htdata.read.reader import DatasetReader
+from htdata.synthetic.rawglove import corpus_clips, glove_layout
 
 PRESSED = 15.0          # counts above the cell's own 10th percentile: pressed
 QUIET = 5.0             # ... below this: quiet
@@ -105,6 +112,15 @@ def load_real_glove(folder: str | Path) -> tuple[list[RealClip], dict[str, Layou
                                 f"{layouts['left'].grid[0]}, {layouts['left'].grid[1]})")
         clips.append(RealClip(int(entry["clip"]), str(entry["label"]), float(entry["fps"]), counts))
     return clips, layouts
+
+
+def sample_glove_clips(seed: int = 0) -> tuple[list[RealClip], dict[str, Layout]]:
+    """The sample raw-count glove's corpus (htdata/synthetic/rawglove.py) as clips of this module: measured the
+    same way as the real ones, by their counts alone."""
+    _, clips = corpus_clips(seed)
+    out = [RealClip(k, c.name, float(c.fps), np.stack([c.counts[h] for h in HANDS], axis=1))
+           for k, c in enumerate(clips)]
+    return out, {h: glove_layout(h) for h in HANDS}
 
 
 @dataclass
@@ -253,7 +269,7 @@ def write_native_clips(clips: list[RealClip], layouts: dict[str, Layout], root: 
         shutil.rmtree(d, ignore_errors=True)
         d.mkdir(parents=True)
     for h in HANDS:
-        shutil.copyfile(layouts[h].path, lay_dir / Path(layouts[h].path).name)
+        (lay_dir / f"{layouts[h].layout_id}.json").write_text(json.dumps(layouts[h].to_dict(), indent=1))
     for clip in clips:
         folder = rec_dir / f"clip_{clip.clip}"
         folder.mkdir()
@@ -271,13 +287,6 @@ def write_native_clips(clips: list[RealClip], layouts: dict[str, Layout], root: 
 def dataset_rows(clips: list[RealClip], layouts: dict[str, Layout], work: Path) -> dict:
     """A default ingest of the clips (no [normalise] table), then `htdata stats` contact share per hand against
     the truth, and the pressed frames `htdata trim --idle --dry-run` would cut."""
-    from htdata.curate.idle import IdleConfig, plan_idle
-    from htdata.ingest.pipeline import load_pipeline
-    from htdata.ingest.plan import Source
-    from htdata.ingest.run import ingest
-    from htdata.inspect.stats import episode_stats
-    from htdata.read.reader import DatasetReader
-
     rec_dir = write_native_clips(clips, layouts, work)
     out = work / "dataset"
     shutil.rmtree(out, ignore_errors=True)

@@ -51,6 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.glove.activity import MOVING_MIN_FULL_SCALE
 from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from htdata.synthetic.rawgrip import plan_hand, press_field
 from htdata.synthetic.rawlayout import CROSSTALK_COL, GRID, LAYOUT_IDS, glove_layout, layout_doc, sensor_mask
@@ -95,8 +96,10 @@ def draft_layout_doc(hand: str, forget: tuple[str, ...] = DRAFT_FORGETS) -> dict
 
 def unmapped_truth(clip: "RawGloveClip", hand: str, unit: "GloveUnit", layout) -> dict[str, np.ndarray]:
     """(32,32) masks over the unmapped cells of `layout` in one clip: "pressed" (a sensor that responds and is
-    pressed >= TOUCH_LEVEL: no longer quiet), "ghost" (moves without a press: the cross-talk column, or a cell that falls beside a
-    press) and "loud" (a louder noise than the glove's)."""
+    pressed by more than the moving-cell rule's least move, MOVING_MIN_FULL_SCALE of full scale: a finding to
+    make), "light" (pressed beyond quiet, TOUCH_LEVEL, but less than that: may be found or not), "ghost" (moves
+    without a press: the cross-talk column, or a cell that falls beside a press) and "loud" (a louder noise than
+    the glove's)."""
     free = np.asarray(layout.unmapped_mask, bool)
     broken = np.zeros(GRID, bool)
     for name in ("dead", "stuck", "saturating"):
@@ -106,7 +109,10 @@ def unmapped_truth(clip: "RawGloveClip", hand: str, unit: "GloveUnit", layout) -
     ghost[:, unit.faults.crosstalk_cols] = True
     for r, c, _ in clip.sinks.get(hand, []):
         ghost[r, c] = True
-    return {"pressed": free & ~broken & (clip.pressure[hand].max(axis=0) >= TOUCH_LEVEL),
+    press = clip.pressure[hand].max(axis=0)
+    moved = press * unit.gain * SPAN > MOVING_MIN_FULL_SCALE * FULL_SCALE      # counts the press added
+    touched = free & ~broken & (press >= TOUCH_LEVEL)
+    return {"pressed": touched & moved, "light": touched & ~moved,
             "ghost": free & ghost, "loud": free & (unit.noise >= LOUD_NOISE)}
 
 

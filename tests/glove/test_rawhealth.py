@@ -36,6 +36,11 @@ def _found(health, name):
 
 def test_each_planted_fault_is_its_class(glove):
     unit, raw = glove
+    raw = raw.copy()
+    for r, c in unit.faults.cells["dead"]:       # press around each dead cell now and then: exercised, never rising
+        for dr, dc in ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, 1)):
+            if 0 <= r + dr < 32 and 0 <= c + dc < 32 and LAYOUT.live_mask[r + dr, c + dc]:
+                raw[100:160, r + dr, c + dc] += 120.0
     h = classify_raw(raw, LAYOUT)
     assert h["assessed"] and h["basis"] == "raw"
     planted = unit.faults.cells
@@ -88,12 +93,17 @@ def test_clean_counts_flag_nothing():
 
 
 def test_a_crosstalk_row_is_found():
-    units, clips = corpus_clips(0)
-    unit = units["right"]
-    # a pinch: the ghost row (1) runs across fingertips that are not pressed, so it is seen on its own
-    h = classify_raw(clips[0].counts["right"].astype(np.float32), LAYOUT)
+    """A raw row that lights up along its length with nothing pressed beside it (the sample glove's own
+    cross-talk runs in its unused column 31, which health does not look at: htdata/glove/activity.py reports it)."""
+    _, clips = corpus_clips(0)
+    raw = clips[0].counts["right"].astype(np.float32)
+    row = 20                                               # a palm row
+    live = np.flatnonzero(LAYOUT.live_mask[row])
+    for k in range(6):                                     # six short swings along the whole row
+        raw[30 + 40 * k:36 + 40 * k, row, live] += 60.0
+    h = classify_raw(raw, LAYOUT)
     rows = {r for r, _ in _found(h, "crosstalk")}
-    assert rows and rows <= set(unit.faults.crosstalk_rows)
+    assert rows == {row}
 
 
 def test_unmapped_cells_move_by_the_one_rule_and_unused_cells_are_honoured():
@@ -109,7 +119,7 @@ def test_unmapped_cells_move_by_the_one_rule_and_unused_cells_are_honoured():
     # the forgotten thumb tip moves; every other moving cell is a ghost row or a loud cell, never the gaps'
     # slow rest wander
     assert (found & truth["pressed"]).sum() >= 0.8 * truth["pressed"].sum() > 0
-    assert not (found & ~(truth["pressed"] | truth["ghost"] | truth["loud"])).any()
+    assert not (found & ~(truth["pressed"] | truth["light"] | truth["ghost"] | truth["loud"])).any()
     # the shipped layout lists the gaps in unused_cells: health counts none of them, moving or not
     moved = raw.copy()
     moved[:, 16, 25] += np.where(np.arange(len(raw)) % 60 < 30, 0, 80)  # a gap cell (row 16) that responds

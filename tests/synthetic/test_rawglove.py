@@ -103,37 +103,24 @@ def _rates(values, clip, hand):
     return c["tp"] / (c["tp"] + c["fn"]), c["rest_above_0"] / c["rest"], c["tp"] / max(c["tp"] + c["fp"], 1)
 
 
-def test_quietest_span_keeps_the_grip_of_a_clip_starting_mid_grasp(corpus):
+def test_a_grip_held_from_the_first_frame_is_kept_by_the_activity_baselines_not_the_rest_window(corpus):
+    """Measured as on the real glove (its counts alone: htdata/benchmarks/realglove.py), at the clip start."""
+    from htdata.benchmarks.realglove import HandTruth, hand_counts, normalised
+    from htdata.glove.rasterise import Rasteriser
+
     _, clips = corpus
     mid = _clip(clips, "mid_grasp")
-    recall_first, _, _ = _rates(normalise_clip(mid, "right", config_for("rest_window", True)), mid, "right")
-    recall_quiet, rest_quiet, prec_quiet = _rates(normalise_clip(mid, "right", config_for("quietest", True)), mid,
-                                                  "right")
-    assert recall_first < 0.3            # the first 10 frames absorb the grip
-    assert recall_quiet > 0.9 and prec_quiet > 0.9 and rest_quiet < 0.05
-    recall_pct, _, _ = _rates(normalise_clip(mid, "right", config_for("percentile", True)), mid, "right")
-    assert recall_pct > 0.9
+    layout = glove_layout("right")
+    truth = HandTruth.of(mid.counts["right"], layout.live_mask)
+    assert truth.mid_grasp
 
+    def kept_at_start(baseline):
+        cfg = config_for(baseline, True)
+        c = hand_counts(truth, normalised(mid.counts["right"], layout, cfg, mid.fps), layout, Rasteriser(layout))
+        return c["start_kept"] / c["start_pressed"]
 
-def test_default_settings_of_a_raw_count_glove_keep_the_rest_dark_and_the_grip(corpus):
-    from htdata.benchmarks.rawglove import held_grip
-    from htdata.ingest.pipeline import load_pipeline
-
-    _, clips = corpus
-    cfg = load_pipeline("native").normalise_for(glove_layout("right"))      # no [normalise.<id>] table
-    assert cfg.baseline == "quietest" and cfg.noise_k == 3
-    rest = [0, 0]
-    grip = [0, 0]
-    for clip in clips:
-        for hand in clip.counts:
-            values = normalise_clip(clip, hand, cfg)
-            pressure = clip.pressure[hand][:, glove_layout(hand).live_mask]
-            c = score(values, pressure)
-            rest = [rest[0] + c["rest_above_0"], rest[1] + c["rest"]]
-            if clip.start == "mid_grasp":
-                grip = [a + b for a, b in zip(grip, held_grip(values, pressure, clip.fps))]
-    assert rest[0] / rest[1] <= 0.02                 # rest leakage (a floor from one window: 7-8%)
-    assert grip[1] and grip[0] / grip[1] >= 0.9      # a grip held at the clip start survives
+    assert kept_at_start("rest_window") < 0.3            # the first 10 frames absorb the grip
+    assert kept_at_start("default") >= 0.9 and kept_at_start("percentile") >= 0.9
 
 
 def test_quietest_span_is_in_seconds():
@@ -178,8 +165,8 @@ def test_drift_baseline_follows_a_ten_minute_drift():
         v = normalise_clip(clip, "right", config_for(baseline, True))[tail]
         return score(v, clip.pressure["right"][tail][:, live])["rest_above_0"] / live.sum() / 900
 
-    with_drift, without = rest_above("drift"), rest_above("rest_window")
-    assert without > 0.3 and with_drift < 0.08
+    with_drift, without = rest_above("default"), rest_above("rest_window")   # default: 60 s windows per cell
+    assert without > 0.3 and with_drift < 0.05
 
 
 def test_drift_knots_round_trip_through_the_episode_record():
@@ -283,18 +270,18 @@ def test_out_of_range_warnings_reach_stderr(tmp_path, capsys):
     # baseline "none" on a raw-count glove reads its rest as pressure: one line per episode names the setting
     line = next(x for x in err.splitlines() if "nat-rawknit_00_slice_rest" in x and "covered pixels" in x)
     assert "left hand (layout rawknit_left_32x32): rest level 5" in line and "of 1023" in line
-    assert "read >= 0.5" in line and "[normalise.rawknit_left_32x32] baseline = \"quietest\"" in line
-    assert "right hand (layout rawknit_right_32x32): rest level" not in err     # its default: quietest
+    assert "read >= 0.5" in line and 'drop the baseline line from [normalise.rawknit_left_32x32]' in line
+    assert "right hand (layout rawknit_right_32x32): rest level" not in err     # its default: drift
     from htdata.read.reader import DatasetReader
     with DatasetReader(tmp_path / "ds") as reader:
-        assert sorted(e["baseline"] for e in reader.manifest["calibrations"].values()) == ["none", "quietest"]
+        assert sorted(e["baseline"] for e in reader.manifest["calibrations"].values()) == ["drift", "none"]
     # and validate fails it, naming the setting (the right hand, on its default, passes)
     from htdata.validate import validate_dataset
     report = validate_dataset(tmp_path / "ds")
     failures = [f for f in report["checks"]["sensors"]["failures"] if f["what"] == "rest_level"]
     assert not report["ok"] and len(failures) == 5 and {f["hand"] for f in failures} == {"left"}
     assert "rest level 5" in failures[0]["message"] and "of 1023" in failures[0]["message"]
-    assert "[normalise.rawknit_left_32x32] baseline = \"quietest\"" in failures[0]["message"]
+    assert "drop the baseline line from [normalise.rawknit_left_32x32]" in failures[0]["message"]
 
 
 def test_taxel_calibration_file_formula_and_errors(tmp_path):
