@@ -1,11 +1,7 @@
 """`make bench` section "real glove": the rules measured on real raw-count recordings (issue 34).
 
 The recordings are a folder given by an explicit path (`htdata bench
---real-glove DIR`; the Makefile passes ../shared/real_glove when it exists):
-`clips/manifest.jsonl` (clip, file, label, fps, frames), `clips/<file>.npz`
-(key `counts`, (T, 2, H, W) raw counts, hand 0 = left) and `layouts/*.json`
-(one layout per hand, found by its "hand"). The toolkit never reads such a
-folder on its own: only this section and the tests that name it do.
+--real-glove DIR`; the Makefile passes ../shared/real_glove when it exists).
 
 The measures, per (clip, hand), with raw counts over the layout's live cells
 (the folder's README defines them; the truth is the raw counts alone):
@@ -24,12 +20,9 @@ The measures, per (clip, hand), with raw counts over the layout's live cells
   share `htdata stats` reports for the hand after a real ingest;
 - trim --idle: frames `htdata trim --idle --dry-run` would cut that hold
   >= CONTACT_CELLS pressed cells (target: none);
-- moving cells: of the cells the moving-cell rule flags against a layout
-  without its unused cells (`htdata layouts check --against`), the share
-  whose range in that clip is > MOVING_TRUE counts, and the flags on cells
-  ranging < MOVING_STILL counts (target: none);
-- suggest: `htdata layouts suggest` from every clip of a hand, the cell
-  precision and recall against the layout's live cells, and its blocks.
+- moving cells and `layouts suggest`: htdata/benchmarks/realglovecells.py.
+
+The clips (a folder, or the sample glove's corpus) are htdata/benchmarks/realclips.py's.
 """
 
 from __future__ import annotations
@@ -43,12 +36,11 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.benchmarks.realclips import HANDS, RealClip, load_real_glove
+from htdata.benchmarks.realglovecells import cells_markdown, cells_rows
 from htdata.benchmarks.tables import table
 from htdata.curate.idle import IdleConfig, plan_idle
-from htdata.errors import ArgumentError
-from htdata.glove.activity import CellActivity, unmapped_moving
-from htdata.glove.layouts import Layout, load_layout, parse_layout
-from htdata.glove.layoutsuggest import suggest_layout
+from htdata.glove.layouts import Layout
 from htdata.glove.normalise import BASELINES, NOISE_K_BASELINES, RAW_COUNT_DEFAULTS, NormaliseConfig, Normaliser
 from htdata.glove.rasterise import Rasteriser
 from htdata.ingest.pipeline import load_pipeline
@@ -56,7 +48,6 @@ from htdata.ingest.plan import Source
 from htdata.ingest.run import ingest
 from htdata.inspect.stats import episode_stats
 from htdata.read.reader import DatasetReader
-from htdata.synthetic.rawglove import corpus_clips, glove_layout
 
 PRESSED = 15.0          # counts above the cell's own 10th percentile: pressed
 QUIET = 5.0             # ... below this: quiet
@@ -66,61 +57,13 @@ START_FRAMES = 30
 MID_GRASP = 15.0
 MID_GRASP_GAIN = 10.0
 CONTACT_CELLS = 7
-MOVING_TRUE = 20.0
-MOVING_STILL = 10.0
-HANDS = ("left", "right")
+MOVING_STILL = 10.0      # counts: no moving-cell flag on a cell ranging less (realglovecells.QUIET_RANGE)
 TARGETS = {"rest_leakage_mean": 0.02, "rest_leakage_worst": 0.05, "held_grip_kept": 0.90,
            "held_grip_kept_start": 0.90, "quiet_false_contact": 0.02, "contact_share_error": 0.10,
            "moving_precision": 0.90, "suggest_blocks": 9, "suggest_precision": 0.90, "suggest_recall": 0.90}
 NOISE_K = RAW_COUNT_DEFAULTS["noise_k"]
 # every baseline option beside the default (no [normalise] table): floored (as by default) where a floor can be fitted
 BASELINE_ROWS = tuple((b, NOISE_K if b in NOISE_K_BASELINES else 0.0) for b in BASELINES)
-
-
-@dataclass
-class RealClip:
-    clip: int
-    label: str
-    fps: float
-    counts: np.ndarray       # (T, 2, H, W) raw counts as recorded, hand 0 = left
-
-    def hand(self, hand: str) -> np.ndarray:
-        return self.counts[:, HANDS.index(hand)]
-
-
-def load_real_glove(folder: str | Path) -> tuple[list[RealClip], dict[str, Layout]]:
-    """(clips, {hand: layout}) of a real-glove folder (module docstring); ArgumentError names what is missing."""
-    root = Path(folder)
-    manifest = root / "clips" / "manifest.jsonl"
-    if not manifest.is_file():
-        raise ArgumentError(f"{root}: no clips/manifest.jsonl (a real-glove folder holds clips/ and layouts/)")
-    layouts = {}
-    for path in sorted((root / "layouts").glob("*.json")):
-        layout = load_layout(str(path))
-        layouts.setdefault(layout.hand, layout)
-    if set(layouts) != set(HANDS):
-        raise ArgumentError(f"{root}/layouts: need a layout per hand, found {sorted(layouts) or 'none'}")
-    clips = []
-    for line in manifest.read_text().splitlines():
-        if not line.strip():
-            continue
-        entry = json.loads(line)
-        with np.load(root / "clips" / entry["file"]) as z:
-            counts = np.asarray(z["counts"])
-        if counts.ndim != 4 or counts.shape[1] != 2 or counts.shape[2:] != layouts["left"].grid:
-            raise ArgumentError(f"{root}/clips/{entry['file']}: counts {counts.shape}, expected (T, 2, "
-                                f"{layouts['left'].grid[0]}, {layouts['left'].grid[1]})")
-        clips.append(RealClip(int(entry["clip"]), str(entry["label"]), float(entry["fps"]), counts))
-    return clips, layouts
-
-
-def sample_glove_clips(seed: int = 0) -> tuple[list[RealClip], dict[str, Layout]]:
-    """The sample raw-count glove's corpus (htdata/synthetic/rawglove.py) as clips of this module: measured the
-    same way as the real ones, by their counts alone."""
-    _, clips = corpus_clips(seed)
-    out = [RealClip(k, c.name, float(c.fps), np.stack([c.counts[h] for h in HANDS], axis=1))
-           for k, c in enumerate(clips)]
-    return out, {h: glove_layout(h) for h in HANDS}
 
 
 @dataclass
@@ -217,50 +160,6 @@ def normalise_rows(clips: list[RealClip], layouts: dict[str, Layout], baselines:
     return rows
 
 
-def moving_cell_rows(clips: list[RealClip], layouts: dict[str, Layout], short_frames: int = 300) -> list[dict]:
-    """Per hand (all clips, and clips of at most `short_frames`): precision of the moving-cell rule against a
-    layout without its unused cells, and the flags on cells that range < MOVING_STILL counts."""
-    rows = []
-    for h in HANDS:
-        doc = layouts[h].to_dict()
-        doc.pop("unused_cells", None)
-        bare = parse_layout(doc, f"{layouts[h].layout_id} without unused_cells")
-        for which in ("all clips", f"clips <= {short_frames} frames"):
-            flagged = true = still = 0
-            for clip in clips:
-                if which != "all clips" and len(clip.counts) > short_frames:
-                    continue
-                activity = CellActivity(bare.grid)
-                activity.add(clip.hand(h).astype(np.float32))
-                found = unmapped_moving(activity, bare)
-                rng = activity.range[tuple(found.cells.T)] if len(found) else np.zeros(0)
-                flagged += len(found)
-                true += int((rng > MOVING_TRUE).sum())
-                still += int((rng < MOVING_STILL).sum())
-            rows.append({"hand": h, "clips": which, "flagged": flagged, "precision": _ratio(true, flagged),
-                         "flagged_under_10": still})
-    return rows
-
-
-def suggest_rows(clips: list[RealClip], layouts: dict[str, Layout]) -> list[dict]:
-    """Per hand: `layouts suggest` from every clip against the layout's live cells."""
-    rows = []
-    for h in HANDS:
-        activities = []
-        for clip in clips:
-            a = CellActivity(layouts[h].grid)
-            a.add(clip.hand(h).astype(np.float32))
-            activities.append(a)
-        doc, _ = suggest_layout(activities, h, f"suggested_{h}", False, [f"clip {c.clip}" for c in clips],
-                                float(layouts[h].value["max"]))
-        got = parse_layout(doc, f"suggested {h} layout").live_mask
-        truth = layouts[h].live_mask
-        rows.append({"hand": h, "blocks": len(doc["blocks"]), "true_blocks": len(layouts[h].blocks),
-                     "precision": _ratio(int((got & truth).sum()), int(got.sum())),
-                     "recall": _ratio(int((got & truth).sum()), int(truth.sum()))})
-    return rows
-
-
 def write_native_clips(clips: list[RealClip], layouts: dict[str, Layout], root: Path) -> Path:
     """Glove-only native recordings of the clips under root/recordings (layout files beside them in
     root/layouts); returns the recordings folder."""
@@ -330,8 +229,7 @@ def realglove_rows(folder: str | Path | None, work: Path, quick: bool = False) -
     work.mkdir(parents=True, exist_ok=True)
     return {"folder": str(folder), "clips": len(clips), "frames": int(sum(len(c.counts) for c in clips)),
             "targets": TARGETS, "normalise": normalise_rows(clips, layouts),
-            "dataset": dataset_rows(clips, layouts, work), "moving_cells": moving_cell_rows(clips, layouts),
-            "suggest": suggest_rows(clips, layouts)}
+            "dataset": dataset_rows(clips, layouts, work), **cells_rows(clips, layouts, leave_one_out=not quick)}
 
 
 def realglove_markdown(d: dict) -> list[str]:
@@ -358,13 +256,9 @@ def realglove_markdown(d: dict) -> list[str]:
                   f"with >= {CONTACT_CELLS} pressed cells (target 0).", ""]
     lines += table(ds["contact_share"], [("clip", "clip"), ("hand", "hand"), ("truth", "contact share, truth"),
                                          ("stats", "htdata stats")])
-    lines += ["", f"Moving cells against the layouts without unused_cells (target precision >= "
-                  f"{t['moving_precision']:.2f}, no flag under {MOVING_STILL:g} counts):", ""]
-    lines += table(dash(d["moving_cells"]), [("hand", "hand"), ("clips", "clips"), ("flagged", "cells flagged"),
-                                             ("precision", f"precision (range > {MOVING_TRUE:g})"),
-                                             ("flagged_under_10", f"flagged, range < {MOVING_STILL:g}")])
-    lines += ["", f"`htdata layouts suggest` from every clip of a hand (target >= {t['suggest_blocks']} blocks, "
-                  f"cell precision and recall >= {t['suggest_precision']:.2f}):", ""]
-    lines += table(dash(d["suggest"]), [("hand", "hand"), ("blocks", "blocks"), ("true_blocks", "layout's blocks"),
-                                        ("precision", "cell precision"), ("recall", "cell recall")])
+    lines += ["", f"Moving cells and `layouts suggest` (htdata/benchmarks/realglovecells.py; targets: flag precision "
+                  f">= {t['moving_precision']:.2f} with no flag under {MOVING_STILL:g} counts; suggest >= "
+                  f"{t['suggest_blocks']} blocks per hand, cell precision and recall >= {t['suggest_precision']:.2f})"
+                  f":", ""]
+    lines += cells_markdown(d)
     return lines + [""]

@@ -22,12 +22,12 @@ clips and over the short ones (SHORT_FRAMES frames or fewer) separately:
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from htdata.benchmarks.realclips import HANDS, RealClip, load_real_glove
 from htdata.benchmarks.tables import table
 from htdata.glove.activity import CellActivity, unmapped_moving
 from htdata.glove.layouts import Layout, parse_layout
@@ -36,29 +36,14 @@ from htdata.glove.layoutsuggest import suggest_layout
 TRUTH_RANGE = 20.0      # counts: a flagged cell that moves more than this in the clip really moves
 QUIET_RANGE = 10.0      # counts: a cell ranging less than this must never be flagged
 SHORT_FRAMES = 300      # a short clip (135-300 frames: little rest wander to see)
-HANDS = ("left", "right")
 
 
-def load_clips(folder: Path) -> list[tuple[int, np.ndarray]]:
-    """(clip id, (T, 2, H, W) float32 raw counts) for every clip of the manifest, in manifest order."""
-    out = []
-    for line in (folder / "clips" / "manifest.jsonl").read_text().splitlines():
-        if line.strip():
-            entry = json.loads(line)
-            with np.load(folder / "clips" / entry["file"]) as z:
-                out.append((int(entry["clip"]), z["counts"].astype(np.float32)))
-    return out
-
-
-def real_layout(folder: Path, hand: str, unused: bool = True) -> Layout:
-    """The folder's layout of `hand` (the one json in layouts/ naming it), without `unused_cells` when not `unused`."""
-    for path in sorted((folder / "layouts").glob("*.json")):
-        doc = json.loads(path.read_text())
-        if doc.get("hand") == hand:
-            if not unused:
-                doc.pop("unused_cells", None)
-            return parse_layout(doc, str(path))
-    raise FileNotFoundError(f"no {hand}-hand layout in {folder / 'layouts'}")
+def bare_layout(layout: Layout) -> Layout:
+    """`layout` without its `unused_cells` (what `layouts check` is measured against: every cell outside the
+    blocks watched)."""
+    doc = layout.to_dict()
+    doc.pop("unused_cells", None)
+    return parse_layout(doc, f"{layout.layout_id} without unused_cells")
 
 
 def _activity(rows: np.ndarray) -> CellActivity:
@@ -71,15 +56,15 @@ def _share(hit: int, total: int) -> float | str:
     return hit / total if total else "n/a"
 
 
-def moving_cell_rows(folder: Path, clips: list[tuple[int, np.ndarray]] | None = None) -> list[dict]:
+def moving_cell_rows(clips: list[RealClip], layouts: dict[str, Layout]) -> list[dict]:
     """One row per (hand, clips): flags of `layouts check --against` and their precision (module docstring)."""
-    clips = load_clips(folder) if clips is None else clips
     rows = []
-    for h, hand in enumerate(HANDS):
-        layout = real_layout(folder, hand, unused=False)
+    for hand in HANDS:
+        layout = bare_layout(layouts[hand])
         per_clip = []
-        for clip, counts in clips:
-            act = _activity(counts[:, h])
+        for c in clips:
+            clip, counts = c.clip, c.counts
+            act = _activity(c.hand(hand))
             found = unmapped_moving(act, layout)
             rng = act.range
             flagged, crosstalk = rng[tuple(found.cells.T)], rng[tuple(found.crosstalk.T)]
@@ -99,17 +84,16 @@ def moving_cell_rows(folder: Path, clips: list[tuple[int, np.ndarray]] | None = 
     return rows
 
 
-def suggest_rows(folder: Path, clips: list[tuple[int, np.ndarray]] | None = None) -> list[dict]:
+def suggest_rows(clips: list[RealClip], layouts: dict[str, Layout]) -> list[dict]:
     """One row per (hand, clips): `layouts suggest` from those clips against the layout's live cells."""
-    clips = load_clips(folder) if clips is None else clips
     rows = []
-    for h, hand in enumerate(HANDS):
-        truth = real_layout(folder, hand).live_mask
-        for name, chosen in (("all", clips), ("short", [c for c in clips if len(c[1]) <= SHORT_FRAMES])):
+    for hand in HANDS:
+        truth = layouts[hand].live_mask
+        for name, chosen in (("all", clips), ("short", [c for c in clips if len(c.counts) <= SHORT_FRAMES])):
             if not chosen:
                 continue
-            acts = [_activity(counts[:, h]) for _, counts in chosen]
-            doc, summary = suggest_layout(acts, hand, f"suggested_{hand}", False, [f"clip_{c}" for c, _ in chosen])
+            acts = [_activity(c.hand(hand)) for c in chosen]
+            doc, summary = suggest_layout(acts, hand, f"suggested_{hand}", False, [f"clip_{c.clip}" for c in chosen])
             got = parse_layout(doc, "suggested").live_mask
             tp = int((got & truth).sum())
             rows.append({"hand": hand, "clips": f"{name} ({len(chosen)})", "blocks": len(doc["blocks"]),
@@ -120,19 +104,18 @@ def suggest_rows(folder: Path, clips: list[tuple[int, np.ndarray]] | None = None
     return rows
 
 
-def suggest_leave_one_out_rows(folder: Path, clips: list[tuple[int, np.ndarray]] | None = None) -> list[dict]:
+def suggest_leave_one_out_rows(clips: list[RealClip], layouts: dict[str, Layout]) -> list[dict]:
     """One row per hand: `layouts suggest` from every clip but one, for each clip left out (how the targets
     hold on a set of clips it was not developed on): least / median / largest blocks, precision and recall."""
-    clips = load_clips(folder) if clips is None else clips
     rows = []
-    for h, hand in enumerate(HANDS):
-        truth = real_layout(folder, hand).live_mask
-        acts = [_activity(counts[:, h]) for _, counts in clips]
+    for hand in HANDS:
+        truth = layouts[hand].live_mask
+        acts = [_activity(c.hand(hand)) for c in clips]
         got = {"blocks": [], "precision": [], "recall": []}
         for k in range(len(clips)):
             keep = [a for i, a in enumerate(acts) if i != k]
-            doc, _ = suggest_layout(keep, hand, f"suggested_{hand}", False, [f"clip_{c}" for i, (c, _) in
-                                                                           enumerate(clips) if i != k])
+            doc, _ = suggest_layout(keep, hand, f"suggested_{hand}", False,
+                                    [f"clip_{c.clip}" for i, c in enumerate(clips) if i != k])
             live = parse_layout(doc, "suggested").live_mask
             tp = int((live & truth).sum())
             got["blocks"].append(len(doc["blocks"]))
@@ -148,21 +131,28 @@ def suggest_leave_one_out_rows(folder: Path, clips: list[tuple[int, np.ndarray]]
     return rows
 
 
-def report(folder: Path) -> list[str]:
-    """Markdown lines: both tables."""
-    clips = load_clips(folder)
+def cells_rows(clips: list[RealClip], layouts: dict[str, Layout], leave_one_out: bool = True) -> dict:
+    """Every table's rows (results.json): moving cells, suggest, and suggest with each clip left out."""
+    return {"moving_cells": moving_cell_rows(clips, layouts), "suggest": suggest_rows(clips, layouts),
+            "suggest_leave_one_out": suggest_leave_one_out_rows(clips, layouts) if leave_one_out else []}
+
+
+def cells_markdown(d: dict) -> list[str]:
+    """Markdown lines: the tables of `cells_rows`."""
     lines = ["Moving cells (`layouts check --against`, layout without unused_cells): flags = forgotten sensors "
              f"(precision: range > {TRUTH_RANGE:g} counts), cross-talk = cells that only fall below rest", ""]
-    lines += table(moving_cell_rows(folder, clips), [
+    lines += table(d["moving_cells"], [
         ("hand", "hand"), ("clips", "clips"), ("flagged", "flagged"), ("precision", "precision"),
         ("under_quiet", f"flags < {QUIET_RANGE:g} counts"), ("crosstalk", "cross-talk"),
         ("crosstalk_precision", "cross-talk precision"), ("threshold_min", "least threshold")])
-    lines += ["Suggested blocks (`layouts suggest` from the clips of a hand) against the layout's live cells", ""]
-    lines += table(suggest_rows(folder, clips), [
+    lines += ["", "Suggested blocks (`layouts suggest` from the clips of a hand) against the layout's live cells", ""]
+    lines += table(d["suggest"], [
         ("hand", "hand"), ("clips", "clips"), ("blocks", "blocks"), ("precision", "cell precision"),
         ("recall", "cell recall"), ("live", "live cells"), ("true_live", "true live"), ("left_out", "moving left out")])
-    lines += ["The same with one clip left out, each in turn (least / median / largest)", ""]
-    lines += table(suggest_leave_one_out_rows(folder, clips), [
+    if not d["suggest_leave_one_out"]:
+        return lines
+    lines += ["", "The same with one clip left out, each in turn (least / median / largest)", ""]
+    lines += table(d["suggest_leave_one_out"], [
         ("hand", "hand"), ("subsets", "subsets"), ("blocks_min", "blocks min"), ("blocks_max", "blocks max"),
         ("precision_min", "precision min"), ("precision_median", "precision median"),
         ("recall_min", "recall min"), ("recall_median", "recall median"), ("recall_max", "recall max"),
@@ -173,4 +163,4 @@ def report(folder: Path) -> list[str]:
 if __name__ == "__main__":
     if len(sys.argv) != 2:
         sys.exit("usage: python -m htdata.benchmarks.realglovecells REAL_GLOVE_FOLDER")
-    print("\n".join(report(Path(sys.argv[1]))))
+    print("\n".join(cells_markdown(cells_rows(*load_real_glove(Path(sys.argv[1]))))))

@@ -14,15 +14,13 @@ import sys
 import numpy as np
 import pytest
 
+from htdata.benchmarks.realclips import HANDS, load_real_glove, sample_glove_clips
 from htdata.benchmarks.realglove import (
     CONTACT_CELLS,
-    HANDS,
     TARGETS,
     HandTruth,
     dataset_rows,
-    load_real_glove,
     normalise_rows,
-    sample_glove_clips,
     write_native_clips,
 )
 from tests.factories.realglove import real_glove_dir

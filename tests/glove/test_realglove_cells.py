@@ -9,24 +9,20 @@ skip. The measures are htdata/benchmarks/realglovecells.py's (also run as
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
-from htdata.benchmarks.realglovecells import load_clips, moving_cell_rows, suggest_rows
-
-REAL = Path(__file__).resolve().parents[2].parent / "shared" / "real_glove"
+from htdata.benchmarks.realclips import load_real_glove
+from htdata.benchmarks.realglovecells import moving_cell_rows, suggest_rows
+from tests.factories.realglove import real_glove_dir
 
 
 @pytest.fixture(scope="module")
-def clips():
-    if not (REAL / "clips" / "manifest.jsonl").is_file():
-        pytest.skip(f"no real glove recordings at {REAL} (../shared/real_glove beside the repository)")
-    return load_clips(REAL)
+def real():
+    return load_real_glove(real_glove_dir())
 
 
-def test_check_against_flags_only_cells_that_really_move_on_long_and_short_clips(clips):
-    rows = moving_cell_rows(REAL, clips)
+def test_check_against_flags_only_cells_that_really_move_on_long_and_short_clips(real):
+    rows = moving_cell_rows(*real)
     assert {(r["hand"], r["clips"].split()[0]) for r in rows} == {(h, c) for h in ("left", "right")
                                                                   for c in ("all", "short")}
     for r in rows:
@@ -43,8 +39,8 @@ def test_check_against_flags_only_cells_that_really_move_on_long_and_short_clips
     assert full["left"]["crosstalk"] > 0
 
 
-def test_suggest_cuts_the_connected_glove_into_blocks_that_match_its_live_cells(clips):
-    for r in suggest_rows(REAL, clips):
+def test_suggest_cuts_the_connected_glove_into_blocks_that_match_its_live_cells(real):
+    for r in suggest_rows(*real):
         if not r["clips"].startswith("all"):
             continue                      # the short clips alone press too little of the left hand to find it
         where = f"{r['hand']} hand: {r['blocks']} blocks {r['boxes']}"
