@@ -65,7 +65,7 @@ def test_stats_contact_follows_the_glove_truth(datasets):
     for g in s["gloves"]:
         area = min_area(int(glove_layout(g["hand"]).live_mask.sum()))
         truth = np.concatenate([c.truth_contact(g["hand"]).sum(axis=1) >= area for c in clips]).mean()
-        assert abs(g["contact_fraction"] - truth) < 0.03
+        assert abs(g["contact_fraction"] - truth) <= 0.10     # the README's target (counts truth: test_raw_count_rules)
         assert f"at least {area} taxels pressed more than 0.015 of full scale above rest" in g["contact_rule"]
         assert "more than 2 quantisation steps above their noise floor" in g["contact_rule"]
         assert g["contact_fraction_threshold"] is not None          # the old figure, beside it
