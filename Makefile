@@ -75,8 +75,11 @@ test: setup
 install-check:
 	PYTHON=$(PYTHON) tools/install_check.sh
 
+# The real-glove section measures the raw-count rules on ../shared/real_glove when that folder exists
+# (REAL_GLOVE= to leave it out; without it the section says it was not measured).
+REAL_GLOVE ?= $(wildcard ../shared/real_glove)
 bench: setup
-	$(HTDATA) bench --out bench
+	$(HTDATA) bench --out bench $(if $(REAL_GLOVE),--real-glove $(REAL_GLOVE))
 
 # HandTouch stage 1 (configs/full.toml, bf16) on a CUDA GPU at batch 32 / 8 workers and 128 / 16:
 # samples/s, data-wait share, GPU busy share. No `setup`: it runs on a machine that already has

@@ -20,6 +20,9 @@
     raster.py      rasterisation mode x glove layout: render speed vs taxel round-trip error
     rawglove.py    "raw-count glove": baselines and noise floors scored against the generator's truth
     rawglovecells.py  "raw-count glove", moving cells: the moving-cell rule against the generator's truth
+    realclips.py   raw-count glove clips measured by their counts: a real-glove folder (given explicitly) or the sample glove
+    realglove.py   "real glove": the raw-count defaults against the folder README's measures and targets (+ stats, trim)
+    realglovecells.py  moving cells and suggested blocks on real glove recordings (a folder given explicitly)
     lag.py         the tactile-video lag estimator: error against known lags, cost per episode minute
     rgb.py         RGB: JPEG quality vs bytes vs PSNR, resize method vs time vs error
     stats.py       `htdata stats` speed against the loader's tactile-only decode rate

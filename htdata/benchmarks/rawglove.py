@@ -1,8 +1,8 @@
 """`make bench` section "raw-count glove": baselines and noise floors scored against the generator's truth.
 
 The glove is the sample world's raw-count knit glove (htdata/synthetic/rawglove.py:
-10-bit counts, rest ~550 with per-taxel offsets and gains, noise, drift,
-faults, cross-talk rows). For every baseline option (none / first_frame /
+float16 counts, rest ~557 / ~566 with per-cell offsets and gains, slow
+wander, drift, faults, a cross-talk column, grips of a few tens of cells). For every baseline option (none / first_frame /
 rest_window (first 10 frames) / quietest (1 s span) / percentile (p5) / drift
 (30 s windows)), with and without the noise floor (noise_k = 3, never below
 one count), on clips that start at rest and clips that start mid-grasp:
@@ -218,8 +218,9 @@ def cells_markdown(d: dict) -> list[str]:
         return []
     dash = lambda rows: [{k: ("-" if v is None else v) for k, v in r.items()} for r in rows]   # noqa: E731
     lines = ["Moving cells: unmapped cells of a first-draft layout (the thumb tip forgotten, no unused cells) that "
-             "move, against truth = a responding sensor pressed >= the truth level, over every clip and hand. "
-             "False ones split into cross-talk rows / loud cells (they do move) and resting cells.", ""]
+             "move, against truth = a responding sensor pressed beyond quiet (5 counts), over every clip and hand. "
+             "False ones split into ghosts (the cross-talk column, cells falling beside a press) / loud cells (they do "
+             "move) and resting cells.", ""]
     lines += table(dash(d["moving_cells"]), [("rule", "rule"), ("pressed", "pressed cells"), ("found", "found"),
                                             ("precision", "precision"), ("recall", "recall"),
                                             ("false_ghost_or_loud", "false: ghost / loud"),

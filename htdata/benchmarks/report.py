@@ -7,6 +7,7 @@ from htdata.benchmarks.lag import lag_markdown
 from htdata.benchmarks.maps import maps_markdown
 from htdata.benchmarks.raw import raw_markdown
 from htdata.benchmarks.rawglove import rawglove_markdown
+from htdata.benchmarks.realglove import realglove_markdown
 from htdata.benchmarks.tables import fmt as _fmt
 from htdata.benchmarks.tables import table
 from htdata.benchmarks.view import view_markdown
@@ -31,6 +32,7 @@ HEADINGS = {
     "export": "## htdata export lerobot: speed and size vs htdata's shards",
     "rawglove": "## Raw-count glove: baselines, noise floors and contact against the truth",
     "view": "## htdata view --save: seconds and memory vs episode length",
+    "realglove": "## Real glove: the raw-count rules on real recordings",
 }
 TARGET_OVERHEAD_PCT = 15.0  # issue #22: share of our in-worker time the bare bound does not spend
 TARGET_SCALING = 1.9        # 1 -> 2 workers, opentouch and touchanything (#22)
@@ -318,7 +320,8 @@ def _stats(d: dict) -> list[str]:
 RENDERERS = {"machine": _machine, "codecs": _codecs, "rgb": _rgb, "raster": _raster, "ingest": _ingest,
              "scaling": _scaling, "rss": _rss, "loader": _loader, "index": _index, "validate": _validate,
              "append": _append, "stats": _stats, "lag": lag_markdown, "raw": raw_markdown, "maps": maps_markdown,
-             "export": export_markdown, "rawglove": rawglove_markdown, "view": view_markdown}
+             "export": export_markdown, "rawglove": rawglove_markdown, "view": view_markdown,
+             "realglove": realglove_markdown}
 
 
 def _discovered(name: str, results: dict) -> list[str]:

@@ -42,6 +42,7 @@ from htdata.benchmarks.maps import maps_rows
 from htdata.benchmarks.raster import raster_rows
 from htdata.benchmarks.raw import raw_rows
 from htdata.benchmarks.rawglove import rawglove_rows
+from htdata.benchmarks.realglove import realglove_rows
 from htdata.benchmarks.report import render_report
 from htdata.benchmarks.revisions import ROUND_ONE, revision_rows
 from htdata.benchmarks.rgb import rgb_section
@@ -56,7 +57,7 @@ from htdata.synthetic.corpus import FORMATS, SCALES, CorpusConfig, corpus_comple
 
 SECTION_GROUP = "htdata.bench_sections"
 BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "scaling", "rss", "loader", "index", "validate", "append",
-                    "stats", "lag", "raw", "maps", "export", "rawglove", "view")
+                    "stats", "lag", "raw", "maps", "export", "rawglove", "view", "realglove")
 # Top-level keys of results.json that are not sections: no section may take these names.
 RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds",
                  "gpu_check")
@@ -89,6 +90,7 @@ class BenchConfig:
     append_sizes: tuple[int, ...] = (20, 200)    # episodes before the one appended (an order of magnitude apart)
     view_lengths: tuple[int, ...] = (150, 600)   # episodes saved with `htdata view --save` (600: issue #38's target)
     sections: tuple[str, ...] | None = None   # None: every built-in and discovered section
+    real_glove: Path | None = None         # real raw-count recordings (section "realglove"; None: it says so)
 
     @classmethod
     def quick_config(cls, out: Path, seed: int = 0) -> "BenchConfig":
@@ -292,6 +294,9 @@ class Sections:
 
     def view(self) -> dict:
         return view_rows(self.cfg.work, self.cfg.view_lengths, again=not self.cfg.quick)
+
+    def realglove(self) -> dict:
+        return realglove_rows(self.cfg.real_glove, self.cfg.work / "realglove", self.cfg.quick)
 
     def discovered(self, name: str, entry_point: metadata.EntryPoint) -> dict:
         """Load and run one discovered section; its result must be a JSON-able dict."""

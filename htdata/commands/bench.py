@@ -17,6 +17,7 @@ Examples:
   htdata bench --out bench            # full: ~6-10 min on 2 cores (make bench)
   htdata bench --quick --out /tmp/b   # tiny sizes (tests)
   htdata bench --only codecs,export   # some sections (installed plugin sections by name too)
+  htdata bench --only realglove --real-glove ../shared/real_glove   # the rules on real recordings
 """
 
 
@@ -28,12 +29,17 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--only", default=None, metavar="A,B",
                         help="comma-separated sections to run (default: all, discovered ones included)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    parser.add_argument("--real-glove", type=Path, default=None, metavar="DIR",
+                        help="real raw-count recordings for section realglove (clips/manifest.jsonl, clips/*.npz, "
+                             "layouts/*.json; make bench passes ../shared/real_glove when it exists); without it "
+                             "the section says it was not measured")
 
 
 def run(args: argparse.Namespace) -> int:
     cfg = BenchConfig.quick_config(args.out, args.seed) if args.quick else BenchConfig(out=args.out, seed=args.seed)
     if args.only is not None:
         cfg.sections = tuple(s.strip() for s in args.only.split(",") if s.strip())
+    cfg.real_glove = args.real_glove
     t_start = time.perf_counter()
 
     def log(message: str) -> None:

@@ -19,7 +19,7 @@ meta/episodes/, data/chunk-*/file-*.parquet, videos/<key>/chunk-*/file-*.mp4):
                                     row-major (the feature's info.grid gives [rows, cols] to reshape it);
                                     NaN/Inf cells (no taxel there) as 0; a hand recorded with two grid shapes
                                     gets one feature per shape: ...raw_<rows>x<cols>
-  observation.tactile.<hand>.map    with --maps: the canonical 224x224 map as grey video (value x 255)
+  observation.tactile.<hand>.map    with --maps: the canonical 224x224 map as grey video (value x --maps-gain x 255)
   observation.present               bool per source (egocentric, tactile.<hand>): is this frame's value real?
   htdata.frame_index                which stored htdata frame the row is (see Time)
   meta/htdata/                      glove layouts, coverage and region masks, split assignment, episode ids
@@ -72,6 +72,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--fps", type=float, default=None, metavar="F",
                    help="resample to F frames/s (default: the episodes' own rate, no resampling)")
     p.add_argument("--maps", action="store_true", help="also export each hand's canonical map as a video feature")
+    p.add_argument("--maps-gain", type=float, default=1.0, metavar="G",
+                   help="--maps: grey level = clip(value x G, 0, 1) x 255 (default 1; a raw-count glove's maps press "
+                        "to a few percent of 1: the export says when its videos look faint and which G to use)")
     p.add_argument("--crf", type=int, default=18, help="H.264 quality, 0 (lossless) .. 51 (default 18)")
     p.add_argument("--force", action="store_true",
                    help="replace OUT if it is a previous htdata export (never anything else)")
@@ -88,7 +91,8 @@ def run(args: argparse.Namespace) -> int:
 
 
     cfg = LeRobotExportConfig(dataset=args.dataset, out=output_path(args.out, "export"), version=args.version, split=args.split,
-                              part=args.part, fps=args.fps, maps=args.maps, crf=args.crf, force=args.force)
+                              part=args.part, fps=args.fps, maps=args.maps, maps_gain=args.maps_gain, crf=args.crf,
+                              force=args.force)
     bar = tqdm(total=0, unit="frame", desc="export", disable=args.quiet, file=sys.stderr)
     try:
         summary = export_lerobot(cfg, progress=bar.update, on_total=lambda n: setattr(bar, "total", n))
@@ -100,4 +104,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {summary['out']}: LeRobot v3.0, {summary['episodes']} episodes, {summary['frames']} frames "
           f"at {summary['fps']} fps{' (resampled)' if summary['resampled'] else ''}, {summary['tasks']} tasks, "
           f"hands {', '.join(summary['hands']) or 'none'}, {summary['bytes'] / 1e6:.1f} MB")
+    for key, faint in summary.get("faint_maps", {}).items():
+        print(f"warning: {key}: the map video is faint: 99.9% of its lit pixels are below grey level "
+              f"{faint['p99_9']} of 255 at --maps-gain {args.maps_gain:g}; --maps-gain {faint['gain']:g} puts them "
+              f"near white (htdata stats suggests a scale for the maps themselves)", file=sys.stderr)
     return 0

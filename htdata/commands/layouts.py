@@ -16,8 +16,10 @@ A RECORDING is a source folder read with --pipeline's adapter (default
 native: a recording folder, or a folder of them) or a .npy of raw rows
 (T,H,W). A cell MOVES when its raw range over a recording exceeds
 max(12 x the glove's frame-to-frame noise + 3 x its slow rest wander,
-4 x value.step) (docs/LAYOUTS.md). `check --against` exits 1 when a cell outside every
-block (and not in unused_cells / bend_cells) moves.
+4 x value.step, 0.02 x value.max) (docs/LAYOUTS.md). `check --against`
+exits 1 when a cell outside every block (and not in unused_cells /
+bend_cells) moves; cells that only fall below their rest are listed as
+cross-talk and do not fail the check.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ import numpy as np
 from htdata.commands.outputs import output_path
 from htdata.errors import ArgumentError
 from htdata.format.table import CANVAS
-from htdata.glove.activity import rule_text, unmapped_moving
+from htdata.glove.activity import describe_cells, rule_text, unmapped_moving
 from htdata.glove.layouts import LAYOUTS_ENV, Layout, list_layouts, load_canonical, load_layout
 from htdata.glove.layoutsuggest import layout_id_from_name, layout_json_text, suggest_layout
 from htdata.glove.rasterise import Rasteriser
@@ -128,11 +130,13 @@ def check_against(layout: Layout, recordings: list[str], pipeline: str) -> int:
         found = unmapped_moving(s.activity, layout)
         head = (f"{s.recording} [{s.episode_id}] {s.hand} hand: {found.frames} frames, noise {found.noise:.4g}, "
                 f"wander {found.wander:.4g}, moving = range > {found.threshold:.4g}")
+        crosstalk = (f"; {len(found.crosstalk)} only fall below rest (cross-talk beside a press, not a "
+                     f"sensor){_ranged(found.crosstalk, found.crosstalk_ranges)}" if len(found.crosstalk) else "")
         if not len(found):
-            print(f"{head}: no cell outside the blocks moves")
+            print(f"{head}: no cell outside the blocks {'rises' if crosstalk else 'moves'}{crosstalk}")
             continue
         findings.update(map(tuple, found.cells.tolist()))
-        print(f"{head}: {len(found)} cell(s) outside every block move:")
+        print(f"{head}: {len(found)} cell(s) outside every block move{crosstalk}:")
         print(f"    {'cell':>9s} {'range':>9s} {'min':>9s} {'max':>9s} {'noise':>8s} {'wander':>8s}")
         wander = s.activity.cell_wander()
         for (r, c), v in zip(found.cells.tolist(), found.ranges):
@@ -144,6 +148,11 @@ def check_against(layout: Layout, recordings: list[str], pipeline: str) -> int:
               f"{layout.path or layout.layout_id}")
         return 1
     return 0
+
+
+def _ranged(cells: np.ndarray, ranges: np.ndarray, limit: int = 12) -> str:
+    """": [r, c] range, ..." for the first `limit` cells."""
+    return ": " + describe_cells(cells.tolist(), ranges.tolist(), limit) if len(cells) else ""
 
 
 def _cells(cells: list, limit: int = 12) -> str:
@@ -178,7 +187,7 @@ def suggest(args: argparse.Namespace) -> int:
           f"frames (median noise {summary['noise']:.4g}, wander {summary['wander']:.4g}, moving = range > {summary['threshold']:.4g}); "
           f"{len(doc['blocks'])} block(s), "
           f"{summary['inside_blocks_not_moving']} cell(s) inside them did not move; {len(summary['left_out'])} "
-          f"moving cell(s) in lines or alone left out (cross-talk, noisy cells){_cells(summary['left_out'])}:")
+          f"moving cell(s) outside them (lines, lone cells, patches of one recording){_cells(summary['left_out'])}:")
     for b in doc["blocks"]:
         turn = f", rotate {b['rotate']}" if b.get("rotate") else ""
         print(f"    {b['name']:10s} rows {b['rows'][0]}-{b['rows'][1]} cols {b['cols'][0]}-{b['cols'][1]} "
@@ -201,7 +210,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                                      "outside every block that move in recordings")
     p.epilog = ("example: htdata layouts check my_glove.json --against /raw/rec_01 /raw/rec_02\n"
                 f"A cell moves when its raw {rule_text()} in a recording "
-                "(docs/LAYOUTS.md); cells in unused_cells or bend_cells are never listed.")
+                "(docs/LAYOUTS.md); cells in unused_cells or bend_cells are never listed; cells that only fall "
+                "below their rest are listed as cross-talk and do not fail the check.")
     p.formatter_class = argparse.RawDescriptionHelpFormatter
     p.add_argument("file", metavar="LAYOUT", help="path to a layout JSON (or a layout id)")
     p.add_argument("--against", nargs="+", default=[], metavar="RECORDING",
@@ -210,8 +220,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                    help="pipeline whose adapter reads the recordings (default: native)")
     p = sub.add_parser("suggest", help="write a starting layout whose blocks cover the cells that move in recordings")
     p.epilog = ("example: htdata layouts suggest /raw/rec_01 /raw/rec_02 my_glove_right.json --hand right\n"
-                "Blocks = boxes around the cells that move in any recording; places are PLACEHOLDERS by size: "
-                "edit them, then render and check the layout (docs/LAYOUTS.md).")
+                "Blocks = the cells that rise in recordings (in two of them when three or more are given), cut "
+                "where the shape narrows and along rows / columns that do not move, strips cut into near-square "
+                "blocks; places are PLACEHOLDERS by size: edit them, then render and check the layout "
+                "(docs/LAYOUTS.md).")
     p.formatter_class = argparse.RawDescriptionHelpFormatter
     p.add_argument("paths", nargs="+", metavar="RECORDING... OUT.json",
                    help="recordings (source folders or .npy raw rows), then the layout JSON to write")

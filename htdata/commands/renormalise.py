@@ -61,6 +61,9 @@ def run(args: argparse.Namespace) -> int:
     except (NoSuchEpisode, DatasetLocked, FileNotFoundError, ValueError) as exc:
         print(f"htdata renormalise: error: {exc}", file=sys.stderr)
         return 2
+    for lines in plan.warnings.values():     # as the ingest warns: a raw-count glove's rest read as pressure
+        for line in lines:
+            print(line, file=sys.stderr)
     for line in plan.lines(args.dry_run):
         print(line)
     if manifest is not None:

@@ -25,7 +25,8 @@ Layout written under OUT:
   native/<recording>/                            100 Hz tactile, 30 Hz video, clock offset
 With --raw-glove, only OUT/rawglove/ (not part of the default corpus):
   rawglove/<clip>/ + layouts/ + truth.json       two-hand 32x32 raw-count knit glove, float16
-                                                 counts, glove only, with ground truth
+                                                 counts, glove only, with ground truth (the real
+                                                 glove's facts: tools/rawglove_facts.py)
   htdata sample data/raw --raw-glove
   htdata ingest --pipeline native --layouts data/raw/rawglove/layouts data/raw/rawglove OUT \
       --set normalise.rawknit_right_32x32.baseline=quietest --set normalise.rawknit_right_32x32.noise_k=3
@@ -62,7 +63,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                              "same seed, scale and formats; otherwise write it, replacing OUT/<format> folders")
     parser.add_argument("--raw-glove", action="store_true",
                         help="write only OUT/rawglove: the realistic raw-count glove (5 glove-only clips, "
-                             "1380 frames, ~6 MB) with its layouts and ground truth")
+                             "1530 frames, ~6 MB) with its layouts and ground truth")
     parser.add_argument("--dry-run", action="store_true", help="print the planned episodes and exit")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 

@@ -127,7 +127,8 @@ def text_lines(s: dict) -> list[str]:
                     f"{k} {_fmt(g['raw_quantiles'][k])}" for k in ("p1", "p50", "p99", "max"))]
                   if g.get("raw_quantiles") else []),
                 f"  health: {h['taxels_assessed']} taxel-episodes assessed ({h['episodes_not_assessed']} episodes "
-                f"too short), flagged: {flagged}; quiet and never pressed: {h['unexercised']}",
+                f"too short), flagged: {flagged}; quiet and never pressed: {h['unexercised']}"
+                + (f"; drift: {h['drift']}" if h.get("drift") else ""),
                 "  region              taxels  contact  mean pressure"]
         for region, r in g["regions"].items():
             out.append(f"  {region:<20}{r['taxels']:>6}  {_fmt(r['contact_frequency']):>7}  "

@@ -50,6 +50,7 @@ from htdata.glove.layouts import Layout, load_layout
 from htdata.glove.normalise import Normaliser
 from htdata.glove.normalisesettings import NormaliseSettings
 from htdata.glove.rasterise import Rasteriser
+from htdata.glove.restlevel import rest_level_warning
 from htdata.read.rawstream import apply_paired, paired_row, paired_source_row
 from htdata.read.reader import DatasetReader
 from htdata.store.confine import inside
@@ -66,6 +67,7 @@ class RenormalisePlan:
     unchanged: int = 0
     repacked_units: list[int] = field(default_factory=list)
     calibrations: dict[str, dict] = field(default_factory=dict)   # new id -> manifest entry
+    warnings: dict[str, list[str]] = field(default_factory=dict)  # episode -> lines (the ingest's rest-level warning)
 
     def lines(self, dry_run: bool = False) -> list[str]:
         would = "would " if dry_run else ""
@@ -121,6 +123,39 @@ def plan_renormalise(snap: Snapshot, normalising: NormaliseSettings, patterns: l
     return plan
 
 
+def rest_level_warnings(reader: DatasetReader, snap: Snapshot, normalising: NormaliseSettings,
+                        plan: RenormalisePlan) -> None:
+    """Fill plan.warnings as an ingest would warn: a raw-count glove whose rest reads as pressure under the new
+    settings (baseline "none"), judged on the episode hand's first stored paired rows."""
+    layouts = dataset_layouts(snap)
+    records = {ep["episode_id"]: ep for ep in snap.episodes}
+    for eid, hands in plan.changes.items():
+        for hand in hands:
+            layout = layouts[records[eid]["layouts"][hand]]
+            cfg = normalising.normalise_for(layout)
+            if cfg.baseline != "none" or cfg.taxel_calibration_sha256:
+                continue
+            rows = first_paired_rows(reader, eid, hand, normalising.fit_frames).astype(np.float32)
+            with np.errstate(invalid="ignore"):
+                lo, hi = np.nanmin(rows, axis=0), np.nanmax(rows, axis=0)
+            line = rest_level_warning(hand, layout, cfg, lo, hi)
+            if line:
+                plan.warnings.setdefault(eid, []).append(f"{line} (episode {eid})")
+
+
+def first_paired_rows(reader: DatasetReader, eid: str, hand: str, frames: int) -> np.ndarray:
+    """The paired raw rows of the episode's first `frames` frames holding the hand (what the ingest fitted on)."""
+    first, n = reader.episode_range(eid)
+    rows = []
+    for i in range(first, first + n):
+        if len(rows) == frames:
+            break
+        members = reader.sample(i, (JSON_MEMBER, tactile_member(hand), raw_member(hand)))
+        if has_hand(members, hand):   # RGB-only samples hold no rows
+            rows.append(paired_row(members, hand, f"{eid} frame {i - first}"))
+    return np.stack(rows)
+
+
 class Recalibration:
     """The SampleRewrite of a renormalise: new maps (and bend vectors) for the changed episode hands."""
 
@@ -155,15 +190,7 @@ class Recalibration:
 
     def _first_rows(self, eid: str, hand: str) -> np.ndarray:
         """The paired raw rows of the episode's first `chunk_frames` frames (what the ingest fitted on)."""
-        first, n = self.reader.episode_range(eid)
-        rows = []
-        for i in range(first, first + n):
-            if len(rows) == self.normalising.fit_frames:
-                break
-            members = self.reader.sample(i, (JSON_MEMBER, tactile_member(hand), raw_member(hand)))
-            if has_hand(members, hand):   # RGB-only samples hold no rows
-                rows.append(paired_row(members, hand, f"{eid} frame {i - first}"))
-        return np.stack(rows)
+        return first_paired_rows(self.reader, eid, hand, self.normalising.fit_frames)
 
     def _paired_rows(self, eid: str, hand: str) -> tuple[np.ndarray, float, np.ndarray]:
         """(paired raw rows, glove fps, their source row numbers) of the whole episode, each source row once
@@ -243,7 +270,8 @@ class Recalibration:
                                    **{hand: taxel_digest(series) for hand, (_, _, _, series) in state.items()}}
         changed = ", ".join(f"{h} {old or '(none)'} -> {new}" for h, (old, new) in self.plan.changes[eid].items())
         record["notes"] = list(record.get("notes", [])) + [
-            f"renormalised from stored raw rows (version {self.snap.version}): calibration {changed}"]
+            f"renormalised from stored raw rows (version {self.snap.version}): calibration {changed}",
+            *self.plan.warnings.get(eid, [])]
         return record
 
 
@@ -253,24 +281,34 @@ def renormalise(root, normalising: NormaliseSettings, patterns: list[str] | None
     with WriterLock(root, command):
         snap = open_snapshot(root)
         plan = plan_renormalise(snap, normalising, patterns, force)
-        if dry_run or not plan.changes:
+        if not plan.changes:
             return plan, None
-        reader = DatasetReader(snap.root, version=snap.version)
-        rewrite = Recalibration(reader, snap, normalising, plan)
-        first = unit = snap.next_unit()
-        clear_uncommitted(snap.root, unit)
-        parts = []
-        try:
-            for part in snap.parts():
-                if part.unit not in plan.repacked_units:
-                    parts.append(part)
-                    continue
-                kept = [KeptEpisode(record=rec, frames=range(int(rec["num_frames"]))) for rec in part.episodes]
-                parts.append(repack_unit(reader, kept, unit, samples_per_shard_of(part), rewrite=rewrite))
-                unit += 1
-        except ValueError:   # bad settings for some frame: leave no shard of this attempt behind
-            clear_uncommitted(snap.root, first)
-            raise
-        manifest = commit_parts(snap.root, parts, {"calibrations": plan.calibrations}, snap, command,
-                                next_unit=unit)
+        with DatasetReader(snap.root, version=snap.version) as reader:
+            rest_level_warnings(reader, snap, normalising, plan)
+            if dry_run:
+                return plan, None
+            manifest = _write(reader, snap, normalising, plan, command)
         return plan, manifest
+
+
+def _write(reader: DatasetReader, snap: Snapshot, normalising: NormaliseSettings, plan: RenormalisePlan,
+           command: str) -> dict:
+    """Re-pack the units holding changed episodes under the new calibrations and commit them (the manifest)."""
+    rewrite = Recalibration(reader, snap, normalising, plan)
+    first = unit = snap.next_unit()
+    clear_uncommitted(snap.root, unit)
+    parts = []
+    try:
+        for part in snap.parts():
+            if part.unit not in plan.repacked_units:
+                parts.append(part)
+                continue
+            kept = [KeptEpisode(record=rec, frames=range(int(rec["num_frames"]))) for rec in part.episodes]
+            parts.append(repack_unit(reader, kept, unit, samples_per_shard_of(part), rewrite=rewrite))
+            unit += 1
+    except ValueError:   # bad settings for some frame: leave no shard of this attempt behind
+        clear_uncommitted(snap.root, first)
+        raise
+    manifest = commit_parts(snap.root, parts, {"calibrations": plan.calibrations}, snap, command,
+                            next_unit=unit)
+    return manifest

@@ -18,7 +18,7 @@ One LeRobot episode per htdata episode. Frame features:
                                       flattened row-major (info.grid = [rows, cols]; names "r<row>c<col>")
                                       (non-finite cells, i.e. no taxel there, as 0; a hand recorded with two grid
                                       shapes gets one feature per shape, ...raw_<rows>x<cols>)
-  observation.tactile.<hand>.map      video (--maps only), the canonical 224x224 map, value x 255 as grey
+  observation.tactile.<hand>.map      video (--maps only), the canonical 224x224 map, value x --maps-gain x 255 as grey
   observation.present                 bool per source (egocentric when exported, tactile.<hand>...): real value?
   htdata.frame_index                  int64, the stored htdata frame (within its episode) of the row
 LeRobot needs every feature in every frame, so a frame missing a source is filled and flagged
@@ -181,7 +181,26 @@ def _write(reader, plan: _Plan, cfg: LeRobotExportConfig, work: Path, pa, pq, pr
     write_meta(reader, plan, cfg, work, feats, stats, vstats, tasks, episode_rows, index, pa, pq)
     return {"episodes": len(plan.positions), "frames": index, "fps": plan.fps, "resampled": plan.resample,
             "tasks": len(tasks), "hands": plan.hands, "raw_features": [s.key for s in plan.slots],
-            "video_keys": plan.video_keys, "bytes": sum(p.stat().st_size for p in work.rglob("*") if p.is_file())}
+            "video_keys": plan.video_keys, "bytes": sum(p.stat().st_size for p in work.rglob("*") if p.is_file()),
+            "faint_maps": faint_maps({k: v for k, v in vstats.items() if k != RGB_KEY}, plan.maps_gain)}
+
+
+FAINT_BELOW = 128        # a map video whose p99.9 lit grey level is below this uses less than half its range
+
+
+def faint_maps(vstats: dict[str, VideoStats], gain: float) -> dict[str, dict]:
+    """Map videos that look faint: {key: {"p99_9": grey level of the lit pixels' p99.9, "gain": a --maps-gain
+    that brings it near white}} (the same rule as `htdata stats`' scale suggestion, htdata/inspect/scalehint.py)."""
+    out = {}
+    for key, vs in vstats.items():
+        lit = vs.hist[0, 1:]
+        if lit.sum() == 0:
+            continue
+        level = 1 + int(np.searchsorted(np.cumsum(lit) / lit.sum(), 0.999))
+        if level < FAINT_BELOW:
+            suggested = gain * 255.0 / level
+            out[key] = {"p99_9": level, "gain": float(f"{suggested:.2g}") if suggested < 10 else float(int(suggested))}
+    return out
 
 
 def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, samples: list[int], times: list[float],
@@ -227,7 +246,7 @@ def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, sam
         if cfg.maps:
             for hand in plan.hands:
                 _add_map_frame(_hand_map(members, hand, where, renderer, pos), t, where, videos[map_key(hand)],
-                               vstats[map_key(hand)])
+                               vstats[map_key(hand)], plan.maps_gain)
         if progress is not None:
             progress(1)
     for v in videos.values():
@@ -244,11 +263,12 @@ def _hand_map(members: dict, hand: str, where: str, renderer: RawMapRenderer | N
     return None
 
 
-def _add_map_frame(m: np.ndarray | None, t: float, where: str, video: VideoWriter, vstats: VideoStats) -> None:
-    """--maps: the canonical map as grey (value x 255); black where the hand has no map this frame."""
+def _add_map_frame(m: np.ndarray | None, t: float, where: str, video: VideoWriter, vstats: VideoStats,
+                   gain: float = 1.0) -> None:
+    """--maps: the canonical map as grey (value x gain x 255, clipped); black where the hand has no map this frame."""
     grey = np.zeros((CANVAS, CANVAS), np.uint8)
     if m is not None:
-        grey = np.round(np.clip(np.nan_to_num(m), 0.0, 1.0) * 255).astype(np.uint8)
+        grey = np.round(np.clip(np.nan_to_num(m) * np.float32(gain), 0.0, 1.0) * 255).astype(np.uint8)
     rgb = np.repeat(grey[..., None], 3, axis=2)
     video.add(rgb, t, where)
     if m is not None:

@@ -47,6 +47,7 @@ class LeRobotExportConfig:
     part: str | None = None
     fps: float | None = None          # None: the episodes' own rate, no resampling
     maps: bool = False
+    maps_gain: float = 1.0            # --maps: grey level = clip(value x gain, 0, 1) x 255
     codec: str = "libx264"
     crf: int = 18
     gop: int = 2                      # keyframe every 2 frames: LeRobot's default, cheap random access
@@ -56,6 +57,8 @@ class LeRobotExportConfig:
         """Raise ArgumentError naming the option (--part, --fps, crf, gop, codec, OUT) that cannot be exported."""
         if self.part is not None and self.split is None:
             raise ArgumentError("--part needs --split NAME")
+        if not (isinstance(self.maps_gain, (int, float)) and np.isfinite(self.maps_gain) and self.maps_gain > 0):
+            raise ArgumentError(f"--maps-gain must be a finite number > 0, got {self.maps_gain!r}")
         if self.fps is not None and not (self.fps > 0 and float(self.fps).is_integer()):
             raise ArgumentError(f"--fps must be a positive whole number (LeRobot's fps is an int), got {self.fps}")
         if not 0 <= self.crf <= 51:
@@ -90,6 +93,7 @@ class _Plan:
     resample: bool
     split_doc: dict | None = None
     video_keys: list[str] = field(default_factory=list)
+    maps_gain: float = 1.0                   # the map videos' grey level = clip(value x gain) x 255
     rgb: bool = True                         # any exported frame holds RGB: else no egocentric video at all
 
     @property
@@ -169,7 +173,8 @@ def plan_export(reader: DatasetReader, cfg: LeRobotExportConfig) -> _Plan:
     # a glove-only selection (no frame holds RGB) has no egocentric feature: no all-black video
     rgb = any(_has_rgb(reader, p) for p in positions)
     video_keys = ([RGB_KEY] if rgb else []) + ([map_key(h) for h in hands] if cfg.maps else [])
-    return _Plan(positions, parts, hands, slots, layout_grids, layouts, fps, resample, split_doc, video_keys, rgb)
+    return _Plan(positions, parts, hands, slots, layout_grids, layouts, fps, resample, split_doc, video_keys,
+                 maps_gain=float(cfg.maps_gain), rgb=rgb)
 
 
 def _has_rgb(reader: DatasetReader, pos: int) -> bool:
@@ -187,6 +192,8 @@ def features(plan: _Plan) -> dict:
     for key in plan.video_keys:
         feats[key] = {"dtype": "video", "shape": [CANVAS, CANVAS, 3], "names": ["height", "width", "channels"],
                       "info": dict(video_info)}
+        if key != RGB_KEY:     # a map video: what its grey levels mean
+            feats[key]["info"]["htdata.grey_level"] = f"round(clip(map value x {plan.maps_gain:g}, 0, 1) x 255)"
     for slot in plan.slots:
         rows, cols = slot.grid
         # flat (rows*cols,), row-major, the grid in "info": LeRobot's tooling and policies take state

@@ -2,8 +2,9 @@
 
     canonical.py    the canonical hand: places, regions, parts of the 224x224 frame
     layouts.py      glove layouts (schemas/layouts/*.json): blocks of raw cells -> canvas places
-    activity.py     which raw cells move (fast noise + slow rest wander): live cells a layout leaves out
+    activity.py     which raw cells move (noise + rest wander, contact floor), which only fall (cross-talk)
     layoutsuggest.py a starting layout from the cells that move in recordings (`htdata layouts suggest`)
+    blockcuts.py    rectangular blocks cut from a connected mask of moving cells (for layoutsuggest)
     normalise.py    glove units -> [0,1]: the settings and the Normaliser that applies them
     baselinefit.py  fitting the per-taxel baseline and noise floor (first frames, or the whole episode)
     normalisesettings.py  a pipeline's [normalise.<layout>] tables over each layout's value block

@@ -1,9 +1,10 @@
 """Which raw cells move: per-cell activity over a recording, and the rule that calls a cell "moving".
 
-A cell outside every block of a layout is never drawn. When its values move
+A cell outside every block of a layout is never drawn. When its values rise
 during a recording it is almost always a sensor the layout forgot, so the
 ingest reports it (episode record `unmapped_moving`, reports/ingest.json,
-stderr) and `htdata layouts check LAYOUT --against RECORDING` lists it. Cells a
+stderr) and `htdata layouts check LAYOUT --against RECORDING` lists it; a
+cell that only falls below its rest is cross-talk and is listed apart. Cells a
 layout declares in `unused_cells` (and bend cells) are never reported.
 
 Activity is accumulated over chunks of raw rows (T,H,W), in the glove's own
@@ -36,19 +37,41 @@ cell of the grid moving (issue 27), while pressed cells move 25-120 counts.
 The rule: a cell MOVES when its range > threshold, where
 
     threshold = max(MOVING_K * glove noise + WANDER_K * glove wander,
-                    MOVING_MIN_STEPS * value.step)
+                    MOVING_MIN_STEPS * value.step,
+                    MOVING_MIN_FULL_SCALE * value.max)
 
 (`value.step` = the layout's quantisation step, 0 when the layout does not
-state it): a resting cell's range is its slow wander plus its fast noise's
-range. MOVING_K = 12: the range of white noise over 18,000 frames (10
-minutes at 30 fps) is about 9 noise stds. WANDER_K = 3: the glove's median
-wander measured on quiet blocks is short of a whole clip's and a cell's
-wander varies (p90 / median ~1.4 on the real glove), so three medians clear
-the resting cells (real glove: 3 x 5 + 1.8 = 17 counts, below the 25 of a
-light press). MOVING_MIN_STEPS = 4 keeps a cell flickering between a few
-adjacent quantisation levels quiet. On noiseless data (threshold 0) any
-change moves. All three constants live here; ingest (`unmapped_moving`),
-`htdata layouts check --against`, `htdata layouts suggest` and raw-row health
+state it; `value.max` its full scale, 0 when there is no layout yet): a
+resting cell's range is its slow wander plus its fast noise's range.
+MOVING_K = 12: the range of white noise over 18,000 frames (10 minutes at
+30 fps) is about 9 noise stds. WANDER_K = 3: the glove's median wander
+measured on quiet blocks is short of a whole clip's and a cell's wander
+varies (p90 / median ~1.4 on the real glove), so three medians clear the
+resting cells. MOVING_MIN_STEPS = 4 keeps a cell flickering between a few
+adjacent quantisation levels quiet. MOVING_MIN_FULL_SCALE = the contact
+level (htdata.glove.contact.THRESHOLD, 0.02 of full scale, 20.5 counts of
+1023): a cell outside every block that never moves by that much would never
+read contact in a map, so it is no finding. It is the bar on SHORT clips,
+where the wander measured is small (1.4-2 counts over 135-300 frames) while
+resting cells still range 4-9 counts (the whole glove dips by ~5 counts for
+a few frames, which half-second block means smooth away) and cells beside a
+press or on a cross-talk column move 10-20 counts; on long clips of a noisy
+glove the noise and wander term is the larger. On noiseless data without a
+full scale (threshold 0) any change moves.
+
+A moving cell is CROSS-TALK, not a sensor, when it only falls: it falls
+below its rest by more than the threshold and never rises that far above it
+(in the pressure direction: `inverted` gloves fall when pressed). Its rest
+is its level while the glove rests (`CellActivity.rest_level`: its median
+block mean over the REST_SHARE of blocks where the reference cells sit
+nearest their own low level, the glove-wide shift of each block taken out):
+a cell beside a press falls while the glove is pressed, so its own median
+may be its fallen level, but the glove's quiet blocks show where it rests.
+A cell that both rises and falls, or moves by neither alone, is counted as
+rising (a finding to look at). The constants live here; ingest
+(`unmapped_moving`), `htdata layouts check --against`, `htdata layouts
+suggest` (without the full-scale floor: it looks for sensor areas, and a
+lightly pressed taxel is one) and raw-row health
 (htdata/glove/rawhealth.py) all use `moving_cells`.
 """
 
@@ -56,15 +79,20 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+
+from htdata.glove.contact import THRESHOLD as CONTACT_THRESHOLD
+from htdata.glove.restlevel import nanpercentile_columns
 
 MOVING_K = 12.0          # x the glove's fast (second-difference) noise
 WANDER_K = 3.0           # x the glove's slow rest wander (range of quiet block means)
 MOVING_MIN_STEPS = 4.0   # x the quantisation step: the least a cell must move
 WANDER_BLOCK = 16        # frames per block mean (half a second at 30 fps)
 WANDER_QUIET_K = 6.0     # a cell's block is quiet up to its p10 + this many robust spreads of its lower half
+MOVING_MIN_FULL_SCALE = CONTACT_THRESHOLD   # x full scale (value.max): the least a cell must move (contact level)
+REST_SHARE = 0.10        # the glove's quietest share of blocks: where each cell's rest level is read
 _NOISE_FROM_ABS_DIFF2 = math.sqrt(math.pi / 12.0)
 
 
@@ -133,18 +161,21 @@ class CellActivity:
         return float(np.median(n[sel])) if sel.any() else 0.0
 
     def cell_wander(self) -> np.ndarray:
-        """(H,W) range of each cell's block means over its quiet blocks (NaN without two; module docstring)."""
+        """(H,W) range of each cell's block means over its quiet blocks (NaN without two; module docstring).
+
+        Every cell at once (`nanpercentile_columns`: numpy's nan-percentiles loop over cells in Python).
+        """
         if len(self._blocks) < 2:
             return np.full(self.grid, np.nan)
-        b = np.stack(self._blocks).reshape(len(self._blocks), -1)
+        b = np.stack(self._blocks).reshape(len(self._blocks), -1).astype(np.float64)
         with np.errstate(invalid="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)     # a cell never finite: NaN
             # rest = the cell's lower half (a press only raises a cell: held for most of a clip, it still
             # leaves the lower half to rest); quiet = up to its 10th percentile + K robust spreads of that half
-            mid = np.nanmedian(b, axis=0)
+            mid, p10 = nanpercentile_columns(b, [50, 10])
             low = np.where(b <= mid, b, np.nan)
-            spread = 1.4826 * np.nanmedian(np.abs(low - np.nanmedian(low, axis=0)), axis=0)
-            quiet = np.where(b <= np.nanpercentile(b, 10, axis=0) + WANDER_QUIET_K * spread, b, np.nan)
+            spread = 1.4826 * nanpercentile_columns(np.abs(low - nanpercentile_columns(low, 50)), 50)
+            quiet = np.where(b <= p10 + WANDER_QUIET_K * spread, b, np.nan)
             out = np.nanmax(quiet, axis=0) - np.nanmin(quiet, axis=0)
         return out.reshape(self.grid)
 
@@ -154,56 +185,109 @@ class CellActivity:
         sel = np.isfinite(w) if reference is None else (np.asarray(reference, bool) & np.isfinite(w))
         return float(np.median(w[sel])) if sel.any() else 0.0
 
+    def rest_level(self, reference: np.ndarray | None = None) -> np.ndarray:
+        """(H,W) each cell's level while the glove rests: its median block mean over the glove's quietest blocks.
 
-def moving_threshold(noise: float, step: float | None, wander: float = 0.0) -> float:
+        Quiet blocks = the REST_SHARE of blocks (at least one) where the `reference` cells (every finite cell
+        when None) sit nearest their own low level (10th percentile of block means), after the glove-wide
+        shift of that block (the reference cells' median) is taken out: a press raises some cells, cross-talk
+        lowers others, a common-mode dip moves them all. NaN without a full block.
+        """
+        if not self._blocks:
+            return np.full(self.grid, np.nan)
+        b = np.stack(self._blocks).reshape(len(self._blocks), -1).astype(np.float64)
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)     # a cell never finite: NaN
+            d = b - nanpercentile_columns(b, 10)
+            ref = np.isfinite(d).any(axis=0)
+            if reference is not None:
+                ref &= np.asarray(reference, bool).reshape(-1)
+            if not ref.any():
+                ref = np.isfinite(d).any(axis=0)
+            d = d[:, ref]
+            shift = nanpercentile_columns(d.T, 50)              # (blocks,) glove-wide shift
+            away = np.nanmean(np.abs(d - shift[:, None]), axis=1)
+            away = np.where(np.isfinite(away), away, np.inf)
+            quiet = np.argsort(away, kind="stable")[:max(1, math.ceil(REST_SHARE * len(b)))]
+            rest = nanpercentile_columns(b[quiet], 50)
+        return rest.reshape(self.grid)
+
+
+def moving_threshold(noise: float, step: float | None, wander: float = 0.0, full_scale: float | None = None) -> float:
     """Range above which a cell moves (module docstring), in raw units."""
-    return max(MOVING_K * float(noise) + WANDER_K * float(wander), MOVING_MIN_STEPS * float(step or 0.0))
+    return max(MOVING_K * float(noise) + WANDER_K * float(wander), MOVING_MIN_STEPS * float(step or 0.0),
+               MOVING_MIN_FULL_SCALE * float(full_scale or 0.0))
 
 
-def rule_text() -> str:
-    """The rule in words, with its constants (stderr lines, layout notes, the health legend)."""
-    return f"range > max({MOVING_K:g} x fast noise + {WANDER_K:g} x rest wander, {MOVING_MIN_STEPS:g} x step)"
+def rule_text(full_scale: bool = True) -> str:
+    """The rule in words, with its constants (stderr lines, layout notes, the health legend); `full_scale`
+    False: without the contact floor (`layouts suggest`, where full scale is not known yet)."""
+    floor = f", {MOVING_MIN_FULL_SCALE:g} x full scale" if full_scale else ""
+    return f"range > max({MOVING_K:g} x fast noise + {WANDER_K:g} x rest wander, {MOVING_MIN_STEPS:g} x step{floor})"
 
 
 @dataclass(frozen=True)
 class MovingCells:
-    """Cells of a mask whose range exceeds the threshold, most active first."""
+    """Cells of a mask whose range exceeds the threshold, most active first: `crosstalk` fall below their rest
+    by more than the threshold and never rise that far above it; `cells` are the others (sensors)."""
 
-    cells: np.ndarray      # (N,2) int raw (row, col)
+    cells: np.ndarray      # (N,2) int raw (row, col): move, and not only by falling
     ranges: np.ndarray     # (N,) raw units
     noise: float
     threshold: float
     frames: int
     wander: float = 0.0
+    crosstalk: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))   # (M,2): only fall
+    crosstalk_ranges: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))   # (M,)
 
     def __len__(self) -> int:
         return len(self.cells)
 
     def record(self) -> dict:
         """The episode record's / report's entry (schemas/episode.schema.json `unmapped_moving`)."""
-        return {"count": len(self), "cells": self.cells.tolist(),
-                "range": [round(float(v), 4) for v in self.ranges],
-                "noise": round(self.noise, 6), "wander": round(self.wander, 6), "threshold": round(self.threshold, 6), "frames": self.frames}
+        out = {"count": len(self), "cells": self.cells.tolist(),
+               "range": [round(float(v), 4) for v in self.ranges],
+               "noise": round(self.noise, 6), "wander": round(self.wander, 6), "threshold": round(self.threshold, 6),
+               "frames": self.frames}
+        if len(self.crosstalk):
+            out["crosstalk"] = {"count": len(self.crosstalk), "cells": self.crosstalk.tolist(),
+                                "range": [round(float(v), 4) for v in self.crosstalk_ranges]}
+        return out
+
+
+def _by_range(cells: np.ndarray, ranges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    order = np.lexsort((cells[:, 1], cells[:, 0], -ranges)) if len(cells) else np.zeros(0, np.int64)
+    return cells[order].astype(np.int64).reshape(-1, 2), ranges[order].astype(np.float64)
 
 
 def moving_cells(activity: CellActivity, mask: np.ndarray, reference: np.ndarray | None,
-                 step: float | None) -> MovingCells:
+                 step: float | None, full_scale: float | None = None, inverted: bool = False) -> MovingCells:
     """The cells of `mask` that move, measured against the `reference` cells' noise and wander (None: every
-    cell), largest range first."""
+    cell), largest range first; cells that only fall below their rest (`CellActivity.rest_level`; in the
+    pressure direction: up when `inverted`) by more than the threshold are set apart as cross-talk."""
     noise, wander = activity.noise(reference), activity.wander(reference)
-    thr = moving_threshold(noise, step, wander)
+    thr = moving_threshold(noise, step, wander, full_scale)
     rng = activity.range
     hit = np.asarray(mask, bool) & (rng > thr)
-    cells = np.argwhere(hit)
-    ranges = rng[hit]     # row-major, like argwhere
-    order = np.lexsort((cells[:, 1], cells[:, 0], -ranges)) if len(cells) else np.zeros(0, np.int64)
-    return MovingCells(cells=cells[order].astype(np.int64), ranges=ranges[order].astype(np.float64),
-                       noise=float(noise), threshold=thr, frames=activity.frames, wander=float(wander))
+    rest = activity.rest_level(reference)
+    with np.errstate(invalid="ignore"):
+        rise = (rest - activity.lo) if inverted else (activity.hi - rest)
+        fall = (activity.hi - rest) if inverted else (rest - activity.lo)
+        # cross-talk: falls below its rest by more than the threshold and never rises that far above it (no rest
+        # level, under one block of frames: NaN, never cross-talk); a cell moving by neither alone rises too
+        only_falls = hit & (fall > thr) & ~(rise > thr)
+    rises = hit & ~only_falls
+    cells, ranges = _by_range(np.argwhere(rises), rng[rises])        # row-major, like argwhere
+    xcells, xranges = _by_range(np.argwhere(only_falls), rng[only_falls])
+    return MovingCells(cells=cells, ranges=ranges, noise=float(noise), threshold=thr, frames=activity.frames,
+                       wander=float(wander), crosstalk=xcells, crosstalk_ranges=xranges)
 
 
 def unmapped_moving(activity: CellActivity, layout) -> MovingCells:
-    """Cells outside every block (not bend, not unused) that move, measured against the layout's live cells."""
-    return moving_cells(activity, layout.unmapped_mask, layout.live_mask, layout.value.get("step"))
+    """Cells outside every block (not bend, not unused) that move, measured against the layout's live cells,
+    with the layout's step, full scale (value.max) and direction (value.convention)."""
+    return moving_cells(activity, layout.unmapped_mask, layout.live_mask, layout.value.get("step"),
+                        full_scale=layout.value.get("max"), inverted=layout.value.get("convention") == "inverted")
 
 
 def describe_cells(cells, ranges, limit: int = 12) -> str:
@@ -217,5 +301,6 @@ def unmapped_warning(where: str, hand: str, layout_id: str, entry: dict) -> str:
     """One stderr line for an episode hand's unmapped moving cells (an episode record's entry)."""
     return (f"warning: {where}: {hand} hand (layout {layout_id}): {entry['count']} cell(s) outside every block "
             f"move (range > {entry['threshold']:.4g} raw units = max({MOVING_K:g} x noise {entry['noise']:.4g} + "
-            f"{WANDER_K:g} x wander {entry.get('wander', 0.0):.4g}, {MOVING_MIN_STEPS:g} x step)) and are not drawn: {describe_cells(entry['cells'], entry['range'])}; "
+            f"{WANDER_K:g} x wander {entry.get('wander', 0.0):.4g}, {MOVING_MIN_STEPS:g} x step, "
+            f"{MOVING_MIN_FULL_SCALE:g} x full scale)) and are not drawn: {describe_cells(entry['cells'], entry['range'])}; "
             f"add them to a block, or list them in the layout's unused_cells")

@@ -11,26 +11,22 @@ floors at k x 1.4826 x the window's median absolute deviation).
 Baselines chosen by activity (episode-wide: the ingest reads the episode's
 paired rows once more before normalising it, `fit_whole_episode`):
 - "quietest": the per-taxel median of the quietest span of `rest_seconds`
-  (default 1 s): the span whose mean live value is lowest (a press raises
-  the value, so the hands are most at rest there), wherever it lies. A clip
-  that starts mid-grasp keeps its grip instead of taking it for rest.
-- "percentile": the per-taxel `baseline_percentile` (default 5) percentile
-  over the whole episode: keeps every press a taxel holds for less than
-  95% of the episode.
-- "drift": a rest level that follows slow drift: per window of
-  `drift_window_s` seconds (default 30), the per-taxel median of the
-  window's quiet frames (those whose mean live value stays near the window's
-  lowest: `quiet_frames`), knots at the window centres, linearly interpolated between them
-  by the raw row's position in the episode (the line through the first / last
-  two knots continued beyond the first / last centre). Stored as knots (`baseline` is then (K,H,W), `knot_rows`
-  their row positions); `apply` needs the rows' positions (`rows=`).
-For these three, the spread of `noise_k` is measured on the WHOLE episode's
-resting frames (`restlevel.resting_frames`: quiet in their `drift_window_s`
-window and near the episode's low): 1.4826 x the
-median distance of a taxel's resting values from its baseline
-(`restlevel.rest_spread`), plus half a quantisation step, so rest wander
-widens the floor; the quietest second alone left 7-9% of a real glove's
-resting pixels lit (issue 27).
+  (default 1 s): the span whose mean live value is lowest, wherever it lies.
+  On a knit glove a grip moves that mean by under 0.012 of full scale, so
+  the span can fall inside a grip: kept for gloves whose presses move it.
+- "percentile": each cell's own rest, its `baseline_percentile` percentile
+  over the whole episode: a press only raises a cell, so this keeps every
+  press a cell holds for less than (100 - percentile)% of the episode.
+- "drift": the same per window of `drift_window_s` seconds (each cell's
+  percentile there), knots at the window centres, linearly interpolated
+  between them by the raw row's position in the episode (the line through the
+  first / last two knots continued beyond the first / last centre): a rest
+  level that follows slow drift. Stored as knots (`baseline` is then (K,H,W),
+  `knot_rows` their row positions); `apply` needs the rows' positions (`rows=`).
+For these three the noise floor is per cell (`cell_floor`): noise_k x the
+cell's own rest spread, from its lower half, bounded by the glove's.
+A hand's mean level is no guide on a real glove (a grip moves it by 0.6-12.5 of
+1023 counts), so nothing here chooses frames by it but "quietest" (issue 34).
 
 A floor (noise_k or noise_floor > 0) is never below the layout's step (`value.step / max_value`, the
 `min_floor` passed in): a taxel still in its rest window (spread 0) would otherwise flicker at one count.
@@ -40,7 +36,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from htdata.glove.restlevel import nan_quiet, quiet_frames, rest_spread, resting_frames, windows
+from htdata.glove.restlevel import nan_quiet, nanpercentile_columns, windows
+
+REST_SPREAD_Z = 1.2816   # median - 10th percentile of a normal distribution, in standard deviations
+GLOVE_QUANTILE = 25.0   # the glove's rest spread: this percentile of its live cells' (cell_floor)
+FLOOR_CAP = 2.0         # a cell's rest spread counts up to this many times the glove's
 
 
 def live_level(unit: np.ndarray, live_mask: np.ndarray) -> np.ndarray:
@@ -93,33 +93,60 @@ def fit_whole_episode(unit: np.ndarray, rows: np.ndarray, fps: float, cfg, live_
     baseline is (H,W), or (K,H,W) knots at `knot_rows` (K,) for "drift"
     (knot_rows is None otherwise); the floor is None without noise_k.
     """
-    quiet = unit[quietest_span(unit, live_mask, cfg.rest_seconds, fps)]
     knot_rows = None
     with np.errstate(invalid="ignore"), nan_quiet():
         if cfg.baseline == "quietest":
-            base = np.nanmedian(quiet, axis=0)
+            base = np.nanmedian(unit[quietest_span(unit, live_mask, cfg.rest_seconds, fps)], axis=0)
         elif cfg.baseline == "percentile":
-            base = np.nanpercentile(unit, cfg.baseline_percentile, axis=0)
+            base = cell_percentile(unit, cfg.baseline_percentile)
         else:
-            base, knot_rows = drift_knots(unit, rows, fps, live_mask, cfg.drift_window_s)
+            base, knot_rows = drift_knots(unit, rows, fps, cfg.baseline_percentile, cfg.drift_window_s)
     baseline = np.clip(np.nan_to_num(base, nan=0.0), 0.0, 1.0).astype(np.float32)
     if cfg.noise_k <= 0:
         return baseline, knot_rows, None
-    rest = np.flatnonzero(resting_frames(live_level(unit, live_mask), round(cfg.drift_window_s * fps)))
-    at = drift_baseline_at(baseline, knot_rows, rows[rest]) if cfg.baseline == "drift" else baseline
-    # + half a step: counts come in whole steps, so the median distance is only known to a step
-    spread = np.float32(cfg.noise_k) * np.nan_to_num(rest_spread(unit[rest] - at), nan=0.0)
-    floor = np.maximum(np.float32(cfg.noise_floor) + spread + min_floor / 2, min_floor).astype(np.float32)
+    at = drift_baseline_at(baseline, knot_rows, rows) if cfg.baseline == "drift" else baseline
+    floor = cell_floor(unit - at, live_mask, cfg.noise_k, cfg.noise_floor, min_floor)
     return baseline, knot_rows, floor
 
 
-def drift_knots(unit: np.ndarray, rows: np.ndarray, fps: float, live_mask: np.ndarray,
+def cell_percentile(unit: np.ndarray, q: float) -> np.ndarray:
+    """(H,W) per-cell `q` percentile of (T,H,W) values over time (NaN where a cell is never finite)."""
+    flat = unit.reshape(len(unit), -1)
+    return np.asarray(nanpercentile_columns(flat, q), np.float32).reshape(unit.shape[1:])
+
+
+def cell_floor(residual: np.ndarray, live_mask: np.ndarray, noise_k: float, noise_floor: float,
+               min_floor: np.float32) -> np.ndarray:
+    """(H,W) noise floor from (T,H,W) values minus their baseline: `noise_k` x each cell's rest spread.
+
+    A cell's rest spread is (its median - its 10th percentile) / 1.2816 (the
+    standard deviation of a normal rest): a press only raises a cell, so while
+    it rests at least half the episode its lower half is rest, noise and slow
+    wander, whatever the rest of the hand does. The spread used is kept
+    between the glove's and FLOOR_CAP times it. The glove's is the
+    GLOVE_QUANTILE-th percentile over its live cells, not their median: a grip
+    loads many cells of a real knit glove by a few counts for most of a clip
+    (the median cell of a working hand sits 2-4 counts above its rest), the
+    quietest quarter of the cells rests. Below it a cell would flicker with the
+    glove's wander; above the cap a cell held pressed for most of the episode
+    would take its grip for rest and hide it. Plus half a quantisation step.
+    """
+    flat = residual.reshape(len(residual), -1)
+    p10, p50 = nanpercentile_columns(flat, [10.0, 50.0])
+    spread = (np.nan_to_num(p50 - p10, nan=0.0) / REST_SPREAD_Z).reshape(residual.shape[1:])
+    live = np.asarray(live_mask, bool) & np.isfinite(residual).any(axis=0)
+    glove = float(np.percentile(spread[live], GLOVE_QUANTILE)) if live.any() else 0.0
+    spread = np.clip(spread, glove, FLOOR_CAP * glove)
+    floor = np.float32(noise_floor) + np.float32(noise_k) * spread + min_floor / 2
+    return np.maximum(floor, min_floor).astype(np.float32)
+
+
+def drift_knots(unit: np.ndarray, rows: np.ndarray, fps: float, q: float,
                 window_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """((K,H,W) rest level per window of `window_s` seconds: median of its quiet frames, (K,) centre rows)."""
-    level, knots, centres = live_level(unit, live_mask), [], []
+    """((K,H,W) rest level per window of `window_s` seconds: each cell's `q` percentile there, (K,) centre rows)."""
+    knots, centres = [], []
     for a, b in windows(unit.shape[0], round(window_s * fps)):
-        quiet = np.flatnonzero(quiet_frames(level[a:b])) + a
-        knots.append(np.nanmedian(unit[quiet], axis=0))
+        knots.append(cell_percentile(unit[a:b], q))
         centres.append(float(np.mean(rows[a:b])))
     return np.stack(knots), np.asarray(centres, np.float32)
 

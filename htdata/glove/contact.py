@@ -1,11 +1,13 @@
 """When a glove hand is "in contact": one rule per episode hand, from its calibration.
 
     calibrated  (the calibration has a noise floor: noise_k > 0 or noise_floor > 0)
-                a taxel is in contact when its normalised value is more than LEVEL_STEPS
-                quantisation steps (`value.step / max`, 0 when the layout gives no step)
-                above its noise floor (values are floor-subtracted, so: value > 2 steps);
+                a taxel is in contact when it is pressed: more than PRESS of full scale
+                above its rest (its baseline), and more than LEVEL_STEPS quantisation
+                steps (`value.step / max`, 0 when the layout gives no step) above its
+                noise floor. Values are floor-subtracted, so with the taxel's floor f:
+                value > max(2 steps, PRESS - f) (x the calibration's scale);
                 a frame is in contact when at least max(MIN_AREA_TAXELS, MIN_AREA_SHARE x the
-                hand's live taxels) taxels are (3 on a 169-taxel glove, 6 on a 580-taxel one).
+                hand's live taxels) taxels are (3 on a 169-taxel glove, 7 on a 692-taxel one).
     threshold   (no noise floor: the clean-world gloves, and the old rule on request)
                 a taxel is in contact above THRESHOLD (0.02) and one taxel is enough.
 
@@ -14,7 +16,12 @@ maximum taxel counts a hand that only steadies an object as in contact in
 half of its frames from a handful of flickering taxels. A floor fitted on
 the glove's own noise says what "above rest" means for each taxel, and an
 area of a few taxels says what a touch is (a single taxel crossing its
-floor now and then is noise). Without a floor there is nothing glove-specific
+floor now and then is noise). The floor says where rest ends, not where a
+touch begins: a real knit glove's hand that only steadies an object has
+dozens of cells 5-15 counts above rest in most frames, while a press moves a
+cell by 15 to ~460 counts (../shared/real_glove, issue 34), so a touch is a
+rise of PRESS above rest (when the per-taxel floor is known; without it,
+the floor alone). Without a floor there is nothing glove-specific
 to go by, so the old threshold stays (the sample corpus's gloves have none:
 their numbers are unchanged).
 
@@ -39,7 +46,10 @@ LEVEL_STEPS = 2
 # ... and in 0.18% of resting frames 3 scattered taxels are above that at once (none reach 6): a big glove
 # needs a bigger area, or one stray frame keeps a whole idle tail in `trim --idle`.
 MIN_AREA_SHARE = 0.01
-RULE_VERSION = 1           # part of the stats cache key
+# calibrated rule: the least rise above rest that is a press, in full-scale units: 15 of 1023 counts on a knit glove,
+# whose rest wanders by several counts over a clip while a grip presses its cells by 15 to ~460 counts.
+PRESS = 0.015
+RULE_VERSION = 2           # part of the stats cache key
 
 
 @dataclass(frozen=True)
@@ -47,19 +57,28 @@ class ContactRule:
     basis: str             # "calibrated" or "threshold"
     level: float           # a taxel is in contact when its normalised value is > level
     min_taxels: int        # a hand is in contact in a frame when at least this many taxels are
+    press: float = 0.0     # calibrated: ... and > press - its floor (value units; 0: the floor alone)
 
-    def taxels(self, x: np.ndarray) -> np.ndarray:
-        """(T, L) normalised values -> (T, L) bool taxel contact."""
-        return np.asarray(x) > self.level
+    def levels(self, floor: np.ndarray | None = None) -> np.ndarray | float:
+        """The level each taxel must exceed: `level`, raised to press - floor where the (L,) per-taxel noise floor
+        (in value units: the calibration's floor x scale) is known."""
+        if not self.press or floor is None:
+            return self.level
+        return np.maximum(np.float32(self.level), np.float32(self.press) - np.asarray(floor, np.float32))
 
-    def frames(self, x: np.ndarray) -> np.ndarray:
+    def taxels(self, x: np.ndarray, floor: np.ndarray | None = None) -> np.ndarray:
+        """(T, L) normalised values -> (T, L) bool taxel contact (`floor`: see `levels`)."""
+        return np.asarray(x) > self.levels(floor)
+
+    def frames(self, x: np.ndarray, floor: np.ndarray | None = None) -> np.ndarray:
         """(T, L) normalised values -> (T,) bool: the hand is in contact."""
-        return self.taxels(x).sum(axis=1) >= self.min_taxels
+        return self.taxels(x, floor).sum(axis=1) >= self.min_taxels
 
     def describe(self) -> str:
         if self.basis == "calibrated":
-            return (f"at least {self.min_taxels} taxels more than {LEVEL_STEPS} quantisation steps above their "
-                    f"noise floor (value > {self.level:.4g})")
+            pressed = f"pressed more than {PRESS:g} of full scale above rest and " if self.press else ""
+            return (f"at least {self.min_taxels} taxels {pressed}more than {LEVEL_STEPS} quantisation steps above "
+                    f"their noise floor (value > {self.level:.4g})")
         return f"any taxel > {self.level:g}" if self.min_taxels == 1 else \
             f"at least {self.min_taxels} taxels > {self.level:g}"
 
@@ -82,7 +101,9 @@ def rule_for(calibration: dict | None, layout_value: dict | None = None, live_ta
                         or float(calibration.get("noise_floor", 0) or 0) > 0):
         step = float((layout_value or {}).get("step") or 0.0)
         top = float(calibration.get("max_value") or (layout_value or {}).get("max") or 1.0)
-        return ContactRule("calibrated", round(LEVEL_STEPS * step / top, 9), min_area(live_taxels))
+        scale = float(calibration.get("scale") or 1.0)
+        return ContactRule("calibrated", round(LEVEL_STEPS * step / top * scale, 9), min_area(live_taxels),
+                           round(PRESS * scale, 9))
     return OLD_RULE
 
 

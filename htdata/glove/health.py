@@ -304,6 +304,9 @@ def merge_counts(into: dict, health: dict) -> None:
         into["episodes_not_assessed"] += 1
         return
     into["episodes_assessed"] += 1
+    if health.get("basis") == "raw":     # drift is told from raw rows only, on long enough episodes
+        key = "drift_assessed" if health.get("drift_assessed") else "drift_not_assessed"
+        into[key] = into.get(key, 0) + 1
     into["taxels_assessed"] += int(health["live"])
     into["unexercised"] += int(health.get("unexercised", 0))
     into["unmapped_moving"] += int(health.get("unmapped_moving", 0))

@@ -1,15 +1,27 @@
 """A starting layout from recordings: blocks around the cells that move (`htdata layouts suggest`).
 
-The cells whose raw values move in any recording (htdata.glove.activity's rule,
-each recording against its own noise and wander over the whole grid) that lie
-in a 2x2 square of moving cells (`sensor_areas`: a cross-talk line or a lone
-noisy cell is no sensor area, and would join every block it touches) are
-grouped into 4-connected components; each component's bounding box becomes a
-block (boxes that overlap are merged until none do). The moving cells left
-out are counted in the summary and the layout's notes.
+Per recording (each against its own noise and wander over the whole grid,
+htdata.glove.activity's rule without the contact floor: a lightly pressed
+taxel is still a sensor) the cells that move and do not only fall below
+their rest (cross-talk) are counted: `support` = in how many recordings each
+cell moved. Blocks are seeded on the cells that moved in at least
+SUPPORT_MIN recordings when there are at least SUPPORT_FROM (a sensor area
+is pressed again; a raw row shifting with one hard press, a cross-talk patch
+or a short clip's noise is one recording's; when no area moved twice, in
+one) and lie in a 2x2 square of such
+cells (`sensor_areas`: a cross-talk line or a lone noisy cell is no sensor
+area). The seed mask is cut into rectangles where it narrows and along rows
+and columns that do not move (htdata.glove.blockcuts: on a real glove the
+palm touches every finger strip and the thumb, so one bounding box would be
+the whole grid), each block grows over neighbouring lines of cells that
+moved in any recording (`grow_blocks`), and strips are cut into near-square
+blocks, one per place (`split_strips`). The moving cells left outside every
+block are counted in the summary and the layout's notes.
 Blocks are given DISTINCT PLACEHOLDER places, largest block first: the
-`palm` group when it fits, then the largest free place it fits (rotated by
-90 when it only fits that way). The places and orientations are guesses by
+`palm` group when it fits (and no more than 15 blocks need places), then
+the largest free place it fits (rotated by 90 when it only fits that way);
+beyond the canonical hand's 18 places the smallest blocks are left out.
+The places and orientations are guesses by
 size, not anatomy: the user presses taxels, looks at `htdata layouts render`,
 and edits each block's `place` and `rotate` / `flip_x` / `flip_y`
 (docs/LAYOUTS.md). Cells inside a box that never moved stay live (they may
@@ -28,7 +40,11 @@ import numpy as np
 
 from htdata.errors import ArgumentError
 from htdata.glove.activity import CellActivity, moving_cells, rule_text
+from htdata.glove.blockcuts import cut_blocks, grow_blocks, split_strips
 from htdata.glove.layouts import load_canonical, parse_layout
+
+SUPPORT_MIN = 2          # seed cells moved in at least this many recordings ...
+SUPPORT_FROM = 3         # ... when at least this many are given (fewer: in one)
 
 
 def layout_json_text(doc: dict) -> str:
@@ -79,7 +95,8 @@ def sensor_areas(mask: np.ndarray) -> np.ndarray:
 
 
 def _assign_places(boxes: list[tuple[int, int, int, int]]) -> list[tuple[str, int]]:
-    """(place, rotate) per box: distinct targets, largest box first, each where it fits."""
+    """(place, rotate) per box: distinct targets, largest box first, each where it fits (the `palm` group for
+    the largest when the others still find places: at most 1 + the 14 places outside the palm)."""
     canon = load_canonical()
 
     def size(t: str) -> tuple[int, int]:
@@ -87,11 +104,12 @@ def _assign_places(boxes: list[tuple[int, int, int, int]]) -> list[tuple[str, in
         return y1 - y0, x1 - x0
 
     places = sorted(canon.places, key=lambda p: -size(p)[0] * size(p)[1])
+    palm_group = len(boxes) <= 1 + sum(not p.startswith("palm.") for p in places)
     taken: set[str] = set()
     out: dict[int, tuple[str, int]] = {}
     for i in sorted(range(len(boxes)), key=lambda i: -(boxes[i][1] - boxes[i][0] + 1) * (boxes[i][3] - boxes[i][2] + 1)):
         h, w = boxes[i][1] - boxes[i][0] + 1, boxes[i][3] - boxes[i][2] + 1
-        free = (["palm"] if not any(t.startswith("palm") for t in taken) else []) + \
+        free = (["palm"] if palm_group and not any(t.startswith("palm") for t in taken) else []) + \
                [p for p in places if p not in taken and not ("palm" in taken and p.startswith("palm."))]
         for target in free:
             ph, pw = size(target)
@@ -109,6 +127,19 @@ def _assign_places(boxes: list[tuple[int, int, int, int]]) -> list[tuple[str, in
     return [out[i] for i in range(len(boxes))]
 
 
+def suggested_boxes(support: np.ndarray, recordings: int) -> list[tuple[int, int, int, int]]:
+    """Block boxes from `support` (in how many of `recordings` each cell moved; module docstring), at most one
+    per place of the canonical hand (the largest kept)."""
+    seeds = cut_blocks(sensor_areas(support >= (SUPPORT_MIN if recordings >= SUPPORT_FROM else 1)))
+    if not seeds:            # no area moved in two recordings: each was pressed once, so one is enough
+        seeds = cut_blocks(sensor_areas(support >= 1))
+    most = len(load_canonical().places)
+    boxes = split_strips(grow_blocks(seeds, support >= 1, support), most)
+    if len(boxes) > most:
+        boxes = sorted(sorted(boxes, key=lambda b: -(b[1] - b[0] + 1) * (b[3] - b[2] + 1))[:most])
+    return boxes
+
+
 def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, integral: bool, sources: list[str],
                    max_value: float | None = None) -> tuple[dict, dict]:
     """(layout document, summary) for the cells that move in any of `activities` (one per recording hand).
@@ -120,27 +151,30 @@ def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, in
     if any(a.grid != grid for a in activities):
         raise ArgumentError(f"recordings have different grids: {sorted({a.grid for a in activities})}")
     step = 1.0 if integral else None
-    mask = np.zeros(grid, bool)
+    support = np.zeros(grid, np.int64)
     noises, wanders, thresholds = [], [], []
     for a in activities:
-        found = moving_cells(a, np.ones(grid, bool), None, step)
-        mask[found.cells[:, 0], found.cells[:, 1]] = True
+        found = moving_cells(a, np.ones(grid, bool), None, step)    # cross-talk (only falls) set apart
+        support[found.cells[:, 0], found.cells[:, 1]] += 1
         noises.append(found.noise)
         wanders.append(found.wander)
         thresholds.append(found.threshold)
     noise, wander, threshold = float(np.median(noises)), float(np.median(wanders)), float(np.median(thresholds))
     frames = sum(a.frames for a in activities)
-    moving = int(mask.sum())     # every moving cell; the blocks are drawn around sensor_areas(mask)
+    mask = support > 0
+    moving = int(mask.sum())     # every cell that rose in a recording; the blocks are drawn around sensor areas
     if not moving:
         raise ArgumentError(f"no cell moves in {', '.join(sources)} (noise {noise:.4g}, threshold "
                             f"{threshold:.4g} raw units over {frames} frames): press the glove while recording")
-    core = sensor_areas(mask)
-    if not core.any():
+    boxes = suggested_boxes(support, len(activities))
+    if not boxes:
         raise ArgumentError(f"the {moving} moving cell(s) in {', '.join(sources)} form no area of at least 2x2 cells "
                             f"(lines and single cells: cross-talk or noise, not a sensor area): press the glove "
                             f"while recording")
-    lines = np.argwhere(mask & ~core)
-    boxes = cell_boxes(core)
+    inside = np.zeros(grid, bool)
+    for r0, r1, c0, c1 in boxes:
+        inside[r0:r1 + 1, c0:c1 + 1] = True
+    lines = np.argwhere(mask & ~inside)
     targets = _assign_places(boxes)
     top = float(max_value) if max_value is not None else max(float(a.hi[a.count > 0].max()) for a in activities)
     value = {"convention": "direct", "max": int(top) if integral and top == int(top) else top}
@@ -156,9 +190,10 @@ def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, in
     doc = {"layout_id": layout_id, "hand": hand, "grid": list(grid), "value": value, "blocks": blocks,
            "dead_cells": [], "bend_cells": [],
            "source": f"htdata layouts suggest from {', '.join(sources)} ({frames} frames)",
-           "notes": (f"STARTING POINT, edit it: {moving} moving cells ({rule_text()} in a recording; "
-                     f"median noise {noise:.4g}, wander {wander:.4g}, threshold {threshold:.4g} raw units) grouped into {len(blocks)} block(s); {len(lines)} moving cell(s) in "
-                     f"lines or alone (cross-talk, noisy cells) left out of the blocks. Places were "
+           "notes": (f"STARTING POINT, edit it: {moving} moving cells ({rule_text(full_scale=False)} in a recording; "
+                     f"median noise {noise:.4g}, wander {wander:.4g}, threshold {threshold:.4g} raw units; cells that "
+                     f"only fall below rest are cross-talk) cut into {len(blocks)} block(s); {len(lines)} moving "
+                     f"cell(s) outside them (lines, lone cells, patches of one recording). Places were "
                      f"assigned by size, not anatomy: set each block's place and orientation (rotate, flip_x, "
                      f"flip_y; docs/LAYOUTS.md), split blocks that span several places, mark sensorless cells "
                      f"inside blocks as dead_cells and non-pressure cells as bend_cells, and set value.max to "
@@ -167,6 +202,5 @@ def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, in
     summary = {"moving": moving, "noise": noise, "wander": wander, "threshold": threshold, "frames": frames,
                "left_out": lines.tolist(),
                "recordings": len(activities),
-               "inside_blocks_not_moving": int(sum((r1 - r0 + 1) * (c1 - c0 + 1) for r0, r1, c0, c1 in boxes)
-                                               - core.sum())}
+               "inside_blocks_not_moving": int((inside & ~mask).sum())}
     return doc, summary

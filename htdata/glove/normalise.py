@@ -23,7 +23,7 @@ wander around it read as contact). `noise_k` sets a per-taxel floor of k
 robust spreads (rest window, or the episode's rest: below), `noise_floor` a
 constant one in unit values; values up to the floor read 0.
 A layout of raw counts (direct, value.max > 1) without a [normalise.<id>]
-table gets RAW_COUNT_DEFAULTS (quietest + noise_k 3), not baseline "none".
+table gets RAW_COUNT_DEFAULTS (each cell's 10th percentile per 60 s window + noise_k 5), not baseline "none".
 
 Streaming: fitted once (`fit_baseline`: first chunk; `fit_episode`), then `apply` chunk by chunk, same
 as on the whole. `fitted()` / `restore()` carry the fitted arrays into the episode record and back
@@ -58,8 +58,10 @@ BASELINES = ("none", "first_frame", "rest_window", "quietest", "percentile", "dr
 # baselines fitted on the whole episode (`fit_episode`), not on its first chunk
 EPISODE_BASELINES = ("quietest", "percentile", "drift")
 # A raw-count glove (direct, value.max > 1) without a [normalise.<id>] table: "none" would read its rest level
-# (~557 of 1023 on a knit glove) as 0.55 pressure everywhere (issue 27). Measured in `make bench`, "raw-count glove".
-RAW_COUNT_DEFAULTS = {"baseline": "quietest", "noise_k": 3.0}
+# (~557 of 1023 on a knit glove) as 0.55 pressure everywhere (issue 27). Each cell's own rest (its 10th percentile per
+# minute: a press only raises a cell) and a per-cell noise floor hold a grip a real glove's mean level cannot see
+# (issue 34). Measured in `make bench`, "real glove" (docs/INGEST.md).
+RAW_COUNT_DEFAULTS = {"baseline": "drift", "baseline_percentile": 10.0, "drift_window_s": 60.0, "noise_k": 5.0}
 NOISE_K_BASELINES = ("rest_window", *EPISODE_BASELINES)   # the baselines a noise_k floor is measured against
 
 

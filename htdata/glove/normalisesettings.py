@@ -15,7 +15,7 @@ from pathlib import Path
 
 from htdata.errors import ConfigError
 from htdata.glove.layouts import nearest_hint
-from htdata.glove.normalise import NOISE_K_BASELINES, NormaliseConfig
+from htdata.glove.normalise import NOISE_K_BASELINES, RAW_COUNT_DEFAULTS, NormaliseConfig
 
 
 @dataclass(frozen=True)
@@ -38,6 +38,21 @@ class NormaliseSettings:
     shared_layouts: list[str] = field(default_factory=list)
     settings: tuple[str, ...] = ()
     fit_frames: int = 64   # [tactile] chunk_frames' default
+
+    def default_note(self, layout) -> str | None:
+        """One line when `layout` holds raw counts and has no `[normalise.<id>]` table, so the raw-count default
+        (RAW_COUNT_DEFAULTS) applies to it (None otherwise): the ingest says once per layout what it chose."""
+        if layout.layout_id in self.normalise:
+            return None
+        value = layout.value
+        if not (value["convention"] == "direct" and float(value["max"]) > 1):
+            return None
+        d = RAW_COUNT_DEFAULTS
+        return (f"layout {layout.layout_id} holds raw counts (value.max {float(value['max']):g}) and pipeline "
+                f"{self.name!r} has no [normalise.{layout.layout_id}] table: the raw-count default applies, "
+                f"baseline = \"{d['baseline']}\" (each cell's {d['baseline_percentile']:g}th percentile per "
+                f"{d['drift_window_s']:g} s window), noise_k = {d['noise_k']:g} (a per-cell floor); docs/INGEST.md "
+                f"\"Raw-count gloves\"")
 
     def normalise_for(self, layout) -> NormaliseConfig:
         """The config for `layout` (a glove.layouts.Layout): its `[normalise.<id>]` table over its value block."""

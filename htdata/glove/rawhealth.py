@@ -49,7 +49,7 @@ from __future__ import annotations
 import numpy as np
 
 from htdata.glove import health
-from htdata.glove.activity import CellActivity, moving_cells, rule_text
+from htdata.glove.activity import CellActivity, rule_text, unmapped_moving
 from htdata.glove.health import CLASSES, MIN_FRAMES, TaxelGrid, _crosstalk, _exercised, _neighbour_median
 from htdata.glove.restlevel import nanpercentile_columns, quiet_frames
 
@@ -168,6 +168,20 @@ def _unmapped(raw: np.ndarray, layout, out: dict) -> None:
         return
     activity = CellActivity(raw.shape[1:])
     activity.add(raw)
-    found = moving_cells(activity, mask, layout.live_mask, layout.value.get("step"))
+    found = unmapped_moving(activity, layout)
     out["unmapped_moving"] = len(found)
     out["unmapped_moving_cells"] = sorted(found.cells.tolist())
+
+
+def drift_status(summary: dict) -> str | None:
+    """How far drift was assessed in a merged health summary (`health.merge_counts`); None without raw rows."""
+    told, untold = summary.get("drift_assessed", 0), summary.get("drift_not_assessed", 0)
+    if not told and not untold:
+        return None
+    if not told:
+        return (f"not assessed: every episode is shorter than {DRIFT_MIN_FRAMES} frames (too short to tell drift "
+                f"from wander)")
+    if untold:
+        return f"assessed on {told} of {told + untold} episodes (the others are shorter than {DRIFT_MIN_FRAMES} frames)"
+    return "assessed"
+

@@ -1,7 +1,7 @@
 """Rest-level helpers of the normaliser: which frames are quiet, and the per-glove calibration file.
 
-`quiet_frames` picks the resting frames of a window (the quietest span,
-the drift-following baseline and raw-row health use it);
+`quiet_frames` picks the resting frames of a window by the hand's mean level
+(raw-row health's drift check uses it);
 `load_taxel_calibration` reads a glove's measured per-taxel offset and gain.
 """
 
@@ -28,32 +28,6 @@ def quiet_frames(level: np.ndarray) -> np.ndarray:
     return finite & (level <= np.percentile(lv, 10) + 4 * mad + 1e-4)
 
 
-def windowed_quiet(level: np.ndarray, window: int) -> np.ndarray:
-    """(T,) bool: `quiet_frames` of each window of `window` frames (a short tail joins the window before it).
-
-    Per window, not over the episode: a rest level that drifts by a few counts over minutes would leave
-    every frame after the drift out of an episode-wide choice.
-    """
-    out = np.zeros(len(level), bool)
-    for a, b in windows(len(level), window):
-        out[a:b] |= quiet_frames(level[a:b])
-    return out
-
-
-REST_MARGIN = 0.01   # unit values: a frame whose mean sits this far above the episode's low is not at rest
-
-
-def resting_frames(level: np.ndarray, window: int) -> np.ndarray:
-    """(T,) bool: the episode's resting frames for its noise floor: `windowed_quiet`, and within REST_MARGIN
-    of the episode's low (its 5th percentile): a window gripped throughout has no rest to offer (a grip
-    raises the mean live value of a knit glove by 0.15-0.3, a rest level drifting over minutes by < 0.005)."""
-    quiet = windowed_quiet(level, window)
-    finite = np.isfinite(level)
-    if not finite.any():
-        return quiet
-    return quiet & (np.where(finite, level, np.inf) <= np.percentile(level[finite], 5) + REST_MARGIN)
-
-
 def windows(T: int, window: int):
     """(start, stop) of consecutive windows of `window` (>= 2) frames over T; a short tail (under half a
     window) is the last full window instead."""
@@ -63,16 +37,6 @@ def windows(T: int, window: int):
         if b - a < max(2, w // 2) and a > 0:
             a = max(0, b - w)
         yield a, b
-
-
-def rest_spread(residual: np.ndarray) -> np.ndarray:
-    """(H,W) robust spread of (T,H,W) resting values around the baseline: 1.4826 x median |residual|.
-
-    About the BASELINE, not about each taxel's own median: a rest level that wanders away from the
-    baseline over the episode widens the spread (and so the noise floor) by as much.
-    """
-    with nan_quiet():
-        return np.float32(1.4826) * np.nanmedian(np.abs(residual), axis=0)
 
 
 REST_WARN_LEVEL = 0.1   # a glove whose resting cells read this much with baseline "none" gets a warning
@@ -97,8 +61,8 @@ def rest_level_warning(hand: str, layout, cfg, lo: np.ndarray, hi: np.ndarray) -
         return None
     lid = layout.layout_id
     return (f"warning: {hand} hand (layout {lid}): rest level {rest:.4g} of {cfg.max_value:g}: covered pixels read "
-            f">= {reads:.2f} at rest with baseline = \"none\"; set a baseline ([normalise.{lid}] baseline = "
-            f"\"quietest\", noise_k = 3)")
+            f">= {reads:.2f} at rest with baseline = \"none\"; set a baseline (drop the baseline line from [normalise.{lid}] for the "
+            f"raw-count default: baseline = \"drift\", noise_k = 5)")
 
 
 class nan_quiet:

@@ -20,6 +20,7 @@ from pathlib import Path
 from htdata.errors import ArgumentError
 from htdata.format.table import INGEST_REPORT, MANIFEST_FILE
 from htdata.glove.codecrule import resolve_sources
+from htdata.glove.layouts import load_layout
 from htdata.ingest.append import kept_unavailable, plan_append
 from htdata.ingest.commit import check_compatible, commit
 from htdata.ingest.executors import make_executor, usable_cores
@@ -175,7 +176,7 @@ def _ingest(sources, out: Path, lock: WriterLock, workers, executor, address, re
         t_ran = time.perf_counter()
         report = build_report(sources, tasks, records, ran, plan_failures, plan, parent,
                               discovered={r.episode_id for rs in refs for r in rs}, t_start=t_start)
-        report["notes"] += checked.notes
+        report["notes"] += checked.notes + raw_count_default_notes([(r, source_of[r.episode_id]) for r in plan.todo])
         if lock.note:
             report["notes"].append(lock.note)
         write_bytes_atomic(out / INGEST_REPORT, dumps(report))   # explains a run that commits nothing too
@@ -187,6 +188,20 @@ def _ingest(sources, out: Path, lock: WriterLock, workers, executor, address, re
     report["timing"]["commit_s"] = report["timing"]["total_s"] - (t_ran - t_start)
     write_bytes_atomic(out / INGEST_REPORT, dumps(report))
     return report
+
+
+def raw_count_default_notes(pairs: list[tuple]) -> list[str]:
+    """One note per raw-count layout without a `[normalise.<id>]` table among the (ref, source) pairs ingested
+    now: which default normalisation it got."""
+    settings = {}
+    notes = []
+    for ref, source in pairs:
+        normalising = settings.setdefault(id(source), source.pipeline.normalise_settings())
+        for path in sorted(set(ref.layout_files.values())):
+            line = normalising.default_note(load_layout(path))
+            if line and line not in notes:
+                notes.append(line)
+    return notes
 
 
 def check_ingested_something(report: dict, out: Path) -> None:

@@ -226,9 +226,23 @@ def compute_episode(reader, pos: int, gloves: dict[str, Glove]) -> dict:
             x, raw = _raw_taxels(s, normalisers[hand], glove, ep, hand, nan_samples)
         else:
             x, raw = _map_taxels(s, glove), None
-        out["hands"][hand] = hand_stats(x, s.frames, glove, ep["layouts"][hand], raw,
-                                        episode_rule(reader.manifest, ep, hand, glove.layout))
+        rule = episode_rule(reader.manifest, ep, hand, glove.layout)
+        floor = _taxel_floor(reader, ep, hand, glove, normalisers.get(hand)) if rule.press else None
+        out["hands"][hand] = hand_stats(x, s.frames, glove, ep["layouts"][hand], raw, rule, floor)
     return out
+
+
+def _taxel_floor(reader, ep: dict, hand: str, glove: "Glove", normaliser=None) -> np.ndarray | None:
+    """(L,) noise floor of the episode hand's live taxels in value units (floor x scale), from its calibration
+    record; None where none is recorded (the contact rule then goes by the floor alone)."""
+    if normaliser is None:
+        try:
+            normaliser = episode_normaliser(reader.manifest, ep, hand, glove.layout)
+        except DatasetError:
+            return None
+    if not normaliser.cfg.fits:
+        return None
+    return normaliser.floor[glove.layout.live_mask] * np.float32(normaliser.cfg.scale)
 
 
 def raw_histogram(raw: np.ndarray, top: float) -> dict:
@@ -241,17 +255,18 @@ def raw_histogram(raw: np.ndarray, top: float) -> dict:
 
 
 def hand_stats(x: np.ndarray, frames: list[int], glove: Glove, layout_id: str, raw: np.ndarray | None = None,
-               rule: ContactRule = OLD_RULE) -> dict:
+               rule: ContactRule = OLD_RULE, floor: np.ndarray | None = None) -> dict:
     """Mergeable sums of one episode hand's (T, L) taxel series (+ raw-unit sketch and raw-row taxel health
     when `raw`, its (T, H, W) raw rows, is given).
 
-    Contact follows `rule` (htdata.glove.contact: the episode hand's calibration);
-    "contact_frames_threshold" keeps the old count (any taxel > 0.02) beside it.
+    Contact follows `rule` (htdata.glove.contact: the episode hand's calibration, with `floor`, its (L,)
+    per-taxel noise floor in value units where recorded); "contact_frames_threshold" keeps the old count
+    (any taxel > 0.02) beside it.
     """
     x = np.clip(x.astype(np.float64), 0.0, 1.0)
     zeros, hist = value_histogram(x.ravel())
-    in_contact = rule.frames(x) if len(x) else np.zeros(0, bool)
-    contact = rule.taxels(x) & in_contact[:, None]     # a region touches only in a frame the hand touches
+    in_contact = rule.frames(x, floor) if len(x) else np.zeros(0, bool)
+    contact = rule.taxels(x, floor) & in_contact[:, None]     # a region touches only in a frame the hand touches
     regions = {}
     names = np.asarray(glove.regions)
     for name in sorted(set(glove.regions)):

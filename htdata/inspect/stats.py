@@ -33,6 +33,7 @@ from htdata.errors import ArgumentError
 from htdata.format.table import HANDS, STATS_DIR
 from htdata.glove.contact import RULE_VERSION, ContactRule
 from htdata.glove.health import CLASSES, HEALTH_VERSION, merge_counts
+from htdata.glove.rawhealth import drift_status
 from htdata.inspect.episodestats import (
     CONTACT_THRESHOLD,
     HIST_BINS,
@@ -220,6 +221,9 @@ def summarise(reader: DatasetReader, per_episode: list[dict], by: str | None = N
     groups = []
     for key in sorted(accs):
         row = dict(zip(_key_names(by), key))
+        drift = drift_status(healths[key])
+        if drift is not None:        # raw rows stored: said in words, also when short clips could not tell it
+            healths[key]["drift"] = drift
         row.update(_glove_summary(accs[key], gloves, healths[key]))
         groups.append(row)
     return {"dataset": str(reader.root), "version": reader.version, "episodes": len(reader.episodes),

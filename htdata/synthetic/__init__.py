@@ -9,5 +9,8 @@
   TouchAnything-style folders, htdata-native folders);
 - `corpus`: plans the episodes of a corpus and writes them through `formats`;
 - `state`: the hidden state of one hand over time (what the glove painter and the renderer read);
-- `rawglove`: a raw-count knit glove (two hands, 32x32, float16 counts) with the ground truth behind it.
+- `rawglove`: a raw-count knit glove (two hands, 32x32, float16 counts) with the ground truth behind it;
+  `rawlayout` its wiring and layouts, `rawgrip` its grips, `restwander` the slow wander of its cells at rest;
+- `rawfacts`: the facts of a raw-count glove measured from its counts (the sample glove, or real
+  recordings the caller names).
 """

@@ -130,7 +130,8 @@ def check_rest_level(sensor: dict, episodes: list[dict], calibrations: dict, che
             check.fail("rest_level", f"episode {eid}: {hand} hand (layout {lid}): rest level {raw:.4g} of {top:g}: "
                        f"covered pixels read >= {rest:.2f} even in the quietest frame with baseline = \"none\" "
                        f"(the rest is read as pressure); set a baseline "
-                       f"([normalise.{lid}] baseline = \"quietest\", noise_k = 3) and renormalise",
+                       f"(drop the baseline line from [normalise.{lid}] for the raw-count default: baseline = "
+                       f"\"drift\", noise_k = 5) and renormalise",
                        episode=eid, hand=hand, found=round(rest, 4))
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from htdata.glove.contact import MIN_AREA_TAXELS, OLD_RULE, min_area, rule_for
-from htdata.synthetic.rawglove import FULL_SCALE, corpus_clips, glove_layout, write_rawglove
+from htdata.synthetic.rawglove import CLIPS, FULL_SCALE, corpus_clips, glove_layout, write_rawglove
 
 STEP = {"convention": "direct", "max": FULL_SCALE, "step": 1}
 
@@ -46,9 +46,9 @@ def datasets(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("contact")
     write_rawglove(tmp / "rg")
     out = {}
-    for baseline in ("quietest", "rest_window"):
-        sets = [f"normalise.rawknit_{h}_32x32.{k}={v}" for h in ("left", "right")
-                for k, v in (("baseline", baseline), ("noise_k", 3))]
+    for baseline in ("default", "rest_window"):      # default: no [normalise] table (each cell's own rest)
+        sets = [] if baseline == "default" else [f"normalise.rawknit_{h}_32x32.{k}={v}" for h in ("left", "right")
+                                                 for k, v in (("baseline", baseline), ("noise_k", 3))]
         args = ["--pipeline", "native", "--layouts", tmp / "rg" / "layouts"]
         for s in sets:
             args += ["--set", s]
@@ -61,12 +61,13 @@ def test_stats_contact_follows_the_glove_truth(datasets):
     from htdata.inspect.stats import dataset_stats
 
     _, clips = corpus_clips(0)
-    s = dataset_stats(datasets["quietest"], cache_dir=None)
+    s = dataset_stats(datasets["default"], cache_dir=None)
     for g in s["gloves"]:
         area = min_area(int(glove_layout(g["hand"]).live_mask.sum()))
         truth = np.concatenate([c.truth_contact(g["hand"]).sum(axis=1) >= area for c in clips]).mean()
-        assert abs(g["contact_fraction"] - truth) < 0.03
-        assert f"{area} taxels more than 2 quantisation steps above their noise floor" in g["contact_rule"]
+        assert abs(g["contact_fraction"] - truth) <= 0.10     # the README's target (counts truth: test_raw_count_rules)
+        assert f"at least {area} taxels pressed more than 0.015 of full scale above rest" in g["contact_rule"]
+        assert "more than 2 quantisation steps above their noise floor" in g["contact_rule"]
         assert g["contact_fraction_threshold"] is not None          # the old figure, beside it
 
 
@@ -75,24 +76,18 @@ def test_idle_trim_cuts_where_the_glove_rests(datasets):
     from htdata.read.reader import DatasetReader
 
     truth = _truth_spans(margin=15)                  # 0.5 s at 30 fps
-    with DatasetReader(datasets["quietest"]) as reader:
+    with DatasetReader(datasets["default"]) as reader:
         cuts = {c.episode: c for c in plan_idle(reader, IdleConfig(), cache_dir=None)}
     for eid, (a, b) in truth.items():
         keep = cuts[eid].keep or range(0, cuts[eid].frames)
         assert abs(keep.start - a) <= 10 and abs(keep.stop - b) <= 10, (eid, keep, (a, b))
-    # the first-frames rest window absorbs the grip / misses the drift: some cut is far off the truth
-    with DatasetReader(datasets["rest_window"]) as reader:
-        cuts = {c.episode: c for c in plan_idle(reader, IdleConfig(), cache_dir=None)}
-    off = [max(abs((c.keep or range(c.frames)).start - truth[e][0]), abs((c.keep or range(c.frames)).stop - truth[e][1]))
-           for e, c in cuts.items()]
-    assert max(off) > 30
 
 
 def test_taxel_health_comes_from_the_raw_rows_whatever_the_calibration(datasets):
     from htdata.inspect.stats import dataset_stats
 
     healths = [{g["hand"]: g["health"] for g in dataset_stats(datasets[b], cache_dir=None)["gloves"]}
-               for b in ("quietest", "rest_window")]
+               for b in ("default", "rest_window")]
     assert healths[0] == healths[1]
     assert healths[0]["right"]["basis"] == ["raw"]
     assert healths[0]["right"]["counts"]["stuck"] > 0 and healths[0]["right"]["counts"]["saturated"] > 0
@@ -102,14 +97,14 @@ def test_glove_only_dataset_says_why_paired_items_are_none(datasets):
     from htdata.read.torchdata import TactileFrameDataset
 
     with pytest.raises(ValueError, match='glove-only dataset.*frames="tactile"'):
-        TactileFrameDataset(datasets["quietest"])
-    assert len(TactileFrameDataset(datasets["quietest"], frames="tactile")) == 2 * 1380
+        TactileFrameDataset(datasets["default"])
+    assert len(TactileFrameDataset(datasets["default"], frames="tactile")) == 2 * sum(n for _, n, _ in CLIPS)
 
 
 def test_card_of_a_glove_only_dataset_states_its_contact_rule_and_draws_no_sync_plots(datasets, tmp_path):
     from htdata.inspect.card import write_card
 
-    write_card(datasets["quietest"], tmp_path / "card.html")
+    write_card(datasets["default"], tmp_path / "card.html")
     md = (tmp_path / "card.md").read_text()
     assert "glove-only episode(s) (no video) have none" in md
-    assert "sync_skew" not in md and "taxels more than 2 quantisation steps above their noise floor" in md
+    assert "sync_skew" not in md and "more than 2 quantisation steps above their noise floor" in md

@@ -130,7 +130,8 @@ def test_from_layout_value():
     assert cfg.baseline == "none" and cfg.noise_k == 0            # OpenTouch-style: as before
     assert NormaliseConfig.from_layout_value({"convention": "direct", "max": 1.0}).baseline == "none"
     raw = NormaliseConfig.from_layout_value({"convention": "direct", "max": 1023, "step": 1})
-    assert raw.baseline == "quietest" and raw.noise_k == 3.0       # raw counts rest far above 0
+    assert raw.baseline == "drift" and raw.noise_k == 5.0          # raw counts rest far above 0: each cell's own rest
+    assert raw.baseline_percentile == 10.0 and raw.drift_window_s == 60.0
 
 
 def test_noise_floor_is_estimated_from_the_whole_episode_rest_not_one_window():

@@ -36,6 +36,11 @@ def _found(health, name):
 
 def test_each_planted_fault_is_its_class(glove):
     unit, raw = glove
+    raw = raw.copy()
+    for r, c in unit.faults.cells["dead"]:       # press around each dead cell now and then: exercised, never rising
+        for dr, dc in ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, 1)):
+            if 0 <= r + dr < 32 and 0 <= c + dc < 32 and LAYOUT.live_mask[r + dr, c + dc]:
+                raw[100:160, r + dr, c + dc] += 120.0
     h = classify_raw(raw, LAYOUT)
     assert h["assessed"] and h["basis"] == "raw"
     planted = unit.faults.cells
@@ -80,7 +85,7 @@ def test_drift_is_read_from_quiet_frames_and_not_told_on_short_clips(glove):
 def test_clean_counts_flag_nothing():
     unit = GloveUnit.make("right", 11)
     unit.faults.cells = {k: [] for k in unit.faults.cells}
-    unit.faults.crosstalk_rows = []
+    unit.faults.crosstalk_cols = []
     unit.noise = np.minimum(unit.noise, 1.2)      # no loud taxels either
     raw = make_clip("c", "power_grasp", 400, "rest", 11, {"right": unit}).counts["right"].astype(np.float32)
     h = classify_raw(raw, LAYOUT)
@@ -88,12 +93,17 @@ def test_clean_counts_flag_nothing():
 
 
 def test_a_crosstalk_row_is_found():
-    units, clips = corpus_clips(0)
-    unit = units["right"]
-    # a pinch: the ghost row (1) runs across fingertips that are not pressed, so it is seen on its own
-    h = classify_raw(clips[0].counts["right"].astype(np.float32), LAYOUT)
+    """A raw row that lights up along its length with nothing pressed beside it (the sample glove's own
+    cross-talk runs in its unused column 31, which health does not look at: htdata/glove/activity.py reports it)."""
+    _, clips = corpus_clips(0)
+    raw = clips[0].counts["right"].astype(np.float32)
+    row = 20                                               # a palm row
+    live = np.flatnonzero(LAYOUT.live_mask[row])
+    for k in range(6):                                     # six short swings along the whole row
+        raw[30 + 40 * k:36 + 40 * k, row, live] += 60.0
+    h = classify_raw(raw, LAYOUT)
     rows = {r for r, _ in _found(h, "crosstalk")}
-    assert rows and rows <= set(unit.faults.crosstalk_rows)
+    assert rows == {row}
 
 
 def test_unmapped_cells_move_by_the_one_rule_and_unused_cells_are_honoured():
@@ -109,13 +119,13 @@ def test_unmapped_cells_move_by_the_one_rule_and_unused_cells_are_honoured():
     # the forgotten thumb tip moves; every other moving cell is a ghost row or a loud cell, never the gaps'
     # slow rest wander
     assert (found & truth["pressed"]).sum() >= 0.8 * truth["pressed"].sum() > 0
-    assert not (found & ~(truth["pressed"] | truth["ghost"] | truth["loud"])).any()
+    assert not (found & ~(truth["pressed"] | truth["light"] | truth["ghost"] | truth["loud"])).any()
     # the shipped layout lists the gaps in unused_cells: health counts none of them, moving or not
     moved = raw.copy()
-    moved[:, 13, 5] += np.where(np.arange(len(raw)) % 60 < 30, 0, 80)   # a gap cell (row 13) that responds
+    moved[:, 16, 25] += np.where(np.arange(len(raw)) % 60 < 30, 0, 80)  # a gap cell (row 16) that responds
     shipped = classify_raw(moved, LAYOUT)
     assert shipped["unmapped_cells"] == 0 and shipped["unmapped_moving"] == 0
-    assert [13, 5] in classify_raw(moved, draft)["unmapped_moving_cells"]
+    assert [16, 25] in classify_raw(moved, draft)["unmapped_moving_cells"]
 
 
 def test_inverted_gloves_are_read_in_the_pressure_direction(glove):
@@ -139,17 +149,17 @@ def test_health_map_draws_unexercised_and_unmapped_cells_and_states_thresholds(g
 
     unit, raw = glove
     raw = raw.copy()
-    raw[:, 13, 5] += np.where(np.arange(len(raw)) % 60 < 30, 0, 80)
+    raw[:, 16, 25] += np.where(np.arange(len(raw)) % 60 < 30, 0, 80)
     draft = parse_layout({**draft_layout_doc("right", forget=()), "layout_id": LAYOUT.layout_id}, "draft")
     h = classify_raw(raw, draft)
-    assert [13, 5] in h["unmapped_moving_cells"]
+    assert [16, 25] in h["unmapped_moving_cells"]
     g = Glove(LAYOUT, load_canonical())
     per_episode = [{"hands": {"right": {"layout": LAYOUT.layout_id, "health": h}}}]
     classes = taxel_classes(per_episode, LAYOUT.layout_id, "right", g)
     idle = {tuple(c) for c in h["unexercised_cells"]}
     assert idle and all(classes[i] == UNEXERCISED_INDEX for i, c in enumerate(g.taxels.cells.tolist())
                         if tuple(c) in idle)
-    panel = draw_grid_panel(g, classes, {(13, 5)})
+    panel = draw_grid_panel(g, classes, {(16, 25)})
     assert (panel == np.array(UNMAPPED_MOVING, np.uint8)).all(axis=2).any()
     assert (panel == np.array(UNEXERCISED, np.uint8)).all(axis=2).any()
     text = " ".join(t for _, t in _legend({"raw"}))

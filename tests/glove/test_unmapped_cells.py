@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from htdata.glove.activity import MOVING_K, WANDER_K, CellActivity, moving_cells, unmapped_moving
+from htdata.glove.activity import MOVING_K, MOVING_MIN_FULL_SCALE, WANDER_K, CellActivity, moving_cells, unmapped_moving
 from htdata.glove.layouts import parse_layout
 from htdata.store.manifest import load_episodes
 from tests.factories import ingest_cli
@@ -184,7 +184,10 @@ def test_suggest_writes_a_loadable_layout_covering_exactly_the_live_cells(tmp_pa
     live = {tuple(c) for c in np.argwhere(lay.live_mask).tolist()}
     want = set(THUMB) | {(r, c) for r in range(4) for c in range(4)} | {(r, c) for r in range(8, 16) for c in range(16)}
     assert live == want                         # the rest shift of rec_b (60 counts) is not movement
-    assert len({b.place for b in lay.blocks}) == len(lay.blocks) == 3
+    # the index tip and the thumb strip whole, the 8x16 palm cut in two near-square blocks (one per place)
+    boxes = sorted((b.rows[0], b.rows[1], b.cols[0], b.cols[1]) for b in lay.blocks)
+    assert boxes == [(0, 3, 0, 3), (0, 3, 10, 15), (8, 15, 0, 7), (8, 15, 8, 15)]
+    assert len({b.place for b in lay.blocks}) == len(lay.blocks)
     assert "168 moving cell(s)" in printed and "placeholder" in printed
     assert main(["layouts", "suggest", *map(str, recs), str(out)]) == 1      # refuses to overwrite
     assert "exists" in capsys.readouterr().err
@@ -228,9 +231,13 @@ def test_slow_rest_wander_is_not_movement_on_the_sample_raw_glove(rawglove):
         truth = unmapped_truth(clip, "right", units["right"], draft)
         hit = np.zeros(draft.grid, bool)
         hit[tuple(found.cells.T)] = True
-        explained = truth["pressed"] | truth["ghost"] | truth["loud"]
+        explained = truth["pressed"] | truth["light"] | truth["ghost"] | truth["loud"]
         assert not (hit & ~explained).any(), f"{clip.name}: resting gap cells called moving"
-        assert (hit & truth["pressed"]).sum() >= 0.8 * truth["pressed"].sum()
+        # listed: as moving, or (a forgotten sensor held through the glove's quiet blocks falls when released)
+        # as cross-talk; never hidden
+        listed = hit.copy()
+        listed[tuple(found.crosstalk.T)] = True
+        assert (listed & truth["pressed"]).sum() >= 0.8 * truth["pressed"].sum()
         assert found.wander > 1.0 and found.threshold > MOVING_K * found.noise
         # today's rule (fast noise only) calls the gaps' slow wander movement
         old = draft.unmapped_mask & (act.range > moving_threshold(found.noise, 1))
@@ -248,11 +255,79 @@ def test_suggest_finds_the_true_sensor_areas_of_the_sample_raw_glove(rawglove):
         acts.append(CellActivity((32, 32)))
         acts[-1].add(clip.counts["right"])
     doc, summary = suggest_layout(acts, "right", "suggested", True, [c.name for c in clips])
-    boxes = sorted((b["rows"][0], b["rows"][1], b["cols"][0], b["cols"][1]) for b in doc["blocks"])
-    # every finger column (3 segments), the thumb (2) and the four palm blocks: the nine true sensor areas
-    assert boxes == [(0, 11, 1, 4), (0, 11, 7, 10), (0, 11, 13, 16), (0, 11, 19, 22), (4, 12, 26, 29),
-                     (14, 20, 1, 10), (14, 20, 12, 23), (22, 30, 1, 10), (22, 30, 12, 23)]
-    truth = glove_layout("right")
-    lay = parse_layout(doc, "suggested")
-    assert np.array_equal(lay.live_mask, truth.live_mask)
-    assert summary["left_out"] and summary["wander"] > 1.0       # ghost rows and loud cells: not blocks
+    # the sensor is one connected knit (the palm touches every finger strip and the thumb): still at least the
+    # four fingers, the thumb and the palm apart (issue 34: >= 9 blocks), and exactly the live cells
+    assert len(doc["blocks"]) >= 9
+    truth = glove_layout("right").live_mask
+    got = parse_layout(doc, "suggested").live_mask
+    # cell precision against the true layout, recall of the live cells the clips pressed (suggest finds what was
+    # pressed: the real glove's twelve clips press nearly all of it, tests/glove/test_realglove_cells.py)
+    pressed = truth & np.any([c.pressure["right"].max(axis=0) >= 0.05 for c in clips], axis=0)
+    assert (got & truth).sum() >= 0.9 * got.sum() and (got & pressed).sum() >= 0.9 * pressed.sum()
+    assert summary["left_out"] and summary["wander"] > 1.0       # the cross-talk column, loud cells: not blocks
+
+
+# --------------------------------------------------------------------------- real-glove behaviour, built here
+
+
+def _quiet_glove(frames: int, seed: int = 3) -> np.ndarray:
+    """(T,16,16) raw counts of a glove at rest like the real knit one: smooth rest wander of a couple of counts,
+    a glove-wide dip of ~5 counts now and then, float16 counts (0.5-count steps near 550)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(frames)[:, None, None]
+    x = 550 + rng.uniform(-25, 25, (1, *GRID)) + 1.5 * np.sin(2 * np.pi * t / rng.uniform(40, 120, (1, *GRID)))
+    x -= 5.0 * np.exp(-0.5 * ((t % 60 - 30) / 4.0) ** 2)                   # the glove-wide dips
+    return x.astype(np.float16).astype(np.float32)
+
+
+def test_a_short_resting_clip_never_moves_and_a_press_of_the_contact_level_does():
+    draft = parse_layout(draft_layout(), "draft.json")
+    x = _quiet_glove(135)                                   # 4.5 s: little slow wander to measure
+    act = CellActivity(GRID)
+    act.add(x)
+    quiet = unmapped_moving(act, draft)
+    assert len(quiet) == 0 and len(quiet.crosstalk) == 0
+    # the contact floor (0.02 x value.max = 20.5 counts) holds although noise and wander are tiny here
+    assert quiet.threshold == pytest.approx(MOVING_MIN_FULL_SCALE * 1023)
+    pressed = x.copy()
+    pressed[60:90, 1, 12] += 30.0                           # a forgotten thumb cell pressed lightly
+    act = CellActivity(GRID)
+    act.add(pressed)
+    assert unmapped_moving(act, draft).cells.tolist() == [[1, 12]]
+
+
+def test_cells_that_only_fall_below_rest_are_crosstalk_and_do_not_fail_the_check(tmp_path, capsys):
+    from htdata.cli import main
+
+    x = _quiet_glove(600)
+    grip = np.zeros(600)
+    grip[200:420] = 1.0
+    x[:, 8:16, 0:16] += 200 * grip[:, None, None]           # the palm grips ...
+    x[:, 5, 4:9] -= 40 * grip[:, None]                      # ... and the gap row beside it falls (cross-talk)
+    act = CellActivity(GRID)
+    act.add(x)
+    draft = parse_layout(draft_layout(unused=[list(c) for c in THUMB]), "draft.json")
+    found = unmapped_moving(act, draft)
+    assert len(found) == 0 and sorted(found.crosstalk.tolist()) == [[5, c] for c in range(4, 9)]
+    assert found.record()["crosstalk"]["count"] == 5 and found.record()["count"] == 0
+    assert act.rest_level(draft.live_mask)[5, 4] == pytest.approx(float(np.median(x[:200, 5, 4])), abs=3)
+    # the same cells rising are forgotten sensors; a cell that rises and falls rises
+    up = x.copy()
+    up[:, 5, 4:9] += 80 * grip[:, None]
+    up[100:150, 6, 6] += 40
+    up[450:500, 6, 6] -= 40
+    act_up = CellActivity(GRID)
+    act_up.add(up)
+    assert sorted(unmapped_moving(act_up, draft).cells.tolist()) == [[5, c] for c in range(4, 9)] + [[6, 6]]
+    # an inverted glove (larger = less pressure): the same falling cells press
+    inverted = parse_layout({**draft_layout(unused=[list(c) for c in THUMB]),
+                             "value": {"convention": "inverted", "max": 1023, "step": 1}}, "inv.json")
+    assert sorted(unmapped_moving(act, inverted).cells.tolist()) == [[5, c] for c in range(4, 9)]
+    # `layouts check --against`: listed as cross-talk, exit 0
+    layout = tmp_path / "draft.json"
+    layout.write_text(json.dumps(draft_layout(unused=[list(c) for c in THUMB])))
+    np.save(tmp_path / "grip.npy", x)
+    capsys.readouterr()
+    assert main(["layouts", "check", str(layout), "--against", str(tmp_path / "grip.npy")]) == 0
+    out = capsys.readouterr().out
+    assert "no cell outside the blocks rises; 5 only fall below rest (cross-talk" in out and "[5, 4]" in out

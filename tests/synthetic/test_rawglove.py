@@ -28,22 +28,23 @@ def corpus():
 
 
 def _clip(clips, start):
-    return next(c for c in clips if c.start == start and c.task == "power_grasp")
+    return next(c for c in clips if c.start == start and c.task == "pour")
 
 
 def test_counts_look_like_the_real_glove(corpus):
     units, clips = corpus
     clip = _clip(clips, "rest")
     for hand, counts in clip.counts.items():
-        assert counts.dtype == np.float16 and np.array_equal(counts, np.round(counts))   # integer counts
+        assert counts.dtype == np.float16 and not np.array_equal(counts, np.round(counts))   # half counts too
         live = glove_layout(hand).live_mask
         first = counts[:10].astype(np.float32)[:, live]
-        assert abs(float(np.median(first)) - REST) < 10                                  # rest ~550
-        assert np.std(np.median(first, axis=0)) > 10                                     # per-taxel offsets
+        assert abs(float(np.median(first)) - REST[hand]) < 3                             # rest ~557 / ~566
+        offsets = np.median(first, axis=0)
+        assert np.ptp(offsets[offsets < 700]) > 15                                       # per-cell offsets
         assert float(counts.max()) == SATURATE                                           # cells saturate
-        # noise mostly around one count: about a third of the taxels have zero robust spread over 10 frames
+        # hardly any fast noise: a third or more of the taxels have zero robust spread over 10 frames
         mad = np.median(np.abs(first - np.median(first, axis=0)), axis=0)
-        assert 0.2 < float((mad == 0).mean()) < 0.5
+        assert 0.2 < float((mad == 0).mean()) < 0.7
     u = units["right"]
     raw = clip.counts["right"].astype(np.float32)
     (r, c), = u.faults.cells["saturating"][:1]
@@ -61,13 +62,13 @@ def test_every_cell_wanders_slowly_at_rest_like_the_real_glove(corpus):
     clip = _clip(clips, "rest")
     lay = glove_layout("left")
     gaps = ~np.asarray(lay.live_mask) & ~np.asarray(lay.unmapped_mask)   # the gaps (listed as unused cells)
-    gaps[units["left"].faults.crosstalk_rows, :] = False
-    quiet = gaps & (units["left"].noise < 2)
+    gaps[:, units["left"].faults.crosstalk_cols] = False
+    quiet = gaps & (units["left"].noise < 1)
     act = CellActivity(lay.grid)
     act.add(clip.counts["left"])
     # a gap cell carries no sensor, yet its rest level wanders several counts over a clip, far more than its
-    # frame-to-frame noise (the real glove: median 5, p90 6-7 counts, fast noise 0.15)
-    assert 5 <= float(np.median(act.range[quiet])) <= 10
+    # frame-to-frame noise (the real glove: gaps range 4-6 counts over 150-1000 frames, fast noise 0.15)
+    assert 3 <= float(np.median(act.range[quiet])) <= 8
     assert float(np.median(act.cell_wander()[quiet])) >= 3 * float(np.median(act.cell_noise[quiet]))
 
 
@@ -76,7 +77,7 @@ def test_clip_starts_and_determinism(corpus):
     rest, mid = _clip(clips, "rest"), _clip(clips, "mid_grasp")
     assert not rest.truth_contact("right")[0].any()
     assert rest.truth_contact("right").any()
-    assert mid.truth_contact("right")[0].mean() > 0.5          # already gripping in frame 0
+    assert mid.truth_contact("right")[0].sum() >= 15           # already gripping in frame 0
     assert not mid.truth_contact("right")[-1].any()            # and let go before the end
     again = corpus_clips(0)[1]
     assert all(np.array_equal(a.counts[h], b.counts[h]) for a, b in zip(clips, again) for h in a.counts)
@@ -85,9 +86,12 @@ def test_clip_starts_and_determinism(corpus):
 def test_write_rawglove_is_a_glove_only_native_corpus(tmp_path):
     out = write_rawglove(tmp_path / "rg")
     assert out["clips"] == 5
-    rec = json.loads((tmp_path / "rg" / "rawknit_00_pinch_pick_rest" / "recording.json").read_text())
+    rec = json.loads((tmp_path / "rg" / "rawknit_00_slice_rest" / "recording.json").read_text())
     assert "video" not in rec and set(rec["hands"]) == {"left", "right"}
-    with np.load(tmp_path / "rg" / "rawknit_00_pinch_pick_rest" / "tactile_left.npz") as z:
+    truth = json.loads((tmp_path / "rg" / "truth.json").read_text())
+    assert truth["clips"]["rawknit_00_slice_rest"]["working_hand"] == "right"
+    assert truth["faults"]["right"]["crosstalk_cols"] == [31]
+    with np.load(tmp_path / "rg" / "rawknit_00_slice_rest" / "tactile_left.npz") as z:
         assert z["values"].dtype == np.float16 and z["values"].shape[1:] == (32, 32)
     assert sorted(p.name for p in (tmp_path / "rg" / "layouts").iterdir()) == \
         ["rawknit_left_32x32.calibration.npz", "rawknit_left_32x32.json",
@@ -99,37 +103,24 @@ def _rates(values, clip, hand):
     return c["tp"] / (c["tp"] + c["fn"]), c["rest_above_0"] / c["rest"], c["tp"] / max(c["tp"] + c["fp"], 1)
 
 
-def test_quietest_span_keeps_the_grip_of_a_clip_starting_mid_grasp(corpus):
+def test_a_grip_held_from_the_first_frame_is_kept_by_the_activity_baselines_not_the_rest_window(corpus):
+    """Measured as on the real glove (its counts alone: htdata/benchmarks/realglove.py), at the clip start."""
+    from htdata.benchmarks.realglove import HandTruth, hand_counts, normalised
+    from htdata.glove.rasterise import Rasteriser
+
     _, clips = corpus
     mid = _clip(clips, "mid_grasp")
-    recall_first, _, _ = _rates(normalise_clip(mid, "right", config_for("rest_window", True)), mid, "right")
-    recall_quiet, rest_quiet, prec_quiet = _rates(normalise_clip(mid, "right", config_for("quietest", True)), mid,
-                                                  "right")
-    assert recall_first < 0.3            # the first 10 frames absorb the grip
-    assert recall_quiet > 0.9 and prec_quiet > 0.9 and rest_quiet < 0.05
-    recall_pct, _, _ = _rates(normalise_clip(mid, "right", config_for("percentile", True)), mid, "right")
-    assert recall_pct > 0.9
+    layout = glove_layout("right")
+    truth = HandTruth.of(mid.counts["right"], layout.live_mask)
+    assert truth.mid_grasp
 
+    def kept_at_start(baseline):
+        cfg = config_for(baseline, True)
+        c = hand_counts(truth, normalised(mid.counts["right"], layout, cfg, mid.fps), layout, Rasteriser(layout))
+        return c["start_kept"] / c["start_pressed"]
 
-def test_default_settings_of_a_raw_count_glove_keep_the_rest_dark_and_the_grip(corpus):
-    from htdata.benchmarks.rawglove import held_grip
-    from htdata.ingest.pipeline import load_pipeline
-
-    _, clips = corpus
-    cfg = load_pipeline("native").normalise_for(glove_layout("right"))      # no [normalise.<id>] table
-    assert cfg.baseline == "quietest" and cfg.noise_k == 3
-    rest = [0, 0]
-    grip = [0, 0]
-    for clip in clips:
-        for hand in clip.counts:
-            values = normalise_clip(clip, hand, cfg)
-            pressure = clip.pressure[hand][:, glove_layout(hand).live_mask]
-            c = score(values, pressure)
-            rest = [rest[0] + c["rest_above_0"], rest[1] + c["rest"]]
-            if clip.start == "mid_grasp":
-                grip = [a + b for a, b in zip(grip, held_grip(values, pressure, clip.fps))]
-    assert rest[0] / rest[1] <= 0.02                 # rest leakage (a floor from one window: 7-8%)
-    assert grip[1] and grip[0] / grip[1] >= 0.9      # a grip held at the clip start survives
+    assert kept_at_start("rest_window") < 0.3            # the first 10 frames absorb the grip
+    assert kept_at_start("default") >= 0.9 and kept_at_start("percentile") >= 0.9
 
 
 def test_quietest_span_is_in_seconds():
@@ -147,19 +138,20 @@ def test_quietest_span_is_in_seconds():
 
 def test_noise_floor_never_below_the_quantisation_step():
     lay = glove_layout("right")
+    step = float(lay.value["step"])                          # the glove's float16 counts: 0.25-count steps
     raw = np.full((40, 32, 32), 550.0, np.float32)          # no spread at all: k x 0 = 0
     n = Normaliser(config_for("rest_window", True), lay)
     n.fit_baseline(raw)
-    assert np.all(n.floor[lay.live_mask] >= np.float32(1.0 / FULL_SCALE))   # step 1 count
-    raw[5, 3, 3] += 1.0                                      # one count of flicker reads 0
+    assert np.all(n.floor[lay.live_mask] >= np.float32(step / FULL_SCALE))   # one step
+    raw[5, 3, 3] += step                                     # one step of flicker reads 0
     v, _ = n.apply(raw)
     assert v[5, 3, 3] == 0
-    raw[5, 3, 3] += 1.0                                      # two counts do not
+    raw[5, 3, 3] += step                                     # two steps do not
     assert n.apply(raw)[0][5, 3, 3] > 0
-    # without a floor (noise_k = 0, noise_floor = 0) nothing changes: one count reads above 0
+    # without a floor (noise_k = 0, noise_floor = 0) nothing changes: one step reads above 0
     plain = Normaliser(config_for("rest_window", False), lay)
     plain.fit_baseline(raw[:10])
-    raw[6, 3, 3] += 1.0
+    raw[6, 3, 3] += step
     assert plain.apply(raw)[0][6, 3, 3] > 0
 
 
@@ -173,8 +165,8 @@ def test_drift_baseline_follows_a_ten_minute_drift():
         v = normalise_clip(clip, "right", config_for(baseline, True))[tail]
         return score(v, clip.pressure["right"][tail][:, live])["rest_above_0"] / live.sum() / 900
 
-    with_drift, without = rest_above("drift"), rest_above("rest_window")
-    assert without > 0.3 and with_drift < 0.08
+    with_drift, without = rest_above("default"), rest_above("rest_window")   # default: 60 s windows per cell
+    assert without > 0.3 and with_drift < 0.05
 
 
 def test_drift_knots_round_trip_through_the_episode_record():
@@ -273,23 +265,23 @@ def test_out_of_range_warnings_reach_stderr(tmp_path, capsys):
                     "--set", "normalise.rawknit_left_32x32.baseline=none", tmp_path / "rg", tmp_path / "ds")
     assert rc == 0
     err = capsys.readouterr().err
-    assert "episode nat-rawknit_00_pinch_pick_rest: warning: right hand: 240 of 240 frames" in err
+    assert "episode nat-rawknit_00_slice_rest: warning: right hand: 450 of 450 frames" in err
     assert "outside [0, 472]" in err and "FULL-SCALE" in err
     # baseline "none" on a raw-count glove reads its rest as pressure: one line per episode names the setting
-    line = next(x for x in err.splitlines() if "nat-rawknit_00_pinch_pick_rest" in x and "covered pixels" in x)
+    line = next(x for x in err.splitlines() if "nat-rawknit_00_slice_rest" in x and "covered pixels" in x)
     assert "left hand (layout rawknit_left_32x32): rest level 5" in line and "of 1023" in line
-    assert "read >= 0.5" in line and "[normalise.rawknit_left_32x32] baseline = \"quietest\"" in line
-    assert "right hand (layout rawknit_right_32x32): rest level" not in err     # its default: quietest
+    assert "read >= 0.5" in line and 'drop the baseline line from [normalise.rawknit_left_32x32]' in line
+    assert "right hand (layout rawknit_right_32x32): rest level" not in err     # its default: drift
     from htdata.read.reader import DatasetReader
     with DatasetReader(tmp_path / "ds") as reader:
-        assert sorted(e["baseline"] for e in reader.manifest["calibrations"].values()) == ["none", "quietest"]
+        assert sorted(e["baseline"] for e in reader.manifest["calibrations"].values()) == ["drift", "none"]
     # and validate fails it, naming the setting (the right hand, on its default, passes)
     from htdata.validate import validate_dataset
     report = validate_dataset(tmp_path / "ds")
     failures = [f for f in report["checks"]["sensors"]["failures"] if f["what"] == "rest_level"]
     assert not report["ok"] and len(failures) == 5 and {f["hand"] for f in failures} == {"left"}
     assert "rest level 5" in failures[0]["message"] and "of 1023" in failures[0]["message"]
-    assert "[normalise.rawknit_left_32x32] baseline = \"quietest\"" in failures[0]["message"]
+    assert "drop the baseline line from [normalise.rawknit_left_32x32]" in failures[0]["message"]
 
 
 def test_taxel_calibration_file_formula_and_errors(tmp_path):
@@ -339,4 +331,6 @@ def test_ingest_with_a_taxel_calibration_file_and_renormalise_from_the_record(tm
     stats = dataset_stats(out, cache_dir=None)
     assert all(g["frames_from_raw"] == g["frames"] for g in stats["gloves"])
     right = next(g for g in stats["gloves"] if g["hand"] == "right")
-    assert 0.4 < right["contact_fraction"] < 0.7
+    clips = corpus_clips(0)[1]                    # truth: frames with >= 7 pressed cells (issue 34's measure)
+    truth = sum(int((c.truth_contact("right").sum(axis=1) >= 7).sum()) for c in clips) / sum(c.n_frames for c in clips)
+    assert abs(right["contact_fraction"] - truth) <= 0.10

@@ -1,0 +1,166 @@
+"""Moving cells and suggested blocks on REAL raw-count glove recordings (the README measures of a real_glove folder).
+
+The folder (given explicitly; the toolkit never looks for it) holds
+`clips/manifest.jsonl` + `clips/clip_N.npz` (key `counts`, (T, 2, H, W) raw
+counts, hand 0 = left) and `layouts/<id>.json` per hand. Per hand, over all
+clips and over the short ones (SHORT_FRAMES frames or fewer) separately:
+
+- `moving_cell_rows`: what `htdata layouts check LAYOUT --against` reports
+  against the hand's layout WITHOUT its `unused_cells` (the same
+  `unmapped_moving` on each clip's raw rows): cells flagged as forgotten
+  sensors, their precision (share whose range in that clip > TRUTH_RANGE
+  counts), how many flags range < QUIET_RANGE counts (must be none), and the
+  cells reported as cross-talk (they only fall below rest) with the same
+  precision;
+- `suggest_rows`: `htdata layouts suggest` from the clips of one hand (as a
+  user passes several recordings): blocks, and the cell precision / recall of
+  the suggested layout's live cells against the layout's live cells;
+  `suggest_leave_one_out_rows` repeats it with each clip left out in turn.
+
+    python -m htdata.benchmarks.realglovecells ../shared/real_glove
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from htdata.benchmarks.realclips import HANDS, RealClip, load_real_glove
+from htdata.benchmarks.tables import table
+from htdata.glove.activity import CellActivity, unmapped_moving
+from htdata.glove.layouts import Layout, parse_layout
+from htdata.glove.layoutsuggest import suggest_layout
+
+TRUTH_RANGE = 20.0      # counts: a flagged cell that moves more than this in the clip really moves
+QUIET_RANGE = 10.0      # counts: a cell ranging less than this must never be flagged
+SHORT_FRAMES = 300      # a short clip (135-300 frames: little rest wander to see)
+
+
+def bare_layout(layout: Layout) -> Layout:
+    """`layout` without its `unused_cells` (what `layouts check` is measured against: every cell outside the
+    blocks watched)."""
+    doc = layout.to_dict()
+    doc.pop("unused_cells", None)
+    return parse_layout(doc, f"{layout.layout_id} without unused_cells")
+
+
+def _activity(rows: np.ndarray) -> CellActivity:
+    act = CellActivity(rows.shape[1:])
+    act.add(rows)
+    return act
+
+
+def _share(hit: int, total: int) -> float | str:
+    return hit / total if total else "n/a"
+
+
+def moving_cell_rows(clips: list[RealClip], layouts: dict[str, Layout]) -> list[dict]:
+    """One row per (hand, clips): flags of `layouts check --against` and their precision (module docstring)."""
+    rows = []
+    for hand in HANDS:
+        layout = bare_layout(layouts[hand])
+        per_clip = []
+        for c in clips:
+            clip, counts = c.clip, c.counts
+            act = _activity(c.hand(hand))
+            found = unmapped_moving(act, layout)
+            rng = act.range
+            flagged, crosstalk = rng[tuple(found.cells.T)], rng[tuple(found.crosstalk.T)]
+            per_clip.append({"clip": clip, "frames": len(counts), "threshold": found.threshold,
+                             "flagged": len(flagged), "true": int((flagged > TRUTH_RANGE).sum()),
+                             "under_quiet": int((np.concatenate([flagged, crosstalk]) < QUIET_RANGE).sum()),
+                             "crosstalk": len(crosstalk), "crosstalk_true": int((crosstalk > TRUTH_RANGE).sum())})
+        for name, keep in (("all", lambda c: True), ("short", lambda c: c["frames"] <= SHORT_FRAMES)):
+            chosen = [c for c in per_clip if keep(c)]
+            total = {k: sum(c[k] for c in chosen) for k in ("flagged", "true", "under_quiet", "crosstalk",
+                                                             "crosstalk_true")}
+            rows.append({"hand": hand, "clips": f"{name} ({len(chosen)})", **total,
+                         "precision": _share(total["true"], total["flagged"]),
+                         "crosstalk_precision": _share(total["crosstalk_true"], total["crosstalk"]),
+                         "threshold_min": min((c["threshold"] for c in chosen), default=None),
+                         "per_clip": chosen})
+    return rows
+
+
+def suggest_rows(clips: list[RealClip], layouts: dict[str, Layout]) -> list[dict]:
+    """One row per (hand, clips): `layouts suggest` from those clips against the layout's live cells."""
+    rows = []
+    for hand in HANDS:
+        truth = layouts[hand].live_mask
+        for name, chosen in (("all", clips), ("short", [c for c in clips if len(c.counts) <= SHORT_FRAMES])):
+            if not chosen:
+                continue
+            acts = [_activity(c.hand(hand)) for c in chosen]
+            doc, summary = suggest_layout(acts, hand, f"suggested_{hand}", False, [f"clip_{c.clip}" for c in chosen])
+            got = parse_layout(doc, "suggested").live_mask
+            tp = int((got & truth).sum())
+            rows.append({"hand": hand, "clips": f"{name} ({len(chosen)})", "blocks": len(doc["blocks"]),
+                         "precision": _share(tp, int(got.sum())), "recall": _share(tp, int(truth.sum())),
+                         "live": int(got.sum()), "true_live": int(truth.sum()),
+                         "left_out": len(summary["left_out"]),
+                         "boxes": [(b["rows"][0], b["rows"][1], b["cols"][0], b["cols"][1]) for b in doc["blocks"]]})
+    return rows
+
+
+def suggest_leave_one_out_rows(clips: list[RealClip], layouts: dict[str, Layout]) -> list[dict]:
+    """One row per hand: `layouts suggest` from every clip but one, for each clip left out (how the targets
+    hold on a set of clips it was not developed on): least / median / largest blocks, precision and recall."""
+    rows = []
+    for hand in HANDS:
+        truth = layouts[hand].live_mask
+        acts = [_activity(c.hand(hand)) for c in clips]
+        got = {"blocks": [], "precision": [], "recall": []}
+        for k in range(len(clips)):
+            keep = [a for i, a in enumerate(acts) if i != k]
+            doc, _ = suggest_layout(keep, hand, f"suggested_{hand}", False,
+                                    [f"clip_{c.clip}" for i, c in enumerate(clips) if i != k])
+            live = parse_layout(doc, "suggested").live_mask
+            tp = int((live & truth).sum())
+            got["blocks"].append(len(doc["blocks"]))
+            got["precision"].append(tp / max(int(live.sum()), 1))
+            got["recall"].append(tp / int(truth.sum()))
+        row = {"hand": hand, "subsets": len(clips)}
+        for key, values in got.items():
+            row.update({f"{key}_min": min(values), f"{key}_median": float(np.median(values)),
+                        f"{key}_max": max(values)})
+        row["meet_targets"] = sum(b >= 9 and p >= 0.9 and r >= 0.9 for b, p, r in
+                                  zip(got["blocks"], got["precision"], got["recall"]))
+        rows.append(row)
+    return rows
+
+
+def cells_rows(clips: list[RealClip], layouts: dict[str, Layout], leave_one_out: bool = True) -> dict:
+    """Every table's rows (results.json): moving cells, suggest, and suggest with each clip left out."""
+    return {"moving_cells": moving_cell_rows(clips, layouts), "suggest": suggest_rows(clips, layouts),
+            "suggest_leave_one_out": suggest_leave_one_out_rows(clips, layouts) if leave_one_out else []}
+
+
+def cells_markdown(d: dict) -> list[str]:
+    """Markdown lines: the tables of `cells_rows`."""
+    lines = ["Moving cells (`layouts check --against`, layout without unused_cells): flags = forgotten sensors "
+             f"(precision: range > {TRUTH_RANGE:g} counts), cross-talk = cells that only fall below rest", ""]
+    lines += table(d["moving_cells"], [
+        ("hand", "hand"), ("clips", "clips"), ("flagged", "flagged"), ("precision", "precision"),
+        ("under_quiet", f"flags < {QUIET_RANGE:g} counts"), ("crosstalk", "cross-talk"),
+        ("crosstalk_precision", "cross-talk precision"), ("threshold_min", "least threshold")])
+    lines += ["", "Suggested blocks (`layouts suggest` from the clips of a hand) against the layout's live cells", ""]
+    lines += table(d["suggest"], [
+        ("hand", "hand"), ("clips", "clips"), ("blocks", "blocks"), ("precision", "cell precision"),
+        ("recall", "cell recall"), ("live", "live cells"), ("true_live", "true live"), ("left_out", "moving left out")])
+    if not d["suggest_leave_one_out"]:
+        return lines
+    lines += ["", "The same with one clip left out, each in turn (least / median / largest)", ""]
+    lines += table(d["suggest_leave_one_out"], [
+        ("hand", "hand"), ("subsets", "subsets"), ("blocks_min", "blocks min"), ("blocks_max", "blocks max"),
+        ("precision_min", "precision min"), ("precision_median", "precision median"),
+        ("recall_min", "recall min"), ("recall_median", "recall median"), ("recall_max", "recall max"),
+        ("meet_targets", "subsets meeting all targets")])
+    return lines
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 2:
+        sys.exit("usage: python -m htdata.benchmarks.realglovecells REAL_GLOVE_FOLDER")
+    print("\n".join(cells_markdown(cells_rows(*load_real_glove(Path(sys.argv[1]))))))
