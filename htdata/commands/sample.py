@@ -25,11 +25,10 @@ Layout written under OUT:
   native/<recording>/                            100 Hz tactile, 30 Hz video, clock offset
 With --raw-glove, only OUT/rawglove/ (not part of the default corpus):
   rawglove/<clip>/ + layouts/ + truth.json       two-hand 32x32 raw-count knit glove, float16
-                                                 counts, glove only, with ground truth (the real
-                                                 glove's facts: tools/rawglove_facts.py)
+                                                 counts, glove only, with ground truth (it copies
+                                                 a real knit glove's facts: docs/INGEST.md)
   htdata sample data/raw --raw-glove
-  htdata ingest --pipeline native --layouts data/raw/rawglove/layouts data/raw/rawglove OUT \
-      --set normalise.rawknit_right_32x32.baseline=quietest --set normalise.rawknit_right_32x32.noise_k=3
+  htdata ingest --pipeline native --layouts data/raw/rawglove/layouts data/raw/rawglove OUT
 Same --seed -> identical tactile arrays and JPEG bytes. OUT/.complete (written last) names
 the seed, scale and formats of a finished corpus; --reuse keeps such a corpus and
 rewrites anything else (a corpus cut short, or one of another seed).

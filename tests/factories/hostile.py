@@ -25,7 +25,10 @@ import OpenEXR
 
 ROOT = Path(__file__).resolve().parents[2]
 
-_PEAK = "\nimport resource as _r, sys as _s\n_s.stdout.write('\\nPEAK_RSS_KB %d\\n' % _r.getrusage(_r.RUSAGE_SELF).ru_maxrss)\n"
+# the child's own peak: VmHWM (exec resets it); ru_maxrss would carry the forking pytest worker's across exec
+# (htdata.benchmarks.ingest.own_peak_rss_kb reads it the same way)
+_PEAK = ("\nimport sys as _s\n_hwm = [l for l in open('/proc/self/status') if l.startswith('VmHWM:')][0]\n"
+         "_s.stdout.write('\\nPEAK_RSS_KB %d\\n' % int(_hwm.split()[1]))\n")
 
 
 def forged_jpeg(width: int, height: int) -> bytes:

@@ -37,11 +37,12 @@ def test_planning_a_long_packed_glove_stream_holds_a_few_bytes_per_row(tmp_path)
     write_long_glove(big / "rec_good" / "tactile_right.npz", rows, 0, (9 * FRAME_NS) // rows)
     make_native(tmp_path / "small")
     code = f"""
-import contextlib, io, resource
+import contextlib, io
+from htdata.benchmarks.ingest import own_peak_rss_kb
 from tests.factories import ingest_cli
 with contextlib.redirect_stderr(io.StringIO()) as err:
     assert ingest_cli("--pipeline", "native", {str(tmp_path / 'small')!r}, {str(tmp_path / 'ds0')!r}) == 0
-    warm = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    warm = own_peak_rss_kb()
     rc = ingest_cli("--pipeline", "native", {str(big)!r}, {str(tmp_path / 'ds1')!r})
 print("rc", rc, "warm_kb", warm)
 print(err.getvalue())
