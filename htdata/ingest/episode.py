@@ -111,9 +111,9 @@ def _fit_episode_baselines(ref, cfg: PipelineConfig, adapter, streams, sync, nor
 def _kept_values(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict, tally: EpisodeTally):
     """Normalised taxels (and bend vectors) of a chunk's kept frames; their contact goes into the tally.
 
-    Maps are rendered one frame at a time as each frame leaves (`_frame_maps`): a chunk of
-    rendered maps is 200 KiB per frame and hand, and frames waiting in the FrameQueue would keep
-    two chunks of them alive; the taxels are 1/100th of that.
+    Maps are rendered one frame at a time as each frame leaves (`_frame_maps`, from the chunk's
+    `Rasteriser.frames`): a chunk of rendered maps is 200 KiB per frame and hand, and frames
+    waiting in the FrameQueue would keep two chunks of them alive; the taxels are 1/100th of that.
     """
     kept, bends = {}, {}
     for h in tally.hands if keep.size else ():
@@ -124,10 +124,10 @@ def _kept_values(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict,
     return kept, bends
 
 
-def _frame_maps(kept: dict, n: int, rasters: dict, clock: StageClock) -> dict:
-    """The (224,224) maps of kept frame n of the chunk, one per hand."""
+def _frame_maps(frames: dict, n: int, clock: StageClock) -> dict:
+    """The (224,224) maps of kept frame n of the chunk, one per hand (`frames`: Rasteriser.frames per hand)."""
     with clock.stage("rasterise"):
-        return {h: rasters[h].render(v[n:n + 1])[0] for h, v in kept.items()}
+        return {h: f[n] for h, f in frames.items()}
 
 
 def _frame_meta(ref, sync, k: int, rgb_index: int, frame_index: int, hands: list[str]) -> dict:
@@ -187,6 +187,7 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
                         fetcher.discard(rgb_idx[j])
                 with clock.stage("rasterise"):
                     kept, bends = _kept_values(values, np.flatnonzero(ok), rasters, keep_bend, tally)
+                    frames = {h: rasters[h].frames(v) for h, v in kept.items()} if with_maps else {}
             n = 0
             for j in range(stop - start):
                 k, i = start + j, int(rgb_idx[j])
@@ -207,7 +208,7 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
                 tally.frames += 1
                 tally.paired += 1
                 yield from queue.push(Frame(key=meta["key"], source_frame=i, meta=meta, rgb=rgb,
-                                            maps=_frame_maps(kept, n, rasters, clock) if with_maps else {},
+                                            maps=_frame_maps(frames, n, clock),
                                             bends={h: b[n] for h, b in bends.items()}, raw=rows), paired=True)
                 n += 1
         for frame in emit.before(None):
