@@ -1,9 +1,11 @@
 """Tactile map and RGB frame codecs, and the tactile value rule.
 
 Stored format (docs/FORMAT.md "Value rule"): tactile maps are float32 in [0,1],
-written as single-channel ("Y") OpenEXR, ZIP by default, with HALF or FLOAT
-pixels: the pipeline's `[codec] tactile = "auto"` picks the pixel type by the
-rule in htdata/glove/codecrule.py (smallest codec keeping every glove's levels).
+written as single-channel ("Y") OpenEXR, ZIP by default (written by
+htdata/format/exrzip.py: the binding's file layout at a third of its cost;
+other compressions by the OpenEXR binding), with HALF or FLOAT pixels: the
+pipeline's `[codec] tactile = "auto"` picks the pixel type by the rule in
+htdata/glove/codecrule.py (smallest codec keeping every glove's levels).
 FLOAT is exact; HALF is NOT lossless (max error 2**-12, below). The decoder
 reads either. RGB frames are JPEG (lossy). Everything works in memory
 (BytesIO), so tar members need no temp files.

@@ -2,9 +2,10 @@
 
 Why: the OpenEXR binding costs ~1 ms of CPU per 224x224 map, most of it
 fixed per-call work and the set-up of a fresh deflate compressor for each
-16-line chunk (the codec bench's "exr_half_zip_binding" row). This writer lays out the same
-file itself, about 3x cheaper, so a glove-only ingest that stores its maps
-is not bound by the encoder.
+16-line chunk (the codec bench's stored-map layout table: exr_half_zip vs
+exr_half_zip_binding). This writer lays out the same file itself, about 3x
+cheaper, so a glove-only ingest that stores its maps is not bound by the
+encoder.
 
 The file, as OpenEXR's spec ("OpenEXR File Layout") and the binding write it:
 - magic 76 2f 31 01, version 2 (single-part scanline, no flags);
@@ -40,7 +41,7 @@ import numpy as np
 
 LINES_PER_CHUNK = 16          # ZIP_COMPRESSION: 16 scanlines per chunk (ZIPS would be 1)
 # zlib level 1 (deflate_fast) is ~2x cheaper than 4 (lazy matching) on maps and ~1.2x larger:
-# the codec bench's exr_half_zip row gives the bytes and the time, the binding row beside it.
+# the stored-map layout table gives the bytes and the time of exr_*_zip and of exr_*_zip_binding.
 ZLIB_LEVEL = 1
 _MAGIC_VERSION = b"\x76\x2f\x31\x01" + struct.pack("<i", 2)
 _PIXEL_TYPES = {np.dtype(np.float16): 1, np.dtype(np.float32): 2}   # OpenEXR HALF, FLOAT
@@ -74,12 +75,8 @@ def _zero_chunk(nbytes: int) -> bytes:
     """The stored bytes of an all-zero chunk (most chunks of a resting hand's map): deflated once."""
     filtered = np.full(nbytes, 128, np.uint8)
     filtered[0] = 0
-    return _deflated_or_raw(filtered, bytes(nbytes), level=9)    # made once: the smallest stream
-
-
-def _deflated_or_raw(filtered: np.ndarray, raw: bytes, level: int = ZLIB_LEVEL) -> bytes:
-    packed = zlib.compress(filtered.tobytes(), level)
-    return packed if len(packed) < len(raw) else raw
+    packed = zlib.compress(filtered, 9)         # made once: the smallest stream
+    return packed if len(packed) < nbytes else bytes(nbytes)
 
 
 def zip_filter(words: np.ndarray) -> np.ndarray:
@@ -105,9 +102,9 @@ def _chunk_data(words: np.ndarray) -> list[bytes]:
     nonzero = np.flatnonzero(words.any(axis=1))
     data = [_zero_chunk(nbytes)] * len(words)
     if nonzero.size:
-        filtered = zip_filter(words[nonzero])
-        for k, f in zip(nonzero.tolist(), filtered):
-            data[k] = _deflated_or_raw(f, words[k].tobytes())
+        for k, filtered in zip(nonzero.tolist(), zip_filter(words[nonzero])):
+            packed = zlib.compress(filtered, ZLIB_LEVEL)      # releases the GIL: encodepool's threads overlap
+            data[k] = packed if len(packed) < nbytes else words[k].tobytes()
     return data
 
 
