@@ -34,6 +34,7 @@ ours back with OpenEXR and OpenImageIO). Pixels are written as given
 from __future__ import annotations
 
 import struct
+import sys
 import zlib
 from functools import lru_cache
 
@@ -109,8 +110,10 @@ def _chunk_data(words: np.ndarray) -> list[bytes]:
 
 
 def zip_writable(pixels: np.ndarray) -> bool:
-    """Whether `encode_zip_exr` writes `pixels`: a non-empty 2-D float16 or float32 array."""
-    return pixels.ndim == 2 and 0 not in pixels.shape and pixels.dtype in _PIXEL_TYPES
+    """Whether `encode_zip_exr` writes `pixels`: a non-empty 2-D float16 or float32 array in native byte
+    order, on a little-endian machine (EXR's byte order: the words are written as they lie in memory)."""
+    return (sys.byteorder == "little" and pixels.ndim == 2 and 0 not in pixels.shape
+            and pixels.dtype in _PIXEL_TYPES)
 
 
 def encode_zip_exr(pixels: np.ndarray, channel: str = "Y") -> bytes:
