@@ -83,6 +83,12 @@ def export(rev: str | None, into: Path) -> Path:
     return export_revision(REPO, rev, into)
 
 
+def commit_of(rev: str) -> str:
+    """`rev` (a branch, HEAD, ...) as the short commit it names now, so the record says what was measured."""
+    return subprocess.run(["git", "rev-parse", "--short", rev], cwd=REPO, check=True, capture_output=True,
+                          text=True).stdout.strip()
+
+
 def run_py(tree: Path, args: list[str], cwd: Path) -> tuple[float, str]:
     env = {**os.environ, "PYTHONPATH": str(tree), "HTDATA_ROOT": str(tree)}
     t = time.perf_counter()
@@ -159,9 +165,10 @@ def main(argv=None) -> int:
                  "new": statistics.median(r[m] for r in rows["new"])} for m in metrics}
     for m in metrics:
         table[m]["ratio_new_over_base"] = table[m]["new"] / table[m]["base"]
-    result = {"base": args.base, "new": args.new or "working tree", "reps": args.reps, "median": table,
+    base, new = commit_of(args.base), (commit_of(args.new) if args.new else "working tree")
+    result = {"base": base, "new": new, "reps": args.reps, "glove_only": args.glove_only, "median": table,
               "runs": rows}
-    print(f"| metric (median of {args.reps}) | base {args.base} | new {args.new or 'working tree'} | new/base |")
+    print(f"| metric (median of {args.reps}) | base {base} | new {new} | new/base |")
     print("|---|---|---|---|")
     for m in metrics:
         t = table[m]
