@@ -171,12 +171,25 @@ def decode_exr(data: bytes, where: str = "EXR") -> np.ndarray:
 EXR_PIXEL_TYPES = {"half": np.float16, "float": np.float32}
 
 
+# float16 bits of 1.0: a half map whose every bit pattern is <= this holds only values in [+0, 1] (a sign,
+# NaN or Inf pattern is larger), so it passes the value rule as it is.
+_HALF_ONE_BITS = 0x3C00
+
+
 def encode_tactile(tactile_map: np.ndarray, compression: str = "zip", where: str = "tactile map",
                    pixel_type: str = "half") -> bytes:
-    """Value rule + EXR of `pixel_type` ("half" or "float"), channel "Y" (the dataset format)."""
+    """Value rule + EXR of `pixel_type` ("half" or "float"), channel "Y" (the dataset format).
+
+    A float16 map (the ingest renders a "half" dataset's maps in half) is checked by its own values;
+    one inside [0,1] is stored as it is, with no conversion (one max over its bits).
+    """
     if pixel_type not in EXR_PIXEL_TYPES:
         raise ArgumentError(f"{where}: unknown EXR pixel type {pixel_type!r}; known: {sorted(EXR_PIXEL_TYPES)}")
-    return encode_exr(check_tactile_values(tactile_map, where), compression, EXR_PIXEL_TYPES[pixel_type])
+    arr = np.asarray(tactile_map)
+    if (pixel_type == "half" and arr.dtype == np.float16 and arr.shape == MAP_SHAPE
+            and int(arr.view(np.uint16).max()) <= _HALF_ONE_BITS):
+        return encode_exr(arr, compression, np.float16)
+    return encode_exr(check_tactile_values(arr, where), compression, EXR_PIXEL_TYPES[pixel_type])
 
 
 def decode_tactile(data: bytes, where: str = "tactile map") -> np.ndarray:

@@ -108,8 +108,10 @@ def _fit_episode_baselines(ref, cfg: PipelineConfig, adapter, streams, sync, nor
                 raise EpisodeError(ref, None, f"{h} hand baseline {normalisers[h].cfg.baseline!r}: {exc}") from exc
 
 
-def _kept_values(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict, tally: EpisodeTally):
-    """Normalised taxels (and bend vectors) of a chunk's kept frames; their contact goes into the tally.
+def _kept_values(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict, tally: EpisodeTally,
+                 map_dtype) -> tuple[dict, dict]:
+    """(bend vectors, `Rasteriser.frames` of `map_dtype` or {} for None) of a chunk's kept frames, per hand;
+    their contact goes into the tally.
 
     Maps are rendered one frame at a time as each frame leaves (`_frame_maps`, from the chunk's
     `Rasteriser.frames`): a chunk of rendered maps is 200 KiB per frame and hand, and frames
@@ -121,7 +123,8 @@ def _kept_values(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict,
         tally.add_contact(h, kept[h][:, tally.layouts[h].live_mask])
         if keep_bend[h]:
             bends[h] = rasters[h].bend_vector(kept[h])
-    return kept, bends
+    frames = {h: rasters[h].frames(v, map_dtype) for h, v in kept.items()} if map_dtype is not None else {}
+    return bends, frames
 
 
 def _frame_maps(frames: dict, n: int, clock: StageClock) -> dict:
@@ -141,14 +144,14 @@ def _frame_meta(ref, sync, k: int, rgb_index: int, frame_index: int, hands: list
 
 
 def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock: StageClock | None = None,
-                   with_rgb: bool = True, with_maps: bool = True) -> Iterator[Frame]:
+                   with_rgb: bool = True, with_maps: bool = True, map_dtype=np.float32) -> Iterator[Frame]:
     """Yield the frames of one planned episode in time order (see the module docstring); raise EpisodeError.
 
-    `ref` must come from planning (layouts resolved). `with_maps=False` renders no
-    map (Frame.maps is empty: a dataset whose readers render them from the raw
-    rows, [tactile] maps = "raw"; contact and bend vectors are still computed). `with_rgb=False` skips
-    the RGB decode (Frame.rgb is None, no RGB-only frames): the benchmarks
-    that only need maps. Per chunk: the tactile rows (paired and unpaired)
+    `ref` must come from planning (layouts resolved). `with_maps=False` renders no map (Frame.maps is
+    empty: a dataset whose readers render them from the raw rows, [tactile] maps = "raw"; contact and
+    bend vectors are still computed); `map_dtype`: float32 or float16 (a "half" dataset's stored pixels,
+    bit for bit: its ingest converts nothing). `with_rgb=False` skips the RGB decode (Frame.rgb is None,
+    no RGB-only frames): the benchmarks that only need maps. Per chunk: the tactile rows (paired and unpaired)
     are read, normalised and rasterised first, then the chunk's RGB frames
     are fetched in order; `FrameQueue` releases each paired frame once no
     later dropped frame can add raw rows to it. An episode without a single
@@ -186,8 +189,8 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
                     for j in np.flatnonzero(~ok):
                         fetcher.discard(rgb_idx[j])
                 with clock.stage("rasterise"):
-                    kept, bends = _kept_values(values, np.flatnonzero(ok), rasters, keep_bend, tally)
-                    frames = {h: rasters[h].frames(v) for h, v in kept.items()} if with_maps else {}
+                    bends, frames = _kept_values(values, np.flatnonzero(ok), rasters, keep_bend, tally,
+                                                 map_dtype if with_maps else None)
             n = 0
             for j in range(stop - start):
                 k, i = start + j, int(rgb_idx[j])
@@ -232,9 +235,9 @@ class EpisodeStream:
     """
 
     def __init__(self, ref, cfg: PipelineConfig, adapter, clock: StageClock | None = None, with_rgb: bool = True,
-                 with_maps: bool = True):
+                 with_maps: bool = True, map_dtype=np.float32):
         self.ref, self.cfg, self.adapter, self.clock, self.with_rgb = ref, cfg, adapter, clock, with_rgb
-        self.with_maps = with_maps
+        self.with_maps, self.map_dtype = with_maps, map_dtype
         self._tally = EpisodeTally()
         self._state = "new"        # -> "reading" -> "done"
 
@@ -243,7 +246,7 @@ class EpisodeStream:
             raise RuntimeError(f"episode {self.ref.episode_id}: an EpisodeStream is read once")
         self._state = "reading"
         yield from episode_frames(self.ref, self.cfg, self.adapter, self._tally, self.clock, self.with_rgb,
-                                  self.with_maps)
+                                  self.with_maps, self.map_dtype)
         self._state = "done"
 
     def finished_tally(self) -> EpisodeTally:

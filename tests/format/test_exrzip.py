@@ -155,3 +155,25 @@ def test_zip_filter_is_openexrs_byte_loop():
 def test_refuses_what_it_cannot_write(bad):
     with pytest.raises(ValueError, match="encode_zip_exr"):
         encode_zip_exr(bad)
+
+
+def test_a_half_map_is_stored_as_it_is_and_checked_by_its_own_values():
+    """The ingest renders a "half" dataset's maps in float16: stored without conversion, the same bytes as the
+    float32 map they round from; outside [0,1] they meet the same value rule (NaN/Inf refused, round-off clipped)."""
+    m = _cases()["sparse_half"].astype(np.float32)
+    assert encode_tactile(m.astype(np.float16)) == encode_tactile(m)
+    assert encode_tactile(np.zeros((224, 224), np.float16)) == encode_tactile(np.zeros((224, 224), np.float32))
+    edge = np.zeros((224, 224), np.float16)
+    edge[3, :3] = [-0.0, 1.0, np.float16(1.0) + np.float16(2.0**-10)]     # -0.0 kept, 1.000977 clipped to 1
+    want = edge.astype(np.float32)
+    want[3, 2] = 1.0
+    assert encode_tactile(edge) == encode_tactile(want)
+    for bad, match in ((np.nan, "non-finite"), (np.inf, "non-finite"), (1.5, r"\[0,1\]"), (-0.5, r"\[0,1\]")):
+        m16 = np.zeros((224, 224), np.float16)
+        m16[7, 9] = bad
+        with pytest.raises(ValueError, match=match):
+            encode_tactile(m16, where="ep__000001.tactile_left.exr")
+    with pytest.raises(ValueError, match="shape"):
+        encode_tactile(np.zeros((224, 223), np.float16))
+    assert encode_tactile(m.astype(np.float16), pixel_type="float") == encode_tactile(m.astype(np.float16).astype(np.float32),
+                                                                                       pixel_type="float")

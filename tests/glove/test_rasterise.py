@@ -9,6 +9,7 @@ import pytest
 import scipy.sparse as sp
 
 from htdata.benchmarks.raster import raster_benchmark
+from htdata.format.codec import to_half
 from htdata.format.table import CANVAS
 from htdata.glove.layouts import GROUPS, load_canonical, load_layout
 from htdata.glove.rasterise import BILINEAR_ROUNDTRIP_BOUND, MODES, Rasteriser
@@ -293,6 +294,11 @@ def test_frames_render_each_map_as_render_does_byte_for_byte(lid, mode):
         assert got.tobytes() == rendered[n].tobytes()
     with pytest.raises(IndexError):
         frames[5]
+    half = r.frames(g, np.float16)       # the stored pixels of a "half" dataset: to_half of the same map
+    for n in range(5):
+        assert half[n].dtype == np.float16 and half[n].tobytes() == to_half(rendered[n]).tobytes()
     assert len(r.frames(np.zeros((0, *r.layout.grid), np.float32))) == 0
     with pytest.raises(ValueError, match="expected"):
         r.frames(np.zeros(r.layout.grid, np.float32))
+    with pytest.raises(ValueError, match="float32 or float16"):
+        r.frames(g, np.float64)
