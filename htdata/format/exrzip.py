@@ -25,7 +25,8 @@ The file, as OpenEXR's spec ("OpenEXR File Layout") and the binding write it:
 
 So header, offset table and filtered chunk bytes equal the binding's byte
 for byte; only the deflate streams differ (Python's zlib at `ZLIB_LEVEL`;
-the binding bundles libdeflate), so a map inflates to the same pixels
+the binding bundles libdeflate, reachable only per call with a fresh
+compressor each time), so a map inflates to the same pixels
 (tests/format/test_exrzip.py checks both against the binding and reads
 ours back with OpenEXR and OpenImageIO). Pixels are written as given
 (no value rule here): NaN, Inf, -0.0 and subnormals keep their bits.
@@ -41,8 +42,10 @@ from functools import lru_cache
 import numpy as np
 
 LINES_PER_CHUNK = 16          # ZIP_COMPRESSION: 16 scanlines per chunk (ZIPS would be 1)
-# zlib level 1 (deflate_fast) is ~2x cheaper than 4 (lazy matching) on maps and ~1.2x larger:
-# the stored-map layout table gives the bytes and the time of exr_*_zip and of exr_*_zip_binding.
+# zlib level 1 (deflate_fast): ~2x less deflate time than level 4 (lazy matching), whose files are the
+# binding's size but cost about the binding's CPU on dense maps; level 1 files are 1.2-1.3x the binding's
+# (sparse glove maps - dense sample-corpus maps). The stored-map layout table of the codec bench gives
+# the bytes and the time of exr_*_zip (this writer) and exr_*_zip_binding side by side.
 ZLIB_LEVEL = 1
 _MAGIC_VERSION = b"\x76\x2f\x31\x01" + struct.pack("<i", 2)
 _PIXEL_TYPES = {np.dtype(np.float16): 1, np.dtype(np.float32): 2}   # OpenEXR HALF, FLOAT
