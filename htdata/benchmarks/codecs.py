@@ -157,7 +157,7 @@ def codec_rows(maps_by_layout: dict[str, np.ndarray], compression: str | None = 
 def layout_section(all_maps: np.ndarray, gloves: dict[str, GloveStep], ingest_codec: str) -> dict:
     """The stored-map layout table (maplayouts.py) on up to LAYOUT_MAPS of the maps, its pick for the
     dataset's gloves and for each glove alone, and what the ingest writes (`ingest_codec`, full canvas,
-    the OpenEXR binding, in encodepool's threads)."""
+    htdata's ZIP writer, in encodepool's threads)."""
     take = np.linspace(0, len(all_maps) - 1, num=min(LAYOUT_MAPS, len(all_maps))).round().astype(int)
     rows = layout_rows(all_maps[np.unique(take)])
     chosen, why = pick_layout(rows, [g.step for g in gloves.values()])

@@ -4,8 +4,10 @@ The codec table (codecs.py) picks the pixel type; this one asks what else the me
 cost less with, for the maps the ingest stores by default (issue 26): compression RLE / ZIPS / ZIP /
 PIZ; a data window around the covered pixels (display window 224x224, readers place the window:
 htdata/format/codec.py, tests/format/test_exr_interop.py); half pixels where the exactness rule allows them;
-OpenImageIO's writer beside the OpenEXR binding; and, per OpenEXR variant, the maps per second with
-the encode in 2 threads (the binding releases the GIL: htdata/ingest/encodepool.py uses it).
+three writers: htdata's own ZIP writer (htdata/format/exrzip.py: what the ingest writes, zlib), the
+OpenEXR binding (every other variant, and "_binding": its ZIP, libdeflate) and OpenImageIO's; and,
+per variant but OpenImageIO's, the maps per second with the encode in 2 threads (both writers
+release the GIL while they compress: htdata/ingest/encodepool.py uses it).
 
 RULE (`pick_layout`): among the variants exact for every glove (max error below half of each glove's
 quantisation step: the codec rule's test) and within `BYTES_BUDGET` of the smallest of those (the
@@ -67,8 +69,11 @@ def variants() -> dict[str, dict]:
         for comp in COMPRESSIONS:
             for window in (False, True):
                 name = f"exr_{pixel}_{comp}" + ("_window" if window else "")
+                writer = "htdata (exrzip.py)" if comp == "zip" and not window else "OpenEXR"
                 out[name] = {"encode": (lambda m, c=comp, d=dtype, w=window: encode_exr(m, c, d, window=w)),
-                             "pixel": pixel, "compression": comp, "window": window, "writer": "OpenEXR"}
+                             "pixel": pixel, "compression": comp, "window": window, "writer": writer}
+        out[f"exr_{pixel}_zip_binding"] = {"encode": (lambda m, d=dtype: encode_exr(m, "zip", d, binding=True)),
+                                           "pixel": pixel, "compression": "zip", "window": False, "writer": "OpenEXR"}
         for comp in OIIO_COMPRESSIONS:
             out[f"exr_{pixel}_{comp}_oiio"] = {"encode": _oiio_writer(comp, pixel), "pixel": pixel,
                                                "compression": comp, "window": False, "writer": "OpenImageIO"}
@@ -106,7 +111,7 @@ def layout_rows(maps: np.ndarray, reps: int = 3) -> list[dict]:
                 rows[name] = {"layout": name, **{k: v[k] for k in ("pixel", "compression", "window", "writer")},
                               "bytes_per_map": float(np.mean([len(b) for b in blobs])), "max_error": err,
                               "encode_ms_threads": (_timed(v["encode"], maps, THREADS)[1]
-                                                    if v["writer"] == "OpenEXR" else "n/a (one temp file)")}
+                                                    if v["writer"] != "OpenImageIO" else "n/a (one temp file)")}
     for name, ms in times.items():
         rows[name]["encode_ms"] = float(np.median(ms))
     return list(rows.values())

@@ -72,7 +72,7 @@ def _layouts(c: dict) -> list[str]:
     if "layouts" not in c:
         return []
     lines = ["Stored-map layouts at the bound: compression, a data window around the covered pixels (display "
-             "window 224x224), half where exact, OpenImageIO's writer beside the OpenEXR binding; encode ms = "
+             "window 224x224), half where exact, three writers (htdata's ZIP writer, the OpenEXR binding, OpenImageIO); encode ms = "
              "median of alternating passes, one thread; the threads column is wall ms per map with 2 threads:", ""]
     lines += table(c["layouts"], [("layout", "layout"), ("writer", "writer"), ("bytes_per_map", "bytes/map"),
                                   ("encode_ms", "encode ms"), ("encode_ms_threads", "encode ms, 2 threads"),
@@ -81,7 +81,7 @@ def _layouts(c: dict) -> list[str]:
     per = ", ".join(f"{k} -> {v}" for k, v in c["layout_per_glove"].items())
     return lines + [f"**Stored-map layout: {c['layout_default']}** (computed from the table above) — rule: "
                     f"{c['layout_rule']}. Measured: {c['layout_reason']}. Per glove alone: {per}. The ingest "
-                    f"writes {c['ingest_layout']} (full canvas, OpenEXR binding, encoded in 2 threads): {same}.", ""]
+                    f"writes {c['ingest_layout']} (full canvas, htdata's ZIP writer, encoded in 2 threads): {same}.", ""]
 
 
 def _rgb(r: dict) -> list[str]:

@@ -1,9 +1,11 @@
 """Tactile map and RGB frame codecs, and the tactile value rule.
 
 Stored format (docs/FORMAT.md "Value rule"): tactile maps are float32 in [0,1],
-written as single-channel ("Y") OpenEXR, ZIP by default, with HALF or FLOAT
-pixels: the pipeline's `[codec] tactile = "auto"` picks the pixel type by the
-rule in htdata/glove/codecrule.py (smallest codec keeping every glove's levels).
+written as single-channel ("Y") OpenEXR, ZIP by default (written by
+htdata/format/exrzip.py: the binding's file layout at a third of its cost;
+other compressions by the OpenEXR binding), with HALF or FLOAT pixels: the
+pipeline's `[codec] tactile = "auto"` picks the pixel type by the rule in
+htdata/glove/codecrule.py (smallest codec keeping every glove's levels).
 FLOAT is exact; HALF is NOT lossless (max error 2**-12, below). The decoder
 reads either. RGB frames are JPEG (lossy). Everything works in memory
 (BytesIO), so tar members need no temp files.
@@ -33,6 +35,7 @@ import OpenEXR
 
 from htdata.errors import ArgumentError, DatasetError
 from htdata.format.canvas import CANVAS, MAP_SHAPE
+from htdata.format.exrzip import encode_zip_exr, zip_writable
 from htdata.format.imageheader import DeclaredShapeError, check_exr_windows, jpeg_size
 
 # Resampling round-off tolerated (and clipped) outside [0,1]; see the value rule.
@@ -107,19 +110,24 @@ def covered_window(tactile_map: np.ndarray) -> tuple[int, int, int, int]:
 
 
 def encode_exr(tactile_map: np.ndarray, compression: str = "zip", pixel_type=np.float16,
-               window: bool = False) -> bytes:
+               window: bool = False, binding: bool = False) -> bytes:
     """Raw EXR writer (no value rule): one channel "Y" of `pixel_type`.
 
+    ZIP (the dataset's compression) is written by htdata/format/exrzip.py: the binding's header, offset
+    table and filtered chunk bytes, with zlib's deflate streams, ~3x cheaper. Other compressions, a data
+    window and `binding=True` (the stored-map layout table's "_binding" rows) go through the OpenEXR binding.
     `window`: store only the data window around the non-zero pixels (the display window stays the
     map's full shape; readers place the window in it, pixels outside read 0). The bench measures it.
     """
     if compression not in _EXR_COMPRESSIONS:
         raise ArgumentError(f"unknown EXR compression {compression!r}; known: {sorted(_EXR_COMPRESSIONS)}")
-    header = {"compression": _EXR_COMPRESSIONS[compression], "type": OpenEXR.scanlineimage}
     if np.dtype(pixel_type) == np.float16:
         pixels = to_half(tactile_map)
     else:
         pixels = np.ascontiguousarray(tactile_map, dtype=pixel_type)
+    if compression == "zip" and not (window or binding) and zip_writable(pixels):
+        return encode_zip_exr(pixels, EXR_CHANNEL)
+    header = {"compression": _EXR_COMPRESSIONS[compression], "type": OpenEXR.scanlineimage}
     if window:
         x0, y0, x1, y1 = covered_window(pixels)
         h, w = pixels.shape
@@ -163,12 +171,25 @@ def decode_exr(data: bytes, where: str = "EXR") -> np.ndarray:
 EXR_PIXEL_TYPES = {"half": np.float16, "float": np.float32}
 
 
+# float16 bits of 1.0: a half map whose every bit pattern is <= this holds only values in [+0, 1] (a sign,
+# NaN or Inf pattern is larger), so it passes the value rule as it is.
+_HALF_ONE_BITS = 0x3C00
+
+
 def encode_tactile(tactile_map: np.ndarray, compression: str = "zip", where: str = "tactile map",
                    pixel_type: str = "half") -> bytes:
-    """Value rule + EXR of `pixel_type` ("half" or "float"), channel "Y" (the dataset format)."""
+    """Value rule + EXR of `pixel_type` ("half" or "float"), channel "Y" (the dataset format).
+
+    A float16 map (the ingest renders a "half" dataset's maps in half) is checked by its own values;
+    one inside [0,1] is stored as it is, with no conversion (one max over its bits).
+    """
     if pixel_type not in EXR_PIXEL_TYPES:
         raise ArgumentError(f"{where}: unknown EXR pixel type {pixel_type!r}; known: {sorted(EXR_PIXEL_TYPES)}")
-    return encode_exr(check_tactile_values(tactile_map, where), compression, EXR_PIXEL_TYPES[pixel_type])
+    arr = np.asarray(tactile_map)
+    if (pixel_type == "half" and arr.dtype == np.float16 and arr.shape == MAP_SHAPE
+            and int(arr.view(np.uint16).max()) <= _HALF_ONE_BITS):
+        return encode_exr(arr, compression, np.float16)
+    return encode_exr(check_tactile_values(arr, where), compression, EXR_PIXEL_TYPES[pixel_type])
 
 
 def decode_tactile(data: bytes, where: str = "tactile map") -> np.ndarray:

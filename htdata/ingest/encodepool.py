@@ -1,7 +1,7 @@
 """Sample encoding off the main thread, results in frame order.
 
-`encode_sample` is mostly EXR (the OpenEXR binding) and JPEG (cv2): both
-release the GIL while they work (the codec bench's "2 threads" column
+`encode_sample` is mostly EXR (htdata/format/exrzip.py: zlib) and JPEG (cv2):
+both release the GIL while they compress (the codec bench's "2 threads" column
 measures it: ~2x the maps per second on 2 cores), so while the worker's main
 thread reads, normalises and rasterises the next frames, `encode_threads()`
 threads encode the previous ones (none where a worker has no spare core). The bytes are the same as inline: each

@@ -108,12 +108,14 @@ def _fit_episode_baselines(ref, cfg: PipelineConfig, adapter, streams, sync, nor
                 raise EpisodeError(ref, None, f"{h} hand baseline {normalisers[h].cfg.baseline!r}: {exc}") from exc
 
 
-def _kept_values(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict, tally: EpisodeTally):
-    """Normalised taxels (and bend vectors) of a chunk's kept frames; their contact goes into the tally.
+def _kept_values(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict, tally: EpisodeTally,
+                 map_dtype) -> tuple[dict, dict]:
+    """(bend vectors, `Rasteriser.frames` of `map_dtype` or {} for None) of a chunk's kept frames, per hand;
+    their contact goes into the tally.
 
-    Maps are rendered one frame at a time as each frame leaves (`_frame_maps`): a chunk of
-    rendered maps is 200 KiB per frame and hand, and frames waiting in the FrameQueue would keep
-    two chunks of them alive; the taxels are 1/100th of that.
+    Maps are rendered one frame at a time as each frame leaves (`_frame_maps`, from the chunk's
+    `Rasteriser.frames`): a chunk of rendered maps is 200 KiB per frame and hand, and frames
+    waiting in the FrameQueue would keep two chunks of them alive; the taxels are 1/100th of that.
     """
     kept, bends = {}, {}
     for h in tally.hands if keep.size else ():
@@ -121,13 +123,14 @@ def _kept_values(values: dict, keep: np.ndarray, rasters: dict, keep_bend: dict,
         tally.add_contact(h, kept[h][:, tally.layouts[h].live_mask])
         if keep_bend[h]:
             bends[h] = rasters[h].bend_vector(kept[h])
-    return kept, bends
+    frames = {h: rasters[h].frames(v, map_dtype) for h, v in kept.items()} if map_dtype is not None else {}
+    return bends, frames
 
 
-def _frame_maps(kept: dict, n: int, rasters: dict, clock: StageClock) -> dict:
-    """The (224,224) maps of kept frame n of the chunk, one per hand."""
+def _frame_maps(frames: dict, n: int, clock: StageClock) -> dict:
+    """The (224,224) maps of kept frame n of the chunk, one per hand (`frames`: Rasteriser.frames per hand)."""
     with clock.stage("rasterise"):
-        return {h: rasters[h].render(v[n:n + 1])[0] for h, v in kept.items()}
+        return {h: f[n] for h, f in frames.items()}
 
 
 def _frame_meta(ref, sync, k: int, rgb_index: int, frame_index: int, hands: list[str]) -> dict:
@@ -141,14 +144,14 @@ def _frame_meta(ref, sync, k: int, rgb_index: int, frame_index: int, hands: list
 
 
 def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock: StageClock | None = None,
-                   with_rgb: bool = True, with_maps: bool = True) -> Iterator[Frame]:
+                   with_rgb: bool = True, with_maps: bool = True, map_dtype=np.float32) -> Iterator[Frame]:
     """Yield the frames of one planned episode in time order (see the module docstring); raise EpisodeError.
 
-    `ref` must come from planning (layouts resolved). `with_maps=False` renders no
-    map (Frame.maps is empty: a dataset whose readers render them from the raw
-    rows, [tactile] maps = "raw"; contact and bend vectors are still computed). `with_rgb=False` skips
-    the RGB decode (Frame.rgb is None, no RGB-only frames): the benchmarks
-    that only need maps. Per chunk: the tactile rows (paired and unpaired)
+    `ref` must come from planning (layouts resolved). `with_maps=False` renders no map (Frame.maps is
+    empty: a dataset whose readers render them from the raw rows, [tactile] maps = "raw"; contact and
+    bend vectors are still computed); `map_dtype`: float32 or float16 (a "half" dataset's stored pixels,
+    bit for bit: its ingest converts nothing). `with_rgb=False` skips the RGB decode (Frame.rgb is None,
+    no RGB-only frames): the benchmarks that only need maps. Per chunk: the tactile rows (paired and unpaired)
     are read, normalised and rasterised first, then the chunk's RGB frames
     are fetched in order; `FrameQueue` releases each paired frame once no
     later dropped frame can add raw rows to it. An episode without a single
@@ -186,7 +189,8 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
                     for j in np.flatnonzero(~ok):
                         fetcher.discard(rgb_idx[j])
                 with clock.stage("rasterise"):
-                    kept, bends = _kept_values(values, np.flatnonzero(ok), rasters, keep_bend, tally)
+                    bends, frames = _kept_values(values, np.flatnonzero(ok), rasters, keep_bend, tally,
+                                                 map_dtype if with_maps else None)
             n = 0
             for j in range(stop - start):
                 k, i = start + j, int(rgb_idx[j])
@@ -207,7 +211,7 @@ def episode_frames(ref, cfg: PipelineConfig, adapter, tally: EpisodeTally, clock
                 tally.frames += 1
                 tally.paired += 1
                 yield from queue.push(Frame(key=meta["key"], source_frame=i, meta=meta, rgb=rgb,
-                                            maps=_frame_maps(kept, n, rasters, clock) if with_maps else {},
+                                            maps=_frame_maps(frames, n, clock),
                                             bends={h: b[n] for h, b in bends.items()}, raw=rows), paired=True)
                 n += 1
         for frame in emit.before(None):
@@ -231,9 +235,9 @@ class EpisodeStream:
     """
 
     def __init__(self, ref, cfg: PipelineConfig, adapter, clock: StageClock | None = None, with_rgb: bool = True,
-                 with_maps: bool = True):
+                 with_maps: bool = True, map_dtype=np.float32):
         self.ref, self.cfg, self.adapter, self.clock, self.with_rgb = ref, cfg, adapter, clock, with_rgb
-        self.with_maps = with_maps
+        self.with_maps, self.map_dtype = with_maps, map_dtype
         self._tally = EpisodeTally()
         self._state = "new"        # -> "reading" -> "done"
 
@@ -242,7 +246,7 @@ class EpisodeStream:
             raise RuntimeError(f"episode {self.ref.episode_id}: an EpisodeStream is read once")
         self._state = "reading"
         yield from episode_frames(self.ref, self.cfg, self.adapter, self._tally, self.clock, self.with_rgb,
-                                  self.with_maps)
+                                  self.with_maps, self.map_dtype)
         self._state = "done"
 
     def finished_tally(self) -> EpisodeTally:

@@ -24,7 +24,7 @@ class Frame:
     source_frame: int              # RGB frame index in the source
     meta: dict                     # the sample's JSON member
     rgb: np.ndarray | None         # (size,size,3) uint8 RGB; None when RGB was not asked for
-    maps: dict[str, np.ndarray]    # hand -> (224,224) float32 in [0,1]
+    maps: dict[str, np.ndarray]    # hand -> (224,224) float32 in [0,1] (float16 if the stream was asked for it)
     bends: dict[str, np.ndarray] = field(default_factory=dict)   # hand -> (K,) float32
     # hand -> rows gathered while the frame waits (htdata.ingest.fullrate); arrays once `finish_raw` ran
     raw: dict = field(default_factory=dict)

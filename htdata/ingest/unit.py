@@ -33,6 +33,8 @@ import pickle
 import time
 from pathlib import Path
 
+import numpy as np
+
 from htdata.errors import EpisodeError
 from htdata.format.shardio import ShardWriter
 from htdata.format.table import SHARDS_DIR, CodecSettings
@@ -85,8 +87,10 @@ def codec_settings(cfg: PipelineConfig) -> CodecSettings:
 def spool_episode(ref, cfg: PipelineConfig, adapter, spool: Spool, clock: StageClock) -> EpisodeTally:
     """Encode and spool every kept frame of one episode; raise on any failure."""
     settings = codec_settings(cfg)
-    # maps not stored: none rendered here; readers render them from the raw rows
-    stream = EpisodeStream(ref, cfg, adapter, clock, with_maps=cfg.tactile.maps.stores_maps)
+    # maps not stored: none rendered here; readers render them from the raw rows. Half maps are rendered
+    # as half (the bits the encoder would round float32 maps to), so the encoder converts nothing.
+    stream = EpisodeStream(ref, cfg, adapter, clock, with_maps=cfg.tactile.maps.stores_maps,
+                           map_dtype=np.float16 if settings.tactile_pixel_type == "half" else np.float32)
     spool.start()
     # encoded in threads while this one makes the next frames (encodepool.py); "encode" = the time
     # this thread waits for them, so the stages still add up to the wall time

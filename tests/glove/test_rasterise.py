@@ -9,6 +9,7 @@ import pytest
 import scipy.sparse as sp
 
 from htdata.benchmarks.raster import raster_benchmark
+from htdata.format.codec import to_half
 from htdata.format.table import CANVAS
 from htdata.glove.layouts import GROUPS, load_canonical, load_layout
 from htdata.glove.rasterise import BILINEAR_ROUNDTRIP_BOUND, MODES, Rasteriser
@@ -273,3 +274,31 @@ def test_nearest_gather_is_the_sparse_product_byte_for_byte(lid):
 @pytest.mark.parametrize("lid", SHIPPED)
 def test_bilinear_keeps_the_sparse_product(lid):
     assert _rast(lid, "bilinear")._gather is None
+
+
+@pytest.mark.parametrize("lid, mode", CASES)
+def test_frames_render_each_map_as_render_does_byte_for_byte(lid, mode):
+    """`frames(g)[n]` (the ingest's one-map-at-a-time path) equals `render(g)[n]`: hard values, non-live junk."""
+    r = _rast(lid, mode)
+    g = np.random.default_rng(4).normal(0.5, 0.8, (5, *r.layout.grid)).astype(np.float32)   # beyond [0,1] too
+    g[0, 0, :] = np.nan
+    g[1] = -0.0
+    g[2, 1, 1] = np.inf
+    g[3] = 0.0
+    g[4, ~r.layout.live_mask] = 1e30
+    frames, rendered = r.frames(g), r.render(g)
+    assert len(frames) == 5
+    for n in range(5):
+        got = frames[n]
+        assert got.shape == (CANVAS, CANVAS) and got.dtype == np.float32
+        assert got.tobytes() == rendered[n].tobytes()
+    with pytest.raises(IndexError):
+        frames[5]
+    half = r.frames(g, np.float16)       # the stored pixels of a "half" dataset: to_half of the same map
+    for n in range(5):
+        assert half[n].dtype == np.float16 and half[n].tobytes() == to_half(rendered[n]).tobytes()
+    assert len(r.frames(np.zeros((0, *r.layout.grid), np.float32))) == 0
+    with pytest.raises(ValueError, match="expected"):
+        r.frames(np.zeros(r.layout.grid, np.float32))
+    with pytest.raises(ValueError, match="float32 or float16"):
+        r.frames(g, np.float64)
