@@ -31,10 +31,9 @@ import numpy as np
 import torch
 
 from htdata.curate.split import assign_episodes
+from htdata.fileio import write_json_atomic, write_text_atomic
 from htdata.read.metadata import DatasetMetadata
-from htdata.store.fsutil import write_json_atomic
 
-from .bench.report import write_text_atomic
 from .config import parse_override
 from .rgb_pretrain import PAIRINGS, ProbeItems, RGBPretrainConfig, load_items, probe_score, save_probe, train_probe
 

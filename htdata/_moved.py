@@ -64,6 +64,8 @@ MOVED_NAMES = {
     # the adapter contract's helpers, each in a module of its own now
     "htdata.source.adapters.base": ("htdata.source.adapters.discovery", "htdata.source.adapters.sourcetree",
                                     "htdata.source.adapters.params", "htdata.source.adapters.streamchecks"),
+    # the third house pass: the crash-safe writes went below every package (htdata/fileio.py); the store kept sha256_file
+    "htdata.store.fsutil": "htdata.fileio",
 }
 # old name -> new name, for names that were renamed as they moved (looked up before the name itself)
 RENAMED = {("htdata.source.adapters.base", "check_adapter_params"): "check_declared_params"}

@@ -47,8 +47,8 @@ from htdata.curate.splitrule import (  # noqa: F401
     test_counts,
 )
 from htdata.curate.splitversions import SplitResult, write_versioned_split
+from htdata.fileio import write_json_atomic
 from htdata.format.table import EPISODES_FILE, MANIFEST_FILE
-from htdata.store.fsutil import write_json_atomic
 from htdata.store.manifest import parse_episodes, parse_manifest
 from htdata.store.splitfiles import PARTS, count_parts, list_splits, split_path  # noqa: F401
 from htdata.store.versions import manifest_path as current_manifest_path

@@ -18,6 +18,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from htdata.errors import ArgumentError
+from htdata.fileio import write_bytes_atomic
 from htdata.format.table import INGEST_REPORT, MANIFEST_FILE
 from htdata.glove.codecrule import resolve_sources
 from htdata.ingest.append import kept_unavailable, plan_append
@@ -35,7 +36,6 @@ from htdata.ingest.workdir import (
     prepare_output,
     remove_strays,
 )
-from htdata.store.fsutil import write_bytes_atomic
 from htdata.store.lock import WriterLock
 from htdata.store.snapshot import current_snapshot
 from htdata.store.versions import restore_pointer

@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 from htdata.errors import EpisodeError
+from htdata.fileio import write_bytes_atomic
 from htdata.format.shardio import ShardWriter
 from htdata.format.table import SHARDS_DIR, CodecSettings
 from htdata.glove.calibration import episode_calibrations
@@ -42,7 +43,6 @@ from htdata.ingest.pipeline import PipelineConfig
 from htdata.ingest.timing import StageClock
 from htdata.ingest.workdir import clear_unit_files, dumps, spool_path, unit_record_path
 from htdata.source.adapters import get_adapter
-from htdata.store.fsutil import write_bytes_atomic
 
 
 class Spool:

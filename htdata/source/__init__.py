@@ -5,6 +5,6 @@
     lag.py      estimate a constant clock lag between the streams
     rgb.py      RGB frames: channel order, square crop, resize to the canvas
 
-May import: htdata's base modules (errors, faults, resources), htdata.format and htdata.glove.
+May import: htdata's base modules (errors, faults, fileio, resources, settings), htdata.format and htdata.glove.
 Never the store, reading, curation or the commands above it.
 """

@@ -1,6 +1,6 @@
 """The store: a dataset's files on disk, its versions and their lifecycle primitives.
 
-    fsutil.py    atomic writes, checksums
+    fsutil.py    the sha256 of a stored file, local or at a URL (the atomic writes are htdata/fileio.py)
     storage.py   local paths and fsspec URLs behind one small API (readers)
     confine.py   the paths a dataset's records name stay inside its root
     lock.py      the one-writer lock

@@ -117,7 +117,8 @@ def test_no_import_cycle_at_any_level():
 # the layers below it. The root modules are placed one by one. Packages sharing a floor are
 # siblings: neither imports the other (the two writers of new versions, over what they share).
 LAYERS = (
-    ("htdata", "htdata._moved", "htdata.errors", "htdata.faults", "htdata.resources", "htdata.settings"),
+    ("htdata", "htdata._moved", "htdata.errors", "htdata.faults", "htdata.fileio", "htdata.resources",
+     "htdata.settings"),
     ("htdata.format",),
     ("htdata.glove",),
     ("htdata.source",),
