@@ -5,6 +5,7 @@
     codec.py      member codecs (EXR float maps, JPEG RGB, npy raw rows, PNG masks, JSON)
     shardio.py    tar shards: sample keys, the shard writer and member-range reads
     mapstorage.py MapStorage: maps stored, or rendered from raw rows by the readers ([tactile] maps, codec.tactile.maps)
+    tactilesettings.py  a pipeline's [tactile] section: EXR compression, raster mode, raw rows, maps stored or not
 
 May import: htdata's base modules only. Everything else builds on it.
 

@@ -78,7 +78,7 @@ class NormaliseConfig:
     drift_window_s: float = 30.0      # baseline="drift": window of the running rest level
     # A per-glove calibration measured once: an .npz with per-taxel `offset` (rest, raw units) and `gain`
     # (multiplier after the offset, 1 = nominal: a taxel twice as sensitive has 0.5), each (H,W). The pipeline resolves the path and fills in its sha256
-    # (PipelineConfig.normalise_for); the arrays travel in each episode record's calibration_fit.
+    # (NormaliseSettings.normalise_for); the arrays travel in each episode record's calibration_fit.
     taxel_calibration: str = ""
     taxel_calibration_sha256: str = ""
 

@@ -158,7 +158,7 @@ def run_unit(task) -> dict:
                 for layout in tally.layouts.values():
                     if layout.layout_id not in layouts:
                         layouts[layout.layout_id] = layout_entry(layout)
-                calibrations.update(episode_calibrations(cfg, tally.layouts))
+                calibrations.update(episode_calibrations(cfg.normalise_settings(), tally.layouts))
                 report_progress({"unit": task.unit, "episode_id": ref.episode_id, "frames": tally.frames})
                 _fault_hook(task.unit)
             with clock.stage("write"):

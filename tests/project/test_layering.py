@@ -216,6 +216,16 @@ def test_the_writers_layer_and_the_two_writers_are_checked():
                                          "htdata.write.repack -> htdata.curate.edit"]
 
 
+def test_nothing_below_the_writers_names_the_ingest_pipeline():
+    """Code below ingest takes the pipeline's sections (source/syncsettings.py, source/rgbsettings.py,
+    format/tactilesettings.py, glove/codecsettings.py, glove/normalisesettings.py), never ingest's
+    PipelineConfig by duck typing: an attribute access the import graph above cannot see."""
+    floor = layer_of("htdata.ingest")
+    offenders = [m for m in ALL if m.startswith("htdata.") and layer_of(m) < floor
+                 and "PipelineConfig" in ALL[m].read_text()]
+    assert not offenders, f"modules below ingest naming its PipelineConfig (take its section instead): {offenders}"
+
+
 def test_function_level_imports_of_own_modules_say_why():
     offenders = []
     for m in ALL:
