@@ -56,6 +56,8 @@ MOVED = {
     # round four (the house pass): the writers' shared layer, ingest's configuration, the synthetic corpus
     "htdata.curate.repack": "htdata.write.repack", "htdata.pipeline": "htdata.ingest.pipeline",
     "htdata.sample": "htdata.synthetic",
+    # the third house pass: the split rule below the writers (validate and handtouch apply it)
+    "htdata.curate.splitrule": "htdata.store.splitrule",
 }
 # Modules that kept their names: an attribute they no longer have is looked up in this module (or these).
 MOVED_NAMES = {

@@ -8,6 +8,7 @@
     manifest.py  load / parse dataset.json, episodes.jsonl, index.npy; layout files of a version
     parts.py     a version as parts (one per work unit) and their assembly into one index
     splitfiles.py split documents of a version: read, count, carry to a child version
+    splitrule.py  the split rule: which part each episode goes to, and the split document it makes
     snapshot.py  open a version as a snapshot; commit parts as a new version
     history.py   log and diff of versions
     gcrecord.py  gc tombstones: what `htdata gc` leaves for the readers it may outlive (`VersionCollected`)

@@ -58,7 +58,8 @@ def test_a_name_renamed_as_it_moved_warns_with_its_new_name():
 @pytest.mark.parametrize("old, new", [("htdata.pipeline", "htdata.ingest.pipeline"),
                                       ("htdata.curate.repack", "htdata.write.repack"),
                                       ("htdata.sample.corpus", "htdata.synthetic.corpus"),
-                                      ("htdata.repack", "htdata.write.repack")])
+                                      ("htdata.repack", "htdata.write.repack"),
+                                      ("htdata.curate.splitrule", "htdata.store.splitrule")])
 def test_the_house_pass_moves_warn_and_name_the_new_module(old, new):
     sys.modules.pop(old, None)
     with warnings.catch_warnings(record=True) as caught:
