@@ -270,10 +270,12 @@ TEST_DIRS_BESIDE_PACKAGES = {"project", "factories", "handtouch"}
 
 
 def test_tests_mirror_the_packages_and_share_builders_only_through_factories():
-    """tests/<package>/ per htdata package (docs/DESIGN.md "Tests"); no test imports another test module."""
+    """tests/<package>/ for each htdata package and only for them (docs/DESIGN.md "Tests"); no test imports
+    another test module."""
     packages = {p.name for p in (ROOT / "htdata").iterdir() if (p / "__init__.py").is_file()}
     dirs = {p.name for p in TEST_ROOT.iterdir() if p.is_dir() and (p / "__init__.py").is_file()}
     assert dirs - packages - TEST_DIRS_BESIDE_PACKAGES == set(), "test folders that mirror no package"
+    assert packages - dirs == set(), "packages without their tests/<package>/ folder"
     assert not list(TEST_ROOT.glob("test_*.py")), "tests at the top of tests/: put them in tests/<package>/"
     offenders = []
     for path in sorted(TEST_ROOT.rglob("test_*.py")):
