@@ -27,7 +27,7 @@ import importlib.util
 import sys
 import warnings
 
-# The htdata version that deletes this module and the two `__getattr__` hand-offs below.
+# The htdata version that deletes this module and the `__getattr__` hand-offs of the modules in MOVED_NAMES.
 REMOVED_IN = (0, 3)
 
 # old name -> new name (a package's submodules follow it: htdata.adapters.base -> htdata.source.adapters.base)
