@@ -10,7 +10,7 @@ import numpy as np
 import torch
 
 from htdata.errors import ArgumentError
-from htdata.store.fsutil import write_bytes_atomic
+from htdata.fileio import write_bytes_atomic
 
 CHECKPOINT_FORMAT = 1        # the "format" field of every stage checkpoint
 

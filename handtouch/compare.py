@@ -36,13 +36,13 @@ from handtouch import smoke
 from handtouch.bench.evaluate import evaluate
 from handtouch.bench.items import EvalConfig, prepare
 from handtouch.bench.references import CopyLastModel, ZerosModel
-from handtouch.bench.report import COLUMNS, FULL_COLUMNS, markdown_table, write_text_atomic
+from handtouch.bench.report import COLUMNS, FULL_COLUMNS, markdown_table
 from handtouch.config import load_train_config
 from handtouch.rgb_pretrain import RGBPretrainConfig, ensure_probes
 from handtouch.smoke import codebook_perplexity as perplexity  # the smoke check's own measure
 from handtouch.smoke import jsonable
 from handtouch.train import load_model, train
-from htdata.store.fsutil import write_json_atomic
+from htdata.fileio import write_json_atomic, write_text_atomic
 
 OURS, BASELINE, ABLATION, DESIGN = "ours", "baseline", "ablation", "design choice"
 

@@ -49,7 +49,6 @@ MODULES = {"numpy": "numpy", "scipy": "scipy", "h5py": "h5py", "OpenEXR": "OpenE
            "cv2": "opencv-contrib-python-headless", "av": "av", "jsonschema": "jsonschema", "tqdm": "tqdm",
            "psutil": "psutil", "fsspec": "fsspec", "torch": "torch"}
 SPLIT, OOD_TASK = "main", "palm_push"
-FORMATS = ("opentouch", "touchanything", "native")   # the sample corpus's formats, one pipeline each
 
 
 def missing_modules() -> list[str]:
@@ -74,7 +73,7 @@ def build_dataset(work: Path, workers: int, scale: str = "medium", log=print) ->
     t0 = time.perf_counter()
     raws = _sample_formats(work, scale)
     log(f"gpu-check: sample {time.perf_counter() - t0:.0f} s")
-    pipelines = [a for fmt in FORMATS for a in ("--pipeline", f"{_pipeline(fmt)}={raws[fmt]}")]
+    pipelines = [a for fmt in raws for a in ("--pipeline", f"{_pipeline(fmt)}={raws[fmt]}")]
     steps = [
         ("ingest", ["ingest", "--workers", str(workers), "--quiet", *pipelines, str(dataset)]),
         ("split", ["split", str(dataset), "--ood-task", OOD_TASK, "--seed", "0", "--name", SPLIT, "--force"]),
@@ -89,17 +88,24 @@ def build_dataset(work: Path, workers: int, scale: str = "medium", log=print) ->
     return dataset
 
 
+def sample_formats() -> tuple[str, ...]:
+    """The sample corpus's source formats (htdata.synthetic.corpus.FORMATS), one pipeline each."""
+    from htdata.synthetic.corpus import FORMATS
+
+    return FORMATS
+
+
 def _sample_formats(work: Path, scale: str) -> dict[str, Path]:
     """The medium corpus, one `htdata sample` process per format at once (the writer is serial)."""
     procs = {}
-    for fmt in FORMATS:
+    for fmt in sample_formats():
         argv = [sys.executable, "-m", "htdata.cli", "sample", str(work / f"raw_{fmt}"), "--scale", scale,
                 "--formats", fmt, "--reuse", "--quiet"]
         procs[fmt] = subprocess.Popen(argv, stdout=subprocess.DEVNULL)
     failed = [fmt for fmt, p in procs.items() if p.wait() != 0]
     if failed:
         raise SystemExit(f"gpu-check: htdata sample failed for {', '.join(failed)} (under {work})")
-    return {fmt: work / f"raw_{fmt}" / fmt for fmt in FORMATS}
+    return {fmt: work / f"raw_{fmt}" / fmt for fmt in procs}
 
 
 def _pipeline(name: str) -> Path:

@@ -29,8 +29,8 @@ import numpy as np
 import torch
 
 from htdata.errors import ArgumentError
+from htdata.fileio import write_json_atomic
 from htdata.read import keys
-from htdata.store.fsutil import write_json_atomic
 
 from .bench.items import iterate_batches, load_part, subsample
 from .bench.metrics import MapMetrics

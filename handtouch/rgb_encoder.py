@@ -15,7 +15,6 @@ returns tokens (B,M,C), a feature map (B,C,h,w) or a vector (B,C);
 
 from __future__ import annotations
 
-import hashlib
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +24,7 @@ import torch.nn as nn
 
 from htdata.errors import ConfigError
 from htdata.format.table import CANVAS
+from htdata.store.fsutil import sha256_file
 
 log = logging.getLogger("handtouch.rgb_encoder")
 
@@ -87,14 +87,6 @@ class TactileGridRGB(nn.Module):
 
 
 ARCHS = {"small_conv": SmallConvRGB, "tactile_grid": TactileGridRGB}
-
-
-def sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with path.open("rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 @dataclass(frozen=True)

@@ -42,10 +42,10 @@ import torch
 import torch.nn.functional as F
 
 from htdata.errors import ArgumentError, ConfigError, DatasetError
+from htdata.fileio import write_bytes_atomic
 from htdata.read import keys
 from htdata.read.metadata import DatasetMetadata
 from htdata.read.torchdata import TactileFrameDataset
-from htdata.store.fsutil import write_bytes_atomic
 
 from .bench.items import iterate_batches, subsample
 from .bench.metrics import MapMetrics

@@ -7,7 +7,7 @@ the frozen RGB probe (rgb_pretrain.py) transfers to THAT task. This command asks
 every task: for each task T, a probe of the smoke's config is trained on the other tasks'
 train episodes and scored (covered-cell MSE relative to all zeros, the control's figure)
 
-  seen    on the other tasks' test episodes (htdata.curate.split's rule: 10% of each task's
+  seen    on the other tasks' test episodes (htdata.store.splitrule's rule: 10% of each task's
           episodes, seeded), the in-distribution level of the same probe, and
   held    on every decoded frame of T, which no training item came from.
 
@@ -30,11 +30,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from htdata.curate.split import assign_episodes
+from htdata.fileio import write_json_atomic, write_text_atomic
 from htdata.read.metadata import DatasetMetadata
-from htdata.store.fsutil import write_json_atomic
+from htdata.store.splitrule import assign_episodes
 
-from .bench.report import write_text_atomic
 from .config import parse_override
 from .rgb_pretrain import PAIRINGS, ProbeItems, RGBPretrainConfig, load_items, probe_score, save_probe, train_probe
 

@@ -33,9 +33,9 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 from htdata.errors import ArgumentError, ConfigError
+from htdata.fileio import write_json_atomic
 from htdata.read import keys
 from htdata.read.torchdata import ItemConstants, TactileFrameDataset, TactileWindowDataset
-from htdata.store.fsutil import write_json_atomic
 
 from .checkpoint import CHECKPOINT_FORMAT, read_checkpoint, rng_state, save_checkpoint, set_rng_state  # noqa: F401
 from .config import WINDOW, TrainConfig, load_train_config, model_config_from_dict

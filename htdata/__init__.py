@@ -20,6 +20,7 @@ Root modules, below every package:
 
     errors.py     the exceptions htdata raises on purpose (ConfigError, ArgumentError, DatasetError, EpisodeError ...)
     faults.py     named crash points for the kill -9 tests of every writer
+    fileio.py     crash-safe file writes (atomic_open, write_*_atomic) and sha256_stream
     resources.py  where the project's data files (schemas, layouts, pipelines) live
     settings.py   `--set [TARGET:]dotted.key=value`: the one parser of every override
     _moved.py     old names and keywords, importable until REMOVED_IN (deprecated, each warns)

@@ -27,7 +27,7 @@ import importlib.util
 import sys
 import warnings
 
-# The htdata version that deletes this module and the two `__getattr__` hand-offs below.
+# The htdata version that deletes this module and the `__getattr__` hand-offs of the modules in MOVED_NAMES.
 REMOVED_IN = (0, 3)
 
 # old name -> new name (a package's submodules follow it: htdata.adapters.base -> htdata.source.adapters.base)
@@ -56,6 +56,8 @@ MOVED = {
     # round four (the house pass): the writers' shared layer, ingest's configuration, the synthetic corpus
     "htdata.curate.repack": "htdata.write.repack", "htdata.pipeline": "htdata.ingest.pipeline",
     "htdata.sample": "htdata.synthetic",
+    # the third house pass: the split rule below the writers (validate and handtouch apply it)
+    "htdata.curate.splitrule": "htdata.store.splitrule",
 }
 # Modules that kept their names: an attribute they no longer have is looked up in this module (or these).
 MOVED_NAMES = {
@@ -64,6 +66,8 @@ MOVED_NAMES = {
     # the adapter contract's helpers, each in a module of its own now
     "htdata.source.adapters.base": ("htdata.source.adapters.discovery", "htdata.source.adapters.sourcetree",
                                     "htdata.source.adapters.params", "htdata.source.adapters.streamchecks"),
+    # the third house pass: the crash-safe writes went below every package (htdata/fileio.py); the store kept sha256_file
+    "htdata.store.fsutil": "htdata.fileio",
 }
 # old name -> new name, for names that were renamed as they moved (looked up before the name itself)
 RENAMED = {("htdata.source.adapters.base", "check_adapter_params"): "check_declared_params"}

@@ -14,14 +14,13 @@ RMSE / cIoU cells are per-frame means (pooled values are in the JSON).
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from handtouch.bench.verdicts import cell, verdict_table
+from htdata.fileio import write_text_atomic
 
 Column = tuple[str, str, "str | None", str]     # (header, track, region, key)
 
@@ -145,16 +144,6 @@ def results_markdown(results: dict[str, dict[str, dict]], meta: dict | None = No
         "embeddings permuted across items; theory: 1/C and 5/C, chance without ties.\n",
         markdown_table(results, RETRIEVAL_COLUMNS),
     ])
-
-
-def write_text_atomic(path: str | Path, text: str) -> None:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.chmod(tmp, 0o644)          # mkstemp creates 0600; results are meant to be shared
-    os.replace(tmp, path)
 
 
 def write_results(out_dir: str | Path, results: dict[str, dict[str, dict]], meta: dict | None = None) -> dict:

@@ -99,7 +99,7 @@ def _core_ms(cfg, adapter, ref) -> float:
             tactile[h] = _contact_series(streams, h, Normaliser(cfg.normalise_for(layout), layout))
         t_rgb, thumbs = _rgb_series(streams)
     t0 = time.perf_counter()
-    estimate_lag(t_rgb, thumbs, tactile, int(round(cfg.sync.max_lag_ms * 1e6)))
+    estimate_lag(t_rgb, thumbs, tactile, cfg.sync.max_lag_ns)
     return (time.perf_counter() - t0) * 1e3
 
 
@@ -109,7 +109,7 @@ def measure(folder: Path, true_lag_ms: float, n_frames: int) -> dict:
     cfg, adapter, ref = planned_episode(folder)
     cfg = cfg.with_overrides(['sync.lag="estimate"'])
     t0 = time.perf_counter()
-    est = estimate_episode_lag(ref, cfg, adapter, list(ref.hands))
+    est = estimate_episode_lag(ref, adapter, cfg.adapter.params, cfg.normalise_settings(), cfg.sync, list(ref.hands))
     total_ms = (time.perf_counter() - t0) * 1e3
     minutes = n_frames / FPS / 60.0
     err = None if est.lag_ns is None else abs(est.lag_ns / 1e6 - true_lag_ms)

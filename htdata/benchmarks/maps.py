@@ -32,9 +32,9 @@ from htdata.benchmarks.ingest import ingest_run
 from htdata.benchmarks.sources import discover
 from htdata.benchmarks.tables import fmt, table
 from htdata.format.table import HANDS, JSON_MEMBER, SHARDS_DIR, tactile_member
+from htdata.format.tactilesettings import TactileConfig
 from htdata.glove.layouts import LAYOUTS_ENV
 from htdata.ingest.episode import EpisodeStream
-from htdata.ingest.pipeline import TactileConfig
 from htdata.read.reader import DatasetReader
 from htdata.synthetic.rawglove import write_rawglove
 

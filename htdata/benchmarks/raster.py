@@ -6,9 +6,9 @@ import time
 
 import numpy as np
 
+from htdata.format.tactilesettings import TactileConfig
 from htdata.glove.layouts import list_layouts, load_layout
 from htdata.glove.rasterise import MODES, Rasteriser
-from htdata.ingest.pipeline import TactileConfig
 
 
 def raster_benchmark(layout_id: str, mode: str, frames: int = 256, seed: int = 0) -> dict:

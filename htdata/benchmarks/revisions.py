@@ -7,7 +7,8 @@ a fresh interpreter importing its own tree first (PYTHONPATH, HTDATA_ROOT):
 
 - one moving 600-frame TouchAnything episode, inline (`--workers 0`): wall
   seconds and the child's own peak RSS (VmHWM), the episode issue #22 names;
-- the small sample corpus, all three sources, 1 worker: frames/s.
+- the small sample corpus, every source it writes (htdata.synthetic.corpus.FORMATS;
+  one the base revision has no pipeline for is left out of both), 1 worker: frames/s.
 
 Ratios are current / base, medians over the pairs. An installed htdata (no
 checkout, or a checkout without the base commit) cannot do this: the section
@@ -26,6 +27,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from htdata.synthetic.corpus import FORMATS as CORPUS_FORMATS  # the sample corpus's sources, one pipeline each
 
 ROUND_ONE = "c42b4ea"
 
@@ -79,7 +82,7 @@ def _pipelines(tree: Path, sources: dict[str, Path]) -> list[str]:
 
 
 def revision_rows(work: Path, episode: Path, corpus: Path, base: str = ROUND_ONE, reps: int = 3,
-                  corpus_reps: int = 2, adapters: tuple[str, ...] = ("opentouch", "touchanything", "native")) -> dict:
+                  corpus_reps: int = 2, adapters: tuple[str, ...] = CORPUS_FORMATS) -> dict:
     """Base revision vs the current code (see the module docstring); {"skipped": why} without a checkout."""
     work, episode, corpus = Path(work).resolve(), Path(episode).resolve(), Path(corpus).resolve()  # children run in the trees
     repo = checkout_root()
@@ -89,6 +92,7 @@ def revision_rows(work: Path, episode: Path, corpus: Path, base: str = ROUND_ONE
                       capture_output=True).returncode != 0:
         return {"base": base, "skipped": f"commit {base} is not in {repo} (shallow clone?)"}
     trees = {"base": export_revision(repo, base, work / "revision_base"), "current": repo}
+    adapters = tuple(a for a in adapters if (trees["base"] / "pipelines" / f"{a}.toml").is_file())
     cases = {"episode_600": (_pipelines_for(trees, {"touchanything": episode}, ["--workers", "0"]), reps),
              "corpus_1w": (_pipelines_for(trees, {a: corpus / a for a in adapters}, ["--workers", "1"]), corpus_reps)}
     rows = []

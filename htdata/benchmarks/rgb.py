@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 
 from htdata.benchmarks.timing import best_ms
-from htdata.ingest.pipeline import RgbConfig
+from htdata.source.rgbsettings import RgbConfig
 
 # The criteria the section's defaults are computed by (stated in REPORT.md next to the tables).
 PSNR_TARGET_DB = 40.0

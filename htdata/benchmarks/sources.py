@@ -18,11 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from htdata.format.codec import encode_rgb, encode_tactile
-from htdata.glove.codecrule import resolve_sources
 from htdata.ingest import Source
 from htdata.ingest.episode import EpisodeStream
 from htdata.ingest.pipeline import PipelineConfig, load_pipeline
-from htdata.ingest.plan import resolve_layouts
+from htdata.ingest.plan import resolve_layouts, resolve_sources
 from htdata.source.adapters import get_adapter
 from htdata.source.rgb import to_square_224
 

@@ -52,7 +52,7 @@ from htdata.benchmarks.stats import stats_rows
 from htdata.benchmarks.validation import validate_rows
 from htdata.benchmarks.view import view_rows
 from htdata.errors import ArgumentError
-from htdata.store.fsutil import write_bytes_atomic
+from htdata.fileio import write_bytes_atomic
 from htdata.synthetic.corpus import FORMATS, SCALES, CorpusConfig, corpus_complete, write_corpus
 
 SECTION_GROUP = "htdata.bench_sections"

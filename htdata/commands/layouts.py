@@ -32,13 +32,13 @@ import numpy as np
 
 from htdata.commands.outputs import output_path
 from htdata.errors import ArgumentError
+from htdata.fileio import write_bytes_atomic
 from htdata.format.table import CANVAS
 from htdata.glove.activity import describe_cells, rule_text, unmapped_moving
 from htdata.glove.layouts import LAYOUTS_ENV, Layout, list_layouts, load_canonical, load_layout
 from htdata.glove.layoutsuggest import layout_id_from_name, layout_json_text, suggest_layout
 from htdata.glove.rasterise import Rasteriser
 from htdata.ingest.recordingscan import scan_recordings
-from htdata.store.fsutil import write_bytes_atomic
 
 # BGR colours per part id (0 = background), for `htdata layouts render`.
 _PART_BGR = np.array([[0, 0, 0], [60, 60, 230], [60, 200, 60], [230, 140, 40], [200, 60, 200],

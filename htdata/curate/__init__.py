@@ -1,7 +1,6 @@
 """Curation: every command that makes a new version out of an existing one.
 
     split.py          `htdata split`: hold out tasks, split the rest by episode
-    splitrule.py      the split rule: which part each episode goes to
     splitversions.py  commit a split as a new version
     edit.py           `htdata rm` / `htdata trim`: plan, then re-pack the touched units
     idle.py           `htdata trim --idle`: the idle head and tail of each episode
@@ -9,7 +8,8 @@
     gc.py             `htdata gc`: delete what no kept version lists
     renormalise.py    `htdata renormalise`: new normalisation from the stored raw rows
 
-Re-packing (copying committed samples into new shards) is htdata/write/repack.py, shared with ingest.
+Re-packing (copying committed samples into new shards) is htdata/write/repack.py, shared with ingest;
+the split rule is htdata/store/splitrule.py (validate and the trainer apply it too, and import no writer).
 
 May import: the writers' shared layer (htdata.write), the store, reading, inspection (the stats cache),
 the glove model, the format and the base modules. Never ingest (its sibling), validate, the

@@ -33,10 +33,10 @@ from pathlib import Path
 
 from htdata.errors import ArgumentError, HtdataError
 from htdata.faults import crash_point
+from htdata.fileio import write_bytes_atomic
 from htdata.format.table import SHARDS_DIR
 from htdata.inspect.stats import STATS_DIR, episode_key
 from htdata.read.reader import DatasetReader
-from htdata.store.fsutil import write_bytes_atomic
 from htdata.store.gcrecord import tombstone_file
 from htdata.store.lock import WriterLock
 from htdata.store.manifest import load_manifest

@@ -32,12 +32,13 @@ from pathlib import Path
 
 from htdata.errors import ArgumentError
 from htdata.faults import crash_point
+from htdata.fileio import write_bytes_atomic
 from htdata.format.mapstorage import MapStorage
 from htdata.format.shardio import shard_name
 from htdata.format.table import MANIFEST_FILE, SHARDS_DIR
 from htdata.read.reader import DatasetReader
 from htdata.store.confine import inside
-from htdata.store.fsutil import sha256_file, write_bytes_atomic
+from htdata.store.fsutil import sha256_file
 from htdata.store.lock import LOCK_FILE, WriterLock
 from htdata.store.manifest import load_manifest
 from htdata.store.parts import Part

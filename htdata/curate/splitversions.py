@@ -17,11 +17,11 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from htdata.curate.splitrule import SplitError, build_split
 from htdata.resources import validate_json
 from htdata.store.lock import WriterLock
 from htdata.store.snapshot import commit_parts, open_snapshot
 from htdata.store.splitfiles import PARTS, assignment_of, carried_splits, parent_split_docs
+from htdata.store.splitrule import SplitError, build_split
 
 
 @dataclass

@@ -13,8 +13,8 @@ import json
 from pathlib import Path
 
 from htdata.errors import HtdataError
+from htdata.fileio import write_bytes_atomic
 from htdata.format.table import MANIFEST_FILE
-from htdata.store.fsutil import write_bytes_atomic
 from htdata.store.versions import VERSIONS_DIR
 
 MARKER = ".htdata-export.json"

@@ -7,6 +7,7 @@
     imageheader.py JPEG and EXR sizes read from the header bytes, checked before a decoder allocates them
     shardio.py    tar shards: sample keys, the shard writer and member-range reads
     mapstorage.py MapStorage: maps stored, or rendered from raw rows by the readers ([tactile] maps, codec.tactile.maps)
+    tactilesettings.py  a pipeline's [tactile] section: EXR compression, raster mode, raw rows, maps stored or not
 
 May import: htdata's base modules only. Everything else builds on it.
 

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable
 
+from htdata.fileio import fsync_dir
 from htdata.format.table import MEMBER_ORDER
 
 BLOCK = 512
@@ -301,7 +302,7 @@ class ShardWriter:
             raise FileExistsError(f"{final}: shard already exists; refusing to overwrite a finished shard")
         temp.unlink()
         if self.fsync:
-            _fsync_dir(self.directory)
+            fsync_dir(self.directory)
         self.shards.append(ShardRecord(name=final.name, sha256=out.sha.hexdigest(),
                                        bytes=out.size, samples=self._count))
         self._out = None
@@ -331,13 +332,3 @@ class ShardWriter:
         else:
             self.abort()
 
-
-def _fsync_dir(directory: Path) -> None:
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)

@@ -15,6 +15,7 @@
     rasterise.py    taxels -> the 224x224 map, its coverage and regions (and back)
     health.py       per-taxel health (dead, stuck, noisy ...) of one episode
     codecrule.py    which tactile codec a dataset's gloves need (quantisation step vs codec error)
+    codecsettings.py  a pipeline's [codec] section: the setting and the codec the rule resolved for a run
 
 May import: htdata's base modules and htdata.format. Nothing about sources, storage or commands.
 """

@@ -37,6 +37,7 @@ import numpy as np
 
 from htdata.errors import DatasetError, RecordMismatch
 from htdata.glove.normalise import NormaliseConfig, Normaliser
+from htdata.glove.normalisesettings import NormaliseSettings
 
 
 def calibration_id(layout_id: str, cfg: NormaliseConfig) -> str:
@@ -51,11 +52,11 @@ def calibration_entry(layout_id: str, cfg: NormaliseConfig, origin: str) -> dict
             "fitted_per_episode": bool(cfg.fits)}
 
 
-def episode_calibrations(normalising, layouts: dict) -> dict[str, dict]:
+def episode_calibrations(normalising: NormaliseSettings, layouts: dict) -> dict[str, dict]:
     """{id: manifest entry} of the calibrations a pipeline applies to these layouts (hand -> Layout).
 
-    `normalising` is a glove.normalisesettings.NormaliseSettings, or anything with its `name`,
-    `normalise` and `normalise_for` (an ingest passes its PipelineConfig).
+    `normalising`: the pipeline's glove.normalisesettings.NormaliseSettings (the ingest's and
+    renormalise's alike).
     """
     out = {}
     for layout in layouts.values():

@@ -23,7 +23,9 @@ sizes). An existing dataset keeps its codec on append (`resolve_codec` with
 `existing`); the reason then says whether it keeps the new gloves' levels.
 
 Two callers share `pick_codec`: the ingest, with the analytic max errors
-below (`resolve_codec`), and the bench, with the errors and sizes measured on
+below (`resolve_codec`, through the pipeline's `[codec]` section,
+htdata/glove/codecsettings.py; htdata.ingest.plan.resolve_sources resolves it
+once per run for the run's gloves), and the bench, with the errors and sizes measured on
 real maps (htdata/benchmarks/codecs.py); tests/format/test_codec.py checks that
 both pick the same codec on the sample corpus.
 """
@@ -33,7 +35,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from htdata.errors import ConfigError
-from htdata.glove.layouts import load_layout
+from htdata.glove.layouts import Layout
+from htdata.glove.normalisesettings import NormaliseSettings
 
 SETTINGS = ("auto", "exr_half", "exr_float")      # pipeline [codec] tactile
 PIXEL_TYPES = ("half", "float")
@@ -151,30 +154,6 @@ def codec_block(base: dict, choice: CodecChoice) -> dict:
     return out
 
 
-def resolve_sources(sources: list, refs_per_source: list[list], existing: dict | None = None) -> list:
-    """`sources` (ingest Source objects) with their pipelines' [codec] resolved for this run.
-
-    Gloves = every layout the run's planned refs use (`ref.layout_files`),
-    under each source's normalisation; `existing` = the parent version's
-    manifest "codec" -> "tactile" (None for a new dataset). The pipelines must
-    agree on [codec] tactile and [tactile] compression (one codec per dataset).
-    """
-    import dataclasses
-
-
-    if not sources:
-        return []
-    settings = {(s.pipeline.codec.tactile, s.pipeline.tactile.compression) for s in sources}
-    if len(settings) > 1:
-        raise ConfigError(f"pipelines {[s.pipeline.name for s in sources]} disagree on [codec] tactile / "
-                          f"[tactile] compression ({sorted(settings)}): a dataset has one codec")
-    (setting, compression), = settings
-    pairs = [(s.pipeline, load_layout(path)) for s, refs in zip(sources, refs_per_source)
-             for r in refs for path in sorted(set(r.layout_files.values()))]
-    choice = resolve_codec(setting, compression, dataset_gloves(pairs), existing)
-    return [dataclasses.replace(s, pipeline=s.pipeline.with_codec_choice(choice)) for s in sources]
-
-
 def analytic_rows(compression: str) -> list[dict]:
     """The storable candidates at `compression`, smallest first, with their analytic max errors."""
     return [{"codec": codec_name(p, compression), "max_error": ANALYTIC_MAX_ERROR[p]} for p in SIZE_ORDER]
@@ -212,10 +191,10 @@ def resolve_codec(setting: str, compression: str, gloves: list[GloveStep],
     return CodecChoice(picked, compression, "rule", why)
 
 
-def dataset_gloves(pairs) -> list[GloveStep]:
-    """One GloveStep per distinct (layout, normalisation) in `pairs` of (PipelineConfig, Layout)."""
+def dataset_gloves(pairs: list[tuple[NormaliseSettings, Layout]]) -> list[GloveStep]:
+    """One GloveStep per distinct (layout, normalisation) in `pairs` of (NormaliseSettings, Layout)."""
     out: dict[tuple, GloveStep] = {}
-    for cfg, layout in pairs:
-        g = glove_step(layout, cfg.normalise_for(layout))
+    for normalising, layout in pairs:
+        g = glove_step(layout, normalising.normalise_for(layout))
         out.setdefault((g.layout_id, g.step), g)
     return [out[k] for k in sorted(out, key=lambda k: (k[0], k[1] or 0.0))]

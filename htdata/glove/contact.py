@@ -37,6 +37,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from htdata.glove.normalise import has_noise_floor
+
 THRESHOLD = 0.02           # the old rule: a taxel above this is contact (validate's contact threshold)
 MIN_AREA_TAXELS = 3        # calibrated rule: taxels above their floor for a frame to be in contact
 # calibrated rule: steps above the floor. Measured on the sample raw-count glove (1-count steps, noise_k = 3):
@@ -97,8 +99,8 @@ def min_area(live_taxels: int) -> int:
 def rule_for(calibration: dict | None, layout_value: dict | None = None, live_taxels: int = 0) -> ContactRule:
     """The contact rule of an episode hand from its manifest calibration entry (None: none recorded), its
     layout's value block (the quantisation step) and its number of live taxels."""
-    if calibration and (float(calibration.get("noise_k", 0) or 0) > 0
-                        or float(calibration.get("noise_floor", 0) or 0) > 0):
+    if calibration and has_noise_floor(float(calibration.get("noise_k", 0) or 0),
+                                       float(calibration.get("noise_floor", 0) or 0)):
         step = float((layout_value or {}).get("step") or 0.0)
         top = float(calibration.get("max_value") or (layout_value or {}).get("max") or 1.0)
         scale = float(calibration.get("scale") or 1.0)

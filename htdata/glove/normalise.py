@@ -65,6 +65,11 @@ RAW_COUNT_DEFAULTS = {"baseline": "drift", "baseline_percentile": 10.0, "drift_w
 NOISE_K_BASELINES = ("rest_window", *EPISODE_BASELINES)   # the baselines a noise_k floor is measured against
 
 
+def has_noise_floor(noise_k: float, noise_floor: float) -> bool:
+    """The one test of whether a calibration subtracts a noise floor: k x the rest spread, or a constant one."""
+    return noise_k > 0 or noise_floor > 0
+
+
 @dataclass
 class NormaliseConfig:
     convention: str = "direct"
@@ -80,7 +85,7 @@ class NormaliseConfig:
     drift_window_s: float = 30.0      # baseline="drift": window of the running rest level
     # A per-glove calibration measured once: an .npz with per-taxel `offset` (rest, raw units) and `gain`
     # (multiplier after the offset, 1 = nominal: a taxel twice as sensitive has 0.5), each (H,W). The pipeline resolves the path and fills in its sha256
-    # (PipelineConfig.normalise_for); the arrays travel in each episode record's calibration_fit.
+    # (NormaliseSettings.normalise_for); the arrays travel in each episode record's calibration_fit.
     taxel_calibration: str = ""
     taxel_calibration_sha256: str = ""
 
@@ -88,6 +93,11 @@ class NormaliseConfig:
     def per_episode(self) -> bool:
         """True when the baseline is fitted on the whole episode (`Normaliser.fit_episode`)."""
         return self.baseline in EPISODE_BASELINES
+
+    @property
+    def has_noise_floor(self) -> bool:
+        """True when a floor is subtracted (noise_k or noise_floor > 0: `has_noise_floor`)."""
+        return has_noise_floor(self.noise_k, self.noise_floor)
 
     @property
     def fits(self) -> bool:
@@ -158,7 +168,7 @@ class Normaliser:
         step = (getattr(layout, "value", None) or {}).get("step")
         # a floor (when there is one) never lies below one quantisation step of the glove
         self.min_floor = (np.float32(float(step) / cfg.max_value)
-                          if step and (cfg.noise_k > 0 or cfg.noise_floor > 0) else np.float32(0.0))
+                          if step and cfg.has_noise_floor else np.float32(0.0))
         self.floor = np.full(self.grid, max(cfg.noise_floor, self.min_floor), dtype=np.float32)
         if cfg.baseline == "none":
             self.baseline = np.zeros(self.grid, dtype=np.float32)
@@ -303,7 +313,7 @@ class Normaliser:
                 v = np.maximum(v - self.baseline_at(rows), 0.0)
             elif self.cfg.baseline != "none":
                 v = np.maximum(v - self.baseline, 0.0)
-            if self.cfg.noise_k > 0 or self.cfg.noise_floor > 0:
+            if self.cfg.has_noise_floor:
                 v = np.maximum(v - self.floor, 0.0)
             if self.cfg.scale != 1.0:
                 v = v * np.float32(self.cfg.scale)

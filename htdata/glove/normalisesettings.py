@@ -1,7 +1,7 @@
 """A pipeline's normalisation settings, apart from the rest of the pipeline: the `[normalise.<layout>]`
 tables over each layout's value block, and the rule that every table names a layout in use.
 
-The ingest builds them from its pipeline (htdata.ingest.pipeline.PipelineConfig.normalise_settings);
+The ingest builds them from its pipeline (htdata/ingest/pipeline.py `normalise_settings`);
 `htdata renormalise` needs nothing else of a pipeline, so curation reads these without importing
 ingest's configuration.
 """

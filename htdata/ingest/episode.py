@@ -74,7 +74,8 @@ def _pair_clocks(ref, cfg: PipelineConfig, streams, hands: list[str], adapter) -
     missing = [h for h in hands if h not in streams.tactile_timestamps_ns]
     if missing:
         raise EpisodeError(ref, None, f"no tactile stream for hand(s) {missing}")
-    lag = episode_lag(ref, cfg, adapter, hands)   # [sync] lag: None for "none"; estimates open a 2nd stream
+    # [sync] lag: None for "none"; estimates open a 2nd stream
+    lag = episode_lag(ref, adapter, cfg.adapter.params, cfg.normalise_settings(), cfg.sync, hands)
     try:
         sync = pair(streams.rgb_timestamps_ns, {h: streams.tactile_timestamps_ns[h] for h in hands},
                     cfg.sync.max_skew_ns, cfg.sync.policy, lag=lag)

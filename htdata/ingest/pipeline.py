@@ -4,7 +4,12 @@ A pipeline says how one source format becomes canonical samples: which
 adapter reads it (and its params), which glove layout each hand uses, how
 glove units are normalised (per layout), the sync tolerance and clock lag
 (`[sync] lag`: htdata/source/lag.py), RGB and tactile encoding, and the shard
-size. Files are checked three times: against
+size. `PipelineConfig` holds one object per section; the sections read by code
+below the ingest live beside that code, each with its keys' parsing and checks
+([sync] htdata/source/syncsettings.py, [rgb] htdata/source/rgbsettings.py,
+[tactile] htdata/format/tactilesettings.py, [codec] htdata/glove/codecsettings.py;
+normalising gets htdata/glove/normalisesettings.py's NormaliseSettings), and
+that code never sees the pipeline itself. Files are checked three times: against
 `schemas/pipeline.schema.json` (unknown keys are errors, named with the file),
 for non-finite numbers (TOML allows `nan`/`inf`, JSON Schema's "number"
 accepts them: `max_skew_ms = nan` would fail every episode later), and by
@@ -35,13 +40,11 @@ Example (pipelines/opentouch.toml):
     max_value = 3072
     [sync]
     max_skew_ms = 20
-
-Long because every section's dataclass lives beside the loader that checks them
-against schemas/pipeline.schema.json, so a new key is one edit in one file.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 import tomllib
 from dataclasses import asdict, dataclass, field
@@ -50,7 +53,9 @@ from pathlib import Path
 from htdata.errors import ConfigError
 from htdata.format.mapstorage import MapStorage
 from htdata.format.table import CodecSettings
+from htdata.format.tactilesettings import TactileConfig
 from htdata.glove.codecrule import CodecChoice
+from htdata.glove.codecsettings import CodecConfig
 from htdata.glove.layouts import nearest_hint
 from htdata.glove.normalise import NormaliseConfig
 from htdata.glove.normalisesettings import NormaliseSettings
@@ -58,110 +63,14 @@ from htdata.resources import PIPELINES_DIR, validate_json
 from htdata.settings import apply_settings, parse_setting  # noqa: F401  (parse_setting: an old name of this module)
 from htdata.source.adapters import ADAPTERS
 from htdata.source.adapters.params import check_declared_params
-from htdata.source.lag import LAG_MODES
+from htdata.source.rgbsettings import RgbConfig
+from htdata.source.syncsettings import SyncConfig
 
 
 @dataclass
 class AdapterConfig:
     name: str
     params: dict = field(default_factory=dict)
-
-
-MAX_SYNC_MS = 3_600_000   # sync tolerances past an hour are typos (1e300 overflowed int64 nanoseconds)
-
-
-@dataclass
-class SyncConfig:
-    max_skew_ms: float = 20.0
-    policy: str = "nearest"
-    # Tactile-video lag (htdata/source/lag.py): "none" (clocks as recorded), "estimate" (per episode from the
-    # content, applied when confidence >= min_confidence, searched within +-max_lag_ms), or a number of
-    # ms (tactile - RGB clock, subtracted from every tactile timestamp).
-    lag: str | float = "none"
-    max_lag_ms: float = 500.0
-    min_confidence: float = 0.5
-
-    @property
-    def max_skew_ns(self) -> int:
-        return int(round(self.max_skew_ms * 1e6))
-
-    def validate(self, where: str) -> "SyncConfig":
-        if isinstance(self.max_skew_ms, bool) or not (isinstance(self.max_skew_ms, (int, float))
-                                                      and 0 <= self.max_skew_ms <= MAX_SYNC_MS):
-            raise ConfigError(f"{where}: sync.max_skew_ms must be in [0, {MAX_SYNC_MS}] (one hour), "
-                              f"got {self.max_skew_ms!r}")
-        if isinstance(self.lag, (int, float)) and not isinstance(self.lag, bool) and abs(self.lag) > MAX_SYNC_MS:
-            raise ConfigError(f"{where}: sync.lag must be within +-{MAX_SYNC_MS} ms (one hour), got {self.lag!r}")
-        if isinstance(self.lag, bool) or not (self.lag in LAG_MODES if isinstance(self.lag, str)
-                                              else isinstance(self.lag, (int, float)) and math.isfinite(self.lag)):
-            raise ConfigError(f"{where}: sync.lag must be one of {LAG_MODES} or a finite number of ms, got {self.lag!r}")
-        if not (isinstance(self.max_lag_ms, (int, float)) and 0 < self.max_lag_ms <= 10_000):
-            raise ConfigError(f"{where}: sync.max_lag_ms must be in (0, 10000], got {self.max_lag_ms!r}")
-        if not (isinstance(self.min_confidence, (int, float)) and 0 <= self.min_confidence <= 1):
-            raise ConfigError(f"{where}: sync.min_confidence must be in [0, 1], got {self.min_confidence!r}")
-        return self
-
-    def to_dict(self) -> dict:
-        """Lag keys only when not default: a pipeline that never sets them keeps its to_dict() (and input
-        fingerprints)."""
-        d = {"max_skew_ms": self.max_skew_ms, "policy": self.policy}
-        defaults = SyncConfig()
-        for key in ("lag", "max_lag_ms", "min_confidence"):
-            if getattr(self, key) != getattr(defaults, key):
-                d[key] = getattr(self, key)
-        return d
-
-
-@dataclass
-class RgbConfig:
-    size: int = 224
-    quality: int = 95
-    crop: str = "center"
-    interpolation: str = "area"
-    keep_unpaired: bool = True   # RGB frames without tactile within the skew become RGB-only samples
-
-
-@dataclass
-class TactileConfig:
-    compression: str = "zip"
-    raster_mode: str = "nearest"
-    keep_bend: bool = True
-    keep_raw: bool = True    # raw_<hand>.npy: every glove row as read (source dtype), full rate
-    chunk_frames: int = 64   # tactile frames read/normalised/rasterised per step (memory bound)
-    # maps stored as EXR or rendered by the readers from the raw rows: htdata/format/mapstorage.py
-    maps: MapStorage = MapStorage.AUTO
-
-    @classmethod
-    def from_dict(cls, data: dict, where: str) -> "TactileConfig":
-        """[tactile] as written (TOML / to_dict): `maps` parsed into a MapStorage (absent: AUTO)."""
-        maps = MapStorage.parse(data["maps"], where) if "maps" in data else MapStorage.AUTO
-        return cls(**{**data, "maps": maps})
-
-    def validate(self, where: str) -> "TactileConfig":
-        self.maps.check_tactile(self.keep_raw, self.raster_mode, where)
-        return self
-
-    def to_dict(self) -> dict:
-        d = asdict(self)
-        del d["maps"]
-        if self.maps.pipeline_value is not None:   # only "raw" is written (MapStorage.pipeline_value)
-            d["maps"] = self.maps.pipeline_value
-        return d
-
-
-@dataclass
-class CodecConfig:
-    """[codec]: tactile = "auto" (default: the EXR pixel type the rule in htdata/glove/codecrule.py picks for the
-    dataset's gloves) or an explicit "exr_half" / "exr_float"; the compression is [tactile] compression.
-
-    `choice` is not written by hand: the ingest fills it in when it resolves the setting for a run
-    (`PipelineConfig.with_codec_choice`), so workers and the manifest see one resolved codec.
-    """
-    tactile: str = "auto"
-    choice: dict | None = None       # htdata.glove.codecrule.CodecChoice.info()
-
-    def to_dict(self) -> dict:
-        return {"tactile": self.tactile, **({"choice": dict(self.choice)} if self.choice else {})}
 
 
 OUT_OF_RANGE_POLICIES = ("clip", "drop_frame", "fail")
@@ -273,37 +182,25 @@ class PipelineConfig:
         """Refuse layout ids this pipeline names that no recording of `scope` uses (NormaliseSettings)."""
         self.normalise_settings().check_layout_names(used_ids, used_hands, scope, why)
 
-    def codec_choice(self):
-        """The resolved tactile codec (htdata.glove.codecrule.CodecChoice); the ingest resolves it first."""
-
-        if self.codec.choice is None:
-            raise ValueError(f"{self.path or self.name}: [codec] tactile = {self.codec.tactile!r} is not resolved "
-                              f"for a dataset yet (htdata.glove.codecrule.resolve_sources / with_codec_choice)")
-        return CodecChoice.from_info(self.codec.choice)
+    def codec_choice(self) -> CodecChoice:
+        """The resolved tactile codec (CodecConfig.resolved); the ingest resolves it first."""
+        return self.codec.resolved(self.path or self.name)
 
     def with_maps(self, maps: MapStorage) -> "PipelineConfig":
         """A copy whose [tactile] maps is `maps` (an ingest resolves AUTO before its units run)."""
-        import copy
-
         cfg = copy.deepcopy(self)
         cfg.tactile.maps = maps
         cfg.tactile.validate(self.path or self.name)
         return cfg
 
-    def with_codec_choice(self, choice) -> "PipelineConfig":
+    def with_codec_choice(self, choice: CodecChoice) -> "PipelineConfig":
         """A copy whose [codec] carries `choice` (a CodecChoice for this pipeline's compression)."""
-        import copy
-
-        if choice.compression != self.tactile.compression:
-            raise ValueError(f"{self.path or self.name}: codec choice {choice.codec} does not match "
-                              f"[tactile] compression {self.tactile.compression!r}")
         cfg = copy.deepcopy(self)
-        cfg.codec.choice = choice.info()
+        cfg.codec = self.codec.with_choice(choice, self.tactile.compression, self.path or self.name)
         return cfg
 
-    def codec_settings(self):
+    def codec_settings(self) -> CodecSettings:
         """What the encoders need (htdata.format.table.CodecSettings), from the resolved codec."""
-
         return CodecSettings(tactile_compression=self.tactile.compression, rgb_quality=self.rgb.quality,
                              tactile_pixel_type=self.codec_choice().pixel_type)
 
@@ -321,7 +218,7 @@ class PipelineConfig:
                                  if k not in self.normalise_given or kk in self.normalise_given[k]}
                               for k, v in self.normalise.items()}, **self.out_of_range.to_dict()},
             "sync": self.sync.to_dict(),
-            "rgb": asdict(self.rgb),
+            "rgb": self.rgb.to_dict(),
             "tactile": self.tactile.to_dict(),
             "codec": self.codec.to_dict(),
             "shards": asdict(self.shards),
@@ -348,10 +245,10 @@ class PipelineConfig:
             normalise_given={k: tuple(sorted(v)) for k, v in norm.items()},
             out_of_range=OutOfRangeConfig(policy=policy.get("out_of_range", "clip"),
                                           warn_share=float(policy.get("out_of_range_warn_share", 0.01))),
-            sync=SyncConfig(**data.get("sync", {})),
-            rgb=RgbConfig(**data.get("rgb", {})),
+            sync=SyncConfig.from_dict(data.get("sync", {})),
+            rgb=RgbConfig.from_dict(data.get("rgb", {})),
             tactile=TactileConfig.from_dict(data.get("tactile", {}), where),
-            codec=CodecConfig(**data.get("codec", {})),
+            codec=CodecConfig.from_dict(data.get("codec", {})),
             shards=ShardsConfig(**data.get("shards", {})),
             description=data.get("description", ""),
             shared_layouts=list(data.get("shared_layouts", [])),
@@ -366,12 +263,7 @@ class PipelineConfig:
             for name in ("rest_seconds", "baseline_percentile", "drift_window_s"):
                 if isinstance(getattr(n, name), int) and not isinstance(getattr(n, name), bool):
                     setattr(n, name, float(getattr(n, name)))
-        cfg.sync.max_skew_ms = float(cfg.sync.max_skew_ms)
-        for key in ("max_lag_ms", "min_confidence") + (() if isinstance(cfg.sync.lag, str) else ("lag",)):
-            if isinstance(getattr(cfg.sync, key), int) and not isinstance(getattr(cfg.sync, key), bool):
-                setattr(cfg.sync, key, float(getattr(cfg.sync, key)))
         return cfg.validate()
-
 
     def with_overrides(self, settings: list[str]) -> "PipelineConfig":
         """A copy with `dotted.key=value` settings applied (htdata/settings.py: values read as TOML, else text), validated."""

@@ -28,6 +28,7 @@ from pathlib import Path
 from htdata.errors import ArgumentError, ConfigError, EpisodeError
 from htdata.format.mapstorage import MapStorage
 from htdata.format.table import HANDS
+from htdata.glove.codecrule import dataset_gloves
 from htdata.glove.layouts import load_layout
 from htdata.ingest.append import labels_of
 from htdata.ingest.pipeline import PipelineConfig, load_pipeline
@@ -175,6 +176,27 @@ def check_settings_agree(sources: list[Source]) -> None:
                 raise ConfigError(f"pipelines {first.name!r} ({first.path}) and {s.pipeline.name!r} ({s.pipeline.path}) "
                                   f"disagree on {name}: {a!r} vs {b!r}; a dataset has one codec and raster "
                                   f"setting: make them equal or ingest into separate datasets")
+
+
+def resolve_sources(sources: list[Source], refs_per_source: list[list], existing: dict | None = None) -> list[Source]:
+    """`sources` with their pipelines' [codec] resolved for this run (htdata/glove/codecrule.py's rule).
+
+    Gloves = every layout the run's planned refs use (`ref.layout_files`),
+    under each source's normalisation; `existing` = the parent version's
+    manifest "codec" -> "tactile" (None for a new dataset). The pipelines must
+    agree on [codec] tactile and [tactile] compression (one codec per dataset).
+    """
+    if not sources:
+        return []
+    settings = {(s.pipeline.codec.tactile, s.pipeline.tactile.compression) for s in sources}
+    if len(settings) > 1:
+        raise ConfigError(f"pipelines {[s.pipeline.name for s in sources]} disagree on [codec] tactile / "
+                          f"[tactile] compression ({sorted(settings)}): a dataset has one codec")
+    first = sources[0].pipeline
+    pairs = [(s.pipeline.normalise_settings(), load_layout(path)) for s, refs in zip(sources, refs_per_source)
+             for r in refs for path in sorted(set(r.layout_files.values()))]
+    choice = first.codec.resolve(first.tactile.compression, dataset_gloves(pairs), existing)
+    return [dataclasses.replace(s, pipeline=s.pipeline.with_codec_choice(choice)) for s in sources]
 
 
 # --------------------------------------------------------------------------- layouts, resolved once

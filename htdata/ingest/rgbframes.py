@@ -20,7 +20,6 @@ from htdata.ingest.frame import Frame, frame_errors
 from htdata.ingest.pipeline import PipelineConfig
 from htdata.ingest.tally import EpisodeTally
 from htdata.ingest.timing import StageClock
-from htdata.source.rgb import to_square_224
 
 
 class RgbFetcher:
@@ -66,8 +65,7 @@ def rgb_source(ref, cfg: PipelineConfig, streams, sync, clock: StageClock, with_
     unpaired = _unpaired_rgb(streams, sync) if rgb_cfg.keep_unpaired else []
 
     def resize(frame, i):
-        return to_square_224(frame, rgb_cfg.size, rgb_cfg.crop, rgb_cfg.interpolation,
-                             where=f"{ref.source_ref} [{ref.episode_id}] frame {i}")
+        return rgb_cfg.square(frame, where=f"{ref.source_ref} [{ref.episode_id}] frame {i}")
 
     wanted = np.concatenate([sync.rgb_index, np.asarray([i for _, i, _ in unpaired], dtype=np.int64)])
     return RgbFetcher(ref, streams.iter_rgb(), wanted, resize, clock), unpaired

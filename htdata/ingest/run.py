@@ -18,13 +18,21 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from htdata.errors import ArgumentError
+from htdata.fileio import write_bytes_atomic
 from htdata.format.table import INGEST_REPORT, MANIFEST_FILE
-from htdata.glove.codecrule import resolve_sources
 from htdata.glove.layouts import load_layout
 from htdata.ingest.append import kept_unavailable, plan_append
 from htdata.ingest.commit import check_compatible, commit
 from htdata.ingest.executors import make_executor, usable_cores
-from htdata.ingest.plan import Source, UnitTask, check_settings_agree, check_unique_ids, discover_sources, plan_units
+from htdata.ingest.plan import (
+    Source,
+    UnitTask,
+    check_settings_agree,
+    check_unique_ids,
+    discover_sources,
+    plan_units,
+    resolve_sources,
+)
 from htdata.ingest.sourcesums import check_sources
 from htdata.ingest.timing import timing_summary
 from htdata.ingest.unit import run_unit
@@ -37,7 +45,6 @@ from htdata.ingest.workdir import (
     remove_empty_output,
     remove_strays,
 )
-from htdata.store.fsutil import write_bytes_atomic
 from htdata.store.lock import WriterLock
 from htdata.store.snapshot import current_snapshot
 from htdata.store.versions import restore_pointer

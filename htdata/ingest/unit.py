@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata.errors import EpisodeError
+from htdata.fileio import write_bytes_atomic
 from htdata.format.shardio import ShardWriter
 from htdata.format.table import SHARDS_DIR, CodecSettings
 from htdata.glove.calibration import episode_calibrations
@@ -47,7 +48,6 @@ from htdata.ingest.pipeline import PipelineConfig
 from htdata.ingest.timing import StageClock
 from htdata.ingest.workdir import clear_unit_files, dumps, spool_path, unit_record_path
 from htdata.source.adapters import get_adapter
-from htdata.store.fsutil import write_bytes_atomic
 
 
 class Spool:
@@ -185,7 +185,7 @@ def run_unit(task) -> dict:
                 for layout in tally.layouts.values():
                     if layout.layout_id not in layouts:
                         layouts[layout.layout_id] = layout_entry(layout)
-                calibrations.update(episode_calibrations(cfg, tally.layouts))
+                calibrations.update(episode_calibrations(cfg.normalise_settings(), tally.layouts))
                 report_progress({"unit": task.unit, "episode_id": ref.episode_id, "frames": tally.frames})
                 _fault_hook(task.unit)
             with clock.stage("write"):

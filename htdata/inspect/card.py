@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 
 from htdata.errors import ArgumentError
+from htdata.fileio import write_bytes_atomic
 from htdata.format.mapstorage import MapStorage
 from htdata.format.table import HANDS, RGB_MEMBER, SIZE_FIELDS
 from htdata.glove.layouts import parse_canonical
@@ -41,7 +42,6 @@ from htdata.inspect.preview import render_contact_sheet
 from htdata.inspect.stats import dataset_stats, write_health_map
 from htdata.read.reader import DatasetReader
 from htdata.store import storage
-from htdata.store.fsutil import write_bytes_atomic
 
 PREVIEW_EPISODES = 2
 PREVIEW_FRAMES = 3

@@ -30,6 +30,7 @@ from typing import Callable
 import numpy as np
 
 from htdata.errors import ArgumentError
+from htdata.fileio import write_bytes_atomic
 from htdata.format.table import HANDS, STATS_DIR
 from htdata.glove.contact import RULE_VERSION, ContactRule
 from htdata.glove.health import CLASSES, HEALTH_VERSION, merge_counts
@@ -47,7 +48,6 @@ from htdata.inspect.healthmap import write_health_map as write_png
 from htdata.inspect.scalehint import scale_suggestions
 from htdata.read.reader import DatasetReader
 from htdata.store import storage
-from htdata.store.fsutil import write_bytes_atomic
 from htdata.store.writable import symlinked_folder
 
 # /2: values from the raw rows where stored (format 3), raw-unit sketches; the key covers the calibration

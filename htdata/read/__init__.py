@@ -7,6 +7,7 @@
     rawstream.py   an episode's raw glove rows at full rate, from the shards; MapServing (the loaders' maps_from)
     torchdata.py   torch datasets of frames and windows (maps stored or rendered from raw rows)
     torchitems.py  what a torch item carries: the members asked for, per-layout constants per item or once
+    itemoptions.py ItemOptions: what the torch datasets share (which samples, version, what an item carries)
     torchglove.py  torch dataset of raw glove rows at the glove's own rate
     keys.py        the keys of the items the torch datasets yield
     torchviews.py  `Dataset` (what htdata.open returns): a reader whose `.torch` builds the torch datasets

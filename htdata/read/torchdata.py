@@ -57,28 +57,19 @@ from htdata.errors import ArgumentError
 from htdata.format.mapstorage import hand_present, has_hand
 from htdata.format.table import CANVAS, HANDS, RGB_MEMBER, SIZE_FIELDS
 from htdata.read import keys
-from htdata.read.keys import HAND_IDS
+from htdata.read.itemoptions import FRAME_KINDS, ItemOptions, item_options  # noqa: F401  (FRAME_KINDS: a name here)
 from htdata.read.rawstream import MAP_SOURCE_WORDS
 from htdata.read.reader import DatasetReader
 from htdata.read.torchitems import MEMBERS, ItemBuilder, ItemConstants, expand_batch  # noqa: F401  (names of this module)
 
-_ItemBuilder = ItemBuilder   # the name torchglove and older code import
+_ItemBuilder = ItemBuilder   # the name older code imports
 
 HAND_NAMES = HANDS   # hand id -> name (HAND_IDS inverted: left=0, right=1)
-
-
-FRAME_KINDS = ("paired", "tactile")
 
 
 def _tactile_present(rows: np.ndarray, hand: str, frames: str = "paired") -> np.ndarray:
     present = hand_present(rows, hand)   # its map stored, or rendered from its raw rows
     return present & (rows[SIZE_FIELDS[RGB_MEMBER]] > 0) if frames == "paired" else present
-
-
-def _check_frames(frames: str) -> str:
-    if frames not in FRAME_KINDS:
-        raise ArgumentError(f"frames must be one of {FRAME_KINDS}, got {frames!r}")
-    return frames
 
 
 def shuffled_indices(n: int, seed: int, epoch: int) -> np.ndarray:
@@ -92,13 +83,6 @@ def shuffled_indices(n: int, seed: int, epoch: int) -> np.ndarray:
     if n < 0 or seed < 0 or epoch < 0:
         raise ArgumentError(f"n, seed and epoch must be >= 0 (got {n}, {seed}, {epoch})")
     return np.random.default_rng([seed, epoch]).permutation(n)
-
-
-def _check_hands(hands) -> tuple[str, ...]:
-    hands = tuple(hands)
-    if not hands or any(h not in HAND_IDS for h in hands) or len(set(hands)) != len(hands):
-        raise ArgumentError(f"hands must be a non-empty subset of ('left', 'right'), got {hands}")
-    return hands
 
 
 def _frame_items(reader: DatasetReader, indices: np.ndarray, hands: tuple[str, ...],
@@ -158,16 +142,21 @@ class TactileFrameDataset(_ItemDataset):
         maps_from: "best", "stored" or "raw": where maps come from (module docstring; old name `map_source`).
         members: what an item carries: a subset of ("tactile", "rgb").
         constants: "item" (coverage, regions and ids in every item) or "once" (`constants()`, `expand_batch`).
+        options: all of the above in one htdata.read.itemoptions.ItemOptions (instead of the keywords).
     """
 
     @renamed_keyword("map_source", "maps_from", MAP_SOURCE_WORDS)
     def __init__(self, root, split: str | None = None, part: str | None = None,
                  hands=HANDS, rgb_float: bool = False, version: int | None = None, frames: str = "paired",
-                 maps_from: str = "best", members=MEMBERS, constants: str = "item"):
-        self.hands = _check_hands(hands)
-        self._builder = _ItemBuilder(root, rgb_float, version, maps_from, members, constants)
+                 maps_from: str = "best", members=MEMBERS, constants: str = "item", *,
+                 options: ItemOptions | None = None):
+        o = self.options = item_options(options, split=split, part=part, hands=hands, rgb_float=rgb_float,
+                                        version=version, frames=frames, maps_from=maps_from, members=members,
+                                        constants=constants)
+        self.hands = o.hands
+        self._builder = ItemBuilder(root, o)
         reader = self._builder.reader
-        self.items = _frame_items(reader, reader.sample_indices(split, part), self.hands, _check_frames(frames))
+        self.items = _frame_items(reader, reader.sample_indices(o.split, o.part), self.hands, o.frames)
 
     def __getitem__(self, i: int) -> dict:
         index, hand_id = self.items[i].tolist()
@@ -191,25 +180,33 @@ class TactileWindowDataset(_ItemDataset):
         frames: "paired" (samples with the hand's map and an RGB frame) or "tactile" (+ tactile-only).
         maps_from: "best", "stored" or "raw": where maps come from (module docstring; old name `map_source`).
         members: what an item carries: a subset of ("tactile", "rgb").
+        options: all of the above in one htdata.read.itemoptions.ItemOptions (instead of the keywords);
+            its `constants` must be "item" (a window carries its constants).
     """
 
     @renamed_keyword("map_source", "maps_from", MAP_SOURCE_WORDS)
     def __init__(self, root, window: int = 3, split: str | None = None, part: str | None = None,
                  hands=HANDS, rgb_float: bool = False, version: int | None = None, frames: str = "paired",
-                 maps_from: str = "best", members=MEMBERS):
+                 maps_from: str = "best", members=MEMBERS, *, options: ItemOptions | None = None):
         if window < 1:
             raise ArgumentError(f"window must be >= 1, got {window}")
+        o = self.options = item_options(options, split=split, part=part, hands=hands, rgb_float=rgb_float,
+                                        version=version, frames=frames, maps_from=maps_from, members=members)
+        if o.constants != "item":
+            raise ArgumentError(f"TactileWindowDataset items carry their constants: options.constants must be "
+                                f"'item', got {o.constants!r}")
         self.window = window
-        self.hands = _check_hands(hands)
-        self._builder = _ItemBuilder(root, rgb_float, version, maps_from, members)
+        self.hands = o.hands
+        frames = o.frames
+        self._builder = ItemBuilder(root, o)
         reader = self._builder.reader
         ends = []
-        for ep_pos in reader.episode_positions(split, part):
+        for ep_pos in reader.episode_positions(o.split, o.part):
             first, n = reader.episode_range(ep_pos)
             if n >= window:
                 ends.append(np.arange(first + window - 1, first + n, dtype=np.int64))
         end_idx = np.concatenate(ends) if ends else np.zeros(0, np.int64)
-        items = _frame_items(reader, end_idx, self.hands, _check_frames(frames))
+        items = _frame_items(reader, end_idx, self.hands, frames)
         # keep a window only if its hand is present in every frame of it (an RGB-only sample breaks it)
         if len(items):
             offsets = np.arange(-(window - 1), 1)
@@ -274,19 +271,25 @@ class TactileStream(IterableDataset):
         maps_from: "best", "stored" or "raw": where maps come from (module docstring; old name `map_source`).
         members: what an item carries: a subset of ("tactile", "rgb").
         constants: "item" (coverage, regions and ids in every item) or "once" (`constants()`, `expand_batch`).
+        options: all of the above but `shuffle_seed` in one htdata.read.itemoptions.ItemOptions (instead of
+            the keywords).
     """
 
     @renamed_keyword("map_source", "maps_from", MAP_SOURCE_WORDS)
     def __init__(self, root, split: str | None = None, part: str | None = None,
                  hands=HANDS, rgb_float: bool = False,
                  shuffle_seed: int | None = None, version: int | None = None, frames: str = "paired",
-                 maps_from: str = "best", members=MEMBERS, constants: str = "item"):
-        self.hands = _check_hands(hands)
-        self.frames = _check_frames(frames)
-        self._builder = _ItemBuilder(root, rgb_float, version, maps_from, members, constants)
+                 maps_from: str = "best", members=MEMBERS, constants: str = "item", *,
+                 options: ItemOptions | None = None):
+        o = self.options = item_options(options, split=split, part=part, hands=hands, rgb_float=rgb_float,
+                                        version=version, frames=frames, maps_from=maps_from, members=members,
+                                        constants=constants)
+        self.hands = o.hands
+        self.frames = o.frames
+        self._builder = ItemBuilder(root, o)
         reader = self._builder.reader
         selected = np.zeros(len(reader), bool)
-        selected[reader.sample_indices(split, part)] = True
+        selected[reader.sample_indices(o.split, o.part)] = True
         self._selected = selected
         self.shuffle_seed = shuffle_seed
         self.epoch = 0

@@ -30,9 +30,11 @@ from htdata.errors import ArgumentError
 from htdata.format.codec import check_finite_maps
 from htdata.format.table import HANDS, JSON_MEMBER, SIZE_FIELDS, decode_member, raw_member
 from htdata.read import keys
+from htdata.read.itemoptions import ItemOptions
 from htdata.read.keys import HAND_IDS
 from htdata.read.rawstream import RawStream, episode_stream
-from htdata.read.torchdata import HAND_NAMES, _check_hands, _ItemBuilder, _ItemDataset
+from htdata.read.torchdata import HAND_NAMES, _ItemDataset
+from htdata.read.torchitems import ItemBuilder
 
 KEEP_STREAMS = 2
 
@@ -54,8 +56,11 @@ class GloveRateWindowDataset(_ItemDataset):
         if window < 1:
             raise ArgumentError(f"window must be >= 1, got {window}")
         self.window = window
-        self.hands = _check_hands(hands)
-        self._builder = _ItemBuilder(root, rgb_float=False, version=version, maps_from="raw")
+        # the torch datasets' options: maps always rendered from the raw rows, never an RGB frame
+        self.options = ItemOptions(split=split, part=part, hands=hands, version=version, maps_from="raw",
+                                   members=("tactile",))
+        self.hands = self.options.hands
+        self._builder = ItemBuilder(root, self.options)
         reader = self._builder.reader
         items = []   # (sample index, hand id, position of the paired row in the episode stream)
         for pos in reader.episode_positions(split, part):

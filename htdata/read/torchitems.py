@@ -31,40 +31,14 @@ try:
 except ModuleNotFoundError as exc:   # the data core installs without torch
     raise ModuleNotFoundError(f"{__name__} needs torch: pip install 'htdata[torch]' (torch==2.13.0)") from exc
 
-from htdata._moved import renamed_keyword
-from htdata.errors import ArgumentError
 from htdata.format.table import CANVAS, JSON_MEMBER, MEMBER_ORDER, RGB_MEMBER, decode_member, raw_member, tactile_member
 from htdata.read import keys
+from htdata.read.itemoptions import CONSTANTS, MEMBERS, ItemOptions, check_constants, check_members  # noqa: F401
 from htdata.read.keys import HAND_IDS
-from htdata.read.rawstream import MAP_SOURCE_WORDS, MapServing, RawMapRenderer
+from htdata.read.rawstream import MapServing, RawMapRenderer
 from htdata.read.reader import DatasetReader, SampleRow
 
-MEMBERS = (keys.TACTILE, keys.RGB)     # what a dataset can be asked for
-CONSTANTS = ("item", "once")
 _RGB_POS = MEMBER_ORDER.index(RGB_MEMBER)   # in SampleRow.sizes
-
-
-def check_members(members) -> tuple[str, ...]:
-    """The members as a tuple; ValueError unless a non-empty subset of MEMBERS without repeats.
-
-    Args:
-        members: what an item is asked to carry ("tactile", "rgb").
-    """
-    members = tuple(members)
-    if not members or any(m not in MEMBERS for m in members) or len(set(members)) != len(members):
-        raise ArgumentError(f"members must be a non-empty subset of {MEMBERS}, got {members}")
-    return members
-
-
-def check_constants(constants: str) -> str:
-    """`constants`, or ValueError unless one of CONSTANTS.
-
-    Args:
-        constants: "item" (every item carries coverage, regions, ids) or "once" (an `ids` tensor).
-    """
-    if constants not in CONSTANTS:
-        raise ArgumentError(f"constants must be one of {CONSTANTS}, got {constants!r}")
-    return constants
 
 
 def _long(value: int) -> torch.Tensor:
@@ -129,21 +103,16 @@ class ItemBuilder:
 
     Args:
         root: the dataset folder or URL.
-        rgb_float: RGB as float32 in [0,1] instead of uint8.
-        version: the committed version to read (None: the current one).
-        maps_from: "best", "stored" or "raw" (htdata.read.rawstream.MapServing; old name `map_source`).
-        members: what an item carries: a subset of MEMBERS.
-        constants: "item" or "once" (module docstring).
+        options: the dataset's ItemOptions (version, rgb_float, maps_from, members, constants are read here).
     """
 
-    @renamed_keyword("map_source", "maps_from", MAP_SOURCE_WORDS)
-    def __init__(self, root, rgb_float: bool, version: int | None = None, maps_from: str = "best",
-                 members=MEMBERS, constants: str = "item"):
-        self.reader = DatasetReader(root, version=version)
-        self.rgb_float = rgb_float
-        self.members = check_members(members)
-        self.constants_mode = check_constants(constants)
-        self.serving = MapServing.choose(self.reader.manifest, maps_from, where=str(self.reader.root))
+    def __init__(self, root, options: ItemOptions):
+        self.options = options
+        self.reader = DatasetReader(root, version=options.version)
+        self.rgb_float = options.rgb_float
+        self.members = options.members
+        self.constants_mode = options.constants
+        self.serving = MapServing.choose(self.reader.manifest, options.maps_from, where=str(self.reader.root))
         self.renderer = RawMapRenderer(self.reader) if self.serving.rendered else None
         self._task_ids = {t: i for i, t in enumerate(self.reader.manifest["tasks"])}
         self._scene_ids = {s: i for i, s in enumerate(self.reader.manifest["scenes"])}

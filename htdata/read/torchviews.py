@@ -5,7 +5,8 @@
     clips = ds.torch.windows(window=3, split="main", part="train")
 
 Each method builds the dataset for the reader's own root and version and
-passes every other keyword on (see htdata/read/torchdata.py and torchglove.py).
+passes every other keyword on (see htdata/read/torchdata.py and torchglove.py);
+an `options=` object (htdata/read/itemoptions.py) gets the reader's version.
 
 Imports inside functions: torch is an optional extra (`pip install 'htdata[torch]'`),
 so the torch datasets are imported when one is asked for, never when a reader opens.
@@ -50,6 +51,15 @@ class TorchDatasets:
         self.root = root
         self.version = version
 
+    def _versioned(self, kwargs: dict) -> dict:
+        """`kwargs` reading this version: as `version=`, or inside the `options=` object when one is given."""
+        if "version" in kwargs:
+            raise TypeError(f"got multiple values for keyword argument 'version' (this view reads version "
+                            f"{self.version}: open the dataset at the version wanted)")
+        if kwargs.get("options") is not None:
+            return {**kwargs, "options": kwargs["options"].replace(version=self.version)}
+        return {**kwargs, "version": self.version}
+
     def frames(self, **kwargs):
         """TactileFrameDataset: one item per (frame, hand present).
 
@@ -61,7 +71,7 @@ class TorchDatasets:
         """
         from htdata.read.torchdata import TactileFrameDataset
 
-        return TactileFrameDataset(self.root, version=self.version, **kwargs)
+        return TactileFrameDataset(self.root, **self._versioned(kwargs))
 
     def windows(self, window: int = 3, **kwargs):
         """TactileWindowDataset: `window` consecutive frames of one episode per item.
@@ -75,7 +85,7 @@ class TorchDatasets:
         """
         from htdata.read.torchdata import TactileWindowDataset
 
-        return TactileWindowDataset(self.root, window=window, version=self.version, **kwargs)
+        return TactileWindowDataset(self.root, window=window, **self._versioned(kwargs))
 
     def stream(self, **kwargs):
         """TactileStream: frames read shard by shard (an IterableDataset for large datasets).
@@ -88,7 +98,7 @@ class TorchDatasets:
         """
         from htdata.read.torchdata import TactileStream
 
-        return TactileStream(self.root, version=self.version, **kwargs)
+        return TactileStream(self.root, **self._versioned(kwargs))
 
     def glove_windows(self, window: int = 4, **kwargs):
         """GloveRateWindowDataset: the last `window` glove rows at the glove's own rate.

@@ -46,8 +46,9 @@ import numpy as np
 
 from htdata.glove.layouts import load_layout
 from htdata.glove.normalise import Normaliser
+from htdata.glove.normalisesettings import NormaliseSettings
+from htdata.source.syncsettings import LAG_MODES, SyncConfig  # noqa: F401  (LAG_MODES: a name of this module)
 
-LAG_MODES = ("none", "estimate")
 THUMB = 32                  # grey thumbnails THUMB x THUMB
 COMPONENTS = 16             # principal components of the thumbnails used to find look-alikes
 PCA_FRAMES = 256            # frames the principal components are computed from
@@ -280,39 +281,48 @@ def _rgb_series(streams) -> tuple[np.ndarray, np.ndarray]:
     return ts[order].astype(np.int64), stack
 
 
-def estimate_episode_lag(ref, cfg, adapter, hands: list[str]) -> LagEstimate:
+def estimate_episode_lag(ref, adapter, params: dict, normalising: NormaliseSettings, sync: SyncConfig,
+                         hands: list[str]) -> LagEstimate:
     """Open the episode a second time (the ingest's own pass stays one pass) and estimate its lag.
 
-    Contact is normalised as the ingest normalises it (the pipeline's config
-    for each planned layout, `ref.layout_files`). A source that cannot be read
-    here gives a declined estimate naming why; the ingest pass reports it too.
-    """
+    Args:
+        ref: the planned episode (its layouts resolved: `ref.layout_files`).
+        adapter: the source adapter that reads it, with `params` (the pipeline's [adapter.params]).
+        normalising: the pipeline's normalisation: contact is normalised as the ingest normalises it.
+        sync: the pipeline's [sync] section (the search range `max_lag_ms`).
+        hands: the hands whose contact is compared with the video.
 
+    A source that cannot be read here gives a declined estimate naming why; the ingest pass reports it too.
+    """
     try:
-        with adapter.open(ref, cfg.adapter.params) as streams:
+        with adapter.open(ref, params) as streams:
             tactile = {}
             for h in hands:
                 layout = load_layout(ref.layout_files[h])
-                tactile[h] = _contact_series(streams, h, Normaliser(cfg.normalise_for(layout), layout))
+                tactile[h] = _contact_series(streams, h, Normaliser(normalising.normalise_for(layout), layout))
             t_rgb, thumbs = _rgb_series(streams)
     except Exception as exc:   # noqa: BLE001 (declined, never a failed episode: the main pass decides that)
         return LagEstimate(None, 0.0, f"could not read the episode for the estimate: {type(exc).__name__}: {exc}")
-    return estimate_lag(t_rgb, thumbs, tactile, int(round(cfg.sync.max_lag_ms * 1e6)))
+    return estimate_lag(t_rgb, thumbs, tactile, sync.max_lag_ns)
 
 
-def episode_lag(ref, cfg, adapter, hands: list[str]) -> LagDecision | None:
-    """What `[sync] lag` says for this episode: None for "none" (nothing recorded, nothing shifted)."""
-    mode = cfg.sync.lag
+def episode_lag(ref, adapter, params: dict, normalising: NormaliseSettings, sync: SyncConfig,
+                hands: list[str]) -> LagDecision | None:
+    """What `[sync] lag` says for this episode: None for "none" (nothing recorded, nothing shifted).
+
+    Args: as `estimate_episode_lag`, whose estimate is opened only for `sync.lag = "estimate"`.
+    """
+    mode = sync.lag
     if isinstance(mode, str) and mode == "none":
         return None
     if not isinstance(mode, str):
         return LagDecision("fixed", int(round(float(mode) * 1e6)), True,
                            f"fixed by the pipeline ([sync] lag = {float(mode):g} ms)")
-    est = estimate_episode_lag(ref, cfg, adapter, hands)
+    est = estimate_episode_lag(ref, adapter, params, normalising, sync, hands)
     if est.why:
         return LagDecision("estimate", 0, False, f"not applied: {est.why}", est)
-    if est.confidence < cfg.sync.min_confidence:
+    if est.confidence < sync.min_confidence:
         return LagDecision("estimate", 0, False, f"not applied: confidence {est.confidence:.2f} below "
-                           f"min_confidence {cfg.sync.min_confidence:g}", est)
+                           f"min_confidence {sync.min_confidence:g}", est)
     return LagDecision("estimate", int(est.lag_ns), True,
-                       f"applied: confidence {est.confidence:.2f} >= min_confidence {cfg.sync.min_confidence:g}", est)
+                       f"applied: confidence {est.confidence:.2f} >= min_confidence {sync.min_confidence:g}", est)

@@ -1,6 +1,6 @@
 """The store: a dataset's files on disk, its versions and their lifecycle primitives.
 
-    fsutil.py    atomic writes, checksums
+    fsutil.py    the sha256 of a stored file, local or at a URL (the atomic writes are htdata/fileio.py)
     storage.py   local paths and fsspec URLs behind one small API (readers)
     confine.py   the paths a dataset's records name stay inside its root
     lock.py      the one-writer lock
@@ -9,6 +9,7 @@
     manifest.py  load / parse dataset.json, episodes.jsonl, index.npy; layout files of a version
     parts.py     a version as parts (one per work unit) and their assembly into one index
     splitfiles.py split documents of a version: read, count, carry to a child version
+    splitrule.py  the split rule: which part each episode goes to, and the split document it makes
     snapshot.py  open a version as a snapshot; commit parts as a new version
     episodeids.py episodes named by ids or globs; the one did-you-mean error of a miss
     history.py   log and diff of versions

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata.errors import DatasetError
+from htdata.fileio import write_bytes_atomic
 from htdata.format.codec import encode_png_u8
 from htdata.format.shardio import SampleRecord, ShardRecord
 from htdata.format.table import (
@@ -41,7 +42,6 @@ from htdata.format.table import (
 from htdata.resources import validate_json
 from htdata.store import storage
 from htdata.store.confine import check_manifest_paths, inside
-from htdata.store.fsutil import write_bytes_atomic
 from htdata.store.versions import DatasetStateError, manifest_path
 
 

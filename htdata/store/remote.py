@@ -48,6 +48,7 @@ import numpy as np
 
 from htdata.errors import ArgumentError, DatasetError
 from htdata.faults import crash_point
+from htdata.fileio import atomic_open, sha256_stream
 from htdata.format.table import INDEX_FILE, MANIFEST_FILE
 from htdata.store import storage
 from htdata.store.destination import (
@@ -61,7 +62,7 @@ from htdata.store.destination import (
     read_state,
     refuse_overlap,
 )
-from htdata.store.fsutil import atomic_open, sha256_file, sha256_stream
+from htdata.store.fsutil import sha256_file
 from htdata.store.lock import WriterLock
 from htdata.store.manifest import load_index_file
 from htdata.store.publishplan import PinnedDataset, pin_dataset

@@ -18,8 +18,8 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from htdata.fileio import write_bytes_atomic
 from htdata.format.table import MANIFEST_FILE
-from htdata.store.fsutil import write_bytes_atomic
 from htdata.store.lock import WriterLock
 from htdata.store.versions import _version_files, version_manifest_file
 

@@ -44,9 +44,9 @@ from pathlib import Path
 
 from htdata.errors import ArgumentError, HtdataError
 from htdata.faults import crash_point
+from htdata.fileio import write_bytes_atomic
 from htdata.format.table import EPISODES_FILE, INDEX_FILE, MANIFEST_FILE, SPLITS_DIR
 from htdata.store import storage
-from htdata.store.fsutil import write_bytes_atomic
 from htdata.store.gcrecord import collected_error
 
 VERSIONS_DIR = "versions"

@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from htdata.errors import ArgumentError
+from htdata.fileio import write_json_atomic
 from htdata.glove.layouts import load_layout
 from htdata.source.adapters import ADAPTERS
-from htdata.store.fsutil import write_json_atomic
 from htdata.synthetic.formats import (
     NativeHand,
     NativeRecording,

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections import Counter
 from pathlib import Path
 
-from htdata.store.fsutil import write_json_atomic
+from htdata.fileio import write_json_atomic
 
 CHECKS = ("structure", "content", "time", "sensors", "splits")
 TEXT_FAILURES = 10     # failures / warnings per check shown by format_report (the JSON has them all)

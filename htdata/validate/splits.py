@@ -13,12 +13,12 @@ import hashlib
 import json
 from collections import defaultdict
 
-from htdata.curate.splitrule import test_counts
 from htdata.errors import ArgumentError
 from htdata.format.shardio import sample_key
 from htdata.format.table import HANDS, MANIFEST_FILE, RGB_MEMBER, raw_member, tactile_member
 from htdata.resources import validate_json
 from htdata.store.splitfiles import PARTS, list_splits, split_path
+from htdata.store.splitrule import test_counts
 from htdata.validate.report import Check
 from htdata.validate.structure import Loaded
 
@@ -167,7 +167,7 @@ def _check_counts(doc: dict, name: str, by_id: dict[str, dict], check: Check) ->
 def _check_ratio_against_rule(doc: dict, name: str, n: dict[str, int], got: float, check: Check) -> None:
     """Warn when test is far from what the split's rule gives for its tasks, not from the bare ratio asked.
 
-    The rule (htdata/curate/splitrule.py) keeps a test episode in every task of 2+ episodes, so on a
+    The rule (htdata/store/splitrule.py) keeps a test episode in every task of 2+ episodes, so on a
     few small tasks it holds more than test_ratio on purpose; that is no reason to warn.
     """
     asked = doc["params"]["test_ratio"]

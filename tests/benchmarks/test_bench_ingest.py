@@ -55,3 +55,12 @@ def test_revision_rows_run_both_trees_side_by_side(tmp_path):
         assert row["runs"]["base"][0]["frames"] == row["runs"]["current"][0]["frames"]
     assert (tmp_path / "work" / "revision_base" / "htdata" / "cli.py").is_file()
     assert revision_rows(tmp_path / "w2", root, tmp_path / "corpus", base="0" * 40)["skipped"].startswith("commit")
+
+
+def test_the_revision_rows_default_to_every_source_of_the_sample_corpus():
+    import inspect
+
+    from htdata.benchmarks.revisions import revision_rows
+    from htdata.synthetic.corpus import FORMATS
+
+    assert inspect.signature(revision_rows).parameters["adapters"].default == FORMATS

@@ -13,7 +13,8 @@ import pytest
 
 from htdata.errors import ConfigError, DatasetError
 from htdata.format.mapstorage import MapStorage
-from htdata.ingest.pipeline import TactileConfig, load_pipeline
+from htdata.format.tactilesettings import TactileConfig
+from htdata.ingest.pipeline import load_pipeline
 from htdata.ingest.plan import Source, plan_units
 from htdata.resources import SCHEMAS_DIR
 

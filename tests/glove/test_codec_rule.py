@@ -24,6 +24,7 @@ from htdata.glove.codecrule import (
     pick_codec,
     resolve_codec,
 )
+from htdata.glove.codecsettings import CodecConfig
 from htdata.glove.layouts import load_layout
 from htdata.glove.normalise import NormaliseConfig
 from htdata.glove.rasterise import Rasteriser
@@ -134,3 +135,17 @@ def test_pipeline_codec_setting_resolves_and_survives_the_worker_round_trip():
     assert block["tactile"]["pixel_type"] == "float" and block["choice"]["codec"] == "exr_float_zip"
     with pytest.raises(ValueError, match="tactile"):
         PipelineConfig.from_dict({**cfg.to_dict(), "codec": {"tactile": "exr_double"}}, where="p")
+
+
+def test_the_codec_section_resolves_and_carries_its_choice_without_a_pipeline():
+    section = CodecConfig.from_dict({"tactile": "auto"})
+    with pytest.raises(ValueError, match="p.toml: .*not resolved"):
+        section.resolved("p.toml")
+    choice = section.resolve("zip", [glove_step(load_layout(OT))])     # OpenTouch counts: half loses levels
+    assert (choice.pixel_type, choice.chosen_by) == ("float", "rule")
+    done = section.with_choice(choice, "zip", "p.toml")
+    assert done.resolved("p.toml") == choice and section.choice is None          # a copy; the setting is untouched
+    assert CodecConfig.from_dict(done.to_dict()) == done and section.to_dict() == {"tactile": "auto"}
+    with pytest.raises(ValueError, match="does not match \\[tactile\\] compression 'piz'"):
+        section.with_choice(choice, "piz", "p.toml")
+    assert CodecConfig("exr_half").resolve("zip", [glove_step(load_layout(OT))]).chosen_by == "pipeline"

@@ -154,3 +154,22 @@ def test_noise_floor_is_estimated_from_the_whole_episode_rest_not_one_window():
     quiet = raw[quietest_span(raw / 1023, n.live_mask, n.cfg.rest_seconds, 30.0)] / 1023
     one_window = 3 * 1.4826 * np.median(np.abs(quiet - np.median(quiet, axis=0)), axis=0)
     assert (n.floor > one_window + 1.5 / 1023).mean() > 0.5
+
+
+@pytest.mark.parametrize("noise_k, noise_floor, floored", [(0.0, 0.0, False), (3.0, 0.0, True), (0.0, 0.05, True)])
+def test_one_noise_floor_test_for_the_normaliser_and_the_contact_rule(noise_k, noise_floor, floored):
+    """`has_noise_floor` decides it for the Normaliser (subtract the floor, never below one step) and the
+    contact rule read from a manifest entry alike."""
+    from htdata.glove.contact import rule_for
+    from htdata.glove.normalise import has_noise_floor
+
+    cfg = NormaliseConfig(max_value=10.0, baseline="rest_window" if noise_k else "none", noise_k=noise_k,
+                          noise_floor=noise_floor).validate()
+    assert has_noise_floor(noise_k, noise_floor) is cfg.has_noise_floor is floored
+    lay = SimpleNamespace(layout_id="test_4x4", live_mask=np.ones((4, 4), bool), value={"step": 1, "max": 10})
+    n = Normaliser(cfg, lay)
+    assert n.min_floor == pytest.approx(0.1 if floored else 0.0)          # one step (1 / max_value) when floored
+    if cfg.baseline == "none":
+        v, _ = n.apply(np.full((1, 4, 4), 5.0, np.float32))
+        assert v[0, 1, 1] == pytest.approx(0.4 if floored else 0.5)          # 0.5 - max(0.05, one step)
+    assert rule_for(cfg.to_dict(), lay.value, 16).basis == ("calibrated" if floored else "threshold")

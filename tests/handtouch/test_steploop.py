@@ -84,3 +84,22 @@ def test_heartbeat_names_the_phase_and_the_latest_progress():
     assert any(line.startswith("smoke: train_vit ") and "stage 1 step 3/10" in line and "samples/s" in line
                and "ETA" in line for line in lines)
     assert lines[-1].startswith("smoke: eval_handtouch-vit ") and "step" not in lines[-1]
+
+
+def test_the_gpu_check_ingests_every_source_of_the_sample_corpus(tmp_path, monkeypatch):
+    """Its formats are the corpus's list, not a copy of it (htdata.synthetic.corpus.FORMATS)."""
+    from htdata.synthetic.corpus import FORMATS
+
+    assert gpucheck.sample_formats() == FORMATS
+    started = []
+
+    class Done:
+        def __init__(self, argv, **kw):
+            started.append(argv[argv.index("--formats") + 1])
+
+        def wait(self):
+            return 0
+
+    monkeypatch.setattr(gpucheck.subprocess, "Popen", Done)
+    raws = gpucheck._sample_formats(tmp_path, "tiny")
+    assert tuple(started) == tuple(raws) == FORMATS and raws[FORMATS[0]] == tmp_path / f"raw_{FORMATS[0]}" / FORMATS[0]

@@ -178,3 +178,29 @@ def test_a_partial_normalise_table_keeps_the_layout_units():
     n = cfg.normalise_for(load_layout("opentouch_right_16x16"))
     assert (n.convention, n.max_value, n.noise_floor) == ("inverted", 3072.0, 0.01)
     assert cfg.to_dict()["normalise"]["opentouch_right_16x16"] == {"noise_floor": 0.01}
+
+
+@pytest.mark.parametrize("name", ["opentouch", "touchanything", "native"])
+def test_the_pipeline_holds_its_sections_and_writes_what_they_write(name):
+    """[sync], [rgb], [tactile], [codec] parse and write themselves (beside the code that reads them);
+    the pipeline's dict is theirs, so manifests and unit fingerprints stay what they were."""
+    from htdata.format.tactilesettings import TactileConfig
+    from htdata.glove.codecsettings import CodecConfig
+    from htdata.source.rgbsettings import RgbConfig
+    from htdata.source.syncsettings import SyncConfig
+
+    cfg = load_pipeline(name)
+    d = cfg.to_dict()
+    for key, section in (("sync", SyncConfig), ("rgb", RgbConfig), ("codec", CodecConfig)):
+        assert isinstance(getattr(cfg, key), section) and d[key] == getattr(cfg, key).to_dict()
+        assert section.from_dict(d[key]) == getattr(cfg, key)
+    assert isinstance(cfg.tactile, TactileConfig) and d["tactile"] == cfg.tactile.to_dict()
+    assert TactileConfig.from_dict(d["tactile"], "p") == cfg.tactile
+    assert set(d["sync"]) == {"max_skew_ms", "policy"} and d["codec"] == {"tactile": "auto"}   # defaults left out
+    assert d["rgb"] == {"size": 224, "quality": 95, "crop": "center", "interpolation": "area", "keep_unpaired": True}
+
+
+def test_toml_integers_in_the_sync_section_become_floats(tmp_path):
+    cfg = load_pipeline(write(tmp_path, MINIMAL + "[sync]\nmax_skew_ms = 12\nlag = 40\nmax_lag_ms = 300\n"))
+    assert cfg.to_dict()["sync"] == {"max_skew_ms": 12.0, "policy": "nearest", "lag": 40.0, "max_lag_ms": 300.0}
+    assert all(isinstance(v, float) for k, v in cfg.to_dict()["sync"].items() if k != "policy")

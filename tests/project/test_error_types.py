@@ -16,7 +16,6 @@ from htdata import errors
 from htdata.commands.version_arg import parse_version
 from htdata.curate.edit import NoSuchEpisode
 from htdata.curate.merge import MergeConflict
-from htdata.curate.splitrule import SplitError
 from htdata.errors import ArgumentError, ConfigError, DatasetError, HtdataError, RecordMismatch
 from htdata.format.table import MEMBER_ORDER, decode_member
 from htdata.ingest.pipeline import load_pipeline
@@ -24,6 +23,7 @@ from htdata.inspect.preview import render_contact_sheet
 from htdata.resources import PIPELINES_DIR
 from htdata.settings import parse_setting
 from htdata.store.manifest import IndexDtypeError, parse_manifest
+from htdata.store.splitrule import SplitError
 from tests.factories import PREVIEW_EPISODES, ingest_cli, write_synthetic_dataset
 
 

@@ -117,7 +117,8 @@ def test_no_import_cycle_at_any_level():
 # the layers below it. The root modules are placed one by one. Packages sharing a floor are
 # siblings: neither imports the other (the two writers of new versions, over what they share).
 LAYERS = (
-    ("htdata", "htdata._moved", "htdata.errors", "htdata.faults", "htdata.resources", "htdata.settings"),
+    ("htdata", "htdata._moved", "htdata.errors", "htdata.faults", "htdata.fileio", "htdata.resources",
+     "htdata.settings"),
     ("htdata.format",),
     ("htdata.glove",),
     ("htdata.source",),
@@ -215,6 +216,16 @@ def test_the_writers_layer_and_the_two_writers_are_checked():
                                          "htdata.write.repack -> htdata.curate.edit"]
 
 
+def test_nothing_below_the_writers_names_the_ingest_pipeline():
+    """Code below ingest takes the pipeline's sections (source/syncsettings.py, source/rgbsettings.py,
+    format/tactilesettings.py, glove/codecsettings.py, glove/normalisesettings.py), never ingest's
+    PipelineConfig by duck typing: an attribute access the import graph above cannot see."""
+    floor = layer_of("htdata.ingest")
+    offenders = [m for m in ALL if m.startswith("htdata.") and layer_of(m) < floor
+                 and "PipelineConfig" in ALL[m].read_text()]
+    assert not offenders, f"modules below ingest naming its PipelineConfig (take its section instead): {offenders}"
+
+
 def test_function_level_imports_of_own_modules_say_why():
     offenders = []
     for m in ALL:
@@ -259,10 +270,12 @@ TEST_DIRS_BESIDE_PACKAGES = {"project", "factories", "handtouch"}
 
 
 def test_tests_mirror_the_packages_and_share_builders_only_through_factories():
-    """tests/<package>/ per htdata package (docs/DESIGN.md "Tests"); no test imports another test module."""
+    """tests/<package>/ for each htdata package and only for them (docs/DESIGN.md "Tests"); no test imports
+    another test module."""
     packages = {p.name for p in (ROOT / "htdata").iterdir() if (p / "__init__.py").is_file()}
     dirs = {p.name for p in TEST_ROOT.iterdir() if p.is_dir() and (p / "__init__.py").is_file()}
     assert dirs - packages - TEST_DIRS_BESIDE_PACKAGES == set(), "test folders that mirror no package"
+    assert packages - dirs == set(), "packages without their tests/<package>/ folder"
     assert not list(TEST_ROOT.glob("test_*.py")), "tests at the top of tests/: put them in tests/<package>/"
     offenders = []
     for path in sorted(TEST_ROOT.rglob("test_*.py")):

@@ -15,8 +15,8 @@ def _version(text: str) -> tuple[int, ...]:
 
 
 def test_the_shim_is_removed_by_the_version_it_promised():
-    # Fails on the release that reaches REMOVED_IN: delete htdata/_moved.py, the two package
-    # __getattr__ hand-offs and this test, as the deprecation warnings announced.
+    # Fails on the release that reaches REMOVED_IN: delete htdata/_moved.py, the `__getattr__`
+    # hand-offs of the modules in its MOVED_NAMES and this test, as the deprecation warnings announced.
     assert _version(htdata.__version__) < _moved.REMOVED_IN, (
         f"htdata {htdata.__version__} reached {_moved.REMOVED_IN}: remove the deprecated names")
 
@@ -58,7 +58,8 @@ def test_a_name_renamed_as_it_moved_warns_with_its_new_name():
 @pytest.mark.parametrize("old, new", [("htdata.pipeline", "htdata.ingest.pipeline"),
                                       ("htdata.curate.repack", "htdata.write.repack"),
                                       ("htdata.sample.corpus", "htdata.synthetic.corpus"),
-                                      ("htdata.repack", "htdata.write.repack")])
+                                      ("htdata.repack", "htdata.write.repack"),
+                                      ("htdata.curate.splitrule", "htdata.store.splitrule")])
 def test_the_house_pass_moves_warn_and_name_the_new_module(old, new):
     sys.modules.pop(old, None)
     with warnings.catch_warnings(record=True) as caught:

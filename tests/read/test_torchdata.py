@@ -346,3 +346,42 @@ def test_the_old_map_source_keyword_warns_and_still_chooses_the_maps(dataset):
         TactileFrameDataset(dataset, map_source="auto", maps_from="best")
     with pytest.raises(ValueError, match="maps_from must be one of .*the old map_source='auto' is 'best'"):
         TactileFrameDataset(dataset, maps_from="auto")
+
+
+# ---- one options object for the three datasets (htdata/read/itemoptions.py) ----------------
+def test_one_options_object_selects_the_same_items_as_the_keywords(dataset):
+    from htdata.errors import ArgumentError
+    from htdata.read.itemoptions import ItemOptions
+
+    opts = ItemOptions(split="main", part="val", hands=["right"], members=("tactile",), rgb_float=True)
+    assert opts.hands == ("right",) and opts.replace(part="train").part == "train"
+    keywords = dict(split="main", part="val", hands=("right",), members=("tactile",), rgb_float=True)
+    frames, by_kw = TactileFrameDataset(dataset, options=opts), TactileFrameDataset(dataset, **keywords)
+    assert np.array_equal(frames.items, by_kw.items) and frames.options == by_kw.options == opts
+    assert torch.equal(frames[0]["tactile"], by_kw[0]["tactile"]) and "rgb" not in frames[0]
+    windows = TactileWindowDataset(dataset, window=2, options=opts)
+    assert np.array_equal(windows.items, TactileWindowDataset(dataset, window=2, **keywords).items)
+    stream = [(int(x["index"]), int(x["hand"])) for x in TactileStream(dataset, options=opts)]
+    assert stream == [tuple(r) for r in frames.items.tolist()]
+    with pytest.raises(ArgumentError, match="not both .*also given: part"):
+        TactileFrameDataset(dataset, part="train", options=opts)
+    with pytest.raises(ArgumentError, match="options.constants must be 'item'"):
+        TactileWindowDataset(dataset, window=2, options=opts.replace(constants="once"))
+    with pytest.raises(ArgumentError, match="hands must be"):
+        opts.replace(hands=("middle",))
+    with pytest.raises(ArgumentError, match="frames must be"):
+        ItemOptions(frames="all")
+
+
+def test_the_torch_view_puts_its_version_into_an_options_object(tmp_path):
+    import htdata
+    from htdata.curate.edit import remove_episodes
+    from htdata.read.itemoptions import ItemOptions
+
+    root = write_synthetic_dataset(tmp_path / "ds", MIXED_HANDS_EPISODES, seed=SEED, coverages=coverages())
+    remove_episodes(root, ["ep_b"], dry_run=False, command="rm")
+    old = htdata.open(root, version=1).torch
+    assert len(old.frames(options=ItemOptions(hands=("left",)))) == 4 + 1       # ep_b's left hand is in v1
+    assert old.frames(options=ItemOptions()).reader.version == 1 and len(old.frames()) == 5 + 8 + 1
+    with pytest.raises(TypeError, match="version"):
+        old.frames(version=2)

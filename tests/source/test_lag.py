@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 
 from htdata.benchmarks.lag import planned_episode, write_shifted_native
+from htdata.glove.normalisesettings import NormaliseSettings
 from htdata.source.lag import THUMB, LagDecision, episode_lag, estimate_episode_lag, estimate_lag
+from htdata.source.syncsettings import SyncConfig
 from htdata.store.manifest import load_episodes
 from tests.factories import ingest_cli
 
@@ -19,11 +21,20 @@ FRAME_MS = 1000 / 30
 IMAGE = (160, 160)
 
 
+def _decide(ref, cfg, adapter, hands):
+    """episode_lag as the ingest calls it: the pipeline's sections, never the pipeline (htdata/ingest/episode.py)."""
+    return episode_lag(ref, adapter, cfg.adapter.params, cfg.normalise_settings(), cfg.sync, hands)
+
+
+def _estimate_with(ref, cfg, adapter, hands):
+    return estimate_episode_lag(ref, adapter, cfg.adapter.params, cfg.normalise_settings(), cfg.sync, hands)
+
+
 def _estimate(folder, **overrides):
     cfg, adapter, ref = planned_episode(folder)
     settings = ['sync.lag="estimate"'] + [f"sync.{k}={v}" for k, v in overrides.items()]
     cfg = cfg.with_overrides(settings)
-    return cfg, adapter, ref, estimate_episode_lag(ref, cfg, adapter, list(ref.hands))
+    return cfg, adapter, ref, _estimate_with(ref, cfg, adapter, list(ref.hands))
 
 
 @pytest.mark.parametrize("lag_ms", [-200.0, -50.0, 100.0])
@@ -32,7 +43,7 @@ def test_known_lag_recovered_within_one_frame(tmp_path, lag_ms):
     cfg, adapter, ref, est = _estimate(folder)
     assert est.why == "" and est.confidence >= cfg.sync.min_confidence
     assert abs(est.lag_ns / 1e6 - lag_ms) <= FRAME_MS
-    decision = episode_lag(ref, cfg, adapter, list(ref.hands))
+    decision = _decide(ref, cfg, adapter, list(ref.hands))
     assert decision.applied and decision.shift_ns == est.lag_ns
     assert decision.to_dict()["applied"] is True and decision.to_dict()["lag_ms"] == pytest.approx(est.lag_ns / 1e6)
 
@@ -48,7 +59,7 @@ def test_glove_without_contact_changes_declines(tmp_path):
     folder = write_shifted_native(tmp_path / "rec", "pinch_pick", 3, 90, 100.0, touching=False, image=IMAGE)
     cfg, adapter, ref, est = _estimate(folder)
     assert est.lag_ns is None and est.confidence == 0.0 and est.why.startswith("no contact changes")
-    decision = episode_lag(ref, cfg, adapter, list(ref.hands))
+    decision = _decide(ref, cfg, adapter, list(ref.hands))
     assert not decision.applied and decision.shift_ns == 0 and "no contact changes" in decision.reason
 
 
@@ -83,7 +94,7 @@ def test_best_lag_beyond_the_searched_range_is_not_applied(tmp_path):
     folder = write_shifted_native(tmp_path / "rec", "pinch_pick", 3, 90, -200.0, image=IMAGE)
     cfg, adapter, ref, est = _estimate(folder, max_lag_ms=100)
     assert est.confidence == 0.0 and "edge of the searched range" in est.why
-    assert not episode_lag(ref, cfg, adapter, list(ref.hands)).applied
+    assert not _decide(ref, cfg, adapter, list(ref.hands)).applied
 
 
 def test_duplicated_and_unordered_timestamps(tmp_path):
@@ -106,15 +117,15 @@ def test_unreadable_episode_declines_naming_why(tmp_path):
     folder = write_shifted_native(tmp_path / "rec", "pinch_pick", 3, 40, 0.0, image=IMAGE)
     cfg, adapter, ref = planned_episode(folder)
     (folder / "tactile_right.npz").write_bytes(b"not an npz")
-    est = estimate_episode_lag(ref, cfg.with_overrides(['sync.lag="estimate"']), adapter, ["right"])
+    est = _estimate_with(ref, cfg.with_overrides(['sync.lag="estimate"']), adapter, ["right"])
     assert est.lag_ns is None and est.why.startswith("could not read the episode")
 
 
 def test_fixed_lag_and_none(tmp_path):
     folder = write_shifted_native(tmp_path / "rec", "pinch_pick", 3, 40, 0.0, image=IMAGE)
     cfg, adapter, ref = planned_episode(folder)
-    assert episode_lag(ref, cfg, adapter, ["right"]) is None          # default "none": nothing at all
-    fixed = episode_lag(ref, cfg.with_overrides(["sync.lag=-12.5"]), adapter, ["right"])
+    assert _decide(ref, cfg, adapter, ["right"]) is None          # default "none": nothing at all
+    fixed = _decide(ref, cfg.with_overrides(["sync.lag=-12.5"]), adapter, ["right"])
     assert fixed == LagDecision("fixed", -12_500_000, True, fixed.reason) and "fixed" in fixed.reason
 
 
@@ -204,3 +215,14 @@ def test_look_alikes_match_brute_force_within_the_time_window():
         allowed = np.flatnonzero((gap >= 1.0) & (gap <= SEARCH_S))
         d = ((feats[allowed] - feats[i]) ** 2).sum(axis=1)
         assert set(nb[i]) == set(allowed[np.argsort(d)[:NEIGHBOURS]])
+
+
+def test_the_lag_needs_only_the_sync_section_and_the_normalisation(tmp_path):
+    # No pipeline at all: what the source layer reads is its own sections (a fixed lag opens nothing).
+    folder = write_shifted_native(tmp_path / "rec", "pinch_pick", 3, 40, 0.0, image=IMAGE)
+    _, adapter, ref = planned_episode(folder)
+    plain = NormaliseSettings(name="plain")
+    assert episode_lag(ref, adapter, {}, plain, SyncConfig(), ["right"]) is None
+    fixed = episode_lag(ref, adapter, {}, plain, SyncConfig(lag=7.5), ["right"])
+    assert (fixed.mode, fixed.shift_ns, fixed.applied) == ("fixed", 7_500_000, True)
+    assert SyncConfig(max_lag_ms=100.0).max_lag_ns == 100_000_000 and SyncConfig(max_skew_ms=0.5).max_skew_ns == 500_000

@@ -1,4 +1,9 @@
-"""The split rule: which part each episode goes to (the rule itself is documented in split.py)."""
+"""The split rule: which part each episode goes to, and the split document it makes.
+
+htdata/curate/split.py documents the rule and `htdata split` commits its documents; `htdata validate`
+(htdata/validate/splits.py) and HandTouch's task transfer apply it too, so it lives in the store,
+below every writer, and reading it imports none.
+"""
 
 from __future__ import annotations
 

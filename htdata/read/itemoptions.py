@@ -1,0 +1,118 @@
+"""What the torch datasets share: which samples make items, from which version, and what an item carries.
+
+`TactileFrameDataset`, `TactileWindowDataset` and `TactileStream` (htdata/read/torchdata.py) take the
+same keywords (split, part, hands, rgb_float, version, frames, maps_from, members, constants);
+`ItemOptions` holds them, checked once, and the item builder (htdata/read/torchitems.py) reads only it.
+The keywords keep working; `options=` hands one object to several datasets instead:
+
+    opts = ItemOptions(split="main", part="train", members=("tactile",))
+    frames = TactileFrameDataset(root, options=opts)
+    windows = TactileWindowDataset(root, window=3, options=opts)
+
+No torch here: an options object can be built (and checked) where torch is not installed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+from htdata.errors import ArgumentError
+from htdata.format.table import HANDS
+from htdata.read import keys
+
+FRAME_KINDS = ("paired", "tactile")
+MEMBERS = (keys.TACTILE, keys.RGB)     # what a dataset can be asked for
+CONSTANTS = ("item", "once")
+
+
+def check_hands(hands) -> tuple[str, ...]:
+    """The hands as a tuple; ArgumentError unless a non-empty subset of ("left", "right") without repeats."""
+    hands = tuple(hands)
+    if not hands or any(h not in keys.HAND_IDS for h in hands) or len(set(hands)) != len(hands):
+        raise ArgumentError(f"hands must be a non-empty subset of ('left', 'right'), got {hands}")
+    return hands
+
+
+def check_frames(frames: str) -> str:
+    """`frames`, or ArgumentError unless one of FRAME_KINDS."""
+    if frames not in FRAME_KINDS:
+        raise ArgumentError(f"frames must be one of {FRAME_KINDS}, got {frames!r}")
+    return frames
+
+
+def check_members(members) -> tuple[str, ...]:
+    """The members as a tuple; ArgumentError unless a non-empty subset of MEMBERS without repeats.
+
+    Args:
+        members: what an item is asked to carry ("tactile", "rgb").
+    """
+    members = tuple(members)
+    if not members or any(m not in MEMBERS for m in members) or len(set(members)) != len(members):
+        raise ArgumentError(f"members must be a non-empty subset of {MEMBERS}, got {members}")
+    return members
+
+
+def check_constants(constants: str) -> str:
+    """`constants`, or ArgumentError unless one of CONSTANTS.
+
+    Args:
+        constants: "item" (every item carries coverage, regions, ids) or "once" (an `ids` tensor).
+    """
+    if constants not in CONSTANTS:
+        raise ArgumentError(f"constants must be one of {CONSTANTS}, got {constants!r}")
+    return constants
+
+
+@dataclass(frozen=True)
+class ItemOptions:
+    """Args:
+        split: the split whose `part` is read (None: every sample).
+        part: the part of `split` ("train", "val", ...).
+        hands: the hands that make items ("left", "right").
+        rgb_float: RGB as float32 in [0,1] instead of uint8.
+        version: the committed version to read (None: the current one).
+        frames: "paired" (samples with the hand's map and an RGB frame) or "tactile" (+ tactile-only).
+        maps_from: "best", "stored" or "raw": where maps come from (htdata.read.rawstream.MapServing checks it
+            against the version).
+        members: what an item carries: a subset of ("tactile", "rgb").
+        constants: "item" (coverage, regions and ids in every item) or "once" (`constants()`, `expand_batch`).
+    """
+    split: str | None = None
+    part: str | None = None
+    hands: tuple[str, ...] = HANDS
+    rgb_float: bool = False
+    version: int | None = None
+    frames: str = "paired"
+    maps_from: str = "best"
+    members: tuple[str, ...] = MEMBERS
+    constants: str = "item"
+
+    def __post_init__(self):
+        object.__setattr__(self, "hands", check_hands(self.hands))
+        object.__setattr__(self, "frames", check_frames(self.frames))
+        object.__setattr__(self, "members", check_members(self.members))
+        object.__setattr__(self, "constants", check_constants(self.constants))
+
+    def replace(self, **changes) -> "ItemOptions":
+        """A copy with `changes` (checked like a new one)."""
+        return dataclasses.replace(self, **changes)
+
+
+def item_options(options: ItemOptions | None, **keywords) -> ItemOptions:
+    """A dataset's options: `options` as given, or built from its keywords; ArgumentError for both at once.
+
+    Args:
+        options: the object passed as `options=` (None: none).
+        **keywords: the dataset's keywords that ItemOptions holds, as the call gave them (defaults included).
+    """
+    if options is None:
+        return ItemOptions(**keywords)
+    if not isinstance(options, ItemOptions):
+        raise ArgumentError(f"options must be an htdata.read.itemoptions.ItemOptions, got {type(options).__name__}")
+    defaults = ItemOptions()
+    given = sorted(k for k, v in keywords.items() if getattr(ItemOptions(**{k: v}), k) != getattr(defaults, k))
+    if given:
+        raise ArgumentError(f"pass either options= or its keywords, not both (also given: {', '.join(given)}); "
+                            f"options.replace({given[0]}=...) changes one")
+    return options
