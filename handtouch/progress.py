@@ -19,8 +19,9 @@ line also ends with the ETA of the whole run, not only of the current loop:
 The run's ETA is the current phase's rest (the longer of the loop's ETA and what the
 plan leaves of the phase) plus the later phases' expected seconds, all scaled by how
 fast this run has been so far: the ratio of measured to expected seconds over the
-finished phases the plan marks as timed (cache-dependent phases such as building data,
-which take ~0 s when reused, are not timed: they would say nothing about speed).
+finished phases the plan marks as timed, and the running one once it is over its time
+(cache-dependent phases such as building data, which take ~0 s when reused, are not
+timed: they would say nothing about speed).
 """
 
 from __future__ import annotations
@@ -81,16 +82,20 @@ class RunPlan:
     def finished(self, phase: str, seconds: float) -> None:
         self.done[phase] = self.done.get(phase, 0.0) + seconds
 
-    def speed(self) -> float:
-        """Measured / expected seconds over the finished timed phases, with SPEED_PRIOR_S on each side."""
+    def speed(self, phase: str | None = None, elapsed: float = 0.0) -> float:
+        """Measured / expected seconds over the finished timed phases, with SPEED_PRIOR_S on each side;
+        the running `phase` counts too once it has run over its expected seconds (`elapsed`)."""
         timed = [p for p in self.done if p not in self.untimed and self.expected.get(p, 0.0) > 0]
+        measured = sum(self.done[p] for p in timed) + SPEED_PRIOR_S
         expected = sum(self.expected[p] for p in timed) + SPEED_PRIOR_S
-        ratio = (sum(self.done[p] for p in timed) + SPEED_PRIOR_S) / expected
-        return min(max(ratio, SPEED_BOUNDS[0]), SPEED_BOUNDS[1])
+        planned = self.expected.get(phase, 0.0)
+        if phase not in self.untimed and phase not in self.done and 0.0 < planned < elapsed:
+            measured, expected = measured + elapsed, expected + planned
+        return min(max(measured / expected, SPEED_BOUNDS[0]), SPEED_BOUNDS[1])
 
     def remaining(self, phase: str, elapsed: float, loop_left: float | None = None) -> float:
         """Seconds left in the run: the rest of `phase` (`elapsed` s in) and every later unfinished phase."""
-        speed = self.speed()
+        speed = self.speed(phase, elapsed)
         names = list(self.expected)
         later = names[names.index(phase) + 1:] if phase in self.expected else names
         rest = max(self.expected.get(phase, 0.0) * speed - elapsed, loop_left or 0.0, 0.0)

@@ -32,6 +32,9 @@ def test_speed_rescales_the_plan_once_timed_phases_finish():
     tiny = RunPlan({"split": 1.0, "train": 100.0})
     tiny.finished("split", 3.0)                 # a 1 s phase taking 3 s barely moves the ETA
     assert tiny.speed() == pytest.approx(33.0 / 31.0)
+    # a phase running past its plan is evidence too, before it ends: 200 s into a 100 s phase
+    assert tiny.speed("train", 50.0) == tiny.speed()
+    assert tiny.speed("train", 200.0) == pytest.approx(233.0 / 131.0)
 
 
 def test_a_loop_eta_counts_the_later_loops_of_its_phase():
