@@ -55,3 +55,22 @@ def test_exit_status_of_the_smoke_and_of_the_mis_paired_control():
     assert verdict([gate, reported]) == 1
     assert verdict([gate, other], control=True) == 0                 # the control: the gate caught it
     assert verdict([{**gate, "ok": True}, other], control=True) == 1   # the gate passed on broken data
+
+
+def test_the_control_builds_its_own_data_and_the_plan_knows_what_is_cached(tmp_path, capsys):
+    import json
+
+    from handtouch.smoke import PHASE_SECONDS, parse_args, run_plan
+
+    with pytest.raises(SystemExit):
+        parse_args(["--out", str(tmp_path), "--mispaired-rgb", "--dataset", str(tmp_path / "ds")])
+    assert "--mispaired-rgb builds its own corpus" in capsys.readouterr().err
+    args = parse_args(["--out", str(tmp_path), "--mispaired-rgb"])
+    assert args.raw == tmp_path / "raw" and args.dataset == tmp_path / "dataset"
+    plan = run_plan(args)                                   # nothing there yet: the defaults
+    assert plan.expected["data_sample"] == PHASE_SECONDS["data_sample"]
+    assert plan.expected["eval_handtouch-vit"] == PHASE_SECONDS["eval"] and "train_cnn" in plan.expected
+    write_synthetic_dataset(args.dataset, SPLIT_EPISODES, seed=1)
+    (tmp_path / "results.json").write_text(json.dumps({"meta": {"seconds": {"train_vit": 300.0}}}))
+    plan = run_plan(args)                                   # the last run's seconds; the dataset is there
+    assert plan.expected["train_vit"] == 300.0 and plan.expected["data_ingest"] == 0.0
