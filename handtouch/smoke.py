@@ -182,7 +182,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--max-items", type=int, default=200, help="evaluation items per part")
     p.add_argument("--gate-frames", type=int, default=GateConfig.max_frames,
                    help="frames per part scored by the held-out gate (default %(default)s)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the sample corpus, the split, the RGB probes and the evaluation items (default 0)")
     p.add_argument("--workers", type=int, default=2, help="ingest worker processes")
     p.add_argument("--mispaired-rgb", action="store_true",
                    help="the gate's proof: build OUT/raw and OUT/dataset with every episode's video taken from "
