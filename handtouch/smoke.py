@@ -108,8 +108,9 @@ from htdata.format.table import MANIFEST_FILE
 ENCODERS = ("vit", "cnn")
 HEARTBEAT_S = 5.0     # a progress line at least this often (the issue asked for <= 10 s)
 # Expected seconds per phase for the whole-run ETA when OUT has no earlier results.json to take them
-# from: a run from nothing on this project's 2-core machine, nothing else running (docs/HANDTOUCH.md,
-# "How long it takes"); the ETA rescales them by this run's measured speed as phases finish.
+# from. Probes, ViT, CNN, evaluation and controls: the idle 2-core CI run (docs/HANDTOUCH.md, "How long
+# it takes"); data and the held-out gate: rough idle-machine guesses from the loaded runs of issue 36.
+# Only a starting point: the ETA rescales them by this run's measured speed as phases finish.
 PHASE_SECONDS = {"data_sample": 50.0, "data_ingest": 80.0, "data_split": 3.0, "split_check": 0.5,
                  "eval_prepare": 15.0, "rgb_pretrain": 45.0, "train_vit": 75.0, "train_cnn": 95.0,
                  "train_resnet18": 85.0, "eval": 15.0, "checks": 3.0, "rgb_control": 15.0, "heldout_gate": 40.0,
