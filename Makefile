@@ -5,10 +5,12 @@ PY     := $(VENV)/bin/python
 HTDATA := $(VENV)/bin/htdata
 DATA   ?= data
 SEED   ?= 0
-OOD    ?= palm_push
+# held out whole by `make split`: the smoke's held-out task (power_grasp's touch on a new object) and
+# its stress test (palm-only touch, no training twin); docs/HANDTOUCH.md "Held-out gate"
+OOD    ?= cup_grasp palm_push
 JOBS   ?= 2
 
-.PHONY: setup demo sample ingest split validate preview train-smoke compare task-transfer test lint fix install-check bench \
+.PHONY: setup demo sample ingest split validate preview train-smoke train-smoke-mispaired compare task-transfer test lint fix install-check bench \
         lerobot-check lerobot-load export-lerobot gpu-check clean
 
 setup: $(VENV)/.installed
@@ -35,7 +37,7 @@ ingest: sample
 	  $(DATA)/dataset
 
 split: ingest
-	$(HTDATA) split $(DATA)/dataset --ood-task $(OOD) --seed $(SEED) --name main --force
+	$(HTDATA) split $(DATA)/dataset $(addprefix --ood-task ,$(OOD)) --seed $(SEED) --name main --force
 
 validate: split
 	$(HTDATA) validate $(DATA)/dataset --split main --deep
@@ -46,6 +48,11 @@ preview: validate
 # Trains the three HandTouch stages + baselines on the sample data, scores HT-Bench.
 train-smoke: setup
 	$(PY) -m handtouch.smoke --out runs/smoke --raw $(DATA)/raw --dataset $(DATA)/dataset
+
+# The held-out gate's proof: the smoke on a corpus whose every video shows another episode (htdata
+# sample --mispair-rgb, built under runs/smoke_mispaired); exits 0 only if the gate FAILS there.
+train-smoke-mispaired: setup
+	$(PY) -m handtouch.smoke --out runs/smoke_mispaired --mispaired-rgb
 
 # HandTouch vs the 4 encoder baselines, 3 ablations and 3 design rows, same data / split / budget.
 compare: setup
@@ -84,10 +91,11 @@ bench: setup
 # HandTouch stage 1 (configs/full.toml, bf16) on a CUDA GPU at batch 32 / 8 workers and 128 / 16:
 # samples/s, data-wait share, GPU busy share. No `setup`: it runs on a machine that already has
 # torch (a CUDA build) and the dependencies of pyproject.toml, with the checkout on PYTHONPATH
-# (GPU_PY=python3 by default). Builds the medium sample dataset under GPU_WORK first (reused after),
+# (GPU_PY: the project's venv python when it exists, so `make gpu-check` after `make demo` finds its
+# torch; python3 otherwise). Builds the medium sample dataset under GPU_WORK first (reused after),
 # unless GPU_CHECK_ARGS="--dataset DIR". JSON: $$OUT/gpucheck.json if OUT is set.
 # Exits 2 without a GPU, 3 with a dependency missing (named).
-GPU_PY         ?= python3
+GPU_PY         ?= $(if $(wildcard $(PY)),$(PY),python3)
 GPU_WORK       ?= /tmp/ht_gpucheck
 GPU_CHECK_ARGS ?= --compile --profile 20
 gpu-check:

@@ -16,6 +16,9 @@
     distributed.py    one process or torchrun (DDP)
     progress.py       a progress line every few seconds (the smoke's heartbeat)
     smoke.py          the end-to-end smoke run (`make train-smoke`)
+    smokedata.py      the smoke's data: corpus, dataset, split (a held-out task + a stress task), leak check
+    smokechecks.py    the smoke's checks of what HandTouch learned, and its exit status
+    contact_gate.py   the held-out gate: contact timing on a frame's own RGB and on another episode's
     compare.py        the paper's comparison of encoders on HT-Bench
     rgb_pretrain.py   an RGB encoder trained on the run's data, and the misalignment control
     rgb2t_sweep.py    stage-2/3 experiments on the RGB-to-tactile track from one stage-1 checkpoint

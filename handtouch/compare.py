@@ -7,8 +7,8 @@ RGB-to-tactile, prediction; plus reconstruction) next to the all-zeros and copy-
 references, and writes OUT/compare.json and OUT/compare.md (the paper's table: one row per
 method, the tracks as columns, one table per part).
 
-Data: the smoke's (handtouch.smoke: sample -> ingest -> split `smoke` with `palm_push` as
-OOD), reused when present; `--split NAME` takes an existing split of `--dataset` as is.
+Data: the smoke's (handtouch.smokedata: sample -> ingest -> split `smoke` with `cup_grasp` and
+`palm_push` as OOD), reused when present; `--split NAME` takes an existing split of `--dataset` as is.
 RGB encoder: the smoke's pretrained aligned probe (handtouch.rgb_pretrain, cached under
 --rgb-cache, shared with the smoke), or `--rgb-encoder config` for the config's own
 `rgb_encoder` (a file with real weights, or random:SEED in tests).
@@ -32,15 +32,15 @@ from pathlib import Path
 
 import torch
 
-from handtouch import smoke
+from handtouch import smokedata
 from handtouch.bench.evaluate import evaluate
 from handtouch.bench.items import EvalConfig, prepare
 from handtouch.bench.references import CopyLastModel, ZerosModel
 from handtouch.bench.report import COLUMNS, FULL_COLUMNS, markdown_table
 from handtouch.config import load_train_config
 from handtouch.rgb_pretrain import RGBPretrainConfig, ensure_probes
-from handtouch.smoke import codebook_perplexity as perplexity  # the smoke check's own measure
-from handtouch.smoke import jsonable
+from handtouch.smoke import PhaseTimer, jsonable
+from handtouch.smokechecks import codebook_perplexity as perplexity  # the smoke check's own measure
 from handtouch.train import load_model, train
 from htdata.fileio import write_json_atomic, write_text_atomic
 
@@ -204,7 +204,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--rgb-cache", type=Path, default=Path("runs/smoke/rgb_encoder"), help="RGB probe cache")
     p.add_argument("--max-items", type=int, default=100, help="evaluation items per part")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--ood-task", default="palm_push")
+    p.add_argument("--ood-task", action="append", default=None, dest="ood_tasks", metavar="TASK",
+                   help=f"held-out task(s) of the split (default: the smoke's, {smokedata.OOD_TASK} and "
+                        f"{smokedata.STRESS_TASK})")
     args = p.parse_args(argv)
     keys = [k.strip() for k in args.rows.split(",") if k.strip()]
     unknown = sorted(set(keys) - set(ROW_KEYS))
@@ -212,28 +214,29 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.error(f"--rows: unknown {unknown}; known: {list(ROW_KEYS)}")
     args.rows = [r for r in ROWS if r.key in keys]
     args.parts = [s.strip() for s in args.parts.split(",") if s.strip()]
+    args.ood_tasks = args.ood_tasks or [smokedata.OOD_TASK, smokedata.STRESS_TASK]
     return args
 
 
 def main(argv=None) -> int:
 
     args = parse_args(argv)
-    timer = smoke.PhaseTimer()
+    timer = PhaseTimer()
     torch.manual_seed(args.seed)
     threads = load_train_config(args.config, args.set).threads
     if threads:
-        torch.set_num_threads(threads)   # evaluation under the training budget too (see smoke.main)
+        torch.set_num_threads(threads)   # evaluation under the training budget too (see handtouch.smoke)
     split = args.split
     if not split:
-        timer.run("data", smoke.ensure_raw, args.raw, args.seed)
-        timer.run("data", smoke.ensure_dataset, args.raw, args.dataset, 2)
-        timer.run("data", smoke.make_split, args.dataset, args.ood_task, args.seed)
-        split = smoke.SPLIT_NAME
-    sets = [f"data_root={smoke.toml_str(args.dataset)}", f"split={smoke.toml_str(split)}"]
+        timer.run("data", smokedata.ensure_raw, args.raw, args.seed)
+        timer.run("data", smokedata.ensure_dataset, args.raw, args.dataset, 2)
+        timer.run("data", smokedata.make_split, args.dataset, args.ood_tasks, args.seed)
+        split = smokedata.SPLIT_NAME
+    sets = [f"data_root={smokedata.toml_str(args.dataset)}", f"split={smokedata.toml_str(split)}"]
     if args.rgb_encoder == "pretrain":
         probe = timer.run("rgb_pretrain", ensure_probes, args.dataset, split, args.rgb_cache,
                           RGBPretrainConfig(seed=args.seed), pairings=("aligned",))["aligned"]
-        sets.append(f"rgb_encoder={smoke.toml_str(probe.resolve())}")
+        sets.append(f"rgb_encoder={smokedata.toml_str(probe.resolve())}")
     prepared = timer.run("eval_prepare", prepare, str(args.dataset), split, args.parts,
                          EvalConfig(max_items=args.max_items, seed=args.seed))
     doc = timer.run("train_and_score", compare, args.config, [*sets, *args.set], prepared, args.out, args.rows)

@@ -21,8 +21,10 @@ vanishes (`control_checks`). The shifted probe is reported only: in short episod
 trained model reads the frame of ITS moment is checked by re-scoring it with the frame
 mis-paired at evaluation (`paired_rgb2tactile`, `model_control_checks`).
 
-Probes are cached under OUT/rgb_encoder/KEY/PAIRING.pt, KEY hashing the dataset
-version, the train items and this config: a re-run reuses them.
+Probes are cached under OUT/rgb_encoder/KEY/PAIRING.pt, KEY hashing what the probes read (the
+version's content records, not its number, time, parent or split list: `content_record`), the
+train items and this config: a re-run reuses them, and so does a new version that changed
+nothing they read (a split of another name, a no-op edit).
 """
 
 from __future__ import annotations
@@ -50,7 +52,7 @@ from htdata.read.torchdata import TactileFrameDataset
 from .bench.items import iterate_batches, subsample
 from .bench.metrics import MapMetrics
 from .distributed import torch_threads
-from .progress import Rate
+from .progress import Rate, with_steps_after
 from .rgb_encoder import TactileGridRGB, load_rgb_encoder, to_unit_float
 from .train import lr_at
 
@@ -230,14 +232,32 @@ def save_probe(model: TactileGridRGB, path: Path, meta: dict) -> None:
     write_bytes_atomic(path, buf.getbuffer())
 
 
+# The fields of a version record that say which version it is, not what its samples hold (a new version
+# changing only these serves the same bytes; the records' content is in episodes_sha256 / index_sha256).
+VERSION_RECORD_FIELDS = ("version", "parent", "created", "change", "next_unit", "episodes_file", "index_file",
+                         "splits")
+
+
+def content_record(manifest: dict) -> dict:
+    """The manifest without its VERSION_RECORD_FIELDS: what decides the samples a reader serves."""
+    return {k: v for k, v in manifest.items() if k not in VERSION_RECORD_FIELDS}
+
+
 def cache_key(dataset_root, split: str | None, part: str, cfg: RGBPretrainConfig) -> str:
-    """Dataset version (its manifest) + the train items + this config -> 16 hex digits."""
+    """The dataset content the probes read + the train items + this config -> 16 hex digits."""
 
     items = TactileFrameDataset(str(dataset_root), split=split, part=part).items
-    doc = {"manifest": DatasetMetadata(dataset_root).manifest, "split": split, "part": part,
+    doc = {"content": content_record(DatasetMetadata(dataset_root).manifest), "split": split, "part": part,
            "items": hashlib.sha256(np.ascontiguousarray(items).tobytes()).hexdigest(),
            "config": dataclasses.asdict(cfg), "arch": ARCH}
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def probes_cached(dataset_root, split: str | None, out_dir, cfg: RGBPretrainConfig | None = None,
+                  part: str = "train", pairings=PAIRINGS) -> bool:
+    """True when ensure_probes would train nothing (every pairing's file is in its cache folder)."""
+    folder = Path(out_dir) / cache_key(dataset_root, split, part, (cfg or RGBPretrainConfig()).validate())
+    return all((folder / f"{p}.pt").is_file() for p in pairings)
 
 
 def ensure_probes(dataset_root, split: str | None, out_dir, cfg: RGBPretrainConfig | None = None,
@@ -250,9 +270,10 @@ def ensure_probes(dataset_root, split: str | None, out_dir, cfg: RGBPretrainConf
     missing = [p for p, path in paths.items() if not path.is_file()]
     if missing:
         items = load_items(dataset_root, split, part, cfg)
-        for p in missing:
+        for k, p in enumerate(missing):
             log.info("rgb pretrain: training the %s probe on %d items", p, len(items.hand))
-            save_probe(train_probe(items, p, cfg, progress), paths[p],
+            report = with_steps_after(progress, (len(missing) - k - 1) * cfg.steps)   # the probes still to train
+            save_probe(train_probe(items, p, cfg, report), paths[p],
                        {"pairing": p, "dataset": str(dataset_root), "split": split, "part": part,
                         "config": dataclasses.asdict(cfg)})
     return paths

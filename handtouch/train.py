@@ -41,6 +41,7 @@ from .checkpoint import CHECKPOINT_FORMAT, read_checkpoint, rng_state, save_chec
 from .config import WINDOW, TrainConfig, load_train_config, model_config_from_dict
 from .distributed import DistEnv, StepBatchSampler, barrier, init_distributed, shutdown, torch_threads, wrap
 from .model import HandTouch, covered, masked_mse
+from .progress import with_steps_after
 from .resources import config_file
 from .rgb_encoder import load_rgb_encoder
 from .stages import FRAMES, WINDOWS, Stage, StageLoss, build_stages
@@ -290,8 +291,10 @@ def _train(cfg: TrainConfig, data: TrainData | None, on_record: Callable[[dict],
         heldout = (heldout_batch(data.eval_frames, cfg.eval_batch_size, data.eval_source)
                    if env.is_main else None)
         summaries = {}
-        for stage in build_stages(cfg):
-            summaries[str(stage.number)] = run_stage(stage, model, cfg, data, env, out, logger, heldout, on_progress)
+        stages = build_stages(cfg)
+        for k, stage in enumerate(stages):
+            progress = with_steps_after(on_progress, sum(s.cfg.steps for s in stages[k + 1:]))   # run-wide ETA
+            summaries[str(stage.number)] = run_stage(stage, model, cfg, data, env, out, logger, heldout, progress)
         metrics = {"model": model.name, "encoder": cfg.model.encoder, "world_size": env.world_size,
                    "device": str(env.device), "rgb_encoder": dataclasses.asdict(model.rgb_encoder.info),
                    "stages": summaries, "heldout_source": data.eval_source}

@@ -7,6 +7,7 @@
     ssim.py        batched SSIM in torch (matches skimage's)
     references.py  reference predictors that learn nothing (ZerosModel, CopyLastModel)
     verdicts.py    each trained model's tracks against the reference predictors
+    timing.py      contact timing (AUROC over streams with contact), held-out F-RMSE three ways
     examples.py    the predictions figure's windows: most contact, every track's output
     report.py      results JSON, markdown tables, the predictions PNG
 """

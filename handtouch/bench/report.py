@@ -1,7 +1,7 @@
 """HT-Bench report: results JSON, markdown tables, a predictions PNG.
 
 results.md opens with the verdicts against the reference predictors (verdicts.py) and, when
-the run's meta has them, its checks and misalignment control; then three tables, one row
+the run's meta has them, its checks, held-out gate and misalignment control; then three tables, one row
 per model per part:
 - the paper's column order with F-/H- metrics over sensor-covered pixels
   (`COLUMNS`; regions f_covered / h_covered);
@@ -109,6 +109,27 @@ def control_markdown(control: dict) -> str:
     return "\n".join(rows) + "\n"
 
 
+def heldout_markdown(report: dict) -> str:
+    """The held-out gate (meta["heldout_gate"], handtouch.contact_gate): contact-timing AUROC per group
+    with its mis-paired control, then F-RMSE per frame / pooled / on contact frames against the better
+    of all zeros and the mis-paired model."""
+    rows = ["| Frames of | AUROC | mis-paired RGB | gap | streams with contact (idle) | frames (contact) | "
+            "required |", "|---|---:|---:|---:|---:|---:|---|"]
+    for g in report.values():
+        t = g["timing"]
+        rows.append(f"| {g['where']} | {_fmt_any(t['auroc'])} | {_fmt_any(t['mispaired_auroc'])} | "
+                    f"{_fmt_any(t['gap'])} | {t['streams']} ({t['idle_streams']}) | {t['frames']} "
+                    f"({t['contact_frames']}) | {'yes' if g['required'] else 'reported'} |")
+    rmse = ["| Frames of | F-RMSE | model | all zeros | mis-paired RGB | frames | verdict |",
+            "|---|---|---:|---:|---:|---:|---|"]
+    for g in report.values():
+        for measure, r in g["rmse"].items():
+            word = "ok" if r["ok"] else "not yet"
+            rmse.append(f"| {g['where']} | {measure} | {_fmt_any(r['aligned'])} | {_fmt_any(r['zeros'])} | "
+                        f"{_fmt_any(r['mispaired'])} | {r['frames']} | {word} (vs {r['against'] or '–'}) |")
+    return "\n".join(rows) + "\n\n" + "\n".join(rmse) + "\n"
+
+
 def results_markdown(results: dict[str, dict[str, dict]], meta: dict | None = None) -> str:
     """The results.md document: verdicts (and the run's checks / misalignment control when
     meta has them), covered-pixel table, whole-canvas table, retrieval chance table."""
@@ -123,6 +144,14 @@ def results_markdown(results: dict[str, dict[str, dict]], meta: dict | None = No
             verdict_table(results)]
     if meta.get("checks"):
         head += ["## Checks of this run\n", checks_markdown(meta["checks"])]
+    if meta.get("heldout_gate"):
+        head += ["## Held-out gate: contact timing\n",
+                 "AUROC of the model's predicted contact mass (RGB-to-tactile, mean over covered pixels) for "
+                 "\"this frame has contact\" over the frames of the (episode, hand) streams with contact; the "
+                 "control feeds the same model the RGB of a frame of another episode. Then F-RMSE over covered "
+                 "pixels per frame, pooled and on contact frames (reported, not required), against the better "
+                 "of all zeros and the mis-paired model (handtouch/bench/timing.py).\n",
+                 heldout_markdown(meta["heldout_gate"])]
     if meta.get("misalignment_control"):
         head += ["## Misalignment control\n",
                  "RGB probes (handtouch/rgb_pretrain.py) trained and scored with RGB aligned, shifted by >= "

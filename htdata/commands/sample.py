@@ -33,9 +33,13 @@ Same --seed -> identical tactile arrays and JPEG bytes. OUT/.complete (written l
 the seed, scale and formats of a finished corpus; --reuse keeps such a corpus and
 rewrites anything else (a corpus cut short, or one of another seed).
 
+With --mispair-rgb, the same corpus with every episode's video taken from another episode:
+a broken control (make train-smoke-mispaired), marked as such in OUT/.complete.
+
 Examples:
   htdata sample data/raw --scale small
   htdata sample data/raw --seed 1 --reuse
+  htdata sample runs/smoke_mispaired/raw --mispair-rgb
 """
 
 
@@ -63,13 +67,18 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--raw-glove", action="store_true",
                         help="write only OUT/rawglove: the realistic raw-count glove (5 glove-only clips, "
                              "1530 frames, ~6 MB) with its layouts and ground truth")
+    parser.add_argument("--mispair-rgb", action="store_true",
+                        help="a broken control corpus: every episode's video shows another episode (of another "
+                             "task, each frame at a random moment of it), so RGB and touch are mis-paired as a "
+                             "pipeline that mixed up episodes would store them; for proving a trainer's checks "
+                             "catch that (make train-smoke-mispaired). Never for training")
     parser.add_argument("--dry-run", action="store_true", help="print the planned episodes and exit")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:
     cfg = CorpusConfig(out=args.out, seed=args.seed, scale=args.scale, formats=tuple(args.formats),
-                       overwrite=args.overwrite, progress=not args.quiet)
+                       overwrite=args.overwrite, progress=not args.quiet, mispair_rgb=args.mispair_rgb)
     if getattr(args, "raw_glove", False):
         return _raw_glove(args)
     try:

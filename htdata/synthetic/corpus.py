@@ -11,6 +11,12 @@ writers in `htdata.synthetic.formats`, reproducing each source's quirks:
   NaN at no-sensor cells, bend values, chest video 1-2 frames longer than the
   npz for some episodes, epoch-second `ts`, split.json at the root.
 - native: 100 Hz tactile on the glove's own clock vs 30 Hz video, clock offset.
+
+`mispair_rgb` (`htdata sample --mispair-rgb`) writes a deliberately broken control corpus:
+each episode's video shows the world of another episode of its format (half the format's
+list away, so another task), each frame at a random moment of it. Its tactile data is the
+corpus's own; only the pairing is wrong, as a pipeline that mixed up episodes would store
+it. For proving that a trainer's checks catch such a pipeline (`make train-smoke-mispaired`).
 """
 
 from __future__ import annotations
@@ -99,6 +105,7 @@ class CorpusConfig:
     formats: tuple[str, ...] = FORMATS
     overwrite: bool = False
     progress: bool = True
+    mispair_rgb: bool = False     # the control corpus (module docstring): RGB of another episode
 
     def validate(self) -> "CorpusConfig":
         self.out = Path(self.out)
@@ -191,7 +198,26 @@ def plan_corpus(cfg: CorpusConfig) -> list[PlannedEpisode]:
     cfg.validate()
     plan = _PLANS[cfg.scale]
     planners = {"opentouch": _plan_opentouch, "touchanything": _plan_touchanything, "native": _plan_native}
-    return [ep for fmt in cfg.formats for ep in planners[fmt](int(cfg.seed), plan[fmt])]
+    out = []
+    for fmt in cfg.formats:
+        episodes = planners[fmt](int(cfg.seed), plan[fmt])
+        if cfg.mispair_rgb and len(episodes) > 1:
+            for i, ep in enumerate(episodes):      # half the list away: another task in every format
+                ep.extra["rgb_from"] = episodes[(i + max(len(episodes) // 2, 1)) % len(episodes)].spec
+        out += episodes
+    return out
+
+
+def _video(ep: PlannedEpisode, world: World, times, size: tuple[int, int], seed: int):
+    """The frames the episode's camera stores: its own world at `times` (None: the video frame times), or
+    in a mis-paired control corpus another episode's world (`extra["rgb_from"]`), each frame at a random
+    moment of that episode."""
+    other = ep.extra.get("rgb_from")
+    if other is None:
+        return world.render_frames(times, size)
+    n = len(ep.spec.frame_times() if times is None else times)
+    rng = np.random.default_rng(_episode_seed(seed, "mispair-rgb", ep.fmt, ep.name))
+    return World(other).render_frames(rng.uniform(0.0, other.duration_s, n), size)
 
 
 # ---- raw units ----------------------------------------------------------------
@@ -241,7 +267,7 @@ def _write_opentouch(out: Path, episodes: list[PlannedEpisode], seed: int, bar) 
             t0 = int(rng.integers(10**12, 2 * 10**12))           # device clock, ns
             ts = t0 + np.round(ep.spec.frame_times() * 1e9).astype(np.int64) + rng.integers(-200_000, 200_000, ep.spec.n_frames)
             clips.append(OpenTouchClip(ep.name, np.sort(ts), opentouch_raw(contact, rng),
-                                       world.render_frames(None, OPENTOUCH_IMAGE)))
+                                       _video(ep, world, None, OPENTOUCH_IMAGE, seed)))
             task = TASKS[ep.spec.task]
             rows.append({"id": f"{scene}::{ep.name}", "action": ep.spec.task, "grip_type": task.anchor,
                          "object_name": task.shape, "object_category": "synthetic",
@@ -271,7 +297,7 @@ def _write_touchanything(out: Path, episodes: list[PlannedEpisode], seed: int, b
         ts = t0 + ep.spec.frame_times() + rng.normal(0, 0.002, ep.spec.n_frames)
         write_touchanything_episode(
             out / "touchanything" / ep.name,
-            TouchAnythingEpisode(grids["left"], grids["right"], world.render_frames(video_times, TA_IMAGE),
+            TouchAnythingEpisode(grids["left"], grids["right"], _video(ep, world, video_times, TA_IMAGE, seed),
                                  np.maximum.accumulate(ts)))
         split.setdefault(ep.extra["split"], []).append(f"TouchAnything/{ep.name}")
         frames += ep.spec.n_frames
@@ -298,7 +324,7 @@ def _write_native(out: Path, episodes: list[PlannedEpisode], seed: int, bar) -> 
         video_times = ep.spec.frame_times()
         write_native_recording(out / "native" / ep.name, NativeRecording(
             task=ep.spec.task, scene=ep.spec.scene,
-            video_frames=world.render_frames(video_times, NATIVE_IMAGE),
+            video_frames=_video(ep, world, video_times, NATIVE_IMAGE, seed),
             video_timestamps_ns=video_start + np.round(video_times * 1e9).astype(np.int64),
             hands=hands, operator="synthetic", notes="htdata sample corpus",
             video_storage=ep.extra["video_storage"], extra={"seed": ep.spec.seed}))
@@ -317,7 +343,8 @@ COMPLETE_MARKER = ".complete"
 
 
 def corpus_identity(cfg: CorpusConfig) -> dict:
-    return {"seed": int(cfg.seed), "scale": cfg.scale, "formats": list(cfg.formats)}
+    ident = {"seed": int(cfg.seed), "scale": cfg.scale, "formats": list(cfg.formats)}
+    return {**ident, "mispair_rgb": True} if cfg.mispair_rgb else ident
 
 
 def corpus_complete(cfg: CorpusConfig) -> bool:

@@ -104,6 +104,11 @@ def draw_object(img, shape, xy, scale, rgb, view: View) -> None:
     elif shape == "box":
         cv2.rectangle(img, (c[0] - 3 * r, c[1] - 2 * r), (c[0] + 3 * r, c[1] + 2 * r), rgb, -1)
         cv2.rectangle(img, (c[0] - 3 * r, c[1] - 2 * r), (c[0] + 3 * r, c[1] + 2 * r), dark, 2)
+    elif shape == "cup":      # a mug wider than the fist that holds it: body, rim, a handle on the right
+        hw, top, bottom = int(3.0 * r), c[1] - int(1.6 * r), c[1] + int(2.6 * r)
+        cv2.ellipse(img, (c[0] + hw, c[1] + r // 2), (r, int(1.2 * r)), 0, 0, 360, dark, max(2, r // 3), aa)
+        cv2.rectangle(img, (c[0] - hw, top), (c[0] + hw, bottom), rgb, -1)
+        cv2.ellipse(img, (c[0], top), (hw, max(1, r // 2)), 0, 0, 360, dark, -1, aa)
     elif shape == "bag":
         cv2.ellipse(img, (c[0], c[1] + r // 2), (int(1.4 * r), r), 0, 180, 360, dark, max(2, r // 4), aa)
         cv2.rectangle(img, (c[0] - 2 * r, c[1] + r // 2), (c[0] + 2 * r, c[1] + 4 * r), rgb, -1)

@@ -84,7 +84,14 @@ TASKS: dict[str, TaskProfile] = {t.name: t for t in (
                          "middle.proximal": 0.8, "ring.middle": 0.9, "ring.proximal": 0.7,
                          "little.middle": 0.6},
           {}, (0.0, 0.75, 0.75, 0.75, 0.75), "hook", "bag", (20, 185, 200), True),
+    # power_grasp's touch, support and hand shape on a new object: the smoke's held-out task (a new
+    # task, not new physics, as the paper's OOD). Appended, so every other episode keeps its bytes.
+    _task("cup_grasp", {"palm": 0.8, "thumb": 0.9, "index": 1.0, "middle": 1.0,
+                        "ring": 0.9, "little": 0.75},
+          {"palm": 0.4}, (0.85, 0.9, 0.9, 0.9, 0.9), "fist", "cup", (245, 130, 185), True),
 )}
+# Tasks that share one touch and hand shape on different objects: (held out, its training twin).
+TWINS: dict[str, str] = {"cup_grasp": "power_grasp"}
 
 # Scene styles, chosen by keyword in the scene name (OpenTouch "home_kitchen_p1",
 # TouchAnything "Home", native "lab_bench").

@@ -38,7 +38,8 @@ module each:
 - splits (`splits.py`, `--split NAME`): the split's manifest hash; OOD tasks
   absent from train and test; parts disjoint and covering every episode; no
   byte-identical frame (sha256 of rgb + tactile member bytes) in two parts;
-  stated counts and ratios equal to what the parts hold.
+  stated counts and ratios equal to what the parts hold. `check_split_records`
+  runs the ones that read no sample (no frame hashing): the smoke's leak check.
 - stats (`stats.py`): frames per task / scene / hand; contact-area and
   pressure histograms.
 
@@ -55,8 +56,9 @@ passes (warnings allowed), 1 otherwise.
 """
 
 from htdata.validate.report import CHECKS, Check, format_report, write_report
+from htdata.validate.splits import check_split_records
 from htdata.validate.structure import group_rows
 from htdata.validate.validator import ValidateConfig, validate_dataset
 
-__all__ = ["CHECKS", "Check", "ValidateConfig", "format_report", "group_rows", "validate_dataset",
-           "write_report"]
+__all__ = ["CHECKS", "Check", "ValidateConfig", "check_split_records", "format_report", "group_rows",
+           "validate_dataset", "write_report"]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections import defaultdict
+from pathlib import Path
 
 from htdata.errors import ArgumentError
 from htdata.format.shardio import sample_key
@@ -20,7 +21,7 @@ from htdata.resources import validate_json
 from htdata.store.splitfiles import PARTS, list_splits, split_path
 from htdata.store.splitrule import test_counts
 from htdata.validate.report import Check
-from htdata.validate.structure import Loaded
+from htdata.validate.structure import Loaded, load_dataset
 
 HASHED_MEMBERS = (RGB_MEMBER, *(tactile_member(hand) for hand in HANDS))
 _RAW_OF = {tactile_member(hand): raw_member(hand) for hand in HANDS}
@@ -62,6 +63,18 @@ def check_splits(ds: Loaded, name: str, hashes: dict[int, str], check: Check) ->
     if hashes:
         _check_duplicate_frames(ds, part_of, hashes, check)
     return doc
+
+
+def check_split_records(root, name: str, version: int | None = None, max_listed: int = 100) -> dict:
+    """The split checks that read no sample, on a committed dataset: the split describes this version,
+    every episode sits in one part, held-out (OOD) tasks only in ood (`ood_task_leak`), the stated counts
+    add up. -> the splits Check as a dict (its failures include any the version's records had on load).
+    What `htdata validate --split` adds: the byte-identical frames across parts (every shard read)."""
+    check = Check("splits", max_listed)
+    ds = load_dataset(Path(root), check, version)
+    if ds is not None:
+        check_splits(ds, name, {}, check)
+    return check.to_dict()
 
 
 def _check_made_for(ds: Loaded, doc: dict, name: str, check: Check) -> None:

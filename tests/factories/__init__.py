@@ -23,6 +23,7 @@ tiny raw corpora in the three source formats plus the in-process ingest CLI
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import os
@@ -40,6 +41,7 @@ from htdata.resources import PIPELINES_DIR
 from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, write_layout_files
 from htdata.store.parts import part_from_unit
 from htdata.store.snapshot import commit_parts, current_snapshot
+from htdata.store.splitfiles import split_path
 from htdata.store.versions import version_manifest_file
 from htdata.synthetic.formats import (
     NativeHand,
@@ -195,6 +197,19 @@ def rewrite_manifest(root, manifest: dict) -> None:
     data = json.dumps(manifest, indent=2) + "\n"
     (Path(root) / MANIFEST_FILE).write_text(data)
     (Path(root) / version_manifest_file(manifest["version"])).write_text(data)
+
+
+def edit_split(root, name: str, edit) -> None:
+    """Edit the current version's split file in place (`edit(doc)`), and its sha256 in the manifest
+    (both copies, when the version lists it) so that only the split content checks can notice."""
+    path = split_path(root, name)
+    doc = json.loads(path.read_text())
+    edit(doc)
+    path.write_text(json.dumps(doc))
+    manifest = json.loads((Path(root) / MANIFEST_FILE).read_text())
+    if name in manifest.get("splits", {}):
+        manifest["splits"][name]["sha256"] = hashlib.sha256(path.read_bytes()).hexdigest()
+        rewrite_manifest(root, manifest)
 
 
 def commit_split(root, name: str, parts: dict[str, list[str]]) -> int:

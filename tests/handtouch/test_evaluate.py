@@ -263,7 +263,7 @@ def test_prepared_parts_are_reused_with_identical_scores():
 
 
 def test_smoke_learning_checks_compare_against_references():
-    from handtouch.smoke import learning_checks
+    from handtouch.smokechecks import learning_checks
 
     levels = {"chance_hit_at_1": 0.05, "constant_hit_at_1": 0.05, "shuffled_hit_at_1": 0.06}
     good = {"hit_at_1": 0.3, **levels}
@@ -284,7 +284,7 @@ def test_smoke_checks_fail_for_an_untrained_model():
     from handtouch.config import ModelConfig
     from handtouch.model import HandTouch
     from handtouch.rgb_encoder import load_rgb_encoder
-    from handtouch.smoke import RECON_RATIO, codebook_perplexity, learning_checks, reconstruction_rmse
+    from handtouch.smokechecks import RECON_RATIO, codebook_perplexity, learning_checks, reconstruction_rmse
 
     torch.manual_seed(0)
     model = HandTouch(ModelConfig(patch=32, dim=32, depth=1, heads=2, mlp_ratio=2.0, code_dim=8, codebook_size=16,
@@ -339,14 +339,14 @@ def test_verdicts_compare_every_track_with_the_references(tmp_path):
     assert md.index("## Verdicts") < md.index("## Covered pixels")
 
 
-def test_smoke_rgb_check_is_required_on_test_and_reported_on_ood():
-    from handtouch.smoke import rgb_check
+def test_smoke_rgb_check_is_required_on_test():
+    from handtouch.smokechecks import rgb_check
 
     results = {"m": {"test": {"rgb2tactile": {"f_covered": {"rmse": 0.12}}}},
                "zeros-ref": {"test": {"rgb2tactile": {"f_covered": {"rmse": 0.09}}}}}
     check = rgb_check(results, "m")
     assert check["ok"] is False and check["required"] is True and check["limit"] == 0.09
-    assert rgb_check(results, "m", "test", required=False)["required"] is False   # how ood is reported
+    assert rgb_check(results, "m", "test", required=False)["required"] is False
     results["m"]["test"]["rgb2tactile"]["f_covered"]["rmse"] = 0.09
     assert rgb_check(results, "m")["ok"] is False                    # a tie with all zeros is not better
     results["m"]["test"]["rgb2tactile"]["f_covered"]["rmse"] = 0.05

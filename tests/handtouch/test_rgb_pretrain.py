@@ -1,5 +1,6 @@
 """The pretrained frozen RGB encoder and the misalignment control (handtouch.rgb_pretrain)."""
 
+import dataclasses
 import zlib
 
 import numpy as np
@@ -11,16 +12,24 @@ from handtouch.rgb_encoder import TactileGridRGB, load_rgb_encoder
 from handtouch.rgb_pretrain import (
     CONTROL_MARGIN,
     MODEL_MARGIN,
+    VERSION_RECORD_FIELDS,
     RGBPretrainConfig,
+    cache_key,
+    content_record,
     control_checks,
     control_scores,
     ensure_probes,
     load_items,
     model_control_checks,
     partners,
+    probes_cached,
     save_probe,
 )
+from htdata.curate.edit import remove_episodes
 from htdata.format.table import CANVAS
+from htdata.read.metadata import DatasetMetadata
+from htdata.store.snapshot import commit_parts, open_snapshot
+from htdata.store.splitfiles import split_path
 from tests import factories
 from tests.factories import commit_split, episode_table, write_synthetic_dataset
 
@@ -101,6 +110,30 @@ def test_aligned_dataset_passes_the_misalignment_control(tmp_path, monkeypatch):
     stamps = {p: path.stat().st_mtime_ns for p, path in paths.items()}
     assert ensure_probes(root, "s", tmp_path / "probes", TINY) == paths      # cached: reused, not retrained
     assert {p: path.stat().st_mtime_ns for p, path in paths.items()} == stamps
+
+
+def test_a_version_that_changes_nothing_the_probes_read_keeps_them(tmp_path, monkeypatch):
+    """A new version whose only change is its split list (or its number, time, parent) serves the
+    probes the same bytes: no retraining. A version that changes the samples gets a new key."""
+    root = _dataset(tmp_path / "ds", monkeypatch, rgb_shift=0)
+    cfg = dataclasses.replace(TINY, steps=3)
+    before = DatasetMetadata(root).manifest
+    paths = ensure_probes(root, "s", tmp_path / "probes", cfg, pairings=("aligned",))
+    stamp = paths["aligned"].stat().st_mtime_ns
+    snap = open_snapshot(root)                                             # a new version holding the same
+    same = split_path(root, "s").read_bytes()                              # samples and split: a no-op
+    commit_parts(root, snap.parts(), {}, snap, "test: no-op version", splits=lambda episodes, sha: {"s": same})
+    after = DatasetMetadata(root).manifest
+    assert after["version"] == before["version"] + 1 and after != before
+    assert content_record(after) == content_record(before)
+    assert probes_cached(root, "s", tmp_path / "probes", cfg, pairings=("aligned",))
+    assert ensure_probes(root, "s", tmp_path / "probes", cfg, pairings=("aligned",)) == paths
+    assert paths["aligned"].stat().st_mtime_ns == stamp                    # reused, not retrained
+    key = cache_key(root, "s", "train", cfg)
+    remove_episodes(root, ["ep9"], dry_run=False, command="test: rm ep9")  # a test episode: the samples change
+    assert cache_key(root, "s", "train", cfg) != key
+    assert not probes_cached(root, "s", tmp_path / "probes", cfg, pairings=("aligned",))
+    assert set(VERSION_RECORD_FIELDS) <= set(after) | {"parent"}           # the names are the manifest's
 
 
 def test_rgb_shifted_by_a_second_in_the_data_fails_the_control(tmp_path, monkeypatch):

@@ -316,3 +316,33 @@ def test_cli_dry_run_lists_plan(tmp_path, capsys):
     lines = capsys.readouterr().out.strip().splitlines()
     assert len(lines) == len(plan_corpus(CorpusConfig(out=tmp_path, scale="small")))
     assert not (tmp_path / "none").exists()
+
+
+# ---- the mis-paired control corpus (--mispair-rgb) -----------------------------------------
+
+def test_mispaired_plan_keeps_every_episode_and_films_another_task():
+    normal = plan_corpus(CorpusConfig(out=Path("x"), scale="small"))
+    control = plan_corpus(CorpusConfig(out=Path("x"), scale="small", mispair_rgb=True))
+    assert [(e.fmt, e.name, e.spec) for e in control] == [(e.fmt, e.name, e.spec) for e in normal]
+    assert not any("rgb_from" in e.extra for e in normal)
+    for ep in control:
+        other = ep.extra["rgb_from"]
+        assert other != ep.spec and other.task != ep.spec.task
+        assert other in [e.spec for e in control if e.fmt == ep.fmt]          # same format, same camera
+
+
+def test_mispaired_corpus_has_the_same_touch_and_another_episodes_video(tiny, tmp_path, capsys):
+    out = tmp_path / "control"
+    args = ["sample", str(out), "--scale", "tiny", "--formats", "native", "--quiet", "--mispair-rgb"]
+    assert htdata_main(args) == 0
+    assert json.loads((out / COMPLETE_MARKER).read_text())["mispair_rgb"] is True
+    assert not corpus_complete(CorpusConfig(out=out, scale="tiny", formats=("native",)))   # not a normal corpus
+    capsys.readouterr()
+    assert htdata_main([*args, "--reuse"]) == 0 and "reused" in capsys.readouterr().err
+    for rec in sorted((tiny / "native").iterdir()):
+        ours = out / "native" / rec.name
+        for name in ("tactile_right.npz", "ego_timestamps.npy", "recording.json"):
+            assert (ours / name).read_bytes() == (rec / name).read_bytes(), name
+        a, b = _video_frames(rec / "ego.mp4"), _video_frames(ours / "ego.mp4")
+        assert len(a) == len(b)
+        assert np.mean([np.abs(x.astype(int) - y.astype(int)).mean() for x, y in zip(a, b)]) > 3

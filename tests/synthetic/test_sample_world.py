@@ -8,7 +8,7 @@ import pytest
 from htdata.glove.layouts import load_canonical, load_layout
 from htdata.synthetic.glove import contact_grid, contact_grids, place_intensity
 from htdata.synthetic.render import camera_view, draw_hand
-from htdata.synthetic.tasks import PLACE_NAMES, TASKS
+from htdata.synthetic.tasks import PLACE_NAMES, TASKS, TWINS
 from htdata.synthetic.world import PHASE_APPROACH, PHASE_CONTACT, PHASE_RELEASE, EpisodeSpec, World
 
 OT = "opentouch_right_16x16"
@@ -43,8 +43,11 @@ def test_place_names_match_canonical_template():
 
 def test_tasks_cover_distinct_contact_profiles():
     assert len(TASKS) >= 6
-    profiles = {frozenset(t.contact) for t in TASKS.values()}
-    assert len(profiles) == len(TASKS)  # no two tasks touch the same places
+    # no two tasks touch the same places, but for the declared twins: one touch on two objects
+    profiles = {frozenset(t.contact) for name, t in TASKS.items() if name not in TWINS}
+    assert len(profiles) == len(TASKS) - len(TWINS)
+    for held, twin in TWINS.items():
+        assert TASKS[held].contact == TASKS[twin].contact and TASKS[held].shape != TASKS[twin].shape
     for task in TASKS.values():
         assert set(task.contact) <= set(PLACE_NAMES) and task.contact
         assert all(0 < v <= 1 for v in task.contact.values())
@@ -278,3 +281,17 @@ def test_the_camera_shows_the_support_hand_contact_the_glove_feels(ot_layout):
     pad = np.all(np.abs(next(touching.render_frames(np.array([0.0]), (224, 224))).astype(int)
                         - np.array(SUPPORT_PAD_RGB)) <= 2, axis=2)
     assert pad.sum() > 200 and len(touching.support_pads()) == 1 and idle.support_pads() == []
+
+
+def test_the_held_out_twin_differs_from_its_training_twin_in_what_the_camera_sees():
+    """cup_grasp is power_grasp's touch and hand on a new object: the cup shows around the fist that
+    holds it, and the two tasks' frames at peak force differ where the objects are."""
+    for held, twin in TWINS.items():
+        worlds = {t: World(EpisodeSpec(t, "office_desk_p2", 5, 60)) for t in (held, twin)}
+        frames = {}
+        for t, w in worlds.items():
+            s = w.state("right")
+            frames[t] = w.render(float(s.t[_peak_frame(s)]), (320, 240)).astype(int)
+        near = np.abs(frames[held] - np.array(worlds[held].object_rgb)).max(axis=2) < 20
+        assert near.sum() > 200, near.sum()                     # the held object is visible while held
+        assert not (np.abs(frames[twin] - np.array(worlds[held].object_rgb)).max(axis=2) < 20).any()

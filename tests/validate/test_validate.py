@@ -21,7 +21,7 @@ from htdata.format.table import EPISODES_FILE, FORMAT_VERSION, INDEX_FILE, MANIF
 from htdata.store.manifest import load_episodes, load_index
 from htdata.store.versions import VERSIONS_DIR
 from htdata.validate import group_rows, validate_dataset
-from tests.factories import FRAME_NS, rewrite_manifest, write_synthetic_dataset
+from tests.factories import FRAME_NS, edit_split, rewrite_manifest, write_synthetic_dataset
 from tests.factories import SPLIT_EPISODES as EPISODES
 from tests.factories.hostile import read_members, rewrite_members
 
@@ -358,23 +358,10 @@ def test_all_zero_and_dead_regions_are_warnings(tmp_path):
 
 # -- split faults ---------------------------------------------------------------------------------
 
-def _edit_split(root: Path, name: str, edit) -> None:
-    """Edit the current version's split file, and its sha256 in the manifest (both copies, when the
-    version lists it) so that only the split content checks can notice."""
-    path = split_path(root, name)
-    doc = json.loads(path.read_text())
-    edit(doc)
-    path.write_text(json.dumps(doc))
-    manifest = _manifest(root)
-    if name in manifest.get("splits", {}):
-        manifest["splits"][name]["sha256"] = hashlib.sha256(path.read_bytes()).hexdigest()
-        rewrite_manifest(root, manifest)
-
-
 def test_episode_in_two_parts(ds):
     doc = make_split(ds, ["pour"], test_ratio=0.3, name="s")
     moved = doc["parts"]["train"]["episodes"][0]
-    _edit_split(ds, "s", lambda d: d["parts"]["test"]["episodes"].append(moved))
+    edit_split(ds, "s", lambda d: d["parts"]["test"]["episodes"].append(moved))
     report = validate_dataset(ds, split="s")
     [fail] = _failures(report, "splits", "episode_in_two_parts")
     assert fail["episode"] == moved and fail["found"] == ["train", "test"]
@@ -383,7 +370,7 @@ def test_episode_in_two_parts(ds):
 
 def test_ood_task_in_train(ds):
     make_split(ds, ["pour"], name="s")
-    _edit_split(ds, "s", lambda d: (d["parts"]["ood"]["episodes"].remove("ep_a"),
+    edit_split(ds, "s", lambda d: (d["parts"]["ood"]["episodes"].remove("ep_a"),
                                     d["parts"]["train"]["episodes"].append("ep_a")))
     report = validate_dataset(ds, split="s")
     leaks = _failures(report, "splits", "ood_task_leak")
@@ -411,7 +398,7 @@ def test_split_of_another_commit_and_unknown_split(ds):
     assert doc["format_version"] == 2 and FORMAT_VERSION == 3   # split files have their own version
     assert doc["episodes_sha256"] == _manifest(ds)["episodes_sha256"]
     assert validate_dataset(ds, split="s")["ok"]
-    _edit_split(ds, "s", lambda d: d.update(episodes_sha256="0" * 64))
+    edit_split(ds, "s", lambda d: d.update(episodes_sha256="0" * 64))
     report = validate_dataset(ds, split="s")
     assert _failing_checks(report) == {"splits"}
     [fail] = _failures(report, "splits", "split_manifest")
@@ -450,7 +437,7 @@ def test_split_of_another_manifest_before_versions(ds):
     doc = make_split(ds, ["pour"], name="s")
     assert doc["format_version"] == 1 and split_path(ds, "s") == ds / "splits" / "s.json"
     assert validate_dataset(ds, split="s")["ok"]
-    _edit_split(ds, "s", lambda d: d.update(manifest_sha256="0" * 64))
+    edit_split(ds, "s", lambda d: d.update(manifest_sha256="0" * 64))
     report = validate_dataset(ds, split="s")
     [fail] = _failures(report, "splits", "split_manifest")
     assert fail["expected"] == "0" * 64
