@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -69,6 +70,9 @@ class UnitTask:
     # maps stored or not, resolved by the driver (never AUTO): the pipeline dict leaves "stored" out
     # (MapStorage.pipeline_value), so the worker is told; not in the fingerprint (the dict says "raw")
     maps: MapStorage
+    # the source files (resolved paths) this unit hashes: each file of the run once, by the first unit
+    # in unit order that reads it (`assign_hashing`); the driver checks the digests (ingest/sourcesums.py)
+    hash_files: tuple[str, ...] = ()
 
     @property
     def est_frames(self) -> int:
@@ -82,11 +86,22 @@ class UnitTask:
         """
 
         ident = {"pipeline": self.pipeline,
-                 "episodes": [[r.episode_id, r.source_ref, r.fingerprint, labels_of(r)] for r in self.episodes]}
+                 "episodes": [[r.episode_id, r.source_ref, r.fingerprint, labels_of(r)] for r in self.episodes],
+                 # a resumed record must hold current digests of the files this unit hashes, also of those
+                 # no ref fingerprint covers (a label table): their size and mtime are in
+                 "hash_files": [[p, *_size_mtime(p)] for p in self.hash_files]}
         return hashlib.sha1(json.dumps(ident, sort_keys=True).encode()).hexdigest()
 
     def __repr__(self) -> str:
         return f"unit {self.unit:06d} ({len(self.episodes)} episodes)"
+
+
+def _size_mtime(path: str) -> tuple[int | None, int | None]:
+    try:
+        st = os.stat(path)
+    except OSError:   # unreadable: the unit reports it, and the run fails the file's episodes
+        return None, None
+    return st.st_size, st.st_mtime_ns
 
 
 # Settings every pipeline of one dataset must share: the manifest records one codec and raster mode.
@@ -113,11 +128,29 @@ def check_unique_ids(refs_per_source: list[list]) -> None:
 
 
 def plan_units(todo: list[tuple], out: Path, first_unit: int) -> list[UnitTask]:
-    """One unit per (ref, Source) to ingest, in the order given, numbered from `first_unit`."""
-    return [UnitTask(unit=first_unit + k, out=str(out), pipeline=src.pipeline.to_dict(),
-                     pipeline_path=src.pipeline.path, root=str(src.root), episodes=[ref],
-                     maps=src.pipeline.tactile.maps.decided())
-            for k, (ref, src) in enumerate(todo)]
+    """One unit per (ref, Source) to ingest, in the order given, numbered from `first_unit`; each
+    source file is hashed by the first unit that reads it (`assign_hashing`)."""
+    return assign_hashing([UnitTask(unit=first_unit + k, out=str(out), pipeline=src.pipeline.to_dict(),
+                                    pipeline_path=src.pipeline.path, root=str(src.root), episodes=[ref],
+                                    maps=src.pipeline.tactile.maps.decided())
+                           for k, (ref, src) in enumerate(todo)])
+
+
+def assign_hashing(tasks: list[UnitTask]) -> list[UnitTask]:
+    """`tasks` with `hash_files` set: every source file of the run (resolved path) goes to the first unit,
+    in unit order, whose episodes read it, so a file several episodes share (an OpenTouch scene, a label
+    table) is hashed once per run, by a worker, and the driver reads no source byte. Fixed by the plan
+    (not by which unit finishes first), so a resumed run finds the same owners."""
+    owned: set[str] = set()
+    out = []
+    for t in tasks:
+        mine = []
+        for path in (str(Path(p).resolve()) for r in t.episodes for p in r.source_files):
+            if path not in owned:
+                owned.add(path)
+                mine.append(path)
+        out.append(dataclasses.replace(t, hash_files=tuple(mine)))
+    return out
 
 
 # --------------------------------------------------------------------------- sources and settings
