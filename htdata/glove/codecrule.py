@@ -169,8 +169,9 @@ def resolve_sources(sources: list, refs_per_source: list[list], existing: dict |
         raise ConfigError(f"pipelines {[s.pipeline.name for s in sources]} disagree on [codec] tactile / "
                           f"[tactile] compression ({sorted(settings)}): a dataset has one codec")
     (setting, compression), = settings
+    # each distinct layout file once per source (not once per episode: a large run has ~10^5 of them)
     pairs = [(s.pipeline, load_layout(path)) for s, refs in zip(sources, refs_per_source)
-             for r in refs for path in sorted(set(r.layout_files.values()))]
+             for path in sorted({p for r in refs for p in r.layout_files.values()})]
     choice = resolve_codec(setting, compression, dataset_gloves(pairs), existing)
     return [dataclasses.replace(s, pipeline=s.pipeline.with_codec_choice(choice)) for s in sources]
 

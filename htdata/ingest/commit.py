@@ -44,7 +44,8 @@ def codec_info(cfg: PipelineConfig) -> dict:
 def unit_part(record: dict) -> Part:
     """A unit record's Part: its index rows as the unit made them (arrays, checked vectorised)."""
     where = f"work unit {record['unit']}"
-    return part_from_rows(record["unit"], record["shards"], decode_rows(record["rows"], where), record["episodes"])
+    return part_from_rows(record["unit"], record["shards"], decode_rows(record["rows"], where), record["episodes"],
+                          records_checked=True)   # the unit checked them (unit.check_records)
 
 
 def layout_artifacts(records: list[dict], raster_mode: str, canonical) -> list[LayoutArtifact]:

@@ -130,9 +130,13 @@ def check_unique_ids(refs_per_source: list[list]) -> None:
 def plan_units(todo: list[tuple], out: Path, first_unit: int) -> list[UnitTask]:
     """One unit per (ref, Source) to ingest, in the order given, numbered from `first_unit`; each
     source file is hashed by the first unit that reads it (`assign_hashing`)."""
-    return assign_hashing([UnitTask(unit=first_unit + k, out=str(out), pipeline=src.pipeline.to_dict(),
+    settings: dict[int, tuple] = {}     # per source, once: the units share the pipeline dict
+    for _, src in todo:
+        if id(src) not in settings:
+            settings[id(src)] = (src.pipeline.to_dict(), src.pipeline.tactile.maps.decided())
+    return assign_hashing([UnitTask(unit=first_unit + k, out=str(out), pipeline=settings[id(src)][0],
                                     pipeline_path=src.pipeline.path, root=str(src.root), episodes=[ref],
-                                    maps=src.pipeline.tactile.maps.decided())
+                                    maps=settings[id(src)][1])
                            for k, (ref, src) in enumerate(todo)])
 
 
@@ -142,10 +146,12 @@ def assign_hashing(tasks: list[UnitTask]) -> list[UnitTask]:
     table) is hashed once per run, by a worker, and the driver reads no source byte. Fixed by the plan
     (not by which unit finishes first), so a resumed run finds the same owners."""
     owned: set[str] = set()
+    resolved: dict[str, str] = {}       # a shared file is resolved once, not once per episode
     out = []
     for t in tasks:
         mine = []
-        for path in (str(Path(p).resolve()) for r in t.episodes for p in r.source_files):
+        for name in (p for r in t.episodes for p in r.source_files):
+            path = resolved.get(name) or resolved.setdefault(name, str(Path(name).resolve()))
             if path not in owned:
                 owned.add(path)
                 mine.append(path)
@@ -227,16 +233,40 @@ def check_pipeline_layouts(cfg: PipelineConfig, dirs: tuple = ()) -> None:
             raise type(e)(f"{cfg.path or cfg.name}: [layouts] {hand}: {e}") from None
 
 
-def resolve_layouts(ref, cfg: PipelineConfig, dirs: tuple = ()):
-    """`ref` with its layouts resolved: ids in `layouts`, files in `layout_files`, fingerprint over their bytes."""
+class LayoutLookup:
+    """`load_layout` and the layout file's sha256, once per (name, folders, base) and file in a run:
+    planning resolves every episode's layouts, and ~10^5 episodes share a handful of layouts."""
+
+    def __init__(self, dirs: tuple = ()):
+        self.dirs = tuple(dirs)
+        self._layouts: dict[tuple, object] = {}
+        self._digests: dict[str, str] = {}
+
+    def load(self, name, base=None):
+        key = (str(name), str(base) if base is not None else None)
+        if key not in self._layouts:
+            self._layouts[key] = load_layout(name, self.dirs, base)
+        return self._layouts[key]
+
+    def digest(self, path: str) -> str:
+        if path not in self._digests:
+            self._digests[path] = sha256_file(Path(path))
+        return self._digests[path]
+
+
+def resolve_layouts(ref, cfg: PipelineConfig, dirs: tuple | LayoutLookup = ()):
+    """`ref` with its layouts resolved: ids in `layouts`, files in `layout_files`, fingerprint over their bytes.
+
+    `dirs`: the layout folders (`--layouts`), or a `LayoutLookup` over them that a run shares."""
+    lookup = dirs if isinstance(dirs, LayoutLookup) else LayoutLookup(dirs)
     ids, files, digests = {}, {}, {}
     for h in (h for h in HANDS if h in ref.hands):
         if h in cfg.layouts:
-            layout = load_layout(cfg.layouts[h], dirs, pipeline_layout_base(cfg))
+            layout = lookup.load(cfg.layouts[h], pipeline_layout_base(cfg))
         elif h in ref.layouts:
             named_in = ref.extra.get("layouts_from") if isinstance(ref.extra, dict) else None
             try:
-                layout = load_layout(ref.layouts[h], dirs)
+                layout = lookup.load(ref.layouts[h])
             except (FileNotFoundError, ValueError) as e:
                 if not named_in:
                     raise
@@ -246,7 +276,7 @@ def resolve_layouts(ref, cfg: PipelineConfig, dirs: tuple = ()):
             raise EpisodeError(ref, None, f"no layout for the {h} hand (neither the source nor the pipeline's "
                                f"[layouts] names one)")
         ids[h], files[h] = layout.layout_id, layout.path
-        digests[h] = sha256_file(Path(layout.path))
+        digests[h] = lookup.digest(layout.path)
     fingerprint = hashlib.sha1(json.dumps([ref.fingerprint, digests], sort_keys=True).encode()).hexdigest()
     return dataclasses.replace(ref, layouts=ids, layout_files=files, fingerprint=fingerprint)
 
@@ -305,6 +335,7 @@ def discover_sources(sources: list[Source], layout_dirs: tuple = ()) -> tuple[li
     pipeline [layouts] override that does not resolve) aborts (ValueError).
     """
     refs, failures = [], []
+    lookup = LayoutLookup(layout_dirs)
     for s in sources:
         check_pipeline_layouts(s.pipeline, layout_dirs)
         name = s.pipeline.adapter.name
@@ -316,7 +347,7 @@ def discover_sources(sources: list[Source], layout_dirs: tuple = ()) -> tuple[li
         planned, failed = [], []
         for ref in found:
             try:
-                planned.append(resolve_layouts(ref, s.pipeline, layout_dirs))
+                planned.append(resolve_layouts(ref, s.pipeline, lookup))
             except (FileNotFoundError, ValueError, EpisodeError) as e:
                 err = e if isinstance(e, EpisodeError) else EpisodeError(ref, None, str(e))
                 failed.append(failure_entry("plan", name, err, ref.source_ref))

@@ -18,7 +18,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from htdata.errors import ArgumentError
-from htdata.format.table import INGEST_REPORT, MANIFEST_FILE
+from htdata.format.table import INGEST_REPORT, MANIFEST_FILE, WORK_DIR
 from htdata.glove.codecrule import resolve_sources
 from htdata.ingest.append import kept_unavailable, plan_append
 from htdata.ingest.commit import check_compatible, commit
@@ -29,11 +29,11 @@ from htdata.ingest.timing import timing_summary
 from htdata.ingest.unit import run_unit
 from htdata.ingest.workdir import (
     check_output,
-    clear_unit_files,
     dumps,
     load_valid_record,
     prepare_output,
     remove_strays,
+    unit_record_path,
 )
 from htdata.store.fsutil import write_bytes_atomic
 from htdata.store.lock import WriterLock
@@ -220,10 +220,11 @@ def check_found_something(sources, refs: list[list], failures: list[dict]) -> No
 def run_units(tasks: list[UnitTask], out: Path, runner, progress: bool) -> tuple[list[dict], list[dict]]:
     """Resume finished units, run the rest (largest first); returns (records in unit order, records run now)."""
     records, todo = {}, []
+    present = {p.name for p in (out / WORK_DIR).iterdir()}   # one listing, not a look-up per unit
     for t in tasks:
-        rec = load_valid_record(t)
+        # a unit to run clears its own leftovers where it runs (unit.run_unit): nothing to delete here
+        rec = load_valid_record(t) if unit_record_path(out, t.unit).name in present else None
         if rec is None:
-            clear_unit_files(out, t.unit)
             todo.append(t)
         else:
             records[t.unit] = rec

@@ -108,11 +108,12 @@ def _relative(path: str, root: Path) -> str:
 
 
 def _episode_sums(ref, root: Path, digests: dict, unreadable: dict, listed: dict, strict: bool,
-                  warned: dict[str, str]) -> tuple[dict, EpisodeError | None]:
-    """({relative path: sha256}, the first problem) of one episode's files; lenient mismatches go to `warned`."""
+                  warned: dict[str, str], resolved_of: dict[str, str]) -> tuple[dict, EpisodeError | None]:
+    """({relative path: sha256}, the first problem) of one episode's files; lenient mismatches go to `warned`.
+    `resolved_of` caches resolved paths across episodes (a shared file is resolved once)."""
     sums, problem = {}, None
     for path in ref.source_files:
-        resolved = str(Path(path).resolve())
+        resolved = resolved_of.get(path) or resolved_of.setdefault(path, str(Path(path).resolve()))
         sha = digests.get(resolved)
         if sha is None:
             why = unreadable.get(resolved, "no work unit hashed it")
@@ -146,6 +147,7 @@ def check_digests(tasks: list, records: list[dict], strict: bool, lists: Checksu
         digests.update(rec["source_sha256"])
         unreadable.update({p: f"{why}; hashed by unit {rec['unit']}" for p, why in rec["source_unreadable"].items()})
     warned: dict[str, str] = {}
+    resolved_of: dict[str, str] = {}
     by_unit = {t.unit: t for t in tasks}
     for rec in records:
         task = by_unit[rec["unit"]]
@@ -154,7 +156,7 @@ def check_digests(tasks: list, records: list[dict], strict: bool, lists: Checksu
         problems = []
         for ep in rec["episodes"]:
             sums, problem = _episode_sums(refs[ep["episode_id"]], Path(task.root), digests, unreadable, listed,
-                                          strict, warned)
+                                          strict, warned, resolved_of)
             ep["source_sha256"] = sums
             if problem is not None:
                 problems.append(problem)
@@ -171,5 +173,5 @@ def _fail_unit(rec: dict, task, refs: dict, problems: list[EpisodeError]) -> Non
         problem = first.get(ep["episode_id"]) or EpisodeError(ref, None, f"its work unit failed verification: "
                                                               f"{problems[0].message}", file=problems[0].file)
         rec["failures"].append(failure_entry("verify", ref.source, problem, ref.source_ref))
-    rec.update(episodes=[], shards=[], rows=None, frames=0, dropped=[], layouts={}, calibrations={})
+    rec.update(episodes=[], shards=[], rows="", frames=0, dropped=[], layouts={}, calibrations={})
     clear_unit_files(Path(task.out), task.unit)

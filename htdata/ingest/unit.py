@@ -44,7 +44,8 @@ from htdata.ingest.episode import EpisodeStream, EpisodeTally
 from htdata.ingest.executors import parent_alive, report_progress
 from htdata.ingest.pipeline import PipelineConfig
 from htdata.ingest.timing import StageClock
-from htdata.ingest.workdir import clear_unit_files, dumps, encode_rows, spool_path, unit_record_path
+from htdata.ingest.workdir import ROWS_DTYPE, clear_unit_files, dumps, encode_rows, spool_path, unit_record_path
+from htdata.resources import validate_json
 from htdata.source.adapters import get_adapter
 from htdata.store.fsutil import sha256_file, write_bytes_atomic
 from htdata.store.manifest import UnitResult
@@ -141,6 +142,14 @@ def hash_sources(paths, clock: StageClock) -> tuple[dict[str, str], dict[str, st
     return digests, unreadable
 
 
+def check_records(part, shard_names: list[str]) -> None:
+    """Schema-check the unit's episode records here, in the worker (the commit trusts a unit's part,
+    Part.records_checked); first_sample and shards, which the commit computes, get stand-ins."""
+    for ep in part.episodes:
+        validate_json({**ep, "first_sample": 0, "shards": shard_names}, "episode",
+                      where=f"unit {part.unit}: episode {ep.get('episode_id')!r}")
+
+
 def _fault_hook(unit: int) -> None:
     if os.environ.get("HTDATA_TEST_FAULT_UNIT") != str(unit):
         return
@@ -191,13 +200,14 @@ def run_unit(task) -> dict:
             # the index rows, made and checked here (a loop over samples): the driver only concatenates
             part = part_from_unit(UnitResult(unit=task.unit, shards=shards, samples=writer.samples,
                                              episodes=episodes))
+            check_records(part, [s.name for s in shards])
     finally:
         spool.close()
     record = {
         "unit": task.unit, "fingerprint": task.fingerprint(),
         "episode_ids": [r.episode_id for r in task.episodes],
         "shards": [dataclasses.asdict(s) for s in shards],
-        "rows": encode_rows(part.rows), "frames": int(len(part.rows)),
+        "rows": encode_rows(part.rows), "rows_dtype": ROWS_DTYPE, "frames": int(len(part.rows)),
         "episodes": part.episodes, "failures": failures, "dropped": dropped, "layouts": layouts,
         "calibrations": calibrations, "source_sha256": digests, "source_unreadable": unreadable,
         "seconds": time.perf_counter() - t0, "timing": clock.as_record(),

@@ -15,22 +15,22 @@ from __future__ import annotations
 
 import base64
 import binascii
-import io
 import json
 from pathlib import Path
 
 import numpy as np
 
 from htdata.errors import ArgumentError, DatasetError
-from htdata.format.table import MANIFEST_FILE, SHARDS_DIR, WORK_DIR
+from htdata.format.table import INDEX_DTYPE, MANIFEST_FILE, SHARDS_DIR, WORK_DIR
 from htdata.store.fsutil import sha256_file
 from htdata.store.lock import LOCK_FILE
-from htdata.store.manifest import load_manifest, parse_index
+from htdata.store.manifest import load_manifest
 from htdata.store.versions import list_versions
 
 # Keys a unit record must hold to be reused (records of older versions lack some: their units re-run).
-RECORD_KEYS = ("unit", "fingerprint", "shards", "rows", "frames", "episodes", "failures", "dropped", "layouts",
-               "source_sha256")
+RECORD_KEYS = ("unit", "fingerprint", "shards", "rows", "rows_dtype", "frames", "episodes", "failures", "dropped",
+               "layouts", "source_sha256", "source_unreadable")
+ROWS_DTYPE = str(INDEX_DTYPE.descr)      # what a record's "rows" are, as its "rows_dtype" says
 
 
 def dumps(obj, compact: bool = False) -> bytes:
@@ -42,11 +42,10 @@ def dumps(obj, compact: bool = False) -> bytes:
 
 
 def encode_rows(rows: np.ndarray) -> str:
-    """A unit's index rows (INDEX_DTYPE) as one string of its record: .npy bytes in base64 (one C call each
-    way, ~75 bytes a sample, where a JSON object per sample cost the driver a Python object per frame)."""
-    buf = io.BytesIO()
-    np.save(buf, rows, allow_pickle=False)
-    return base64.b64encode(buf.getvalue()).decode("ascii")
+    """A unit's index rows (INDEX_DTYPE) as one string of its record: the raw bytes in base64 (one C call
+    each way, ~75 characters a sample, where a JSON object per sample cost the driver a Python object per
+    frame); the record names the dtype (`ROWS_DTYPE`), so a record of another format re-runs its unit."""
+    return base64.b64encode(np.ascontiguousarray(rows, dtype=INDEX_DTYPE).tobytes()).decode("ascii")
 
 
 def decode_rows(text: str, where: str) -> np.ndarray:
@@ -55,7 +54,9 @@ def decode_rows(text: str, where: str) -> np.ndarray:
         data = base64.b64decode(text.encode("ascii"), validate=True)
     except (binascii.Error, ValueError, AttributeError) as exc:
         raise DatasetError(f"{where}: index rows are not base64 ({exc})") from exc
-    return np.array(parse_index(data, where))
+    if len(data) % INDEX_DTYPE.itemsize:
+        raise DatasetError(f"{where}: {len(data)} bytes of index rows are not whole {INDEX_DTYPE.itemsize}-byte rows")
+    return np.frombuffer(data, INDEX_DTYPE).copy()
 
 
 def unit_record_path(out: Path, unit: int) -> Path:
@@ -86,7 +87,8 @@ def load_valid_record(task) -> dict | None:
         record = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError):
         return None
-    if not all(k in record for k in RECORD_KEYS) or record["fingerprint"] != task.fingerprint():
+    if not all(k in record for k in RECORD_KEYS) or record["fingerprint"] != task.fingerprint() \
+            or record["rows_dtype"] != ROWS_DTYPE:
         return None
     try:
         if len(decode_rows(record["rows"], str(path))) != record["frames"]:

@@ -37,6 +37,9 @@ class Part:
     shards: list[dict]            # manifest shard entries: name, sha256, bytes, samples
     rows: np.ndarray              # INDEX_DTYPE; shard/episode columns index this part's lists
     episodes: list[dict]          # records (num_frames set), without first_sample / shards
+    # the records were schema-checked where they were made (an ingest unit, in its worker): the commit
+    # need not check them again, so the driver's commit costs no schema check per new episode
+    records_checked: bool = False
 
     @property
     def episode_ids(self) -> list[str]:
@@ -48,6 +51,7 @@ class Assembled:
     rows: np.ndarray              # INDEX_DTYPE, global
     episodes: list[dict]          # records with first_sample, shards, num_frames
     shards: list[dict]            # manifest entries with first_sample
+    unchecked: list[bool]         # per episode: its record still needs the schema check (Part.records_checked)
 
 
 def unit_of_shard(name: str) -> int:
@@ -102,7 +106,8 @@ def part_from_unit(unit) -> Part:
     return Part(unit=int(unit.unit), shards=shards, rows=rows, episodes=episodes)
 
 
-def part_from_rows(unit: int, shards: list[dict], rows: np.ndarray, episodes: list[dict]) -> Part:
+def part_from_rows(unit: int, shards: list[dict], rows: np.ndarray, episodes: list[dict],
+                   records_checked: bool = False) -> Part:
     """A Part from a unit's own index rows (made by `part_from_unit` where the unit ran), checked with
     whole-array operations: no Python per sample, so a commit costs O(units) + vectorised O(samples).
 
@@ -136,7 +141,8 @@ def part_from_rows(unit: int, shards: list[dict], rows: np.ndarray, episodes: li
             raise DatasetError(f"{where}: sample offsets do not rise inside a shard")
     _set_num_frames(records, rows, where)
     return Part(unit=int(unit), rows=np.array(rows, dtype=INDEX_DTYPE), episodes=records,
-                shards=[{k: s[k] for k in ("name", "sha256", "bytes", "samples")} for s in shards])
+                shards=[{k: s[k] for k in ("name", "sha256", "bytes", "samples")} for s in shards],
+                records_checked=records_checked)
 
 
 def _set_num_frames(episodes: list[dict], rows: np.ndarray, where: str) -> None:
@@ -197,7 +203,8 @@ def assemble(parts: list[Part]) -> Assembled:
     shards = [dict(s) for p in parts for s in p.shards]
     episodes = [dict(e) for p in parts for e in p.episodes]
     _fill_positions(rows, shards, episodes)
-    return Assembled(rows=rows, episodes=episodes, shards=shards)
+    return Assembled(rows=rows, episodes=episodes, shards=shards,
+                     unchecked=[not p.records_checked for p in parts for _ in p.episodes])
 
 
 def _fill_positions(rows: np.ndarray, shards: list[dict], episodes: list[dict]) -> None:
