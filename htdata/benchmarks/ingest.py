@@ -61,6 +61,7 @@ def ingest_run(pipelines: list[tuple[str, Path]], out: Path, workers: int, setti
            "frames_per_s": frames / seconds, "frames_per_s_per_worker": frames / seconds / max(workers, 1)}
     if timing:
         row["worker_s"] = float(timing.get("worker_s", 0.0))
+        row["worker_cpu_s"] = float(timing.get("worker_cpu_s", 0.0))
         row.update({k: float(timing.get(k, 0.0)) for k in DRIVER_PHASES})
         row["stages_s"] = {s: float(timing.get(f"{s}_s", 0.0)) for s in STAGES}
     return row

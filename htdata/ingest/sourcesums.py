@@ -100,27 +100,30 @@ def plan_verification(refs: list, roots: dict[str, Path], strict: bool, lists: C
     return out
 
 
-def _relative(path: str, root: Path) -> str:
+def _names(path: str, root: Path) -> tuple[str, str]:
+    """(resolved path, path relative to the source root) of a source file."""
     try:
-        return Path(path).relative_to(root).as_posix()
+        rel = Path(path).relative_to(root).as_posix()
     except ValueError:
-        return str(path)
+        rel = str(path)
+    return str(Path(path).resolve()), rel
 
 
 def _episode_sums(ref, root: Path, digests: dict, unreadable: dict, listed: dict, strict: bool,
-                  warned: dict[str, str], resolved_of: dict[str, str]) -> tuple[dict, EpisodeError | None]:
+                  warned: dict[str, str], names: dict[tuple, tuple[str, str]]) -> tuple[dict, EpisodeError | None]:
     """({relative path: sha256}, the first problem) of one episode's files; lenient mismatches go to `warned`.
-    `resolved_of` caches resolved paths across episodes (a shared file is resolved once)."""
+    `names` caches `_names` across episodes (a shared file is resolved once)."""
     sums, problem = {}, None
     for path in ref.source_files:
-        resolved = resolved_of.get(path) or resolved_of.setdefault(path, str(Path(path).resolve()))
+        key = (path, root)
+        resolved, rel = names.get(key) or names.setdefault(key, _names(path, root))
         sha = digests.get(resolved)
         if sha is None:
             why = unreadable.get(resolved, "no work unit hashed it")
             problem = problem or EpisodeError(ref, None, f"sha256 not available: the file could not be read "
                                               f"({why})", file=path)
             continue
-        sums[_relative(path, root)] = sha
+        sums[rel] = sha
         expected = listed.get(resolved)
         if expected is not None and expected[0] != sha:
             msg = (f"sha256 {sha[:16]}... differs from {expected[1]} ({expected[0][:16]}...): not the bytes the "
@@ -147,7 +150,7 @@ def check_digests(tasks: list, records: list[dict], strict: bool, lists: Checksu
         digests.update(rec["source_sha256"])
         unreadable.update({p: f"{why}; hashed by unit {rec['unit']}" for p, why in rec["source_unreadable"].items()})
     warned: dict[str, str] = {}
-    resolved_of: dict[str, str] = {}
+    names: dict[tuple, tuple[str, str]] = {}
     by_unit = {t.unit: t for t in tasks}
     for rec in records:
         task = by_unit[rec["unit"]]
@@ -156,7 +159,7 @@ def check_digests(tasks: list, records: list[dict], strict: bool, lists: Checksu
         problems = []
         for ep in rec["episodes"]:
             sums, problem = _episode_sums(refs[ep["episode_id"]], Path(task.root), digests, unreadable, listed,
-                                          strict, warned, resolved_of)
+                                          strict, warned, names)
             ep["source_sha256"] = sums
             if problem is not None:
                 problems.append(problem)

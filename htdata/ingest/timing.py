@@ -37,7 +37,9 @@ class StageClock:
 def timing_summary(records: list[dict], total_s: float) -> dict:
     """report["timing"] from the records of the units run in this invocation."""
     worker_s = sum(float(r.get("seconds", 0.0)) for r in records)
-    out = {"frames": sum(int(r["frames"]) for r in records), "total_s": total_s, "worker_s": worker_s}
+    out = {"frames": sum(int(r["frames"]) for r in records), "total_s": total_s, "worker_s": worker_s,
+           # the units' processes' CPU (their encode threads included): the cores a quiet machine would spend
+           "worker_cpu_s": sum(float(r.get("cpu_s", 0.0)) for r in records)}
     staged = 0.0
     for name in STAGES:
         v = sum(float(r.get("timing", {}).get(f"{name}_s", 0.0)) for r in records)

@@ -170,7 +170,7 @@ def run_unit(task) -> dict:
     spool = Spool(spool_path(out, task.unit))
     episodes, failures, dropped, layouts, calibrations = [], [], [], {}, {}
     clock = StageClock()
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     digests, unreadable = hash_sources(task.hash_files, clock)
     try:
         with ShardWriter(out / SHARDS_DIR, task.unit, cfg.shards.samples_per_shard) as writer:
@@ -210,7 +210,7 @@ def run_unit(task) -> dict:
         "rows": encode_rows(part.rows), "rows_dtype": ROWS_DTYPE, "frames": int(len(part.rows)),
         "episodes": part.episodes, "failures": failures, "dropped": dropped, "layouts": layouts,
         "calibrations": calibrations, "source_sha256": digests, "source_unreadable": unreadable,
-        "seconds": time.perf_counter() - t0, "timing": clock.as_record(),
+        "seconds": time.perf_counter() - t0, "cpu_s": time.process_time() - cpu0, "timing": clock.as_record(),
     }
     write_bytes_atomic(unit_record_path(out, task.unit), dumps(record, compact=True))
     return record

@@ -376,7 +376,7 @@ def test_changed_source_redoes_only_its_unit(tmp_path, clean_run):
 
 # --------------------------------------------------------------------------- progress + timing
 
-TIMING_KEYS = {"frames", "total_s", "worker_s", "hash_s", "decode_s", "resize_s", "normalise_s", "rasterise_s",
+TIMING_KEYS = {"frames", "total_s", "worker_s", "worker_cpu_s", "hash_s", "decode_s", "resize_s", "normalise_s", "rasterise_s",
                "encode_s", "write_s", "other_s"}
 DRIVER_KEYS = {"plan_s", "run_s", "commit_s"}
 DRIVER_CPU_KEYS = {"plan_cpu_s", "run_cpu_s", "commit_cpu_s"}     # the driver process's own CPU per phase
@@ -445,7 +445,8 @@ def test_report_has_stage_timing(tmp_path):
     assert timing["run_s"] >= timing["worker_s"]
     for stage in ("hash_s", "decode_s", "resize_s", "normalise_s", "rasterise_s", "encode_s", "write_s"):
         assert timing[stage] > 0, stage
-    stages = sum(timing[k] for k in TIMING_KEYS - {"frames", "total_s", "worker_s", "other_s"})
+    stages = sum(timing[k] for k in TIMING_KEYS - {"frames", "total_s", "worker_s", "worker_cpu_s", "other_s"})
+    assert timing["worker_cpu_s"] > 0
     assert timing["other_s"] >= 0 and abs(stages + timing["other_s"] - timing["worker_s"]) < 1e-6
     assert timing["total_s"] >= timing["worker_s"]        # inline: the units ran inside the wall time
     records = [json.loads(p.read_text()) for p in sorted((out / ".work").glob("unit-*.json"))]
