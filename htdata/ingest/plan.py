@@ -33,6 +33,7 @@ from htdata.glove.layouts import load_layout
 from htdata.ingest.append import labels_of
 from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 from htdata.source.adapters import get_adapter
+from htdata.source.adapters.sourcetree import real_path
 from htdata.store.fsutil import sha256_file
 
 
@@ -147,11 +148,12 @@ def assign_hashing(tasks: list[UnitTask]) -> list[UnitTask]:
     (not by which unit finishes first), so a resumed run finds the same owners."""
     owned: set[str] = set()
     resolved: dict[str, str] = {}       # a shared file is resolved once, not once per episode
+    folders: dict = {}                  # and each folder once (sourcetree.real_path)
     out = []
     for t in tasks:
         mine = []
         for name in (p for r in t.episodes for p in r.source_files):
-            path = resolved.get(name) or resolved.setdefault(name, str(Path(name).resolve()))
+            path = resolved.get(name) or resolved.setdefault(name, str(real_path(Path(name), folders)))
             if path not in owned:
                 owned.add(path)
                 mine.append(path)

@@ -41,6 +41,7 @@ from pathlib import Path
 from htdata.errors import DatasetError, EpisodeError
 from htdata.ingest.plan import failure_entry
 from htdata.ingest.workdir import clear_unit_files
+from htdata.source.adapters.sourcetree import real_path
 
 LIST_NAMES = ("SHA256SUMS",)
 LIST_SUFFIX = ".sha256"
@@ -88,9 +89,11 @@ def plan_verification(refs: list, roots: dict[str, Path], strict: bool, lists: C
     """With `strict` (--verify-sources), fail before any unit runs the episodes reading a file no checksum
     list covers (no digest can save them); every other ref goes on. `roots`: episode id -> source root."""
     out = SourceCheck(refs=[], failures=[], notes=[])
+    folders: dict = {}
     for ref in refs:
         listed = lists.of(roots[ref.episode_id]) if strict else {}
-        unlisted = next((p for p in ref.source_files if strict and str(Path(p).resolve()) not in listed), None)
+        unlisted = next((p for p in ref.source_files if strict and str(real_path(Path(p), folders)) not in listed),
+                        None)
         if unlisted is None:
             out.refs.append(ref)
             continue
@@ -100,23 +103,31 @@ def plan_verification(refs: list, roots: dict[str, Path], strict: bool, lists: C
     return out
 
 
-def _names(path: str, root: Path) -> tuple[str, str]:
-    """(resolved path, path relative to the source root) of a source file."""
-    try:
-        rel = Path(path).relative_to(root).as_posix()
-    except ValueError:
-        rel = str(path)
-    return str(Path(path).resolve()), rel
+class _Names:
+    """(resolved path, path relative to the source root) of source files, each file and folder resolved
+    once per run (a shared file is named by every episode that reads it)."""
+
+    def __init__(self):
+        self._names: dict[tuple, tuple[str, str]] = {}
+        self._folders: dict = {}
+
+    def __call__(self, path: str, root: Path) -> tuple[str, str]:
+        key = (path, root)
+        if key not in self._names:
+            try:
+                rel = Path(path).relative_to(root).as_posix()
+            except ValueError:
+                rel = str(path)
+            self._names[key] = (str(real_path(Path(path), self._folders)), rel)
+        return self._names[key]
 
 
 def _episode_sums(ref, root: Path, digests: dict, unreadable: dict, listed: dict, strict: bool,
-                  warned: dict[str, str], names: dict[tuple, tuple[str, str]]) -> tuple[dict, EpisodeError | None]:
-    """({relative path: sha256}, the first problem) of one episode's files; lenient mismatches go to `warned`.
-    `names` caches `_names` across episodes (a shared file is resolved once)."""
+                  warned: dict[str, str], names: _Names) -> tuple[dict, EpisodeError | None]:
+    """({relative path: sha256}, the first problem) of one episode's files; lenient mismatches go to `warned`."""
     sums, problem = {}, None
     for path in ref.source_files:
-        key = (path, root)
-        resolved, rel = names.get(key) or names.setdefault(key, _names(path, root))
+        resolved, rel = names(path, root)
         sha = digests.get(resolved)
         if sha is None:
             why = unreadable.get(resolved, "no work unit hashed it")
@@ -150,7 +161,7 @@ def check_digests(tasks: list, records: list[dict], strict: bool, lists: Checksu
         digests.update(rec["source_sha256"])
         unreadable.update({p: f"{why}; hashed by unit {rec['unit']}" for p, why in rec["source_unreadable"].items()})
     warned: dict[str, str] = {}
-    names: dict[tuple, tuple[str, str]] = {}
+    names = _Names()
     by_unit = {t.unit: t for t in tasks}
     for rec in records:
         task = by_unit[rec["unit"]]

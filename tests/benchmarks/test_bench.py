@@ -262,9 +262,11 @@ def test_driver_growth_and_projection_arithmetic():
     """Growth = slope between two sizes; 10M frames on 64 cores: wall = fixed + growth x F + max(work, driver run)."""
     from htdata.benchmarks.driver import growth, project
 
-    small = {"frames": 200, "serial_s": 1.02, "serial_cpu_s": 0.51, "run_cpu_s": 0.1}
-    big = {"frames": 4200, "serial_s": 1.10, "serial_cpu_s": 0.55, "run_cpu_s": 0.14}
+    small = {"frames": 200, "units": 4, "serial_s": 1.02, "serial_cpu_s": 0.51, "run_cpu_s": 0.1}
+    big = {"frames": 4200, "units": 84, "serial_s": 1.10, "serial_cpu_s": 0.55, "run_cpu_s": 0.14}
     g = growth(small, big)
+    assert g["serial_cpu_growth_s_per_unit"] == pytest.approx(0.04 / 80) and g["frames_per_unit"] == 50
+    assert g["frames_per_unit_for_target"] == pytest.approx(0.0005 / 2e-5)      # 25 frames per episode
     assert g["serial_growth_s_per_frame"] == pytest.approx(2e-5) and g["serial_fixed_s"] == pytest.approx(1.016)
     assert g["serial_cpu_growth_s_per_frame"] == pytest.approx(1e-5) and g["run_cpu_s_per_frame"] == pytest.approx(
         0.14 / 4200)
