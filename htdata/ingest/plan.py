@@ -33,7 +33,7 @@ from htdata.glove.layouts import load_layout
 from htdata.ingest.append import labels_of
 from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 from htdata.source.adapters import get_adapter
-from htdata.source.adapters.sourcetree import real_path
+from htdata.source.adapters.sourcetree import RealPaths
 from htdata.store.fsutil import sha256_file
 
 
@@ -128,9 +128,9 @@ def check_unique_ids(refs_per_source: list[list]) -> None:
             seen[r.episode_id] = r.source_ref
 
 
-def plan_units(todo: list[tuple], out: Path, first_unit: int) -> list[UnitTask]:
+def plan_units(todo: list[tuple], out: Path, first_unit: int, real: RealPaths | None = None) -> list[UnitTask]:
     """One unit per (ref, Source) to ingest, in the order given, numbered from `first_unit`; each
-    source file is hashed by the first unit that reads it (`assign_hashing`)."""
+    source file is hashed by the first unit that reads it (`assign_hashing`; `real`: the run's RealPaths)."""
     settings: dict[int, tuple] = {}     # per source, once: the units share the pipeline dict
     for _, src in todo:
         if id(src) not in settings:
@@ -138,22 +138,20 @@ def plan_units(todo: list[tuple], out: Path, first_unit: int) -> list[UnitTask]:
     return assign_hashing([UnitTask(unit=first_unit + k, out=str(out), pipeline=settings[id(src)][0],
                                     pipeline_path=src.pipeline.path, root=str(src.root), episodes=[ref],
                                     maps=settings[id(src)][1])
-                           for k, (ref, src) in enumerate(todo)])
+                           for k, (ref, src) in enumerate(todo)], real)
 
 
-def assign_hashing(tasks: list[UnitTask]) -> list[UnitTask]:
+def assign_hashing(tasks: list[UnitTask], real: RealPaths | None = None) -> list[UnitTask]:
     """`tasks` with `hash_files` set: every source file of the run (resolved path) goes to the first unit,
     in unit order, whose episodes read it, so a file several episodes share (an OpenTouch scene, a label
     table) is hashed once per run, by a worker, and the driver reads no source byte. Fixed by the plan
     (not by which unit finishes first), so a resumed run finds the same owners."""
     owned: set[str] = set()
-    resolved: dict[str, str] = {}       # a shared file is resolved once, not once per episode
-    folders: dict = {}                  # and each folder once (sourcetree.real_path)
+    real = real or RealPaths()          # each file and folder resolved once per run
     out = []
     for t in tasks:
         mine = []
-        for name in (p for r in t.episodes for p in r.source_files):
-            path = resolved.get(name) or resolved.setdefault(name, str(real_path(Path(name), folders)))
+        for path in (real(p) for r in t.episodes for p in r.source_files):
             if path not in owned:
                 owned.add(path)
                 mine.append(path)

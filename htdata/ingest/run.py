@@ -35,6 +35,7 @@ from htdata.ingest.workdir import (
     remove_strays,
     unit_record_path,
 )
+from htdata.source.adapters.sourcetree import RealPaths
 from htdata.store.fsutil import write_bytes_atomic
 from htdata.store.lock import WriterLock
 from htdata.store.snapshot import current_snapshot
@@ -143,19 +144,19 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         settings = {id(s): s.pipeline.to_dict() for s in sources}
         plan = plan_append(parent, [r for r, _ in pairs], [settings[id(s)] for _, s in pairs])
         source_of = {r.episode_id: s for r, s in pairs}
-        lists = ChecksumLists()
+        lists, real = ChecksumLists(), RealPaths()
         checked = plan_verification(plan.todo, {r.episode_id: source_of[r.episode_id].root for r in plan.todo},
-                                    verify_sources, lists)
+                                    verify_sources, lists, real)
         plan.todo = checked.refs
         plan_failures = plan_failures + checked.failures
         first_unit = parent.next_unit() if parent else 0
-        tasks = plan_units([(r, source_of[r.episode_id]) for r in plan.todo], out, first_unit)
+        tasks = plan_units([(r, source_of[r.episode_id]) for r in plan.todo], out, first_unit, real)
         remove_strays(out, tasks, first_unit)
         t_run, cpu_run = time.perf_counter(), time.process_time()
         records, ran = run_units(tasks, out, runner, progress)
         t_ran, cpu_ran = time.perf_counter(), time.process_time()
         # the digests the units computed, checked against the lists; source_sha256 into the records
-        sum_notes = check_digests(tasks, records, verify_sources, lists)
+        sum_notes = check_digests(tasks, records, verify_sources, lists, real)
         report = build_report(sources, tasks, records, ran, plan_failures, plan, parent,
                               discovered={r.episode_id for rs in refs for r in rs}, t_start=t_start)
         report["notes"] += sum_notes

@@ -24,7 +24,8 @@ with a file no list covers; after, `check_digests` compares the digests the
 records carry with the lists, fails every unit whose episodes read a
 mismatching (strict) or unreadable file (its records dropped, its shards
 deleted: nothing of it is committed) and writes `source_sha256` into the
-episode records the commit writes.
+episode records the commit writes. Every path is resolved once per run
+(`RealPaths`, shared with the plan): no per-file syscalls twice.
 
 What this cannot detect: damage that happened before the list was made (the
 list then describes the damaged bytes), and anything in a file no list
@@ -41,7 +42,7 @@ from pathlib import Path
 from htdata.errors import DatasetError, EpisodeError
 from htdata.ingest.plan import failure_entry
 from htdata.ingest.workdir import clear_unit_files
-from htdata.source.adapters.sourcetree import real_path
+from htdata.source.adapters.sourcetree import RealPaths
 
 LIST_NAMES = ("SHA256SUMS",)
 LIST_SUFFIX = ".sha256"
@@ -85,15 +86,15 @@ class SourceCheck:
     notes: list[str]
 
 
-def plan_verification(refs: list, roots: dict[str, Path], strict: bool, lists: ChecksumLists) -> SourceCheck:
+def plan_verification(refs: list, roots: dict[str, Path], strict: bool, lists: ChecksumLists,
+                      real: RealPaths | None = None) -> SourceCheck:
     """With `strict` (--verify-sources), fail before any unit runs the episodes reading a file no checksum
     list covers (no digest can save them); every other ref goes on. `roots`: episode id -> source root."""
     out = SourceCheck(refs=[], failures=[], notes=[])
-    folders: dict = {}
+    real = real or RealPaths()
     for ref in refs:
         listed = lists.of(roots[ref.episode_id]) if strict else {}
-        unlisted = next((p for p in ref.source_files if strict and str(real_path(Path(p), folders)) not in listed),
-                        None)
+        unlisted = next((p for p in ref.source_files if strict and real(p) not in listed), None)
         if unlisted is None:
             out.refs.append(ref)
             continue
@@ -104,12 +105,11 @@ def plan_verification(refs: list, roots: dict[str, Path], strict: bool, lists: C
 
 
 class _Names:
-    """(resolved path, path relative to the source root) of source files, each file and folder resolved
-    once per run (a shared file is named by every episode that reads it)."""
+    """(resolved path, path relative to the source root) of source files, each named once per run."""
 
-    def __init__(self):
+    def __init__(self, real: RealPaths):
         self._names: dict[tuple, tuple[str, str]] = {}
-        self._folders: dict = {}
+        self._real = real
 
     def __call__(self, path: str, root: Path) -> tuple[str, str]:
         key = (path, root)
@@ -118,7 +118,7 @@ class _Names:
                 rel = Path(path).relative_to(root).as_posix()
             except ValueError:
                 rel = str(path)
-            self._names[key] = (str(real_path(Path(path), self._folders)), rel)
+            self._names[key] = (self._real(path), rel)
         return self._names[key]
 
 
@@ -146,7 +146,8 @@ def _episode_sums(ref, root: Path, digests: dict, unreadable: dict, listed: dict
     return dict(sorted(sums.items())), problem
 
 
-def check_digests(tasks: list, records: list[dict], strict: bool, lists: ChecksumLists) -> list[str]:
+def check_digests(tasks: list, records: list[dict], strict: bool, lists: ChecksumLists,
+                  real: RealPaths | None = None) -> list[str]:
     """Check the digests the units' records carry (every record of the run, resumed ones too) against the
     checksum lists; returns the warning notes (one per mismatching file, lenient mode).
 
@@ -161,7 +162,7 @@ def check_digests(tasks: list, records: list[dict], strict: bool, lists: Checksu
         digests.update(rec["source_sha256"])
         unreadable.update({p: f"{why}; hashed by unit {rec['unit']}" for p, why in rec["source_unreadable"].items()})
     warned: dict[str, str] = {}
-    names = _Names()
+    names = _Names(real or RealPaths())
     by_unit = {t.unit: t for t in tasks}
     for rec in records:
         task = by_unit[rec["unit"]]

@@ -37,6 +37,22 @@ def real_path(path: Path, folders: dict | None = None) -> Path:
     return full.resolve() if full.is_symlink() else full
 
 
+class RealPaths:
+    """`real_path` of many files as strings, each file and each folder resolved once: an ingest's driver
+    names every source file several times (who hashes it, its checksum list line, its record)."""
+
+    def __init__(self):
+        self.files: dict[str, str] = {}
+        self.folders: dict = {}
+
+    def __call__(self, path: Path | str) -> str:
+        key = str(path)
+        found = self.files.get(key)
+        if found is None:
+            found = self.files[key] = str(real_path(Path(key), self.folders))
+        return found
+
+
 def check_source_file(path: Path | str, root: Path | str | None, folders: dict | None = None) -> Path:
     """Raise EpisodeError (naming `path`) unless it is a regular file whose real path is inside `root`.
 
