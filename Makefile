@@ -11,6 +11,7 @@ OOD    ?= cup_grasp palm_push
 JOBS   ?= 2
 
 .PHONY: setup demo sample ingest split validate preview train-smoke train-smoke-mispaired compare task-transfer test lint fix install-check bench \
+        ray-cluster-check \
         lerobot-check lerobot-load export-lerobot gpu-check clean
 
 setup: $(VENV)/.installed
@@ -76,6 +77,12 @@ fix: setup
 
 test: setup
 	$(PY) -m pytest -q -n $(JOBS) --dist loadfile
+
+# Ingest on a real two-node Ray cluster (`ray start --head` + `ray start --address`, separate processes
+# and temp dirs) writes the process pool's dataset byte for byte; both nodes are stopped by process id,
+# even on failure. Not in `make test` (two Ray nodes: ~1 GB, ~1 min on 2 cores); CI runs it.
+ray-cluster-check: setup
+	$(PY) -m pytest -q -m cluster tests/ingest/test_ray_cluster.py
 
 # A real install: build sdist + wheel, install the wheel into a fresh venv under a
 # temp dir, run layouts -> sample -> ingest -> split -> validate outside the checkout.

@@ -7,7 +7,8 @@
     timing.py      small timing helpers shared by the sections
     sources.py     real frames for the benchmarks: sample-corpus episodes read through the adapters
     ingest.py      ingest throughput per adapter against the bare decode+resize+encode bound; memory vs length
-    scaling.py     ingest worker scaling (1 -> 2 workers), HT-Bench scale on paper from it
+    scaling.py     ingest worker scaling (1 -> N workers, N = the machine's cores)
+    driver.py      the ingest driver's serial work per frame at two corpus sizes; HT-Bench (10M frames) on 64 cores
     append.py      appending one episode to datasets of N and 10N episodes: wall time and bytes written
     revisions.py   the same ingest under another revision of htdata, side by side
     loader.py      read paths of a committed dataset vs the bare decode bound

@@ -34,7 +34,8 @@ from htdata.synthetic.corpus import TA_IMAGE, TA_LAYOUTS, VIDEO_FPS, touchanythi
 from htdata.synthetic.formats import TouchAnythingEpisode, write_touchanything_episode
 from htdata.synthetic.world import EpisodeSpec, World
 
-STAGES = ("decode", "resize", "normalise", "rasterise", "encode", "write", "other")
+STAGES = ("hash", "decode", "resize", "normalise", "rasterise", "encode", "write", "other")
+DRIVER_PHASES = ("plan_s", "run_s", "commit_s", "plan_cpu_s", "run_cpu_s", "commit_cpu_s")
 
 
 def ingest_run(pipelines: list[tuple[str, Path]], out: Path, workers: int, settings: tuple[str, ...] = ()) -> dict:
@@ -60,7 +61,8 @@ def ingest_run(pipelines: list[tuple[str, Path]], out: Path, workers: int, setti
            "frames_per_s": frames / seconds, "frames_per_s_per_worker": frames / seconds / max(workers, 1)}
     if timing:
         row["worker_s"] = float(timing.get("worker_s", 0.0))
-        row.update({k: float(timing.get(k, 0.0)) for k in ("plan_s", "run_s", "commit_s")})
+        row["worker_cpu_s"] = float(timing.get("worker_cpu_s", 0.0))
+        row.update({k: float(timing.get(k, 0.0)) for k in DRIVER_PHASES})
         row["stages_s"] = {s: float(timing.get(f"{s}_s", 0.0)) for s in STAGES}
     return row
 

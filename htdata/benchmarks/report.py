@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from htdata.benchmarks.driver import driver_markdown
 from htdata.benchmarks.export import export_markdown
 from htdata.benchmarks.lag import lag_markdown
 from htdata.benchmarks.maps import maps_markdown
@@ -19,7 +20,8 @@ HEADINGS = {
     "rgb": "## RGB: JPEG quality and resize method",
     "raster": "## Rasterisation mode x layout",
     "ingest": "## Ingest throughput per adapter",
-    "scaling": "## Ingest worker scaling, and HT-Bench (10M frames) on paper",
+    "scaling": "## Ingest worker scaling (1 -> N workers)",
+    "driver": "## The ingest driver's serial work per frame, and HT-Bench (10M frames) on 64 cores",
     "rss": "## Ingest peak memory vs episode length",
     "loader": "## Loader access patterns",
     "index": "## Index load at scale",
@@ -35,7 +37,7 @@ HEADINGS = {
     "realglove": "## Real glove: the raw-count rules on real recordings",
 }
 TARGET_OVERHEAD_PCT = 15.0  # issue #22: share of our in-worker time the bare bound does not spend
-TARGET_SCALING = 1.9        # 1 -> 2 workers, opentouch and touchanything (#22)
+TARGET_SCALING = 1.9        # 1 -> 2 workers, opentouch and touchanything (#22); 0.95 N for 1 -> N
 SCALING_TARGETED = ("opentouch", "touchanything")
 TARGET_RSS_FLAT = 1.25      # peak RSS of the longest episode / the shortest
 TARGET_RSS_600_MB = 150.0   # the 600-frame episode (#22: back to the round-one code's peak)
@@ -194,29 +196,27 @@ def _scaling(d: dict) -> list[str]:
     lines = [f"Each adapter's part of the medium sample corpus at {s0['workers_lo']} and {s0['workers_hi']} "
              f"workers, alternated {s0['reps']} time(s); speed-up = median of the pairs' wall-time ratios. "
              f"run phase = first unit submitted to last result (the driver's planning and commit left out). "
-             f"fixed s = planning + source hashing + commit at {s0['workers_hi']} workers.", ""]
+             f"fixed s = the driver's planning + commit at {s0['workers_hi']} workers (the units hash the "
+             f"sources).", ""]
+    hi = s0["workers_hi"]
     lines += table(d["summary"], [("adapter", "adapter"), ("frames", "frames"), ("units", "units"),
-                                  ("frames_per_s_lo", "frames/s 1 worker"), ("frames_per_s_hi", "frames/s 2 workers"),
+                                  ("frames_per_s_lo", f"frames/s {s0['workers_lo']} worker"),
+                                  ("frames_per_s_hi", f"frames/s {hi} workers"),
                                   ("scaling", "speed-up"), ("run_phase_scaling", "run-phase speed-up"),
                                   ("fixed_s_hi", "fixed s"), ("core_s_per_frame_lo", "core s/frame 1w"),
-                                  ("core_s_per_frame_hi", "core s/frame 2w")])
+                                  ("core_s_per_frame_hi", f"core s/frame {hi}w")])
     for s in d["summary"]:
         reps = ", ".join(f"{v:.2f}" for v in s["scaling_reps"])
         if s["adapter"] in SCALING_TARGETED:
-            ok = s["scaling"] >= TARGET_SCALING
+            target = TARGET_SCALING * s["workers_hi"] / 2      # 95% of linear, as 1.9x is for 2 workers
+            ok = s["scaling"] >= target
             lines.append(f"- {s['adapter']}: {s['workers_lo']} -> {s['workers_hi']} workers {s['scaling']:.2f}x "
-                         f"(pairs: {reps}; target >= {TARGET_SCALING}x): {'met' if ok else 'MISSED'}; "
+                         f"(pairs: {reps}; target >= {target:.3g}x): {'met' if ok else 'MISSED'}; "
                          f"{s['units']} units, so unequal units cap it at "
                          f"{s['units'] / -(-s['units'] // s['workers_hi']):.2f}x.")
         else:
             lines.append(f"- {s['adapter']}: {s['scaling']:.2f}x (pairs: {reps}; no target: {s['units']} units).")
-    lines += ["", "HT-Bench on paper: 10M frames of each source (`htdata.benchmarks.scaling.scale_estimate`: "
-              "core-hours from the 2-worker in-worker seconds per frame; wall on 64 cores = the driver's serial "
-              "seconds per frame x 10M + core-hours / 64; storage bandwidth and cluster scheduling not modelled):",
-              ""]
-    lines += table(d["estimate"], [("adapter", "source"), ("core_s_per_frame", "core s/frame"),
-                                   ("core_hours", "core-hours"), ("driver_serial_hours", "driver serial h"),
-                                   ("wall_hours", "wall h on 64 cores"), ("speedup_on_cores", "speed-up on 64")])
+    lines += ["", "The 10M-frame projection: the driver section below (serial work at two corpus sizes).", ""]
     return lines
 
 
@@ -318,7 +318,7 @@ def _stats(d: dict) -> list[str]:
 
 
 RENDERERS = {"machine": _machine, "codecs": _codecs, "rgb": _rgb, "raster": _raster, "ingest": _ingest,
-             "scaling": _scaling, "rss": _rss, "loader": _loader, "index": _index, "validate": _validate,
+             "scaling": _scaling, "driver": driver_markdown, "rss": _rss, "loader": _loader, "index": _index, "validate": _validate,
              "append": _append, "stats": _stats, "lag": lag_markdown, "raw": raw_markdown, "maps": maps_markdown,
              "export": export_markdown, "rawglove": rawglove_markdown, "view": view_markdown,
              "realglove": realglove_markdown}

@@ -25,13 +25,14 @@ import os
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from importlib import metadata
 from pathlib import Path
 
 from htdata.benchmarks.append import append_rows
 from htdata.benchmarks.codecs import codec_rows, real_maps
 from htdata.benchmarks.dataloader import dataloader_rows
+from htdata.benchmarks.driver import driver_rows
 from htdata.benchmarks.export import export_rows
 from htdata.benchmarks.index import index_rows
 from htdata.benchmarks.ingest import adapter_rows, ingest_run, peak_rss_rows, write_long_touchanything
@@ -53,11 +54,12 @@ from htdata.benchmarks.validation import validate_rows
 from htdata.benchmarks.view import view_rows
 from htdata.errors import ArgumentError
 from htdata.fileio import write_bytes_atomic
+from htdata.ingest.executors import usable_cores
 from htdata.synthetic.corpus import FORMATS, SCALES, CorpusConfig, corpus_complete, write_corpus
 
 SECTION_GROUP = "htdata.bench_sections"
-BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "scaling", "rss", "loader", "index", "validate", "append",
-                    "stats", "lag", "raw", "maps", "export", "rawglove", "view", "realglove")
+BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "scaling", "driver", "rss", "loader", "index", "validate",
+                    "append", "stats", "lag", "raw", "maps", "export", "rawglove", "view", "realglove")
 # Top-level keys of results.json that are not sections: no section may take these names.
 RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds",
                  "gpu_check")
@@ -80,7 +82,10 @@ class BenchConfig:
     codec_maps_per_glove: int = 96         # per glove layout
     rgb_frames: int = 12
     raster_frames: int = 256
-    ingest_workers: tuple[int, ...] = (1, 2)
+    # 1 -> N workers, N = the machine's usable cores (at least 2)
+    ingest_workers: tuple[int, ...] = field(default_factory=lambda: (1, max(2, usable_cores())))
+    driver_scales: tuple[str, str] = ("tiny", "medium")   # the driver's serial work at two corpus sizes
+    driver_sources: tuple[str, ...] | None = None         # None: every source format
     rss_lengths: tuple[int, ...] = (150, 600, 2400)
     loader_random: int = 400
     loader_windows: int = 100
@@ -97,13 +102,21 @@ class BenchConfig:
         return cls(out=out, quick=True, seed=seed, scale="tiny", scaling_scale="tiny", ingest_reps=1,
                    scaling_reps=1, revision=None, codec_maps_per_glove=8, rgb_frames=2,
                    raster_frames=8, rss_lengths=(20, 40), loader_random=20, loader_windows=5, dataloader_items=64,
-                   index_rows=(10_000,), append_sizes=(2, 20), view_lengths=(20, 40))
+                   index_rows=(10_000,), append_sizes=(2, 20), view_lengths=(20, 40), driver_scales=("tiny", "small"),
+                   driver_sources=("opentouch",))
 
     def validate(self) -> "BenchConfig":
         self.out = Path(self.out)
         for name in ("scale", "scaling_scale"):
             if getattr(self, name) not in SCALES:
                 raise ArgumentError(f"{name} must be one of {SCALES}, got {getattr(self, name)!r}")
+        if len(self.driver_scales) != 2 or [SCALES.index(s) for s in self.driver_scales if s in SCALES] != sorted(
+                {SCALES.index(s) for s in self.driver_scales if s in SCALES}) or len(set(self.driver_scales)) != 2:
+            raise ArgumentError(f"driver_scales must be two corpus scales of {SCALES}, smaller first, got "
+                                f"{self.driver_scales}")
+        unknown = [s for s in (self.driver_sources or ()) if s not in FORMATS]
+        if unknown or self.driver_sources == ():
+            raise ArgumentError(f"driver_sources must be None or formats of {FORMATS}, got {self.driver_sources}")
         if min(self.ingest_reps, self.scaling_reps, self.revision_frames) < 1:
             raise ArgumentError("ingest_reps, scaling_reps and revision_frames must be >= 1")
         positive = {"codec_maps_per_glove": self.codec_maps_per_glove, "rgb_frames": self.rgb_frames,
@@ -154,12 +167,13 @@ def bench_sources() -> tuple[str, ...]:
     return FORMATS
 
 
-def ensure_corpus(cfg: BenchConfig, scale: str | None = None) -> Path:
-    """The deterministic sample corpus; reused when a complete one of the same scale/seed exists."""
+def ensure_corpus(cfg: BenchConfig, scale: str | None = None, formats: tuple[str, ...] = FORMATS) -> Path:
+    """The deterministic sample corpus (`formats` of it); reused when a complete one of the same scale/seed exists."""
 
     scale = scale or cfg.scale
-    root = cfg.work / f"raw_{scale}_{cfg.seed}"
-    corpus = CorpusConfig(out=root, seed=cfg.seed, scale=scale, progress=False, overwrite=True)
+    formats = tuple(f for f in FORMATS if f in formats)
+    root = cfg.work / (f"raw_{scale}_{cfg.seed}" + ("" if formats == FORMATS else "_" + "_".join(formats)))
+    corpus = CorpusConfig(out=root, seed=cfg.seed, scale=scale, formats=formats, progress=False, overwrite=True)
     if not corpus_complete(corpus):
         write_corpus(corpus)
     return root
@@ -252,6 +266,15 @@ class Sections:
         corpus = ensure_corpus(self.cfg, self.cfg.scaling_scale)
         workers = (min(self.cfg.ingest_workers), max(self.cfg.ingest_workers))
         return scaling_rows(corpus, self.cfg.work, bench_sources(), workers, self.cfg.scaling_reps)
+
+    def driver(self) -> dict:
+        sources = self.cfg.driver_sources or bench_sources()
+        corpora = []
+        for scale in self.cfg.driver_scales:
+            self.log(f"sample corpus ({scale})")
+            corpora.append(ensure_corpus(self.cfg, scale, FORMATS if self.cfg.driver_sources is None else sources))
+        return driver_rows(tuple(corpora), self.cfg.driver_scales, self.cfg.work, sources,
+                           max(self.cfg.ingest_workers), self.cfg.scaling_reps)
 
     def rss(self) -> list:
         return peak_rss_rows(self.cfg.work, self.cfg.rss_lengths)

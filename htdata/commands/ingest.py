@@ -80,7 +80,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--executor", choices=("process", "ray"), default="process",
                         help="process (default): local pool, the progress bar advances per finished episode; "
                              "ray: one Ray task per work unit, the bar advances per finished unit")
-    parser.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
+    parser.add_argument("--address", default=None,
+                        help="Ray cluster to join (with --executor ray): HOST:PORT of the head as `ray start "
+                             "--head` prints it, 'auto' or ray://HOST:PORT; every node must see SRC and OUT at "
+                             "the same paths (docs/USAGE.md, Scale-out). Default: a local Ray")
     parser.add_argument("--retries", type=int, default=1, help="retries of a unit that raised (default 1)")
     parser.add_argument("--allow-failures", action="store_true", help="exit 0 even if some episodes failed")
     parser.add_argument("--verify-sources", action="store_true",

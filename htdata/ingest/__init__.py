@@ -2,7 +2,7 @@
 htdata/commands/ingest.py).
 
     pipeline.py ingest pipelines as data: pipelines/*.toml -> PipelineConfig (checked, with --set overrides)
-    plan.py     sources, discovery, layouts resolved once per episode, one work unit per episode
+    plan.py     sources, discovery, layouts resolved once per run, one work unit per episode, who hashes what
     append.py   against the current version: reuse / relabel / re-ingest / keep; the parent's parts
                 (reused units are re-packed by htdata/write/repack.py, shared with curate)
     chunk.py    one chunk of glove rows: read, check, normalise, out-of-range policy, raw rows per frame
@@ -17,7 +17,8 @@ htdata/commands/ingest.py).
     commit.py   compatibility with the parent; parent parts + unit records -> a new version
     run.py      `ingest()`: lock -> plan -> executor (executors.py) -> report -> commit
     timing.py   per-stage wall time (report["timing"])
-    sourcesums.py  source files' sha256; SHA256SUMS lists beside the recordings; --verify-sources
+    sourcesums.py  source files' sha256 (taken by the units that read them) checked against SHA256SUMS
+                lists beside the recordings; --verify-sources
     recordingscan.py  raw recordings read for cell activity (`htdata layouts check --against` / `suggest`)
 
 May import: the writers' shared layer (htdata.write), reading, the store, sources, the glove

@@ -4,7 +4,9 @@ Layouts come from the unit records (the document each unit used, see
 unit.layout_entry), so nothing is re-resolved here; each layout's coverage is
 made from its document under the run's raster mode, as the units made it; the codec block comes from
 the pipelines' shared settings (plan.check_settings_agree made them equal,
-`check_compatible` made them equal to the parent's).
+`check_compatible` made them equal to the parent's). Each unit's index rows come as one array
+(`unit_part`, made where the unit ran): the commit checks and concatenates arrays, never a
+Python object per sample.
 """
 
 from __future__ import annotations
@@ -16,14 +18,14 @@ from pathlib import Path
 from htdata.errors import ConfigError, DatasetError
 from htdata.format.codec import DEFAULT_CODEC_INFO
 from htdata.format.mapstorage import MapStorage
-from htdata.format.shardio import SampleRecord, ShardRecord
 from htdata.glove.codecrule import codec_block
 from htdata.glove.layouts import load_canonical, parse_layout
 from htdata.ingest.append import parent_parts
 from htdata.ingest.episode import rasteriser_for
 from htdata.ingest.pipeline import PipelineConfig
-from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, write_layout_files
-from htdata.store.parts import part_from_unit
+from htdata.ingest.workdir import decode_rows
+from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, write_layout_files
+from htdata.store.parts import Part, part_from_rows
 from htdata.store.snapshot import commit_parts
 
 
@@ -39,11 +41,11 @@ def codec_info(cfg: PipelineConfig) -> dict:
     return codec_block(codec, cfg.codec_choice())
 
 
-def unit_result(record: dict) -> UnitResult:
-    return UnitResult(unit=record["unit"],
-                      shards=[ShardRecord(**s) for s in record["shards"]],
-                      samples=[SampleRecord(**s) for s in record["samples"]],
-                      episodes=record["episodes"])
+def unit_part(record: dict) -> Part:
+    """A unit record's Part: its index rows as the unit made them (arrays, checked vectorised)."""
+    where = f"work unit {record['unit']}"
+    return part_from_rows(record["unit"], record["shards"], decode_rows(record["rows"], where), record["episodes"],
+                          records_checked=True)   # the unit checked them (unit.check_records)
 
 
 def layout_artifacts(records: list[dict], raster_mode: str, canonical) -> list[LayoutArtifact]:
@@ -110,7 +112,7 @@ def commit(out: Path, sources: list, records: list[dict], plan, command: str) ->
     ingested = {ep["episode_id"] for r in records for ep in r["episodes"]}
     first_free = max([plan.parent.next_unit() if plan.parent else 0] + [r["unit"] + 1 for r in records])
     kept, next_unit = parent_parts(plan, ingested, first_free)
-    parts = kept + [part_from_unit(unit_result(r)) for r in records if r["episodes"]]
+    parts = kept + [unit_part(r) for r in records if r["episodes"]]
     fields = {"sources": merged_sources(plan.parent, sources), "layouts": layout_entries,
               "canonical": canonical_entry, "codec": codec_info(sources[0].pipeline),
               "calibrations": {k: v for r in records for k, v in r.get("calibrations", {}).items()}}

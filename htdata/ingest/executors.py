@@ -284,9 +284,11 @@ class ProcessExecutor:
 class RayExecutor:
     """Ray tasks, one per unit, with Ray's own bounded retries (`max_retries`).
 
-    `address=None` starts a local Ray with `workers` CPUs; "auto" or
-    "ray://host:port" joins a cluster. Every node must see the source and the
-    dataset directory at the same path (shared filesystem).
+    `address=None` starts a local Ray with `workers` CPUs; "HOST:PORT" (the
+    head's GCS, as `ray start --head` prints it), "auto" or "ray://host:port"
+    joins a cluster. Every node must see the source and the dataset directory
+    at the same path (shared filesystem): tasks write shards there and hash
+    the sources they read (docs/USAGE.md "Scale-out").
     """
 
     def __init__(self, address: str | None = None, workers: int | None = None, max_retries: int = 2):
@@ -322,13 +324,24 @@ class RayExecutor:
 
     def map_units(self, fn: Callable[[Any], Any], tasks: Iterable[Any],
                   on_progress: ProgressCallback | None = None) -> Iterator[tuple[Any, Any]]:
-        """`on_progress` is accepted for a uniform interface; Ray tasks send no events."""
+        """`on_progress` is accepted for a uniform interface; Ray tasks send no events.
+
+        At most 2 x the cluster's CPUs tasks are in flight (submitted in the order given, the
+        largest first): each `ray.wait` looks at those only, so a run of 10^5 units costs the driver
+        O(units), not O(units^2) over a list of every unit still pending."""
         started = self._init()
         try:
             remote = self.ray.remote(max_retries=self.max_retries, retry_exceptions=True)(_run_ray_unit)
-            refs = {remote.remote(fn, 1, task): task for task in tasks}  # a Ray task holds 1 CPU
-            while refs:
-                ready, _ = self.ray.wait(list(refs), num_returns=1)
+            pending = list(tasks)
+            pending.reverse()   # pop() from the end keeps the given order
+            in_flight = max(2, 2 * int(self.ray.cluster_resources().get("CPU", 1)))
+            refs: dict = {}
+            while pending or refs:
+                while pending and len(refs) < in_flight:
+                    task = pending.pop()
+                    refs[remote.remote(fn, 1, task)] = task   # a Ray task holds 1 CPU
+                self.ray.wait(list(refs), num_returns=1)                               # one is done ...
+                ready, _ = self.ray.wait(list(refs), num_returns=len(refs), timeout=0)  # ... take all that are
                 for ref in ready:
                     task = refs.pop(ref)
                     try:

@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,6 +34,7 @@ from htdata.glove.layouts import load_layout
 from htdata.ingest.append import labels_of
 from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 from htdata.source.adapters import get_adapter
+from htdata.source.adapters.sourcetree import RealPaths
 from htdata.store.fsutil import sha256_file
 
 
@@ -70,6 +72,9 @@ class UnitTask:
     # maps stored or not, resolved by the driver (never AUTO): the pipeline dict leaves "stored" out
     # (MapStorage.pipeline_value), so the worker is told; not in the fingerprint (the dict says "raw")
     maps: MapStorage
+    # the source files (resolved paths) this unit hashes: each file of the run once, by the first unit
+    # in unit order that reads it (`assign_hashing`); the driver checks the digests (ingest/sourcesums.py)
+    hash_files: tuple[str, ...] = ()
 
     @property
     def est_frames(self) -> int:
@@ -83,11 +88,22 @@ class UnitTask:
         """
 
         ident = {"pipeline": self.pipeline,
-                 "episodes": [[r.episode_id, r.source_ref, r.fingerprint, labels_of(r)] for r in self.episodes]}
+                 "episodes": [[r.episode_id, r.source_ref, r.fingerprint, labels_of(r)] for r in self.episodes],
+                 # a resumed record must hold current digests of the files this unit hashes, also of those
+                 # no ref fingerprint covers (a label table): their size and mtime are in
+                 "hash_files": [[p, *_size_mtime(p)] for p in self.hash_files]}
         return hashlib.sha1(json.dumps(ident, sort_keys=True).encode()).hexdigest()
 
     def __repr__(self) -> str:
         return f"unit {self.unit:06d} ({len(self.episodes)} episodes)"
+
+
+def _size_mtime(path: str) -> tuple[int | None, int | None]:
+    try:
+        st = os.stat(path)
+    except OSError:   # unreadable: the unit reports it, and the run fails the file's episodes
+        return None, None
+    return st.st_size, st.st_mtime_ns
 
 
 # Settings every pipeline of one dataset must share: the manifest records one codec and raster mode.
@@ -113,12 +129,35 @@ def check_unique_ids(refs_per_source: list[list]) -> None:
             seen[r.episode_id] = r.source_ref
 
 
-def plan_units(todo: list[tuple], out: Path, first_unit: int) -> list[UnitTask]:
-    """One unit per (ref, Source) to ingest, in the order given, numbered from `first_unit`."""
-    return [UnitTask(unit=first_unit + k, out=str(out), pipeline=src.pipeline.to_dict(),
-                     pipeline_path=src.pipeline.path, root=str(src.root), episodes=[ref],
-                     maps=src.pipeline.tactile.maps.decided())
-            for k, (ref, src) in enumerate(todo)]
+def plan_units(todo: list[tuple], out: Path, first_unit: int, real: RealPaths | None = None) -> list[UnitTask]:
+    """One unit per (ref, Source) to ingest, in the order given, numbered from `first_unit`; each
+    source file is hashed by the first unit that reads it (`assign_hashing`; `real`: the run's RealPaths)."""
+    settings: dict[int, tuple] = {}     # per source, once: the units share the pipeline dict
+    for _, src in todo:
+        if id(src) not in settings:
+            settings[id(src)] = (src.pipeline.to_dict(), src.pipeline.tactile.maps.decided())
+    return assign_hashing([UnitTask(unit=first_unit + k, out=str(out), pipeline=settings[id(src)][0],
+                                    pipeline_path=src.pipeline.path, root=str(src.root), episodes=[ref],
+                                    maps=settings[id(src)][1])
+                           for k, (ref, src) in enumerate(todo)], real)
+
+
+def assign_hashing(tasks: list[UnitTask], real: RealPaths | None = None) -> list[UnitTask]:
+    """`tasks` with `hash_files` set: every source file of the run (resolved path) goes to the first unit,
+    in unit order, whose episodes read it, so a file several episodes share (an OpenTouch scene, a label
+    table) is hashed once per run, by a worker, and the driver reads no source byte. Fixed by the plan
+    (not by which unit finishes first), so a resumed run finds the same owners."""
+    owned: set[str] = set()
+    real = real or RealPaths()          # each file and folder resolved once per run
+    out = []
+    for t in tasks:
+        mine = []
+        for path in (real(p) for r in t.episodes for p in r.source_files):
+            if path not in owned:
+                owned.add(path)
+                mine.append(path)
+        out.append(dataclasses.replace(t, hash_files=tuple(mine)))
+    return out
 
 
 # --------------------------------------------------------------------------- sources and settings
@@ -193,8 +232,9 @@ def resolve_sources(sources: list[Source], refs_per_source: list[list], existing
         raise ConfigError(f"pipelines {[s.pipeline.name for s in sources]} disagree on [codec] tactile / "
                           f"[tactile] compression ({sorted(settings)}): a dataset has one codec")
     first = sources[0].pipeline
+    # each distinct layout file once per source (not once per episode: a large run has ~10^5 of them)
     pairs = [(s.pipeline.normalise_settings(), load_layout(path)) for s, refs in zip(sources, refs_per_source)
-             for r in refs for path in sorted(set(r.layout_files.values()))]
+             for path in sorted({p for r in refs for p in r.layout_files.values()})]
     choice = first.codec.resolve(first.tactile.compression, dataset_gloves(pairs), existing)
     return [dataclasses.replace(s, pipeline=s.pipeline.with_codec_choice(choice)) for s in sources]
 
@@ -216,16 +256,40 @@ def check_pipeline_layouts(cfg: PipelineConfig, dirs: tuple = ()) -> None:
             raise type(e)(f"{cfg.path or cfg.name}: [layouts] {hand}: {e}") from None
 
 
-def resolve_layouts(ref, cfg: PipelineConfig, dirs: tuple = ()):
-    """`ref` with its layouts resolved: ids in `layouts`, files in `layout_files`, fingerprint over their bytes."""
+class LayoutLookup:
+    """`load_layout` and the layout file's sha256, once per (name, folders, base) and file in a run:
+    planning resolves every episode's layouts, and ~10^5 episodes share a handful of layouts."""
+
+    def __init__(self, dirs: tuple = ()):
+        self.dirs = tuple(dirs)
+        self._layouts: dict[tuple, object] = {}
+        self._digests: dict[str, str] = {}
+
+    def load(self, name, base=None):
+        key = (str(name), str(base) if base is not None else None)
+        if key not in self._layouts:
+            self._layouts[key] = load_layout(name, self.dirs, base)
+        return self._layouts[key]
+
+    def digest(self, path: str) -> str:
+        if path not in self._digests:
+            self._digests[path] = sha256_file(Path(path))
+        return self._digests[path]
+
+
+def resolve_layouts(ref, cfg: PipelineConfig, dirs: tuple | LayoutLookup = ()):
+    """`ref` with its layouts resolved: ids in `layouts`, files in `layout_files`, fingerprint over their bytes.
+
+    `dirs`: the layout folders (`--layouts`), or a `LayoutLookup` over them that a run shares."""
+    lookup = dirs if isinstance(dirs, LayoutLookup) else LayoutLookup(dirs)
     ids, files, digests = {}, {}, {}
     for h in (h for h in HANDS if h in ref.hands):
         if h in cfg.layouts:
-            layout = load_layout(cfg.layouts[h], dirs, pipeline_layout_base(cfg))
+            layout = lookup.load(cfg.layouts[h], pipeline_layout_base(cfg))
         elif h in ref.layouts:
             named_in = ref.extra.get("layouts_from") if isinstance(ref.extra, dict) else None
             try:
-                layout = load_layout(ref.layouts[h], dirs)
+                layout = lookup.load(ref.layouts[h])
             except (FileNotFoundError, ValueError) as e:
                 if not named_in:
                     raise
@@ -235,7 +299,7 @@ def resolve_layouts(ref, cfg: PipelineConfig, dirs: tuple = ()):
             raise EpisodeError(ref, None, f"no layout for the {h} hand (neither the source nor the pipeline's "
                                f"[layouts] names one)")
         ids[h], files[h] = layout.layout_id, layout.path
-        digests[h] = sha256_file(Path(layout.path))
+        digests[h] = lookup.digest(layout.path)
     fingerprint = hashlib.sha1(json.dumps([ref.fingerprint, digests], sort_keys=True).encode()).hexdigest()
     return dataclasses.replace(ref, layouts=ids, layout_files=files, fingerprint=fingerprint)
 
@@ -294,6 +358,7 @@ def discover_sources(sources: list[Source], layout_dirs: tuple = ()) -> tuple[li
     pipeline [layouts] override that does not resolve) aborts (ValueError).
     """
     refs, failures = [], []
+    lookup = LayoutLookup(layout_dirs)
     for s in sources:
         check_pipeline_layouts(s.pipeline, layout_dirs)
         name = s.pipeline.adapter.name
@@ -305,7 +370,7 @@ def discover_sources(sources: list[Source], layout_dirs: tuple = ()) -> tuple[li
         planned, failed = [], []
         for ref in found:
             try:
-                planned.append(resolve_layouts(ref, s.pipeline, layout_dirs))
+                planned.append(resolve_layouts(ref, s.pipeline, lookup))
             except (FileNotFoundError, ValueError, EpisodeError) as e:
                 err = e if isinstance(e, EpisodeError) else EpisodeError(ref, None, str(e))
                 failed.append(failure_entry("plan", name, err, ref.source_ref))

@@ -19,11 +19,11 @@ from pathlib import Path
 
 from htdata.errors import ArgumentError
 from htdata.fileio import write_bytes_atomic
-from htdata.format.table import INGEST_REPORT, MANIFEST_FILE
+from htdata.format.table import INGEST_REPORT, MANIFEST_FILE, WORK_DIR
 from htdata.glove.layouts import load_layout
 from htdata.ingest.append import kept_unavailable, plan_append
 from htdata.ingest.commit import check_compatible, commit
-from htdata.ingest.executors import make_executor, usable_cores
+from htdata.ingest.executors import make_executor
 from htdata.ingest.plan import (
     Source,
     UnitTask,
@@ -33,18 +33,19 @@ from htdata.ingest.plan import (
     plan_units,
     resolve_sources,
 )
-from htdata.ingest.sourcesums import check_sources
+from htdata.ingest.sourcesums import ChecksumLists, check_digests, plan_verification
 from htdata.ingest.timing import timing_summary
 from htdata.ingest.unit import run_unit
 from htdata.ingest.workdir import (
     check_output,
-    clear_unit_files,
     dumps,
     load_valid_record,
     prepare_output,
     remove_empty_output,
     remove_strays,
+    unit_record_path,
 )
+from htdata.source.adapters.sourcetree import RealPaths
 from htdata.store.lock import WriterLock
 from htdata.store.snapshot import current_snapshot
 from htdata.store.versions import restore_pointer
@@ -97,7 +98,7 @@ class EpisodeProgress:
     def unit_done(self, task: UnitTask, record: dict) -> None:
         self.finished.add(task.unit)
         episodes = self.limits[task.unit] - self.episodes.pop(task.unit, 0)
-        frames = len(record["samples"]) - self.unit_frames.pop(task.unit, 0)
+        frames = int(record["frames"]) - self.unit_frames.pop(task.unit, 0)
         self._advance(episodes, frames)
 
     def close(self) -> None:
@@ -110,7 +111,8 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
     """Ingest (or resume, or append to) the dataset at `out`; returns the report (also reports/ingest.json).
 
     Holds the dataset's writer lock throughout. Source files of the episodes to ingest are
-    hashed and checked against checksum lists when asked (htdata/ingest/sourcesums.py).
+    hashed by the units that read them and checked here against checksum lists
+    (htdata/ingest/sourcesums.py): the driver reads no source byte.
 
     Args:
         sources: the recordings to ingest, each a folder with the pipeline that reads it (`Source`).
@@ -132,7 +134,7 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
             that is not a dataset, a source folder with no recording, or no episode ingested into a new dataset.
         DatasetLocked: another writer holds the dataset.
     """
-    t_start = time.perf_counter()
+    t_start, cpu_start = time.perf_counter(), time.process_time()
     check_settings_agree(sources)
     check_output(out)
     existed = out.exists()
@@ -141,7 +143,7 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         with WriterLock(out, command) as lock:
             try:
                 return _ingest(sources, out, lock, workers, executor, address, retries, progress, layout_dirs,
-                               command, verify_sources, t_start)
+                               command, verify_sources, t_start, cpu_start)
             except BaseException:
                 if new:   # a first ingest that failed before writing anything leaves no empty skeleton
                     remove_empty_output(out)      # (under the lock: no other writer's folders)
@@ -153,7 +155,7 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
 
 
 def _ingest(sources, out: Path, lock: WriterLock, workers, executor, address, retries, progress, layout_dirs,
-            command, verify_sources, t_start) -> dict:
+            command, verify_sources, t_start, cpu_start) -> dict:
     """`ingest` under the writer lock: the executor started, plan, units, report, commit."""
     with _started_executor(executor, workers, address, retries) as runner:
         prepare_output(out)
@@ -171,28 +173,35 @@ def _ingest(sources, out: Path, lock: WriterLock, workers, executor, address, re
         settings = {id(s): s.pipeline.to_dict() for s in sources}
         plan = plan_append(parent, [r for r, _ in pairs], [settings[id(s)] for _, s in pairs])
         source_of = {r.episode_id: s for r, s in pairs}
-        checked = check_sources(plan.todo, {r.episode_id: source_of[r.episode_id].root for r in plan.todo},
-                                verify_sources, threads=usable_cores())
+        lists, real = ChecksumLists(), RealPaths()
+        checked = plan_verification(plan.todo, {r.episode_id: source_of[r.episode_id].root for r in plan.todo},
+                                    verify_sources, lists, real)
         plan.todo = checked.refs
         plan_failures = plan_failures + checked.failures
         first_unit = parent.next_unit() if parent else 0
-        tasks = plan_units([(r, source_of[r.episode_id]) for r in plan.todo], out, first_unit)
+        tasks = plan_units([(r, source_of[r.episode_id]) for r in plan.todo], out, first_unit, real)
         remove_strays(out, tasks, first_unit)
-        t_run = time.perf_counter()
+        t_run, cpu_run = time.perf_counter(), time.process_time()
         records, ran = run_units(tasks, out, runner, progress)
-        t_ran = time.perf_counter()
+        t_ran, cpu_ran = time.perf_counter(), time.process_time()
+        # the digests the units computed, checked against the lists; source_sha256 into the records
+        sum_notes = check_digests(tasks, records, verify_sources, lists, real)
         report = build_report(sources, tasks, records, ran, plan_failures, plan, parent,
                               discovered={r.episode_id for rs in refs for r in rs}, t_start=t_start)
-        report["notes"] += checked.notes + raw_count_default_notes([(r, source_of[r.episode_id]) for r in plan.todo])
+        report["notes"] += checked.notes + sum_notes
+        report["notes"] += raw_count_default_notes([(r, source_of[r.episode_id]) for r in plan.todo])
         if lock.note:
             report["notes"].append(lock.note)
         write_bytes_atomic(out / INGEST_REPORT, dumps(report))   # explains a run that commits nothing too
         if parent is None:
             check_ingested_something(report, out)
-        report["timing"].update(plan_s=t_run - t_start, run_s=t_ran - t_run)
+        report["timing"].update(plan_s=t_run - t_start, run_s=t_ran - t_run,
+                                plan_cpu_s=cpu_run - cpu_start, run_cpu_s=cpu_ran - cpu_run)
         report["version"] = _commit_or_keep(out, sources, records, plan, parent, command, report)
     report["timing"]["total_s"] = time.perf_counter() - t_start
     report["timing"]["commit_s"] = report["timing"]["total_s"] - (t_ran - t_start)
+    # the driver's own CPU (this process, not its workers) per phase: what a cluster cannot parallelise
+    report["timing"]["commit_cpu_s"] = time.process_time() - cpu_ran
     write_bytes_atomic(out / INGEST_REPORT, dumps(report))
     return report
 
@@ -256,10 +265,11 @@ def check_found_something(sources, refs: list[list], failures: list[dict]) -> No
 def run_units(tasks: list[UnitTask], out: Path, runner, progress: bool) -> tuple[list[dict], list[dict]]:
     """Resume finished units, run the rest (largest first); returns (records in unit order, records run now)."""
     records, todo = {}, []
+    present = {p.name for p in (out / WORK_DIR).iterdir()}   # one listing, not a look-up per unit
     for t in tasks:
-        rec = load_valid_record(t)
+        # a unit to run clears its own leftovers where it runs (unit.run_unit): nothing to delete here
+        rec = load_valid_record(t) if unit_record_path(out, t.unit).name in present else None
         if rec is None:
-            clear_unit_files(out, t.unit)
             todo.append(t)
         else:
             records[t.unit] = rec
@@ -306,7 +316,7 @@ def build_report(sources, tasks, ordered, ran, plan_failures, plan, parent, disc
         "units": len(tasks), "units_run": len(ran), "units_resumed": len(tasks) - len(ran),
         "episodes_planned": len(tasks),
         "episodes_ingested": sum(len(r["episodes"]) for r in ordered),
-        "samples": sum(len(r["samples"]) for r in ordered),
+        "samples": sum(int(r["frames"]) for r in ordered),
         # samples without tactile (RGB frames the pairing could not use), by reason; tactile-only episodes
         "rgb_only_samples": _counts(ep.get("rgb_only_frames", {}) for r in ordered for ep in r["episodes"]),
         "tactile_only_episodes": sorted(ep["episode_id"] for r in ordered for ep in r["episodes"]

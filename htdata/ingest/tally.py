@@ -157,8 +157,6 @@ class EpisodeTally:
             record["tactile_only"] = True     # a glove-only recording: no RGB member in any sample
         if self.rgb_only:   # RGB frames kept without tactile (dropped from pairing), by reason
             record["rgb_only_frames"] = dict(sorted(self.rgb_only.items()))
-        if isinstance(ref.extra, dict) and ref.extra.get("source_sha256"):   # htdata.ingest.sourcesums
-            record["source_sha256"] = ref.extra["source_sha256"]
         if isinstance(ref.extra, dict) and ref.extra.get("source_split"):
             record["source_split"] = str(ref.extra["source_split"])
         # Added only when there is something to say: a clean episode's record keeps its exact bytes.

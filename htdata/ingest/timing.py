@@ -5,12 +5,13 @@ from __future__ import annotations
 import time
 from contextlib import contextmanager
 
-STAGES = ("decode", "resize", "normalise", "rasterise", "encode", "write")
+STAGES = ("hash", "decode", "resize", "normalise", "rasterise", "encode", "write")
 
 
 class StageClock:
     """Wall seconds per ingest stage, summed over a unit (perf_counter around whole calls).
 
+    hash = the sha256 of the source files the unit was given (htdata/ingest/sourcesums.py);
     decode = opening the episode's streams + RGB decode + tactile reads;
     resize = rgb.to_square_224; normalise; rasterise (incl. bend vectors and
     contact stats); encode = format.encode_sample (EXR + JPEG + bend .npy +
@@ -36,7 +37,9 @@ class StageClock:
 def timing_summary(records: list[dict], total_s: float) -> dict:
     """report["timing"] from the records of the units run in this invocation."""
     worker_s = sum(float(r.get("seconds", 0.0)) for r in records)
-    out = {"frames": sum(len(r["samples"]) for r in records), "total_s": total_s, "worker_s": worker_s}
+    out = {"frames": sum(int(r["frames"]) for r in records), "total_s": total_s, "worker_s": worker_s,
+           # the units' processes' CPU (their encode threads included): the cores a quiet machine would spend
+           "worker_cpu_s": sum(float(r.get("cpu_s", 0.0)) for r in records)}
     staged = 0.0
     for name in STAGES:
         v = sum(float(r.get("timing", {}).get(f"{name}_s", 0.0)) for r in records)

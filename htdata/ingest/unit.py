@@ -16,7 +16,11 @@ unit again instead of reusing its record.
 The done record also carries the document of every layout the unit's
 episodes used (`layout_entry`): the commit writes them into the dataset,
 with each coverage map made from its document, so a layout file edited
-during the run cannot slip in.
+during the run cannot slip in. It carries the unit's index rows as one
+array (`part_from_unit` runs here, not in the driver) and the sha256 of the
+source files the plan gave it to hash (`task.hash_files`, hashed on the
+node that reads them, just before its episodes are decoded: the driver
+reads no source byte; htdata/ingest/sourcesums.py checks them).
 
 Test hooks (fault injection, used by tests/ingest/test_ingest.py):
 HTDATA_TEST_FAULT_UNIT=U and HTDATA_TEST_FAULT=crash|hang make unit U
@@ -46,8 +50,12 @@ from htdata.ingest.episode import EpisodeStream, EpisodeTally
 from htdata.ingest.executors import parent_alive, report_progress
 from htdata.ingest.pipeline import PipelineConfig
 from htdata.ingest.timing import StageClock
-from htdata.ingest.workdir import clear_unit_files, dumps, spool_path, unit_record_path
+from htdata.ingest.workdir import ROWS_DTYPE, clear_unit_files, dumps, encode_rows, spool_path, unit_record_path
+from htdata.resources import validate_json
 from htdata.source.adapters import get_adapter
+from htdata.store.fsutil import sha256_file
+from htdata.store.manifest import UnitResult
+from htdata.store.parts import part_from_unit
 
 
 class Spool:
@@ -144,6 +152,32 @@ def layout_entry(layout: Layout) -> dict:
     return {"document": layout.to_dict()}
 
 
+def hash_sources(paths, clock: StageClock) -> tuple[dict[str, str], dict[str, str]]:
+    """({path: sha256}, {path: why it could not be read}) of the files this unit was given to hash.
+
+    One sequential read per file, right before the episode is decoded: the decoder then finds the
+    bytes in this node's page cache, so storage (local or network) is read once. The check against
+    the checksum lists is the driver's (htdata/ingest/sourcesums.py), so a failure here is reported,
+    not raised: the file's episodes fail there.
+    """
+    digests, unreadable = {}, {}
+    with clock.stage("hash"):
+        for path in paths:
+            try:
+                digests[path] = sha256_file(path)
+            except OSError as exc:
+                unreadable[path] = f"{type(exc).__name__}: {exc.strerror or exc}"
+    return digests, unreadable
+
+
+def check_records(part, shard_names: list[str]) -> None:
+    """Schema-check the unit's episode records here, in the worker (the commit trusts a unit's part,
+    Part.records_checked); first_sample and shards, which the commit computes, get stand-ins."""
+    for ep in part.episodes:
+        validate_json({**ep, "first_sample": 0, "shards": shard_names}, "episode",
+                      where=f"unit {part.unit}: episode {ep.get('episode_id')!r}")
+
+
 def _fault_hook(unit: int) -> None:
     if os.environ.get("HTDATA_TEST_FAULT_UNIT") != str(unit):
         return
@@ -164,7 +198,8 @@ def run_unit(task) -> dict:
     spool = Spool(spool_path(out, task.unit))
     episodes, failures, dropped, layouts, calibrations = [], [], [], {}, {}
     clock = StageClock()
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
+    digests, unreadable = hash_sources(task.hash_files, clock)
     try:
         with ShardWriter(out / SHARDS_DIR, task.unit, cfg.shards.samples_per_shard) as writer:
             for ref in task.episodes:
@@ -190,17 +225,20 @@ def run_unit(task) -> dict:
                 _fault_hook(task.unit)
             with clock.stage("write"):
                 shards = writer.close()
-            samples = writer.samples
+            # the index rows, made and checked here (a loop over samples): the driver only concatenates
+            part = part_from_unit(UnitResult(unit=task.unit, shards=shards, samples=writer.samples,
+                                             episodes=episodes))
+            check_records(part, [s.name for s in shards])
     finally:
         spool.close()
     record = {
         "unit": task.unit, "fingerprint": task.fingerprint(),
         "episode_ids": [r.episode_id for r in task.episodes],
         "shards": [dataclasses.asdict(s) for s in shards],
-        "samples": [s.to_dict() for s in samples],
-        "episodes": episodes, "failures": failures, "dropped": dropped, "layouts": layouts,
-        "calibrations": calibrations,
-        "seconds": time.perf_counter() - t0, "timing": clock.as_record(),
+        "rows": encode_rows(part.rows), "rows_dtype": ROWS_DTYPE, "frames": int(len(part.rows)),
+        "episodes": part.episodes, "failures": failures, "dropped": dropped, "layouts": layouts,
+        "calibrations": calibrations, "source_sha256": digests, "source_unreadable": unreadable,
+        "seconds": time.perf_counter() - t0, "cpu_s": time.process_time() - cpu0, "timing": clock.as_record(),
     }
     write_bytes_atomic(unit_record_path(out, task.unit), dumps(record, compact=True))
     return record

@@ -2,7 +2,8 @@
 
 Crash safety and resume: a finished unit writes DATASET/.work/unit-UUUUUU.json
 atomically (its records, its fingerprint = pipeline + episode ids + input
-fingerprints, its shards' sha256). A re-run skips units whose record,
+fingerprints, its shards' sha256, its index rows as one array, the sha256
+of the source files it hashed). A re-run skips units whose record,
 fingerprint and shards (sha256) all match and that recorded no machine failure
 (a full disk, an I/O error: "retry" in the failure), removes temp files and rewrites
 every other unit from scratch. Units of a run are numbered from the current
@@ -13,26 +14,54 @@ committed, so a crashed or failed run damages nothing.
 
 from __future__ import annotations
 
+import base64
+import binascii
 import json
 from pathlib import Path
 
-from htdata.errors import ArgumentError
-from htdata.format.table import MANIFEST_FILE, SHARDS_DIR, WORK_DIR
+import numpy as np
+
+from htdata.errors import ArgumentError, DatasetError
+from htdata.format.table import INDEX_DTYPE, MANIFEST_FILE, SHARDS_DIR, WORK_DIR
 from htdata.store.fsutil import sha256_file
 from htdata.store.lock import LOCK_FILE
 from htdata.store.manifest import load_manifest
 from htdata.store.versions import list_versions
 
 # Keys a unit record must hold to be reused (records of older versions lack some: their units re-run).
-RECORD_KEYS = ("unit", "fingerprint", "shards", "samples", "episodes", "failures", "dropped", "layouts")
+RECORD_KEYS = ("unit", "fingerprint", "shards", "rows", "rows_dtype", "frames", "episodes", "failures", "dropped",
+               "layouts", "source_sha256", "source_unreadable")
+ROWS_DTYPE = str(INDEX_DTYPE.descr)      # what a record's "rows" are, as its "rows_dtype" says
 
 
 def dumps(obj, compact: bool = False) -> bytes:
-    """JSON bytes: indented for the reports people read; `compact` for unit records (json's C encoder only
-    runs without indent: a unit record lists every sample, and indenting it was ~3% of an ingest)."""
+    """JSON bytes. `compact` for unit records; otherwise (reports people read) one top-level key a line,
+    each value written by json's C encoder: an indented dump runs the pure-Python encoder, ~1 ms per
+    episode of a large ingest's report (written twice per run, in the driver)."""
     if compact:
         return (json.dumps(obj, sort_keys=True, separators=(",", ":")) + "\n").encode()
-    return (json.dumps(obj, indent=1, sort_keys=True) + "\n").encode()
+    if not isinstance(obj, dict) or not obj:
+        return (json.dumps(obj, sort_keys=True) + "\n").encode()
+    lines = [f" {json.dumps(str(k))}: {json.dumps(v, sort_keys=True)}" for k, v in sorted(obj.items())]
+    return ("{\n" + ",\n".join(lines) + "\n}\n").encode()
+
+
+def encode_rows(rows: np.ndarray) -> str:
+    """A unit's index rows (INDEX_DTYPE) as one string of its record: the raw bytes in base64 (one C call
+    each way, ~75 characters a sample, where a JSON object per sample cost the driver a Python object per
+    frame); the record names the dtype (`ROWS_DTYPE`), so a record of another format re-runs its unit."""
+    return base64.b64encode(np.ascontiguousarray(rows, dtype=INDEX_DTYPE).tobytes()).decode("ascii")
+
+
+def decode_rows(text: str, where: str) -> np.ndarray:
+    """The index rows `encode_rows` made (DatasetError naming `where` if they do not decode)."""
+    try:
+        data = base64.b64decode(text.encode("ascii"), validate=True)
+    except (binascii.Error, ValueError, AttributeError) as exc:
+        raise DatasetError(f"{where}: index rows are not base64 ({exc})") from exc
+    if len(data) % INDEX_DTYPE.itemsize:
+        raise DatasetError(f"{where}: {len(data)} bytes of index rows are not whole {INDEX_DTYPE.itemsize}-byte rows")
+    return np.frombuffer(data, INDEX_DTYPE).copy()
 
 
 def unit_record_path(out: Path, unit: int) -> Path:
@@ -63,7 +92,13 @@ def load_valid_record(task) -> dict | None:
         record = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError):
         return None
-    if not all(k in record for k in RECORD_KEYS) or record["fingerprint"] != task.fingerprint():
+    if not all(k in record for k in RECORD_KEYS) or record["fingerprint"] != task.fingerprint() \
+            or record["rows_dtype"] != ROWS_DTYPE:
+        return None
+    try:
+        if len(decode_rows(record["rows"], str(path))) != record["frames"]:
+            return None
+    except DatasetError:
         return None
     if any(f.get("retry") for f in record["failures"]):   # a full disk, an I/O error: run it again
         return None

@@ -2,8 +2,10 @@
 
 A part is one work unit's output as arrays: its shards (manifest entries),
 its index rows (`shard` and `episode` columns LOCAL to the part) and its
-episode records. Ingest makes parts from the units it ran
-(`part_from_unit`); every later write (append, rm, trim, merge) reuses the
+episode records. An ingest unit makes its rows where it ran
+(`part_from_unit`, a loop over its samples in the worker) and the commit
+takes them back as arrays (`part_from_rows`, checked vectorised: the
+driver never loops over samples); every later write (append, rm, trim, merge) reuses the
 parts of the parent version it does not touch (`parts_of_version`, numpy
 slices of the parent's index: no Python object per sample, so a write costs
 O(what it changes) + O(index) vectorised) and `assemble` concatenates
@@ -35,6 +37,9 @@ class Part:
     shards: list[dict]            # manifest shard entries: name, sha256, bytes, samples
     rows: np.ndarray              # INDEX_DTYPE; shard/episode columns index this part's lists
     episodes: list[dict]          # records (num_frames set), without first_sample / shards
+    # the records were schema-checked where they were made (an ingest unit, in its worker): the commit
+    # need not check them again, so the driver's commit costs no schema check per new episode
+    records_checked: bool = False
 
     @property
     def episode_ids(self) -> list[str]:
@@ -46,6 +51,7 @@ class Assembled:
     rows: np.ndarray              # INDEX_DTYPE, global
     episodes: list[dict]          # records with first_sample, shards, num_frames
     shards: list[dict]            # manifest entries with first_sample
+    unchecked: list[bool]         # per episode: its record still needs the schema check (Part.records_checked)
 
 
 def unit_of_shard(name: str) -> int:
@@ -98,6 +104,45 @@ def part_from_unit(unit) -> Part:
     episodes = [records[e] for e in order]
     _set_num_frames(episodes, rows, where)
     return Part(unit=int(unit.unit), shards=shards, rows=rows, episodes=episodes)
+
+
+def part_from_rows(unit: int, shards: list[dict], rows: np.ndarray, episodes: list[dict],
+                   records_checked: bool = False) -> Part:
+    """A Part from a unit's own index rows (made by `part_from_unit` where the unit ran), checked with
+    whole-array operations: no Python per sample, so a commit costs O(units) + vectorised O(samples).
+
+    The rows must name the unit's shards and episodes by position, episodes in order and contiguous,
+    frames 0..n-1 within each, shards in order with byte offsets rising inside each. Errors name the unit.
+    """
+    where = f"unit {unit}"
+    if rows.dtype != INDEX_DTYPE:
+        raise DatasetError(f"{where}: index rows have dtype {rows.dtype}, not {INDEX_DTYPE}")
+    n = len(rows)
+    records = [{k: v for k, v in rec.items() if k not in COMPUTED_FIELDS} for rec in episodes]
+    if n == 0 and records:
+        raise DatasetError(f"{where}: episode record(s) without samples: {[e['episode_id'] for e in records]}")
+    if n:
+        ep, shard = rows["episode"].astype(np.int64), rows["shard"].astype(np.int64)
+        step, shard_step = np.diff(ep), np.diff(shard)
+        if ep[0] != 0 or ep[-1] != len(records) - 1 or np.any((step != 0) & (step != 1)):
+            raise DatasetError(f"{where}: index rows do not hold the unit's {len(records)} episode(s) in order, "
+                               f"each contiguous (episode column {ep[0]}..{ep[-1]})")
+        if shard[0] != 0 or shard[-1] != len(shards) - 1 or np.any((shard_step != 0) & (shard_step != 1)):
+            raise DatasetError(f"{where}: index rows do not fill the unit's {len(shards)} shard(s) in order")
+        starts = np.flatnonzero(np.r_[True, step != 0])
+        expected = np.arange(n) - np.repeat(starts, np.diff(np.r_[starts, n]))
+        bad = np.flatnonzero(rows["frame"].astype(np.int64) != expected)
+        if bad.size:
+            i = int(bad[0])
+            raise DatasetError(f"{where}: episode {records[int(ep[i])]['episode_id']!r}: expected frame "
+                               f"{int(expected[i])}, got {int(rows['frame'][i])}")
+        offsets = rows["offset"].astype(np.int64)
+        if np.any((shard_step == 0) & (np.diff(offsets) <= 0)):
+            raise DatasetError(f"{where}: sample offsets do not rise inside a shard")
+    _set_num_frames(records, rows, where)
+    return Part(unit=int(unit), rows=np.array(rows, dtype=INDEX_DTYPE), episodes=records,
+                shards=[{k: s[k] for k in ("name", "sha256", "bytes", "samples")} for s in shards],
+                records_checked=records_checked)
 
 
 def _set_num_frames(episodes: list[dict], rows: np.ndarray, where: str) -> None:
@@ -158,7 +203,8 @@ def assemble(parts: list[Part]) -> Assembled:
     shards = [dict(s) for p in parts for s in p.shards]
     episodes = [dict(e) for p in parts for e in p.episodes]
     _fill_positions(rows, shards, episodes)
-    return Assembled(rows=rows, episodes=episodes, shards=shards)
+    return Assembled(rows=rows, episodes=episodes, shards=shards,
+                     unchecked=[not p.records_checked for p in parts for _ in p.episodes])
 
 
 def _fill_positions(rows: np.ndarray, shards: list[dict], episodes: list[dict]) -> None:

@@ -110,8 +110,9 @@ def commit_parts(root: str | os.PathLike, parts: list[Part], fields: dict, paren
     built = assemble(parts)
     _check_shards_on_disk(root, built.shards)
     layouts = {**(parent.manifest["layouts"] if parent else {}), **fields.get("layouts", {})}
-    for ep in built.episodes:
-        validate_json(ep, "episode", where=f"{EPISODES_FILE}: episode {ep.get('episode_id')!r}")
+    for ep, unchecked in zip(built.episodes, built.unchecked):
+        if unchecked:   # a record its maker checked (Part.records_checked) is not checked twice
+            validate_json(ep, "episode", where=f"{EPISODES_FILE}: episode {ep.get('episode_id')!r}")
         for hand, layout_id in ep["layouts"].items():
             if layout_id not in layouts:
                 raise ValueError(f"episode {ep['episode_id']!r}: layout {layout_id!r} ({hand}) not provided to commit")

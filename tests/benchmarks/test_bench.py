@@ -19,6 +19,7 @@ import pytest
 from htdata.benchmarks.report import HEADINGS, render_report
 from htdata.benchmarks.suite import BUILTIN_SECTIONS, BenchConfig, discover_sections, finite_json
 from htdata.cli import main as cli_main
+from htdata.ingest.executors import usable_cores
 
 # `htdata view` needs the [view] extra (rerun-sdk): without it its section fails with that one line
 NO_RERUN = {"view"} if importlib.util.find_spec("rerun") is None else set()
@@ -145,13 +146,19 @@ def test_quick_bench_content_is_consistent(quick_run):
     assert glove["speed_ratio"] == pytest.approx(glove["frames_per_s_stored"] / glove["frames_per_s_raw"])
     assert glove["cpu_s_stored"] > 0 and glove["cpu_s_raw"] > 0
     scaling = r["scaling"]
+    cores = max(2, usable_cores())                  # 1 -> N workers on the machine's cores
     assert {s["adapter"] for s in scaling["summary"]} == {"opentouch", "touchanything", "native"}
     for s in scaling["summary"]:
-        assert (s["workers_lo"], s["workers_hi"]) == (1, 2) and s["scaling"] > 0 and s["fixed_s_hi"] > 0
-    assert [e["adapter"] for e in scaling["estimate"]] == [s["adapter"] for s in scaling["summary"]]
-    assert all(e["frames"] == 10_000_000 and e["wall_hours"] > 0 for e in scaling["estimate"])
+        assert (s["workers_lo"], s["workers_hi"]) == (1, cores) and s["scaling"] > 0 and s["fixed_s_hi"] > 0
+    driver = r["driver"]                            # quick: opentouch, tiny vs small corpus
+    (d,) = driver["summary"]
+    assert d["adapter"] == "opentouch" and (d["small"]["scale"], d["big"]["scale"]) == ("tiny", "small")
+    assert d["big"]["frames"] > d["small"]["frames"] > 0 and d["workers"] == cores
+    assert d["serial_growth_s_per_frame"] == pytest.approx(
+        (d["big"]["serial_s"] - d["small"]["serial_s"]) / (d["big"]["frames"] - d["small"]["frames"]))
+    assert d["projection"]["frames"] == 10_000_000 and d["projection"]["wall_hours"] > 0
     assert [(d["item"], d["maps_from"], d["workers_hi"]) for d in r["loader"]["dataloader"]] == [
-        ("full", "best", 2), ("full", "stored", 2), ("tactile", "best", 2)]
+        ("full", "best", cores), ("full", "stored", cores), ("tactile", "best", cores)]
     full, tactile = r["loader"]["dataloader"][0], r["loader"]["dataloader"][2]
     assert tactile["ipc_bytes_per_item"] < full["ipc_bytes_per_item"] / 2   # no RGB, no float coverage, no regions
     assert [row["frames"] for row in r["rss"]] == list(BenchConfig.quick_config(out).rss_lengths)
@@ -250,6 +257,9 @@ def test_finite_json_replaces_non_finite():
     ({"scaling_scale": "huge"}, "scaling_scale"),
     ({"ingest_reps": 0}, "ingest_reps"),
     ({"scale": "huge"}, "scale"),
+    ({"driver_scales": ("medium", "tiny")}, "driver_scales"),
+    ({"driver_scales": ("tiny", "tiny")}, "driver_scales"),
+    ({"driver_sources": ("nope",)}, "driver_sources"),
 ])
 def test_bench_config_rejects_bad_sizes(tmp_path, change, match):
     cfg = BenchConfig.quick_config(tmp_path)
@@ -264,14 +274,27 @@ def test_unknown_section_is_refused(tmp_path, capsys):
     assert "unknown section" in capsys.readouterr().err
 
 
-def test_scale_estimate_arithmetic():
-    """10M frames: core-hours from in-worker seconds per frame; 64-core wall = driver serial + core-hours / 64."""
-    from htdata.benchmarks.scaling import scale_estimate
+def test_driver_growth_and_projection_arithmetic():
+    """Growth = slope between two sizes; 10M frames on 64 cores: wall = fixed + growth x F + max(work, driver run)."""
+    from htdata.benchmarks.driver import growth, project
 
-    row = scale_estimate([{"adapter": "x", "core_s_per_frame_hi": 0.0036, "driver_s_per_frame": 3.6e-5}])[0]
-    assert row["core_hours"] == pytest.approx(10.0) and row["driver_serial_hours"] == pytest.approx(0.1)
-    assert row["wall_hours"] == pytest.approx(0.1 + 10.0 / 64)
-    assert row["speedup_on_cores"] == pytest.approx(10.1 / (0.1 + 10.0 / 64))
+    small = {"frames": 200, "units": 4, "serial_s": 1.02, "serial_cpu_s": 0.51, "run_cpu_s": 0.1}
+    big = {"frames": 4200, "units": 84, "serial_s": 1.10, "serial_cpu_s": 0.55, "run_cpu_s": 0.14}
+    g = growth(small, big)
+    assert g["serial_cpu_growth_s_per_unit"] == pytest.approx(0.04 / 80) and g["frames_per_unit"] == 50
+    assert g["frames_per_unit_for_target"] == pytest.approx(0.0005 / 2e-5)      # 25 frames per episode
+    assert g["serial_growth_s_per_frame"] == pytest.approx(2e-5) and g["serial_fixed_s"] == pytest.approx(1.016)
+    assert g["serial_cpu_growth_s_per_frame"] == pytest.approx(1e-5) and g["run_cpu_s_per_frame"] == pytest.approx(
+        0.14 / 4200)
+    row = project(g, core_s_per_frame=0.0036)
+    serial = 1.016 + 2e-5 * 1e7
+    assert row["core_hours"] == pytest.approx(10.0) and row["serial_hours"] == pytest.approx(serial / 3600)
+    assert row["wall_hours"] == pytest.approx((serial + 1e7 * 0.0036 / 64) / 3600)
+    assert row["speedup"] == pytest.approx((36_000 + serial) / (serial + 562.5))
+    slow = project({**g, "run_cpu_s_per_frame": 1e-4}, core_s_per_frame=0.0036)   # the driver caps the run
+    assert slow["wall_hours"] == pytest.approx((serial + 1000.0) / 3600)
+    with pytest.raises(ValueError, match="two corpus sizes"):
+        growth(small, small)
 
 
 def test_gpu_check_results_beside_the_report_get_their_own_section():

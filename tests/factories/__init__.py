@@ -17,7 +17,7 @@ from htdata.glove.layouts + Rasteriser) and `canonical=CanonicalArtifact(...)`.
 Also here: the episode tables the dataset tests share (`episode_table`,
 MIXED_HANDS_EPISODES, PREVIEW_EPISODES, SPLIT_EPISODES, TRAIN_EPISODES) and
 tiny raw corpora in the three source formats plus the in-process ingest CLI
-(`make_opentouch`, `make_touchanything`, `make_native`, `small_pipeline`,
+(`make_opentouch`, `make_two_scene_opentouch`, `make_touchanything`, `make_native`, `small_pipeline`,
 `ingest_cli`, `temp_leftovers`) for the ingest, Ray and benchmark tests.
 """
 
@@ -312,6 +312,18 @@ def make_opentouch(root: Path, bad: bool = False) -> Path:
         with h5py.File(root / "office_desk_p2.hdf5", "r+") as f:
             f["data/demo_03/rgb_images_jpeg"][4] = np.frombuffer(b"not a jpeg at all", np.uint8)
         rows += [{"id": f"office_desk_p2::demo_0{i}", "action": "type"} for i in (1, 2, 3)]
+    write_opentouch_annotations(root / "annotations.csv", rows)
+    return root
+
+
+def make_two_scene_opentouch(root: Path) -> Path:
+    """make_opentouch's scene (3 clips) and a second good one (office_desk_p2, 2 clips), one label table."""
+    make_opentouch(root)
+    clips = [ot_clip("demo_01", 5, COLOURS[3]), ot_clip("demo_02", 6, COLOURS[0])]
+    write_opentouch_scene(root / "office_desk_p2.hdf5", clips)
+    rows = [{"id": f"home_kitchen_p1::demo_{d}", "action": a} for d, a in (("01", "pour"), ("02", "cut"),
+                                                                           ("003", "wipe"))]
+    rows += [{"id": f"office_desk_p2::{c.demo_id}", "action": "type"} for c in clips]
     write_opentouch_annotations(root / "annotations.csv", rows)
     return root
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
@@ -108,9 +109,10 @@ def test_a_worker_is_told_the_resolved_choice_not_left_to_a_missing_key(tmp_path
     """The pipeline dict leaves "stored" out; the unit task carries the choice itself, and an unresolved
     setting is never handed to a worker."""
     pipeline = load_pipeline("native")
+    ref = SimpleNamespace(source_files=())           # a planned episode reading no file (plan_units assigns hashing)
     with pytest.raises(RuntimeError, match="not resolved"):
-        plan_units([("ref", Source(pipeline, tmp_path))], tmp_path, 0)
+        plan_units([(ref, Source(pipeline, tmp_path))], tmp_path, 0)
     for chosen in (MapStorage.STORED, MapStorage.RAW):
-        [task] = plan_units([("ref", Source(pipeline.with_maps(chosen), tmp_path))], tmp_path, 0)
+        [task] = plan_units([(ref, Source(pipeline.with_maps(chosen), tmp_path))], tmp_path, 0)
         assert task.maps is chosen
         assert ("maps" in task.pipeline["tactile"]) == (chosen is MapStorage.RAW)

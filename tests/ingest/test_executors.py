@@ -89,16 +89,3 @@ def test_started_pool_preloads_and_still_delivers_every_progress_event():
     assert results == list(range(6)) and sorted(e["task"] for e in events) == list(range(6))
     pool.close()                                  # nothing running: a no-op
     InlineExecutor().start(preload=("htdata.ingest.unit",))
-
-
-def test_hash_files_threads_agree_with_serial(tmp_path):
-    from htdata.ingest.sourcesums import hash_files
-    from htdata.store.fsutil import sha256_file
-
-    paths = []
-    for i in range(5):
-        p = tmp_path / f"f{i}.bin"
-        p.write_bytes(bytes([i]) * (100_000 * (i + 1)))
-        paths.append(str(p))
-    serial = {p: sha256_file(p) for p in paths}
-    assert hash_files(paths + paths[:2], threads=3) == serial == hash_files(paths, threads=1)

@@ -376,9 +376,10 @@ def test_changed_source_redoes_only_its_unit(tmp_path, clean_run):
 
 # --------------------------------------------------------------------------- progress + timing
 
-TIMING_KEYS = {"frames", "total_s", "worker_s", "decode_s", "resize_s", "normalise_s", "rasterise_s",
+TIMING_KEYS = {"frames", "total_s", "worker_s", "worker_cpu_s", "hash_s", "decode_s", "resize_s", "normalise_s", "rasterise_s",
                "encode_s", "write_s", "other_s"}
 DRIVER_KEYS = {"plan_s", "run_s", "commit_s"}
+DRIVER_CPU_KEYS = {"plan_cpu_s", "run_cpu_s", "commit_cpu_s"}     # the driver process's own CPU per phase
 
 
 def test_progress_events_arrive_per_episode_from_the_process_pool(tmp_path, monkeypatch):
@@ -422,10 +423,10 @@ def test_episode_progress_reconciles_missing_late_and_repeated_events():
     p.event({"unit": 0, "frames": 4})
     p.event({"unit": 0, "frames": 5})          # a retried unit repeats an event: capped at 2 episodes
     assert (p.done, p.frames) == (3, 9)
-    p.unit_done(tasks[0], {"samples": [None] * 8})
+    p.unit_done(tasks[0], {"frames": 8})
     assert (p.done, p.frames) == (3, 8)        # frames corrected to what the unit wrote
     p.event({"unit": 0, "frames": 5})          # late event of a finished unit: ignored
-    p.unit_done(tasks[1], {"samples": [None] * 7})   # no events at all (Ray): the unit result counts
+    p.unit_done(tasks[1], {"frames": 7})   # no events at all (Ray): the unit result counts
     assert (p.done, p.frames) == (6, 15)
     p.close()
 
@@ -436,14 +437,16 @@ def test_report_has_stage_timing(tmp_path):
     pipe = small_pipeline(tmp_path, "touchanything")
     assert ingest_cli("--pipeline", pipe, raw, out) == 0
     timing = json.loads((out / "reports" / "ingest.json").read_text())["timing"]
-    assert set(timing) == TIMING_KEYS | DRIVER_KEYS
+    assert set(timing) == TIMING_KEYS | DRIVER_KEYS | DRIVER_CPU_KEYS
     assert timing["frames"] == 11
+    assert all(timing[k] >= 0 for k in DRIVER_CPU_KEYS)
     # the driver's phases add up to the wall time, and the units ran inside run_s
     assert sum(timing[k] for k in DRIVER_KEYS) == pytest.approx(timing["total_s"])
     assert timing["run_s"] >= timing["worker_s"]
-    for stage in ("decode_s", "resize_s", "normalise_s", "rasterise_s", "encode_s", "write_s"):
+    for stage in ("hash_s", "decode_s", "resize_s", "normalise_s", "rasterise_s", "encode_s", "write_s"):
         assert timing[stage] > 0, stage
-    stages = sum(timing[k] for k in TIMING_KEYS - {"frames", "total_s", "worker_s", "other_s"})
+    stages = sum(timing[k] for k in TIMING_KEYS - {"frames", "total_s", "worker_s", "worker_cpu_s", "other_s"})
+    assert timing["worker_cpu_s"] > 0
     assert timing["other_s"] >= 0 and abs(stages + timing["other_s"] - timing["worker_s"]) < 1e-6
     assert timing["total_s"] >= timing["worker_s"]        # inline: the units ran inside the wall time
     records = [json.loads(p.read_text()) for p in sorted((out / ".work").glob("unit-*.json"))]

@@ -82,7 +82,8 @@ def test_every_record_keeps_its_source_files_sha256(tmp_path):
 
 def test_a_copy_that_differs_from_sha256sums_is_refused_with_verify_sources(tmp_path, capsys):
     raw = make_opentouch(tmp_path / "raw")
-    _sums(raw, ["home_kitchen_p1.hdf5"])
+    # both files the episodes read are listed: an unlisted one fails them before any unit runs (#37)
+    _sums(raw, ["home_kitchen_p1.hdf5", "annotations.csv"])
     data = bytearray((raw / "home_kitchen_p1.hdf5").read_bytes())
     data[-100] ^= 0x01                                   # one flipped bit a decoder may never notice
     (raw / "home_kitchen_p1.hdf5").write_bytes(bytes(data))

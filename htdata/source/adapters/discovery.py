@@ -81,8 +81,9 @@ def fingerprint_files(root: Path, files: Iterable[Path]) -> str:
     """
     h = hashlib.sha1()
     root = Path(root)
+    folders: dict = {}                  # each folder resolved once (sourcetree.real_path)
     for path in sorted(Path(p) for p in files):
-        check_source_file(path, root)   # every file an episode reads passes the source-tree rules
+        check_source_file(path, root, folders)   # every file an episode reads passes the source-tree rules
         st = path.stat()
         try:
             rel = path.relative_to(root).as_posix()

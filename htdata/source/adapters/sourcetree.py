@@ -24,20 +24,50 @@ def _inside(path: Path, root: Path) -> bool:
     return os.path.commonpath([str(path), str(root)]) == str(root)
 
 
-def check_source_file(path: Path | str, root: Path | str | None) -> Path:
+def real_path(path: Path, folders: dict | None = None) -> Path:
+    """`path.resolve()`; with `folders` (a dict the caller keeps) each folder is resolved once and a file
+    that is no symlink costs one lstat: discovery checks every file an episode reads (a JPEG folder
+    holds one per frame), and resolving each from the root up is most of the driver's planning."""
+    if folders is None:
+        return path.resolve()
+    folder = folders.get(path.parent)
+    if folder is None:
+        folder = folders[path.parent] = path.parent.resolve()
+    full = folder / path.name
+    return full.resolve() if full.is_symlink() else full
+
+
+class RealPaths:
+    """`real_path` of many files as strings, each file and each folder resolved once: an ingest's driver
+    names every source file several times (who hashes it, its checksum list line, its record)."""
+
+    def __init__(self):
+        self.files: dict[str, str] = {}
+        self.folders: dict = {}
+
+    def __call__(self, path: Path | str) -> str:
+        key = str(path)
+        found = self.files.get(key)
+        if found is None:
+            found = self.files[key] = str(real_path(Path(key), self.folders))
+        return found
+
+
+def check_source_file(path: Path | str, root: Path | str | None, folders: dict | None = None) -> Path:
     """Raise EpisodeError (naming `path`) unless it is a regular file whose real path is inside `root`.
 
     `root=None` checks only the file type (e.g. when an opened episode
     re-checks a file that discovery already placed). Returns the path.
-    Never opens the file, so a FIFO cannot block here.
+    Never opens the file, so a FIFO cannot block here. `folders`: see `real_path`.
     """
     path = Path(path)
     try:
         st = os.stat(path)   # follows symlinks: the type of what would be read
     except OSError as exc:
         raise EpisodeError(None, None, f"source file cannot be read: {exc.strerror or exc}", file=path) from exc
-    real = path.resolve()
-    outside = root is not None and not _inside(real, Path(root).resolve())
+    real = real_path(path, folders)
+    outside = root is not None and not _inside(real, real_path(Path(root), folders) if folders is not None
+                                               else Path(root).resolve())
     if outside:
         what = "directory symlink" if stat.S_ISDIR(st.st_mode) else "symlink" if path.is_symlink() else "path"
         raise EpisodeError(None, None, f"{what} leaves the source tree {root} (-> {real}): refused", file=path)
