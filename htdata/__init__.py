@@ -23,6 +23,7 @@ Root modules, below every package:
     fileio.py     crash-safe file writes (atomic_open, write_*_atomic) and sha256_stream
     resources.py  where the project's data files (schemas, layouts, pipelines) live
     settings.py   `--set [TARGET:]dotted.key=value`: the one parser of every override
+    workers.py    every `--workers`: usable cores (affinity-aware), 0 = inline, the one resolver
     _moved.py     old names and keywords, importable until REMOVED_IN (deprecated, each warns)
 
 The front door:

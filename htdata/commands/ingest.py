@@ -28,7 +28,6 @@ them to a block or list them in the layout's `unused_cells`.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 
 from htdata.glove.activity import unmapped_warning
@@ -38,6 +37,7 @@ from htdata.ingest.executors import UnitFailed
 from htdata.ingest.run import failure_line
 from htdata.settings import aim_settings
 from htdata.store.lock import DatasetLocked
+from htdata.workers import usable_cores
 
 EPILOG = """\
 A pipeline says how to read one source format: a shipped name (`htdata pipelines list`:
@@ -75,8 +75,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--layouts", action="append", default=[], metavar="DIR",
                         help=f"folder of glove layout JSONs searched for layout ids (repeatable; before "
                              f"${LAYOUTS_ENV} and the shipped layouts)")
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1,
-                        help="worker processes (default: CPUs); 0 = run units in this process (debugging)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help=f"worker processes (default: the cores this process may use, {usable_cores()} here); "
+                             f"0 = run units in this process (debugging); with --executor ray, a local Ray's CPUs")
     parser.add_argument("--executor", choices=("process", "ray"), default="process",
                         help="process (default): local pool, the progress bar advances per finished episode; "
                              "ray: one Ray task per work unit, the bar advances per finished unit")

@@ -116,7 +116,8 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
     Args:
         sources: the recordings to ingest, each a folder with the pipeline that reads it (`Source`).
         out: the dataset folder: new (created), a dataset to append to, or an ingest to resume.
-        workers: worker processes of the "process" executor (0: inline, in this process); Ray workers otherwise.
+        workers: worker processes of the "process" executor, a local Ray's CPUs with "ray" (htdata/workers.py:
+            None = every usable core; 0 = inline, in this process, "process" only).
         executor: "process" or "ray" (htdata/ingest/executors.py).
         address: the Ray cluster to join (executor "ray" only).
         retries: how often a failed work unit is run again before it counts as failed.

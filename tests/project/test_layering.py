@@ -120,7 +120,7 @@ def test_no_import_cycle_at_any_level():
 # siblings: neither imports the other (the two writers of new versions, over what they share).
 LAYERS = (
     ("htdata", "htdata._moved", "htdata.errors", "htdata.faults", "htdata.fileio", "htdata.resources",
-     "htdata.settings"),
+     "htdata.settings", "htdata.workers"),
     ("htdata.format",),
     ("htdata.glove",),
     ("htdata.source",),
