@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from htdata.errors import HtdataError
 from htdata.glove.activity import unmapped_warning
 from htdata.glove.layouts import LAYOUTS_ENV
 from htdata.ingest import ingest, parse_sources
@@ -103,7 +104,9 @@ def run(args: argparse.Namespace) -> int:
         report = ingest(sources, out, workers=args.workers, executor=args.executor, address=args.address,
                         retries=args.retries, progress=not args.quiet, layout_dirs=tuple(args.layouts),
                         command="htdata ingest " + " ".join(sys.argv[2:]), verify_sources=args.verify_sources)
-    except (ValueError, FileNotFoundError, DatasetLocked) as e:   # LayoutNotFound is a FileNotFoundError: one line, no traceback
+    # one line, no traceback: LayoutNotFound is a FileNotFoundError; a source folder discovery cannot read keeps
+    # its OSError type (ingest.plan.discover_sources); a full disk is the CLI's own line (htdata/cli.py)
+    except (HtdataError, ValueError, FileNotFoundError, PermissionError, NotADirectoryError, DatasetLocked) as e:
         print(f"htdata ingest: error: {e}", file=sys.stderr)
         return 2
     except UnitFailed as e:

@@ -130,8 +130,10 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         The ingest report (episodes ingested, failures, notes, timing, the committed version).
 
     Raises:
-        ValueError: pipelines or settings that disagree (with each other or with the dataset), an `out`
-            that is not a dataset, a source folder with no recording, or no episode ingested into a new dataset.
+        ConfigError / ArgumentError (ValueErrors): pipelines or settings that disagree (with each other or with
+            the dataset), an `out` that is not a dataset, a source folder with no recording, or no episode
+            ingested into a new dataset.
+        Any error a source-wide discovery raises, its type kept (plan.discover_sources).
         DatasetLocked: another writer holds the dataset.
     """
     t_start, cpu_start = time.perf_counter(), time.process_time()
