@@ -15,5 +15,5 @@
     torchviews.py  `Dataset` (what htdata.open returns): a reader whose `.torch` builds the torch datasets
 
 May import: the store, the format, the glove model and the base modules. torch only in
-torchdata/torchglove (an optional extra).
+torchdata, torchitems and torchglove (an optional extra).
 """
