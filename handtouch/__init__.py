@@ -26,4 +26,7 @@
     benchmark.py      the `htdata bench` section "training": stage 1 steps/s, fp32 vs bf16
     gpucheck.py       `make gpu-check`: stage 1 on a CUDA GPU, fed by the real loader
     bench/            HT-Bench: the tracks, their metrics and report
+
+May import: htdata (the reader, the torch datasets, the split rule, its errors), torch and the
+training extras. htdata never imports handtouch (its bench section is an entry point).
 """

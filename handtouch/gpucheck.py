@@ -62,7 +62,7 @@ def missing_modules() -> list[str]:
     return out
 
 
-def build_dataset(work: Path, workers: int, scale: str = "medium", log=print) -> Path:
+def build_dataset(work: Path, workers: int | None, scale: str = "medium", log=print) -> Path:
     """The medium sample corpus ingested and split under `work` (reused when already there)."""
     from htdata.cli import main as htdata
 
@@ -75,7 +75,8 @@ def build_dataset(work: Path, workers: int, scale: str = "medium", log=print) ->
     log(f"gpu-check: sample {time.perf_counter() - t0:.0f} s")
     pipelines = [a for fmt in raws for a in ("--pipeline", f"{_pipeline(fmt)}={raws[fmt]}")]
     steps = [
-        ("ingest", ["ingest", "--workers", str(workers), "--quiet", *pipelines, str(dataset)]),
+        ("ingest", ["ingest", *(["--workers", str(workers)] if workers is not None else []), "--quiet", *pipelines,
+                    str(dataset)]),
         ("split", ["split", str(dataset), "--ood-task", OOD_TASK, "--seed", "0", "--name", SPLIT, "--force"]),
     ]
     for name, argv in steps:
@@ -251,7 +252,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="write the results here (default $OUT/gpucheck.json when $OUT is set)")
     parser.add_argument("--steps", type=int, default=300, help="stage-1 steps per setting (default 300)")
     parser.add_argument("--compile", action="store_true", help="also run batch 128 under torch.compile")
-    parser.add_argument("--ingest-workers", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--ingest-workers", type=int, default=None,
+                        help="htdata ingest --workers of the dataset built (default: ingest's, every usable core)")
     parser.add_argument("--scale", default="medium", choices=("tiny", "small", "medium"),
                         help="sample corpus scale of the dataset built (default medium, ~9k frames)")
     parser.add_argument("--settings", default=",".join(f"{b}:{w}" for b, w in SETTINGS),

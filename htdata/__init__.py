@@ -16,13 +16,14 @@ The tree follows the data path (docs/DESIGN.md):
     synthetic/ the synthetic corpus (`htdata sample`)
     benchmarks/, commands/, cli.py: `htdata bench` and the command line
 
-Root modules, below every package:
+Root modules, below every package (every package may import them):
 
     errors.py     the exceptions htdata raises on purpose (ConfigError, ArgumentError, DatasetError, EpisodeError ...)
     faults.py     named crash points for the kill -9 tests of every writer
     fileio.py     crash-safe file writes (atomic_open, write_*_atomic) and sha256_stream
     resources.py  where the project's data files (schemas, layouts, pipelines) live
     settings.py   `--set [TARGET:]dotted.key=value`: the one parser of every override
+    workers.py    every `--workers`: usable cores (affinity-aware), 0 = inline, the one resolver
     _moved.py     old names and keywords, importable until REMOVED_IN (deprecated, each warns)
 
 The front door:
@@ -34,6 +35,8 @@ The front door:
 
 Imports inside functions: `open` imports the reader when it is called, so that
 `import htdata` (which every command line run does first) stays cheap.
+
+May import: the root modules (each of which imports only root modules); the reader only inside `open`.
 """
 
 from htdata import _moved

@@ -100,3 +100,19 @@ def _rebuild_episode_error(file, episode_id, frame, message) -> EpisodeError:
 class RecordMismatch(DatasetError):
     """A record that decides served values (a calibration, an episode's fitted arrays) no longer matches
     its content id or digest: the one-line message names the file and the record (htdata.glove.calibration)."""
+
+
+def in_context(exc: Exception, context: str) -> Exception | None:
+    """An error of `exc`'s own type whose message starts with `context` (where it happened), for
+    `raise in_context(e, where) from e`: a caller catching it by kind still does (a ConfigError stays a
+    ConfigError, an OSError keeps its errno). None when the type cannot be rebuilt from one message
+    (a custom constructor): re-raise `exc` itself then.
+    """
+    if isinstance(exc, EpisodeError):
+        return EpisodeError(None, exc.frame, f"{context}: {exc.message}", file=exc.file, episode_id=exc.episode_id)
+    if isinstance(exc, OSError) and exc.errno is not None:
+        return type(exc)(exc.errno, f"{context}: {exc.strerror}", *([exc.filename] if exc.filename else []))
+    try:
+        return type(exc)(f"{context}: {exc}")
+    except Exception:   # a constructor that takes other arguments
+        return None

@@ -5,7 +5,7 @@
 # outside the checkout and with HTDATA_ROOT unset, runs
 #   htdata layouts -> sample (tiny) -> ingest (shipped pipelines by name) -> split -> validate --deep
 # with the data core alone (no extras: torch must not come in), and checks that the torch datasets
-# then name the extra to install; then runs every README example as written from an empty folder
+# then name the extra to install and that `htdata bench --help` works (a run names [bench]); then runs every README example as written from an empty folder
 # (tools/readme_examples.sh: the publish example to memory://, s3:// without s3fs is one line),
 # and the export example again once the [export] extra is installed.
 # and checks that schemas/pipelines/configs resolve inside the installed package and
@@ -84,6 +84,13 @@ if "$BIN/python" -c "import htdata.read.torchdata" 2>"$TMP/torch.err"; then
   echo "install-check: FAILED: htdata.read.torchdata imported without torch"; exit 1
 fi
 grep -q "htdata\[torch\]" "$TMP/torch.err" || { cat "$TMP/torch.err"; echo "install-check: FAILED: no hint"; exit 1; }
+
+step "htdata bench without torch: --help teaches, a run is one line naming the [bench] extra"
+"$BIN/htdata" bench --help >/dev/null || { echo "install-check: FAILED: htdata bench --help without torch"; exit 1; }
+if "$BIN/htdata" bench --quick --out "$TMP/bench" 2>"$TMP/bench.err"; then
+  echo "install-check: FAILED: htdata bench ran without torch"; exit 1
+fi
+grep -q "htdata\[bench\]" "$TMP/bench.err" || { cat "$TMP/bench.err"; echo "install-check: FAILED: no hint"; exit 1; }
 
 step "the README's examples, each as written, from an empty folder (tools/readme_examples.sh)"
 mkdir "$TMP/readme"

@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_compare import export, run_py  # noqa: E402  (a sibling tool)
+from bench_compare import corpus_formats, export, run_py  # noqa: E402  (a sibling tool)
 
 RUN_FIELDS = ("created", "sources", "change", "htdata_version", "episodes_file", "index_file", "version",
               "parent", "next_unit", "splits", "format_version")
@@ -28,7 +28,7 @@ RUN_FIELDS = ("created", "sources", "change", "htdata_version", "episodes_file",
 
 def ingest(tree: Path, raw: Path, out: Path) -> None:
     args = ["-m", "htdata.cli", "ingest", "--workers", "0", "--quiet"]
-    for name in ("opentouch", "touchanything", "native"):
+    for name in corpus_formats(raw):
         args += ["--pipeline", f"pipelines/{name}.toml={raw / name}"]
     run_py(tree, args + [str(out)], cwd=tree)
 

@@ -10,4 +10,7 @@
     timing.py      contact timing (AUROC over streams with contact), held-out F-RMSE three ways
     examples.py    the predictions figure's windows: most contact, every track's output
     report.py      results JSON, markdown tables, the predictions PNG
+
+May import: what handtouch may, and of handtouch only `api` (the model's public face) and
+`config`: the tracks score any model, and the trainer's smoke and comparisons import the bench.
 """

@@ -30,4 +30,13 @@
     validation.py  `htdata validate --deep` throughput at 1 and 2 workers
     export.py      `htdata export lerobot` speed and size against htdata's own shards
     view.py        `htdata view --save` seconds and peak memory against episode length
+
+torch: `dataloader.py` imports it at module level, `rgb.py` (`resize_rows`) and `machine.py`
+(`machine_info`, where it may be missing) inside a function; `loader.py` and `maps.py` reach it
+through htdata/read/torchdata.py. So `htdata bench` needs the [bench] extra; `htdata bench --help`
+(which loads no section) does not.
+
+May import: every layer below it (it measures them all: the format up to validate and the
+synthetic corpus). Never the commands; another package's section plugs in through the entry
+point group `htdata.bench_sections`, never imported by name (htdata never imports handtouch).
 """

@@ -6,6 +6,8 @@ import os
 import platform
 import sys
 
+from htdata.workers import usable_cores
+
 BLAS_ENV = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_CORETYPE")
 
 
@@ -32,7 +34,7 @@ def machine_info() -> dict:
     load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
     return {
         "cpu_count": os.cpu_count() or 1,
-        "cpu_affinity": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+        "cpu_affinity": usable_cores(),
         "cpu_model": cpu_model(),
         "ram_gb": psutil.virtual_memory().total / 2**30,
         "loadavg_1m": float(load[0]),

@@ -54,8 +54,8 @@ from htdata.benchmarks.validation import validate_rows
 from htdata.benchmarks.view import view_rows
 from htdata.errors import ArgumentError
 from htdata.fileio import write_bytes_atomic
-from htdata.ingest.executors import usable_cores
 from htdata.synthetic.corpus import FORMATS, SCALES, CorpusConfig, corpus_complete, write_corpus
+from htdata.workers import usable_cores
 
 SECTION_GROUP = "htdata.bench_sections"
 BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "scaling", "driver", "rss", "loader", "index", "validate",

@@ -27,4 +27,7 @@ Commands parse arguments, call the core modules and print; core modules
     bench.py        `htdata bench`: every benchmark side by side
     outputs.py      where a command's output goes: the one rule for output paths
     version_arg.py  a version on the command line: `3` or `v3`
+
+May import: every layer below it (a command parses its arguments and calls a core module that
+does the work, then prints). Only htdata/cli.py sits above, loading a command when it runs.
 """

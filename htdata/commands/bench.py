@@ -1,4 +1,9 @@
-"""`htdata bench`: run every benchmark side by side; write OUT/results.json and OUT/REPORT.md."""
+"""`htdata bench`: run every benchmark side by side; write OUT/results.json and OUT/REPORT.md.
+
+Imports inside functions: `run` loads the suite (htdata/benchmarks/suite.py) when the bench runs, so
+`htdata bench --help` works on an install without torch (the bench's loader sections need the [bench]
+extra); a run without torch is one line naming it.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +12,7 @@ import sys
 import time
 from pathlib import Path
 
-from htdata.benchmarks.suite import BenchConfig, run_bench
+NEEDS_TORCH = "htdata bench needs torch (its loader sections time the torch datasets): pip install 'htdata[bench]'"
 
 EPILOG = """\
 Sections found through the entry point group htdata.bench_sections (e.g. HandTouch's
@@ -36,6 +41,13 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    try:
+        from htdata.benchmarks.suite import BenchConfig, run_bench
+    except ModuleNotFoundError as exc:
+        if exc.name != "torch" and not (exc.name or "").startswith("torch."):
+            raise
+        print(f"htdata bench: error: {NEEDS_TORCH}", file=sys.stderr)
+        return 2
     cfg = BenchConfig.quick_config(args.out, args.seed) if args.quick else BenchConfig(out=args.out, seed=args.seed)
     if args.only is not None:
         cfg.sections = tuple(s.strip() for s in args.only.split(",") if s.strip())

@@ -28,9 +28,9 @@ them to a block or list them in the layout's `unused_cells`.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 
+from htdata.errors import HtdataError
 from htdata.glove.activity import unmapped_warning
 from htdata.glove.layouts import LAYOUTS_ENV
 from htdata.ingest import ingest, parse_sources
@@ -38,6 +38,7 @@ from htdata.ingest.executors import UnitFailed
 from htdata.ingest.run import failure_line
 from htdata.settings import aim_settings
 from htdata.store.lock import DatasetLocked
+from htdata.workers import usable_cores
 
 EPILOG = """\
 A pipeline says how to read one source format: a shipped name (`htdata pipelines list`:
@@ -75,8 +76,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--layouts", action="append", default=[], metavar="DIR",
                         help=f"folder of glove layout JSONs searched for layout ids (repeatable; before "
                              f"${LAYOUTS_ENV} and the shipped layouts)")
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1,
-                        help="worker processes (default: CPUs); 0 = run units in this process (debugging)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help=f"worker processes (default: the cores this process may use, {usable_cores()} here); "
+                             f"0 = run units in this process (debugging); with --executor ray, a local Ray's CPUs")
     parser.add_argument("--executor", choices=("process", "ray"), default="process",
                         help="process (default): local pool, the progress bar advances per finished episode; "
                              "ray: one Ray task per work unit, the bar advances per finished unit")
@@ -102,7 +104,9 @@ def run(args: argparse.Namespace) -> int:
         report = ingest(sources, out, workers=args.workers, executor=args.executor, address=args.address,
                         retries=args.retries, progress=not args.quiet, layout_dirs=tuple(args.layouts),
                         command="htdata ingest " + " ".join(sys.argv[2:]), verify_sources=args.verify_sources)
-    except (ValueError, FileNotFoundError, DatasetLocked) as e:   # LayoutNotFound is a FileNotFoundError: one line, no traceback
+    # one line, no traceback: LayoutNotFound is a FileNotFoundError; a source folder discovery cannot read keeps
+    # its OSError type (ingest.plan.discover_sources); a full disk is the CLI's own line (htdata/cli.py)
+    except (HtdataError, ValueError, FileNotFoundError, PermissionError, NotADirectoryError, DatasetLocked) as e:
         print(f"htdata ingest: error: {e}", file=sys.stderr)
         return 2
     except UnitFailed as e:

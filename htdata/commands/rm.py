@@ -13,7 +13,8 @@ EPILOG = """\
 Nothing is changed in place: the result is a new version (`htdata log` lists versions, old ones
 stay readable until `htdata gc`), planned first and written only then; --dry-run prints the plan.
 Only the storage files holding touched episodes are rewritten. Splits carry over (a removed
-episode leaves its part). An id or glob that matches nothing is an error listing near matches.
+episode leaves its part). An id or glob that matches nothing is an error naming it and the number of
+episodes, with the ids spelled like it when there are any ("did you mean: ..."); nothing is removed.
 
 Examples:
   htdata rm data/dataset ot-home_kitchen_p1-demo_19 --dry-run

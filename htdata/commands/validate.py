@@ -49,7 +49,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", type=Path, default=None, metavar="REPORT",
                         help=f"report path (default DATASET/{VALIDATE_REPORT})")
     parser.add_argument("--workers", type=int, default=None,
-                        help="processes over shards (default: all cores with --deep, else 1)")
+                        help="processes over shards (default: the cores this process may use with --deep, else "
+                             "none); 0 or 1 = check in this process")
 
 
 def run(args: argparse.Namespace) -> int:

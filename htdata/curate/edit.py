@@ -18,12 +18,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from htdata.errors import ArgumentError
-from htdata.read.reader import DatasetReader
 from htdata.store.episodeids import NoSuchEpisode, resolve_episodes  # noqa: F401 (NoSuchEpisode: importable from here)
-from htdata.store.lock import WriterLock
 from htdata.store.parts import Part
-from htdata.store.snapshot import Snapshot, commit_parts, open_snapshot
-from htdata.write.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
+from htdata.store.snapshot import Snapshot
+from htdata.write.newversion import NewVersion
+from htdata.write.repack import KeptEpisode, samples_per_shard_of
 
 
 def parse_frames(spec: str, n: int, episode: str) -> range:
@@ -112,31 +111,26 @@ def _trimmed_record(rec: dict, frames: range, version: int | None) -> dict:
     return rec
 
 
-def apply_edit(snap: Snapshot, plan: list, command: str) -> dict:
-    """Write the planned version (re-packing touched units into new ones); returns its manifest."""
+def apply_edit(nv: NewVersion, plan: list) -> dict:
+    """Write the planned version (re-packing touched units into new ones) in `nv`; returns its manifest."""
     parts: list[Part] = []
-    reader = DatasetReader(snap.root, version=snap.version) if any(k for _, k in plan) else None
-    unit = snap.next_unit()
-    clear_uncommitted(snap.root, unit)
     for part, kept in plan:
         if kept is None:
             parts.append(part)
         elif kept:
-            parts.append(repack_unit(reader, kept, unit, samples_per_shard_of(part)))
-            unit += 1
-    return commit_parts(snap.root, parts, {}, snap, command, next_unit=unit)
+            parts.append(nv.repack(nv.reader(), kept, samples_per_shard_of(part)))
+    return nv.commit(parts)
 
 
 def remove_episodes(root, patterns: list[str], dry_run: bool, command: str) -> tuple[Edit, dict | None]:
-    with WriterLock(root, command):
-        snap = open_snapshot(root)
-        edit, plan = plan_edit(snap, resolve_episodes(snap.episode_ids(), patterns), {})
-        return edit, None if dry_run else apply_edit(snap, plan, command)
+    with NewVersion(root, command) as nv:
+        edit, plan = plan_edit(nv.parent, resolve_episodes(nv.parent.episode_ids(), patterns), {})
+        return edit, None if dry_run else apply_edit(nv, plan)
 
 
 def trim_episode(root, episode: str, frames: str, dry_run: bool, command: str) -> tuple[Edit, dict | None]:
-    with WriterLock(root, command):
-        snap = open_snapshot(root)
+    with NewVersion(root, command) as nv:
+        snap = nv.parent
         ids = resolve_episodes(snap.episode_ids(), [episode])
         if len(ids) != 1:
             raise ArgumentError(f"trim takes one episode; {episode!r} matches {len(ids)}: {', '.join(ids[:5])}")
@@ -146,4 +140,4 @@ def trim_episode(root, episode: str, frames: str, dry_run: bool, command: str) -
         if kept == range(n):     # keeps every frame: the version would be identical, so none is written
             return Edit(parent=snap.version), None
         edit, plan = plan_edit(snap, [], {eid: kept})
-        return edit, None if dry_run else apply_edit(snap, plan, command)
+        return edit, None if dry_run else apply_edit(nv, plan)

@@ -26,8 +26,7 @@ from htdata.errors import ArgumentError
 from htdata.glove.contact import THRESHOLD
 from htdata.inspect.stats import default_cache_dir, episode_stats
 from htdata.read.reader import DatasetReader
-from htdata.store.lock import WriterLock
-from htdata.store.snapshot import open_snapshot
+from htdata.write.newversion import NewVersion
 
 
 @dataclass
@@ -106,12 +105,10 @@ def plan_idle(reader: DatasetReader, cfg: IdleConfig, cache_dir="default") -> li
 def trim_idle(root, cfg: IdleConfig, dry_run: bool, command: str, cache_dir="default"
               ) -> tuple[list[IdleCut], curate_edit.Edit | None, dict | None]:
     """(cuts, edit or None when nothing is idle, manifest of the new version or None)."""
-    with WriterLock(root, command):
-        snap = open_snapshot(root)
-        with DatasetReader(root, version=snap.version) as reader:
-            cuts = plan_idle(reader, cfg, cache_dir)
+    with NewVersion(root, command) as nv:
+        cuts = plan_idle(nv.reader(), cfg, cache_dir)
         trims = {c.episode: c.keep for c in cuts if c.keep is not None}
         if not trims:
             return cuts, None, None
-        edit, plan = curate_edit.plan_edit(snap, [], trims)
-        return cuts, edit, None if dry_run else curate_edit.apply_edit(snap, plan, command)
+        edit, plan = curate_edit.plan_edit(nv.parent, [], trims)
+        return cuts, edit, None if dry_run else curate_edit.apply_edit(nv, plan)

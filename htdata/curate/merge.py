@@ -39,12 +39,13 @@ from htdata.format.table import MANIFEST_FILE, SHARDS_DIR
 from htdata.read.reader import DatasetReader
 from htdata.store.confine import inside
 from htdata.store.fsutil import sha256_file
-from htdata.store.lock import LOCK_FILE, WriterLock
+from htdata.store.lock import LOCK_FILE
 from htdata.store.manifest import load_manifest
 from htdata.store.parts import Part
-from htdata.store.snapshot import Snapshot, commit_parts, open_snapshot
+from htdata.store.snapshot import Snapshot, open_snapshot
 from htdata.store.versions import content_view, list_versions, version_manifest_file
-from htdata.write.repack import KeptEpisode, repack_unit, samples_per_shard_of
+from htdata.write.newversion import NewVersion
+from htdata.write.repack import KeptEpisode, samples_per_shard_of
 
 MERGE_MARKER = ".merge.json"   # written by a merge into an empty OUT, removed after its commit
 
@@ -179,7 +180,8 @@ def merge(a_root, b_root, out_root, command: str) -> MergeReport:
     dup = set(duplicates(a, b))
     report = MergeReport(episodes_a=len(a.episodes), episodes_b=len(b.episodes) - len(dup), deduplicated=sorted(dup))
     out.mkdir(parents=True, exist_ok=True)
-    with WriterLock(out, command):      # the lock first: only its holder may decide what OUT's files are
+    # the lock first: only its holder may decide what OUT's files are; B's units follow A's; resumable
+    with NewVersion(out, command, parent="none", first_unit=a.next_unit(), resumable=True) as nv:
         resuming = _claim(out, _intent(a, b))
         if resuming and list_versions(out):   # killed after its version file: the merge is committed
             head = out / version_manifest_file(list_versions(out)[-1])
@@ -197,24 +199,21 @@ def merge(a_root, b_root, out_root, command: str) -> MergeReport:
                 place_shard(a.root / SHARDS_DIR / s["name"], out / SHARDS_DIR / s["name"], s["sha256"], report,
                             resuming)
             parts.append(part)
-        unit = a.next_unit()
         reader_b = DatasetReader(b.root, version=b.version)
         for part in b.parts():
             kept = [e for e in part.episodes if e["episode_id"] not in dup]
             if not kept:
                 continue
-            if len(kept) < len(part.episodes):   # re-pack B's unit without the duplicate, into OUT
-                for old in (out / SHARDS_DIR).glob(f"shard-{unit:06d}-*.tar"):   # an interrupted run's: redo
-                    old.unlink()
-                parts.append(repack_unit(reader_b, [KeptEpisode(e, range(int(e["num_frames"]))) for e in kept],
-                                         unit, samples_per_shard_of(part), out_root=out))
+            if len(kept) < len(part.episodes):   # re-pack B's unit without the duplicate, into OUT (an
+                # interrupted run's try at that unit is redone: NewVersion.repack writes a unit whole)
+                parts.append(nv.repack(reader_b, [KeptEpisode(e, range(int(e["num_frames"]))) for e in kept],
+                                       samples_per_shard_of(part)))
             else:
-                renamed = _renamed(part, unit)
+                renamed = _renamed(part, nv.take_unit())
                 for old, new in zip(part.shards, renamed.shards):
                     place_shard(b.root / SHARDS_DIR / old["name"], out / SHARDS_DIR / new["name"], old["sha256"],
                                 report, resuming)
                 parts.append(renamed)
-            unit += 1
         crash_point("merge_shards_placed")
         copy_layout_files(a, out)
         copy_layout_files(b, out)
@@ -223,7 +222,7 @@ def merge(a_root, b_root, out_root, command: str) -> MergeReport:
                   "canonical": a.manifest["canonical"], "codec": a.manifest["codec"],
                   # content ids: the same calibration in A and B is one entry (revisions renumbered)
                   "calibrations": {**b.manifest.get("calibrations", {}), **a.manifest.get("calibrations", {})}}
-        report.manifest = commit_parts(out, parts, fields, None, command, splits=lambda eps, sha: {}, next_unit=unit)
+        report.manifest = nv.commit(parts, fields)    # no parent: no splits (a merged dataset needs its own)
         crash_point("merge_committed")
         (out / MERGE_MARKER).unlink()
     return report

@@ -54,9 +54,9 @@ from htdata.glove.restlevel import rest_level_warning
 from htdata.read.rawstream import apply_paired, paired_row, paired_source_row
 from htdata.read.reader import DatasetReader
 from htdata.store.confine import inside
-from htdata.store.lock import WriterLock
-from htdata.store.snapshot import Snapshot, commit_parts, open_snapshot
-from htdata.write.repack import KeptEpisode, clear_uncommitted, repack_unit, samples_per_shard_of
+from htdata.store.snapshot import Snapshot
+from htdata.write.newversion import NewVersion
+from htdata.write.repack import KeptEpisode, samples_per_shard_of
 
 
 @dataclass
@@ -278,37 +278,25 @@ class Recalibration:
 def renormalise(root, normalising: NormaliseSettings, patterns: list[str] | None, dry_run: bool, force: bool,
                 command: str) -> tuple[RenormalisePlan, dict | None]:
     """Plan (and unless `dry_run`, write) a version whose maps follow the calibrations of `normalising` (a pipeline's NormaliseSettings)."""
-    with WriterLock(root, command):
-        snap = open_snapshot(root)
-        plan = plan_renormalise(snap, normalising, patterns, force)
+    with NewVersion(root, command) as nv:
+        plan = plan_renormalise(nv.parent, normalising, patterns, force)
         if not plan.changes:
             return plan, None
-        with DatasetReader(snap.root, version=snap.version) as reader:
-            rest_level_warnings(reader, snap, normalising, plan)
-            if dry_run:
-                return plan, None
-            manifest = _write(reader, snap, normalising, plan, command)
-        return plan, manifest
+        rest_level_warnings(nv.reader(), nv.parent, normalising, plan)
+        if dry_run:
+            return plan, None
+        return plan, _write(nv, normalising, plan)
 
 
-def _write(reader: DatasetReader, snap: Snapshot, normalising: NormaliseSettings, plan: RenormalisePlan,
-           command: str) -> dict:
-    """Re-pack the units holding changed episodes under the new calibrations and commit them (the manifest)."""
-    rewrite = Recalibration(reader, snap, normalising, plan)
-    first = unit = snap.next_unit()
-    clear_uncommitted(snap.root, unit)
+def _write(nv: NewVersion, normalising: NormaliseSettings, plan: RenormalisePlan) -> dict:
+    """Re-pack the units holding changed episodes under the new calibrations and commit them (the manifest);
+    a failure (bad settings for some frame) leaves no shard of this attempt behind (NewVersion)."""
+    rewrite = Recalibration(nv.reader(), nv.parent, normalising, plan)
     parts = []
-    try:
-        for part in snap.parts():
-            if part.unit not in plan.repacked_units:
-                parts.append(part)
-                continue
-            kept = [KeptEpisode(record=rec, frames=range(int(rec["num_frames"]))) for rec in part.episodes]
-            parts.append(repack_unit(reader, kept, unit, samples_per_shard_of(part), rewrite=rewrite))
-            unit += 1
-    except ValueError:   # bad settings for some frame: leave no shard of this attempt behind
-        clear_uncommitted(snap.root, first)
-        raise
-    manifest = commit_parts(snap.root, parts, {"calibrations": plan.calibrations}, snap, command,
-                            next_unit=unit)
-    return manifest
+    for part in nv.parent.parts():
+        if part.unit not in plan.repacked_units:
+            parts.append(part)
+            continue
+        kept = [KeptEpisode(record=rec, frames=range(int(rec["num_frames"]))) for rec in part.episodes]
+        parts.append(nv.repack(nv.reader(), kept, samples_per_shard_of(part), rewrite=rewrite))
+    return nv.commit(parts, {"calibrations": plan.calibrations})

@@ -18,10 +18,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from htdata.resources import validate_json
-from htdata.store.lock import WriterLock
-from htdata.store.snapshot import commit_parts, open_snapshot
 from htdata.store.splitfiles import PARTS, assignment_of, carried_splits, parent_split_docs
 from htdata.store.splitrule import SplitError, build_split
+from htdata.write.newversion import NewVersion
 
 
 @dataclass
@@ -57,8 +56,8 @@ def write_versioned_split(root, config, command: str) -> SplitResult:
     """
     root = Path(root)
     name = config.resolved_name()
-    with WriterLock(root, command):
-        snap = open_snapshot(root)
+    with NewVersion(root, command, new_units=False) as nv:   # the parent's parts, as they are
+        snap = nv.parent
         previous = parent_split_docs(snap).get(name)
         sha = snap.manifest["episodes_sha256"]
         doc = build_split(snap.episodes, config, episodes_sha256=sha)
@@ -83,7 +82,7 @@ def write_versioned_split(root, config, command: str) -> SplitResult:
         def splits(episodes, sha):
             return {**carried_splits(snap, episodes, sha), name: data}
 
-        manifest = commit_parts(root, snap.parts(), {}, snap, command, splits=splits)
+        manifest = nv.commit(snap.parts(), splits=splits)
     old, new = assignment_of(previous) if previous else {}, assignment_of(doc)
     gained = {p: sorted(e for e, q in new.items() if q == p and old.get(e) != p) for p in PARTS}
     lost = {p: sorted(e for e, q in old.items() if q == p and new.get(e) != p) for p in PARTS}

@@ -24,10 +24,10 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from htdata.read.reader import DatasetReader
 from htdata.store.parts import Part
 from htdata.store.snapshot import Snapshot
-from htdata.write.repack import KeptEpisode, repack_unit, samples_per_shard_of
+from htdata.write.newversion import NewVersion
+from htdata.write.repack import KeptEpisode, samples_per_shard_of
 
 # Pipeline sections that do not shape a sample (packing and naming only).
 NOT_SAMPLE_SETTINGS = ("name", "shards")
@@ -101,17 +101,16 @@ def kept_unavailable(parent: Snapshot | None, discovered: set[str], roots: list[
                   if e["episode_id"] not in discovered and str(e.get("source_ref", "")).startswith(prefixes))
 
 
-def parent_parts(plan: AppendPlan, ingested: set[str], first_unit: int) -> tuple[list[Part], int]:
+def parent_parts(plan: AppendPlan, ingested: set[str], nv: NewVersion) -> list[Part]:
     """The parent's parts in the new version: replaced episodes leave, relabelled ones get new labels.
 
     A part that keeps some episodes but loses others (datasets written
-    before one-episode units) is re-packed into a new unit from `first_unit`.
-    Returns (parts, next free unit).
+    before one-episode units) is re-packed into the next free unit of the ingest's transaction `nv`.
     """
     if plan.parent is None:
-        return [], first_unit
+        return []
     gone = plan.replaced & ingested
-    parts, unit, reader = [], first_unit, None
+    parts = []
     for part in plan.parent.parts():
         records = [relabel(e, plan.relabelled[e["episode_id"]]) if e["episode_id"] in plan.relabelled else e
                    for e in part.episodes]
@@ -119,9 +118,6 @@ def parent_parts(plan: AppendPlan, ingested: set[str], first_unit: int) -> tuple
         if len(kept) == len(records):
             parts.append(Part(unit=part.unit, shards=part.shards, rows=part.rows, episodes=records))
         elif kept:
-            if reader is None:
-                reader = DatasetReader(plan.parent.root, version=plan.parent.version)
-            parts.append(repack_unit(reader, [KeptEpisode(e, range(int(e["num_frames"]))) for e in kept], unit,
-                                     samples_per_shard_of(part)))
-            unit += 1
-    return parts, unit
+            parts.append(nv.repack(nv.reader(), [KeptEpisode(e, range(int(e["num_frames"]))) for e in kept],
+                                   samples_per_shard_of(part)))
+    return parts

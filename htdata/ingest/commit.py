@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-from pathlib import Path
 
 from htdata.errors import ConfigError, DatasetError
 from htdata.format.codec import DEFAULT_CODEC_INFO
@@ -26,7 +25,7 @@ from htdata.ingest.pipeline import PipelineConfig
 from htdata.ingest.workdir import decode_rows
 from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, write_layout_files
 from htdata.store.parts import Part, part_from_rows
-from htdata.store.snapshot import commit_parts
+from htdata.write.newversion import NewVersion
 
 
 def codec_info(cfg: PipelineConfig) -> dict:
@@ -102,18 +101,19 @@ def merged_sources(parent, sources: list) -> list[dict]:
     return old + new
 
 
-def commit(out: Path, sources: list, records: list[dict], plan, command: str) -> dict:
-    """Write the new version: the parent's parts (minus replaced episodes) then this run's units."""
-
+def commit(nv: NewVersion, sources: list, records: list[dict], plan) -> dict:
+    """Write the new version in the ingest's transaction `nv`: the parent's parts (minus replaced episodes)
+    then this run's units."""
+    out = nv.root
     canon = load_canonical()
     canonical = CanonicalArtifact(document=canon.to_dict(), region_map=canon.region_map, part_map=canon.part_map)
     artifacts = layout_artifacts(records, sources[0].pipeline.tactile.raster_mode, canon)
     layout_entries, canonical_entry = write_layout_files(out, artifacts, canonical)
     ingested = {ep["episode_id"] for r in records for ep in r["episodes"]}
-    first_free = max([plan.parent.next_unit() if plan.parent else 0] + [r["unit"] + 1 for r in records])
-    kept, next_unit = parent_parts(plan, ingested, first_free)
+    nv.skip_to(max([nv.first_unit] + [r["unit"] + 1 for r in records]))   # the run's units are taken
+    kept = parent_parts(plan, ingested, nv)
     parts = kept + [unit_part(r) for r in records if r["episodes"]]
     fields = {"sources": merged_sources(plan.parent, sources), "layouts": layout_entries,
               "canonical": canonical_entry, "codec": codec_info(sources[0].pipeline),
               "calibrations": {k: v for r in records for k, v in r.get("calibrations", {}).items()}}
-    return commit_parts(out, parts, fields, plan.parent, command, next_unit=next_unit)
+    return nv.commit(parts, fields)

@@ -17,8 +17,9 @@ KeyboardInterrupt kills them (their unfinished units are redone by the re-run,
 which resumes byte-identical, as after kill -9) and goes on up to the CLI,
 which says it in one line.
 
-Threads: a worker runs `limit_threads(n)` before its first unit, with n =
-usable cores // workers (at least 1): with 2 workers on 2 cores each uses
+Workers: how many is htdata/workers.py's (`resolve_workers`: not given = every usable core, 0 =
+inline in this process, `InlineExecutor`). Threads: a worker runs `limit_threads(n)` before its
+first unit, with n = usable cores // workers (at least 1): with 2 workers on 2 cores each uses
 one thread in OpenCV (resize, JPEG), torch (if loaded) and OpenMP/BLAS,
 instead of every worker starting a pool as wide as the machine. Ray tasks
 (1 CPU each) use one thread. Video decoders are single-threaded anyway
@@ -44,6 +45,7 @@ from typing import Any, Callable, Iterable, Iterator
 
 from htdata.errors import ArgumentError
 from htdata.ingest.encodepool import THREADS_ENV
+from htdata.workers import resolve_workers, usable_cores  # noqa: F401 (usable_cores: its old home, importable here)
 
 EXECUTORS = ("process", "ray")
 
@@ -62,14 +64,6 @@ def report_progress(event: dict) -> None:
     """Send a small progress event to the driver, if the executor running us listens."""
     if _progress_sink is not None:
         _progress_sink(event)
-
-
-def usable_cores() -> int:
-    """Cores this process may run on (affinity mask when the OS exposes it)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return max(1, os.cpu_count() or 1)
 
 
 def threads_per_worker(workers: int, cores: int | None = None) -> int:
@@ -206,7 +200,9 @@ class ProcessExecutor:
 
     def __init__(self, workers: int | None = None, max_retries: int = 1, start_method: str = "spawn",
                  threads: int | None = None):
-        self.workers = max(1, int(workers or usable_cores()))
+        self.workers = resolve_workers(workers)   # None: every usable core
+        if self.workers == 0:
+            raise ArgumentError("a process pool needs >= 1 worker; 0 workers run inline (InlineExecutor)")
         self.max_retries = max(0, int(max_retries))
         self.threads = threads_per_worker(self.workers) if threads is None else max(1, int(threads))
         # spawn: the parent may hold threads (tqdm monitor, BLAS) that fork would copy mid-lock.
@@ -356,12 +352,19 @@ class RayExecutor:
 
 def make_executor(kind: str, workers: int | None = None, address: str | None = None,
                   max_retries: int = 1):
+    """The executor of `kind` with `workers` (htdata/workers.py: None = every usable core, 0 = inline)."""
+    if kind not in EXECUTORS:
+        raise ArgumentError(f"unknown executor {kind!r}; expected one of {EXECUTORS}")
+    given = workers
+    workers = resolve_workers(workers)
     if kind == "process":
         if address:
             raise ArgumentError("--address is only meaningful with --executor ray")
         if workers == 0:
             return InlineExecutor(max_retries=max_retries)
         return ProcessExecutor(workers, max_retries=max_retries)
-    if kind == "ray":
-        return RayExecutor(address=address, workers=workers, max_retries=max_retries)
-    raise ArgumentError(f"unknown executor {kind!r}; expected one of {EXECUTORS}")
+    if given == 0:
+        raise ArgumentError("--workers 0 runs units inline, in this process; Ray runs them on its workers: give "
+                            "--workers N (N >= 1: a local Ray's CPUs) or leave it out (every usable core)")
+    # a local Ray gets the workers as its CPUs; a cluster (address) has its own
+    return RayExecutor(address=address, workers=workers, max_retries=max_retries)

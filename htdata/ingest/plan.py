@@ -26,7 +26,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from htdata.errors import ArgumentError, ConfigError, EpisodeError
+from htdata.errors import ArgumentError, ConfigError, EpisodeError, in_context
 from htdata.format.mapstorage import MapStorage
 from htdata.format.table import HANDS
 from htdata.glove.codecrule import dataset_gloves
@@ -355,7 +355,8 @@ def discover_sources(sources: list[Source], layout_dirs: tuple = ()) -> tuple[li
     A bad file (discovery) or an episode whose layout does not resolve
     (stage "plan") is a failure like a bad episode; only a source-wide
     problem (bad adapter params, unreadable annotation/split file, a
-    pipeline [layouts] override that does not resolve) aborts (ValueError).
+    pipeline [layouts] override that does not resolve) aborts with the adapter's own error type (a
+    ConfigError, a DatasetError, an OSError ...), its message naming the source and the adapter.
     """
     refs, failures = [], []
     lookup = LayoutLookup(layout_dirs)
@@ -364,8 +365,11 @@ def discover_sources(sources: list[Source], layout_dirs: tuple = ()) -> tuple[li
         name = s.pipeline.adapter.name
         try:
             found, bad = get_adapter(name).discover_all(s.root, s.pipeline.adapter.params)
-        except Exception as e:
-            raise ValueError(f"{s.root}: discovery with adapter {name!r} failed: {e}") from e
+        except Exception as e:   # the error keeps its type (a ConfigError stays one), its message says where
+            again = in_context(e, f"{s.root}: discovery with adapter {name!r} failed")
+            if again is None:
+                raise
+            raise again from e
         failures += [failure_entry("discovery", name, e) for e in bad]
         planned, failed = [], []
         for ref in found:

@@ -46,9 +46,8 @@ from htdata.ingest.workdir import (
     unit_record_path,
 )
 from htdata.source.adapters.sourcetree import RealPaths
-from htdata.store.lock import WriterLock
-from htdata.store.snapshot import current_snapshot
 from htdata.store.versions import restore_pointer
+from htdata.write.newversion import NewVersion
 
 
 class EpisodeProgress:
@@ -117,7 +116,8 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
     Args:
         sources: the recordings to ingest, each a folder with the pipeline that reads it (`Source`).
         out: the dataset folder: new (created), a dataset to append to, or an ingest to resume.
-        workers: worker processes of the "process" executor (0: inline, in this process); Ray workers otherwise.
+        workers: worker processes of the "process" executor, a local Ray's CPUs with "ray" (htdata/workers.py:
+            None = every usable core; 0 = inline, in this process, "process" only).
         executor: "process" or "ray" (htdata/ingest/executors.py).
         address: the Ray cluster to join (executor "ray" only).
         retries: how often a failed work unit is run again before it counts as failed.
@@ -130,8 +130,10 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         The ingest report (episodes ingested, failures, notes, timing, the committed version).
 
     Raises:
-        ValueError: pipelines or settings that disagree (with each other or with the dataset), an `out`
-            that is not a dataset, a source folder with no recording, or no episode ingested into a new dataset.
+        ConfigError / ArgumentError (ValueErrors): pipelines or settings that disagree (with each other or with
+            the dataset), an `out` that is not a dataset, a source folder with no recording, or no episode
+            ingested into a new dataset.
+        Any error a source-wide discovery raises, its type kept (plan.discover_sources).
         DatasetLocked: another writer holds the dataset.
     """
     t_start, cpu_start = time.perf_counter(), time.process_time()
@@ -140,10 +142,11 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
     existed = out.exists()
     new = not existed or not any(out.iterdir())
     try:
-        with WriterLock(out, command) as lock:
+        # the lock, the parent and unit numbers; resumable: finished units stay for a re-run to resume
+        with NewVersion(out, command, parent="optional", resumable=True) as nv:
             try:
-                return _ingest(sources, out, lock, workers, executor, address, retries, progress, layout_dirs,
-                               command, verify_sources, t_start, cpu_start)
+                return _ingest(sources, nv, workers, executor, address, retries, progress, layout_dirs,
+                               verify_sources, t_start, cpu_start)
             except BaseException:
                 if new:   # a first ingest that failed before writing anything leaves no empty skeleton
                     remove_empty_output(out)      # (under the lock: no other writer's folders)
@@ -154,12 +157,13 @@ def ingest(sources: list[Source], out: Path, workers: int = 1, executor: str = "
         raise
 
 
-def _ingest(sources, out: Path, lock: WriterLock, workers, executor, address, retries, progress, layout_dirs,
-            command, verify_sources, t_start, cpu_start) -> dict:
-    """`ingest` under the writer lock: the executor started, plan, units, report, commit."""
+def _ingest(sources, nv: NewVersion, workers, executor, address, retries, progress, layout_dirs,
+            verify_sources, t_start, cpu_start) -> dict:
+    """`ingest` in its new-version transaction (writer lock, parent): the executor started, plan, units,
+    report, commit."""
+    out, parent = nv.root, nv.parent
     with _started_executor(executor, workers, address, retries) as runner:
         prepare_output(out)
-        parent = current_snapshot(out)
         refs, plan_failures = discover_sources(sources, tuple(layout_dirs))
         check_found_something(sources, refs, plan_failures)
         check_unique_ids(refs)
@@ -178,9 +182,8 @@ def _ingest(sources, out: Path, lock: WriterLock, workers, executor, address, re
                                     verify_sources, lists, real)
         plan.todo = checked.refs
         plan_failures = plan_failures + checked.failures
-        first_unit = parent.next_unit() if parent else 0
-        tasks = plan_units([(r, source_of[r.episode_id]) for r in plan.todo], out, first_unit, real)
-        remove_strays(out, tasks, first_unit)
+        tasks = plan_units([(r, source_of[r.episode_id]) for r in plan.todo], out, nv.first_unit, real)
+        remove_strays(out, tasks, nv.first_unit)
         t_run, cpu_run = time.perf_counter(), time.process_time()
         records, ran = run_units(tasks, out, runner, progress)
         t_ran, cpu_ran = time.perf_counter(), time.process_time()
@@ -190,14 +193,14 @@ def _ingest(sources, out: Path, lock: WriterLock, workers, executor, address, re
                               discovered={r.episode_id for rs in refs for r in rs}, t_start=t_start)
         report["notes"] += checked.notes + sum_notes
         report["notes"] += raw_count_default_notes([(r, source_of[r.episode_id]) for r in plan.todo])
-        if lock.note:
-            report["notes"].append(lock.note)
+        if nv.note:
+            report["notes"].append(nv.note)
         write_bytes_atomic(out / INGEST_REPORT, dumps(report))   # explains a run that commits nothing too
         if parent is None:
             check_ingested_something(report, out)
         report["timing"].update(plan_s=t_run - t_start, run_s=t_ran - t_run,
                                 plan_cpu_s=cpu_run - cpu_start, run_cpu_s=cpu_ran - cpu_run)
-        report["version"] = _commit_or_keep(out, sources, records, plan, parent, command, report)
+        report["version"] = _commit_or_keep(nv, sources, records, plan, report)
     report["timing"]["total_s"] = time.perf_counter() - t_start
     report["timing"]["commit_s"] = report["timing"]["total_s"] - (t_ran - t_start)
     # the driver's own CPU (this process, not its workers) per phase: what a cluster cannot parallelise
@@ -229,14 +232,14 @@ def check_ingested_something(report: dict, out: Path) -> None:
                             f"{out / INGEST_REPORT}: {shown}{more}")
 
 
-def _commit_or_keep(out: Path, sources, records: list[dict], plan, parent, command: str, report: dict):
+def _commit_or_keep(nv: NewVersion, sources, records: list[dict], plan, report: dict):
     """Commit a new version when episodes were ingested or relabelled, else keep the parent (its pointer
     restored when lost or stale, noted in the report); returns the version now current."""
     if report["episodes_ingested"] or plan.relabelled:
-        return commit(out, sources, records, plan, command)["version"]
-    notes = report["notes"]
+        return commit(nv, sources, records, plan)["version"]
+    parent, notes = nv.parent, report["notes"]
     notes.append(f"nothing changed: version {parent.version} stays current")
-    if parent.version is not None and restore_pointer(out, parent.version):   # a lost or stale pointer
+    if parent.version is not None and restore_pointer(nv.root, parent.version):   # a lost or stale pointer
         notes.append(f"{MANIFEST_FILE} rewritten from version {parent.version}'s file")
     return parent.version
 

@@ -1,7 +1,8 @@
 """What the torch datasets share: which samples make items, from which version, and what an item carries.
 
 `TactileFrameDataset`, `TactileWindowDataset` and `TactileStream` (htdata/read/torchdata.py) take the
-same keywords (split, part, hands, rgb_float, version, frames, maps_from, members, constants);
+same keywords (split, part, hands, rgb_float, version, frames, maps_from, members, constants; on_error,
+which only a stream can honour beyond "raise");
 `ItemOptions` holds them, checked once, and the item builder (htdata/read/torchitems.py) reads only it.
 The keywords keep working; `options=` hands one object to several datasets instead:
 
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 from htdata.errors import ArgumentError
 from htdata.format.table import HANDS
 from htdata.read import keys
+from htdata.read.onerror import check_on_error
 
 FRAME_KINDS = ("paired", "tactile")
 MEMBERS = (keys.TACTILE, keys.RGB)     # what a dataset can be asked for
@@ -77,6 +79,8 @@ class ItemOptions:
             against the version).
         members: what an item carries: a subset of ("tactile", "rgb").
         constants: "item" (coverage, regions and ids in every item) or "once" (`constants()`, `expand_batch`).
+        on_error: a sample that does not read or decode (htdata/read/onerror.py): "raise", "warn" (skip it with
+            one warning line naming it) or "skip"; a stream (TactileStream) only: a map-style dataset raises.
     """
     split: str | None = None
     part: str | None = None
@@ -87,16 +91,27 @@ class ItemOptions:
     maps_from: str = "best"
     members: tuple[str, ...] = MEMBERS
     constants: str = "item"
+    on_error: str = "raise"
 
     def __post_init__(self):
         object.__setattr__(self, "hands", check_hands(self.hands))
         object.__setattr__(self, "frames", check_frames(self.frames))
         object.__setattr__(self, "members", check_members(self.members))
         object.__setattr__(self, "constants", check_constants(self.constants))
+        check_on_error(self.on_error)
 
     def replace(self, **changes) -> "ItemOptions":
         """A copy with `changes` (checked like a new one)."""
         return dataclasses.replace(self, **changes)
+
+
+def streamed_only(options: ItemOptions, dataset: str) -> ItemOptions:
+    """`options`, or ArgumentError when they ask a map-style `dataset` to skip samples: it owes an item at
+    every index its sampler draws (a stream, TactileStream, can skip)."""
+    if options.on_error != "raise":
+        raise ArgumentError(f"{dataset} is map-style: every index must give an item, so on_error must be 'raise', "
+                            f"got {options.on_error!r}; TactileStream skips samples it cannot read")
+    return options
 
 
 def item_options(options: ItemOptions | None, **keywords) -> ItemOptions:

@@ -29,11 +29,10 @@ import functools
 import os
 from collections import OrderedDict
 from collections.abc import Iterator
-from typing import NamedTuple
 
 from htdata.errors import ArgumentError, DatasetError
 from htdata.format.mapstorage import MapStorage
-from htdata.format.shardio import BLOCK, describe_header, header_matches, padded, sample_key
+from htdata.format.shardio import BLOCK, describe_header, header_matches, sample_key
 from htdata.format.table import (
     HANDS,
     INDEX_DTYPE,
@@ -46,53 +45,15 @@ from htdata.format.table import (
     tactile_member,
 )
 from htdata.read.metadata import DatasetMetadata, OutOfRange, collected_guard
+from htdata.read.onerror import READ_ERRORS, SkipPolicy
 from htdata.read.rawstream import RawMapRenderer, check_records
+from htdata.read.samplerow import SampleRow, member_layout  # noqa: F401 (member_layout: a name here)
 from htdata.store import storage
 from htdata.store.confine import inside
 from htdata.store.splitfiles import SplitRejected  # noqa: F401 (its old home: importable from here)
 
 MAX_OPEN_SHARDS = 128   # an LRU of open shard files; one-episode units make many small shards
 _SIZE_POS = tuple(INDEX_DTYPE.names.index(SIZE_FIELDS[s]) for s in MEMBER_ORDER)
-
-
-class SampleRow(NamedTuple):
-    """One index.npy row as plain ints; `sizes` follows format.MEMBER_ORDER (0 = absent).
-
-    Args:
-        shard: the shard's number (position in the manifest's "shards").
-        offset: byte offset of the sample's first tar header in that shard.
-        episode: the episode's position in episodes.jsonl.
-        frame: the frame within the episode.
-        sizes: each member's size in bytes, in MEMBER_ORDER (0: the sample lacks it).
-    """
-    shard: int
-    offset: int
-    episode: int
-    frame: int
-    sizes: tuple[int, ...]
-
-
-def member_layout(sizes: tuple[int, ...], wanted=None) -> tuple[list[tuple[str, int, int]], int]:
-    """Where a sample's members lie in its span of the shard, and how many bytes to read.
-
-    Only members present (size > 0) and in `wanted` are listed; the read
-    stops at the end of the last listed member.
-
-    Args:
-        sizes: member sizes in MEMBER_ORDER (SampleRow.sizes).
-        wanted: suffixes to list ("json", "rgb.jpg", ...); None lists every present member.
-
-    Returns:
-        ([(suffix, header offset from the first header, size)], bytes to read).
-    """
-    layout, pos, end = [], 0, 0
-    for suffix, size in zip(MEMBER_ORDER, sizes):
-        if size:
-            if wanted is None or suffix in wanted:
-                layout.append((suffix, pos, size))
-                end = pos + BLOCK + size
-            pos += BLOCK + padded(size)
-    return layout, end
 
 
 def _from_meta(name: str):
@@ -354,38 +315,58 @@ class DatasetReader:
         return [self.decoded(i) for i in range(end - k, end + 1)]
 
     def iter_samples(self, shards: list[int] | None = None, decode: bool = False,
-                     suffixes=None) -> Iterator[tuple[int, dict]]:
+                     suffixes=None, on_error: str = "raise") -> Iterator[tuple[int, dict]]:
         """Stream the samples shard by shard, each shard read front to back.
 
         Args:
             shards: shard numbers to read, in that order; None: every shard.
             decode: yield decoded samples (as `decoded`) instead of member bytes.
             suffixes: the members returned (and decoded), as in `sample`; None: every member.
+            on_error: a sample that does not read or decode (htdata/read/onerror.py): "raise" (default),
+                "warn" (skip it with one warning line naming it) or "skip"; a shard that does not open is
+                skipped whole.
 
         Returns:
             An iterator of (global sample index, members or decoded sample).
 
         Raises:
             OutOfRange (an ArgumentError and IndexError): a shard number the version does not have.
-            DatasetError: an index row or a tar header disagrees with the manifest.
+            DatasetError: an index row or a tar header disagrees with the manifest (on_error="raise").
+            VersionCollected: the version's shards were removed by `htdata gc` (whatever `on_error`).
         """
-        rows = self.meta.index
+        policy = SkipPolicy(on_error)
         wanted = range(len(self._shard_names)) if shards is None else list(shards)
         bad = [s for s in wanted if not 0 <= s < len(self._shard_names)]
         if bad:
             raise OutOfRange(f"{self.root}: no shard {bad[0]} (version {self.version} has {len(self._shard_names)})")
         for shard in wanted:
-            entry = self.manifest["shards"][shard]
-            first, count = int(entry["first_sample"]), int(entry["samples"])
-            with storage.open_binary(self._shard_path(shard, confined=True)) as f:
-                for i in range(first, first + count):
-                    values = rows[i].item()
-                    row = SampleRow(values[0], values[1], values[2], values[3],
-                                    tuple(values[p] for p in _SIZE_POS))
-                    if row.shard != shard:
-                        raise DatasetError(f"{self.root}: index row {i} names shard {row.shard}, "
-                                           f"manifest puts it in {shard}")
-                    key = self._key(row)
-                    members = self._read_members(f, row, key, self._members_to_read(suffixes) if decode else suffixes)
-                    yield i, (self._decode_row(row, members, f"{self.root}: {key}", suffixes) if decode else members)
+            try:
+                with collected_guard(self.root, self.version, self._shard_path(shard)):
+                    f = storage.open_binary(self._shard_path(shard, confined=True))
+            except READ_ERRORS as exc:
+                if not policy.skips(exc, f"shard {self._shard_names[shard]} (every sample in it)"):
+                    raise
+                continue
+            with f:
+                yield from self._stream_shard(f, shard, decode, suffixes, policy)
 
+    def _stream_shard(self, f, shard: int, decode: bool, suffixes, policy: SkipPolicy) -> Iterator[tuple[int, dict]]:
+        """The samples of one open shard, front to back, as `iter_samples` yields them."""
+        rows = self.meta.index
+        entry = self.manifest["shards"][shard]
+        first, count = int(entry["first_sample"]), int(entry["samples"])
+        for i in range(first, first + count):
+            try:
+                values = rows[i].item()
+                row = SampleRow(values[0], values[1], values[2], values[3], tuple(values[p] for p in _SIZE_POS))
+                if row.shard != shard:
+                    raise DatasetError(f"{self.root}: index row {i} names shard {row.shard}, "
+                                       f"manifest puts it in {shard}")
+                key = self._key(row)
+                members = self._read_members(f, row, key, self._members_to_read(suffixes) if decode else suffixes)
+                out = self._decode_row(row, members, f"{self.root}: {key}", suffixes) if decode else members
+            except READ_ERRORS as exc:
+                if not policy.skips(exc, f"sample {i} of shard {self._shard_names[shard]}"):
+                    raise
+                continue
+            yield i, out

@@ -57,7 +57,8 @@ from htdata.errors import ArgumentError
 from htdata.format.mapstorage import hand_present, has_hand
 from htdata.format.table import CANVAS, HANDS, RGB_MEMBER, SIZE_FIELDS
 from htdata.read import keys
-from htdata.read.itemoptions import FRAME_KINDS, ItemOptions, item_options  # noqa: F401  (FRAME_KINDS: a name here)
+from htdata.read.itemoptions import FRAME_KINDS, ItemOptions, item_options, streamed_only  # noqa: F401 (FRAME_KINDS: a name here)
+from htdata.read.onerror import READ_ERRORS, SkipPolicy
 from htdata.read.rawstream import MAP_SOURCE_WORDS
 from htdata.read.reader import DatasetReader
 from htdata.read.torchitems import MEMBERS, ItemBuilder, ItemConstants, expand_batch  # noqa: F401  (names of this module)
@@ -153,6 +154,7 @@ class TactileFrameDataset(_ItemDataset):
         o = self.options = item_options(options, split=split, part=part, hands=hands, rgb_float=rgb_float,
                                         version=version, frames=frames, maps_from=maps_from, members=members,
                                         constants=constants)
+        streamed_only(o, "TactileFrameDataset")
         self.hands = o.hands
         self._builder = ItemBuilder(root, o)
         reader = self._builder.reader
@@ -195,6 +197,7 @@ class TactileWindowDataset(_ItemDataset):
         if o.constants != "item":
             raise ArgumentError(f"TactileWindowDataset items carry their constants: options.constants must be "
                                 f"'item', got {o.constants!r}")
+        streamed_only(o, "TactileWindowDataset")
         self.window = window
         self.hands = o.hands
         frames = o.frames
@@ -271,6 +274,8 @@ class TactileStream(IterableDataset):
         maps_from: "best", "stored" or "raw": where maps come from (module docstring; old name `map_source`).
         members: what an item carries: a subset of ("tactile", "rgb").
         constants: "item" (coverage, regions and ids in every item) or "once" (`constants()`, `expand_batch`).
+        on_error: a sample that does not read or decode (htdata/read/onerror.py): "raise" (default), "warn"
+            (skip it with one warning line naming it) or "skip"; a shard that does not open is skipped whole.
         options: all of the above but `shuffle_seed` in one htdata.read.itemoptions.ItemOptions (instead of
             the keywords).
     """
@@ -279,11 +284,11 @@ class TactileStream(IterableDataset):
     def __init__(self, root, split: str | None = None, part: str | None = None,
                  hands=HANDS, rgb_float: bool = False,
                  shuffle_seed: int | None = None, version: int | None = None, frames: str = "paired",
-                 maps_from: str = "best", members=MEMBERS, constants: str = "item", *,
+                 maps_from: str = "best", members=MEMBERS, constants: str = "item", on_error: str = "raise", *,
                  options: ItemOptions | None = None):
         o = self.options = item_options(options, split=split, part=part, hands=hands, rgb_float=rgb_float,
                                         version=version, frames=frames, maps_from=maps_from, members=members,
-                                        constants=constants)
+                                        constants=constants, on_error=on_error)
         self.hands = o.hands
         self.frames = o.frames
         self._builder = ItemBuilder(root, o)
@@ -338,7 +343,8 @@ class TactileStream(IterableDataset):
         """
         builder, reader = self._builder, self.reader
         wanted = builder.suffixes(self.hands)
-        for index, members in reader.iter_samples(shards, suffixes=wanted):
+        policy = SkipPolicy(self.options.on_error)     # the reader skips what does not read, this what does not decode
+        for index, members in reader.iter_samples(shards, suffixes=wanted, on_error=self.options.on_error):
             if not self._selected[index]:
                 continue
             present = ((lambda h: has_hand(members, h)) if builder.wants_tactile else   # maps not read: the index says
@@ -349,7 +355,12 @@ class TactileStream(IterableDataset):
                 continue
             row = reader.row(index)
             rgb = builder.empty_rgb(len(hands))   # JPEG decoded once for both hands
-            maps = builder.decode_into(members, hands, f"{reader.root}: {reader.key(index)}", rgb, row.episode)
+            try:
+                maps = builder.decode_into(members, hands, f"{reader.root}: {reader.key(index)}", rgb, row.episode)
+            except READ_ERRORS as exc:
+                if not policy.skips(exc, f"sample {index} ({reader.key(index)})"):
+                    raise
+                continue
             for k, hand in enumerate(hands):
                 yield builder.put_members(builder.ids(row, index, hand), None if maps[k] is None else maps[k][None],
                                           None if rgb is None else rgb[k])

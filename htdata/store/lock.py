@@ -28,14 +28,16 @@ import sys
 import time
 from pathlib import Path
 
+from htdata.errors import HtdataError
 from htdata.store.writable import check_writable_folders
 
 LOCK_FILE = ".lock"
 TAKEOVER_STALE_S = 30.0   # a takeover mutex older than this was left by a writer killed inside it
 
 
-class DatasetLocked(RuntimeError):
-    """Another live writer holds the dataset."""
+class DatasetLocked(HtdataError, RuntimeError):
+    """Another live writer holds the dataset (or its lock cannot be taken): an htdata error, one line at the
+    command line; still a RuntimeError, as before."""
 
 
 def _now() -> str:

@@ -1,12 +1,14 @@
 """Open a version of a dataset as a Snapshot, and commit a new version from parts.
 
-Every command that writes a dataset (ingest, rm, trim, merge, split) does the
-same three things: open the current version (the parent), build the new
-version's parts (reusing the parent's untouched ones), and `commit_parts`.
+Every command that writes a dataset (ingest, rm, trim, merge, split,
+renormalise) does the same three things: open the current version (the
+parent), build the new version's parts (reusing the parent's untouched ones),
+and `commit_parts`; htdata/write/newversion.py (`NewVersion`) is their one
+owner, with the writer lock around them and the clean-up of a failed write.
 `commit_parts` checks that every shard it lists is on disk with its recorded
 size, validates the episode records, computes the change against the
-parent, and hands the files to `versions.write_version`, which makes the
-version current with one atomic rename. The caller holds the writer lock.
+parent, and hands the files to `versions.write_version`, which links the
+version file into place (the commit). The caller holds the writer lock.
 """
 
 from __future__ import annotations

@@ -13,4 +13,8 @@
   `rawlayout` its wiring and layouts, `rawgrip` its grips, `restwander` the slow wander of its cells at rest;
 - `rawfacts`: the facts of a raw-count glove measured from its counts (the sample glove, or real
   recordings the caller names).
+
+May import: sources (the formats it writes, the adapters' registry), the glove model, the format
+and the base modules. Never the store, reading, the writers, validate, the benchmarks or the commands:
+it writes recordings, not datasets.
 """

@@ -53,6 +53,10 @@ and members); `validator.py` holds `validate_dataset`; `gate.py` runs it as a
 gate (`require_valid`: `htdata publish` refuses a version that fails, naming
 the first failing check). Exit status of the command: 0 when every check
 passes (warnings allowed), 1 otherwise.
+
+May import: reading, inspection (the stats cache), the store, the glove model, the format and the
+base modules. Never the writers (write, ingest, curate: validate writes no version), the
+benchmarks or the commands.
 """
 
 from htdata.validate.report import CHECKS, Check, format_report, write_report

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -21,6 +20,7 @@ from htdata.validate.splits import check_split_name, check_splits
 from htdata.validate.stats import dataset_stats
 from htdata.validate.structure import Loaded, check_index, check_shard_files, load_dataset
 from htdata.validate.timestamps import check_time, empty_timestamps, merge_timestamps
+from htdata.workers import resolve_workers
 
 
 @dataclass
@@ -31,19 +31,19 @@ class ValidateConfig:
     deep: bool = False
     sample_frac: float = 0.05
     seed: int = 0
-    workers: int | None = None   # None: all cores for --deep, 1 otherwise
+    workers: int | None = None   # htdata/workers.py: None = every usable core for --deep, inline otherwise; 0 inline
     max_listed: int = 1000       # failures listed per check (all are counted)
 
     def validate(self) -> None:
         if not (0.0 < self.sample_frac <= 1.0):
             raise ArgumentError(f"--sample-frac must be in (0, 1], got {self.sample_frac}")
-        if self.workers is not None and self.workers < 1:
-            raise ArgumentError(f"--workers must be >= 1, got {self.workers}")
+        resolve_workers(self.workers)    # ArgumentError below 0
         if self.max_listed < 1:
             raise ArgumentError(f"max_listed must be >= 1, got {self.max_listed}")
 
     def resolved_workers(self, n_shards: int) -> int:
-        wanted = self.workers if self.workers is not None else (os.cpu_count() or 1) if self.deep else 1
+        """Processes over `n_shards` shards: at most one a shard; 1 = inline, in this process (0 asks for that)."""
+        wanted = resolve_workers(self.workers, default=None if self.deep else 0)
         return max(1, min(wanted, max(n_shards, 1)))
 
 
@@ -58,7 +58,8 @@ def validate_dataset(path, split: str | None = None, deep: bool = False, sample_
         deep: decode every sample (else a `sample_frac` sample of them) and recompute the taxel digests.
         sample_frac: the share of samples decoded when not `deep`, in (0, 1].
         seed: which samples that share is.
-        workers: processes for the content checks (None: all cores for `deep`, 1 otherwise).
+        workers: processes for the content checks (htdata/workers.py: None = every usable core for `deep`, else
+            none; 0 or 1 = in this process).
         max_listed: failures listed per check (all are counted).
         version: the committed version to check (None: the current one).
 

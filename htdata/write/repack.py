@@ -51,10 +51,20 @@ def clear_uncommitted(root: Path, next_unit: int) -> list[str]:
     crashed would, so a re-run gives the same dataset. The caller holds the
     writer lock (no other writer can be making them right now).
     """
+    return _clear_units(root, lambda unit: unit >= next_unit)
+
+
+def clear_unit(root: Path, unit: int) -> list[str]:
+    """Delete the shard files (temp ones too) of one unit no version lists: a unit is written whole, never
+    on top of an earlier try's shards. The caller holds the writer lock."""
+    return _clear_units(root, lambda u: u == unit)
+
+
+def _clear_units(root: Path, doomed) -> list[str]:
     gone = []
     for p in sorted((Path(root) / SHARDS_DIR).glob("*shard-*.tar*")):
         name = p.name.lstrip(".").removesuffix(".tmp")
-        if SHARD_NAME_RE.match(name) and unit_of_shard(name) >= next_unit:
+        if SHARD_NAME_RE.match(name) and doomed(unit_of_shard(name)):
             p.unlink()
             gone.append(p.name)
     return gone

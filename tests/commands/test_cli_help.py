@@ -105,3 +105,38 @@ def test_stats_brief_is_a_short_summary_first(tmp_path, capsys):
     assert cli(["stats", str(root)]) == 0
     full = capsys.readouterr().out.strip().split("\n")
     assert full[:len(brief)] == brief and len(full) > len(brief) + 5
+
+
+def test_rm_help_promises_only_the_suggestions_it_gives(tmp_path, capsys):
+    """The miss names the pattern and the episode count; 'did you mean' only where ids are spelled alike."""
+    assert "with the ids spelled like it when there are any" in help_text(capsys, "rm")
+    root = write_synthetic_dataset(tmp_path / "ds", SPLIT_EPISODES[:4])
+    ids = [e["episode_id"] for e in SPLIT_EPISODES[:4]]
+    assert cli(["rm", str(root), ids[0] + "x"]) == 2
+    err = capsys.readouterr().err
+    assert f"no episode matches {ids[0] + 'x'!r} (4 episodes); did you mean: {ids[0]}" in err
+    assert cli(["rm", str(root), "zzz-*"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("no episode matches 'zzz-*' (4 episodes)") and "did you mean" not in err
+
+
+def test_bench_help_works_without_torch_and_a_run_names_the_extra(tmp_path):
+    """An install without the [bench] extra: `htdata bench --help` teaches; a run is one line naming the extra."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from tests.factories.notorch import without_torch
+
+    env = without_torch(tmp_path / "notorch", Path(__file__).resolve().parents[2])
+    probe = subprocess.run([sys.executable, "-c", "import torch"], env=env, capture_output=True, text=True)
+    assert probe.returncode != 0 and "No module named 'torch'" in probe.stderr     # the blocker works
+    helped = subprocess.run([sys.executable, "-m", "htdata.cli", "bench", "--help"], env=env, capture_output=True,
+                            text=True)
+    assert helped.returncode == 0 and "Examples:" in helped.stdout and "Traceback" not in helped.stderr
+    ran = subprocess.run([sys.executable, "-m", "htdata.cli", "bench", "--quick", "--out", str(tmp_path / "b")],
+                         env=env, capture_output=True, text=True)
+    assert ran.returncode == 2 and ran.stderr.strip().splitlines() == [
+        "htdata bench: error: htdata bench needs torch (its loader sections time the torch datasets): "
+        "pip install 'htdata[bench]'"]
+    assert not (tmp_path / "b").exists()

@@ -1,12 +1,15 @@
-"""Thread caps of workers: each worker fills its share of the cores once, never more."""
+"""Worker counts (htdata/workers.py: one meaning of --workers) and thread caps: each worker fills its share of
+the cores once, never more."""
 
 from __future__ import annotations
 
 import cv2
 import pytest
 
+from htdata.errors import ArgumentError
 from htdata.ingest import executors
-from htdata.ingest.executors import InlineExecutor, ProcessExecutor, limit_threads, threads_per_worker
+from htdata.ingest.executors import InlineExecutor, ProcessExecutor, limit_threads, make_executor, threads_per_worker
+from htdata.workers import resolve_workers, usable_cores
 
 
 def test_threads_per_worker_splits_cores():
@@ -16,6 +19,30 @@ def test_threads_per_worker_splits_cores():
     assert threads_per_worker(2, cores=8) == 4
     assert threads_per_worker(0, cores=4) == 4      # 0 workers (inline) counts as one
     assert executors.usable_cores() >= 1
+
+
+def test_workers_have_one_meaning(monkeypatch):
+    """htdata/workers.py: not given = the usable cores (the affinity mask, not the machine's count), 0 = inline,
+    below 0 an error naming the option; the executors and validate read it, nothing counts cores itself."""
+    import htdata.workers as workers_module
+
+    monkeypatch.setattr(workers_module.os, "sched_getaffinity", lambda pid: {0, 3, 5})
+    monkeypatch.setattr(workers_module.os, "cpu_count", lambda: 64)
+    assert usable_cores() == 3 and resolve_workers(None) == 3 and resolve_workers(None, default=0) == 0
+    assert resolve_workers(0) == 0 and resolve_workers(2) == 2
+    for bad in (-1, 1.5):
+        with pytest.raises(ArgumentError, match="--workers must be"):
+            resolve_workers(bad)
+    assert isinstance(make_executor("process", 0), InlineExecutor)
+    pool = make_executor("process", None)
+    assert isinstance(pool, ProcessExecutor) and pool.workers == 3 and pool.threads == 1
+    assert ProcessExecutor().workers == 3
+    with pytest.raises(ArgumentError, match="0 workers run inline"):
+        ProcessExecutor(workers=0)
+    with pytest.raises(ArgumentError, match="--workers must be >= 0"):
+        make_executor("process", -2)
+    with pytest.raises(ArgumentError, match="--workers 0 runs units inline"):
+        make_executor("ray", 0)
 
 
 def test_limit_threads_sets_opencv_and_keeps_user_env(monkeypatch):

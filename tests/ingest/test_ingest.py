@@ -16,6 +16,7 @@ import h5py
 import numpy as np
 import pytest
 
+from htdata.errors import ConfigError, DatasetError, EpisodeError
 from htdata.ingest import parse_sources
 from htdata.synthetic.formats import write_opentouch_annotations, write_opentouch_scene
 from tests.factories import (
@@ -239,6 +240,36 @@ def test_source_wide_discovery_error_aborts(tmp_path, capsys):
     assert ingest_cli("--pipeline", "touchanything", raw, tmp_path / "ds") == 2
     err = capsys.readouterr().err
     assert "discovery with adapter 'touchanything' failed" in err and "split.json: not valid JSON" in err
+
+
+@pytest.mark.parametrize("error", [ConfigError("adapter.params.annotations: no such column 'task'"),
+                                   DatasetError("labels.csv: row 3 names no recording"),
+                                   PermissionError(13, "Permission denied", "labels.csv"),
+                                   EpisodeError(None, None, "split table unreadable", file="split.json")])
+def test_a_source_wide_discovery_error_keeps_its_type_and_says_where(tmp_path, monkeypatch, capsys, error):
+    """ingest.plan.discover_sources once re-typed every one as ValueError: a caller catching a ConfigError by
+    kind missed it. Now the type stays, the message leads with the source and the adapter, the CLI one line."""
+    from htdata.ingest import plan
+    from htdata.ingest.pipeline import load_pipeline
+    from htdata.ingest.plan import Source, discover_sources
+
+    raw = make_native(tmp_path / "raw")
+    real = plan.get_adapter
+
+    def failing(name):
+        adapter = real(name)
+        monkeypatch.setattr(adapter, "discover_all", lambda root, params: (_ for _ in ()).throw(error))
+        return adapter
+
+    monkeypatch.setattr(plan, "get_adapter", failing)
+    with pytest.raises(type(error), match="discovery with adapter 'native' failed") as caught:
+        discover_sources([Source(load_pipeline("native"), raw)])
+    assert type(caught.value) is type(error) and str(raw) in str(caught.value)
+    if isinstance(error, OSError):
+        assert caught.value.errno == 13 and caught.value.filename == "labels.csv"
+    assert ingest_cli("--pipeline", "native", raw, tmp_path / "ds") == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "discovery with adapter 'native' failed" in err
 
 
 def test_nonfinite_frames_are_dropped_and_counted(tmp_path):

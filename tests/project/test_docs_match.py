@@ -48,3 +48,22 @@ def test_every_readme_example_is_run_by_the_install_check():
         assert example in script, f"README example not run by tools/readme_examples.sh: {example}"
     assert "ds.decoded(0)" in script and "memory://bucket/my-dataset" in script
     assert "readme_examples.sh" in (ROOT / "tools/install_check.sh").read_text()
+
+
+def test_design_stays_short_names_every_package_and_its_recipes_name_real_files():
+    """docs/DESIGN.md is the contract (under 10,000 characters: the detail lives beside the code); its table
+    names every package, every package says what it may import, and every file its recipes name exists."""
+    text = (ROOT / "docs/DESIGN.md").read_text()
+    assert len(text) < 10_000, f"docs/DESIGN.md is {len(text)} characters: move detail to the docs beside it"
+    table = text[text.index("| package |"):text.index("## Layering")]
+    packages = sorted(p.parent.name for p in (ROOT / "htdata").glob("*/__init__.py"))
+    assert [p for p in packages if f"`{p}/`" not in table] == []
+    inits = sorted((ROOT / "htdata").rglob("__init__.py")) + sorted((ROOT / "handtouch").rglob("__init__.py"))
+    assert [str(p.relative_to(ROOT)) for p in inits if "May import" not in p.read_text()] == []
+    recipes = text[text.index("## How to add"):]
+    named = {n.rstrip(".,;:)") for n in re.findall(r"(?:htdata|handtouch|tests|schemas|pipelines)/[\w/.<>]+", recipes)}
+    packages_re = "|".join(packages)   # a path inside htdata named from its package ("synthetic/corpus.py")
+    named |= {f"htdata/{n}" for n in re.findall(rf"(?<![\w/])((?:{packages_re})/[\w/]+\.py)", recipes)}
+    named = {n for n in named if "<name>" not in n}     # a template: the new format's own files
+    assert named and [n for n in named if not (ROOT / n).exists()] == []
+    assert "htdata/ingest/frame.py" in recipes and "NewVersion" in recipes

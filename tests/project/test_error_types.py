@@ -43,6 +43,13 @@ def test_the_user_errors_defined_beside_their_code_are_htdata_types_too():
         assert issubclass(kind, base) and issubclass(kind, ValueError)
 
 
+def test_a_locked_dataset_is_an_htdata_error_caught_as_before():
+    from htdata.store.lock import DatasetLocked
+
+    assert issubclass(DatasetLocked, HtdataError) and issubclass(DatasetLocked, RuntimeError)
+    assert not issubclass(DatasetLocked, ValueError)     # `except ValueError` never caught it: still does not
+
+
 def _bad_pipeline(tmp_path):
     text = (PIPELINES_DIR / "native.toml").read_text().replace("max_skew_ms = 20", "max_skew_ms = -5")
     path = tmp_path / "bad.toml"

@@ -8,6 +8,8 @@ circle, it does not remove it):
   package or a lower layer, never an upper one.
 - An import of the project's own modules inside a function only where the module's docstring
   says why ("Imports inside functions:"), e.g. the CLI loading a command only when it runs.
+- A new version is committed through write/newversion.py: no module outside write/ and store/
+  names `commit_parts`.
 - Core modules do not parse arguments: argparse lives in htdata/commands/ (and the CLI table).
 - Modules stay under ~400 lines, functions under ~80, unless the docstring says why ("Long because").
 - Each package's `__init__.py` docstring names every module and sub-package in it (one line each).
@@ -118,7 +120,7 @@ def test_no_import_cycle_at_any_level():
 # siblings: neither imports the other (the two writers of new versions, over what they share).
 LAYERS = (
     ("htdata", "htdata._moved", "htdata.errors", "htdata.faults", "htdata.fileio", "htdata.resources",
-     "htdata.settings"),
+     "htdata.settings", "htdata.workers"),
     ("htdata.format",),
     ("htdata.glove",),
     ("htdata.source",),
@@ -224,6 +226,37 @@ def test_nothing_below_the_writers_names_the_ingest_pipeline():
     offenders = [m for m in ALL if m.startswith("htdata.") and layer_of(m) < floor
                  and "PipelineConfig" in ALL[m].read_text()]
     assert not offenders, f"modules below ingest naming its PipelineConfig (take its section instead): {offenders}"
+
+
+def commit_callers(sources: dict[str, str]) -> list[str]:
+    """Modules outside write/ and store/ naming `commit_parts` (an import or a call): a new version is
+    committed through write/newversion.py's `NewVersion`, which owns the lock, the parent, the units and
+    the clean-up around it."""
+    owners = ("htdata.write", "htdata.store")
+    offenders = []
+    for module, text in sorted(sources.items()):
+        if not module.startswith("htdata") or module.startswith(owners):
+            continue
+        tree = ast.parse(text)
+        names = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)}
+        names |= {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)}
+        names |= {a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) for a in n.names}
+        if "commit_parts" in names:
+            offenders.append(module)
+    return offenders
+
+
+def test_only_write_and_store_commit_a_version():
+    offenders = commit_callers({m: ALL[m].read_text() for m in ALL})
+    assert not offenders, f"modules committing a version by hand (use htdata.write.newversion.NewVersion): {offenders}"
+
+
+def test_commit_callers_finds_a_planted_commit():
+    planted = {"htdata.curate.x": "from htdata.store.snapshot import commit_parts\n",
+               "htdata.ingest.y": "from htdata.store import snapshot\nsnapshot.commit_parts(1)\n",
+               "htdata.write.newversion": "from htdata.store.snapshot import commit_parts\n",
+               "htdata.curate.z": "from htdata.write.newversion import NewVersion\n"}
+    assert commit_callers(planted) == ["htdata.curate.x", "htdata.ingest.y"]
 
 
 def test_function_level_imports_of_own_modules_say_why():

@@ -446,8 +446,21 @@ def test_split_of_another_manifest_before_versions(ds):
 def test_bad_arguments():
     with pytest.raises(ValueError, match="--sample-frac"):
         validate_dataset("x", sample_frac=0.0)
-    with pytest.raises(ValueError, match="--workers"):
-        validate_dataset("x", workers=0)
+    with pytest.raises(ValueError, match="--workers must be >= 0"):
+        validate_dataset("x", workers=-1)
+
+
+def test_workers_have_one_meaning_0_is_this_process(pristine, monkeypatch):
+    """htdata/workers.py: 0 (or 1) checks in this process; not given = every usable core with --deep."""
+    from htdata.validate import shards, validator
+    from htdata.validate.validator import ValidateConfig
+
+    asked = []
+    monkeypatch.setattr(validator, "run_jobs", lambda jobs, workers: asked.append(workers) or shards.run_jobs(jobs, 1))
+    assert validate_dataset(pristine, workers=0, deep=True)["ok"] and asked == [1]     # 1: inline (run_jobs)
+    monkeypatch.setattr(validator, "resolve_workers", lambda requested, default=None: 3 if default is None else 0)
+    assert ValidateConfig(deep=True).resolved_workers(8) == 3 and ValidateConfig().resolved_workers(8) == 1
+    assert ValidateConfig(deep=True).resolved_workers(2) == 2      # at most one process a shard
 
 
 def test_validate_benchmark_reports_frames_per_second(pristine):

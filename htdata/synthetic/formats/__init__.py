@@ -16,6 +16,9 @@ Frames are taken from iterables and written one at a time, so long
 episodes stream to disk. One module per source (`opentouch`,
 `touchanything`, `native`, mirroring htdata/source/adapters/), shared encoding in
 `media`; the names below are the writers' public API.
+
+May import: what htdata.synthetic may; a writer mirrors its adapter's format and never imports
+the adapter that reads it (the tests pair them).
 """
 
 from htdata.synthetic.formats.media import write_h264
