@@ -3,7 +3,7 @@
     canvas.py     the canvas side and the hand names
     table.py      file names of a dataset, canvas, hands, the member table and the index dtype
     codec.py      member codecs (EXR float maps, JPEG RGB, npy raw rows, PNG masks, JSON)
-    exrzip.py     the ZIP EXR map writer, built byte by byte (OpenEXR's file layout, zlib's deflate)
+    exrzip.py     the ZIP EXR map writer, built byte by byte (OpenEXR's file layout, ISA-L's deflate)
     imageheader.py JPEG and EXR sizes read from the header bytes, checked before a decoder allocates them
     shardio.py    tar shards: sample keys, the shard writer and member-range reads
     mapstorage.py MapStorage: maps stored, or rendered from raw rows by the readers ([tactile] maps, codec.tactile.maps)

@@ -114,7 +114,7 @@ def encode_exr(tactile_map: np.ndarray, compression: str = "zip", pixel_type=np.
     """Raw EXR writer (no value rule): one channel "Y" of `pixel_type`.
 
     ZIP (the dataset's compression) is written by htdata/format/exrzip.py: the binding's header, offset
-    table and filtered chunk bytes, with zlib's deflate streams, ~3x cheaper. Other compressions, a data
+    table and filtered chunk bytes, with ISA-L's deflate streams, ~3x cheaper. Other compressions, a data
     window and `binding=True` (the stored-map layout table's "_binding" rows) go through the OpenEXR binding.
     `window`: store only the data window around the non-zero pixels (the display window stays the
     map's full shape; readers place the window in it, pixels outside read 0). The bench measures it.

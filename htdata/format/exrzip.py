@@ -24,9 +24,10 @@ The file, as OpenEXR's spec ("OpenEXR File Layout") and the binding write it:
   chunk whose count equals its raw size as uncompressed).
 
 So header, offset table and filtered chunk bytes equal the binding's byte
-for byte; only the deflate streams differ (Python's zlib at `ZLIB_LEVEL`;
-the binding bundles libdeflate, reachable only per call with a fresh
-compressor each time), so a map inflates to the same pixels
+for byte; only the deflate streams differ (ISA-L's igzip at `DEFLATE_LEVEL`
+through python-isal's zlib-compatible `isal_zlib`; the binding bundles
+libdeflate, reachable only per call with a fresh compressor each time), so
+any zlib inflater (OpenEXR's, OpenImageIO's) gives back the same pixels
 (tests/format/test_exrzip.py checks both against the binding and reads
 ours back with OpenEXR and OpenImageIO). Pixels are written as given
 (no value rule here): NaN, Inf, -0.0 and subnormals keep their bits.
@@ -40,13 +41,15 @@ import zlib
 from functools import lru_cache
 
 import numpy as np
+from isal import isal_zlib
 
 LINES_PER_CHUNK = 16          # ZIP_COMPRESSION: 16 scanlines per chunk (ZIPS would be 1)
-# zlib level 1 (deflate_fast): ~2x less deflate time than level 4 (lazy matching), whose files are the
-# binding's size but cost about the binding's CPU on dense maps; level 1 files are 1.2-1.3x the binding's
-# (sparse glove maps - dense sample-corpus maps). The stored-map layout table of the codec bench gives
-# the bytes and the time of exr_*_zip (this writer) and exr_*_zip_binding side by side.
-ZLIB_LEVEL = 1
+# ISA-L level 1: on the raw-count glove's maps ~2x less deflate time than Python's zlib at level 1 and
+# ~17% fewer bytes (zlib level 1 was 1.2-1.3x the binding's bytes; ISA-L level 0 is ~3x faster again but
+# 1.5x zlib-1's bytes). The deflate is a glove-only ingest's largest cost of storing maps (issue 34: stored
+# >= 0.8x the maps = "raw" speed). The stored-map layout table of the codec bench gives the bytes and the
+# time of exr_*_zip (this writer) and exr_*_zip_binding side by side.
+DEFLATE_LEVEL = 1
 _MAGIC_VERSION = b"\x76\x2f\x31\x01" + struct.pack("<i", 2)
 _PIXEL_TYPES = {np.dtype(np.float16): 1, np.dtype(np.float32): 2}   # OpenEXR HALF, FLOAT
 _ZIP_COMPRESSION = 3
@@ -107,7 +110,7 @@ def _chunk_data(words: np.ndarray) -> list[bytes]:
     data = [_zero_chunk(nbytes)] * len(words)
     if nonzero.size:
         for k, filtered in zip(nonzero.tolist(), zip_filter(words[nonzero])):
-            packed = zlib.compress(filtered, ZLIB_LEVEL)      # releases the GIL: encodepool's threads overlap
+            packed = isal_zlib.compress(filtered, DEFLATE_LEVEL)   # releases the GIL: encodepool's threads overlap
             data[k] = packed if len(packed) < nbytes else words[k].tobytes()
     return data
 

@@ -1,6 +1,6 @@
 """Sample encoding off the main thread, results in frame order.
 
-`encode_sample` is mostly EXR (htdata/format/exrzip.py: zlib) and JPEG (cv2):
+`encode_sample` is mostly EXR (htdata/format/exrzip.py: ISA-L deflate) and JPEG (cv2):
 both release the GIL while they compress (the codec bench's "2 threads" column
 measures it: ~2x the maps per second on 2 cores), so while the worker's main
 thread reads, normalises and rasterises the next frames, `encode_threads()`
@@ -8,6 +8,13 @@ threads encode the previous ones (none where a worker has no spare core). The by
 sample is encoded by the same call, and results are handed back in the
 order the frames came. At most `DEPTH` samples wait (each ~0.5 MB of maps +
 RGB), so memory stays bounded.
+
+An episode without video (a glove-only recording) encodes inline: its
+samples' only GIL-free work is the maps' deflate, ~14 calls of ~10 us per
+map, and each one hands the GIL back and forth with the main thread, so 2
+threads cost more CPU than they take off it (the bench's glove-only row,
+issue 34: ~20% more CPU, ~10% slower than inline). The pool starts its
+threads at the first sample that has an RGB frame.
 
 A failure is raised by `put` / `drain` for the frame it belongs to, naming
 it (frame_errors), as the inline encode did.
@@ -39,10 +46,9 @@ class EncodePool:
     """`with EncodePool(settings, ref) as pool:` then `pool.put(...)` per frame and `pool.drain()` at the end."""
 
     def __init__(self, settings: CodecSettings, ref, threads: int | None = None, depth: int = DEPTH):
-        threads = encode_threads() if threads is None else threads
+        self.threads = encode_threads() if threads is None else threads
         self.settings, self.ref, self.depth = settings, ref, max(1, depth)
-        self._pool = (ThreadPoolExecutor(max_workers=threads, thread_name_prefix="htdata-encode")
-                      if threads > 0 else None)
+        self._pool: ThreadPoolExecutor | None = None     # started by the first sample with RGB (module docstring)
         self._pending: deque[tuple[str, int, Future]] = deque()
 
     def __enter__(self) -> "EncodePool":
@@ -57,6 +63,8 @@ class EncodePool:
 
     def put(self, key: str, sample: dict, source_frame: int) -> list[tuple[str, dict[str, bytes]]]:
         """Queue one frame's sample; return the (key, members) done, oldest first, once the queue is full."""
+        if self._pool is None and self.threads > 0 and sample.get("rgb") is not None:
+            self._pool = ThreadPoolExecutor(max_workers=self.threads, thread_name_prefix="htdata-encode")
         if self._pool is None:
             with frame_errors(self.ref, source_frame):
                 return [(key, encode_sample(sample, self.settings, key))]

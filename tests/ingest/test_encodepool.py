@@ -41,6 +41,20 @@ def test_the_pool_gives_the_inline_bytes_in_frame_order(threads, depth):
     assert [m for _, m in got] == [encode_sample(s, settings, f"ep__{i:06d}") for i, s in enumerate(samples)]
 
 
+def test_a_glove_only_episode_encodes_inline_and_one_with_rgb_in_threads():
+    """No RGB: no thread is started (the maps' short deflate calls cost more handed to threads); the first
+    sample with RGB starts them. Either way the bytes are the inline ones, in frame order."""
+    settings = CodecSettings()
+    glove_only = [{**_sample(i), "rgb": None} for i in range(6)]
+    with EncodePool(settings, REF, threads=2, depth=2) as pool:
+        got = [r for i, s in enumerate(glove_only) for r in pool.put(f"ep__{i:06d}", s, i)] + pool.drain()
+        assert pool._pool is None
+    assert [m for _, m in got] == [encode_sample(s, settings, f"ep__{i:06d}") for i, s in enumerate(glove_only)]
+    with EncodePool(settings, REF, threads=2, depth=2) as pool:
+        assert pool.put("ep__000000", _sample(0), 0) == [] and pool._pool is not None   # queued, not inline
+        pool.drain()
+
+
 def test_a_failed_encode_names_its_frame():
     bad = _sample(7)
     bad["tactile"]["right"][3, 4] = np.nan
