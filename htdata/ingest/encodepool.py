@@ -12,9 +12,10 @@ RGB), so memory stays bounded.
 An episode without video (a glove-only recording) encodes inline: its
 samples' only GIL-free work is the maps' deflate, ~14 calls of ~10 us per
 map, and each one hands the GIL back and forth with the main thread, so 2
-threads cost more CPU than they take off it (the bench's glove-only row,
-issue 34: ~20% more CPU, ~10% slower than inline). The pool starts its
-threads at the first sample that has an RGB frame.
+threads cost more CPU than they take off it (the bench's glove-only
+recording, 1 worker, $HTDATA_ENCODE_THREADS 2 vs 0: ~25% more CPU, ~10%
+fewer frames/s). The pool starts its threads at the first sample that has
+an RGB frame.
 
 A failure is raised by `put` / `drain` for the frame it belongs to, naming
 it (frame_errors), as the inline encode did.
