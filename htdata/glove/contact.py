@@ -19,7 +19,7 @@ area of a few taxels says what a touch is (a single taxel crossing its
 floor now and then is noise). The floor says where rest ends, not where a
 touch begins: a real knit glove's hand that only steadies an object has
 dozens of cells 5-15 counts above rest in most frames, while a press moves a
-cell by 15 to ~460 counts (../shared/real_glove, issue 34), so a touch is a
+cell by 15 to ~460 counts (the real knit glove's recordings, issue 34: `htdata bench --real-glove DIR`), so a touch is a
 rise of PRESS above rest (when the per-taxel floor is known; without it,
 the floor alone). Without a floor there is nothing glove-specific
 to go by, so the old threshold stays (the sample corpus's gloves have none:

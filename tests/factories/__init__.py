@@ -18,7 +18,7 @@ Also here: the episode tables the dataset tests share (`episode_table`,
 MIXED_HANDS_EPISODES, PREVIEW_EPISODES, SPLIT_EPISODES, TRAIN_EPISODES) and
 tiny raw corpora in the three source formats plus the in-process ingest CLI
 (`make_opentouch`, `make_two_scene_opentouch`, `make_touchanything`, `make_native`, `small_pipeline`,
-`ingest_cli`, `temp_leftovers`) for the ingest, Ray and benchmark tests.
+`ingest_cli`, `ingest_crashing_at_unit`, `temp_leftovers`) for the ingest, Ray and benchmark tests.
 """
 
 from __future__ import annotations
@@ -27,6 +27,8 @@ import hashlib
 import io
 import json
 import os
+import subprocess
+import sys
 import zlib
 from pathlib import Path
 
@@ -375,6 +377,14 @@ def ingest_cli(*args, workers: int = 0) -> int:
     from htdata.cli import main
 
     return main(["ingest", "--workers", str(workers), "--quiet", *map(str, args)])
+
+
+def ingest_crashing_at_unit(unit: int, *args) -> subprocess.CompletedProcess:
+    """The ingest CLI, inline, in a subprocess whose unit `unit` dies as a kill -9 would
+    (HTDATA_TEST_FAULT=crash: returncode 137); the units before it finish and stay for a resume."""
+    env = {**os.environ, "HTDATA_TEST_FAULT_UNIT": str(unit), "HTDATA_TEST_FAULT": "crash"}
+    return subprocess.run([sys.executable, "-m", "htdata.cli", "ingest", "--workers", "0", "--quiet",
+                           *map(str, args)], env=env, capture_output=True, text=True)
 
 
 def temp_leftovers(out: Path) -> list[str]:

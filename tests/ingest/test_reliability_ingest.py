@@ -6,14 +6,11 @@ whose fingerprint left the labels out: labels edited in between were lost
 """
 
 import json
-import os
-import subprocess
-import sys
 
 import pytest
 
 from htdata.read.reader import DatasetReader
-from tests.factories import ingest_cli, make_native, make_opentouch, small_pipeline
+from tests.factories import ingest_cli, ingest_crashing_at_unit, make_native, make_opentouch, small_pipeline
 
 
 def test_labels_edited_between_a_crash_and_its_resume_are_honoured(tmp_path):
@@ -21,9 +18,7 @@ def test_labels_edited_between_a_crash_and_its_resume_are_honoured(tmp_path):
     pipe = small_pipeline(tmp_path, "opentouch")
     out = tmp_path / "ds"
     # units run largest first: demo_003 (unit 0), demo_01 (unit 1), then demo_02 (unit 2) dies
-    env = {**os.environ, "HTDATA_TEST_FAULT_UNIT": "2", "HTDATA_TEST_FAULT": "crash"}
-    killed = subprocess.run([sys.executable, "-m", "htdata.cli", "ingest", "--workers", "0", "--quiet",
-                             "--pipeline", str(pipe), str(raw), str(out)], env=env, capture_output=True, text=True)
+    killed = ingest_crashing_at_unit(2, "--pipeline", pipe, raw, out)
     assert killed.returncode == 137, killed.stderr
     assert len(list((out / ".work").glob("unit-*.json"))) == 2          # two units finished before the kill
     csv = raw / "annotations.csv"

@@ -8,15 +8,19 @@ source file; `--verify-sources` still fails every episode of a file that differs
 import hashlib
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 from htdata.format.table import SHARDS_DIR, WORK_DIR
 from htdata.ingest.pipeline import load_pipeline
 from htdata.ingest.plan import Source, discover_sources, plan_units
 from htdata.read.reader import DatasetReader
-from tests.factories import ingest_cli, make_opentouch, make_two_scene_opentouch, small_pipeline
+from tests.factories import (
+    ingest_cli,
+    ingest_crashing_at_unit,
+    make_opentouch,
+    make_two_scene_opentouch,
+    small_pipeline,
+)
 
 
 def sha(path: Path) -> str:
@@ -117,9 +121,7 @@ def test_a_resumed_owner_unit_gives_its_digests_to_the_units_run_after_it(tmp_pa
     pipe = small_pipeline(tmp_path, "opentouch")
     out = tmp_path / "ds"
     # unit 0 (demo_003) hashes both files and finishes; unit 2 (demo_02, run last) dies
-    env = {**os.environ, "HTDATA_TEST_FAULT_UNIT": "2", "HTDATA_TEST_FAULT": "crash"}
-    killed = subprocess.run([sys.executable, "-m", "htdata.cli", "ingest", "--workers", "0", "--quiet",
-                             "--pipeline", str(pipe), str(raw), str(out)], env=env, capture_output=True, text=True)
+    killed = ingest_crashing_at_unit(2, "--pipeline", pipe, raw, out)
     assert killed.returncode == 137, killed.stderr
     assert ingest_cli("--pipeline", pipe, raw, out) == 0
     report = json.loads((out / "reports" / "ingest.json").read_text())
