@@ -26,6 +26,7 @@ Examples:
   htdata view data/dataset
   htdata view data/dataset --episode ot-home_kitchen_p1-demo_19 --save episode.rrd
   htdata view data/dataset --split main --part test --web
+  htdata view data/dataset --web --no-browser --web-port 8090 --grpc-port 8876
 """
 
 
@@ -46,6 +47,13 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                       help="write the recording to FILE.rrd and open nothing (default: open the viewer)")
     sink.add_argument("--web", action="store_true",
                       help="serve the web viewer and open a browser on it, until Ctrl-C (default: the native viewer)")
+    parser.add_argument("--web-port", type=int, default=view.WEB_PORT, metavar="N",
+                        help=f"--web: the page's port (default {view.WEB_PORT})")
+    parser.add_argument("--grpc-port", type=int, default=view.GRPC_PORT, metavar="N",
+                        help=f"--web: the port the page reads the episode from (default {view.GRPC_PORT}); "
+                             "`rerun rerun+http://127.0.0.1:N/proxy` connects to it too")
+    parser.add_argument("--no-browser", action="store_true",
+                        help="--web: serve without opening a browser (open the printed URL yourself)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -53,7 +61,9 @@ def run(args: argparse.Namespace) -> int:
         view.load_rerun()
         save = output_path(args.save, "view") if args.save else None
         result = view.view_episode(args.dataset, episode=args.episode, version=args.version, split=args.split,
-                                   part=args.part, contrast=args.contrast, save=save, web=args.web)
+                                   part=args.part, contrast=args.contrast, save=save, web=args.web,
+                                   open_browser=not args.no_browser, web_port=args.web_port,
+                                   grpc_port=args.grpc_port)
     except (ValueError, ImportError, FileNotFoundError, OSError) as exc:
         print(f"htdata view: error: {exc}", file=sys.stderr)
         return 2
@@ -66,9 +76,13 @@ def run(args: argparse.Namespace) -> int:
     if not args.web:
         print(f"sent {what} to the Rerun viewer")
         return 0
-    print(f"serving {what} at {result.target} in the web viewer; Ctrl-C to stop", flush=True)
+    print(f"serving {what} at {result.target} in the web viewer (data: {result.data_url}); Ctrl-C to stop",
+          flush=True)
+    stream = result.stream   # Rerun serves the data port only while its stream lives: hold it until Ctrl-C
     try:
         while True:
             time.sleep(3600)
     except KeyboardInterrupt:
         return 0
+    finally:
+        del stream

@@ -59,6 +59,7 @@ VIEW_EXTRA = "pip install '.[view]'"
 BATCH = 32                     # frames per column batch sent to Rerun (the memory bound, in frames)
 APPLICATION_ID = "htdata"
 WEB_PORT = 9090                # the web viewer's page (Rerun's default port)
+GRPC_PORT = 9876               # the data the web page reads (Rerun's default gRPC port)
 MAP_DRAW_ORDER = 0.0           # the no-sensor overlay is drawn just above its map
 
 
@@ -105,6 +106,10 @@ class ViewResult:
     plan: ViewPlan
     target: str          # the .rrd written, the web viewer's URL, or "viewer" (spawned)
     frames: int          # samples logged
+    # --web: the stream whose gRPC server the page reads. Rerun serves only while this object lives,
+    # so the caller keeps it until it stops serving (dropping it closes the data port).
+    stream: object = None
+    data_url: str = ""   # --web: the gRPC address of that server (what `rerun URL` connects to)
 
 
 class _Columns:
@@ -225,9 +230,10 @@ def _at(rec, rr, frame: int, t_ns: int) -> None:
 
 def view_episode(dataset, *, episode: str | None = None, version: int | None = None, split: str | None = None,
                  part: str | None = None, contrast: str = "auto", save=None, web: bool = False,
-                 open_browser: bool = True) -> ViewResult:
+                 open_browser: bool = True, web_port: int = WEB_PORT, grpc_port: int = GRPC_PORT) -> ViewResult:
     """Log one episode to Rerun: into `save` (an .rrd file, nothing opened), a served web viewer (`web`),
-    or a spawned native viewer (neither).
+    or a spawned native viewer (neither). With `web`, the returned `stream` must be kept alive for as
+    long as the viewer is to be served (the data port closes when it is dropped).
 
     Raises:
         ViewerMissing: rerun-sdk is not installed.
@@ -250,12 +256,12 @@ def view_episode(dataset, *, episode: str | None = None, version: int | None = N
             return ViewResult(plan, str(_save(rec, rr, reader, plan, Path(save), layout)), plan.num_frames)
         if web:
             try:
-                grpc = rec.serve_grpc(default_blueprint=layout)
-                rr.serve_web_viewer(web_port=WEB_PORT, connect_to=grpc, open_browser=open_browser)
+                grpc = rec.serve_grpc(grpc_port=grpc_port, default_blueprint=layout)
+                rr.serve_web_viewer(web_port=web_port, connect_to=grpc, open_browser=open_browser)
             except RuntimeError as exc:   # a port in use, most often
                 raise ViewerFailed(f"the web viewer could not be served ({_first_line(exc)}); write the recording "
                                    "with --save FILE.rrd instead") from None
-            target = f"http://localhost:{WEB_PORT}/?url={grpc}"
+            target = f"http://localhost:{web_port}/?url={grpc}"
         else:
             _spawn(rr, rec, layout)
             target = "viewer"
@@ -266,6 +272,8 @@ def view_episode(dataset, *, episode: str | None = None, version: int | None = N
         except RuntimeError as exc:   # the viewer went away mid-stream (closed, crashed)
             raise ViewerFailed(f"the Rerun viewer stopped taking data ({_first_line(exc)}); write the recording "
                                "with --save FILE.rrd instead") from None
+        if web:
+            return ViewResult(plan, target, frames, stream=rec, data_url=grpc)
         return ViewResult(plan, target, frames)
 
 
