@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import errno
 import importlib
+import os
 import sys
 
 from htdata.errors import HtdataError
@@ -105,6 +106,9 @@ def main(argv: list[str] | None = None) -> int:
     args = sub.parse_args(argv[1:])
     try:
         return int(module.run(args) or 0)
+    except BrokenPipeError:   # `htdata log | head -1`: the reader has what it wanted; stop quietly
+        _silence_stdout()
+        return 141            # what a shell reports for a writer ended by SIGPIPE (128 + 13)
     except KeyboardInterrupt:   # Ctrl-C: one line, no traceback; every write commits whole or not at all
         how = getattr(module, "INTERRUPTED", "run the command again: a version is committed whole or not at all")
         print(f"\nhtdata {name}: interrupted (Ctrl-C); {how}", file=sys.stderr)
@@ -126,6 +130,16 @@ def main(argv: list[str] | None = None) -> int:
 
 
 _NO_SPACE = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null, so the interpreter's flush at exit does not meet the closed pipe again
+    (the way the Python docs give for SIGPIPE; signals stay as they are, so a write still finishes whole)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):   # stdout has no file descriptor (captured): nothing will flush to a pipe
+        pass
 
 
 if __name__ == "__main__":
