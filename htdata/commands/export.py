@@ -93,14 +93,20 @@ def run(args: argparse.Namespace) -> int:
     cfg = LeRobotExportConfig(dataset=args.dataset, out=output_path(args.out, "export"), version=args.version, split=args.split,
                               part=args.part, fps=args.fps, maps=args.maps, maps_gain=args.maps_gain, crf=args.crf,
                               force=args.force)
-    bar = tqdm(total=0, unit="frame", desc="export", disable=args.quiet, file=sys.stderr)
+    bars = []   # the bar starts when the export knows its total: an error before that prints no empty bar
+
+    def start(total: int) -> None:
+        bars.append(tqdm(total=total, unit="frame", desc="export", disable=args.quiet, file=sys.stderr))
+
     try:
-        summary = export_lerobot(cfg, progress=bar.update, on_total=lambda n: setattr(bar, "total", n))
+        summary = export_lerobot(cfg, progress=lambda n=1: bars and bars[0].update(n), on_total=start)
     except (ValueError, FileNotFoundError, FileExistsError, KeyError, OSError) as exc:
-        bar.close()
+        for bar in bars:
+            bar.close()
         print(f"htdata export: error: {exc}", file=sys.stderr)
         return 2
-    bar.close()
+    for bar in bars:
+        bar.close()
     print(f"wrote {summary['out']}: LeRobot v3.0, {summary['episodes']} episodes, {summary['frames']} frames "
           f"at {summary['fps']} fps{' (resampled)' if summary['resampled'] else ''}, {summary['tasks']} tasks, "
           f"hands {', '.join(summary['hands']) or 'none'}, {summary['bytes'] / 1e6:.1f} MB")

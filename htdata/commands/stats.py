@@ -11,6 +11,7 @@ from htdata.commands.outputs import output_path
 from htdata.commands.version_arg import version_arg
 from htdata.glove.health import CLASSES
 from htdata.inspect import stats
+from htdata.resources import PIPELINES_DIR
 
 EPILOG = """\
 The text output starts with a short summary (what --brief prints alone), then per glove:
@@ -98,11 +99,17 @@ def scale_lines(s: dict) -> list[str]:
     """Per layout whose maps look faint: the suggested `scale` and the lines to paste (htdata/inspect/scalehint.py)."""
     out = []
     for layout, hint in (s.get("scale") or {}).items():
-        if hint.get("toml"):
-            out += [f"scale {layout}: {hint['reason']}. In the pipeline TOML, the scale line goes under the "
-                    f"layout's table (add the table if the pipeline has none):",
-                    *(f"    {line}" for line in hint["toml"].splitlines()),
-                    f"  then: htdata renormalise {s['dataset']} --pipeline PIPELINE.toml"]
+        if not hint.get("toml"):
+            continue
+        pipes = hint.get("pipelines") or ["PIPELINE"]
+        shipped = [p for p in pipes if (PIPELINES_DIR / f"{p}.toml").is_file()]
+        mine = {p: (f"my_{p}.toml" if p in shipped else f"{p}.toml") for p in pipes}
+        out.append(f"scale {layout}: {hint['reason']}. Add these lines to the pipeline "
+                   f"{' and '.join(mine.values())} (under the layout's table; add the table if it has none):")
+        out += [f"    {line}" for line in hint["toml"].splitlines()]
+        out += [f"  first: htdata pipelines show {p} > {mine[p]}   (a shipped pipeline: copy it to edit)"
+                for p in shipped]
+        out += [f"  then: htdata renormalise {s['dataset']} --pipeline {mine[p]}" for p in pipes]
     return out
 
 

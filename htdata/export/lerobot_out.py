@@ -56,11 +56,11 @@ def check_out(out: Path, dataset: Path, force: bool) -> None:
         raise ExportTargetRefused(f"{out}: is inside the htdata dataset {inside}; export somewhere else")
     if not out.exists():
         return
+    if not (out / MARKER).is_file():   # said first: --force would not help here
+        raise ExportTargetRefused(f"{out}: exists and is not a previous htdata export (no {MARKER}); the export "
+                                  f"writes a new folder: choose another OUT (--force replaces only an export it wrote)")
     if not force:
-        raise FileExistsError(f"{out} exists (pass --force to replace a previous export)")
-    if not (out / MARKER).is_file():
-        raise ExportTargetRefused(f"{out}: exists and is not a previous htdata export (no {MARKER}); --force "
-                                  f"replaces only an export it wrote: remove it by hand or choose another OUT")
+        raise FileExistsError(f"{out} holds a previous htdata export; pass --force to replace it")
     held = next((p.parent for p in out.rglob(MANIFEST_FILE) if _is_dataset(p.parent)), None)
     if held is not None or _is_dataset(out):
         raise ExportTargetRefused(f"{out}: holds an htdata dataset ({held or out}); --force never deletes one")

@@ -17,7 +17,7 @@ import numpy as np
 from htdata.errors import ArgumentError, EpisodeError
 from htdata.glove.activity import CellActivity
 from htdata.ingest.pipeline import PipelineConfig, load_pipeline
-from htdata.source.adapters import get_adapter
+from htdata.source.adapters import get_adapter, nothing_found
 from htdata.source.adapters.streamchecks import ANY_GRID
 
 CHUNK_ROWS = 512
@@ -68,8 +68,7 @@ def _scan_source(path: Path, pipeline, hand: str | None, layout_file: str | None
         e = bad[0]
         raise ArgumentError(f"{e.file or path}: {e.message}")
     if not refs:
-        raise ArgumentError(f"{path}: no recording found by the {pipeline.adapter.name!r} adapter "
-                            f"(pipeline {pipeline.path or pipeline.name})")
+        raise ArgumentError(f"{nothing_found(pipeline.adapter.name, path)} (pipeline {pipeline.path or pipeline.name})")
     out = []
     for ref in refs:
         hands = [h for h in ref.hands if hand is None or h == hand]

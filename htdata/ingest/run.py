@@ -45,6 +45,7 @@ from htdata.ingest.workdir import (
     remove_strays,
     unit_record_path,
 )
+from htdata.source.adapters import nothing_found
 from htdata.source.adapters.sourcetree import RealPaths
 from htdata.store.versions import restore_pointer
 from htdata.write.newversion import NewVersion
@@ -261,8 +262,8 @@ def check_found_something(sources, refs: list[list], failures: list[dict]) -> No
     for source, found in zip(sources, refs):
         root = str(source.root).rstrip("/") + "/"
         if not found and not any(str(f.get("file") or f.get("source_ref") or "").startswith(root) for f in failures):
-            raise ArgumentError(f"{source.root}: no recording found for pipeline {source.pipeline.name!r} (adapter "
-                                f"{source.pipeline.adapter.name!r}); check the folder and the pipeline")
+            raise ArgumentError(f"{nothing_found(source.pipeline.adapter.name, source.root)} (pipeline "
+                                f"{source.pipeline.name!r}); check the folder and the pipeline")
 
 
 def run_units(tasks: list[UnitTask], out: Path, runner, progress: bool) -> tuple[list[dict], list[dict]]:

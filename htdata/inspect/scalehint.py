@@ -11,11 +11,15 @@ known to 0.001) and proposes
 
 rounded DOWN to two significant digits, so that about 0.1% of pressed
 values saturate at 1. Only when that quantile is below SUGGEST_BELOW (the
-maps use less than half of the scale) and there are at least MIN_PRESSED
+maps use less than a quarter of the scale: a glove whose firm presses reach
+0.4 is not faint, its light presses are, and the project's own sample left
+glove is such a one) and there are at least MIN_PRESSED
 pressed values; otherwise the current scale is said to fit (or why nothing
 can be said). The line to paste is `scale = S` under the layout's
-`[normalise.<layout id>]` table of the pipeline TOML, then
-`htdata renormalise DATASET --pipeline PIPELINE.toml` remakes the maps.
+`[normalise.<layout id>]` table of the pipeline TOML the episodes were
+ingested with (their `source`: a shipped pipeline is first copied with
+`htdata pipelines show NAME > my_NAME.toml`), then
+`htdata renormalise DATASET --pipeline my_NAME.toml` remakes the maps.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ import numpy as np
 from htdata.inspect.episodestats import HIST_BINS, quantile
 
 SUGGEST_QUANTILE = 0.999
-SUGGEST_BELOW = 0.5        # pressed values' p99.9 below this: the maps use less than half of the colour scale
+SUGGEST_BELOW = 0.25       # pressed values' p99.9 below this: the maps use less than a quarter of the colour scale
 TARGET = 1.0               # where the p99.9 of pressed values lands with the suggested scale
 MIN_PRESSED = 1000         # fewer pressed taxel values than this: too few to suggest anything
 
@@ -51,13 +55,15 @@ def scale_suggestions(reader, per_episode: list[dict]) -> dict[str, dict]:
     acc: dict[str, dict] = {}
     for ep, st in zip(reader.episodes, per_episode):
         for hand, h in st["hands"].items():
-            a = acc.setdefault(h["layout"], {"hist": np.zeros(HIST_BINS, np.int64), "scales": set()})
+            a = acc.setdefault(h["layout"], {"hist": np.zeros(HIST_BINS, np.int64), "scales": set(), "pipelines": set()})
+            a["pipelines"].add(str(ep.get("source") or ""))
             level = float((h.get("contact_rule") or {}).get("level", 0.0))
             start = min(int(math.ceil(level * HIST_BINS)), HIST_BINS)   # bins whose values lie above the level
             hist = np.asarray(h["hist"], np.int64)
             a["hist"][start:] += hist[start:]
             a["scales"].add(_current_scale(reader.manifest, ep, hand))
-    return {layout: _suggest(layout, a["hist"], a["scales"]) for layout, a in sorted(acc.items())}
+    return {layout: {**_suggest(layout, a["hist"], a["scales"]), "pipelines": sorted(a["pipelines"] - {""})}
+            for layout, a in sorted(acc.items())}
 
 
 def _suggest(layout: str, hist: np.ndarray, scales: set) -> dict:

@@ -77,8 +77,13 @@ def _load_manifest(root: Path, check: Check, version: int | None) -> tuple[dict,
         return None
     rel = str(mpath.relative_to(root)) if mpath.is_relative_to(root) else str(mpath)
     if not mpath.is_file():
-        check.fail("manifest_missing", f"{mpath}: no {MANIFEST_FILE} (not a committed dataset)",
-                   file=str(mpath))
+        if not root.exists():   # a typo in the path: say that, not that a folder lacks a file
+            why = f"{root}: no such folder"
+        elif not root.is_dir():
+            why = f"{root}: is a file, not a dataset folder"
+        else:
+            why = f"{mpath}: no {MANIFEST_FILE} (not a committed dataset)"
+        check.fail("manifest_missing", why, file=str(mpath))
         return None
     manifest_bytes = mpath.read_bytes()
     try:

@@ -35,7 +35,7 @@ def test_empty_source_folder_is_an_error(tmp_path, capsys, existing):
     capsys.readouterr()
     assert ingest_cli("--pipeline", pipe, empty, out) == 2
     err = capsys.readouterr().err
-    assert f"{empty}: no recording found for pipeline 'native'" in err and "Traceback" not in err
+    assert f"no native recordings (recording.json) under {empty}" in err and "Traceback" not in err
 
 
 def test_duplicate_annotation_id_with_conflicting_task_names_both_rows(tmp_path, capsys):

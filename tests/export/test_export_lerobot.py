@@ -198,8 +198,13 @@ def test_resampling_takes_the_nearest_frame(dataset, tmp_path):
 def test_errors_are_one_line_and_leave_nothing(dataset, tmp_path, capsys):
     out = tmp_path / "x"
     out.mkdir()
-    assert cli(["export", "lerobot", str(dataset), str(out), "--quiet"]) == 2
-    assert "exists (pass --force" in capsys.readouterr().err
+    (out / "recording.json").write_text("{}")     # a folder of recordings, not an export
+    for force in ([], ["--force"]):                 # the same advice with or without --force, and no empty bar
+        assert cli(["export", "lerobot", str(dataset), str(out), *force]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "is not a previous htdata export" in err and "choose another OUT" in err, err
+        assert "pass --force" not in err and "frame" not in err   # no bar
+    assert (out / "recording.json").read_text() == "{}"
     assert cli(["export", "lerobot", str(dataset), str(tmp_path / "y"), "--part", "test", "--quiet"]) == 2
     assert "--part needs --split" in capsys.readouterr().err
     assert cli(["export", "lerobot", str(dataset), str(tmp_path / "z"), "--split", "nope", "--quiet"]) == 2
@@ -315,6 +320,7 @@ def test_force_replaces_only_a_previous_export(dataset, tmp_path, capsys):
     out = tmp_path / "lr"
     assert cli(["export", "lerobot", str(ds), str(out), "--quiet"]) == 0
     assert (out / ".htdata-export.json").is_file()
+    assert "holds a previous htdata export; pass --force to replace it" in refused(out)
     assert cli(["export", "lerobot", str(ds), str(out), "--quiet", "--force"]) == 0
     shutil.copytree(dataset, out / "inner")
     assert "holds an htdata dataset" in refused(out, "--force")

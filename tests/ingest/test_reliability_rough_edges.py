@@ -15,7 +15,7 @@ from pathlib import Path
 
 from htdata.store.manifest import load_episodes
 from htdata.store.versions import list_versions
-from tests.factories import ingest_cli, make_native, make_opentouch
+from tests.factories import ingest_cli, make_native, make_opentouch, make_touchanything
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -39,11 +39,23 @@ def test_ctrl_c_during_an_ingest_is_one_line_saying_how_to_resume(tmp_path, spaw
     assert ingest_cli("--pipeline", "opentouch", raw, out) == 0 and list_versions(out) == [1]
 
 
+def test_a_folder_of_another_format_says_so_before_any_label_table(tmp_path, capsys):
+    """A TouchAnything folder given to the OpenTouch pipeline: the first line is that no OpenTouch HDF5 is
+    there and which pipeline fits, not that OpenTouch's label table is missing (whose fix led nowhere)."""
+    raw = make_touchanything(tmp_path / "raw")
+    assert ingest_cli("--pipeline", "opentouch", raw, tmp_path / "ds") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no OpenTouch HDF5 scene files (*.hdf5) under" in err, err
+    assert "--pipeline touchanything" in err and "annotation" not in err and "%|" not in err, err
+
+
 def test_a_first_ingest_whose_pipeline_fits_nothing_leaves_no_skeleton(tmp_path, capsys):
     raw = make_opentouch(tmp_path / "raw")
     out = tmp_path / "ds"
     assert ingest_cli("--pipeline", "native", raw, out) == 2
-    assert "no recording found for pipeline 'native'" in capsys.readouterr().err
+    err = capsys.readouterr().err   # what is missing, and what the folder holds instead
+    assert "no native recordings (recording.json) under" in err and "OpenTouch HDF5 scene files (*.hdf5): " \
+        "--pipeline opentouch" in err, err
     assert not out.exists()
     out.mkdir()                                   # an empty folder given: left as it was, empty
     assert ingest_cli("--pipeline", "native", raw, out) == 2

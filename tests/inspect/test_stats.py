@@ -330,6 +330,11 @@ def test_scale_is_suggested_for_faint_gloves_only(tmp_path):
     assert hint["suggested_scale"] <= 1.0 / hint["p99_9"] < hint["suggested_scale"] * 1.1     # rounded down
     assert hint["toml"] == f"[normalise.{RIGHT}]\nscale = {hint['suggested_scale']:g}"
     assert stats.dataset_stats(strong, cache_dir=None)["scale"][RIGHT]["suggested_scale"] is None
+    # firm presses at ~0.4 (the sample world's left glove) are not faint: no hint on the project's own data
+    firm = write_taxel_dataset(tmp_path / "firm", [{"episode_id": "m", "hands": {
+        "right": (RIGHT, clean_series(RIGHT, 40, seed=5, blobs=4) * 0.75)}}])
+    firm_hint = stats.dataset_stats(firm, cache_dir=None)["scale"][RIGHT]
+    assert 0.3 < firm_hint["p99_9"] < 0.5 and firm_hint["suggested_scale"] is None, firm_hint
     with DatasetReader(faint) as r:        # too few pressed values: nothing suggested, and why
         few = scale_suggestions(r, [{"hands": {"right": {"layout": RIGHT, "contact_rule": {"level": 0.02},
                                                          "hist": [0] * 100 + [5] + [0] * (HIST_BINS - 101)}}}])
@@ -345,6 +350,9 @@ def test_the_suggested_scale_pasted_into_the_pipeline_fills_the_colour_scale(raw
     lid = faint[0]
     scale = hints[lid]["suggested_scale"]
     assert f"    [normalise.{lid}]\n    scale = {scale:g}\n" in out          # the lines to paste, as printed
+    assert hints[lid]["pipelines"] == ["native"]    # ingested with the shipped pipeline: copy it first, then use it
+    assert "  first: htdata pipelines show native > my_native.toml" in out, out
+    assert f"  then: htdata renormalise {rawknit} --pipeline my_native.toml" in out, out
     pipe = rawknit.parent / "rawknit.toml"
     pipe.write_text(pipe.read_text().replace(f"[normalise.{lid}]\n", f"[normalise.{lid}]\nscale = {scale:g}\n"))
     assert cli_main(["renormalise", str(rawknit), "--pipeline", str(pipe)]) == 0

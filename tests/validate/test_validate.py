@@ -257,6 +257,16 @@ def test_validate_on_a_folder_that_is_no_dataset_writes_nothing_and_prints_one_l
     assert sorted(p.name for p in folder.iterdir()) == ["a.txt"]      # no reports/ written into it
 
 
+def test_validate_on_a_missing_folder_says_it_does_not_exist(tmp_path, capsys):
+    gone = tmp_path / "datset"                  # a typo
+    assert cli_main(["validate", str(gone)]) == 1
+    assert capsys.readouterr().err.splitlines() == [f"htdata validate: FAIL manifest_missing: {gone}: no such folder"]
+    assert not gone.exists()
+    (tmp_path / "notes.txt").write_text("x")
+    assert cli_main(["validate", str(tmp_path / "notes.txt")]) == 1
+    assert "notes.txt: is a file, not a dataset folder" in capsys.readouterr().err
+
+
 # -- content faults -------------------------------------------------------------------------------
 
 def test_nan_tactile_frame_is_caught_only_by_content(ds):

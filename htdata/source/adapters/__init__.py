@@ -34,6 +34,24 @@ ADAPTERS: dict[str, type] = {
 }
 
 
+def nothing_found(name: str, root, params: dict | None = None) -> str:
+    """Why adapter `name` found no recording under `root`, and which adapter's files are there instead
+    (a folder of another format is the most common cause: the pipeline was mistyped)."""
+    adapter = get_adapter(name)
+    text = f"no {adapter.recording_files} under {root}, so the {name!r} adapter found no recording"
+    others = [other for other in ADAPTERS if other != name and _holds(other, root)]
+    if others:
+        text += "; it holds " + " and ".join(f"{get_adapter(o).recording_files}: --pipeline {o}" for o in others)
+    return text
+
+
+def _holds(name: str, root) -> bool:
+    try:
+        return bool(get_adapter(name).discovery_files(root, {}))
+    except (OSError, ValueError):   # a tree this adapter refuses to walk holds none of its files
+        return False
+
+
 def get_adapter(name: str) -> Adapter:
     try:
         return ADAPTERS[name]()
@@ -41,4 +59,4 @@ def get_adapter(name: str) -> Adapter:
         raise ArgumentError(f"unknown adapter {name!r}; known: {sorted(ADAPTERS)}") from None
 
 
-__all__ = ["ADAPTERS", "Adapter", "EpisodeRef", "EpisodeStreams", "get_adapter"]
+__all__ = ["ADAPTERS", "Adapter", "EpisodeRef", "EpisodeStreams", "get_adapter", "nothing_found"]

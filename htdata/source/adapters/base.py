@@ -133,6 +133,7 @@ class FileDiscovery(abc.ABC):
     """
 
     name: str
+    recording_files: str   # what discovery_files looks for, in a user's words ("OpenTouch HDF5 files (*.hdf5)")
 
     def discovery_context(self, root: Path, params: dict):
         return None

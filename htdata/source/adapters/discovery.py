@@ -35,11 +35,14 @@ def discover_all(adapter, root: Path | str, params: dict) -> tuple[list, list[Ep
     file is a failure of the later one (the first keeps the id).
     """
     root = Path(root)
+    files = adapter.discovery_files(root, params)
+    if not files:   # nothing of this format here: say that, not what the source-wide context lacks
+        return [], []
     context = adapter.discovery_context(root, params)
     refs = []
     failures: list[EpisodeError] = []
     seen: dict[str, str] = {}
-    for path in adapter.discovery_files(root, params):
+    for path in files:
         try:
             check_source_file(path, root)
             found = adapter.discover_file(path, root, params, context)

@@ -102,6 +102,7 @@ MAX_STAMP_SLACK = 4096
 
 class NativeAdapter(FileDiscovery):
     name = SOURCE
+    recording_files = f"native recordings ({RECORDING_JSON})"
     # Everything a native recording needs is in its recording.json: no params.
     PARAMS: tuple[AdapterParam, ...] = ()
 

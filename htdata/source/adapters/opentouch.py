@@ -200,6 +200,7 @@ class OpenTouchContext:
 
 class OpenTouchAdapter(FileDiscovery):
     name = SOURCE
+    recording_files = "OpenTouch HDF5 scene files (*.hdf5)"
     PARAMS: tuple[AdapterParam, ...] = (
         AdapterParam("channel_order", (str,), "bgr", f"JPEG channel order, one of {CHANNEL_ORDERS}"),
         AdapterParam("annotations", (str,), None, "label table path (cwd, then the source root)"),

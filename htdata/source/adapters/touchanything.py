@@ -91,6 +91,7 @@ class TouchAnythingContext:
 
 class TouchAnythingAdapter(FileDiscovery):
     name = SOURCE
+    recording_files = f"TouchAnything episode folders ({NPZ_NAME})"
     PARAMS: tuple[AdapterParam, ...] = (
         AdapterParam("video", (str,), "chest", f"which camera is the RGB stream: one of {sorted(VIDEO_NAMES)}"),
         AdapterParam("layouts", (dict,), {}, "{hand: layout id} overriding the defaults"),
