@@ -10,7 +10,7 @@ SEED   ?= 0
 OOD    ?= cup_grasp palm_push
 JOBS   ?= 2
 
-.PHONY: setup demo sample ingest split validate preview train-smoke train-smoke-mispaired compare task-transfer test lint fix install-check bench \
+.PHONY: setup demo demo-intro sample ingest split validate preview train-smoke train-smoke-mispaired compare task-transfer test lint fix install-check bench \
         ray-cluster-check \
         lerobot-check lerobot-load export-lerobot gpu-check clean
 
@@ -20,8 +20,9 @@ setup: $(VENV)/.installed
 # (torch==2.13.0 is pinned in pyproject.toml: the CPU wheel on the machine's disk).
 $(VENV)/.installed: pyproject.toml setup.py
 	$(PYTHON) -m venv $(VENV)
+	@echo "make setup: installing htdata with every extra into $(VENV)/ (about 2 GB; 2-3 min the first time)"
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e ".[torch,train,bench,export,ray,test,view]"
+	$(PY) -m pip install --progress-bar off -e ".[torch,train,bench,export,ray,test,view]"   # a line per package: progress
 	touch $@
 
 # Raw sample corpus: written once, reused after (--reuse: a finished corpus of this seed, which
@@ -65,7 +66,12 @@ compare: setup
 task-transfer: ingest
 	$(PY) -m handtouch.task_transfer --dataset $(DATA)/dataset --out runs/task_transfer --controls
 
-demo: preview train-smoke
+# Printed first, so the wait is known up front (measured on an idle 2-core machine; a busy one takes longer).
+demo-intro:
+	@echo "make demo: install (2-3 min the first time), sample recordings + ingest + split + validate + preview"
+	@echo "  (~1 min), then the HandTouch smoke (~5 min): about 8 min on an idle 2-core machine, more when it is busy"
+
+demo: demo-intro preview train-smoke
 	@echo "demo done: $(DATA)/dataset, $(DATA)/preview.png, runs/smoke/results.md"
 
 # Lint: ruff's error rules and import order (pyproject.toml [tool.ruff]); `make fix` applies its fixes.

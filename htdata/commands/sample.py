@@ -74,6 +74,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                              "catch that (make train-smoke-mispaired). Never for training")
     parser.add_argument("--dry-run", action="store_true", help="print the planned episodes and exit")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--json", action="store_true",
+                        help="print the summary as JSON (default: a line per format and the next command)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -101,8 +103,20 @@ def run(args: argparse.Namespace) -> int:
         return 2
     summary["seconds"] = round(time.perf_counter() - t0, 2)
     summary["out"] = str(cfg.out)
-    print(json.dumps(summary, indent=1))
+    print(json.dumps(summary, indent=1) if args.json else "\n".join(corpus_lines(summary)))
     return 0
+
+
+def corpus_lines(summary: dict) -> list[str]:
+    """What was written, a line per format, and the command that ingests it."""
+    formats = [f for f in FORMATS if isinstance(summary.get(f), dict)]
+    out = summary["out"]
+    lines = [f"wrote {out} in {summary['seconds']:.0f} s:"]
+    lines += [f"  {f:<14} {summary[f]['episodes']:>4} episodes {summary[f]['frames']:>6} frames  -> {out}/{f}"
+              for f in formats]
+    pipes = " ".join(f"--pipeline {f}={out}/{f}" for f in formats)
+    lines.append(f"next: htdata ingest {pipes} DATASET   (then: htdata validate DATASET)")
+    return lines
 
 
 def _raw_glove(args: argparse.Namespace) -> int:
@@ -124,5 +138,9 @@ def _raw_glove(args: argparse.Namespace) -> int:
         shutil.rmtree(target)
     summary = write_rawglove(target, seed=args.seed)
     summary["out"] = str(target)
-    print(json.dumps(summary, indent=1))
+    if args.json:
+        print(json.dumps(summary, indent=1))
+        return 0
+    print(f"wrote {target}: {summary['clips']} glove-only clips, {summary['frames']} frames, layouts and truth.json\n"
+          f"next: htdata ingest --pipeline native --layouts {target}/layouts {target} DATASET")
     return 0

@@ -258,12 +258,15 @@ def test_cli_writes_selected_formats_and_summary(tmp_path, capsys):
     out = tmp_path / "only_native"
     assert htdata_main(["sample", str(out), "--scale", "tiny", "--formats", "native"]) == 0
     captured = capsys.readouterr()
-    summary = json.loads(captured.out)
-    assert summary["native"]["episodes"] == 2 and "opentouch" not in summary
+    lines = captured.out.splitlines()      # a person's summary: what was written and the next command
+    assert lines[0].startswith(f"wrote {out} in ") and "native" in lines[1] and "2 episodes" in lines[1]
+    assert lines[-1].startswith(f"next: htdata ingest --pipeline native={out}/native DATASET")
     assert "htdata sample" in captured.err  # tqdm progress goes to stderr
     assert sorted(p.name for p in out.iterdir()) == [COMPLETE_MARKER, "native"]
     assert htdata_main(["sample", str(out), "--scale", "tiny", "--formats", "native",
-                        "--overwrite", "--quiet"]) == 0
+                        "--overwrite", "--quiet", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["native"]["episodes"] == 2 and "opentouch" not in summary
 
 
 def _stamps(root: Path) -> dict:
