@@ -10,11 +10,14 @@ from htdata.commands.outputs import output_path
 from htdata.inspect import preview
 
 EPILOG = """\
-A contact sheet of one episode: rows over time (the N frames with the most contact, or with
---pick even N frames evenly spaced), each labelled with its frame number and clip time (seconds
+A contact sheet of one episode: rows over time (by default the grasp's phases: a frame before the
+first contact, frames over the contact span, a frame after the last; --pick contact: the N
+frames with the most contact; --pick even: N frames evenly spaced), each labelled with its
+frame number and clip time (seconds
 since the episode's first frame); columns RGB | left tactile | right tactile (no RGB column when
 the episode has no video). Tactile maps are colour-mapped (black = 0, pale yellow = the top of
-the colour bar) with the hand's region outlines; grey hatching = where the glove has no sensor;
+the colour bar) with the hand's region outlines, named on the first row; grey hatching = where
+the glove has no sensor (the legend under the sheet says so);
 a grey panel = a hand the episode does not have; magenta = a non-finite value (damage).
 --contrast quantile stretches the colours to the dataset's 99th percentile so faint contact shows.
 Defaults: the two-handed episode with the most contact, 6 frames, auto contrast.
@@ -34,9 +37,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--episode", default=None, metavar="ID",
                         help="episode id (default: the two-handed episode with the most contact)")
     parser.add_argument("--frames", type=int, default=6, metavar="N", help="rows: N frames (default 6)")
-    parser.add_argument("--pick", choices=preview.PICKS, default="contact",
-                        help="contact (default): the N frames with the most contact (each glove hand's contact "
-                             "rule: docs/USAGE.md), in time order; even: N frames evenly spaced")
+    parser.add_argument("--pick", choices=preview.PICKS, default="phases",
+                        help="phases (default): before / during / after contact; contact: the N frames with the "
+                             "most contact (each glove hand's contact rule: docs/USAGE.md), in time order; even: "
+                             "N frames evenly spaced")
     parser.add_argument("--contrast", choices=preview.CONTRASTS, default="auto",
                         help="auto (default): quantile when the dataset's p99 of positive taxel values is below "
                              f"{preview.AUTO_QUANTILE_BELOW}, else fixed; fixed: colour scale 0..1; quantile: "
@@ -53,5 +57,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"htdata preview: error: {exc}", file=sys.stderr)
         return 2
     print(f"wrote {out}; colour bar 0..{vmax:.3g} ({used} contrast"
-          f"{', p99 of the positive taxel values' if used == 'quantile' else ''}; {args.pick} frames)")
+          f"{', p99 of the positive taxel values' if used == 'quantile' else ''}; frames: "
+          f"{preview.PICK_WORDS[args.pick]})")
     return 0

@@ -1,6 +1,10 @@
 """`htdata preview`: a contact sheet of one episode, drawn with cv2 only.
 
-Rows are N frames in time order: by default the N frames with the most
+Rows are N frames in time order: by default the episode's phases
+(`pick="phases"`: one frame before the first contact, frames spread over
+the contact span, one after the last contact, so a reader sees the grasp
+begin, hold and end; a part the episode lacks gives its rows to the contact
+span), or the N frames with the most
 contact (`pick="contact"`: hands in contact by each glove hand's contact
 rule, htdata/glove/contact.py, then the highest taxel value; at least
 len/(2N) frames apart; evenly spaced when nothing is in contact), or N
@@ -9,8 +13,9 @@ frames evenly spaced over the episode, first and last included
 episode without video: a glove-only sheet is two columns wide). Each row is labelled with
 its frame number and CLIP time (seconds since the episode's first frame). Tactile maps are
 colour-mapped (inferno, 0 = black, 1 = pale yellow), the canonical region
-outlines are drawn on top, pixels the glove does not cover are shaded with a
-grey hatch, and a hand the episode does not have is a grey panel labelled
+outlines are drawn on top and named on the first row, pixels the glove does not
+cover are shaded with a grey hatch (the legend under the sheet says so), and a
+hand the episode does not have is a grey panel labelled
 "no left hand" / "no right hand". Non-finite tactile pixels (a damaged
 dataset) show as magenta rather than being hidden.
 
@@ -35,6 +40,7 @@ import numpy as np
 
 from htdata.errors import ArgumentError
 from htdata.format.table import CANVAS, HANDS, JSON_MEMBER, RGB_MEMBER, SIZE_FIELDS, decode_member
+from htdata.glove.canonical import PART_NAMES
 from htdata.inspect.outline import region_outline  # noqa: F401  (preview.region_outline stays a name of this module)
 from htdata.inspect.stats import default_cache_dir, episode_stats, positive_value_quantile
 from htdata.read.reader import DatasetReader
@@ -53,11 +59,13 @@ FONT = cv2.FONT_HERSHEY_SIMPLEX
 BAR_STRIP_H = 14
 BAR_FONT = 0.4
 BAR_LINE_H = 14                  # caption line spacing
-BAR_CAPTION_LINES = 2            # the caption wraps to at most this many lines under the ticks
+BAR_CAPTION_LINES = 3            # the caption (scale, frames, legend) wraps to at most this many lines
 BAR_H = 56 + (BAR_CAPTION_LINES - 1) * BAR_LINE_H   # colour bar band under the rows (+ room for descenders)
 BAR_TICKS = 5
 CONTRASTS = ("auto", "fixed", "quantile")
-PICKS = ("contact", "even")
+PICKS = ("phases", "contact", "even")
+PICK_WORDS = {"phases": "before / during / after contact", "contact": "most contact", "even": "evenly spaced"}
+LEGEND = "hatched = no sensor, white lines = hand regions"
 AUTO_QUANTILE_BELOW = 0.3        # contrast "auto": quantile when the dataset's p99 is below this
 CONTRAST_QUANTILE = 0.99         # of the dataset's positive taxel values
 MIN_VMAX = 0.01                  # never stretch further than this: noise would fill the panel
@@ -176,6 +184,49 @@ def contact_positions(stats: dict, num_frames: int, rows: int) -> np.ndarray:
     return np.asarray(sorted(chosen), np.int64)
 
 
+def _contact_frames(stats: dict, num_frames: int) -> np.ndarray:
+    """Per frame, how many hands are in contact (each hand's own contact rule, from `htdata stats`)."""
+    hands = np.zeros(num_frames)
+    for h in stats["hands"].values():
+        if "frame_contact" in h:
+            hands[np.asarray(h["frame_index"], np.int64)] += np.asarray(h["frame_contact"], bool)
+    return hands
+
+
+def phase_positions(stats: dict, num_frames: int, rows: int) -> np.ndarray:
+    """`rows` frames showing the episode's phases, in time order (see the module docstring): the middle of
+    the lead-in before the first contact, frames evenly over the contact span, the middle of the tail."""
+    on = np.flatnonzero(_contact_frames(stats, num_frames))
+    if not on.size or rows < 1:
+        return frame_positions(num_frames, rows)
+    first, last = int(on[0]), int(on[-1])
+    edges = ([first // 2] if first > 0 and rows >= 3 else []) + \
+            ([(last + 1 + num_frames - 1) // 2] if last < num_frames - 1 and rows >= 2 else [])
+    during = max(1, rows - len(edges))
+    # the middles of `during` equal slices of the contact span (one row: the middle of the hold, not its onset)
+    span = on[np.unique(np.floor((np.arange(during) + 0.5) * on.size / during).astype(np.int64))]
+    chosen = sorted({*map(int, span), *edges})
+    for f in frame_positions(num_frames, rows).tolist():     # a short contact span: fill the rows evenly
+        if len(chosen) >= min(rows, num_frames):
+            break
+        if f not in chosen:
+            chosen = sorted({*chosen, int(f)})
+    return np.asarray(chosen, np.int64)
+
+
+def region_labels(parts: np.ndarray) -> list[tuple[str, tuple[int, int]]]:
+    """(name, (x, y)) per hand region of the canonical part map: its name at the region pixel nearest the
+    region's centroid (a curved finger's centroid can lie outside it)."""
+    out = []
+    for pid, name in PART_NAMES.items():
+        ys, xs = np.nonzero(parts == pid)
+        if not ys.size:
+            continue
+        k = int(np.argmin((ys - ys.mean()) ** 2 + (xs - xs.mean()) ** 2))
+        out.append((name, (int(xs[k]), int(ys[k]))))
+    return out
+
+
 def wrap_text(text: str, width: int, scale: float = BAR_FONT, max_lines: int = BAR_CAPTION_LINES) -> list[str]:
     """`text` broken at spaces into lines no wider than `width` px (cv2's Hershey font at `scale`); a text
     longer than `max_lines` ends in "..." on the last line, so nothing is ever drawn past `width`."""
@@ -239,9 +290,9 @@ def _default_episode(episodes: list[dict]) -> str:
 
 
 def render_contact_sheet(dataset, episode: str | None = None, frames: int = 6, contrast: str = "auto",
-                         pick: str = "contact") -> np.ndarray:
+                         pick: str = "phases") -> np.ndarray:
     """Contact sheet of one episode as a BGR uint8 image (contrast: "auto", "fixed" 0..1 or "quantile";
-    pick: "contact" or "even" frames).
+    pick: "phases", "contact" or "even" frames).
 
     Default episode: among those with the most hands (so a two-handed
     dataset shows both gloves and mirroring can be checked by eye), the one
@@ -265,27 +316,28 @@ def render_contact_sheet(dataset, episode: str | None = None, frames: int = 6, c
         first, n = reader.episode_range(pos)
         chosen = frame_positions(n, frames)
         picked = "evenly spaced"
-        if pick == "contact" and n:
+        if pick != "even" and n:
             try:
                 (entry,), _ = episode_stats(reader, [pos], cache_dir=default_cache_dir(reader.root))
-                chosen = contact_positions(entry, n, frames)
-                picked = "most contact"
+                chosen = (phase_positions if pick == "phases" else contact_positions)(entry, n, frames)
+                picked = PICK_WORDS[pick] if _contact_frames(entry, n).any() else "evenly spaced (no contact)"
             except (ValueError, KeyError):   # layouts the stats cannot sample: even spacing, said in the caption
                 picked = "evenly spaced (no stats for this dataset)"
         outline = region_outline(reader.place_map)
         coverage = {hand: reader.coverage(layout_id) for hand, layout_id in ep["layouts"].items()}
         rgb = episode_has_rgb(reader, pos)
-        sheet = _draw_rows(reader, ep, first, n, chosen, rgb, coverage, outline, vmax)
+        sheet = _draw_rows(reader, ep, first, n, chosen, rgb, coverage, outline, vmax,
+                           region_labels(reader.region_map))
         caption = ("tactile value, fixed scale 0..1" if contrast == "fixed" else
                    f"tactile value 0..{vmax:.3g} (p{CONTRAST_QUANTILE * 100:g} of the dataset's positive "
-                   f"taxel values; above saturates)") + f"; frames: {picked}"
+                   f"taxel values; above saturates)") + f"; frames: {picked}; {LEGEND}"
         x0 = PAD + (CANVAS + PAD if rgb else 0)          # under the tactile columns
         draw_colour_bar(sheet, x0, sheet.shape[0] - BAR_H + 4, 2 * CANVAS + PAD, vmax, caption)
     return sheet
 
 
 def _draw_rows(reader: DatasetReader, ep: dict, first: int, n: int, chosen: np.ndarray, rgb: bool,
-               coverage: dict, outline: np.ndarray, vmax: float) -> np.ndarray:
+               coverage: dict, outline: np.ndarray, vmax: float, labels=()) -> np.ndarray:
     """The sheet without its colour bar: title, column heads, one row of panels per chosen frame."""
     _, titles = sheet_columns(rgb)
     height, width = sheet_size(len(chosen), rgb)
@@ -307,7 +359,11 @@ def _draw_rows(reader: DatasetReader, ep: dict, first: int, n: int, chosen: np.n
                           else absent_panel("RGB (glove only)"))
         for hand in HANDS:
             if hand in sample["tactile"]:
-                panels.append(render_tactile(sample["tactile"][hand], coverage[hand], outline, vmax))
+                panel = render_tactile(sample["tactile"][hand], coverage[hand], outline, vmax)
+                for name, (px, py) in (labels if r == 0 else ()):   # region names once, on the first row
+                    (tw, th), _ = cv2.getTextSize(name, FONT, 0.35, 1)
+                    _label(panel, name, (max(0, min(CANVAS - tw, px - tw // 2)), max(th, py + th // 2)), 0.35)
+                panels.append(panel)
             else:   # an RGB-only sample (format 3) or a hand the episode does not have
                 panels.append(absent_panel("tactile" if sample["meta"].get("rgb_only") and hand in ep["hands"]
                                            else f"{hand} hand"))
@@ -319,7 +375,7 @@ def _draw_rows(reader: DatasetReader, ep: dict, first: int, n: int, chosen: np.n
 
 
 def write_preview(dataset, out, episode: str | None = None, frames: int = 6, contrast: str = "auto",
-                  pick: str = "contact") -> Path:
+                  pick: str = "phases") -> Path:
     out = Path(out)
     if out.suffix.lower() != ".png":
         raise ArgumentError(f"{out}: the preview is written as PNG; give a .png path")

@@ -128,7 +128,7 @@ def test_quantile_contrast_brightens_faint_maps(tmp_path):
     def hottest(panel: np.ndarray) -> int:
         lum = panel.astype(int).sum(axis=2)
         return int(lum[~(panel == pv.OUTLINE).all(axis=2)].max())      # outlines are white by design
-    hot = [max(hottest(_panel(s, r, 2)) for r in rows) for s in (fixed, quant)]
+    hot = [max(hottest(_panel(s, r, 2)) for r in rows[1:]) for s in (fixed, quant)]   # row 0 carries region names
     assert hot[0] < 400 < hot[1]                                              # faint stays dark unless stretched
     assert cli_main(["preview", str(root), str(tmp_path / "q.png"), "--contrast", "quantile"]) == 0
 
@@ -167,7 +167,7 @@ def test_cli_prints_the_colour_bar_range(tmp_path, capsys):
     assert cli_main(["preview", str(faint), str(tmp_path / "f.png")]) == 0
     out = capsys.readouterr().out
     used, vmax = pv.contrast_scale(faint, "auto")
-    assert f"colour bar 0..{vmax:.3g} (quantile contrast" in out and "contact frames" in out
+    assert f"colour bar 0..{vmax:.3g} (quantile contrast" in out and "frames: before / during / after contact" in out
 
 
 @pytest.fixture(scope="module")
@@ -208,3 +208,37 @@ def test_colour_bar_caption_wraps_inside_the_sheet(glove_only, tmp_path):
         assert not (band[:, -pv.PAD:] > 120).any()        # nothing drawn into the right margin (it was cut there)
         assert not (band[-2:] > 120).any()                # nor onto the bottom edge
         assert (band[pv.BAR_STRIP_H + 36:, :] > 120).any(axis=2).sum() > 100   # the caption's lines are there
+
+
+def _contact_stats(n: int, on: range) -> dict:
+    contact = np.zeros(n, int)
+    contact[list(on)] = 1
+    return {"hands": {"right": {"frame_index": list(range(n)), "frame_max": (contact * 0.5).tolist(),
+                                "frame_contact": contact.tolist()}}}
+
+
+def test_phases_pick_shows_the_grasp_begin_hold_and_end():
+    """The default rows: one frame before the first contact, the rest spread over the contact span,
+    one after the last (the six near-identical frames of one grasp were the old default)."""
+    rows = pv.phase_positions(_contact_stats(60, range(20, 41)), 60, 6).tolist()
+    assert rows == sorted(rows) and len(rows) == 6
+    assert rows[0] < 20 and rows[-1] > 40 and all(20 <= r <= 40 for r in rows[1:-1])
+    assert rows[-2] - rows[1] >= 15                       # spread over the hold, not bunched at its peak
+    mid = pv.phase_positions(_contact_stats(60, range(0, 41)), 60, 6).tolist()   # starts mid-grasp
+    assert mid[0] <= 5 and mid[-1] > 40 and len(mid) == 6     # no lead-in: the hold from its start
+    assert pv.phase_positions(_contact_stats(30, range(0)), 30, 4).tolist() == pv.frame_positions(30, 4).tolist()
+    short = pv.phase_positions(_contact_stats(30, range(10, 12)), 30, 6).tolist()  # a short touch: rows still drawn
+    assert len(short) == 6 and {10, 11} <= set(short)
+
+
+def test_region_names_sit_on_their_regions(ds):
+    import htdata
+    from htdata.glove.canonical import PART_NAMES
+
+    parts = htdata.open(ds).region_map
+    labels = dict(pv.region_labels(parts))
+    assert set(labels) == set(PART_NAMES.values())
+    ids = {name: pid for pid, name in PART_NAMES.items()}
+    assert all(parts[y, x] == ids[name] for name, (x, y) in labels.items())
+    sheet = pv.render_contact_sheet(ds, frames=2)
+    assert sheet.shape[:2] == pv.sheet_size(2, rgb=True)
