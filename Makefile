@@ -114,9 +114,12 @@ GPU_CHECK_ARGS ?= --compile --profile 20
 gpu-check:
 	PYTHONPATH=$(CURDIR)$${PYTHONPATH:+:$$PYTHONPATH} $(GPU_PY) -m handtouch.gpucheck --work $(GPU_WORK) $(GPU_CHECK_ARGS)
 
-# LeRobot v3.0 export of the sample dataset (pyarrow comes with make setup's [export] extra).
+# LeRobot v3.0 export of the sample dataset (pyarrow comes with make setup's [export] extra), with the
+# glove at its own rate: up to LEROBOT_WINDOW rows since the previous frame (the sample's 100 Hz glove
+# beside 30 fps video stores at most 8 in a frame; more is an error naming the K needed).
+LEROBOT_WINDOW ?= 8
 export-lerobot: split
-	$(HTDATA) export lerobot $(DATA)/dataset $(DATA)/lerobot --split main --force --quiet
+	$(HTDATA) export lerobot $(DATA)/dataset $(DATA)/lerobot --split main --force --quiet --tactile-window $(LEROBOT_WINDOW)
 
 # The export checked by LeRobot's own tooling, in a venv of its own (LeRobot's pins differ from
 # ours): lerobot-doctor (no torch) must report no FAIL but "Training Readiness" (it FAILs any

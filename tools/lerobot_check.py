@@ -16,7 +16,9 @@ Checks against htdata's DatasetReader (matched through meta/htdata/episodes.json
   raw rows equal exactly (float32 bits; NaN/Inf cells exported as 0) where observation.present says real, zeros elsewhere;
   observation.present equals which members the htdata sample holds; task strings equal;
   every video frame decodes at its row's timestamp; RGB within the codec tolerance (measured, printed);
-  windows equal htdata's frames row for row.
+  windows equal htdata's frames row for row;
+  --tactile-window exports: each episode's window rows (where ..._mask), in order, equal htdata's
+  full-rate stream of that hand (htdata.read.rawstream.episode_stream), each row once, at its time.
 Exit 0 when everything holds; otherwise one line per problem and exit 1.
 """
 
@@ -33,7 +35,7 @@ import pyarrow.parquet as pq
 
 from htdata.format.codec import decode_rgb
 from htdata.format.table import RGB_MEMBER, raw_member
-from htdata.read.rawstream import paired_row
+from htdata.read.rawstream import episode_stream, paired_row
 from htdata.read.reader import DatasetReader
 
 TOLERANCE_S = 1e-4           # LeRobotDataset's default tolerance_s
@@ -79,7 +81,7 @@ def check(dataset: Path, export: Path, windows: int, seed: int) -> tuple[list[st
     info, table = ex["info"], ex["table"]
     feats = info["features"]
     fps = info["fps"]
-    raw_keys = [k for k in feats if k.startswith("observation.tactile.") and feats[k]["dtype"] == "float32"]
+    raw_keys = [k for k in feats if k.startswith("observation.tactile.") and k.rsplit(".", 1)[1].startswith("raw")]
     video_keys = [k for k in feats if feats[k]["dtype"] == "video"]
     present_names = feats["observation.present"]["names"]
     cols = {k: table.column(k).to_pylist() for k in ("timestamp", "frame_index", "episode_index", "index",
@@ -160,8 +162,49 @@ def check(dataset: Path, export: Path, windows: int, seed: int) -> tuple[list[st
         problems.append(f"RGB beyond the codec tolerance: {rgb} (limits mean {RGB_MEAN_ABS_MAX}, p99 {RGB_P99_ABS_MAX})")
     win = check_windows(reader, ex, cols, raws, raw_keys, videos, ids, windows, seed, problems)
     item = one_item(ex, cols, raws, raw_keys, videos, fps)
+    full_rate = check_tactile_windows(reader, ex, ids, raw_keys, problems)
     return problems, {"rows": len(table), "episodes": len(ex["episodes"]), "rgb_vs_htdata": rgb, "grid": grid,
-                      "windows_checked": win, "item": item}
+                      "windows_checked": win, "item": item, "tactile_window_rows_checked": full_rate}
+
+
+def check_tactile_windows(reader, ex, ids, raw_keys, problems) -> int:
+    """--tactile-window exports: every full-rate glove row htdata serves, once, in order, at its time."""
+    feats, table = ex["info"]["features"], ex["table"]
+    checked = 0
+    for key in raw_keys:
+        stem = key.replace(".raw", ".window", 1)
+        if stem not in feats:
+            continue
+        k, rows, cols = feats[stem]["info"]["window"]
+        hand = key.split(".")[2]
+        values = np.asarray(table.column(stem).to_pylist(), np.float32).reshape(len(table), k, rows, cols)
+        mask = np.asarray(table.column(f"{stem}_mask").to_pylist(), bool)
+        dt = np.asarray(table.column(f"{stem}_dt").to_pylist(), np.float64)
+        src = np.asarray(table.column("htdata.frame_index").to_pylist(), np.int64)
+        for ep in ex["episodes"]:
+            lo, hi = ep["dataset_from_index"], ep["dataset_to_index"]
+            eid = ids[ep["episode_index"]]["episode_id"]
+            got = values[lo:hi][mask[lo:hi]]
+            try:
+                want = episode_stream(reader, eid, hand)
+            except ValueError:          # the episode has no rows of this hand: every slot must be padding
+                want = None
+            if want is None or tuple(want.rows.shape[1:]) != (rows, cols):   # not this grid's (or no) rows
+                if mask[lo:hi].any():
+                    problems.append(f"{eid}: {stem} holds rows but htdata has no {hand} rows of grid {rows}x{cols}")
+                continue
+            if got.shape != want.rows.shape or not np.array_equal(got, _exported(want.rows)):
+                problems.append(f"{eid}: {stem} rows {got.shape} differ from htdata's {hand} stream {want.rows.shape}")
+                continue
+            first = reader.episode_range(eid)[0]
+            t_frame = np.array([json.loads(reader.sample(first + int(f), ("json",))["json"])["t_rgb_ns"]
+                                for f in src[lo:hi]], np.float64)
+            t_rows = (t_frame[:, None] + dt[lo:hi] * 1e9)[mask[lo:hi]]
+            if not np.allclose(t_rows, want.t_ns, atol=2_000):
+                problems.append(f"{eid}: {stem}_dt does not give htdata's row times (worst "
+                                f"{np.abs(t_rows - want.t_ns).max():.0f} ns)")
+            checked += len(got)
+    return checked
 
 
 def _exported(row: np.ndarray) -> np.ndarray:

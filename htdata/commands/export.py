@@ -47,6 +47,7 @@ Needs pyarrow: pip install 'htdata[export]'.
 Examples:
   htdata export lerobot data/dataset data/lerobot
   htdata export lerobot data/dataset data/lerobot_train --split main --part train --fps 30 --maps
+  htdata export lerobot data/dataset data/lerobot_full_rate --tactile-window 8
 Open it with LeRobot (pip install lerobot), or check it with lerobot-doctor:
   lerobot-doctor check data/lerobot
 """
@@ -75,6 +76,11 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--maps-gain", type=float, default=1.0, metavar="G",
                    help="--maps: grey level = clip(value x G, 0, 1) x 255 (default 1; a raw-count glove's maps press "
                         "to a few percent of 1: the export says when its videos look faint and which G to use)")
+    p.add_argument("--tactile-window", type=int, default=None, metavar="K",
+                   help="also give each frame the glove rows recorded since the previous frame (the glove at its "
+                        "own rate, e.g. 100 Hz beside 30 fps video): observation.tactile.<hand>.window (K rows, "
+                        "padded; ..._mask, ..._dt). More than K rows between two frames is an error naming the "
+                        "K needed: no row is dropped (default: no window; .raw holds the paired row only)")
     p.add_argument("--crf", type=int, default=18, help="H.264 quality, 0 (lossless) .. 51 (default 18)")
     p.add_argument("--force", action="store_true",
                    help="replace OUT if it is a previous htdata export (never anything else)")
@@ -92,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = LeRobotExportConfig(dataset=args.dataset, out=output_path(args.out, "export"), version=args.version, split=args.split,
                               part=args.part, fps=args.fps, maps=args.maps, maps_gain=args.maps_gain, crf=args.crf,
-                              force=args.force)
+                              force=args.force, tactile_window=args.tactile_window)
     bars = []   # the bar starts when the export knows its total: an error before that prints no empty bar
 
     def start(total: int) -> None:

@@ -21,10 +21,12 @@ One LeRobot episode per htdata episode. Frame features:
   observation.tactile.<hand>.map      video (--maps only), the canonical 224x224 map, value x --maps-gain x 255 as grey
   observation.present                 bool per source (egocentric when exported, tactile.<hand>...): real value?
   htdata.frame_index                  int64, the stored htdata frame (within its episode) of the row
+  observation.tactile.<hand>.window   (--tactile-window K only) the glove rows recorded since the previous
+                                      frame, at the glove's own rate, with ..._mask and ..._dt (lerobot_window.py)
 LeRobot needs every feature in every frame, so a frame missing a source is filled and flagged
 in observation.present: a missing RGB frame repeats the last real one (black before the first),
-a missing glove row is zeros. Unpaired full-rate glove rows (the ones between two frames) are not
-exported: LeRobot frames are one row per frame.
+a missing glove row is zeros. Without --tactile-window, the unpaired full-rate glove rows (the
+ones between two frames) are not exported: `.raw` is the one row paired with the frame.
 
 Time: LeRobot's loader finds a row's video frame as round(timestamp x fps) and then checks the
 frame's time against the row's within 1e-4 s, so rows must sit on an exact 1/fps grid. Each
@@ -72,6 +74,7 @@ from htdata.export.lerobot_plan import (  # noqa: F401
     raw_key,
 )
 from htdata.export.lerobot_stats import FeatureStats, VideoStats
+from htdata.export.lerobot_window import EpisodeWindows, TiledStats, sample_rows, window_features, window_keys
 from htdata.export.videoencode import VideoWriter
 from htdata.format.mapstorage import MapStorage
 from htdata.format.table import CANVAS, JSON_MEMBER, RGB_MEMBER, decode_member, raw_member, tactile_member
@@ -130,13 +133,18 @@ def export_lerobot(cfg: LeRobotExportConfig, progress: Progress | None = None,
 
 
 def _write(reader, plan: _Plan, cfg: LeRobotExportConfig, work: Path, pa, pq, progress, on_total) -> dict:
-    feats = features(plan)
+    k_window = cfg.tactile_window
+    win_feats = window_features(plan.slots, k_window) if k_window else {}
+    feats = features(plan) | win_feats
+    pa_type = {"float32": pa.list_(pa.float32()), "bool": pa.list_(pa.bool_())}
     schema = pa.schema(
         [pa.field(slot.key, pa.list_(pa.float32())) for slot in plan.slots]
+        + [pa.field(key, pa_type[f["dtype"]]) for key, f in win_feats.items()]
         + [pa.field(PRESENT_KEY, pa.list_(pa.bool_())), pa.field("timestamp", pa.float32()),
            pa.field("frame_index", pa.int64()), pa.field("episode_index", pa.int64()),
            pa.field("index", pa.int64()), pa.field("task_index", pa.int64()), pa.field(SOURCE_KEY, pa.int64())])
     stats = {k: FeatureStats() for k in feats if feats[k]["dtype"] != "video"}
+    stats.update({window_keys(s.key)[0]: TiledStats(k_window) for s in plan.slots} if k_window else {})
     vstats = {k: VideoStats() for k in plan.video_keys}
     tasks: dict[str, int] = {}
     episode_rows: list[dict] = []
@@ -149,8 +157,13 @@ def _write(reader, plan: _Plan, cfg: LeRobotExportConfig, work: Path, pa, pq, pr
             ep = reader.episodes[pos]
             samples, times = _episode_schedule(reader, pos, plan)
             task_index = tasks.setdefault(ep["task"], len(tasks))
-            raw, present = _episode_frames(reader, plan, cfg, pos, samples, times, work, ep_index, vstats, progress)
+            raw, present, windows = _episode_frames(reader, plan, cfg, pos, samples, times, work, ep_index, vstats,
+                                                    progress)
             n = len(samples)
+            win_cols = {}
+            for k, w in windows.items():
+                w.add_stats(stats, plan.slots[k].key)
+                win_cols |= w.columns(plan.slots[k].key)
             cols = {PRESENT_KEY: present, "timestamp": np.asarray(times, np.float32),
                     "frame_index": np.arange(n), "episode_index": np.full(n, ep_index),
                     "index": np.arange(index, index + n), "task_index": np.full(n, task_index),
@@ -158,6 +171,7 @@ def _write(reader, plan: _Plan, cfg: LeRobotExportConfig, work: Path, pa, pq, pr
             _add_stats(stats, plan, raw, cols)
             table = pa.table({slot.key: pa.array(raw[k].reshape(n, -1).tolist(), schema.field(slot.key).type)
                               for k, slot in enumerate(plan.slots)} | {
+                key: pa.array(v.tolist(), schema.field(key).type) for key, v in win_cols.items()} | {
                 PRESENT_KEY: pa.array(present.tolist(), pa.list_(pa.bool_())),
                 "timestamp": pa.array(cols["timestamp"], pa.float32()),
                 **{k: pa.array(cols[k], pa.int64())
@@ -204,8 +218,9 @@ def faint_maps(vstats: dict[str, VideoStats], gain: float) -> dict[str, dict]:
 
 
 def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, samples: list[int], times: list[float],
-                    work: Path, ep_index: int, vstats: dict, progress) -> tuple[list[np.ndarray], np.ndarray]:
-    """Encode one episode's videos; return its raw rows per slot and the presence flags (see the module doc)."""
+                    work: Path, ep_index: int, vstats: dict, progress) -> tuple[list[np.ndarray], np.ndarray, dict]:
+    """Encode one episode's videos; return its raw rows per slot, the presence flags (see the module doc) and,
+    with --tactile-window, the EpisodeWindows per raw slot."""
     ep = reader.episodes[pos]
     eid = ep["episode_id"]
     wanted = (JSON_MEMBER, *((RGB_MEMBER,) if plan.rgb else ()), *[raw_member(h) for h in plan.hands],
@@ -222,11 +237,18 @@ def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, sam
     # a version that stores no maps (htdata/format/mapstorage.py): --maps renders them from the raw rows
     renderer = None if MapStorage.of(reader.manifest).stores_maps else RawMapRenderer(reader)
     first = reader.episode_range(pos)[0]
+    windows = {k: EpisodeWindows(len(samples), cfg.tactile_window, plan.slots[k].grid)
+               for k in range(len(plan.slots))} if cfg.tactile_window else {}   # a hand it lacks: all padding
+    previous = first - 1                           # the stored frame of the previous exported frame
     for f, (i, t) in enumerate(zip(samples, times)):
         if cache is None or cache[0] != i:
             cache = (i, reader.read_sample(i, wanted)[2])
         members = cache[1]
         where = f"{reader.root}: {reader.key(i)} (episode {eid!r} frame {i - first})"
+        if windows:   # the last frame also takes the rows of stored frames after it (a resampled end)
+            last = first + reader.episode_range(pos)[1] - 1 if f == len(samples) - 1 else i
+            _fill_windows(reader, windows, slot_of, members, previous, i, last, f, where)
+        previous = i
         if plan.rgb:
             if RGB_MEMBER in members:
                 last_rgb = decode_member(RGB_MEMBER, members[RGB_MEMBER], where)
@@ -251,7 +273,24 @@ def _episode_frames(reader, plan: _Plan, cfg: LeRobotExportConfig, pos: int, sam
             progress(1)
     for v in videos.values():
         v.close()
-    return raw, present
+    return raw, present, windows
+
+
+def _fill_windows(reader, windows: dict, slot_of: dict, members: dict, previous: int, i: int, last: int, f: int,
+                  where: str) -> None:
+    """Frame f's windows: the rows of stored frames previous+1 .. last (frame f is stored frame i, whose
+    members are `members`; last > i only for the export's last frame)."""
+    wanted = (JSON_MEMBER, *[raw_member(h) for h in slot_of])
+    held = {hand: ([], []) for hand in slot_of}
+    for j in range(previous + 1, last + 1):
+        got = members if j == i else reader.read_sample(j, wanted)[2]
+        for hand, (rows, times) in held.items():
+            r, t = sample_rows(got, hand, where if j == i else f"{reader.root}: {reader.key(j)}")
+            rows += r
+            times += t
+    t_frame = int(decode_member(JSON_MEMBER, members[JSON_MEMBER], where)["t_rgb_ns"])
+    for hand, k in slot_of.items():
+        windows[k].put(f, *held[hand], t_frame, where, hand)
 
 
 def _hand_map(members: dict, hand: str, where: str, renderer: RawMapRenderer | None, episode: int):

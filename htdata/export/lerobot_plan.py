@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata.errors import ArgumentError, DatasetError
+from htdata.export.lerobot_window import check_window
 from htdata.format.table import CANVAS, HANDS, JSON_MEMBER, RGB_MEMBER, SIZE_FIELDS, decode_member
 from htdata.read.reader import DatasetReader
 from htdata.store import storage
@@ -52,11 +53,13 @@ class LeRobotExportConfig:
     crf: int = 18
     gop: int = 2                      # keyframe every 2 frames: LeRobot's default, cheap random access
     force: bool = False
+    tactile_window: int | None = None  # K: each frame also carries the glove rows since the previous frame
 
     def validate(self) -> None:
         """Raise ArgumentError naming the option (--part, --fps, crf, gop, codec, OUT) that cannot be exported."""
         if self.part is not None and self.split is None:
             raise ArgumentError("--part needs --split NAME")
+        check_window(self.tactile_window)
         if not (isinstance(self.maps_gain, (int, float)) and np.isfinite(self.maps_gain) and self.maps_gain > 0):
             raise ArgumentError(f"--maps-gain must be a finite number > 0, got {self.maps_gain!r}")
         if self.fps is not None and not (self.fps > 0 and float(self.fps).is_integer()):
