@@ -2,6 +2,7 @@
 
     episodestats.py  per-episode statistics from the raw rows and maps
     stats.py         `htdata stats`: the cached per-episode statistics, summaries by task / source
+    statscache.py    one cache entry read no further than its shape (a stranger's stats/ file)
     scalehint.py     a `scale` per glove layout from the p99.9 of its pressed values
     healthmap.py     the taxel-health PNG
     outline.py       region outlines drawn over every map picture

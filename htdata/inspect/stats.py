@@ -46,6 +46,7 @@ from htdata.inspect.episodestats import (
 )
 from htdata.inspect.healthmap import write_health_map as write_png
 from htdata.inspect.scalehint import scale_suggestions
+from htdata.inspect.statscache import read_entry
 from htdata.read.reader import DatasetReader
 from htdata.store import storage
 from htdata.store.writable import symlinked_folder
@@ -82,15 +83,6 @@ def default_cache_dir(root) -> Path | None:
     return None if storage.is_url(root) else Path(root) / STATS_DIR
 
 
-def _read_cached(path: Path | None) -> dict | None:
-    if path is None or not path.exists():
-        return None
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None          # a damaged entry is recomputed (and not rewritten: its name is taken)
-
-
 def episode_stats(reader: DatasetReader, positions: list[int] | None = None, cache_dir=None,
                   progress: Progress | None = None) -> tuple[list[dict], dict]:
     """(stats of each episode in `positions` (default all), {"computed", "cached"} counts).
@@ -104,7 +96,7 @@ def episode_stats(reader: DatasetReader, positions: list[int] | None = None, cac
         cache = None
     keys = {pos: episode_key(reader, pos) for pos in positions}
     paths = {pos: cache / f"{keys[pos]}.json" if cache is not None else None for pos in positions}
-    entries = {pos: _read_cached(paths[pos]) for pos in dict.fromkeys(positions)}
+    entries = {pos: read_entry(paths[pos]) for pos in dict.fromkeys(positions)}
     info = {"computed": 0, "cached": sum(e is not None for e in entries.values()), "frames_computed": 0}
     if refused:
         info["cache_error"] = refused
@@ -333,12 +325,9 @@ def cached_episode_stats(reader: DatasetReader, cache_dir=None) -> dict[int, dic
     if cache is None or not cache.is_dir():
         return out
     for pos in range(len(reader.episodes)):
-        path = cache / f"{episode_key(reader, pos)}.json"
-        if path.exists():
-            try:
-                out[pos] = json.loads(path.read_text())
-            except (OSError, ValueError):
-                continue
+        entry = read_entry(cache / f"{episode_key(reader, pos)}.json")
+        if entry is not None:
+            out[pos] = entry
     return out
 
 
