@@ -88,3 +88,18 @@ def test_the_command_prints_the_summary_and_exits_with_the_verdict(tmp_path, cap
     assert summary.main([str(md), str(js), "--expected-fail", "Training Readiness=no action feature"]) == 0
     assert len(capsys.readouterr().out.splitlines()) == 11
     assert summary.main([str(md), str(js)]) == 1
+
+
+def test_a_narrow_expected_fail_accepts_only_the_window_padding(tmp_path):
+    pattern = r"^observation\.tactile\.\w+\.window\w*\[\d+\]: .* -- clipping detected$"
+    narrow = {"Action Quality": (pattern, "window padding")}
+    padding = ("| Action Quality | **FAIL** | - observation.tactile.left.raw[43]: 53.9% of values at minimum (0.0000)"
+               "<br>- observation.tactile.left.window[700]: 99.6% of values at minimum (0.0000) -- clipping detected |")
+    md, js = _write(tmp_path, DOCTOR_MD.replace(DOCTOR_MD.splitlines()[15], padding))
+    lines, ok = summary.summarise(md, js, EXPECTED, [], narrow)
+    assert ok and any("expected: window padding" in line for line in lines), lines
+    # a real clipping of a .raw feature, or a NaN, is not padding: the FAIL stands
+    for other in ("observation.tactile.left.raw[3]: 99.9% of values at maximum (1023.0000) -- clipping detected",
+                  "observation.tactile.left.window: 4 NaN values detected"):
+        md, js = _write(tmp_path, DOCTOR_MD.replace(DOCTOR_MD.splitlines()[15], padding[:-2] + f"<br>- {other} |"))
+        assert not summary.summarise(md, js, EXPECTED, [], narrow)[1], other
