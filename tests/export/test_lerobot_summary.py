@@ -63,7 +63,7 @@ def test_summary_is_one_line_per_check_with_rows_and_rgb(tmp_path):
     assert "  PASS  Metadata & Format Compliance" in lines
     assert "  FAIL  Training Readiness  (1 message)  expected: no action feature" in lines
     assert lines[-3] == ("tools/lerobot_check.py: OK: 2982 rows and 46 episodes compared with htdata's reader, "
-                         "20 delta_timestamps windows; RGB vs htdata: mean |diff| 2.06, p99 14, max 94 of 255 "
+                         "20 delta_timestamps windows, 0 full-rate glove rows in tactile windows; RGB vs htdata: mean |diff| 2.06, p99 14, max 94 of 255 "
                          "over 2982 frames")
     assert lines[-2] == "full reports: data/lerobot_doctor.md" and lines[-1] == "lerobot-check: OK"
 
