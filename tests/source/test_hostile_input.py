@@ -344,3 +344,42 @@ def test_0xff_run_in_key_frame_concealed_by_decoder_is_caught(tmp_path):
     with pytest.raises(VideoError, match="video frame 0 is damaged: the decoder concealed corrupt data"):
         for _ in iter_video_rgb(path):
             pass
+
+
+def _gzip_zeros(nbytes: int) -> bytes:
+    """gzip (zlib stream, as HDF5's deflate filter stores it) of `nbytes` zero bytes, made block by block."""
+    import zlib
+
+    z, block, out = zlib.compressobj(1), bytes(16 << 20), []
+    for _ in range(nbytes // len(block)):
+        out.append(z.compress(block))
+    out.append(z.flush())
+    return b"".join(out)
+
+
+def test_an_hdf5_gzip_bomb_chunk_is_refused_before_it_is_inflated(tmp_path):
+    """One 1 GiB gzip chunk (about 1 MB on disk) as a clip's pressure: the old size check passed it (the declared
+    shape fits the file's 1100:1 ratio) and reading one row inflated the whole chunk (~1.1 GB peak)."""
+    from tests.factories.hostile import peak_rss_mb
+
+    raw = make_opentouch(tmp_path / "raw")
+    rows = (1 << 30) // (16 * 16 * 4)                      # 1 GiB of float32 16x16 rows in one chunk
+    with h5py.File(raw / "home_kitchen_p1.hdf5", "r+") as f:
+        g = f["data/demo_02"]
+        n = int(g["timestamps"].shape[0])
+        del g["right_pressure"]
+        ds = g.create_dataset("right_pressure", shape=(n, 16, 16), maxshape=(None, 16, 16), chunks=(rows, 16, 16),
+                              dtype="<f4", compression="gzip")
+        ds.id.write_direct_chunk((0, 0, 0), _gzip_zeros(rows * 16 * 16 * 4))
+    out = tmp_path / "ds"
+    text, peak = peak_rss_mb(f"""
+import sys
+sys.stderr = sys.stdout                                  # the one-line error, read back below
+from htdata.cli import main
+rc = main(["ingest", "--workers", "0", "--quiet", "--pipeline", "opentouch", {str(raw)!r}, {str(out)!r}])
+print("RC", rc)
+""")
+    assert "RC 1" in text and peak < 500, (f"peak {peak:.0f} MB", text)
+    assert "home_kitchen_p1.hdf5 [ot-home_kitchen_p1-demo_02]" in text and f"chunk shape ({rows}, 16, 16)" in text, text
+    episodes = sorted(e["episode_id"] for e in load_episodes(out))
+    assert "ot-home_kitchen_p1-demo_02" not in episodes and episodes, episodes

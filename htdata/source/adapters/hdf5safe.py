@@ -1,7 +1,9 @@
 """HDF5 a stranger wrote, opened safely: declared sizes checked before reading, no byte read from another file.
 
 `check_hdf5_size` refuses a dataset whose shape needs more bytes than its
-storage can hold (a forged shape is an error, not a multi-GB allocation);
+storage can hold (a forged shape is an error, not a multi-GB allocation),
+and a chunk that expands beyond MAX_CHUNK_BYTES (HDF5 inflates a whole chunk
+to read one row of it: a 1 GiB gzip chunk is ~1 MB on disk);
 `in_file` refuses external links, external raw storage and virtual datasets
 mapping other files, so every byte an episode reads is in the file that
 `source_sha256` hashes (docs/RELIABILITY.md).
@@ -18,16 +20,26 @@ from htdata.source.adapters.base import EpisodeRef
 
 # Deflate (the usual HDF5 filter) expands at most ~1032:1.
 MAX_FILTER_RATIO = 1100
+# One chunk, expanded: HDF5 decompresses a chunk whole to read any row of it, so this bounds the
+# memory of one read (a tactile recording's chunks are KBs to a few MB; 64 MiB is far above them).
+MAX_CHUNK_BYTES = 64 << 20
 
 
 def check_hdf5_size(ref: EpisodeRef, ds, path: Path) -> None:
     """Refuse a dataset whose declared shape needs more bytes than its storage can hold (before reading it).
 
     Contiguous data must be fully stored; chunked (filtered) data may expand
-    at most MAX_FILTER_RATIO times its stored bytes. A shape forged to 2e8
-    rows is an error here instead of a multi-GB allocation on read.
+    at most MAX_FILTER_RATIO times its stored bytes, and one chunk to at most
+    MAX_CHUNK_BYTES. A shape forged to 2e8 rows, or a 1 GiB chunk, is an
+    error here instead of a multi-GB allocation on read.
     """
     need = int(np.prod(ds.shape, dtype=np.float64)) * ds.dtype.itemsize if ds.shape else ds.dtype.itemsize
+    if ds.chunks is not None:
+        chunk = int(np.prod(ds.chunks, dtype=np.float64)) * ds.dtype.itemsize
+        if chunk > MAX_CHUNK_BYTES:
+            raise EpisodeError(ref, None, f"{ds.name}: chunk shape {ds.chunks} {ds.dtype} expands to {chunk} bytes, "
+                               f"over the {MAX_CHUNK_BYTES >> 20} MiB a chunk may hold (HDF5 inflates a whole chunk "
+                               f"to read one row): refused before reading", file=path)
     stored = int(ds.id.get_storage_size())
     limit = stored if ds.chunks is None else stored * MAX_FILTER_RATIO + (1 << 20)
     if need > limit:

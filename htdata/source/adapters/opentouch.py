@@ -328,6 +328,7 @@ class OpenTouchStreams(EpisodeStreams):
             check_stream_rows(ref, "timestamps", int(stamps.shape[0]) if stamps.shape else 1, self.path)
             ts = np.asarray(stamps[()], dtype=np.int64)
             self._jpegs = in_file(ref, g, "rgb_images_jpeg", self.path)
+            check_hdf5_size(ref, self._jpegs, self.path)
             self._pressure = {}
             for hand in ref.hands:
                 ds = in_file(ref, g, f"{hand}_pressure", self.path)
