@@ -197,21 +197,32 @@ def decode_tactile(data: bytes, where: str = "tactile map") -> np.ndarray:
     arr = decode_exr(data, where)
     if arr.shape != MAP_SHAPE:
         raise DatasetError(f"{where}: decoded tactile map has shape {arr.shape}, expected {MAP_SHAPE}")
-    return check_finite_maps(arr, where)
+    return check_served_maps(arr, where)
 
 
-def check_finite_maps(maps: np.ndarray, where: str) -> np.ndarray:
-    """`maps` ((224,224) or (n,224,224)) when every value is finite; else a DatasetError (a ValueError) naming `where`.
+def check_served_maps(maps: np.ndarray, where: str) -> np.ndarray:
+    """`maps` ((224,224) or (n,224,224)) when every value is finite and inside the format's [0,1] (give or
+    take ROUND_OFF); else a DatasetError (a ValueError) naming `where`.
 
-    One sum per map (maps are in [0,1], so a finite map never sums to inf): a NaN served
-    to a training run poisons its loss silently, so the loaders refuse it here.
+    A NaN served to a training run poisons its loss silently, and a stored map of 1e38 or -1 (a
+    re-sealed member: the writer clips to [0,1]) is a value the format never promised: the loaders
+    refuse both here. One sum, min and max per map.
     """
-    sums = maps.reshape(-1, maps.shape[-2] * maps.shape[-1]).sum(axis=1, dtype=np.float64)
+    flat = maps.reshape(-1, maps.shape[-2] * maps.shape[-1])
+    with np.errstate(over="ignore", invalid="ignore"):
+        sums = flat.sum(axis=1, dtype=np.float64)
     bad = np.flatnonzero(~np.isfinite(sums))
+    which = (lambda k: "" if maps.ndim == 2 else f" (map {int(k)} of {len(sums)} in this batch)")
     if bad.size:
-        which = "" if maps.ndim == 2 else f" (map {int(bad[0])} of {len(sums)} in this batch)"
-        raise DatasetError(f"{where}: tactile map holds NaN/Inf values{which}: its raw glove rows are not finite; "
-                           f"`htdata validate --deep` lists every such sample")
+        raise DatasetError(f"{where}: tactile map holds NaN/Inf values{which(bad[0])}: its raw glove rows are not "
+                           f"finite; `htdata validate --deep` lists every such sample")
+    low, high = flat.min(axis=1), flat.max(axis=1)
+    out = np.flatnonzero((low < -ROUND_OFF) | (high > 1.0 + ROUND_OFF))
+    if out.size:
+        k = int(out[0])
+        raise DatasetError(f"{where}: tactile map holds values {float(low[k]):.6g}..{float(high[k]):.6g}{which(k)}, "
+                           f"outside the format's [0,1]: the member was not written by htdata (`htdata validate "
+                           f"--deep` lists every such sample)")
     return maps
 
 

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata.errors import ArgumentError, DatasetError
-from htdata.format.codec import check_finite_maps
+from htdata.format.codec import check_served_maps
 from htdata.format.mapstorage import EXACT_RASTER, MapStorage
 from htdata.format.table import JSON_MEMBER, MANIFEST_FILE, decode_member, raw_member
 from htdata.glove.calibration import episode_normaliser, refuse_mismatched
@@ -276,7 +276,7 @@ class RawMapRenderer:
         """
         normaliser, raster = self.parts_for(episode, hand)
         values, _ = apply_paired(normaliser, members, hand, where)
-        return check_finite_maps(raster.render(values)[0], f"{where} ({hand})")
+        return check_served_maps(raster.render(values)[0], f"{where} ({hand})")
 
     def render_many(self, episode: int, hand: str, members_list: list[dict[str, bytes]], where: str = "sample"
                     ) -> np.ndarray:
@@ -290,7 +290,7 @@ class RawMapRenderer:
         """
         normaliser, raster = self.parts_for(episode, hand)
         values, _ = apply_paired_many(normaliser, members_list, hand, where)
-        return check_finite_maps(raster.render(values), f"{where} ({hand})")
+        return check_served_maps(raster.render(values), f"{where} ({hand})")
 
     def sample_map(self, index: int, hand: str) -> np.ndarray:
         """(224,224) float32 map of sample `index`, read and rendered (KeyError when it holds no raw rows).

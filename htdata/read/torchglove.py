@@ -27,7 +27,7 @@ except ModuleNotFoundError as exc:   # the data core installs without torch
     raise ModuleNotFoundError(f"{__name__} needs torch: pip install 'htdata[torch]' (torch==2.13.0)") from exc
 
 from htdata.errors import ArgumentError
-from htdata.format.codec import check_finite_maps
+from htdata.format.codec import check_served_maps
 from htdata.format.table import HANDS, JSON_MEMBER, SIZE_FIELDS, decode_member, raw_member
 from htdata.read import keys
 from htdata.read.itemoptions import ItemOptions
@@ -108,7 +108,7 @@ class GloveRateWindowDataset(_ItemDataset):
         values, _ = normaliser.apply(rows, rows=stream.source_row[pos - self.window + 1:pos + 1])
         out = builder.ids(row, index, hand)
         del out[keys.HAS_RGB]
-        maps = check_finite_maps(raster.render(values), f"{builder.reader.root}: {builder.reader.key(index)} ({hand})")
+        maps = check_served_maps(raster.render(values), f"{builder.reader.root}: {builder.reader.key(index)} ({hand})")
         out[keys.TACTILE] = torch.from_numpy(maps[:, None])
         out[keys.T_NS] = torch.from_numpy(stream.t_ns[pos - self.window + 1:pos + 1].copy())
         return out

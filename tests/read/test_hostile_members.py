@@ -87,3 +87,25 @@ def test_a_raw_member_of_the_wrong_grid_names_the_sample(tmp_path):
     report = validate_dataset(ds, deep=True)
     lines = [f["message"] for f in report["checks"]["content"]["failures"]]
     assert any(f"sample {key}.raw_right.npy: raw rows shaped (1, 8, 8)" in line for line in lines), lines
+
+
+@pytest.mark.parametrize("value", [60000.0, -1.0])
+def test_a_resealed_map_outside_0_1_is_a_named_error_and_a_named_fail(ds, value):
+    """Issue 44 item 6: a stored map of 1e38 (a float EXR) or -1 was served by the reader, and validate
+    aborted with "'list' argument must have no negative elements". Written in the dataset's own pixel type
+    (half here: 60000 is its 1e38), so that only the value rule can object."""
+    from htdata.format.codec import EXR_PIXEL_TYPES, encode_exr
+
+    reader = htdata.open(ds)
+    hand = next(h for h in ("left", "right") if f"tactile_{h}.exr" in reader.read_sample(1)[2])
+    bad = np.zeros((224, 224), np.float32)
+    bad[100:110, 100:110] = value
+    pixel = EXR_PIXEL_TYPES[reader.manifest["codec"].get("pixel_type", "half")]
+    rewrite_members(ds, 1, {f"tactile_{hand}.exr": encode_exr(bad.astype(pixel), "zip", pixel)})
+    key = _key(ds, 1)
+    with pytest.raises(DatasetError, match=rf"{key}.*outside the format's \[0,1\]"):
+        htdata.open(ds).decoded(1)
+    report = validate_dataset(ds, deep=True)
+    assert report["ok"] is False
+    failures = [f for c in report["checks"].values() for f in c.get("failures", [])]
+    assert any(key in f["message"] and "[0,1]" in f["message"] for f in failures), failures
