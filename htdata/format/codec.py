@@ -212,7 +212,9 @@ def check_served_maps(maps: np.ndarray, where: str) -> np.ndarray:
     with np.errstate(over="ignore", invalid="ignore"):
         sums = flat.sum(axis=1, dtype=np.float64)
     bad = np.flatnonzero(~np.isfinite(sums))
-    which = (lambda k: "" if maps.ndim == 2 else f" (map {int(k)} of {len(sums)} in this batch)")
+    def which(k) -> str:
+        return "" if maps.ndim == 2 else f" (map {int(k)} of {len(sums)} in this batch)"
+
     if bad.size:
         raise DatasetError(f"{where}: tactile map holds NaN/Inf values{which(bad[0])}: its raw glove rows are not "
                            f"finite; `htdata validate --deep` lists every such sample")
