@@ -79,8 +79,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         validate.write_report(report, output_path(out, "validate") if args.json is not None else out)
         print(f"report: {out}")
-    except OSError as exc:
-        print(f"htdata validate: cannot write report {out}: {exc}", file=sys.stderr)
+    except (OSError, ValueError) as exc:
+        print(f"htdata validate: error: cannot write report {out}: {exc}", file=sys.stderr)
+        if args.json is not None:   # the report asked for is not there: not a success, whatever the verdict
+            return 2
     return 0 if report["ok"] else 1
 
 

@@ -491,3 +491,11 @@ def test_regions_never_pressed_are_unexercised_by_name_not_dead():
     w = check.warnings[0]
     assert w["regions"] == ["thumb.distal", "index.distal"] and "dead" not in w["what"]
     assert "never pressed" in w["message"] and "thumb.distal, index.distal" in w["message"]
+
+
+def test_a_json_report_that_cannot_be_written_is_an_error(tmp_path, capsys):
+    ds = write_synthetic_dataset(tmp_path / "ds", EPISODES[:1])
+    (tmp_path / "afile").write_text("x")
+    for target in (tmp_path / "afile" / "r.json", Path("/proc/self/nope/r.json")):
+        assert cli_main(["validate", str(ds), "--json", str(target)]) == 2
+        assert "htdata validate: error: cannot write report" in capsys.readouterr().err
