@@ -383,3 +383,18 @@ print("RC", rc)
     assert "home_kitchen_p1.hdf5 [ot-home_kitchen_p1-demo_02]" in text and f"chunk shape ({rows}, 16, 16)" in text, text
     episodes = sorted(e["episode_id"] for e in load_episodes(out))
     assert "ot-home_kitchen_p1-demo_02" not in episodes and episodes, episodes
+
+
+@pytest.mark.parametrize("offset", ["1e308", "9223372036800000000"])   # the second + 0.3 s wraps int64
+def test_a_clock_offset_beyond_int64_names_the_field(tmp_path, capsys, offset):
+    """Issue 44 weak edge: clock_offset_ns 1e308 was a bare OverflowError (and a large int64 one a silent wrap)."""
+    raw = make_native(tmp_path / "raw")
+    rec = raw / "rec_good" / "recording.json"
+    doc = json.loads(rec.read_text())
+    text = json.dumps(doc).replace('"clock_offset_ns": 0', f'"clock_offset_ns": {offset}')
+    assert text != json.dumps(doc)
+    rec.write_text(text)
+    assert ingest_cli("--pipeline", "native", raw, tmp_path / "ds") in (1, 2)
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "OverflowError" not in err, err
+    assert "rec_good" in err and "clock_offset_ns" in err, err

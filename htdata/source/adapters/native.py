@@ -213,7 +213,16 @@ class NativeStreams(EpisodeStreams):
             raise EpisodeError(ref, None, f"{hand} tactile stream has zero frames", file=path)
         if rows.num_rows != ts.size:
             self.notes.append(f"{path.name}: {rows.num_rows} value rows vs {ts.size} timestamps: aligned on shortest")
-        self.tactile_timestamps_ns[hand] = ts[:n].astype(np.int64) + np.int64(offset_ns)
+        ts = ts[:n].astype(np.int64)
+        # Python ints: an offset of 1e308 (or one that pushes a stamp past int64) is named, not an OverflowError
+        # or a silent wrap-around of the clock
+        first, last = int(ts.min()) + int(offset_ns), int(ts.max()) + int(offset_ns)
+        bounds = np.iinfo(np.int64)
+        if not (bounds.min <= first and last <= bounds.max):
+            raise EpisodeError(ref, None, f"hands.{hand}.clock_offset_ns {offset_ns:.6g} puts the {hand} stamps at "
+                               f"{first:.6g}..{last:.6g} ns, outside int64 nanoseconds: a clock offset this large "
+                               f"is no offset", file=path.parent / RECORDING_JSON)
+        self.tactile_timestamps_ns[hand] = ts + np.int64(offset_ns)
 
     def _count_video_frames(self) -> int:
         if self._frames is not None:
