@@ -17,7 +17,7 @@ import importlib
 import os
 import sys
 
-from htdata.errors import HtdataError
+from htdata.errors import AlreadyCommitted, HtdataError
 
 # name -> (module, one-line help). Order is the order of the data path.
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -113,6 +113,9 @@ def main(argv: list[str] | None = None) -> int:
         how = getattr(module, "INTERRUPTED", "run the command again: a version is committed whole or not at all")
         print(f"\nhtdata {name}: interrupted (Ctrl-C); {how}", file=sys.stderr)
         return 130
+    except AlreadyCommitted as exc:   # a re-run of a write killed after its commit: the change is there
+        print(f"htdata {name}: {exc}")
+        return 0
     except HtdataError as exc:   # a user-caused error no command caught itself: its one line, no traceback
         print(f"htdata {name}: error: {exc}", file=sys.stderr)
         return 2

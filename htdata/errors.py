@@ -97,6 +97,17 @@ def _rebuild_episode_error(file, episode_id, frame, message) -> EpisodeError:
     return EpisodeError(None, frame, message, file=file, episode_id=episode_id)
 
 
+class AlreadyCommitted(HtdataError):
+    """This very command already committed its version (killed before dataset.json was rewritten, now
+    restored by htdata.write.newversion): nothing more to do. The CLI prints its one line and exits 0."""
+
+    def __init__(self, root, version: int, command: str):
+        super().__init__(f"version {version} of {root} already holds this change (committed by an earlier "
+                         f"`{command}` that was interrupted before its last step; dataset.json now points to it): "
+                         f"nothing to do")
+        self.version = version
+
+
 class RecordMismatch(DatasetError):
     """A record that decides served values (a calibration, an episode's fitted arrays) no longer matches
     its content id or digest: the one-line message names the file and the record (htdata.glove.calibration)."""

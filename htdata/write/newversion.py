@@ -13,6 +13,12 @@ this order, through `NewVersion`:
 4. carry the parent's parts, or re-pack the touched ones into new units (`repack`, byte for byte);
 5. `commit`: htdata/store/snapshot.py `commit_parts`, the version file linked into place last.
 
+A write killed after its version file was linked but before dataset.json was rewritten has
+committed (the version file is the commit; dataset.json its cache). The next write finishes it
+when it takes the lock: the pointer is rewritten from the newest version file, and a re-run of the
+very command that made that version (its change record's command line) ends there with
+`AlreadyCommitted` (the CLI: one line, rc 0) instead of failing on a change already made.
+
 Any failure before the commit (an exception, Ctrl-C) deletes the units this write made, so a failed
 write leaves the dataset as it found it; a kill -9 leaves them to the next write's step 3. Nothing
 happens before the first write: a `--dry-run` plans under the lock and writes nothing. A resumable
@@ -23,14 +29,16 @@ htdata/curate/merge.py).
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
+from htdata.errors import AlreadyCommitted
 from htdata.read.reader import DatasetReader
 from htdata.store.lock import WriterLock
 from htdata.store.parts import Part
 from htdata.store.snapshot import Snapshot, SplitMaker, commit_parts, current_snapshot, open_snapshot
-from htdata.store.versions import list_versions
+from htdata.store.versions import list_versions, restore_pointer, version_manifest_file
 from htdata.write.repack import KeptEpisode, SampleRewrite, clear_uncommitted, clear_unit, repack_unit
 
 PARENTS = ("current", "optional", "none")
@@ -66,6 +74,7 @@ class NewVersion:
     def __enter__(self) -> "NewVersion":
         self.lock.acquire()
         try:
+            self._finish_interrupted_commit()
             if self._parent_mode == "current":
                 self.parent = open_snapshot(self.root)
             elif self._parent_mode == "optional":
@@ -85,6 +94,18 @@ class NewVersion:
             if self._reader is not None:
                 self._reader.close()
             self.lock.release()
+
+    def _finish_interrupted_commit(self) -> None:
+        """An earlier write linked its version file but was killed before the pointer: rewrite the pointer; when
+        that write was this very command, raise AlreadyCommitted (see the module docstring)."""
+        if self.resumable:   # an ingest or merge re-run resumes its own way (and says what it restored)
+            return
+        versions = list_versions(self.root)
+        if not versions or not restore_pointer(self.root, versions[-1]):
+            return
+        newest = json.loads((self.root / version_manifest_file(versions[-1])).read_text())
+        if (newest.get("change") or {}).get("command") == self.command:
+            raise AlreadyCommitted(self.root, versions[-1], self.command)
 
     @property
     def note(self) -> str | None:
