@@ -398,3 +398,33 @@ def test_a_clock_offset_beyond_int64_names_the_field(tmp_path, capsys, offset):
     err = capsys.readouterr().err
     assert "Traceback" not in err and "OverflowError" not in err, err
     assert "rec_good" in err and "clock_offset_ns" in err, err
+
+
+def _h264_segment(path: Path, width: int, height: int, frames: int) -> bytes:
+    import av
+
+    with av.open(str(path), "w", format="h264") as c:
+        s = c.add_stream("libx264", rate=30)
+        s.width, s.height, s.pix_fmt = width, height, "yuv420p"
+        for i in range(frames):
+            frame = av.VideoFrame.from_ndarray(np.full((height, width, 3), 40 * i, np.uint8), format="rgb24")
+            for p in s.encode(frame):
+                c.mux(p)
+        for p in s.encode():
+            c.mux(p)
+    return path.read_bytes()
+
+
+def test_a_video_that_grows_past_the_frame_limit_mid_stream_fails_at_that_frame(tmp_path):
+    """Issue 44 item 1: the size check read the container's first declaration only; a stream whose SPS
+    switches to a larger picture after its first frames decoded it (12000x12000: ~850 MB, rc 0)."""
+    small = _h264_segment(tmp_path / "a.h264", 320, 240, 4)
+    big = _h264_segment(tmp_path / "b.h264", 4200, 4200, 1)        # 17.6 Mpx: over the 16.8 Mpx limit
+    video = tmp_path / "grows.h264"
+    video.write_bytes(small + big)
+    got = []
+    with pytest.raises(VideoError) as info:
+        for rgb in iter_video_rgb(video):
+            got.append(rgb.shape)
+    # the decoder holds a few frames back: some of the small ones come out before the refusal, never a big one
+    assert got and set(got) == {(240, 320, 3)} and "16.8 Mpx" in str(info.value), (got, str(info.value))

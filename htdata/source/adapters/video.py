@@ -7,7 +7,7 @@ from typing import Iterator
 
 import numpy as np
 
-from htdata.source.rgb import frame_size_error
+from htdata.source.rgb import MAX_SOURCE_FRAME_PIXELS, frame_size_error
 
 
 class VideoError(Exception):
@@ -72,9 +72,12 @@ VIDEO_DECODE_THREADS = 1
 
 
 def configure_decoder_threads(stream, threads: int = VIDEO_DECODE_THREADS) -> None:
-    """Single-threaded (by default) slice decoding for `stream`; set before the first packet."""
+    """Single-threaded (by default) slice decoding for `stream`, and FFmpeg's own frame-size limit
+    (`max_pixels`: the decoder refuses to allocate a larger picture, so a stream that switches to a
+    12000x12000 SPS mid-way fails at that frame instead of costing ~1 GB); set before the first packet."""
     stream.thread_type = "SLICE"
     stream.codec_context.thread_count = int(threads)
+    stream.codec_context.options = {"max_pixels": str(MAX_SOURCE_FRAME_PIXELS)}
 
 
 def iter_video_rgb(path: Path | str) -> Iterator[np.ndarray]:
@@ -118,9 +121,13 @@ def iter_video_rgb(path: Path | str) -> Iterator[np.ndarray]:
                 frames = packet.decode()  # the final empty packet flushes the decoder
             except _av_errors() as exc:
                 bad = _presentation_index(path, packet.pts, count)
-                raise VideoError(bad, f"video frame does not decode: corrupt packet at frame {bad}, "
+                raise VideoError(bad, f"video frame does not decode: a corrupt packet at frame {bad}, or a picture "
+                                 f"over the {MAX_SOURCE_FRAME_PIXELS / 1e6:.1f} Mpx a source frame may hold; "
                                  f"{count} frames decoded before it ({exc})") from exc
             for frame in frames:
+                why = frame_size_error(int(frame.height), int(frame.width))
+                if why:   # a size changed mid-stream: refused before the RGB copy of it
+                    raise VideoError(count, f"video frame {count} {why}")
                 if frame.is_corrupt:
                     raise VideoError(count, f"video frame {count} is damaged: the decoder concealed corrupt "
                                      f"data (corrupt-frame flag set), {count} frames decoded before it")
