@@ -428,3 +428,66 @@ def test_a_video_that_grows_past_the_frame_limit_mid_stream_fails_at_that_frame(
             got.append(rgb.shape)
     # the decoder holds a few frames back: some of the small ones come out before the refusal, never a big one
     assert got and set(got) == {(240, 320, 3)} and "16.8 Mpx" in str(info.value), (got, str(info.value))
+
+
+def _mp4(path: Path, width: int = 320, height: int = 240, frames: int = 6) -> Path:
+    import av
+
+    with av.open(str(path), "w") as c:
+        s = c.add_stream("libx264", rate=30)
+        s.width, s.height, s.pix_fmt = width, height, "yuv420p"
+        for i in range(frames):
+            for p in s.encode(av.VideoFrame.from_ndarray(np.full((height, width, 3), 30 * i, np.uint8), format="rgb24")):
+                c.mux(p)
+        for p in s.encode():
+            c.mux(p)
+    return path
+
+
+def test_the_mp4_header_is_read_before_ffmpeg_opens_the_file(tmp_path):
+    from htdata.source.adapters.mp4header import Mp4HeaderError, check_mp4_header
+
+    video = _mp4(tmp_path / "ok.mp4")
+    check_mp4_header(video, 320 * 240)                     # the SPS found and read: 320x240 exactly
+    with pytest.raises(Mp4HeaderError, match="320x240"):
+        check_mp4_header(video, 320 * 240 - 1)
+    assert len(list(iter_video_rgb(video))) == 6
+
+
+def test_an_mp4_declaring_3e7_samples_is_refused_before_ffmpeg_indexes_them(tmp_path):
+    """Issue 44 item 2: av.open built an index of every declared sample (~1.16 GB for 3e7) before any check."""
+    from tests.factories.hostile import peak_rss_mb
+
+    video = _mp4(tmp_path / "many.mp4")
+    data = bytearray(video.read_bytes())
+    at = data.find(b"stsz") + 4 + 4 + 4                    # type, version/flags, sample_size: then the count
+    sizes = data[at + 4:]                                  # keep the per-sample table as it is: only the count lies
+    data[at:at + 4] = (30_000_000).to_bytes(4, "big")
+    video.write_bytes(bytes(data[:at + 4]) + bytes(sizes))
+    text, peak = peak_rss_mb(f"""
+from htdata.source.adapters.video import VideoError, iter_video_rgb
+try:
+    list(iter_video_rgb({str(video)!r}))
+    print("DECODED")
+except VideoError as exc:
+    print("REFUSED", exc)
+""")
+    assert "REFUSED" in text and "30000000 samples" in text and peak < 500, (text, peak)
+
+
+def test_an_sps_declaring_16000x16000_is_read_as_such():
+    """The avcC path of the header check, on an SPS written bit by bit (baseline profile, 1000x1000 macroblocks)."""
+    from htdata.source.adapters.mp4header import Mp4HeaderError, _check_avcc, sps_picture_size
+
+    bits = "".join(f"{v:08b}" for v in (66, 0, 40))          # profile_idc, constraints, level_idc
+
+    def ue(v: int) -> str:
+        code = bin(v + 1)[2:]
+        return "0" * (len(code) - 1) + code
+    bits += ue(0) + ue(0) + ue(0) + ue(0) + ue(1) + "0" + ue(999) + ue(999) + "1" + "1"
+    bits += "0" * (-len(bits) % 8)
+    nal = bytes([0x67]) + int(bits, 2).to_bytes(len(bits) // 8, "big")
+    assert sps_picture_size(nal) == (16000, 16000)
+    avcc = bytes([1, 66, 0, 40, 0xFF, 0xE1]) + len(nal).to_bytes(2, "big") + nal
+    with pytest.raises(Mp4HeaderError, match="16000x16000"):
+        _check_avcc(avcc, 1 << 24)

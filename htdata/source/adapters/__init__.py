@@ -14,6 +14,7 @@
     hdf5safe.py       HDF5 a stranger wrote, opened safely (sizes checked, no byte of another file)
     npzrows.py        forward row reads from one .npy member of an .npz, without loading the array
     video.py          packet timestamps (no decode) and streaming RGB decode
+    mp4header.py      an MP4's declared sizes (samples, SPS picture) read from its boxes before FFmpeg opens it
 
 May import: what htdata.source may (the base modules, the format, the glove model) and
 htdata.source's own modules.

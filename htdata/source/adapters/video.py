@@ -7,6 +7,7 @@ from typing import Iterator
 
 import numpy as np
 
+from htdata.source.adapters.mp4header import Mp4HeaderError, check_mp4_header
 from htdata.source.rgb import MAX_SOURCE_FRAME_PIXELS, frame_size_error
 
 
@@ -16,6 +17,16 @@ class VideoError(Exception):
     def __init__(self, frame: int | None, message: str):
         self.frame = frame
         super().__init__(message)
+
+
+def check_declared(path: Path | str, frame: int | None = 0) -> None:
+    """The file's declared sizes, from its MP4 boxes, before FFmpeg opens it (htdata/source/adapters/mp4header.py)."""
+    try:
+        check_mp4_header(path, MAX_SOURCE_FRAME_PIXELS)
+    except Mp4HeaderError as exc:
+        raise VideoError(frame, f"video {exc}") from None
+    except OSError as exc:
+        raise VideoError(None, f"video does not open ({exc})") from exc
 
 
 def _av_errors() -> tuple[type[BaseException], ...]:
@@ -31,6 +42,7 @@ def probe_video_pts_ns(path: Path | str) -> np.ndarray:
     """
     import av
 
+    check_declared(path, None)
     try:
         with av.open(str(path)) as container:
             if not container.streams.video:
@@ -97,6 +109,7 @@ def iter_video_rgb(path: Path | str) -> Iterator[np.ndarray]:
     import av
 
     count = 0
+    check_declared(path)
     try:
         container = av.open(str(path))
     except _av_errors() as exc:
