@@ -34,6 +34,7 @@ import os
 from pathlib import Path
 
 from htdata.errors import AlreadyCommitted
+from htdata.format.table import MANIFEST_FILE
 from htdata.read.reader import DatasetReader
 from htdata.store.lock import WriterLock
 from htdata.store.parts import Part
@@ -101,7 +102,15 @@ class NewVersion:
         if self.resumable:   # an ingest or merge re-run resumes its own way (and says what it restored)
             return
         versions = list_versions(self.root)
-        if not versions or not restore_pointer(self.root, versions[-1]):
+        try:
+            pointed = json.loads((self.root / MANIFEST_FILE).read_text()).get("version")
+        except (OSError, ValueError, AttributeError):
+            return    # a missing or damaged pointer is `htdata repair`'s (it names what it finds)
+        # only the interrupted commit's state: the pointer one version behind a newer version file (a pointer
+        # AHEAD of the newest file means a version file was deleted: that stays an error naming its fix)
+        if not versions or not isinstance(pointed, int) or pointed >= versions[-1]:
+            return
+        if not restore_pointer(self.root, versions[-1]):
             return
         newest = json.loads((self.root / version_manifest_file(versions[-1])).read_text())
         if (newest.get("change") or {}).get("command") == self.command:

@@ -47,10 +47,13 @@ def state(root):
 
 
 def same(s: dict) -> dict:
-    """`state` without the command lines that name the dataset's folder (split records its path)."""
+    """`state` without what names the dataset's folder or the clock: the command line (split records its
+    path) and the split files' digests (a split file records when it was made)."""
     for key, value in s.items():
         if key.startswith("v") and isinstance(value, dict):
             value["manifest"]["change"].pop("command", None)
+            for entry in value["manifest"].get("splits", {}).values():
+                entry.pop("sha256", None)
     return s
 
 
