@@ -6,9 +6,11 @@ after a crash see the old file or the new one, never half of one. Files get
 the mode open() would give (0666 & ~umask), not mkstemp's 0600: a dataset
 and a benchmark's results are shared data.
 
-The store adds what needs its URLs (htdata/store/fsutil.py `sha256_file`);
-the shard writer (htdata/format/shardio.py) links its temp file instead of
-renaming it (a finished shard is never replaced) and fsyncs the folder here.
+A file that must never be replaced (a shard, a version file, the writer lock)
+is created exclusively instead: written whole to a temp file, fsynced, then
+hard-linked to its name, which fails if the name exists (`link_exclusive`,
+`write_bytes_exclusive`): the one "create it complete or not at all" of the
+project. The store adds what needs its URLs (htdata/store/fsutil.py).
 """
 
 from __future__ import annotations
@@ -67,6 +69,41 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
     """`data` as the whole content of `path` (atomic_open)."""
     with atomic_open(path) as f:
         f.write(data)
+
+
+def link_exclusive(temp: str | os.PathLike, path: str | os.PathLike) -> None:
+    """Give the finished file `temp` the name `path` (a hard link: atomic, FileExistsError when `path` exists,
+    never a replacement), then remove `temp` whatever happened."""
+    try:
+        os.link(temp, path)
+    finally:
+        try:
+            Path(temp).unlink(missing_ok=True)
+        except OSError:
+            pass    # a read-only folder: the caller's error matters more
+
+
+def write_bytes_exclusive(path: str | os.PathLike, data: bytes) -> None:
+    """`data` as a new file `path`, complete when it appears (temp + fsync + `link_exclusive`).
+
+    Raises:
+        FileExistsError: `path` exists (nothing is changed).
+        OSError: the temp file could not be written (a full disk, a read-only folder); no temp is left.
+    """
+    path = Path(path)
+    temp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(temp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+    except BaseException:
+        try:
+            temp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        raise
+    link_exclusive(temp, path)
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable
 
-from htdata.fileio import fsync_dir
+from htdata.fileio import fsync_dir, link_exclusive
 from htdata.format.table import MEMBER_ORDER
 
 BLOCK = 512
@@ -297,10 +297,9 @@ class ShardWriter:
         out.f.close()
         temp, final = self._temp_path(part), self._final_path(part)
         try:
-            os.link(temp, final)  # atomic and fails if `final` exists: no overwrite race
+            link_exclusive(temp, final)  # atomic and fails if `final` exists: no overwrite race
         except FileExistsError:
-            raise FileExistsError(f"{final}: shard already exists; refusing to overwrite a finished shard")
-        temp.unlink()
+            raise FileExistsError(f"{final}: shard already exists; refusing to overwrite a finished shard") from None
         if self.fsync:
             fsync_dir(self.directory)
         self.shards.append(ShardRecord(name=final.name, sha256=out.sha.hexdigest(),

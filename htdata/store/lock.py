@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 
 from htdata.errors import HtdataError
+from htdata.fileio import write_bytes_exclusive
 from htdata.store.writable import check_writable_folders
 
 LOCK_FILE = ".lock"
@@ -101,13 +102,8 @@ class WriterLock:
 
         A lock file is therefore never seen half written by another writer.
         """
-        tmp = self.path.with_name(f"{LOCK_FILE}.{os.getpid()}.tmp")
-        try:   # the temp file goes whatever happens (a full disk fails the write: no .lock.<pid>.tmp left)
-            with open(tmp, "wb") as f:
-                f.write(self._record())
-                f.flush()
-                os.fsync(f.fileno())
-            os.link(tmp, self.path)
+        try:   # the temp file goes whatever happens (a full disk fails the write: no temp left)
+            write_bytes_exclusive(self.path, self._record())
             return True
         except FileExistsError:
             return False
@@ -116,11 +112,6 @@ class WriterLock:
                 raise DatasetLocked(f"{self.path.parent}: cannot take the writer lock {self.path}: "
                                     f"{exc.strerror} (a read-only dataset?); nothing was written") from None
             raise
-        finally:
-            try:
-                tmp.unlink(missing_ok=True)
-            except OSError:
-                pass    # a read-only folder: there is no temp file to remove
 
     def _take_over(self, stale: dict) -> None:
         """Remove the lock if it still holds `stale`, under a short mutex so two writers cannot both

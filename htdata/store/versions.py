@@ -44,7 +44,7 @@ from pathlib import Path
 
 from htdata.errors import ArgumentError, HtdataError
 from htdata.faults import crash_point
-from htdata.fileio import write_bytes_atomic
+from htdata.fileio import write_bytes_atomic, write_bytes_exclusive
 from htdata.format.table import EPISODES_FILE, INDEX_FILE, MANIFEST_FILE, SPLITS_DIR
 from htdata.store import storage
 from htdata.store.gcrecord import collected_error
@@ -206,18 +206,11 @@ def summarise(diff: dict) -> dict:
 
 
 def _link_exclusive(path: Path, data: bytes) -> None:
-    """Write `data` to `path`, which must not exist (temp + fsync + link: never overwrites)."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
+    """Write `data` to `path`, which must not exist (fileio.write_bytes_exclusive: never overwrites)."""
     try:
-        os.link(tmp, path)
+        write_bytes_exclusive(path, data)
     except FileExistsError:
         raise FileExistsError(f"{path}: version already exists; versions are never rewritten") from None
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def clear_orphans(root: Path, current: int | None) -> None:
