@@ -12,6 +12,7 @@ def test_create_exclusively_is_written_once():
     """'temp, fsync, link, fail if it exists' lives in htdata/fileio.py (link_exclusive, write_bytes_exclusive);
     the shard writer, the version files and the writer lock call it."""
     pattern = re.compile(r"\bos\.link\(")
-    found = [str(p.relative_to(ROOT)) for p in (ROOT / "htdata").rglob("*.py")
-             if p.name != "fileio.py" and pattern.search(p.read_text())]
-    assert found == [], f"os.link outside htdata/fileio.py: {found}"
+    # merge hard-links another dataset's finished shard to share its bytes (a copy where links fail): not a create
+    other_uses = {"htdata/fileio.py", "htdata/curate/merge.py"}
+    found = [str(p.relative_to(ROOT)) for p in (ROOT / "htdata").rglob("*.py") if pattern.search(p.read_text())]
+    assert sorted(set(found) - other_uses) == [], f"os.link outside htdata/fileio.py: {found}"
