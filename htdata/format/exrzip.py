@@ -55,6 +55,9 @@ _PIXEL_TYPES = {np.dtype(np.float16): 1, np.dtype(np.float32): 2}   # OpenEXR HA
 _ZIP_COMPRESSION = 3
 
 
+MAX_CHANNEL_NAME = 31   # bytes of a channel name in a header without the long-names flag (OpenEXR's limit)
+
+
 def _attribute(name: str, type_name: str, value: bytes) -> bytes:
     return name.encode() + b"\0" + type_name.encode() + b"\0" + struct.pack("<i", len(value)) + value
 
@@ -124,6 +127,12 @@ def zip_writable(pixels: np.ndarray) -> bool:
 
 def encode_zip_exr(pixels: np.ndarray, channel: str = "Y") -> bytes:
     """A (H, W) float16 or float32 array -> the bytes of a one-channel scanline ZIP EXR holding it exactly."""
+    name = channel.encode("utf-8") if isinstance(channel, str) else b""
+    if not 0 < len(name) <= MAX_CHANNEL_NAME or b"\0" in name:
+        # the header stores it NUL-terminated, without the long-names flag: 1..31 bytes, no NUL, or readers
+        # would take the rest of the header for the name
+        raise ValueError(f"encode_zip_exr: channel name {channel!r} must be 1..{MAX_CHANNEL_NAME} UTF-8 bytes "
+                         f"without NUL")
     arr = np.ascontiguousarray(pixels)
     if not zip_writable(arr):
         raise ValueError(f"encode_zip_exr: expected a non-empty 2-D float16/float32 array, got {arr.shape} {arr.dtype}")

@@ -193,3 +193,12 @@ def test_a_half_map_is_stored_as_it_is_and_checked_by_its_own_values():
         encode_tactile(np.zeros((224, 223), np.float16))
     assert encode_tactile(m.astype(np.float16), pixel_type="float") == encode_tactile(m.astype(np.float16).astype(np.float32),
                                                                                        pixel_type="float")
+
+
+@pytest.mark.parametrize("bad", ["", "Y\0Z", "x" * 32, 7])
+def test_the_writer_refuses_a_channel_name_a_header_cannot_hold(bad):
+    from htdata.format.exrzip import encode_zip_exr
+
+    with pytest.raises(ValueError, match="channel name"):
+        encode_zip_exr(np.zeros((4, 4), np.float16), channel=bad)
+    assert encode_zip_exr(np.zeros((4, 4), np.float16), channel="x" * 31)   # the longest short name
