@@ -16,6 +16,9 @@ from pathlib import Path
 
 CONTAINERS = {b"moov", b"trak", b"mdia", b"minf", b"stbl"}
 MAX_BOXES = 10_000            # a box tree this wide is no camera's file
+# FFmpeg indexes every declared sample (tens of bytes each) at open: 4M samples is 18.5 h at 60 fps and
+# ~150 MB of index; a 30 MB file declaring 3e7 one-byte samples cost ~0.4-1.2 GB before any check
+MAX_VIDEO_SAMPLES = 4_000_000
 
 
 class Mp4HeaderError(ValueError):
@@ -67,9 +70,12 @@ def _check_stsz(f, body: int, end: int, file_size: int) -> None:
     if len(data) < 12:
         raise Mp4HeaderError("stsz box shorter than its header")
     _, sample_size, count = struct.unpack(">III", data)
-    if count > file_size:
-        raise Mp4HeaderError(f"stsz declares {count} samples in a {file_size}-byte file (each sample is at least "
-                             f"one byte): refused before opening")
+    if count > MAX_VIDEO_SAMPLES:
+        raise Mp4HeaderError(f"stsz declares {count} samples, more than a recording may hold ({MAX_VIDEO_SAMPLES}: "
+                             f"FFmpeg would index them all at open): refused before opening")
+    if count * max(sample_size, 1) > file_size:
+        raise Mp4HeaderError(f"stsz declares {count} samples of {sample_size or 'at least 1'} bytes in a "
+                             f"{file_size}-byte file: refused before opening")
     if sample_size == 0 and body + 12 + 4 * count > end:
         raise Mp4HeaderError(f"stsz declares {count} sample sizes but holds {max(0, (end - body - 12) // 4)}")
 
