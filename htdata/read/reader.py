@@ -286,12 +286,27 @@ class DatasetReader:
     def _decode_row(self, row: SampleRow, members: dict[str, bytes], where: str, suffixes) -> dict:
         """decode_sample of the members asked for, plus the maps rendered from raw rows when not stored."""
         asked = members if suffixes is None else {s: b for s, b in members.items() if s in suffixes}
+        if self._renderer is None:
+            self._check_stored_maps(row, where, suffixes)
         out = decode_sample(asked, where)
         if self._renderer is not None:
             for hand in HANDS:
                 if raw_member(hand) in members and (suffixes is None or tactile_member(hand) in suffixes):
                     out["tactile"][hand] = self._renderer.render(row.episode, hand, members, where)
         return out
+
+    def _check_stored_maps(self, row: SampleRow, where: str, suffixes) -> None:
+        """A version that records stored maps serves none from a sample holding raw rows but no map (a manifest
+        claiming maps over shards written with maps = "raw"): a named error, as validate's hand_member FAIL,
+        never a sample with its maps silently missing."""
+        sizes = dict(zip(MEMBER_ORDER, row.sizes))
+        for hand in HANDS:
+            if suffixes is not None and tactile_member(hand) not in suffixes:
+                continue
+            if sizes.get(raw_member(hand), 0) and not sizes.get(tactile_member(hand), 0):
+                raise DatasetError(f"{where}: holds {raw_member(hand)} but no {tactile_member(hand)} although the "
+                                   f"version records stored maps: the manifest does not describe these shards "
+                                   f"(`htdata validate` lists every such sample)")
 
     def window(self, episode: str | int, frame: int, k: int) -> list[dict]:
         """Decoded frames T-k..T (k+1 frames) of one episode; never crosses its start.

@@ -123,6 +123,21 @@ def test_a_map_member_in_a_version_without_maps_fails_validate(pair, tmp_path):
     assert "hand_member" in failed and "maps = \"raw\"" in failed["hand_member"]
 
 
+def test_a_manifest_claiming_stored_maps_over_shards_without_them_is_refused_by_the_reader(pair, tmp_path):
+    """Issue 44 weak edge: it was served as samples with no maps at all (validate already failed it)."""
+    from htdata.errors import DatasetError
+
+    copy = shutil.copytree(pair[1], tmp_path / "ds")
+    manifest = DatasetReader(copy).manifest
+    manifest["codec"]["tactile"]["maps"] = "stored"
+    rewrite_manifest(copy, manifest)
+    reader = DatasetReader(copy)
+    with pytest.raises(DatasetError, match=r"raw_(left|right)\.npy but no tactile_(left|right)\.exr"):
+        for i in range(len(reader)):
+            reader.decoded(i)
+    assert not validate_dataset(copy)["ok"]
+
+
 def test_inspect_and_export_run_on_rendered_maps(pair, tmp_path, capsys):
     stored, rendered = pair
     assert cli(["preview", str(rendered), str(tmp_path / "p.png")]) == 0
