@@ -104,6 +104,19 @@ def test_timestamp_count_mismatch_noted(tmp_path, adapter):
         assert len(list(st.iter_rgb())) == 6
 
 
+def test_a_timestamp_count_far_from_the_video_is_a_printed_warning(tmp_path, adapter, capsys):
+    """Issue 44 weak edge: 100x more stamps than frames was recorded as a note but never printed."""
+    from tests.factories import ingest_cli
+
+    write_native_recording(tmp_path / "raw" / "r", recording(6, n_ts=600))
+    (ref,) = adapter.discover(tmp_path / "raw", {})
+    with adapter.open(ref, {}) as st:
+        assert any(n.startswith("warning: ego_timestamps.npy has 594 frames more than video") and "100x apart" in n
+                   for n in st.notes), st.notes
+    assert ingest_cli("--pipeline", "native", tmp_path / "raw", tmp_path / "ds") == 0
+    assert "100x apart, so they may not describe the same recording" in capsys.readouterr().err
+
+
 def test_schema_violation_names_the_file(tmp_path, adapter):
     write_native_recording(tmp_path / "r", recording(2))
     path = tmp_path / "r/recording.json"

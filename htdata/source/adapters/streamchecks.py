@@ -55,12 +55,22 @@ def check_tactile_shape(ref: EpisodeRef, hand: str, shape: tuple[int, ...], file
                            f"{layout_id!r} grid {grid} (expected (M, {grid[0]}, {grid[1]}))", file=file)
 
 
+# Two descriptions of one stream that disagree by this factor or more describe different recordings (a
+# wrong timestamps file, a cut video): the note becomes a warning the ingest prints, not only records.
+MISMATCH_WARN_RATIO = 2
+
+
 def file_frame_mismatch_note(what_a: str, n_a: int, what_b: str, n_b: int) -> str | None:
-    """Note text for a length mismatch aligned on the shortest stream (None when equal)."""
+    """Note text for a length mismatch aligned on the shortest stream (None when equal); a "warning:" one
+    (printed by the ingest) when one count is MISMATCH_WARN_RATIO times the other or more."""
     if n_a == n_b:
         return None
     more, less, d = (what_a, what_b, n_a - n_b) if n_a > n_b else (what_b, what_a, n_b - n_a)
-    return f"{more} has {d} frame{'s' if d != 1 else ''} more than {less}: aligned on shortest ({min(n_a, n_b)})"
+    text = f"{more} has {d} frame{'s' if d != 1 else ''} more than {less}: aligned on shortest ({min(n_a, n_b)})"
+    if max(n_a, n_b) >= MISMATCH_WARN_RATIO * max(min(n_a, n_b), 1):
+        ratio = max(n_a, n_b) / max(min(n_a, n_b), 1)
+        return f"warning: {text}; {ratio:.0f}x apart, so they may not describe the same recording"
+    return text
 
 
 def iter_episode_video(ref: EpisodeRef, video: Path, n_frames: int) -> Iterator[tuple[int, np.ndarray]]:
