@@ -125,7 +125,8 @@ class CellActivity:
         np.minimum(self.lo, np.where(finite, x, np.inf).min(axis=0), out=self.lo)
         np.maximum(self.hi, np.where(finite, x, -np.inf).max(axis=0), out=self.hi)
         seq = np.concatenate([self._tail, x]) if len(self._tail) else x
-        with np.errstate(invalid="ignore"):
+        # a huge raw value (3e38 in float32) overflows to inf here and is left out by `ok` below: no warning
+        with np.errstate(invalid="ignore", over="ignore"):
             d = np.abs(seq[2:] - 2 * seq[1:-1] + seq[:-2]) if len(seq) > 2 else np.zeros((0, *self.grid), np.float32)
         ok = np.isfinite(d)
         self.abs_diff += np.where(ok, d, 0.0).sum(axis=0, dtype=np.float64)

@@ -54,3 +54,18 @@ def test_cell_wander_needs_two_blocks():
     assert np.isnan(act.cell_wander()).all() and act.wander() == 0.0
     act.add(np.ones((1, 2, 2), np.float32))
     assert np.isfinite(act.cell_wander()).all()
+
+
+def test_huge_raw_values_leave_no_numpy_warning():
+    """Issue 44 weak edge: a glove row of 3e38 leaked 'overflow encountered in multiply' onto the console."""
+    import warnings
+
+    from htdata.glove.activity import CellActivity
+
+    rows = np.full((12, 4, 4), 500.0, np.float32)
+    rows[5:8] = 3e38
+    act = CellActivity((4, 4))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        act.add(rows)
+    assert act.frames == 12
