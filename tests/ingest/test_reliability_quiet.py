@@ -76,12 +76,12 @@ def lines(text: str) -> list[str]:
 
 def test_read_only_dataset_gc_and_ingest_one_line(tmp_path, monkeypatch, capsys):
     root = native_dataset(tmp_path)
-    import htdata.store.lock as lock
+    import htdata.fileio as fileio   # the lock is created by fileio.write_bytes_exclusive
 
     def read_only(path, *a, **kw):
         raise OSError(errno.EROFS, "Read-only file system", str(path))
 
-    monkeypatch.setattr(lock, "open", read_only, raising=False)
+    monkeypatch.setattr(fileio, "open", read_only, raising=False)
     monkeypatch.setattr(Path, "unlink", lambda self, missing_ok=False: read_only(self))
     capsys.readouterr()
     assert main(["gc", str(root)]) == 2
