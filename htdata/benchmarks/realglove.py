@@ -40,6 +40,7 @@ from htdata.benchmarks.realglovecells import cells_markdown, cells_rows
 from htdata.benchmarks.realglovev2 import (
     DERIVED_GLOVES,
     config_for,
+    derived_clips,
     derived_counts,
     derived_layout,
     glove_truths,
@@ -200,9 +201,11 @@ def write_native_clips(clips: list[RealClip], layouts: dict[str, Layout], root: 
     return rec_dir
 
 
-def dataset_rows(clips: list[RealClip], layouts: dict[str, Layout], work: Path) -> dict:
+def dataset_rows(clips: list[RealClip], layouts: dict[str, Layout], work: Path,
+                 truth_clips: list[RealClip] | None = None) -> dict:
     """A default ingest of the clips (no [normalise] table), then `htdata stats` contact share per hand against
-    the truth, and the pressed frames `htdata trim --idle --dry-run` would cut."""
+    the truth (of `truth_clips`, the original presses of a derived glove's clips), and the pressed frames
+    `htdata trim --idle --dry-run` would cut."""
     rec_dir = write_native_clips(clips, layouts, work)
     out = work / "dataset"
     shutil.rmtree(out, ignore_errors=True)
@@ -210,7 +213,7 @@ def dataset_rows(clips: list[RealClip], layouts: dict[str, Layout], work: Path) 
     ingest([Source(load_pipeline("native"), rec_dir)], out, workers=0, progress=False,
            layout_dirs=(str(work / "layouts"),), command="htdata bench (real glove)")
     ingest_s = time.perf_counter() - t0
-    by_id = {f"nat-clip_{c.clip}": c for c in clips}
+    by_id = {f"nat-clip_{c.clip}": c for c in (truth_clips or clips)}
     shares, cut_pressed, cut_frames = [], 0, 0
     with DatasetReader(out) as reader:
         per_episode, _ = episode_stats(reader, cache_dir=None)
@@ -246,7 +249,10 @@ def realglove_rows(folder: str | Path | None, work: Path, quick: bool = False) -
     work.mkdir(parents=True, exist_ok=True)
     return {"folder": str(folder), "clips": len(clips), "frames": int(sum(len(c.counts) for c in clips)),
             "targets": TARGETS, "normalise": normalise_rows(clips, layouts),
-            "dataset": dataset_rows(clips, layouts, work), **cells_rows(clips, layouts, leave_one_out=not quick)}
+            "dataset": dataset_rows(clips, layouts, work), "dataset_gloves": [
+                {"glove": g[0], **dataset_rows(*derived_clips(g, clips, layouts), work / f"glove_{k}", clips)}
+                for k, g in enumerate(DERIVED_GLOVES[1:], 1)],
+            **cells_rows(clips, layouts, leave_one_out=not quick)}
 
 
 def realglove_markdown(d: dict) -> list[str]:
@@ -279,6 +285,12 @@ def realglove_markdown(d: dict) -> list[str]:
                   f"with >= {CONTACT_CELLS} pressed cells (target 0).", ""]
     lines += table(ds["contact_share"], [("clip", "clip"), ("hand", "hand"), ("truth", "contact share, truth"),
                                          ("stats", "htdata stats")])
+    lines += ["", "The same default ingest of each derived glove, against the original presses:", ""]
+    lines += table([{"glove": g["glove"], "left": g["contact_share_error"]["left"],
+                     "right": g["contact_share_error"]["right"], "cut": g["idle_cut_frames"],
+                     "cut_pressed": g["idle_cut_pressed_frames"]} for g in d.get("dataset_gloves", [])],
+                   [("glove", "glove"), ("left", "contact share worst error, left"), ("right", "right"),
+                    ("cut", "trim --idle cuts"), ("cut_pressed", "of them >= 7 pressed cells")])
     lines += ["", f"Moving cells and `layouts suggest` (htdata/benchmarks/realglovecells.py; targets: flag precision "
                   f">= {t['moving_precision']:.2f} with no flag under {MOVING_STILL:g} counts; suggest >= "
                   f"{t['suggest_blocks']} blocks per hand, cell precision and recall >= {t['suggest_precision']:.2f})"

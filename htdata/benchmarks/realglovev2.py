@@ -24,7 +24,7 @@ from typing import Callable
 
 import numpy as np
 
-from htdata.benchmarks.realclips import RealClip
+from htdata.benchmarks.realclips import HANDS, RealClip
 from htdata.glove.layouts import Layout
 from htdata.glove.normalise import NormaliseConfig
 from htdata.glove.rasterise import Rasteriser
@@ -153,3 +153,13 @@ def config_for(layout: Layout, plan: tuple[str, float] | None) -> NormaliseConfi
     if plan is not None:
         cfg = dataclasses.replace(cfg, baseline=plan[0], noise_k=plan[1]).validate()
     return cfg
+
+
+def derived_clips(glove: DerivedGlove, clips: list[RealClip],
+                  layouts: dict[str, Layout]) -> tuple[list[RealClip], dict[str, Layout]]:
+    """The clips and layouts as the derived glove records them (its counts, its value block)."""
+    truths = {h: glove_truths(clips, h, layouts[h].live_mask) for h in HANDS}
+    out = [RealClip(c.clip, c.label, c.fps, np.stack(
+        [derived_counts(glove, c.hand(h), truths[h][c.clip], layouts[h].live_mask) for h in HANDS], axis=1))
+        for c in clips]
+    return out, {h: derived_layout(glove, layouts[h]) for h in HANDS}

@@ -13,7 +13,13 @@ import pytest
 
 from htdata.benchmarks.realclips import HANDS, RealClip, load_real_glove
 from htdata.benchmarks.realglove import TARGETS, HandTruth, normalise_rows
-from htdata.benchmarks.realglovev2 import DERIVED_GLOVES, derived_counts, derived_layout, glove_truths
+from htdata.benchmarks.realglovev2 import (
+    DERIVED_GLOVES,
+    derived_clips,
+    derived_counts,
+    derived_layout,
+    glove_truths,
+)
 from tests.factories.realglove import real_glove_dir
 
 
@@ -35,6 +41,12 @@ def _clips(held_cell: int = 3) -> tuple[list[RealClip], np.ndarray]:
 @dataclasses.dataclass(frozen=True)
 class _Value:
     value: dict
+
+
+@dataclasses.dataclass(frozen=True)
+class _Layout:
+    value: dict
+    live_mask: np.ndarray
 
 
 def test_the_rest_comes_from_the_glove_so_a_grip_held_through_a_clip_is_pressed():
@@ -89,3 +101,12 @@ def test_an_inverted_glove_reads_as_the_direct_one(real_rows):
     rows = {r["glove"].split(" ")[0]: r for r in real_rows[2]}
     for key in ("v2_rest_leakage_mean", "v2_held_grip_kept", "v2_held_grip_kept_start", "v2_quiet_false_contact"):
         assert rows["inverted"][key] == pytest.approx(rows["real"][key], abs=0.01), key
+
+
+def test_derived_clips_keep_the_truth_of_the_original_presses():
+    clips, live = _clips()
+    layouts = {h: _Layout({"convention": "direct", "max": 1023}, live) for h in HANDS}
+    half, lays = derived_clips(next(g for g in DERIVED_GLOVES if g[0] == "half-sensitive"), clips, layouts)
+    assert [c.clip for c in half] == [c.clip for c in clips] and lays["left"].value["max"] == 1023
+    rest = glove_truths(clips, "left", live)[2].rest[3]
+    assert np.allclose(half[2].hand("left")[:, 0, 3] - rest, (clips[2].hand("left")[:, 0, 3] - rest) / 2, atol=0.5)
