@@ -24,6 +24,7 @@
     realclips.py   raw-count glove clips measured by their counts: a real-glove folder (given explicitly) or the sample glove
     realglove.py   "real glove": the raw-count defaults against the folder README's measures and targets (+ stats, trim)
     realglovecells.py  moving cells and suggested blocks on real glove recordings (a folder given explicitly)
+    realglovev2.py  measures version 2 (rest from the glove, not the clip) and the gloves derived from the clips
     lag.py         the tactile-video lag estimator: error against known lags, cost per episode minute
     rgb.py         RGB: JPEG quality vs bytes vs PSNR, resize method vs time vs error
     stats.py       `htdata stats` speed against the loader's tactile-only decode rate

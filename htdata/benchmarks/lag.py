@@ -24,6 +24,7 @@ from htdata.benchmarks.sources import discover
 from htdata.benchmarks.tables import fmt as _fmt
 from htdata.benchmarks.tables import table
 from htdata.errors import ArgumentError
+from htdata.glove.glovevalue import is_inverted
 from htdata.glove.layouts import load_layout
 from htdata.glove.normalise import Normaliser
 from htdata.source.lag import _contact_series, _rgb_series, estimate_episode_lag, estimate_lag
@@ -65,7 +66,7 @@ def write_shifted_native(folder: Path, task: str, seed: int, n_frames: int, lag_
     rec_hands = {}
     for hand, layout_id in LAYOUTS[spec.hands].items():
         layout = load_layout(layout_id)
-        fill = float("nan") if layout.value.get("convention") == "direct" else 0.0
+        fill = float("nan") if not is_inverted(layout.value.get("convention")) else 0.0
         contact = np.concatenate([w.contact_grids(layout, hand, t_glove, fill=fill) for w in worlds])
         if not touching:
             contact = np.where(np.isnan(contact), contact, 0.0).astype(np.float32)

@@ -27,7 +27,6 @@ The clips (a folder, or the sample glove's corpus) are htdata/benchmarks/realcli
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import shutil
 import time
@@ -38,6 +37,16 @@ import numpy as np
 
 from htdata.benchmarks.realclips import HANDS, RealClip, load_real_glove
 from htdata.benchmarks.realglovecells import cells_markdown, cells_rows
+from htdata.benchmarks.realglovev2 import (
+    DERIVED_GLOVES,
+    config_for,
+    derived_clips,
+    derived_counts,
+    derived_layout,
+    glove_truths,
+    hand_counts_v2,
+    v2_summary,
+)
 from htdata.benchmarks.tables import table
 from htdata.curate.idle import IdleConfig, plan_idle
 from htdata.glove.layouts import Layout
@@ -127,36 +136,45 @@ def _ratio(a: int, b: int) -> float | None:
     return a / b if b else None
 
 
-def normalise_rows(clips: list[RealClip], layouts: dict[str, Layout], baselines: bool = True) -> list[dict]:
-    """One row per setting (the default, then every baseline unless not `baselines`): the README's
-    normalisation measures."""
+def normalise_rows(clips: list[RealClip], layouts: dict[str, Layout], baselines: bool = True,
+                   gloves: tuple = DERIVED_GLOVES) -> list[dict]:
+    """One row per (glove, setting): the real glove and each derived glove (realglovev2.DERIVED_GLOVES), the
+    default and then every baseline unless not `baselines`; version 1's measures and version 2's side by side,
+    both against the original presses."""
     plans = [("default (no [normalise] table)", None)] + [(f"{b}" + (f", noise_k={k:g}" if k else ""), (b, k))
                                                           for b, k in (BASELINE_ROWS if baselines else ())]
     rasters = {h: Rasteriser(layouts[h]) for h in HANDS}
     truths = {(c.clip, h): HandTruth.of(c.hand(h), layouts[h].live_mask) for c in clips for h in HANDS}
+    truths2 = {h: glove_truths(clips, h, layouts[h].live_mask) for h in HANDS}
     rows = []
-    for label, plan in plans:
-        total, leaks, seconds, frames = {}, [], 0.0, 0
-        for clip in clips:
-            for h in HANDS:
-                cfg = NormaliseConfig.from_layout_value(layouts[h].value)
-                if plan is not None:
-                    cfg = dataclasses.replace(cfg, baseline=plan[0], noise_k=plan[1]).validate()
-                t0 = time.perf_counter()
-                values = normalised(clip.hand(h), layouts[h], cfg, clip.fps)
-                seconds += time.perf_counter() - t0
-                frames += len(values)
-                c = hand_counts(truths[(clip.clip, h)], values, layouts[h], rasters[h])
-                total = {k: total.get(k, 0) + n for k, n in c.items()}
-                leaks.append((f"clip {clip.clip} {h}", _ratio(c["rest_quiet_lit"], c["rest_quiet"]) or 0.0))
-        worst = max(leaks, key=lambda x: x[1])
-        rows.append({"setting": label, "rest_leakage_mean": float(np.mean([v for _, v in leaks])),
-                     "rest_leakage_worst": worst[1], "rest_leakage_worst_at": worst[0],
-                     "rest_canvas_lit": _ratio(total["rest_pixels_lit"], total["rest_pixels"]),
-                     "held_grip_kept": _ratio(total["pressed_kept"], total["pressed"]),
-                     "held_grip_kept_start": _ratio(total["start_kept"], total["start_pressed"]),
-                     "quiet_false_contact": _ratio(total["quiet_lit"], total["quiet"]),
-                     "us_per_hand_frame": 1e6 * seconds / max(frames, 1)})
+    for glove in gloves:
+        counts = {(c.clip, h): derived_counts(glove, c.hand(h), truths2[h][c.clip], layouts[h].live_mask)
+                  for c in clips for h in HANDS}
+        glayouts = {h: derived_layout(glove, layouts[h]) for h in HANDS}
+        for label, plan in plans:
+            total, total2, leaks, leaks2, seconds, frames = {}, {}, [], [], 0.0, 0
+            for clip in clips:
+                for h in HANDS:
+                    cfg = config_for(glayouts[h], plan)
+                    t0 = time.perf_counter()
+                    values = normalised(counts[(clip.clip, h)], glayouts[h], cfg, clip.fps)
+                    seconds += time.perf_counter() - t0
+                    frames += len(values)
+                    c = hand_counts(truths[(clip.clip, h)], values, layouts[h], rasters[h])
+                    c2 = hand_counts_v2(truths2[h][clip.clip], values, layouts[h], rasters[h])
+                    total = {k: total.get(k, 0) + n for k, n in c.items()}
+                    total2 = {k: total2.get(k, 0) + n for k, n in c2.items()}
+                    leaks.append((f"clip {clip.clip} {h}", _ratio(c["rest_quiet_lit"], c["rest_quiet"]) or 0.0))
+                    leaks2.append((f"clip {clip.clip} {h}", _ratio(c2["rest_quiet_lit"], c2["rest_quiet"]) or 0.0))
+            worst = max(leaks, key=lambda x: x[1])
+            rows.append({"glove": glove[0], "setting": label, **v2_summary(total2, leaks2),
+                         "rest_leakage_mean": float(np.mean([v for _, v in leaks])),
+                         "rest_leakage_worst": worst[1], "rest_leakage_worst_at": worst[0],
+                         "rest_canvas_lit": _ratio(total["rest_pixels_lit"], total["rest_pixels"]),
+                         "held_grip_kept": _ratio(total["pressed_kept"], total["pressed"]),
+                         "held_grip_kept_start": _ratio(total["start_kept"], total["start_pressed"]),
+                         "quiet_false_contact": _ratio(total["quiet_lit"], total["quiet"]),
+                         "us_per_hand_frame": 1e6 * seconds / max(frames, 1)})
     return rows
 
 
@@ -183,9 +201,11 @@ def write_native_clips(clips: list[RealClip], layouts: dict[str, Layout], root: 
     return rec_dir
 
 
-def dataset_rows(clips: list[RealClip], layouts: dict[str, Layout], work: Path) -> dict:
+def dataset_rows(clips: list[RealClip], layouts: dict[str, Layout], work: Path,
+                 truth_clips: list[RealClip] | None = None) -> dict:
     """A default ingest of the clips (no [normalise] table), then `htdata stats` contact share per hand against
-    the truth, and the pressed frames `htdata trim --idle --dry-run` would cut."""
+    the truth (of `truth_clips`, the original presses of a derived glove's clips), and the pressed frames
+    `htdata trim --idle --dry-run` would cut."""
     rec_dir = write_native_clips(clips, layouts, work)
     out = work / "dataset"
     shutil.rmtree(out, ignore_errors=True)
@@ -193,7 +213,7 @@ def dataset_rows(clips: list[RealClip], layouts: dict[str, Layout], work: Path) 
     ingest([Source(load_pipeline("native"), rec_dir)], out, workers=0, progress=False,
            layout_dirs=(str(work / "layouts"),), command="htdata bench (real glove)")
     ingest_s = time.perf_counter() - t0
-    by_id = {f"nat-clip_{c.clip}": c for c in clips}
+    by_id = {f"nat-clip_{c.clip}": c for c in (truth_clips or clips)}
     shares, cut_pressed, cut_frames = [], 0, 0
     with DatasetReader(out) as reader:
         per_episode, _ = episode_stats(reader, cache_dir=None)
@@ -229,7 +249,10 @@ def realglove_rows(folder: str | Path | None, work: Path, quick: bool = False) -
     work.mkdir(parents=True, exist_ok=True)
     return {"folder": str(folder), "clips": len(clips), "frames": int(sum(len(c.counts) for c in clips)),
             "targets": TARGETS, "normalise": normalise_rows(clips, layouts),
-            "dataset": dataset_rows(clips, layouts, work), **cells_rows(clips, layouts, leave_one_out=not quick)}
+            "dataset": dataset_rows(clips, layouts, work), "dataset_gloves": [
+                {"glove": g[0], **dataset_rows(*derived_clips(g, clips, layouts), work / f"glove_{k}", clips)}
+                for k, g in enumerate(DERIVED_GLOVES[1:], 1)],
+            **cells_rows(clips, layouts, leave_one_out=not quick)}
 
 
 def realglove_markdown(d: dict) -> list[str]:
@@ -242,11 +265,17 @@ def realglove_markdown(d: dict) -> list[str]:
              f"{t['rest_leakage_mean']:.0%}, worst <= {t['rest_leakage_worst']:.0%}; held grip kept >= "
              f"{t['held_grip_kept']:.2f} (all frames and the start of mid-grasp clips); quiet false contact <= "
              f"{t['quiet_false_contact']:.0%}.", ""]
+    lines += ["Version 2 (rest from the glove: htdata/benchmarks/realglovev2.py), every glove derived from the clips "
+              "with the same truth (the original presses); version 1's columns (rest from the clip) beside it.", ""]
     lines += table(dash(d["normalise"]), [
-        ("setting", "setting"), ("rest_leakage_mean", "rest leakage mean"), ("rest_leakage_worst", "worst"),
-        ("rest_leakage_worst_at", "worst at"), ("rest_canvas_lit", "rest canvas px > 0"),
-        ("held_grip_kept", "held grip kept"), ("held_grip_kept_start", "kept, start of mid-grasp"),
-        ("quiet_false_contact", "quiet false contact"), ("us_per_hand_frame", "us / hand-frame")])
+        ("glove", "glove"), ("setting", "setting"), ("v2_rest_leakage_mean", "v2 rest leakage mean"),
+        ("v2_rest_leakage_worst", "v2 worst"), ("v2_rest_canvas_lit", "v2 rest canvas px > 0"),
+        ("v2_held_grip_kept", "v2 held grip kept"), ("v2_held_grip_kept_start", "v2 kept, start of mid-grasp"),
+        ("v2_held_grip_kept_held_cells", "v2 kept, cells held through"),
+        ("v2_quiet_false_contact", "v2 quiet false contact"),
+        ("rest_leakage_mean", "v1 rest leakage mean"), ("rest_leakage_worst", "v1 worst"),
+        ("held_grip_kept", "v1 held grip kept"), ("held_grip_kept_start", "v1 kept, start"),
+        ("quiet_false_contact", "v1 quiet false contact"), ("us_per_hand_frame", "us / hand-frame")])
     ds = d["dataset"]
     err = ", ".join(f"{h} {e:.3f}" for h, e in ds["contact_share_error"].items())
     lines += ["", f"Default ingest of the clips ({ds['frames']} frames, {ds['ingest_s']:.1f} s, inline): `htdata "
@@ -256,6 +285,12 @@ def realglove_markdown(d: dict) -> list[str]:
                   f"with >= {CONTACT_CELLS} pressed cells (target 0).", ""]
     lines += table(ds["contact_share"], [("clip", "clip"), ("hand", "hand"), ("truth", "contact share, truth"),
                                          ("stats", "htdata stats")])
+    lines += ["", "The same default ingest of each derived glove, against the original presses:", ""]
+    lines += table([{"glove": g["glove"], "left": g["contact_share_error"]["left"],
+                     "right": g["contact_share_error"]["right"], "cut": g["idle_cut_frames"],
+                     "cut_pressed": g["idle_cut_pressed_frames"]} for g in d.get("dataset_gloves", [])],
+                   [("glove", "glove"), ("left", "contact share worst error, left"), ("right", "right"),
+                    ("cut", "trim --idle cuts"), ("cut_pressed", "of them >= 7 pressed cells")])
     lines += ["", f"Moving cells and `layouts suggest` (htdata/benchmarks/realglovecells.py; targets: flag precision "
                   f">= {t['moving_precision']:.2f} with no flag under {MOVING_STILL:g} counts; suggest >= "
                   f"{t['suggest_blocks']} blocks per hand, cell precision and recall >= {t['suggest_precision']:.2f})"

@@ -84,6 +84,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from htdata.glove.contact import THRESHOLD as CONTACT_THRESHOLD
+from htdata.glove.glovevalue import is_inverted
 from htdata.glove.restlevel import nanpercentile_columns
 
 MOVING_K = 12.0          # x the glove's fast (second-difference) noise
@@ -288,7 +289,7 @@ def unmapped_moving(activity: CellActivity, layout) -> MovingCells:
     """Cells outside every block (not bend, not unused) that move, measured against the layout's live cells,
     with the layout's step, full scale (value.max) and direction (value.convention)."""
     return moving_cells(activity, layout.unmapped_mask, layout.live_mask, layout.value.get("step"),
-                        full_scale=layout.value.get("max"), inverted=layout.value.get("convention") == "inverted")
+                        full_scale=layout.value.get("max"), inverted=is_inverted(layout.value.get("convention")))
 
 
 def describe_cells(cells, ranges, limit: int = 12) -> str:

@@ -22,7 +22,7 @@ Noise floor: a baseline alone leaves raw-count gloves lit at rest (noise and
 wander around it read as contact). `noise_k` sets a per-taxel floor of k
 robust spreads (rest window, or the episode's rest: below), `noise_floor` a
 constant one in unit values; values up to the floor read 0.
-A layout of raw counts (direct, value.max > 1) without a [normalise.<id>]
+A layout of raw counts (value.max > 1, either direction: htdata.glove.glovevalue) without a [normalise.<id>]
 table gets RAW_COUNT_DEFAULTS (each cell's 10th percentile per 60 s window + noise_k 5), not baseline "none".
 
 Streaming: fitted once (`fit_baseline`: first chunk; `fit_episode`), then `apply` chunk by chunk, same
@@ -51,13 +51,13 @@ import numpy as np
 
 from htdata.errors import ConfigError, DatasetError
 from htdata.glove.baselinefit import drift_baseline_at, fit_first_frames, fit_whole_episode
+from htdata.glove.glovevalue import CONVENTIONS, is_inverted, is_raw_count, pressure_share
 from htdata.glove.restlevel import load_taxel_calibration
 
-CONVENTIONS = ("inverted", "direct")
 BASELINES = ("none", "first_frame", "rest_window", "quietest", "percentile", "drift")
 # baselines fitted on the whole episode (`fit_episode`), not on its first chunk
 EPISODE_BASELINES = ("quietest", "percentile", "drift")
-# A raw-count glove (direct, value.max > 1) without a [normalise.<id>] table: "none" would read its rest level
+# A raw-count glove (value.max > 1, counts rising or falling with pressure) without a [normalise.<id>] table: "none" would read its rest level
 # (~557 of 1023 on a knit glove) as 0.55 pressure everywhere (issue 27). Each cell's own rest (its 10th percentile per
 # minute: a press only raises a cell) and a per-cell noise floor hold a grip a real glove's mean level cannot see
 # (issue 34). Measured in `make bench`, "real glove" (docs/INGEST.md).
@@ -140,8 +140,8 @@ class NormaliseConfig:
     @classmethod
     def from_layout_value(cls, value: dict) -> "NormaliseConfig":
         """Default config from a layout's `value` block ({"convention", "max"}): RAW_COUNT_DEFAULTS for raw
-        counts (direct, max > 1: the values rest far above 0), else no baseline."""
-        extra = RAW_COUNT_DEFAULTS if value["convention"] == "direct" and float(value["max"]) > 1 else {}
+        counts (max > 1 in either direction: the values rest far from the no-pressure end), else no baseline."""
+        extra = RAW_COUNT_DEFAULTS if is_raw_count(value["max"]) else {}
         return cls(convention=value["convention"], max_value=float(value["max"]), **extra).validate()
 
     def to_dict(self) -> dict:
@@ -191,11 +191,9 @@ class Normaliser:
         with np.errstate(invalid="ignore", over="ignore"):
             top = np.float32(self.cfg.max_value)
             if self.offset is not None:       # rest reads 0, a taxel's press counts by its own sensitivity
-                above = (self.offset - raw) if self.cfg.convention == "inverted" else (raw - self.offset)
+                above = (self.offset - raw) if is_inverted(self.cfg.convention) else (raw - self.offset)
                 return above * self.gain / top
-            if self.cfg.convention == "inverted":
-                return (top - raw) / top
-            return raw / top
+            return pressure_share(raw, self.cfg.convention, top)
 
     def out_of_range(self, raw) -> tuple[np.ndarray, np.ndarray]:
         """(below, above): per frame, how many live finite taxels of `raw` lie below 0 / above max_value."""

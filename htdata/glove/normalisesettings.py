@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from htdata.errors import ConfigError
+from htdata.glove.glovevalue import is_raw_count
 from htdata.glove.layouts import nearest_hint
 from htdata.glove.normalise import NOISE_K_BASELINES, RAW_COUNT_DEFAULTS, NormaliseConfig
 
@@ -45,7 +46,7 @@ class NormaliseSettings:
         if layout.layout_id in self.normalise:
             return None
         value = layout.value
-        if not (value["convention"] == "direct" and float(value["max"]) > 1):
+        if not is_raw_count(value["max"]):
             return None
         d = RAW_COUNT_DEFAULTS
         return (f"layout {layout.layout_id} holds raw counts (value.max {float(value['max']):g}) and pipeline "

@@ -50,6 +50,7 @@ import numpy as np
 
 from htdata.glove import health
 from htdata.glove.activity import CellActivity, rule_text, unmapped_moving
+from htdata.glove.glovevalue import pressure_share
 from htdata.glove.health import CLASSES, MIN_FRAMES, TaxelGrid, _crosstalk, _exercised, _neighbour_median
 from htdata.glove.restlevel import nanpercentile_columns, quiet_frames
 
@@ -80,9 +81,7 @@ THRESHOLDS = {"saturated": f"rest >= {SATURATED_REST:.0%} of full scale",
 
 def pressure_units(raw: np.ndarray, value: dict) -> np.ndarray:
     """Raw glove units -> share of full scale in the pressure direction (float32, NaN kept)."""
-    top = float(value["max"])
-    raw = np.asarray(raw, np.float32)
-    return (np.float32(top) - raw) / np.float32(top) if value.get("convention") == "inverted" else raw / np.float32(top)
+    return pressure_share(raw, value.get("convention"), float(value["max"]))
 
 
 def _drifting(u: np.ndarray) -> tuple[np.ndarray, bool]:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from htdata.errors import ConfigError
+from htdata.glove.glovevalue import least_pressure, pressure_share
 
 
 def quiet_frames(level: np.ndarray) -> np.ndarray:
@@ -51,12 +52,12 @@ def rest_level_warning(hand: str, layout, cfg, lo: np.ndarray, hi: np.ndarray) -
     if cfg.baseline != "none" or cfg.taxel_calibration_sha256:
         return None
     live = np.asarray(layout.live_mask, bool)
-    raw = (hi if cfg.convention == "inverted" else lo)[live]
+    raw = least_pressure(lo, hi, cfg.convention)[live]
     raw = raw[np.isfinite(raw)]
     if not raw.size:
         return None
     rest = float(np.median(raw))
-    reads = (cfg.max_value - rest) / cfg.max_value if cfg.convention == "inverted" else rest / cfg.max_value
+    reads = float(pressure_share(rest, cfg.convention, cfg.max_value))
     if reads < REST_WARN_LEVEL:
         return None
     lid = layout.layout_id

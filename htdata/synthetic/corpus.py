@@ -31,6 +31,7 @@ import numpy as np
 
 from htdata.errors import ArgumentError
 from htdata.fileio import write_json_atomic
+from htdata.glove.glovevalue import is_inverted
 from htdata.glove.layouts import load_layout
 from htdata.source.adapters import ADAPTERS
 from htdata.synthetic.formats import (
@@ -238,7 +239,7 @@ def touchanything_raw(contact: np.ndarray, layout, rng: np.random.Generator) -> 
 
 def native_raw(contact: np.ndarray, layout, rng: np.random.Generator) -> np.ndarray:
     """Raw units of the layout's own value convention."""
-    if layout.value.get("convention") == "inverted":
+    if is_inverted(layout.value.get("convention")):
         top = float(layout.value["max"])
         raw = top * (1.0 - contact) + rng.normal(0.0, top * OPENTOUCH_NOISE / OPENTOUCH_MAX, contact.shape)
         return np.clip(raw, 0.0, top).astype(np.float32)
@@ -247,7 +248,7 @@ def native_raw(contact: np.ndarray, layout, rng: np.random.Generator) -> np.ndar
 
 def _fill_for(layout) -> float:
     """No-sensor cells: NaN for direct-valued (TouchAnything-style) gloves, no load otherwise."""
-    return float("nan") if layout.value.get("convention") == "direct" else 0.0
+    return float("nan") if not is_inverted(layout.value.get("convention")) else 0.0
 
 
 # ---- writers ------------------------------------------------------------------

@@ -24,6 +24,7 @@ import warnings
 
 import numpy as np
 
+from htdata.glove.glovevalue import is_raw_count, toward_pressure
 from htdata.glove.health import WARN_SHARE, flagged_share
 from htdata.inspect.stats import cached_episode_stats, episode_stats
 from htdata.read.reader import DatasetReader
@@ -116,7 +117,7 @@ def check_rest_level(sensor: dict, episodes: list[dict], calibrations: dict, che
     for name in sorted(k for k in sensor if not k.startswith("_")):
         eid, hand = name.rsplit(":", 1)
         cal = calibrations.get((by_id.get(eid, {}).get("calibration") or {}).get(hand, ""), {})
-        raw_counts = cal.get("convention") == "direct" and float(cal.get("max_value", 1.0)) > 1.0
+        raw_counts = is_raw_count(cal.get("max_value", 1.0))
         if not raw_counts or cal.get("baseline") != "none" or cal.get("taxel_calibration_sha256") \
                 or not sensor[name]["region_means"]:
             continue
@@ -126,7 +127,7 @@ def check_rest_level(sensor: dict, episodes: list[dict], calibrations: dict, che
         if rest >= REST_FAIL_LEVEL:
             lid, top = cal.get("layout", "?"), float(cal.get("max_value", 1.0))
             raw = rest * top / float(cal.get("scale", 1.0))
-            raw = top - raw if cal.get("convention") == "inverted" else raw
+            raw = float(toward_pressure(raw, cal.get("convention"), top))
             check.fail("rest_level", f"episode {eid}: {hand} hand (layout {lid}): rest level {raw:.4g} of {top:g}: "
                        f"covered pixels read >= {rest:.2f} even in the quietest frame with baseline = \"none\" "
                        f"(the rest is read as pressure); set a baseline "

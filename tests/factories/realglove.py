@@ -6,11 +6,14 @@ in a clone without it (CI has it).
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 
-REAL_GLOVE = Path(__file__).resolve().parents[2].parent / "shared" / "real_glove"
+# HTDATA_REAL_GLOVE names the folder where the checkout has no ../shared beside it (a worktree elsewhere)
+REAL_GLOVE = Path(os.environ.get("HTDATA_REAL_GLOVE")
+                  or Path(__file__).resolve().parents[2].parent / "shared" / "real_glove")
 
 
 def real_glove_dir() -> Path:

@@ -127,7 +127,8 @@ def test_validate_rejects(kwargs, match):
 def test_from_layout_value():
     cfg = NormaliseConfig.from_layout_value({"convention": "inverted", "max": 3072})
     assert cfg.convention == "inverted" and cfg.max_value == 3072.0
-    assert cfg.baseline == "none" and cfg.noise_k == 0            # OpenTouch-style: as before
+    # counts falling with pressure are raw counts too (issue 43): the raw-count default, as for a direct glove
+    assert cfg.baseline == "drift" and cfg.noise_k == 5.0
     assert NormaliseConfig.from_layout_value({"convention": "direct", "max": 1.0}).baseline == "none"
     raw = NormaliseConfig.from_layout_value({"convention": "direct", "max": 1023, "step": 1})
     assert raw.baseline == "drift" and raw.noise_k == 5.0          # raw counts rest far above 0: each cell's own rest

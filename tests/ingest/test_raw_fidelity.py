@@ -97,8 +97,9 @@ def test_paired_row_is_the_one_the_map_was_made_from(native_counts):
     raster = Rasteriser(layout)
     for i in range(len(reader)):
         s = reader.decoded(i)
-        paired = s["raw"]["right"][s["meta"]["raw_paired"]["right"]]
-        values, _ = normaliser.apply(paired[None])
+        k = s["meta"]["raw_paired"]["right"]
+        # the raw-count default (drift) reads its rest at the row's place in the episode
+        values, _ = normaliser.apply(s["raw"]["right"][k][None], rows=[s["meta"]["raw_row"]["right"][k]])
         expect = raster.render(values)[0]
         assert np.abs(expect - s["tactile"]["right"]).max() <= 2.5e-4    # the map codec's rounding only
 
@@ -110,7 +111,9 @@ def test_manifest_records_the_calibration(native_counts):
     entry = manifest["calibrations"][cal_id]
     assert entry["layout"] == LAYOUT and entry["convention"] == "inverted" and entry["max_value"] == 3072
     assert entry["revision"] == 1 and "value block" in entry["from"]
-    assert cal_id == calibration_id(LAYOUT, NormaliseConfig(convention="inverted", max_value=3072.0))
+    # an inverted raw-count glove without a [normalise] table: the raw-count default (issue 43)
+    assert entry["baseline"] == "drift" and entry["noise_k"] == 5
+    assert cal_id == calibration_id(LAYOUT, NormaliseConfig.from_layout_value(load_layout(LAYOUT).value))
 
 
 def test_rows_of_dropped_frames_and_duplicate_timestamps_are_kept(tmp_path):
@@ -280,7 +283,10 @@ def stuck_taxel_dataset(tmp_path) -> tuple[Path, tuple[int, int]]:
         video_frames=[np.full((40, 40, 3), COLOURS[0], np.uint8)] * frames,
         hands={"right": NativeHand(LAYOUT, values, t_video)}))
     out = tmp_path / "ds"
-    assert ingest_cli("--pipeline", f"{small_pipeline(tmp_path, 'native')}={tmp_path / 'raw'}", out) == 0
+    # baseline "none": a glove calibrated to read its rest as no load (the raw-count default's own rest, each
+    # cell's 10th percentile, would take a cell stuck all episode long for its rest)
+    assert ingest_cli("--pipeline", f"{small_pipeline(tmp_path, 'native')}={tmp_path / 'raw'}",
+                      "--set", f"normalise.{LAYOUT}.baseline=none", out) == 0
     return out, (r, c)
 
 
@@ -312,7 +318,7 @@ def test_glove_rate_windows_follow_the_full_rate_stream(native_counts):
     assert np.array_equal(item["tactile"][-1, 0].numpy(), RawMapRenderer(reader).sample_map(int(item["index"]), "right"))
     renderer = RawMapRenderer(reader)
     normaliser, raster = renderer.parts_for(0, "right")
-    expect = raster.render(normaliser.apply(values[end - 3:end + 1])[0])
+    expect = raster.render(normaliser.apply(values[end - 3:end + 1], rows=np.arange(end - 3, end + 1))[0])
     assert np.array_equal(item["tactile"][:, 0].numpy(), expect)
 
 
@@ -338,12 +344,13 @@ def test_renormalise_recomputes_taxel_health_and_names_the_frame_on_bad_settings
     out, _ = stuck_taxel_dataset(tmp_path)
     assert load_episodes(out)[0]["taxel_health"]["right"]["counts"]["stuck"] == 1
     # a 1e-3 scale puts the stuck taxel at 5e-4, below the stuck level: the record's health follows the maps
-    assert cli(["renormalise", str(out), "--pipeline", "native", "--set", f"normalise.{LAYOUT}.scale=0.001"]) == 0
+    assert cli(["renormalise", str(out), "--pipeline", "native", "--set", f"normalise.{LAYOUT}.baseline=none",
+                "--set", f"normalise.{LAYOUT}.scale=0.001"]) == 0
     health = load_episodes(out)[0]["taxel_health"]["right"]
     assert health["assessed"] and sum(health["counts"].values()) == 0
     # clip = false with a scale pushing the stuck taxel above 1: refused, naming episode, frame and hand
-    assert cli(["renormalise", str(out), "--pipeline", "native", "--set", f"normalise.{LAYOUT}.scale=50",
-                "--set", f"normalise.{LAYOUT}.clip=false"]) == 2
+    assert cli(["renormalise", str(out), "--pipeline", "native", "--set", f"normalise.{LAYOUT}.baseline=none",
+                "--set", f"normalise.{LAYOUT}.scale=50", "--set", f"normalise.{LAYOUT}.clip=false"]) == 2
     err = capsys.readouterr().err
     assert "nat-rec_stuck frame 0 right hand" in err and "clip=false" in err
     assert load_manifest(out)["version"] == 2                      # nothing written

@@ -211,7 +211,9 @@ def raw_ds(tmp_path_factory):
                           video_timestamps_ns=t_video,
                           hands={"right": NativeHand("opentouch_right_16x16", values, t_glove)})
     write_native_recording(root / "src" / "rec_a", rec)
-    assert ingest_cli("--pipeline", "native", "--set", "tactile.maps=stored", root / "src", root / "ds") == 0
+    # baseline "none": the exact values below (an inverted raw-count glove otherwise gets the raw-count default)
+    assert ingest_cli("--pipeline", "native", "--set", "tactile.maps=stored", "--set",
+                      "normalise.opentouch_right_16x16.baseline=none", root / "src", root / "ds") == 0
     return root / "ds"
 
 

@@ -1,0 +1,44 @@
+"""What a glove's value block says about its counts: the one owner of the rules every other module reads.
+
+A layout's `value` ({"convention", "max"}) and a calibration (`convention`, `max_value`) say:
+
+- direction: "direct" counts rise with pressure, "inverted" counts fall with it (OpenTouch: 3072 = no load);
+- a raw-count glove: full scale above 1 (an ADC's counts, either direction): its cells rest far from the
+  no-pressure end with per-cell offsets, so it needs a rest of its own (the raw-count default,
+  htdata.glove.normalise.RAW_COUNT_DEFAULTS); a glove in [0, 1] is read as given.
+
+Rules that assume "a press raises a cell" (rest level, wander, moving cells, health, validate's rest check)
+turn counts toward pressure here first, so an inverted glove gets the same answers as a direct one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+CONVENTIONS = ("inverted", "direct")
+
+
+def is_inverted(convention: str | None) -> bool:
+    """True when the glove's counts fall with pressure."""
+    return convention == "inverted"
+
+
+def is_raw_count(max_value) -> bool:
+    """True for a raw-count glove (full scale above 1, either direction)."""
+    return float(max_value) > 1.0
+
+
+def toward_pressure(raw, convention: str | None, top) -> np.ndarray:
+    """Raw units turned so they rise with pressure (float32): `top - raw` for an inverted glove, else `raw`."""
+    raw = np.asarray(raw, np.float32)
+    return np.float32(top) - raw if is_inverted(convention) else raw
+
+
+def pressure_share(raw, convention: str | None, top) -> np.ndarray:
+    """Raw units -> share of full scale in the pressure direction (float32, NaN kept)."""
+    return toward_pressure(raw, convention, top) / np.float32(top)
+
+
+def least_pressure(lo, hi, convention: str | None):
+    """Of a cell's lowest and highest raw reading, the one with the least pressure (its rest side)."""
+    return hi if is_inverted(convention) else lo
