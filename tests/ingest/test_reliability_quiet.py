@@ -76,7 +76,7 @@ def lines(text: str) -> list[str]:
 
 def test_read_only_dataset_gc_and_ingest_one_line(tmp_path, monkeypatch, capsys):
     root = native_dataset(tmp_path)
-    import htdata.fileio as fileio   # the lock is created by fileio.write_bytes_exclusive
+    import htdata.fileio as fileio  # the lock is created by fileio.write_bytes_exclusive
 
     def read_only(path, *a, **kw):
         raise OSError(errno.EROFS, "Read-only file system", str(path))
