@@ -17,7 +17,8 @@ A write killed after its version file was linked but before dataset.json was rew
 committed (the version file is the commit; dataset.json its cache). The next write finishes it
 when it takes the lock: the pointer is rewritten from the newest version file, and a re-run of the
 very command that made that version (its change record's command line) ends there with
-`AlreadyCommitted` (the CLI: one line, rc 0) instead of failing on a change already made.
+`AlreadyCommitted` (the CLI: one line, rc 0) instead of failing on a change already made. (That
+pointer repair is the one write a `--dry-run` may make: it changes no version, only the cache.)
 
 Any failure before the commit (an exception, Ctrl-C) deletes the units this write made, so a failed
 write leaves the dataset as it found it; a kill -9 leaves them to the next write's step 3. Nothing
@@ -106,7 +107,7 @@ class NewVersion:
             pointed = json.loads((self.root / MANIFEST_FILE).read_text()).get("version")
         except (OSError, ValueError, AttributeError):
             return    # a missing or damaged pointer is `htdata repair`'s (it names what it finds)
-        # only the interrupted commit's state: the pointer one version behind a newer version file (a pointer
+        # only the interrupted commit's state: the pointer behind a newer version file (a pointer
         # AHEAD of the newest file means a version file was deleted: that stays an error naming its fix)
         if not versions or not isinstance(pointed, int) or pointed >= versions[-1]:
             return
