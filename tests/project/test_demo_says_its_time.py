@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -16,7 +17,10 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_demo_prints_its_expected_time_before_any_work():
     # -n: what make would run, in order, without running it (.venv exists or not: setup's recipe is listed
     # either way when it is out of date; the intro comes first regardless)
-    out = subprocess.run(["make", "-n", "-B", "demo"], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    # a clean environment: under `make test` the parent make's MAKEFLAGS / MAKELEVEL would add its own lines
+    env = {k: v for k, v in os.environ.items() if k not in ("MAKEFLAGS", "MFLAGS", "MAKELEVEL")}
+    out = subprocess.run(["make", "--no-print-directory", "-n", "-B", "demo"], cwd=ROOT, capture_output=True,
+                         text=True, check=True, env=env).stdout
     first = out.splitlines()[0]
     assert first.startswith("echo") and re.search(r"\d+-?\d* min", first), first
 
