@@ -39,7 +39,7 @@ from htdata.format.table import MANIFEST_FILE, SHARDS_DIR
 from htdata.read.reader import DatasetReader
 from htdata.store.confine import inside
 from htdata.store.fsutil import sha256_file
-from htdata.store.lock import LOCK_FILE
+from htdata.store.lock import is_lock_file
 from htdata.store.manifest import load_manifest
 from htdata.store.parts import Part
 from htdata.store.snapshot import Snapshot, open_snapshot
@@ -165,7 +165,7 @@ def _claim(out: Path, intent: dict) -> bool:
             raise MergeConflict(f"{out}: holds an interrupted merge {what}; run that merge again to finish it, "
                                 f"or choose a new directory")
         return True
-    if [p.name for p in out.iterdir() if p.name != LOCK_FILE]:
+    if [p.name for p in out.iterdir() if not is_lock_file(p.name)]:
         raise MergeConflict(f"{out}: not empty; merge writes a new dataset (choose a new directory)")
     write_bytes_atomic(marker, (json.dumps(intent) + "\n").encode())
     return False
@@ -190,7 +190,7 @@ def merge(a_root, b_root, out_root, command: str) -> MergeReport:
             report.manifest = load_manifest(out)
             return report
         for tmp in out.rglob(".*.tmp"):       # this merge's own temp files (the marker says OUT is ours)
-            if not tmp.name.startswith(LOCK_FILE):   # a lock temp file belongs to a writer trying the lock now
+            if not is_lock_file(tmp.name):   # a lock temp file belongs to a writer trying the lock now
                 tmp.unlink(missing_ok=True)
         (out / SHARDS_DIR).mkdir(exist_ok=True)
         parts = []

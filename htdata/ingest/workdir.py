@@ -24,7 +24,7 @@ import numpy as np
 from htdata.errors import ArgumentError, DatasetError
 from htdata.format.table import INDEX_DTYPE, MANIFEST_FILE, SHARDS_DIR, WORK_DIR
 from htdata.store.fsutil import sha256_file
-from htdata.store.lock import LOCK_FILE
+from htdata.store.lock import is_lock_file
 from htdata.store.manifest import load_manifest
 from htdata.store.versions import list_versions
 
@@ -114,7 +114,7 @@ def check_output(out: Path) -> None:
     (a writer's lock file alone does not count: the lock then names that writer)."""
     if out.exists() and not out.is_dir():
         raise ArgumentError(f"{out}: exists and is not a directory")
-    content = [p for p in out.iterdir() if p.name != LOCK_FILE] if out.is_dir() else []
+    content = [p for p in out.iterdir() if not is_lock_file(p.name)] if out.is_dir() else []
     if content and not (out / MANIFEST_FILE).is_file() and not (out / WORK_DIR).is_dir() \
             and not list_versions(out):     # committed version files make it a dataset, pointer or not
         raise ArgumentError(f"{out}: directory is not empty and is not an htdata dataset; "
@@ -133,7 +133,7 @@ def remove_empty_output(out: Path, subfolders: bool = True) -> None:
     anything leaves. Anything a run wrote (a report naming its failures, a unit to resume) keeps it all."""
     skeleton = (out / WORK_DIR, out / SHARDS_DIR) if subfolders else ()
     try:
-        content = [p for p in out.iterdir() if p.name != LOCK_FILE] if out.is_dir() and not out.is_symlink() else []
+        content = [p for p in out.iterdir() if not is_lock_file(p.name)] if out.is_dir() and not out.is_symlink() else []
         if all(p in skeleton and p.is_dir() and not p.is_symlink() and not any(p.iterdir()) for p in content):
             for p in content:
                 p.rmdir()
@@ -160,7 +160,7 @@ def remove_strays(out: Path, tasks: list, first_unit: int) -> None:
     """
     planned = {t.unit for t in tasks}
     for p in list(out.rglob(".*.tmp")) + list((out / WORK_DIR).glob("spool-*.bin")):
-        if not p.name.startswith(LOCK_FILE):   # a lock temp file belongs to a writer trying the lock now
+        if not is_lock_file(p.name):   # a lock temp file belongs to a writer trying the lock now
             p.unlink(missing_ok=True)
     keep = committed_shards(out)
     for p in (out / SHARDS_DIR).glob("shard-*.tar"):

@@ -36,6 +36,13 @@ LOCK_FILE = ".lock"
 TAKEOVER_STALE_S = 30.0   # a takeover mutex older than this was left by a writer killed inside it
 
 
+def is_lock_file(name: str) -> bool:
+    """The lock, its takeover mutex (`.lock.takeover`) or a temp file a writer is trying the lock with
+    (`..lock.PID.tmp`, fileio.write_bytes_exclusive): files of a writer racing for the dataset now, which no
+    cleanup may remove and no "is OUT empty" check may count."""
+    return name == LOCK_FILE or name.startswith(LOCK_FILE + ".") or name.startswith("." + LOCK_FILE + ".")
+
+
 class DatasetLocked(HtdataError, RuntimeError):
     """Another live writer holds the dataset (or its lock cannot be taken): an htdata error, one line at the
     command line; still a RuntimeError, as before."""

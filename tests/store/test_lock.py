@@ -6,6 +6,7 @@ import os
 import socket
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -107,3 +108,30 @@ def test_racing_takeovers_of_a_stale_lock_one_wins(tmp_path):
         write_lock(tmp_path, pid=int(dead))
         assert race(tmp_path) == ["refused", "refused", "refused", "won"]
         assert not (tmp_path / LOCK_FILE).exists()
+
+
+def test_a_cleanup_keeps_the_temp_file_a_racing_writer_takes_the_lock_with(tmp_path, monkeypatch):
+    """CI caught it: merge and ingest cleanups removed `*.tmp` except names starting '.lock', but the lock's
+    temp file is '..lock.PID.tmp' (fileio.write_bytes_exclusive), so a writer racing for the lock lost its
+    temp file between write and link and failed with a raw ENOENT."""
+    from htdata import fileio
+    from htdata.ingest.workdir import remove_strays
+    from htdata.store.lock import LOCK_FILE, WriterLock, is_lock_file
+
+    seen = []
+
+    def link_later(src, dst):              # the name the real writer uses, captured mid-race
+        seen.append(Path(src).name)
+        raise FileExistsError(dst)
+
+    monkeypatch.setattr(fileio.os, "link", link_later)
+    (tmp_path / LOCK_FILE).write_text("{}")
+    assert WriterLock(tmp_path)._try_create() is False
+    monkeypatch.undo()
+    assert seen and is_lock_file(seen[0])
+    racing = tmp_path / seen[0]
+    racing.write_text("lock record being written")
+    other = tmp_path / ".index.json.123.tmp"
+    other.write_text("left by a kill")
+    remove_strays(tmp_path, [], first_unit=0)
+    assert racing.exists() and not other.exists()
