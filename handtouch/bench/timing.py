@@ -78,6 +78,23 @@ def auroc(scores, labels) -> float | None:
     return float((ranks[y].sum() - pos * (pos + 1) / 2.0) / (pos * neg))
 
 
+POSITION_BINS = 10
+
+
+def position_clock(position, label, bins: int = POSITION_BINS) -> np.ndarray:
+    """(bins,) P(contact | which tenth of its episode a frame is in), from frames' relative positions in
+    [0, 1) and their contact labels: the clock reference, a predictor that reads no image at all. An
+    empty bin gets the overall rate."""
+    b = position_bin(position, bins)
+    y = np.asarray(label, bool)
+    rate = y.mean() if len(y) else 0.0
+    return np.array([y[b == k].mean() if (b == k).any() else rate for k in range(bins)])
+
+
+def position_bin(position, bins: int = POSITION_BINS) -> np.ndarray:
+    return np.clip((np.asarray(position, np.float64) * bins).astype(np.int64), 0, bins - 1)
+
+
 def contact_streams(episode, hand, label) -> np.ndarray:
     """(N,) bool: the frame's (episode, hand) stream has a contact frame among the given frames."""
     episode, hand, label = np.asarray(episode), np.asarray(hand), np.asarray(label, bool)

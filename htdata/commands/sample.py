@@ -34,12 +34,15 @@ the seed, scale and formats of a finished corpus; --reuse keeps such a corpus an
 rewrites anything else (a corpus cut short, or one of another seed).
 
 With --mispair-rgb, the same corpus with every episode's video taken from another episode:
-a broken control (make train-smoke-mispaired), marked as such in OUT/.complete.
+a broken control (make train-smoke-mispaired), marked as such in OUT/.complete. Two more keep
+each episode's own world: --rgb-lag-frames K (video K frames behind the glove; make
+train-smoke-lagged) and --reverse-rgb (each video played backwards; make train-smoke-reversed).
 
 Examples:
   htdata sample data/raw --scale small
   htdata sample data/raw --seed 1 --reuse
   htdata sample runs/smoke_mispaired/raw --mispair-rgb
+  htdata sample runs/smoke_lagged/raw --rgb-lag-frames 6
 """
 
 
@@ -72,6 +75,13 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                              "task, each frame at a random moment of it), so RGB and touch are mis-paired as a "
                              "pipeline that mixed up episodes would store them; for proving a trainer's checks "
                              "catch that (make train-smoke-mispaired). Never for training")
+    parser.add_argument("--rgb-lag-frames", type=int, default=0, metavar="K",
+                        help="a broken control corpus: every video lags its glove by K video frames (frame i "
+                             "shows the moment K frames earlier), as an uncorrected clock offset would store "
+                             "it (make train-smoke-lagged). Never for training")
+    parser.add_argument("--reverse-rgb", action="store_true",
+                        help="a broken control corpus: every episode's video played backwards (make "
+                             "train-smoke-reversed). Never for training")
     parser.add_argument("--dry-run", action="store_true", help="print the planned episodes and exit")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--json", action="store_true",
@@ -80,7 +90,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     cfg = CorpusConfig(out=args.out, seed=args.seed, scale=args.scale, formats=tuple(args.formats),
-                       overwrite=args.overwrite, progress=not args.quiet, mispair_rgb=args.mispair_rgb)
+                       overwrite=args.overwrite, progress=not args.quiet, mispair_rgb=args.mispair_rgb,
+                       rgb_lag_frames=args.rgb_lag_frames, reverse_rgb=args.reverse_rgb)
     if getattr(args, "raw_glove", False):
         return _raw_glove(args)
     try:
@@ -88,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
         if args.dry_run:
             for ep in plan_corpus(cfg):
                 print(f"{ep.fmt}\t{ep.name}\t{ep.spec.task}\t{ep.spec.scene}\t{ep.spec.n_frames}\t"
-                      f"{','.join(ep.spec.hands)}")
+                      f"{','.join(ep.spec.hands)}\t{ep.spec.timing}")
             return 0
         if args.reuse:
             if corpus_complete(cfg):

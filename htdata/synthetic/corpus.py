@@ -17,6 +17,10 @@ each episode's video shows the world of another episode of its format (half the 
 list away, so another task), each frame at a random moment of it. Its tactile data is the
 corpus's own; only the pairing is wrong, as a pipeline that mixed up episodes would store
 it. For proving that a trainer's checks catch such a pipeline (`make train-smoke-mispaired`).
+Two more broken controls keep each episode's own world: `rgb_lag_frames` (`--rgb-lag-frames K`)
+stores video that lags the glove by K video frames (frame i shows the moment K frames earlier), as a
+pipeline with an uncorrected clock offset would (`make train-smoke-lagged`); `reverse_rgb`
+(`--reverse-rgb`) stores each episode's video played backwards (`make train-smoke-reversed`).
 """
 
 from __future__ import annotations
@@ -46,7 +50,7 @@ from htdata.synthetic.formats import (
     write_touchanything_split,
 )
 from htdata.synthetic.tasks import TASKS, scene_style, stable_hash
-from htdata.synthetic.world import EpisodeSpec, World
+from htdata.synthetic.world import TIMINGS, EpisodeSpec, World
 
 SCALES = ("tiny", "small", "medium")
 
@@ -107,6 +111,8 @@ class CorpusConfig:
     overwrite: bool = False
     progress: bool = True
     mispair_rgb: bool = False     # the control corpus (module docstring): RGB of another episode
+    rgb_lag_frames: int = 0       # a control corpus: video K frames behind the glove
+    reverse_rgb: bool = False     # a control corpus: each episode's video played backwards
 
     def validate(self) -> "CorpusConfig":
         self.out = Path(self.out)
@@ -116,6 +122,10 @@ class CorpusConfig:
         if unknown or not self.formats:
             raise ArgumentError(f"formats must be a non-empty subset of {FORMATS}, got {self.formats}")
         self.formats = tuple(f for f in FORMATS if f in self.formats)
+        if not 0 <= int(self.rgb_lag_frames) <= 300:
+            raise ArgumentError(f"rgb_lag_frames must be in [0, 300] video frames, got {self.rgb_lag_frames}")
+        if sum([bool(self.mispair_rgb), int(self.rgb_lag_frames) > 0, bool(self.reverse_rgb)]) > 1:
+            raise ArgumentError("one broken control at a time: --mispair-rgb, --rgb-lag-frames or --reverse-rgb")
         if not 0 <= int(self.seed) < 2**32:
             raise ArgumentError(f"seed must be in [0, 2**32), got {self.seed}")
         return self
@@ -135,6 +145,12 @@ def _episode_seed(seed: int, *parts) -> int:
     return stable_hash(seed, *parts) & 0x7FFFFFFF
 
 
+def _timing(seed: int, task: str, k: int) -> str:
+    """The contact timing of a task's k-th episode in the corpus: every timing of TIMINGS in turn (so each
+    task, the held-out ones too, holds all of them), the turn shifted by task and seed."""
+    return TIMINGS[(k + stable_hash("timing", task) + int(seed)) % len(TIMINGS)]
+
+
 def _n_frames(seed: int, frames: tuple[int, int]) -> int:
     return int(np.random.default_rng(seed).integers(frames[0], frames[1] + 1))
 
@@ -149,7 +165,8 @@ def _plan_opentouch(seed: int, spec: dict) -> list[PlannedEpisode]:
             for k in range(spec["per_cell"]):
                 number += int(rng.integers(1, 4))   # ids have gaps, like the release
                 ep_seed = _episode_seed(seed, "opentouch", scene, task, k)
-                ep = EpisodeSpec(task, scene, ep_seed, _n_frames(ep_seed, spec["frames"]), VIDEO_FPS, ("right",))
+                ep = EpisodeSpec(task, scene, ep_seed, _n_frames(ep_seed, spec["frames"]), VIDEO_FPS, ("right",),
+                                 _timing(seed, task, s_idx * spec["per_cell"] + k))
                 out.append(PlannedEpisode("opentouch", ep.validate(), f"demo_{number:0{pad}d}"))
     return out
 
@@ -170,7 +187,9 @@ def _plan_touchanything(seed: int, spec: dict) -> list[PlannedEpisode]:
             for k in range(spec["per_cell"]):
                 ep_seed = _episode_seed(seed, "touchanything", scene, task, k)
                 n = _n_frames(ep_seed, spec["frames"])
-                ep = EpisodeSpec(task, scene, ep_seed, n, VIDEO_FPS, ("left", "right")).validate()
+                # after the OpenTouch clips of the task: a task's six small-corpus episodes get six timings
+                timing = _timing(seed, task, len(spec["scenes"]) * spec["per_cell"] + k_task)
+                ep = EpisodeSpec(task, scene, ep_seed, n, VIDEO_FPS, ("left", "right"), timing).validate()
                 if task == TA_UNSEEN_TASK:
                     split = "test_unseen"
                 else:
@@ -187,7 +206,8 @@ def _plan_native(seed: int, spec: dict) -> list[PlannedEpisode]:
     out = []
     for k, (task, scene, hands, storage) in enumerate(spec["recordings"]):
         ep_seed = _episode_seed(seed, "native", scene, task, k)
-        ep = EpisodeSpec(task, scene, ep_seed, _n_frames(ep_seed, spec["frames"]), VIDEO_FPS, hands)
+        ep = EpisodeSpec(task, scene, ep_seed, _n_frames(ep_seed, spec["frames"]), VIDEO_FPS, hands,
+                         _timing(seed, "native", k))
         layouts = ({"right": OPENTOUCH_LAYOUT} if hands == ("right",) else dict(TA_LAYOUTS))
         out.append(PlannedEpisode("native", ep.validate(), f"rec_{k:03d}_{task}",
                                   {"layouts": layouts, "video_storage": storage}))
@@ -205,18 +225,27 @@ def plan_corpus(cfg: CorpusConfig) -> list[PlannedEpisode]:
         if cfg.mispair_rgb and len(episodes) > 1:
             for i, ep in enumerate(episodes):      # half the list away: another task in every format
                 ep.extra["rgb_from"] = episodes[(i + max(len(episodes) // 2, 1)) % len(episodes)].spec
+        for ep in episodes:
+            if cfg.rgb_lag_frames:
+                ep.extra["rgb_lag_frames"] = int(cfg.rgb_lag_frames)
+            if cfg.reverse_rgb:
+                ep.extra["reverse_rgb"] = True
         out += episodes
     return out
 
 
 def _video(ep: PlannedEpisode, world: World, times, size: tuple[int, int], seed: int):
     """The frames the episode's camera stores: its own world at `times` (None: the video frame times), or
-    in a mis-paired control corpus another episode's world (`extra["rgb_from"]`), each frame at a random
-    moment of that episode."""
+    in a control corpus (module docstring) that world K frames earlier (`extra["rgb_lag_frames"]`),
+    played backwards (`extra["reverse_rgb"]`), or another episode's world (`extra["rgb_from"]`), each
+    frame at a random moment of that episode."""
     other = ep.extra.get("rgb_from")
+    times = ep.spec.frame_times() if times is None else np.asarray(times, np.float64)
     if other is None:
-        return world.render_frames(times, size)
-    n = len(ep.spec.frame_times() if times is None else times)
+        if ep.extra.get("reverse_rgb"):
+            times = times[0] + times[-1] - times
+        return world.render_frames(times - ep.extra.get("rgb_lag_frames", 0) / ep.spec.fps, size)
+    n = len(times)
     rng = np.random.default_rng(_episode_seed(seed, "mispair-rgb", ep.fmt, ep.name))
     return World(other).render_frames(rng.uniform(0.0, other.duration_s, n), size)
 
@@ -343,9 +372,20 @@ _WRITERS = {"opentouch": _write_opentouch, "touchanything": _write_touchanything
 COMPLETE_MARKER = ".complete"
 
 
+# The world's version: 2 since contact timing varies between episodes (world.TIMINGS); a corpus written
+# by an older world is not reused.
+WORLD_VERSION = 2
+
+
 def corpus_identity(cfg: CorpusConfig) -> dict:
-    ident = {"seed": int(cfg.seed), "scale": cfg.scale, "formats": list(cfg.formats)}
-    return {**ident, "mispair_rgb": True} if cfg.mispair_rgb else ident
+    ident = {"seed": int(cfg.seed), "scale": cfg.scale, "formats": list(cfg.formats), "world": WORLD_VERSION}
+    if cfg.mispair_rgb:
+        ident["mispair_rgb"] = True
+    if cfg.rgb_lag_frames:
+        ident["rgb_lag_frames"] = int(cfg.rgb_lag_frames)
+    if cfg.reverse_rgb:
+        ident["reverse_rgb"] = True
+    return ident
 
 
 def corpus_complete(cfg: CorpusConfig) -> bool:

@@ -28,6 +28,12 @@ from htdata.synthetic.state import HandState
 from htdata.synthetic.tasks import TASKS, scene_style, stable_hash
 
 PHASE_APPROACH, PHASE_CONTACT, PHASE_RELEASE = 0, 1, 2
+# When contact happens in an episode (EpisodeSpec.timing). "classic" is the world's first timing and
+# the default: one contact starting 15-30 % in and ending by 90 %, so the relative position in the
+# episode alone told contact apart (AUROC 0.96, issue #45). The others were appended for that: an idle
+# lead-in and tail of varying length, two contacts, a clip that starts mid-grasp or ends holding.
+# A classic episode keeps its bytes; `contact_windows` draws the others from their own stream.
+TIMINGS = ("classic", "late", "mid_grasp", "two_contacts", "held_to_end", "early")
 # A support hand that feels contact (the task's support profile) closes on the pad it presses;
 # one that feels nothing hangs half open in the air. The RGB-to-tactile held-out check failed
 # while both looked alike (docs/HANDTOUCH.md, "Held-out RGB-to-tactile").
@@ -44,6 +50,8 @@ class EpisodeSpec:
     n_frames: int
     fps: float = 30.0
     hands: tuple[str, ...] = ("right",)
+    timing: str = "classic"       # TIMINGS: when contact happens
+
 
     def validate(self) -> "EpisodeSpec":
         if self.task not in TASKS:
@@ -53,6 +61,9 @@ class EpisodeSpec:
             raise ValueError(f"episode {self.task}/{self.scene}/{self.seed}: n_frames must be >= 1")
         if not np.isfinite(self.fps) or self.fps <= 0:
             raise ValueError(f"episode {self.task}/{self.scene}/{self.seed}: fps must be > 0")
+        if self.timing not in TIMINGS:
+            raise ValueError(f"episode {self.task}/{self.scene}/{self.seed}: timing {self.timing!r} is not "
+                             f"one of {TIMINGS}")
         if not self.hands or any(h not in HANDS for h in self.hands) or \
                 len(set(self.hands)) != len(self.hands):
             raise ValueError(f"hands must be a non-empty subset of {HANDS}, got {self.hands}")
@@ -88,6 +99,31 @@ class _HandPlan:
     tremor_f: np.ndarray      # (3,) Hz
     tremor_p: np.ndarray      # (3,) phases
     jitter_key: int
+    # (start, end) fractions of each contact for a timing other than "classic" (which uses a, b);
+    # a start < 0 is a clip that begins mid-grasp, an end > 1 one that ends holding
+    windows: tuple[tuple[float, float], ...] = ()
+    approach: float = 0.0     # fraction of the episode a reach in (and out) takes, varied timings
+
+
+def contact_windows(timing: str, rng: np.random.Generator, ramp: float) -> tuple[tuple[float, float], ...]:
+    """The contacts of one hand for a varied `timing` (TIMINGS), as (start, end) episode fractions."""
+    full = ramp + 0.02                   # a start this far before 0 is already at full force at u = 0
+    if timing == "late":                 # a long idle lead-in; some hold on past the end
+        a = rng.uniform(0.50, 0.70)
+        return ((a, a + rng.uniform(0.30, 0.50)),)
+    if timing == "mid_grasp":            # the recording starts while the hand holds
+        return ((-full, rng.uniform(0.30, 0.55)),)
+    if timing == "two_contacts":
+        a1 = rng.uniform(0.04, 0.12)
+        b1 = a1 + rng.uniform(0.18, 0.26)
+        a2 = b1 + rng.uniform(0.14, 0.24)
+        return ((a1, b1), (a2, a2 + rng.uniform(0.30, 0.50)))
+    if timing == "held_to_end":          # the recording stops while the hand still holds
+        return ((rng.uniform(0.35, 0.70), 1.0 + full),)
+    if timing == "early":                # a long idle tail
+        a = rng.uniform(0.0, 0.08)
+        return ((a, a + rng.uniform(0.25, 0.40)),)
+    raise ValueError(f"contact_windows: no windows for timing {timing!r}")
 
 
 class World:
@@ -105,6 +141,12 @@ class World:
         self.object_rgb = tuple(int(np.clip(c + j, 0, 255)) for c, j in zip(self.task.colour, jitter))
         self.dominant = "right" if "right" in spec.hands else "left"
         self.plans = {h: self._plan(rng, h) for h in spec.hands}
+        if spec.timing != "classic":     # drawn after, from their own stream: the draws above keep their values
+            for h, p in self.plans.items():
+                t_rng = np.random.default_rng([spec.seed & 0xFFFFFFFF, stable_hash(spec.task),
+                                               stable_hash(spec.scene), stable_hash("timing", spec.timing, h)])
+                p.windows = contact_windows(spec.timing, t_rng, p.ramp)
+                p.approach = float(t_rng.uniform(0.10, 0.22))
 
     # ---- hidden state -------------------------------------------------------
     def _plan(self, rng: np.random.Generator, hand: str) -> _HandPlan:
@@ -131,6 +173,8 @@ class World:
         t = self.spec.frame_times() if times_s is None else np.asarray(times_s, dtype=np.float64)
         p = self.plans[hand]
         u = (t + 0.5 / self.spec.fps) / self.spec.duration_s   # frame centres: T=1 is mid-contact
+        if p.windows:
+            return self._windowed_state(hand, t, u, p)
         phase = np.where(u < p.a, PHASE_APPROACH, np.where(u < p.b, PHASE_CONTACT, PHASE_RELEASE))
         envelope = _smoothstep((u - p.a) / p.ramp) * _smoothstep((p.b - u) / p.ramp)
         envelope = np.where(phase == PHASE_CONTACT, envelope, 0.0)
@@ -149,6 +193,39 @@ class World:
         if self.task.carry and role == "dominant":
             lift = np.sin(np.pi * np.clip((u - p.a) / (p.b - p.a), 0, 1)) * 0.06
             xy[:, 1] -= np.where(phase == PHASE_CONTACT, lift, 0.0)
+        xy += 0.003 * np.stack([np.sin(2 * np.pi * p.tremor_f[1] * t + p.tremor_p[2]),
+                                np.cos(2 * np.pi * p.tremor_f[2] * t + p.tremor_p[1])], axis=1)
+        return HandState(self.spec.task, hand, role, t, phase.astype(np.int8),
+                         force.astype(np.float32), closure.astype(np.float32),
+                         xy.astype(np.float32), p.jitter_key)
+
+    def _windowed_state(self, hand: str, t: np.ndarray, u: np.ndarray, p: _HandPlan) -> HandState:
+        """`state` for a varied timing: the classic time course once per contact window, the hand
+        reaching in over `p.approach` before each and out after (max over the windows)."""
+        envelope, shape, reach, lift = (np.zeros_like(u) for _ in range(4))
+        inside = np.zeros(u.shape, bool)
+        pre = 0.08
+        for a, b in p.windows:
+            within = (u >= a) & (u < b)
+            inside |= within
+            envelope = np.maximum(envelope, np.where(within, _smoothstep((u - a) / p.ramp) *
+                                                     _smoothstep((b - u) / p.ramp), 0.0))
+            shape = np.maximum(shape, _smoothstep((u - a + pre) / (p.ramp + pre)) *
+                               _smoothstep((b + pre - u) / (p.ramp + pre)))
+            reach = np.maximum(reach, _smoothstep((u - a + p.approach) / p.approach) *
+                               _smoothstep((b + p.approach - u) / p.approach))
+            lift = np.maximum(lift, np.where(within, np.sin(np.pi * np.clip((u - a) / (b - a), 0, 1)), 0.0))
+        first = min(a for a, _ in p.windows)
+        phase = np.where(inside, PHASE_CONTACT, np.where(u < first, PHASE_APPROACH, PHASE_RELEASE))
+        tremor = sum(np.sin(2 * np.pi * f * t + ph) for f, ph in zip(p.tremor_f, p.tremor_p)) / 3
+        slow = 0.08 * np.sin(2 * np.pi * 0.7 * t + p.tremor_p[0])
+        force = np.clip(p.peak * envelope * (1.0 + slow + 0.04 * tremor), 0.0, 1.0)
+        role = "dominant" if hand == self.dominant else "support"
+        target_closure = np.array(self.task.closure if role == "dominant" else (self._support_closure(),) * 5)
+        closure = np.clip(shape[:, None] * target_closure[None, :], 0.0, 1.0)
+        xy = p.start_xy[None, :] + reach[:, None] * (p.target_xy - p.start_xy)[None, :]
+        if self.task.carry and role == "dominant":
+            xy[:, 1] -= lift * 0.06
         xy += 0.003 * np.stack([np.sin(2 * np.pi * p.tremor_f[1] * t + p.tremor_p[2]),
                                 np.cos(2 * np.pi * p.tremor_f[2] * t + p.tremor_p[1])], axis=1)
         return HandState(self.spec.task, hand, role, t, phase.astype(np.int8),

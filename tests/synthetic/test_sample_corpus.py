@@ -13,7 +13,14 @@ import numpy as np
 import pytest
 
 from htdata.cli import main as htdata_main
-from htdata.synthetic.corpus import COMPLETE_MARKER, CorpusConfig, corpus_complete, plan_corpus, write_corpus
+from htdata.synthetic.corpus import (
+    COMPLETE_MARKER,
+    WORLD_VERSION,
+    CorpusConfig,
+    corpus_complete,
+    plan_corpus,
+    write_corpus,
+)
 from htdata.synthetic.tasks import TASKS
 
 OT_KEYS = {"camera_poses", "labels", "rgb_images_jpeg", "right_hand_landmarks", "right_palm_pos",
@@ -133,7 +140,7 @@ def test_opentouch_pinch_contact_on_thumb_and_index_tips(tiny):
     peak = contact[int(np.argmax(contact.sum(axis=(1, 2))))]
     assert peak[0:3, 9:11].max() > 0.3 and peak[12:16, 13:16].max() > 0.3  # index / thumb distal
     assert peak[9:16, 0:11].max() < 0.05                                   # palm untouched (noise)
-    assert contact[0].max() < 0.05                                         # approach: nothing
+    assert contact.max(axis=(1, 2)).min() < 0.05    # idle somewhere (timings vary: not always the first frame)
 
 
 def test_opentouch_jpegs_are_stored_bgr_swapped(tiny):
@@ -279,7 +286,8 @@ def test_reuse_keeps_a_finished_corpus_of_the_same_seed_and_rewrites_anything_el
     assert htdata_main(args) == 0                               # nothing there: written
     cfg = CorpusConfig(out=out, scale="tiny", formats=("native",))
     assert corpus_complete(cfg)
-    assert json.loads((out / COMPLETE_MARKER).read_text()) == {"seed": 0, "scale": "tiny", "formats": ["native"]}
+    assert json.loads((out / COMPLETE_MARKER).read_text()) == {"seed": 0, "scale": "tiny", "formats": ["native"],
+                                                                "world": WORLD_VERSION}
     before = _stamps(out)
     capsys.readouterr()
     assert htdata_main(args) == 0                               # finished, same seed: kept as is
