@@ -10,7 +10,7 @@ SEED   ?= 0
 OOD    ?= cup_grasp palm_push
 JOBS   ?= 2
 
-.PHONY: setup demo demo-intro sample ingest split validate preview train-smoke train-smoke-mispaired compare task-transfer test lint fix install-check bench \
+.PHONY: setup demo demo-intro sample ingest split validate preview train-smoke train-smoke-mispaired train-smoke-lagged train-smoke-reversed compare task-transfer test lint fix install-check bench \
         ray-cluster-check \
         lerobot-check lerobot-load export-lerobot gpu-check clean
 
@@ -54,7 +54,16 @@ train-smoke: setup
 # The held-out gate's proof: the smoke on a corpus whose every video shows another episode (htdata
 # sample --mispair-rgb, built under runs/smoke_mispaired); exits 0 only if the gate FAILS there.
 train-smoke-mispaired: setup
-	$(PY) -m handtouch.smoke --out runs/smoke_mispaired --mispaired-rgb
+	$(PY) -m handtouch.smoke --out runs/smoke_mispaired --broken mispaired
+
+# The lag check's proof: every video 6 frames (0.2 s) behind its glove (htdata sample --rgb-lag-frames 6,
+# under runs/smoke_lagged); exits 0 only if the lag check FAILS there, naming the lag.
+train-smoke-lagged: setup
+	$(PY) -m handtouch.smoke --out runs/smoke_lagged --broken lagged
+
+# Video played backwards within each episode (htdata sample --reverse-rgb): the held-out gate must fail.
+train-smoke-reversed: setup
+	$(PY) -m handtouch.smoke --out runs/smoke_reversed --broken reversed
 
 # HandTouch vs the 4 encoder baselines, 3 ablations and 3 design rows, same data / split / budget.
 compare: setup

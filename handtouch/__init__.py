@@ -30,3 +30,11 @@
 May import: htdata (the reader, the torch datasets, the split rule, its errors), torch and the
 training extras. htdata never imports handtouch (its bench section is an entry point).
 """
+
+import os
+
+# Idle OpenMP threads sleep instead of spinning: on a busy machine the smoke's two threads spent their
+# time waiting on each other (19-21 samples/s against 115-260; docs/HANDTOUCH.md, "How long it takes").
+# The arithmetic, and so the weights, are the same. Read when torch loads, so set before any import of it.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+

@@ -1,18 +1,26 @@
 """The smoke's held-out gate: a model's contact timing on its own frame and on another episode's.
 
 `score_part` decodes the frames of a split part (a seeded subsample of at most
-`GateConfig.max_frames`), runs the model's RGB-to-tactile on each frame's own RGB and on the
-RGB of a random frame of another episode of the part (rgb_pretrain.partners, "shuffled": the
-test-part controls' pairing), and keeps per frame what handtouch.bench.timing needs (the
-contact label, the predicted contact mass, the squared error of the model, of the mis-paired
-model and of all zeros). `gate` turns the tables of the parts into the checks and the report:
+`GateConfig.max_frames`), runs the model's RGB-to-tactile on each frame's own RGB, on the RGB of
+a random frame of another episode of the part (rgb_pretrain.partners, "shuffled": the test-part
+controls' pairing) and on the RGB of another episode's frame at the same relative moment (the
+phase-matched control: `phase_partners`), and keeps per frame what handtouch.bench.timing needs
+(the contact label, the predicted contact mass, the squared errors, the frame and its relative
+position). `gate` turns the tables of the parts into the checks and the report:
 
-    test   every frame of the test part: the gate's two checks, required (in-distribution);
-    ood    the held-out task's frames: the gate's two checks, required;
+    test   every frame of the test part: the gate's checks, required (in-distribution), but the
+           phase-matched one, reported: the test part holds one episode per task, and their timings
+           may coincide (seed 0: a clock fitted on those six episodes scored 0.83, the phase-matched
+           control 0.86), which says nothing about the model;
+    ood    the held-out task's frames: the gate's checks, required;
     stress the stress task's frames (held out too; shares no touch with a training task):
-           the same two checks, reported only;
-and held-out F-RMSE per frame, pooled and on contact frames against the better of all zeros
-and the mis-paired model, reported for ood and stress.
+           the same checks, reported only;
+the checks being: contact-timing AUROC >= the floor, >= the mis-paired control's + the gap,
+>= the phase-matched control's + the gap, and the lag check (predicted and measured contact agree
+best within +-2 frames of no shift, over shifts of +-1 s). Reported beside them: the clock
+reference (P(contact | tenth of the episode) measured on the test part: what reading no image at
+all scores), and held-out F-RMSE per frame, pooled and on contact frames against the better of
+all zeros and the mis-paired model.
 """
 
 from __future__ import annotations
@@ -27,7 +35,20 @@ from htdata.read.metadata import DatasetMetadata
 from htdata.read.torchdata import TactileFrameDataset
 
 from .bench.items import subsample
-from .bench.timing import FrameTable, contact_mass, has_contact, rmse_report, timing_checks, timing_scores
+from .bench.timing import (
+    LAG_SPAN_S,
+    PHASE_MATCHED,
+    FrameTable,
+    contact_mass,
+    contact_streams,
+    has_contact,
+    lag_check,
+    lag_curve,
+    position_clock,
+    rmse_report,
+    timing_checks,
+    timing_scores,
+)
 from .rgb_pretrain import episode_fps, partners
 
 
@@ -66,19 +87,47 @@ def _decode(dataset_root, split: str, part: str, cfg: GateConfig) -> dict[str, t
     return out
 
 
+def phase_partners(episode: np.ndarray, task: np.ndarray, position: np.ndarray, seed: int = 0) -> np.ndarray:
+    """For each frame, the row of another episode's frame at the nearest relative position (-1: none).
+
+    Each episode gets one partner episode, drawn (seeded) among the other episodes of its task in the
+    rows, or among all other episodes when its task has no other; then each frame the partner's frame
+    nearest its relative position."""
+    rng = np.random.default_rng([seed, 45])
+    out = np.full(len(episode), -1, np.int64)
+    episodes = np.unique(episode)
+    task_of = {int(e): task[np.flatnonzero(episode == e)[0]] for e in episodes}
+    for e in episodes:
+        same = [o for o in episodes if o != e and task_of[int(o)] == task_of[int(e)]]
+        pool = same or [o for o in episodes if o != e]
+        if not pool:
+            continue
+        theirs = np.flatnonzero(episode == rng.choice(pool))
+        mine = np.flatnonzero(episode == e)
+        nearest = np.abs(position[mine][:, None] - position[theirs][None, :]).argmin(1)
+        out[mine] = theirs[nearest]
+    return out
+
+
 def score_part(model, dataset_root, split: str, part: str, cfg: GateConfig | None = None) -> FrameTable:
-    """The FrameTable of one part: each frame scored on its own RGB and on another episode's."""
+    """The FrameTable of one part: each frame scored on its own RGB, on another episode's at a random
+    moment and on another episode's at the same relative moment."""
     cfg = cfg or GateConfig()
     flat = _decode(dataset_root, split, part, cfg)
+    meta = DatasetMetadata(dataset_root)
     episode, frame = flat[keys.EPISODE].numpy(), flat[keys.FRAME].numpy()
+    lengths = np.array([max(int(ep.get("num_frames") or 0), 1) for ep in meta.episodes])
+    position = (frame + 0.5) / lengths[episode]
+    task_of_row = flat[keys.TASK].numpy()
     src = partners(episode, frame, episode_fps(dataset_root)[episode], "shuffled", seed=cfg.seed)
-    keep = np.flatnonzero(src >= 0)     # a part of one episode has no other episode to pair with
+    phase_src = phase_partners(episode, task_of_row, position, cfg.seed)
+    keep = np.flatnonzero((src >= 0) & (phase_src >= 0))   # a part of one episode has no other to pair with
     if len(keep) == 0:
         raise SystemExit(f"contact gate: part {part!r} of split {split!r} has one episode; "
-                         "the mis-paired control needs two")
-    task_names = np.array(DatasetMetadata(dataset_root).manifest["tasks"])
-    mass = {p: np.zeros(len(keep)) for p in ("aligned", "mispaired")}
-    sq = {p: np.zeros(len(keep)) for p in ("aligned", "mispaired", "zeros")}
+                         "the mis-paired and phase-matched controls need two")
+    task_names = np.array(meta.manifest["tasks"])
+    mass = {p: np.zeros(len(keep)) for p in ("aligned", "mispaired", PHASE_MATCHED)}
+    sq = {p: np.zeros(len(keep)) for p in ("aligned", "mispaired", PHASE_MATCHED, "zeros")}
     label, count = np.zeros(len(keep), bool), np.zeros(len(keep))
     if isinstance(model, torch.nn.Module):
         model.eval()
@@ -91,23 +140,34 @@ def score_part(model, dataset_root, split: str, part: str, cfg: GateConfig | Non
             label[rows] = has_contact(tac, cov).numpy()
             count[rows] = cov.flatten(1).sum(1).double().numpy()
             sq["zeros"][rows] = (tac.pow(2) * cov).flatten(1).sum(1).double().numpy()
-            for pairing, rgb_rows in (("aligned", i), ("mispaired", torch.from_numpy(src[keep[rows]]))):
+            for pairing, rgb_rows in (("aligned", i), ("mispaired", torch.from_numpy(src[keep[rows]])),
+                                      (PHASE_MATCHED, torch.from_numpy(phase_src[keep[rows]]))):
                 pred = model.rgb_to_tactile(flat[keys.RGB][rgb_rows], cov, hand).float()
                 mass[pairing][rows] = contact_mass(pred, cov).double().numpy()
                 sq[pairing][rows] = ((pred - tac).pow(2) * cov).flatten(1).sum(1).double().numpy()
-    return FrameTable(episode[keep], flat[keys.HAND].numpy()[keep], task_names[flat[keys.TASK].numpy()[keep]],
-                      label, count, mass, sq)
+    return FrameTable(episode[keep], flat[keys.HAND].numpy()[keep], task_names[task_of_row[keep]],
+                      label, count, mass, sq, frame[keep], position[keep])
 
 
-def gate(tables: dict[str, FrameTable], ood_task: str, stress_task: str | None) -> tuple[list[dict], dict]:
-    """-> (checks, report) from the tables of the test and ood parts (module docstring)."""
+def gate(tables: dict[str, FrameTable], ood_task: str, stress_task: str | None,
+         fps: float = 30.0) -> tuple[list[dict], dict]:
+    """-> (checks, report) from the tables of the test and ood parts (module docstring); `fps` turns the
+    lag check's +-LAG_SPAN_S into frames and its finding into seconds."""
     groups = {"test": (tables["test"], True, "test")}
     groups["ood"] = (tables["ood"].of_tasks([ood_task]), True, f"held-out (ood) {ood_task}")
     if stress_task:
         groups["stress"] = (tables["ood"].of_tasks([stress_task]), False, f"held-out stress test {stress_task}")
+    test = tables["test"].select(contact_streams(tables["test"].episode, tables["test"].hand, tables["test"].label))
+    clock = position_clock(test.position, test.label) if test.position is not None and len(test) else None
+    span = max(1, round(LAG_SPAN_S * fps))
     checks, report = [], {}
     for name, (table, required, where) in groups.items():
-        scores = timing_scores(table)
-        checks += timing_checks(scores, where, required)
-        report[name] = {"where": where, "required": required, "timing": scores, "rmse": rmse_report(table)}
+        scores = timing_scores(table, clock)
+        checks += timing_checks(scores, where, required, phase_required=required and name != "test")
+        entry = {"where": where, "required": required, "timing": scores, "rmse": rmse_report(table),
+                 "clock": None if clock is None else clock.tolist()}
+        if table.frame is not None:
+            entry["lag"] = lag_curve(table, span)
+            checks.append(lag_check(entry["lag"], where, fps, required))
+        report[name] = entry
     return checks, report

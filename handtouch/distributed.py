@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -20,6 +21,34 @@ from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import Sampler
 
 from htdata.errors import ConfigError
+
+
+def _busy_seconds() -> float | None:
+    """CPU seconds the whole machine has spent busy since boot (/proc/stat), None where unreadable."""
+    try:
+        fields = [float(x) for x in open("/proc/stat").readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+    idle = fields[3] + (fields[4] if len(fields) > 4 else 0.0)      # idle + iowait
+    return (sum(fields[:8]) - idle) / os.sysconf("SC_CLK_TCK")
+
+
+def free_cores(sample_s: float = 0.3) -> int:
+    """The cores this process may use (its CPU affinity) less those other processes keep busy, measured
+    over `sample_s` (machine busy time less this process's own), at least 1: the thread count that does
+    not fight other jobs for cores. More threads than free cores multiplied a phase's time (docs/
+    HANDTOUCH.md, "How long it takes"). Where /proc/stat is missing: the 1-minute load average."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    before, mine = _busy_seconds(), sum(os.times()[:2])
+    if before is None:
+        others = os.getloadavg()[0] if hasattr(os, "getloadavg") else 0.0
+    else:
+        time.sleep(sample_s)
+        others = max((_busy_seconds() - before) - (sum(os.times()[:2]) - mine), 0.0) / sample_s
+    return max(1, min(cores, int(cores - others + 0.5)))
 
 
 @contextlib.contextmanager

@@ -335,11 +335,11 @@ def control_scores(paths: dict[str, Path], parts: dict[str, ProbeItems], cfg: RG
 
 
 def control_checks(scores: dict, part: str = "test", margin: float = CONTROL_MARGIN) -> list[dict]:
-    """Pass/fail: the aligned probe's ratio + margin <= each control's, on `part`; only the
-    REQUIRED_CONTROLS can fail a run (the others are reported)."""
+    """Pass/fail: the aligned probe's ratio + margin <= each control's that was trained, on `part`; only
+    the REQUIRED_CONTROLS can fail a run (the others are reported)."""
     out = []
     aligned = scores[part]["aligned"]["ratio"]
-    for p in PAIRINGS[1:]:
+    for p in [p for p in PAIRINGS[1:] if p in scores[part]]:
         ctrl = scores[part][p]["ratio"]
         ok = aligned is not None and ctrl is not None and aligned + margin <= ctrl
         out.append({"check": f"RGB probe ({part}): aligned coarse-MSE/zeros + {margin} <= {p} control's",

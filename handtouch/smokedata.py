@@ -43,17 +43,29 @@ def htdata(*args: str) -> None:
         raise SystemExit(f"smoke: `htdata {' '.join(args)}` failed with exit code {rc}")
 
 
-def raw_complete(raw: Path, seed: int, mispaired_rgb: bool = False) -> bool:
+# The broken pipelines the smoke must catch, each a control corpus of `htdata sample` (the flag that
+# writes it) and what must fail on it (handtouch.smokechecks.verdict).
+BROKEN = {"mispaired": "--mispair-rgb", "lagged": "--rgb-lag-frames", "reversed": "--reverse-rgb"}
+LAG_FRAMES = 6     # the lagged control's video lag: 0.2 s at 30 fps, 3x the lag check's tolerance
+
+
+def _corpus(raw: Path, seed: int, broken: str | None, lag_frames: int) -> CorpusConfig:
+    return CorpusConfig(out=raw, seed=seed, scale=SCALE, progress=False, mispair_rgb=broken == "mispaired",
+                        rgb_lag_frames=lag_frames if broken == "lagged" else 0, reverse_rgb=broken == "reversed")
+
+
+def raw_complete(raw: Path, seed: int, broken: str | None = None, lag_frames: int = LAG_FRAMES) -> bool:
     """True when `raw` holds the finished sample corpus `ensure_raw` would write."""
-    return corpus_complete(CorpusConfig(out=raw, seed=seed, scale=SCALE, progress=False,
-                                        mispair_rgb=mispaired_rgb))
+    return corpus_complete(_corpus(raw, seed, broken, lag_frames))
 
 
-def ensure_raw(raw: Path, seed: int, mispaired_rgb: bool = False) -> None:
+def ensure_raw(raw: Path, seed: int, broken: str | None = None, lag_frames: int = LAG_FRAMES) -> None:
     """The small sample corpus of `seed` at `raw`: kept if finished (the Makefile's too), else written.
-    mispaired_rgb: the control corpus (`htdata sample --mispair-rgb`): every episode's video shows
-    another episode."""
-    extra = ["--mispair-rgb"] if mispaired_rgb else []
+    broken (BROKEN): a control corpus: every episode's video shows another episode ("mispaired"), lags
+    its glove by `lag_frames` frames ("lagged") or plays backwards ("reversed")."""
+    extra = []
+    if broken:
+        extra = [BROKEN[broken], str(lag_frames)] if broken == "lagged" else [BROKEN[broken]]
     htdata("sample", str(raw), "--seed", str(seed), "--scale", SCALE, "--quiet", "--reuse", *extra)
 
 

@@ -90,7 +90,7 @@ def checks_markdown(checks: list[dict]) -> str:
     """The run's pass/fail checks (meta["checks"]): check, value, limit, verdict."""
     rows = ["| Check | Value | Limit | Verdict |", "|---|---:|---:|---|"]
     rows += [f"| {c['check']} | {_fmt_any(c['value'])} | {_fmt_any(c['limit'])} | "
-             f"{'ok' if c['ok'] else ('FAILED' if c.get('required', True) else 'not yet (not required)')} |"
+             f"{'ok' if c['ok'] else ('FAILED' if c.get('required', True) else 'missed (reported, not required)')} |"
              for c in checks]
     return "\n".join(rows) + "\n"
 
@@ -113,12 +113,15 @@ def heldout_markdown(report: dict) -> str:
     """The held-out gate (meta["heldout_gate"], handtouch.contact_gate): contact-timing AUROC per group
     with its mis-paired control, then F-RMSE per frame / pooled / on contact frames against the better
     of all zeros and the mis-paired model."""
-    rows = ["| Frames of | AUROC | mis-paired RGB | gap | streams with contact (idle) | frames (contact) | "
-            "required |", "|---|---:|---:|---:|---:|---:|---|"]
+    rows = ["| Frames of | AUROC | mis-paired RGB | phase-matched RGB | clock (no image) | best lag shift "
+            "(frames) | streams with contact (idle) | frames (contact) | required |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
     for g in report.values():
         t = g["timing"]
+        lag = (g.get("lag") or {}).get("best_shift")
         rows.append(f"| {g['where']} | {_fmt_any(t['auroc'])} | {_fmt_any(t['mispaired_auroc'])} | "
-                    f"{_fmt_any(t['gap'])} | {t['streams']} ({t['idle_streams']}) | {t['frames']} "
+                    f"{_fmt_any(t.get('phase_matched_auroc'))} | {_fmt_any(t.get('position_auroc'))} | "
+                    f"{_fmt_any(lag)} | {t['streams']} ({t['idle_streams']}) | {t['frames']} "
                     f"({t['contact_frames']}) | {'yes' if g['required'] else 'reported'} |")
     rmse = ["| Frames of | F-RMSE | model | all zeros | mis-paired RGB | frames | verdict |",
             "|---|---|---:|---:|---:|---:|---|"]
@@ -130,12 +133,41 @@ def heldout_markdown(report: dict) -> str:
     return "\n".join(rows) + "\n\n" + "\n".join(rmse) + "\n"
 
 
+def headline_markdown(meta: dict) -> str:
+    """The first lines of results.md: passed or not, the held-out gate's figures against their controls,
+    and what a "not yet" cell means at the smoke's budget."""
+    checks = meta.get("checks") or []
+    required = [c for c in checks if c.get("required", True)]
+    failed = [c["check"] for c in required if not c["ok"]]
+    lines = []
+    if checks:
+        verdict = "PASSED" if not failed else f"FAILED ({len(failed)} of {len(required)} required checks)"
+        if meta.get("broken_control"):
+            verdict += (f" -- a broken control run ({meta['broken_control']}): here a failure is the expected "
+                        "outcome")
+        lines.append(f"**{verdict}**: {len(required) - len(failed)} of {len(required)} required checks ok; "
+                     f"{len(checks) - len(required)} more reported only.")
+        lines += [f"- failed: {c}" for c in failed]
+    gate = (meta.get("heldout_gate") or {}).get("ood")
+    if gate:
+        t, lag = gate["timing"], (gate.get("lag") or {}).get("best_shift")
+        lines.append(f"- held-out gate on {gate['where']}: contact-timing AUROC {_fmt_any(t['auroc'])} against "
+                     f"{_fmt_any(t['mispaired_auroc'])} with another episode's frame at a random moment, "
+                     f"{_fmt_any(t.get('phase_matched_auroc'))} at the same moment, and "
+                     f"{_fmt_any(t.get('position_auroc'))} for a clock that reads no image; predicted and "
+                     f"measured contact agree best at a shift of {_fmt_any(lag)} frames.")
+    lines.append("- \"not yet\" in the verdict table: the model is measured and not better than that reference "
+                 "at this budget (a few hundred steps on CPU). Only the checks below decide the run; at the "
+                 "smoke's budget several not-yet cells are expected (docs/HANDTOUCH.md, \"Held-out gate\").")
+    return "\n".join(lines) + "\n"
+
+
 def results_markdown(results: dict[str, dict[str, dict]], meta: dict | None = None) -> str:
-    """The results.md document: verdicts (and the run's checks / misalignment control when
+    """The results.md document: a headline, verdicts (and the run's checks / misalignment control when
     meta has them), covered-pixel table, whole-canvas table, retrieval chance table."""
 
     meta = meta or {}
-    head = ["# HT-Bench results\n",
+    head = ["# HT-Bench results\n", headline_markdown(meta),
             "RMSE / cIoU: per-frame means; cIoU clamps predictions to [0,1]. Definitions: README, "
             "\"HT-Bench metrics: definitions\".\n",
             "## Verdicts against the references\n",
@@ -148,7 +180,11 @@ def results_markdown(results: dict[str, dict[str, dict]], meta: dict | None = No
         head += ["## Held-out gate: contact timing\n",
                  "AUROC of the model's predicted contact mass (RGB-to-tactile, mean over covered pixels) for "
                  "\"this frame has contact\" over the frames of the (episode, hand) streams with contact; the "
-                 "control feeds the same model the RGB of a frame of another episode. Then F-RMSE over covered "
+                 "controls feed the same model the RGB of another episode's frame at a random moment "
+                 "(mis-paired) and at the same relative moment (phase-matched); the clock reads no image: "
+                 "P(contact | tenth of the episode) measured on the test part. Best lag shift: where "
+                 "predicted and measured contact agree best over shifts of +-1 s (negative: the RGB lags; "
+                 "lag.png plots the curves). Then F-RMSE over covered "
                  "pixels per frame, pooled and on contact frames (reported, not required), against the better "
                  "of all zeros and the mis-paired model (handtouch/bench/timing.py).\n",
                  heldout_markdown(meta["heldout_gate"])]
@@ -192,6 +228,72 @@ def _colour(tactile: np.ndarray, coverage: np.ndarray | None = None) -> np.ndarr
     return img
 
 
+def _text(img, text, xy, scale=0.42, colour=(230, 230, 230)) -> None:
+    cv2.putText(img, text, xy, cv2.FONT_HERSHEY_SIMPLEX, scale, colour, 1, cv2.LINE_AA)
+
+
+def colour_bar(width: int) -> np.ndarray:
+    """A legend strip: the colour scale of the maps from 0 to 1 with ticks, and what grey and the cyan
+    outline mean."""
+    strip = np.zeros((44, width, 3), np.uint8)
+    x0, x1 = 40, max(41, min(width // 2, 400))
+    ramp = np.linspace(0.0, 1.0, x1 - x0, dtype=np.float32)[None, :].repeat(12, 0)
+    strip[6:18, x0:x1] = _colour(ramp)
+    for v in (0.0, 0.25, 0.5, 0.75, 1.0):
+        x = int(x0 + v * (x1 - x0 - 1))
+        strip[18:22, x] = 255
+        _text(strip, f"{v:g}", (x - 8, 36), 0.38)
+    _text(strip, "map", (4, 16), 0.38)
+    _text(strip, "pressure, 0-1 (|pred-GT|: error, same scale). dim grey: no sensor; cyan outline: hidden "
+          "part", (x1 + 12, 16), 0.38)
+    return strip
+
+
+def render_lag_curves(report: dict, path: str | Path, fps: float = 30.0) -> np.ndarray:
+    """lag.png: per group of the held-out gate (test, held-out, stress), the AUROC of predicted contact
+    for measured contact moved by each shift, with 0.5 (chance) and the best shift marked."""
+    groups = [(g["where"], g["lag"]) for g in report.values() if g.get("lag")]
+    if not groups:
+        raise ValueError("render_lag_curves: the report has no lag curves")
+    w, h, left, bottom, top = 720, 360, 56, 56, 30
+    img = np.full((h, w, 3), 255, np.uint8)
+    shifts = groups[0][1]["shifts"]
+    lo, hi = shifts[0], shifts[-1]
+
+    def xy(shift, value):
+        x = left + (shift - lo) / max(hi - lo, 1) * (w - left - 20)
+        y = top + (1.0 - value) / 0.6 * (h - top - bottom)        # the axis runs 0.4 .. 1.0
+        return int(round(x)), int(round(min(max(y, top), h - bottom)))
+
+    black, grey = (0, 0, 0), (170, 170, 170)
+    cv2.rectangle(img, xy(lo, 1.0), xy(hi, 0.4), black, 1)
+    for v in (0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0):
+        _text(img, f"{v:.1f}", (8, xy(lo, v)[1] + 4), 0.38, black)
+    cv2.line(img, xy(lo, 0.5), xy(hi, 0.5), grey, 1)
+    for s in range(lo, hi + 1, max(1, (hi - lo) // 6)):
+        x = xy(s, 0.4)[0]
+        _text(img, f"{s}", (x - 8, h - bottom + 16), 0.38, black)
+    cv2.line(img, xy(0, 1.0), xy(0, 0.4), grey, 1)
+    _text(img, f"shift of measured contact (frames at {fps:g} fps; negative: the RGB lags the glove)",
+          (left, h - 14), 0.42, black)
+    _text(img, "contact-timing AUROC with measured contact shifted (grey: chance 0.5, no shift)", (left, 18), 0.42,
+          black)
+    colours = [(200, 90, 30), (40, 40, 220), (40, 160, 40), (150, 60, 150)]
+    for k, (where, curve) in enumerate(groups):
+        colour = colours[k % len(colours)]
+        pts = [xy(s, v) for s, v in zip(curve["shifts"], curve["auroc"]) if v is not None]
+        if len(pts) > 1:
+            cv2.polylines(img, [np.array(pts, np.int32)], False, colour, 2, cv2.LINE_AA)
+        if curve.get("best_shift") is not None:
+            cv2.circle(img, xy(curve["best_shift"], curve["best_auroc"]), 5, colour, -1, cv2.LINE_AA)
+        _text(img, f"{where}: best {curve.get('best_shift')}", (w - 300, top + 18 + 18 * k), 0.42, colour)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(path), img):
+        raise OSError(f"could not write {path}")
+    return img
+
+
 def render_predictions(examples: dict[str, np.ndarray], path: str | Path, title: str = "") -> np.ndarray:
     """Rows: frames; columns: RGB, GT, inpaint (hidden part outlined), rgb2tactile, prediction, |pred-GT|.
 
@@ -224,7 +326,7 @@ def render_predictions(examples: dict[str, np.ndarray], path: str | Path, title:
                     (255, 255, 255), 1, cv2.LINE_AA)
     if title:
         cv2.putText(header, title, (4, 13), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (200, 200, 200), 1, cv2.LINE_AA)
-    img = np.concatenate([header, grid], 0)
+    img = np.concatenate([header, grid, colour_bar(grid.shape[1])], 0)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(path), img):

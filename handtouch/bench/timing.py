@@ -44,6 +44,19 @@ CONTACT_LEVEL = THRESHOLD
 AUROC_FLOOR = 0.70
 MISPAIRED_GAP = 0.15
 PREDICTORS = ("aligned", "mispaired", "zeros")   # the model on its own frame, on another episode's, all zeros
+# The phase-matched control: the model fed another episode's frame (same task where the part has one)
+# at the same relative moment. The mis-paired control takes a random moment, so it removes the phase
+# and the episode together, and a gate against it alone passed video played backwards (issue #45): a
+# model must beat the phase-matched control by the same gap.
+PHASE_MATCHED = "phase_matched"
+# The lag check: the shift (in frames) at which predicted and measured contact agree best must lie
+# within this many frames of 0; shifts of up to LAG_SPAN_S seconds each way are tried.
+LAG_TOLERANCE_FRAMES = 2
+LAG_SPAN_S = 1.0
+# A contact lasts many frames, so the curve has a flat top (seed 0's held-out task: 0.786-0.791 from
+# -1 to +3 frames): its single highest point wanders with noise. The best shift is the middle of the
+# top, the contiguous shifts within LAG_PLATEAU of the highest.
+LAG_PLATEAU = 0.01
 
 
 def has_contact(tactile: torch.Tensor, coverage: torch.Tensor, level: float = CONTACT_LEVEL) -> torch.Tensor:
@@ -113,8 +126,10 @@ class FrameTable:
     task: np.ndarray                     # task names
     label: np.ndarray                    # bool: the frame has contact
     count: np.ndarray                    # covered pixels
-    mass: dict[str, np.ndarray] = field(default_factory=dict)     # aligned, mispaired
-    sq_err: dict[str, np.ndarray] = field(default_factory=dict)   # aligned, mispaired, zeros
+    mass: dict[str, np.ndarray] = field(default_factory=dict)     # aligned, mispaired[, phase_matched]
+    sq_err: dict[str, np.ndarray] = field(default_factory=dict)   # aligned, mispaired, zeros[, phase_matched]
+    frame: np.ndarray | None = None      # frame index in its episode (the lag check needs it)
+    position: np.ndarray | None = None   # (frame + 0.5) / the episode's frames: the clock reference's input
 
     def __len__(self) -> int:
         return len(self.label)
@@ -123,37 +138,105 @@ class FrameTable:
         keep = np.asarray(keep, bool)
         return FrameTable(self.episode[keep], self.hand[keep], self.task[keep], self.label[keep],
                           self.count[keep], {k: v[keep] for k, v in self.mass.items()},
-                          {k: v[keep] for k, v in self.sq_err.items()})
+                          {k: v[keep] for k, v in self.sq_err.items()},
+                          None if self.frame is None else self.frame[keep],
+                          None if self.position is None else self.position[keep])
 
     def of_tasks(self, tasks) -> "FrameTable":
         """The frames of these tasks (None: every frame)."""
         return self if tasks is None else self.select(np.isin(self.task, list(tasks)))
 
 
-def timing_scores(table: FrameTable) -> dict:
-    """AUROC of the aligned and the mis-paired contact mass over the streams with contact."""
+def timing_scores(table: FrameTable, clock: np.ndarray | None = None) -> dict:
+    """AUROC of the aligned, the mis-paired and (when scored) the phase-matched contact mass over the
+    streams with contact; with `clock` (position_clock) also the clock reference's AUROC, which reads
+    only where in its episode a frame is (reported: what a model could score without the image)."""
     streams = contact_streams(table.episode, table.hand, table.label)
     t = table.select(streams)
     aligned = auroc(t.mass["aligned"], t.label) if len(t) else None
     mispaired = auroc(t.mass["mispaired"], t.label) if len(t) else None
     gap = aligned - mispaired if aligned is not None and mispaired is not None else None
     ids = set(zip(t.episode.tolist(), t.hand.tolist()))
-    return {"auroc": aligned, "mispaired_auroc": mispaired, "gap": gap, "streams": len(ids),
+    extra = {}
+    if PHASE_MATCHED in t.mass:
+        extra["phase_matched_auroc"] = auroc(t.mass[PHASE_MATCHED], t.label) if len(t) else None
+    if clock is not None and t.position is not None:
+        extra["position_auroc"] = auroc(clock[position_bin(t.position, len(clock))], t.label) if len(t) else None
+    return {"auroc": aligned, "mispaired_auroc": mispaired, "gap": gap, **extra, "streams": len(ids),
             "idle_streams": len(set(zip(table.episode.tolist(), table.hand.tolist()))) - len(ids),
             "frames": len(t), "contact_frames": int(t.label.sum()), "tasks": sorted(set(t.task.tolist()))}
 
 
 def timing_checks(scores: dict, where: str, required: bool = True, floor: float = AUROC_FLOOR,
-                  gap: float = MISPAIRED_GAP) -> list[dict]:
-    """The gate's two checks on one part: AUROC >= floor; AUROC - mis-paired AUROC >= gap."""
+                  gap: float = MISPAIRED_GAP, phase_required: bool | None = None) -> list[dict]:
+    """The gate's checks on one part: AUROC >= floor; AUROC - mis-paired AUROC >= gap; and where the
+    phase-matched control was scored, AUROC - its AUROC >= gap (required when `phase_required`, default
+    `required`)."""
+    phase_required = required if phase_required is None else phase_required
     a, m = scores["auroc"], scores["mispaired_auroc"]
     known = a is not None and m is not None
-    return [
+    phase = []
+    if "phase_matched_auroc" in scores:
+        pm = scores["phase_matched_auroc"]
+        phase = [{"check": f"contact-timing AUROC ({where}) >= phase-matched RGB's + {gap} (another episode's "
+                           f"frame at the same moment)", "value": a,
+                  "limit": pm + gap if a is not None and pm is not None else None,
+                  "ok": bool(a is not None and pm is not None and a - pm >= gap), "required": phase_required}]
+    return phase + [
         {"check": f"contact-timing AUROC ({where}, streams with contact) >= {floor}", "value": a, "limit": floor,
          "ok": bool(a is not None and a >= floor), "required": required},
         {"check": f"contact-timing AUROC ({where}) >= mis-paired RGB's + {gap}", "value": a,
          "limit": m + gap if known else None, "ok": bool(known and a - m >= gap), "required": required},
     ]
+
+
+def lag_curve(table: FrameTable, span_frames: int) -> dict:
+    """Agreement of predicted and measured contact when the prediction is moved by each shift.
+
+    For shift s in -span..span frames: the AUROC of the aligned contact mass at frame f for the label
+    at frame f + s of the same (episode, hand) stream, over the streams with contact and the frames whose
+    partner the table holds. A pipeline whose RGB lags the glove by k frames shows its best agreement at
+    s = -k (the frame shows the moment k frames before its label). The best shift is the middle of the
+    curve's top (LAG_PLATEAU), rounded toward 0.
+    """
+    if table.frame is None:
+        raise ValueError("lag_curve: the table has no frame indices")
+    t = table.select(contact_streams(table.episode, table.hand, table.label))
+    stream = t.episode.astype(np.int64) * 2 + t.hand.astype(np.int64)
+    where = {(int(k), int(f)): i for i, (k, f) in enumerate(zip(stream, t.frame))}
+    shifts, values = list(range(-span_frames, span_frames + 1)), []
+    for s in shifts:
+        pairs = [(i, where[(int(k), int(f) + s)]) for i, (k, f) in enumerate(zip(stream, t.frame))
+                 if (int(k), int(f) + s) in where]
+        i, j = (np.array(x, np.int64) for x in zip(*pairs)) if pairs else (np.zeros(0, np.int64),) * 2
+        values.append(auroc(t.mass["aligned"][i], t.label[j]) if len(i) else None)
+    best = None
+    known = [(v, -abs(s), i) for i, (s, v) in enumerate(zip(shifts, values)) if v is not None]
+    if known:
+        top, _, peak = max(known)
+        lo = hi = peak
+        while lo > 0 and values[lo - 1] is not None and values[lo - 1] >= top - LAG_PLATEAU:
+            lo -= 1
+        while hi < len(values) - 1 and values[hi + 1] is not None and values[hi + 1] >= top - LAG_PLATEAU:
+            hi += 1
+        middle = (shifts[lo] + shifts[hi]) / 2
+        best = int(np.sign(middle) * np.floor(abs(middle)))
+    return {"shifts": shifts, "auroc": values, "best_shift": best,
+            "best_auroc": None if best is None else values[shifts.index(best)], "at_zero": values[span_frames]}
+
+
+def lag_check(curve: dict, where: str, fps: float, required: bool = True,
+              tolerance: int = LAG_TOLERANCE_FRAMES) -> dict:
+    """The lag check on one part: the best shift of `lag_curve` within +-tolerance frames; when it is
+    not, the check names the lag it found (negative shift: the RGB lags the glove)."""
+    best = curve["best_shift"]
+    ok = best is not None and abs(best) <= tolerance
+    lag = ""
+    if best is not None and not ok:
+        who = "the RGB lags the glove" if best < 0 else "the RGB runs ahead of the glove"
+        lag = f"; {who} by {abs(best)} frames ({abs(best) / fps:.2f} s at {fps:g} fps)"
+    return {"check": f"lag: predicted and measured contact agree best within +-{tolerance} frames of no shift "
+                     f"({where}){lag}", "value": best, "limit": tolerance, "ok": bool(ok), "required": required}
 
 
 def _rmse(sq: np.ndarray, count: np.ndarray, pooled: bool) -> float | None:

@@ -17,10 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from htdata.errors import ArgumentError
+from htdata.format.canvas import HANDS
 from htdata.glove.layouts import Layout, load_layout
 from htdata.synthetic.rawglove import corpus_clips, glove_layout
-
-HANDS = ("left", "right")
 
 
 @dataclass

@@ -57,15 +57,17 @@ from htdata.ingest.plan import Source
 from htdata.ingest.run import ingest
 from htdata.inspect.stats import episode_stats
 from htdata.read.reader import DatasetReader
+from htdata.synthetic.rawfacts import (  # the truth's one home, beside the facts it defines
+    CONTACT_CELLS,
+    MID_GRASP,
+    MID_GRASP_GAIN,
+    PRESSED,
+    QUIET,
+    REST_SHARE,
+    START_FRAMES,
+    TRUTH_PERCENTILE,
+)
 
-PRESSED = 15.0          # counts above the cell's own 10th percentile: pressed
-QUIET = 5.0             # ... below this: quiet
-TRUTH_PERCENTILE = 10.0
-REST_SHARE = 0.10       # frames with the lowest mean raw count: the hand's rest
-START_FRAMES = 30
-MID_GRASP = 15.0
-MID_GRASP_GAIN = 10.0
-CONTACT_CELLS = 7
 MOVING_STILL = 10.0      # counts: no moving-cell flag on a cell ranging less (realglovecells.QUIET_RANGE)
 TARGETS = {"rest_leakage_mean": 0.02, "rest_leakage_worst": 0.05, "held_grip_kept": 0.90,
            "held_grip_kept_start": 0.90, "quiet_false_contact": 0.02, "contact_share_error": 0.10,

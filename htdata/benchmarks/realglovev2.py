@@ -28,13 +28,14 @@ from htdata.benchmarks.realclips import HANDS, RealClip
 from htdata.glove.layouts import Layout
 from htdata.glove.normalise import NormaliseConfig
 from htdata.glove.rasterise import Rasteriser
-
-PRESSED = 15.0
-QUIET = 5.0
-TRUTH_PERCENTILE = 10.0
-REST_SHARE = 0.10
-START_FRAMES = 30
-MID_GRASP = 15.0
+from htdata.synthetic.rawfacts import (  # the truth's one home (rawfacts.py)
+    MID_GRASP,
+    PRESSED,
+    QUIET,
+    REST_SHARE,
+    START_FRAMES,
+    TRUTH_PERCENTILE,
+)
 
 
 @dataclass

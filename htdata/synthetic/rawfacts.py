@@ -51,9 +51,16 @@ from scipy.ndimage import binary_dilation, label
 from htdata.glove.layouts import parse_layout
 from htdata.synthetic.rawglove import corpus_clips, glove_layout
 
-PRESSED = 15.0          # counts over the cell's own 10th percentile: pressed
+# The real-glove measures' truth (../shared/real_glove/README.md), one home for the facts below, the
+# real-glove bench (benchmarks/realglove.py, version 1) and version 2 (benchmarks/realglovev2.py).
+PRESSED = 15.0          # counts over the cell's rest (v1: its own 10th percentile): pressed
+QUIET = 5.0             # ... below this: quiet
+TRUTH_PERCENTILE = 10.0  # the percentile a cell's rest is taken at
 CONTACT_CELLS = 7       # pressed cells that make a contact frame
 REST_SHARE = 0.10       # the lowest-mean share of frames taken as the hand's rest
+START_FRAMES = 30       # a clip's first second: where a mid-grasp start is looked for
+MID_GRASP = 15.0        # ... with at least this many pressed cells on average
+MID_GRASP_GAIN = 10.0   # ... and this many more than in the clip's quietest second
 FALL = 10.0             # counts below the cell's rest that count as falling
 WANDER_WINDOW = 300     # frames (10 s at 30 fps)
 HELD_SHARE = 0.85       # contact in this share of a clip's frames: held nearly all along
@@ -164,7 +171,8 @@ def hand_facts(raw: np.ndarray, live: np.ndarray) -> dict:
         "crosstalk_moving": int((_ptp(x) > MOVING).sum()) if x.size else 0,
         "crosstalk_rises": bool(x.size and ((x - x_rest).max(axis=0) >= PRESSED).any()),
         "crosstalk_falls": bool(x.size and ((x - x_rest).min(axis=0) <= -FALL).any()),
-        "mid_grasp": bool(T >= 30 and n_pressed[:30].mean() >= 15 and n_pressed[:30].mean() >= min(windows) + 10),
+        "mid_grasp": bool(T >= START_FRAMES and n_pressed[:START_FRAMES].mean() >= MID_GRASP
+                          and n_pressed[:START_FRAMES].mean() >= min(windows) + MID_GRASP_GAIN),
         "held": bool(contact.mean() >= HELD_SHARE),
         "max": float(raw.max()), "saturated_cells": int((raw.max(axis=0) >= 1015).sum()),
         "fine_step": float(np.diff(values).min()) if len(values) > 1 else None,

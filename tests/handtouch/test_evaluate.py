@@ -335,7 +335,7 @@ def test_verdicts_compare_every_track_with_the_references(tmp_path):
     checks = [{"check": "a", "value": 0.1, "limit": 0.09, "ok": False, "required": False},
               {"check": "b", "value": 0.1, "limit": 0.09, "ok": False}]
     md = results_markdown(results, {"checks": checks})
-    assert "| a | 0.1000 | 0.0900 | not yet (not required) |" in md and "| b | 0.1000 | 0.0900 | FAILED |" in md
+    assert "| a | 0.1000 | 0.0900 | missed (reported, not required) |" in md and "| b | 0.1000 | 0.0900 | FAILED |" in md
     assert md.index("## Verdicts") < md.index("## Covered pixels")
 
 
@@ -351,3 +351,31 @@ def test_smoke_rgb_check_is_required_on_test():
     assert rgb_check(results, "m")["ok"] is False                    # a tie with all zeros is not better
     results["m"]["test"]["rgb2tactile"]["f_covered"]["rmse"] = 0.05
     assert rgb_check(results, "m")["ok"] is True
+
+
+def test_results_open_with_a_headline_and_the_lag_curves_are_plotted(tmp_path):
+    import cv2
+
+    from handtouch.bench.report import colour_bar, headline_markdown, render_lag_curves, results_markdown
+
+    curve = {"shifts": list(range(-3, 4)), "auroc": [0.5, 0.6, 0.8, 0.9, 0.8, None, 0.5], "best_shift": 0,
+             "best_auroc": 0.9}
+    gate = {"ood": {"where": "held-out (ood) cup", "required": True, "lag": curve,
+                    "timing": {"auroc": 0.9, "mispaired_auroc": 0.5, "phase_matched_auroc": 0.55,
+                               "position_auroc": 0.6}}}
+    ok = {"check": "a", "value": 1, "limit": 0, "ok": True}
+    missed = {"check": "b", "value": 0, "limit": 1, "ok": False, "required": False}
+    head = headline_markdown({"checks": [ok, missed], "heldout_gate": gate})
+    assert head.startswith("**PASSED**: 1 of 1 required checks ok; 1 more reported only.")
+    assert "AUROC 0.9000 against 0.5000" in head and "0.5500 at the same moment" in head and "0.6000 for a clock" in head
+    failed = headline_markdown({"checks": [{**ok, "ok": False}], "broken_control": "lagged"})
+    assert failed.startswith("**FAILED (1 of 1 required checks)") and "expected outcome" in failed
+    assert "- failed: a" in failed
+    assert results_markdown({}, {"checks": [ok]}).index("**PASSED**") < results_markdown({}, {"checks": [ok]}).index(
+        "## Verdicts")
+    img = render_lag_curves(gate, tmp_path / "lag.png")
+    assert cv2.imread(str(tmp_path / "lag.png")).shape == img.shape and (img < 128).any()
+    with pytest.raises(ValueError, match="no lag curves"):
+        render_lag_curves({"test": {"where": "test", "timing": {}}}, tmp_path / "none.png")
+    bar = colour_bar(600)
+    assert bar.shape[1] == 600 and len({tuple(p) for p in bar[10, 40:300]}) > 50    # a colour ramp

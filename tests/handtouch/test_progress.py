@@ -62,3 +62,25 @@ def test_heartbeat_line_gives_the_run_eta():
     beat.phase("train_vit")                      # the probes are done: their time is not the run's speed
     clock.t = 110.0
     assert beat.line().endswith("run 110 s in, ETA ~75 s")
+
+
+def test_free_cores_leaves_out_the_cores_other_processes_keep_busy():
+    """The smoke's evaluation threads (handtouch.distributed.free_cores): two spinning processes take
+    two cores (at least one is always left); this process's own threads do not count against it."""
+    import os
+    import subprocess
+    import sys
+
+    from handtouch.distributed import free_cores
+
+    cores = len(os.sched_getaffinity(0))
+    assert 1 <= free_cores() <= cores
+    spin = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+    try:
+        import time
+        time.sleep(0.3)                       # both spinning before the measure
+        assert free_cores(sample_s=0.5) <= max(1, cores - 1)
+    finally:
+        for p in spin:
+            p.kill()
+            p.wait()

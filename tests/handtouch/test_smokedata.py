@@ -64,13 +64,33 @@ def test_the_control_builds_its_own_data_and_the_plan_knows_what_is_cached(tmp_p
 
     with pytest.raises(SystemExit):
         parse_args(["--out", str(tmp_path), "--mispaired-rgb", "--dataset", str(tmp_path / "ds")])
-    assert "--mispaired-rgb builds its own corpus" in capsys.readouterr().err
+    assert "--broken builds its own corpus" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        parse_args(["--out", str(tmp_path), "--mispaired-rgb", "--broken", "lagged"])
+    assert parse_args(["--out", str(tmp_path), "--broken", "lagged"]).lag_frames == 6
     args = parse_args(["--out", str(tmp_path), "--mispaired-rgb"])
+    assert args.broken == "mispaired"
     assert args.raw == tmp_path / "raw" and args.dataset == tmp_path / "dataset"
     plan = run_plan(args)                                   # nothing there yet: the defaults
     assert plan.expected["data_sample"] == PHASE_SECONDS["data_sample"]
-    assert plan.expected["eval_handtouch-vit"] == PHASE_SECONDS["eval"] and "train_cnn" in plan.expected
+    assert plan.expected["eval_handtouch-vit"] == PHASE_SECONDS["eval"] and "train_cnn" not in plan.expected
+    assert "train_cnn" in run_plan(parse_args(["--out", str(tmp_path), "--encoders", "vit,cnn"])).expected
     write_synthetic_dataset(args.dataset, SPLIT_EPISODES, seed=1)
     (tmp_path / "results.json").write_text(json.dumps({"meta": {"seconds": {"train_vit": 300.0}}}))
     plan = run_plan(args)                                   # the last run's seconds; the dataset is there
     assert plan.expected["train_vit"] == 300.0 and plan.expected["data_ingest"] == 0.0
+
+
+def test_each_broken_control_passes_only_when_its_own_check_catches_it():
+    from handtouch.bench.timing import lag_check
+
+    gate = {"check": "contact-timing AUROC (held-out (ood) cup_grasp) >= phase-matched RGB's + 0.15", "ok": False,
+            "required": True}
+    curve = {"best_shift": -6, "best_auroc": 0.9, "shifts": [], "auroc": []}
+    lag = lag_check(curve, "held-out (ood) cup_grasp", fps=30.0)
+    assert not lag["ok"] and "the RGB lags the glove by 6 frames (0.20 s at 30 fps)" in lag["check"]
+    assert verdict([gate], control="reversed") == 0 and verdict([{**gate, "ok": True}], control="reversed") == 1
+    assert verdict([lag], control="lagged") == 0
+    assert verdict([gate], control="lagged") == 1          # the lag must be caught by the lag check, named
+    ahead = lag_check({**curve, "best_shift": 6}, "test", fps=30.0)
+    assert verdict([ahead], control="lagged") == 1         # a lag the other way is not the one built

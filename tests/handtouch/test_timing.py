@@ -15,11 +15,15 @@ from handtouch.bench.timing import (
     contact_mass,
     contact_streams,
     has_contact,
+    lag_check,
+    lag_curve,
+    position_bin,
+    position_clock,
     rmse_report,
     timing_checks,
     timing_scores,
 )
-from handtouch.contact_gate import gate
+from handtouch.contact_gate import gate, phase_partners
 
 
 def _brute_auroc(scores, labels) -> float:
@@ -148,10 +152,107 @@ def test_gate_requires_test_and_the_held_out_task_and_reports_the_stress_task():
                      {k: np.concatenate([held.sq_err[k], stress.sq_err[k]]) for k in held.sq_err})
     checks, report = gate({"test": _table(rng, reads_frame=True, task="seen"), "ood": ood}, "cup", "palm")
     assert set(report) == {"test", "ood", "stress"} and report["ood"]["timing"]["tasks"] == ["cup"]
+    assert "phase_matched_auroc" not in report["ood"]["timing"]     # not scored: not checked
     required = [c for c in checks if c["required"]]
-    assert len(required) == 4 and all(c["ok"] for c in required)
+    assert len(required) == 4 and all(c["ok"] for c in required)   # tables without frames: no lag check
     stress_checks = [c for c in checks if "stress" in c["check"]]
     assert len(stress_checks) == 2 and not any(c["required"] or c["ok"] for c in stress_checks)
     # the same gate when the held-out task is the blind one: a required check fails
     checks, _ = gate({"test": _table(rng, reads_frame=True), "ood": ood}, "palm", None)
     assert not all(c["ok"] for c in checks if c["required"])
+
+
+# ---- the phase-matched control, the clock reference and the lag check (issue #45) ----------------
+
+def _clock_world(rng, episodes=8, frames=60, varied=False):
+    """(episode, frame, position, label) of right-hand streams; contact in the middle third of every
+    episode, or (varied) at a random place of each."""
+    ep, fr, label = [], [], []
+    for e in range(episodes):
+        start = int(rng.integers(-15, frames - 5)) if varied else frames // 3   # varied: may run off an end
+        touched = np.zeros(frames, bool)
+        touched[max(start, 0):start + 20] = True
+        ep += [e] * frames
+        fr += list(range(frames))
+        label += touched.tolist()
+    ep, fr, label = np.array(ep), np.array(fr), np.array(label)
+    return ep, fr, (fr + 0.5) / frames, label
+
+
+def _timing_table(ep, fr, pos, label, mass: dict) -> FrameTable:
+    n = len(label)
+    sq = {k: np.zeros(n) for k in ("aligned", "mispaired", "zeros")}
+    return FrameTable(ep, np.ones(n, np.int64), np.array(["held"] * n), label, np.full(n, 100.0), mass, sq, fr, pos)
+
+
+def test_a_clock_passes_the_mis_paired_control_but_not_the_phase_matched_one():
+    """A 'model' that paints contact by where in its episode the frame is (what video played backwards
+    keeps when contact sits mid-episode) beats another episode's frame at a random moment, but not
+    another episode's frame at the same moment."""
+    rng = np.random.default_rng(7)
+    ep, fr, pos, label = _clock_world(rng)
+    clock = position_clock(pos, label)
+    by_position = clock[position_bin(pos)] + rng.normal(0, 0.01, len(pos))
+    partner = phase_partners(ep, np.zeros(len(ep)), pos, seed=0)
+    assert (ep[partner] != ep).all() and np.abs(pos[partner] - pos).max() < 1e-9
+    random_moment = by_position[rng.permutation(len(pos))]
+    table = _timing_table(ep, fr, pos, label, {"aligned": by_position, "mispaired": random_moment,
+                                               "phase_matched": by_position[partner]})
+    scores = timing_scores(table, clock)
+    assert scores["auroc"] > 0.95 and scores["position_auroc"] > 0.95
+    checks = {c["check"].split(" >= ")[1].split(" ")[0]: c["ok"] for c in timing_checks(scores, "held")}
+    assert checks == {"0.7": True, "mis-paired": True, "phase-matched": False}, checks
+
+
+def test_where_timing_varies_the_clock_scores_near_chance_and_a_frame_reader_passes_every_control():
+    rng = np.random.default_rng(8)
+    ep, fr, pos, label = _clock_world(rng, episodes=40, varied=True)
+    clock = position_clock(pos, label)
+    reads = label + rng.normal(0, 0.2, len(label))
+    partner = phase_partners(ep, np.zeros(len(ep)), pos, seed=0)
+    table = _timing_table(ep, fr, pos, label, {"aligned": reads, "mispaired": reads[rng.permutation(len(pos))],
+                                               "phase_matched": reads[partner]})
+    scores = timing_scores(table, clock)
+    assert scores["position_auroc"] < 0.65 and all(c["ok"] for c in timing_checks(scores, "held"))
+
+
+def test_phase_partners_prefer_the_same_task_and_need_another_episode():
+    ep = np.array([0, 0, 1, 1, 2, 2])
+    task = np.array(["a", "a", "b", "b", "a", "a"])
+    pos = np.array([0.1, 0.9, 0.1, 0.9, 0.2, 0.8])
+    out = phase_partners(ep, task, pos)
+    assert out.tolist() == [4, 5, 2, 3, 0, 1] or out[:2].tolist() == [4, 5]
+    assert set(ep[out[:2]]) == {2} and set(ep[out[4:]]) == {0}    # task a pairs within a
+    assert set(ep[out[2:4]]) <= {0, 2}                               # task b has no twin: any other
+    assert (phase_partners(np.zeros(3, int), np.array(["a"] * 3), np.array([0.1, 0.5, 0.9])) == -1).all()
+
+
+@pytest.mark.parametrize("lag", [0, 1, 6])
+def test_the_lag_curve_finds_the_frames_the_rgb_lags_by(lag):
+    """Predictions that follow the label `lag` frames late (what a model shows on video that lags its
+    glove by `lag` frames) agree best at shift -lag; the check passes within 2 frames and names the lag."""
+    rng = np.random.default_rng(9)
+    ep, fr, pos, label = _clock_world(rng, episodes=10, varied=True)
+    late = np.zeros(len(label))
+    for e in np.unique(ep):
+        rows = np.flatnonzero(ep == e)
+        late[rows] = np.concatenate([np.zeros(lag), label[rows][:len(rows) - lag]]) if lag else label[rows]
+    mass = late + rng.normal(0, 0.05, len(label))
+    curve = lag_curve(_timing_table(ep, fr, pos, label, {"aligned": mass, "mispaired": mass}), 30)
+    assert curve["best_shift"] == -lag and len(curve["shifts"]) == 61
+    check = lag_check(curve, "test", fps=30.0)
+    assert check["ok"] == (lag <= 2)
+    if lag > 2:
+        assert f"the RGB lags the glove by {lag} frames (0.20 s at 30 fps)" in check["check"]
+
+
+def test_the_lag_curve_of_a_subsampled_table_and_of_none():
+    rng = np.random.default_rng(10)
+    ep, fr, pos, label = _clock_world(rng, episodes=10, varied=True)
+    keep = rng.random(len(ep)) < 0.6                     # the gate scores a subsample of a part
+    table = _timing_table(ep, fr, pos, label, {"aligned": label + rng.normal(0, 0.1, len(ep)),
+                                               "mispaired": np.zeros(len(ep))}).select(keep)
+    assert lag_curve(table, 10)["best_shift"] == 0
+    empty = table.select(np.zeros(len(table), bool))
+    curve = lag_curve(empty, 5)
+    assert curve["best_shift"] is None and not lag_check(curve, "test", 30.0)["ok"]

@@ -31,3 +31,20 @@ def test_no_module_restates_a_glove_rule_outside_its_owner():
     found = {str(p.relative_to(ROOT)): hits for p in sorted((ROOT / "htdata").rglob("*.py"))
              if p != OWNER and (hits := restatements(p.read_text()))}
     assert not found, f"use htdata.glove.glovevalue (is_inverted, is_raw_count, toward_pressure): {found}"
+
+
+TRUTH_OWNER = ROOT / "htdata" / "synthetic" / "rawfacts.py"
+TRUTH_NAMES = ("PRESSED", "QUIET", "TRUTH_PERCENTILE", "CONTACT_CELLS", "REST_SHARE", "START_FRAMES", "MID_GRASP",
+               "MID_GRASP_GAIN")
+
+
+def test_the_real_glove_truth_has_one_home():
+    """The real-glove measures' truth constants (15 counts, 7 cells, 10 %, ...) are rawfacts.py's; the
+    bench's versions 1 and 2 import them (they sat in three modules, issue 48). Only the measuring side is
+    searched: a toolkit rule (glove/activity.py's REST_SHARE) is the rule measured, never the truth."""
+    defines = re.compile(rf"^({'|'.join(TRUTH_NAMES)})\s*=", re.MULTILINE)
+    assert len(defines.findall(TRUTH_OWNER.read_text())) == len(TRUTH_NAMES)
+    found = {str(p.relative_to(ROOT)): defines.findall(p.read_text()) for p in sorted(
+             [*(ROOT / "htdata" / "benchmarks").rglob("*.py"), *(ROOT / "htdata" / "synthetic").rglob("*.py")])
+             if p != TRUTH_OWNER and defines.search(p.read_text())}
+    assert not found, f"import them from htdata.synthetic.rawfacts: {found}"
