@@ -16,8 +16,8 @@ position). `gate` turns the tables of the parts into the checks and the report:
     stress the stress task's frames (held out too; shares no touch with a training task):
            the same checks, reported only;
 the checks being: contact-timing AUROC >= the floor, >= the mis-paired control's + the gap,
->= the phase-matched control's + the gap, and the lag check (predicted and measured contact agree
-best within +-2 frames of no shift, over shifts of +-1 s). Reported beside them: the clock
+>= the phase-matched control's + the gap, and the lag checks (predicted and measured contact agree
+best within +-2 frames of no shift, over shifts of +-1 s, and there clearly better than 0.5 s away). Reported beside them: the clock
 reference (P(contact | tenth of the episode) measured on the test part: what reading no image at
 all scores), and held-out F-RMSE per frame, pooled and on contact frames against the better of
 all zeros and the mis-paired model.
@@ -36,6 +36,7 @@ from htdata.read.torchdata import TactileFrameDataset
 
 from .bench.items import subsample
 from .bench.timing import (
+    LAG_SIDE_S,
     LAG_SPAN_S,
     PHASE_MATCHED,
     FrameTable,
@@ -44,6 +45,7 @@ from .bench.timing import (
     has_contact,
     lag_check,
     lag_curve,
+    lag_peak_check,
     position_clock,
     rmse_report,
     timing_checks,
@@ -167,7 +169,7 @@ def gate(tables: dict[str, FrameTable], ood_task: str, stress_task: str | None,
         entry = {"where": where, "required": required, "timing": scores, "rmse": rmse_report(table),
                  "clock": None if clock is None else clock.tolist()}
         if table.frame is not None:
-            entry["lag"] = lag_curve(table, span)
-            checks.append(lag_check(entry["lag"], where, fps, required))
+            entry["lag"] = lag_curve(table, span, max(1, round(LAG_SIDE_S * fps)))
+            checks += [lag_check(entry["lag"], where, fps, required), lag_peak_check(entry["lag"], where, fps, required)]
         report[name] = entry
     return checks, report

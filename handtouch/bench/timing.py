@@ -57,6 +57,12 @@ LAG_SPAN_S = 1.0
 # -1 to +3 frames): its single highest point wanders with noise. The best shift is the middle of the
 # top, the contiguous shifts within LAG_PLATEAU of the highest.
 LAG_PLATEAU = 0.01
+# ... and the curve must have a peak: the agreement at the best shift beats the agreement with the contact
+# LAG_SIDE_S away (the better side) by MISPAIRED_GAP. A model that reads the frame of its own moment
+# drops 0.20-0.30 there (seed 0: test, held-out and stress); one trained on video played backwards,
+# whose contact the frame does not show, 0.03-0.08: its AUROC is flat over a second (issue #45).
+LAG_SIDE_S = 0.5
+LAG_MIN_PAIRS = 30      # a shift with fewer (frame, shifted label) pairs gets no AUROC: too few to say
 
 
 def has_contact(tactile: torch.Tensor, coverage: torch.Tensor, level: float = CONTACT_LEVEL) -> torch.Tensor:
@@ -190,15 +196,17 @@ def timing_checks(scores: dict, where: str, required: bool = True, floor: float 
     ]
 
 
-def lag_curve(table: FrameTable, span_frames: int) -> dict:
+def lag_curve(table: FrameTable, span_frames: int, side_frames: int | None = None) -> dict:
     """Agreement of predicted and measured contact when the prediction is moved by each shift.
 
     For shift s in -span..span frames: the AUROC of the aligned contact mass at frame f for the label
     at frame f + s of the same (episode, hand) stream, over the streams with contact and the frames whose
-    partner the table holds. A pipeline whose RGB lags the glove by k frames shows its best agreement at
+    partner the table holds (None with fewer than LAG_MIN_PAIRS pairs). A pipeline whose RGB lags the glove by k frames shows its best agreement at
     s = -k (the frame shows the moment k frames before its label). The best shift is the middle of the
-    curve's top (LAG_PLATEAU), rounded toward 0.
+    curve's top (LAG_PLATEAU), rounded toward 0; `side` is the higher of the agreements `side_frames`
+    (default span // 2) either side of it, or as far as the streams give LAG_MIN_PAIRS pairs.
     """
+    side_frames = span_frames // 2 if side_frames is None else side_frames
     if table.frame is None:
         raise ValueError("lag_curve: the table has no frame indices")
     t = table.select(contact_streams(table.episode, table.hand, table.label))
@@ -209,7 +217,7 @@ def lag_curve(table: FrameTable, span_frames: int) -> dict:
         pairs = [(i, where[(int(k), int(f) + s)]) for i, (k, f) in enumerate(zip(stream, t.frame))
                  if (int(k), int(f) + s) in where]
         i, j = (np.array(x, np.int64) for x in zip(*pairs)) if pairs else (np.zeros(0, np.int64),) * 2
-        values.append(auroc(t.mass["aligned"][i], t.label[j]) if len(i) else None)
+        values.append(auroc(t.mass["aligned"][i], t.label[j]) if len(i) >= LAG_MIN_PAIRS else None)
     best = None
     known = [(v, -abs(s), i) for i, (s, v) in enumerate(zip(shifts, values)) if v is not None]
     if known:
@@ -221,8 +229,29 @@ def lag_curve(table: FrameTable, span_frames: int) -> dict:
             hi += 1
         middle = (shifts[lo] + shifts[hi]) / 2
         best = int(np.sign(middle) * np.floor(abs(middle)))
+    side = None
+    if best is not None:     # each side: side_frames away, or as far as the streams give pairs for
+        around = []
+        for step in (-1, 1):
+            for d in range(side_frames, 0, -1):
+                x = best + step * d
+                if x in shifts and values[shifts.index(x)] is not None:
+                    around.append(values[shifts.index(x)])
+                    break
+        side = max(around, default=None)
     return {"shifts": shifts, "auroc": values, "best_shift": best,
-            "best_auroc": None if best is None else values[shifts.index(best)], "at_zero": values[span_frames]}
+            "best_auroc": None if best is None else values[shifts.index(best)], "at_zero": values[span_frames],
+            "side_frames": side_frames, "side_auroc": side}
+
+
+def lag_peak_check(curve: dict, where: str, fps: float, required: bool = True, gap: float = MISPAIRED_GAP) -> dict:
+    """The lag curve has a peak: its agreement at the best shift >= the agreement `side_frames` away
+    (the better side) + gap (LAG_SIDE_S says why)."""
+    best, side = curve.get("best_auroc"), curve.get("side_auroc")
+    ok = best is not None and side is not None and best - side >= gap
+    return {"check": f"lag: predicted contact follows measured contact in time ({where}): agreement at the best "
+                     f"shift >= agreement {curve.get('side_frames', 0) / fps:.2f} s away + {gap}",
+            "value": best, "limit": None if side is None else side + gap, "ok": bool(ok), "required": required}
 
 
 def lag_check(curve: dict, where: str, fps: float, required: bool = True,

@@ -256,3 +256,26 @@ def test_the_lag_curve_of_a_subsampled_table_and_of_none():
     empty = table.select(np.zeros(len(table), bool))
     curve = lag_curve(empty, 5)
     assert curve["best_shift"] is None and not lag_check(curve, "test", 30.0)["ok"]
+
+
+def test_the_lag_curve_of_a_model_that_does_not_follow_contact_in_time_has_no_peak():
+    """Predictions that follow the label pass the peak check and the floor; those of video played backwards
+    (the label of the mirrored moment) or of a clock do not pass both; a curve as high 0.5 s away as at its
+    best fails the peak check."""
+    from handtouch.bench.timing import lag_peak_check
+
+    rng = np.random.default_rng(11)
+    ep, fr, pos, label = _clock_world(rng, episodes=30, frames=90, varied=True)
+    mirrored = np.zeros(len(label))
+    for e in np.unique(ep):
+        rows = np.flatnonzero(ep == e)
+        mirrored[rows] = label[rows][::-1]
+    clock = position_clock(pos, label)[position_bin(pos)]
+    follows = label + rng.normal(0, 0.1, len(label))
+    for mass, ok in ((follows, True), (mirrored + rng.normal(0, 0.1, len(label)), False), (clock, False)):
+        curve = lag_curve(_timing_table(ep, fr, pos, label, {"aligned": mass, "mispaired": mass}), 30, 15)
+        passes = lag_peak_check(curve, "test", 30.0)["ok"] and curve["at_zero"] >= AUROC_FLOOR
+        assert passes == ok, curve
+    flat = lag_curve(_timing_table(ep, fr, pos, label, {"aligned": np.full(len(label), 0.5),
+                                                         "mispaired": follows}), 30, 15)
+    assert flat["side_auroc"] == flat["best_auroc"] and not lag_peak_check(flat, "test", 30.0)["ok"]
