@@ -27,8 +27,11 @@ The clips (a folder, or the sample glove's corpus) are htdata/benchmarks/realcli
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import json
 import shutil
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,6 +55,7 @@ from htdata.curate.idle import IdleConfig, plan_idle
 from htdata.glove.layouts import Layout
 from htdata.glove.normalise import BASELINES, NOISE_K_BASELINES, RAW_COUNT_DEFAULTS, NormaliseConfig, Normaliser
 from htdata.glove.rasterise import Rasteriser
+from htdata.glove.restreference import pooled_reference, recording_rest, write_rest_reference
 from htdata.ingest.pipeline import load_pipeline
 from htdata.ingest.plan import Source
 from htdata.ingest.run import ingest
@@ -104,6 +108,14 @@ class HandTruth:
         return self.pressed.sum(axis=1) >= CONTACT_CELLS
 
 
+def left_out_reference(cfg: NormaliseConfig, others: list[np.ndarray], path: Path) -> NormaliseConfig:
+    """`cfg` with the glove's rest reference pooled over `others` (the other clips' raw rows of this glove
+    hand: leave-one-out) written to `path` as its taxel calibration (htdata.glove.restreference)."""
+    write_rest_reference(path, pooled_reference([recording_rest(r, cfg.convention) for r in others]))
+    return dataclasses.replace(cfg, taxel_calibration=str(path),
+                               taxel_calibration_sha256=hashlib.sha256(path.read_bytes()).hexdigest()).validate()
+
+
 def normalised(raw: np.ndarray, layout: Layout, cfg: NormaliseConfig, fps: float) -> np.ndarray:
     """(T, H, W) values of one hand's raw rows, fitted as the ingest fits them (whole episode, or first chunk)."""
     norm = Normaliser(cfg, layout)
@@ -138,17 +150,20 @@ def _ratio(a: int, b: int) -> float | None:
     return a / b if b else None
 
 
-def normalise_rows(clips: list[RealClip], layouts: dict[str, Layout], baselines: bool = True,
+def normalise_rows(clips: list[RealClip], layouts: dict[str, Layout], baselines: bool | tuple[str, ...] = True,
                    gloves: tuple = DERIVED_GLOVES) -> list[dict]:
     """One row per (glove, setting): the real glove and each derived glove (realglovev2.DERIVED_GLOVES), the
-    default and then every baseline unless not `baselines`; version 1's measures and version 2's side by side,
-    both against the original presses."""
-    plans = [("default (no [normalise] table)", None)] + [(f"{b}" + (f", noise_k={k:g}" if k else ""), (b, k))
-                                                          for b, k in (BASELINE_ROWS if baselines else ())]
+    default and then every baseline (`baselines` True), none (False) or those named; version 1's measures and
+    version 2's side by side, both against the original presses."""
+    chosen = BASELINE_ROWS if baselines is True else [r for r in BASELINE_ROWS if baselines and r[0] in baselines]
+    plans = [("default (no [normalise] table)", None)] + [(f"{b}" + (" on the glove's rest (leave-one-out)" if b == "shift"
+                                                                 else "") + (f", noise_k={k:g}" if k else ""), (b, k))
+                                                          for b, k in chosen]
     rasters = {h: Rasteriser(layouts[h]) for h in HANDS}
     truths = {(c.clip, h): HandTruth.of(c.hand(h), layouts[h].live_mask) for c in clips for h in HANDS}
     truths2 = {h: glove_truths(clips, h, layouts[h].live_mask) for h in HANDS}
     rows = []
+    tmp = tempfile.TemporaryDirectory(prefix="htdata-realglove-")
     for glove in gloves:
         counts = {(c.clip, h): derived_counts(glove, c.hand(h), truths2[h][c.clip], layouts[h].live_mask)
                   for c in clips for h in HANDS}
@@ -158,6 +173,9 @@ def normalise_rows(clips: list[RealClip], layouts: dict[str, Layout], baselines:
             for clip in clips:
                 for h in HANDS:
                     cfg = config_for(glayouts[h], plan)
+                    if cfg.baseline == "shift":    # the glove's rest from its OTHER clips: the check can fail
+                        cfg = left_out_reference(cfg, [counts[(c.clip, h)] for c in clips if c.clip != clip.clip],
+                                                 Path(tmp.name) / f"{glove[0]}-{h}-{clip.clip}.npz")
                     t0 = time.perf_counter()
                     values = normalised(counts[(clip.clip, h)], glayouts[h], cfg, clip.fps)
                     seconds += time.perf_counter() - t0
@@ -177,6 +195,7 @@ def normalise_rows(clips: list[RealClip], layouts: dict[str, Layout], baselines:
                          "held_grip_kept_start": _ratio(total["start_kept"], total["start_pressed"]),
                          "quiet_false_contact": _ratio(total["quiet_lit"], total["quiet"]),
                          "us_per_hand_frame": 1e6 * seconds / max(frames, 1)})
+    tmp.cleanup()
     return rows
 
 

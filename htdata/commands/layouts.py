@@ -8,6 +8,8 @@
     htdata layouts suggest /raw/rec_01 my_glove_right.json --hand right
                                             # a starting layout from what moves
     htdata layouts render opentouch_right_16x16 out.png
+    htdata layouts rest my_glove_right.json /raw/rec_01 /raw/rec_02 /raw/rec_03 right_rest.npz
+                                            # the glove's own rest, for baseline = "shift"
 
 Layout ids are searched in --layouts DIR (repeatable), then $HTDATA_LAYOUTS,
 then the shipped schemas/layouts/ (htdata.glove.layouts.layout_dirs).
@@ -38,6 +40,13 @@ from htdata.glove.activity import describe_cells, rule_text, unmapped_moving
 from htdata.glove.layouts import LAYOUTS_ENV, Layout, list_layouts, load_canonical, load_layout
 from htdata.glove.layoutsuggest import layout_id_from_name, layout_json_text, suggest_layout
 from htdata.glove.rasterise import Rasteriser
+from htdata.glove.restreference import (
+    MIN_RECORDINGS,
+    REST_PERCENTILE,
+    pooled_reference,
+    recording_rest,
+    write_rest_reference,
+)
 from htdata.ingest.recordingscan import scan_recordings
 
 # BGR colours per part id (0 = background), for `htdata layouts render`.
@@ -235,9 +244,55 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--max", type=float, dest="max_value",
                    help="full-scale raw value for value.max (default: the largest value seen)")
     p.add_argument("--force", action="store_true", help="overwrite OUT.json")
+    p = sub.add_parser("rest", help="write the glove's own rest: each cell's rest pooled over its recordings "
+                                    "(a taxel calibration for baseline = \"shift\")")
+    p.epilog = (f"example: htdata layouts rest my_glove_right.json /raw/rec_01 /raw/rec_02 /raw/rec_03 rest.npz\n"
+                f"A cell's rest in a recording is its {REST_PERCENTILE:g}th percentile on the no-pressure side; the "
+                f"reference is the median over the recordings (at least {MIN_RECORDINGS}), so a grip held through "
+                "one recording does not move it. Then in the pipeline: [normalise.LAYOUT] taxel_calibration = "
+                "\"rest.npz\", baseline = \"shift\", noise_k = 5 (docs/INGEST.md, \"The glove's own rest\").")
+    p.formatter_class = argparse.RawDescriptionHelpFormatter
+    p.add_argument("layout", help="the glove hand's layout (id or JSON): its grid, hand and value.convention")
+    p.add_argument("paths", nargs="+", metavar="RECORDING... OUT.npz",
+                   help="recordings of that glove (source folders or .npy raw rows), then the .npz to write")
+    p.add_argument("--pipeline", default="native",
+                   help="pipeline whose adapter reads the recordings (default: native)")
+    p.add_argument("--force", action="store_true", help="overwrite OUT.npz")
     p = sub.add_parser("render", help="draw the region map + coverage of a layout as a PNG")
     p.add_argument("layout", help="layout id or path to a layout JSON")
     p.add_argument("out", help="output .png path")
+
+
+def rest(args: argparse.Namespace, dirs: tuple) -> int:
+    """`htdata layouts rest LAYOUT RECORDING... OUT.npz`."""
+    if len(args.paths) < 2:
+        raise ArgumentError("rest needs at least one RECORDING and the OUT.npz to write")
+    *recordings, out = args.paths
+    out = Path(out)
+    if out.suffix != ".npz":
+        raise ArgumentError(f"OUT must be a .npz file, got {out}")
+    if out.exists() and not args.force:
+        raise ArgumentError(f"{out} exists (use --force to overwrite it)")
+    layout = load_layout(Path(args.layout) if args.layout.endswith(".json") else args.layout, dirs)
+    scanned = scan_recordings(recordings, args.pipeline, layout.hand, layout.path, keep_rows=True)
+    if not scanned:
+        raise ArgumentError(f"no {layout.hand}-hand rows in {', '.join(recordings)} (layout {layout.layout_id})")
+    for s in scanned:
+        if s.rows.shape[1:] != tuple(layout.grid):
+            raise ArgumentError(f"{s.recording} [{s.episode_id}]: {s.hand} rows are {s.rows.shape[1]}x{s.rows.shape[2]}, "
+                                f"layout {layout.layout_id} is {layout.grid[0]}x{layout.grid[1]}")
+    convention = layout.value["convention"]
+    rests = [recording_rest(s.rows, convention) for s in scanned]
+    reference = pooled_reference(rests)
+    live = np.asarray(layout.live_mask, bool)
+    away = np.stack([r - reference for r in rests])[:, live]
+    write_rest_reference(output_path(out, "layouts rest"), reference)
+    print(f"{len(scanned)} {layout.hand}-hand recording(s) of {layout.layout_id} ({convention}); per recording, "
+          f"the median live cell's rest sits {', '.join(f'{float(np.nanmedian(a)):+.3g}' for a in away)} counts "
+          f"from the reference (the common-mode shift baseline = \"shift\" fits)")
+    print(f"wrote {out}: in the pipeline, [normalise.{layout.layout_id}] taxel_calibration = \"{out.name}\", "
+          f"baseline = \"shift\", noise_k = 5")
+    return 0
 
 
 def _print_rows(rows: list[dict]) -> None:
@@ -264,6 +319,8 @@ def run(args: argparse.Namespace) -> int:
                 return check_against(layout, args.against, args.pipeline)
         elif action == "suggest":
             return suggest(args)
+        elif action == "rest":
+            return rest(args, dirs)
         elif action == "render":
             render_layout_png(load_layout(args.layout, dirs), output_path(args.out, "layouts render"))
             print(f"wrote {args.out}")

@@ -23,7 +23,13 @@ paired rows once more before normalising it, `fit_whole_episode`):
   first / last two knots continued beyond the first / last centre): a rest
   level that follows slow drift. Stored as knots (`baseline` is then (K,H,W),
   `knot_rows` their row positions); `apply` needs the rows' positions (`rows=`).
-For these three the noise floor is per cell (`cell_floor`): noise_k x the
+- "shift": the rest is the glove's (its taxel calibration's offset: a reference pooled over its
+  recordings, htdata.glove.restreference, already subtracted by `to_unit`); fitted here is one
+  number per window of `shift_window_s` (knots, as "drift"), the common-mode shift: the median
+  over live cells of each cell's `baseline_percentile` percentile there. A grip held through a whole recording loads a few dozen of a
+  glove's hundreds of cells, so it moves that median by nothing and stays pressed. May be negative
+  (a glove resting below its reference), unlike the others, which are clipped to [0, 1].
+For these four the noise floor is per cell (`cell_floor`): noise_k x the
 cell's own rest spread, from its lower half, bounded by the glove's.
 A hand's mean level is no guide on a real glove (a grip moves it by 0.6-12.5 of
 1023 counts), so nothing here chooses frames by it but "quietest" (issue 34).
@@ -99,14 +105,36 @@ def fit_whole_episode(unit: np.ndarray, rows: np.ndarray, fps: float, cfg, live_
             base = np.nanmedian(unit[quietest_span(unit, live_mask, cfg.rest_seconds, fps)], axis=0)
         elif cfg.baseline == "percentile":
             base = cell_percentile(unit, cfg.baseline_percentile)
+        elif cfg.baseline == "shift":
+            base, knot_rows = shift_knots(unit, rows, fps, live_mask, cfg.baseline_percentile, cfg.shift_window_s)
         else:
             base, knot_rows = drift_knots(unit, rows, fps, cfg.baseline_percentile, cfg.drift_window_s)
-    baseline = np.clip(np.nan_to_num(base, nan=0.0), 0.0, 1.0).astype(np.float32)
+    low = -1.0 if cfg.baseline == "shift" else 0.0
+    baseline = np.clip(np.nan_to_num(base, nan=0.0), low, 1.0).astype(np.float32)
     if cfg.noise_k <= 0:
         return baseline, knot_rows, None
-    at = drift_baseline_at(baseline, knot_rows, rows) if cfg.baseline == "drift" else baseline
+    at = drift_baseline_at(baseline, knot_rows, rows) if cfg.knotted else baseline
     floor = cell_floor(unit - at, live_mask, cfg.noise_k, cfg.noise_floor, min_floor)
     return baseline, knot_rows, floor
+
+
+def common_shift(unit: np.ndarray, live_mask: np.ndarray, q: float) -> float:
+    """The episode's common-mode shift from its rest reference: the median over live cells of each cell's
+    `q` percentile of (T,H,W) unit values (0 without a finite live cell)."""
+    p = cell_percentile(unit, q)[np.asarray(live_mask, bool)]
+    p = p[np.isfinite(p)]
+    return float(np.median(p)) if p.size else 0.0
+
+
+def shift_knots(unit: np.ndarray, rows: np.ndarray, fps: float, live_mask: np.ndarray, q: float,
+                window_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """((K,H,W) the common-mode shift per window of `window_s` seconds, each knot one value over the grid,
+    (K,) centre rows): baseline "shift" follows the glove's slow wander like "drift", one number a window."""
+    knots, centres = [], []
+    for a, b in windows(unit.shape[0], round(window_s * fps)):
+        knots.append(np.full(unit.shape[1:], common_shift(unit[a:b], live_mask, q), np.float32))
+        centres.append(float(np.mean(rows[a:b])))
+    return np.stack(knots), np.asarray(centres, np.float32)
 
 
 def cell_percentile(unit: np.ndarray, q: float) -> np.ndarray:

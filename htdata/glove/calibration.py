@@ -91,7 +91,7 @@ def _fit_shape(name: str, cfg: NormaliseConfig, grid: tuple[int, int]) -> tuple[
     """Stored shape of a fitted array: the drift baseline is (K,H,W) knots and knot_rows (K,)."""
     if name == "knot_rows":
         return (-1,)
-    if name == "baseline" and cfg.baseline == "drift":
+    if name == "baseline" and cfg.knotted:
         return (-1, *grid)
     return grid
 

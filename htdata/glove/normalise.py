@@ -54,15 +54,19 @@ from htdata.glove.baselinefit import drift_baseline_at, fit_first_frames, fit_wh
 from htdata.glove.glovevalue import CONVENTIONS, is_inverted, is_raw_count, pressure_share
 from htdata.glove.restlevel import load_taxel_calibration
 
-BASELINES = ("none", "first_frame", "rest_window", "quietest", "percentile", "drift")
+BASELINES = ("none", "first_frame", "rest_window", "quietest", "percentile", "drift", "shift")
 # baselines fitted on the whole episode (`fit_episode`), not on its first chunk
-EPISODE_BASELINES = ("quietest", "percentile", "drift")
+EPISODE_BASELINES = ("quietest", "percentile", "drift", "shift")
+# "shift": the glove's own rest comes from its taxel calibration file (a rest reference pooled over the
+# glove's recordings: htdata.glove.restreference); per episode only the common-mode shift is fitted, so a
+# grip held through a whole recording stays pressed (issue 43). Needs taxel_calibration.
 # A raw-count glove (value.max > 1, counts rising or falling with pressure) without a [normalise.<id>] table: "none" would read its rest level
 # (~557 of 1023 on a knit glove) as 0.55 pressure everywhere (issue 27). Each cell's own rest (its 10th percentile per
 # minute: a press only raises a cell) and a per-cell noise floor hold a grip a real glove's mean level cannot see
 # (issue 34). Measured in `make bench`, "real glove" (docs/INGEST.md).
 RAW_COUNT_DEFAULTS = {"baseline": "drift", "baseline_percentile": 10.0, "drift_window_s": 60.0, "noise_k": 5.0}
-NOISE_K_BASELINES = ("rest_window", *EPISODE_BASELINES)   # the baselines a noise_k floor is measured against
+NOISE_K_BASELINES = ("rest_window", *EPISODE_BASELINES)
+KNOTTED_BASELINES = ("drift", "shift")   # NormaliseConfig.knotted   # the baselines a noise_k floor is measured against
 
 
 def has_noise_floor(noise_k: float, noise_floor: float) -> bool:
@@ -83,6 +87,8 @@ class NormaliseConfig:
     rest_seconds: float = 1.0  # span length of baseline="quietest" (and of the noise spread of the episode baselines)
     baseline_percentile: float = 5.0  # baseline="percentile": per-taxel percentile over the episode
     drift_window_s: float = 30.0      # baseline="drift": window of the running rest level
+    shift_window_s: float = 2.0       # baseline="shift": window of the common-mode shift (a median over the
+    #                                   glove's cells: a short window is steady and follows slow wander)
     # A per-glove calibration measured once: an .npz with per-taxel `offset` (rest, raw units) and `gain`
     # (multiplier after the offset, 1 = nominal: a taxel twice as sensitive has 0.5), each (H,W). The pipeline resolves the path and fills in its sha256
     # (NormaliseSettings.normalise_for); the arrays travel in each episode record's calibration_fit.
@@ -93,6 +99,12 @@ class NormaliseConfig:
     def per_episode(self) -> bool:
         """True when the baseline is fitted on the whole episode (`Normaliser.fit_episode`)."""
         return self.baseline in EPISODE_BASELINES
+
+    @property
+    def knotted(self) -> bool:
+        """True when the baseline moves along the episode: knots (K,H,W) at row positions, so `apply` needs
+        the raw rows' positions (baseline "drift", and "shift" whose common-mode shift follows the glove)."""
+        return self.baseline in KNOTTED_BASELINES
 
     @property
     def has_noise_floor(self) -> bool:
@@ -125,11 +137,14 @@ class NormaliseConfig:
                 raise ConfigError(f"{where}: {name} must be a finite number >= 0, got {value!r}")
         if self.noise_floor >= 1:
             raise ConfigError(f"{where}: noise_floor must be < 1 (unit values), got {self.noise_floor!r}")
+        if self.baseline == "shift" and not self.taxel_calibration and not self.taxel_calibration_sha256:
+            raise ConfigError(f"{where}: baseline = \"shift\" fits only a recording's common-mode shift from the "
+                              f"glove's rest reference: set taxel_calibration to one (htdata layouts rest writes it)")
         if self.noise_k > 0 and self.baseline not in NOISE_K_BASELINES:
             raise ConfigError(f"{where}: noise_k needs baseline = \"rest_window\" (the floor is k x the rest "
                               f"window's spread) or one of {EPISODE_BASELINES}, got baseline = {self.baseline!r}")
         for name, lo, hi in (("rest_seconds", 0.0, None), ("baseline_percentile", 0.0, 100.0),
-                             ("drift_window_s", 0.0, None)):
+                             ("drift_window_s", 0.0, None), ("shift_window_s", 0.0, None)):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
                     and value > lo and (hi is None or value <= hi)):
@@ -149,7 +164,8 @@ class NormaliseConfig:
         calibration ids (a hash of this) of pipelines written before they existed stay the same."""
         d = asdict(self)
         del d["taxel_calibration"]        # where the file was is not its identity: its sha256 is
-        for name in ("rest_seconds", "baseline_percentile", "drift_window_s", "taxel_calibration_sha256"):
+        for name in ("rest_seconds", "baseline_percentile", "drift_window_s", "shift_window_s",
+                     "taxel_calibration_sha256"):
             if d[name] == type(self).__dataclass_fields__[name].default:
                 del d[name]
         return d
@@ -252,7 +268,7 @@ class Normaliser:
         if self.baseline is None:
             raise RuntimeError(f"layout {self.layout_id}: nothing fitted yet")
         out = {"baseline": self.baseline, "noise_floor": self.floor}
-        if self.cfg.baseline == "drift":
+        if self.cfg.knotted:
             out["knot_rows"] = self.knot_rows
         if self.offset is not None:
             out["offset"], out["gain"] = self.offset, self.gain
@@ -262,7 +278,7 @@ class Normaliser:
         """Set the arrays `fitted()` returned (an episode's calibration), instead of fitting them."""
         for name, arr in fitted.items():
             arr = np.asarray(arr, dtype=np.float32)
-            if name == "knot_rows" or (name == "baseline" and self.cfg.baseline == "drift"):
+            if name == "knot_rows" or (name == "baseline" and self.cfg.knotted):
                 continue     # knots (K,H,W) and their rows (K,): checked below
             if arr.shape != self.grid:
                 raise DatasetError(f"layout {self.layout_id}: fitted {name} has shape {arr.shape}, expected {self.grid}")
@@ -278,7 +294,7 @@ class Normaliser:
                                        f"(offset, gain)")
                 self.offset = np.asarray(fitted["offset"], np.float32)
                 self.gain = np.asarray(fitted["gain"], np.float32)
-            if self.cfg.baseline == "drift":
+            if self.cfg.knotted:
                 knots = self.baseline.reshape(-1, *self.grid)
                 rows = np.asarray(fitted.get("knot_rows", []), np.float32).reshape(-1)
                 if len(rows) != len(knots) or len(rows) == 0:
@@ -295,7 +311,7 @@ class Normaliser:
         rows' positions in the episode (needed by baseline="drift" only).
         """
         arr = self._check(raw)
-        if self.cfg.baseline == "drift" and self.baseline is not None:
+        if self.cfg.knotted and self.baseline is not None:
             if rows is None:
                 raise ValueError(f"layout {self.layout_id}: baseline=\"drift\" needs the raw rows' positions "
                                  f"(apply(raw, rows=...))")
@@ -307,7 +323,7 @@ class Normaliser:
         finite_mask = np.isfinite(arr[:, self.live_mask]).all(axis=1)
         with np.errstate(invalid="ignore", over="ignore"):
             v = self.to_unit(arr)
-            if self.cfg.baseline == "drift":
+            if self.cfg.knotted:
                 v = np.maximum(v - self.baseline_at(rows), 0.0)
             elif self.cfg.baseline != "none":
                 v = np.maximum(v - self.baseline, 0.0)

@@ -260,7 +260,7 @@ class PipelineConfig:
             n.scale = float(n.scale)
             n.noise_floor = float(n.noise_floor)
             n.noise_k = float(n.noise_k)
-            for name in ("rest_seconds", "baseline_percentile", "drift_window_s"):
+            for name in ("rest_seconds", "baseline_percentile", "drift_window_s", "shift_window_s"):
                 if isinstance(getattr(n, name), int) and not isinstance(getattr(n, name), bool):
                     setattr(n, name, float(getattr(n, name)))
         return cfg.validate()

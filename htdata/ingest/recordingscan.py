@@ -33,6 +33,7 @@ class ScannedHand:
     layout: str | None
     activity: CellActivity
     integral: bool      # every finite value is a whole number (raw counts)
+    rows: np.ndarray | None = None   # every raw row (T,H,W) float32, when scanned with keep_rows
 
 
 def _fold(activity: CellActivity, rows: np.ndarray, integral: bool) -> bool:
@@ -42,7 +43,7 @@ def _fold(activity: CellActivity, rows: np.ndarray, integral: bool) -> bool:
     return integral and bool(np.all(finite == np.round(finite)))
 
 
-def _scan_npy(path: Path, hand: str | None) -> list[ScannedHand]:
+def _scan_npy(path: Path, hand: str | None, keep_rows: bool = False) -> list[ScannedHand]:
     if hand is None:
         raise ArgumentError(f"{path}: a .npy recording holds one hand's rows: say which (--hand left|right)")
     try:
@@ -54,10 +55,12 @@ def _scan_npy(path: Path, hand: str | None) -> list[ScannedHand]:
     act, integral = CellActivity(rows.shape[1:]), True
     for a in range(0, len(rows), CHUNK_ROWS):
         integral = _fold(act, rows[a:a + CHUNK_ROWS], integral)
-    return [ScannedHand(str(path), path.stem, hand, None, act, integral)]
+    return [ScannedHand(str(path), path.stem, hand, None, act, integral,
+                        np.asarray(rows, np.float32) if keep_rows else None)]
 
 
-def _scan_source(path: Path, pipeline, hand: str | None, layout_file: str | None) -> list[ScannedHand]:
+def _scan_source(path: Path, pipeline, hand: str | None, layout_file: str | None,
+                 keep_rows: bool = False) -> list[ScannedHand]:
     import dataclasses
 
 
@@ -79,23 +82,27 @@ def _scan_source(path: Path, pipeline, hand: str | None, layout_file: str | None
             with adapter.open(ref, params) as streams:
                 for h in hands:
                     n = len(streams.tactile_timestamps_ns[h])
-                    act, integral = None, True
+                    act, integral, kept = None, True, []
                     for a in range(0, n, CHUNK_ROWS):
                         rows = np.asarray(streams.read_tactile(h, np.arange(a, min(n, a + CHUNK_ROWS))))
                         act = act or CellActivity(rows.shape[1:])
                         integral = _fold(act, rows, integral)
+                        if keep_rows:
+                            kept.append(np.asarray(rows, np.float32))
                     if act is not None:
-                        out.append(ScannedHand(ref.source_ref, ref.episode_id, h, ref.layouts.get(h), act, integral))
+                        out.append(ScannedHand(ref.source_ref, ref.episode_id, h, ref.layouts.get(h), act, integral,
+                                               np.concatenate(kept) if keep_rows else None))
         except EpisodeError as e:
             raise ArgumentError(f"{e.file or ref.source_ref} [{ref.episode_id}]: {e.message}") from None
     return out
 
 
 def scan_recordings(paths: list[str | Path], pipeline="native", hand: str | None = None,
-                    layout_file: str | None = None) -> list[ScannedHand]:
+                    layout_file: str | None = None, keep_rows: bool = False) -> list[ScannedHand]:
     """Activity of every episode hand in `paths` (only `hand` when given); ValueError names the file.
 
     `layout_file`: the layout JSON the rows must fit (check --against); None reads any grid (suggest).
+    `keep_rows`: also keep each hand's raw rows (`layouts rest` takes percentiles of them).
     """
 
     cfg = pipeline if isinstance(pipeline, PipelineConfig) else load_pipeline(pipeline)
@@ -103,5 +110,6 @@ def scan_recordings(paths: list[str | Path], pipeline="native", hand: str | None
     for p in map(Path, paths):
         if not p.exists():
             raise ArgumentError(f"recording {p} does not exist")
-        out += _scan_npy(p, hand) if p.suffix == ".npy" else _scan_source(p, cfg, hand, layout_file)
+        out += _scan_npy(p, hand, keep_rows) if p.suffix == ".npy" else _scan_source(p, cfg, hand, layout_file,
+                                                                                    keep_rows)
     return out

@@ -198,7 +198,7 @@ def _raw_taxels(s: _Series, normaliser, glove: "Glove", ep: dict, hand: str, nan
     if not s.items:
         return np.zeros((0, glove.layout.num_live), np.float32), np.zeros((0, *glove.layout.grid), np.float32)
     raw = np.stack(s.items)
-    values, finite = normaliser.apply(raw, rows=s.source_rows if normaliser.cfg.baseline == "drift" else None)
+    values, finite = normaliser.apply(raw, rows=s.source_rows if normaliser.cfg.knotted else None)
     if not finite.all():           # the ingest drops such frames: a stored one is damage, named like a NaN map
         for t in np.flatnonzero(~finite):
             nan_samples.append({"episode": ep["episode_id"], "frame": s.frames[t], "hand": hand, "key": s.keys[t][0],
@@ -217,7 +217,7 @@ def compute_episode(reader, pos: int, gloves: dict[str, Glove]) -> dict:
     nan_samples: list = []
     normalisers = {hand: episode_normaliser(reader.manifest, ep, hand, gloves[ep["layouts"][hand]].layout)
                    for hand in from_raw}
-    drifting = tuple(h for h, n in normalisers.items() if n.cfg.baseline == "drift")
+    drifting = tuple(h for h, n in normalisers.items() if n.cfg.knotted)
     series = _read_episode(reader, pos, from_raw, nan_samples, drifting)
     out = {"episode_id": ep["episode_id"], "frames": n, "hands": {}, "nan_samples": nan_samples}
     for hand, s in series.items():

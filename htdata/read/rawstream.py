@@ -227,7 +227,7 @@ def apply_paired_many(normaliser, members_list: list[dict[str, bytes]], hand: st
         where: the samples, named by errors.
     """
     rows = ([paired_source_row(m, hand, where) for m in members_list]
-            if normaliser.cfg.baseline == "drift" else None)
+            if normaliser.cfg.knotted else None)
     grid = tuple(normaliser.grid)
     return normaliser.apply(np.stack([paired_row(m, hand, where, grid) for m in members_list]), rows=rows)
 

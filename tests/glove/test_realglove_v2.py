@@ -78,7 +78,11 @@ def test_derived_gloves_read_the_same_presses_their_own_way():
 @pytest.fixture(scope="module")
 def real_rows():
     clips, layouts = load_real_glove(real_glove_dir())
-    return clips, layouts, normalise_rows(clips, layouts, baselines=False)
+    return clips, layouts, normalise_rows(clips, layouts, baselines=("shift",))
+
+
+def _rows(rows, setting="default"):
+    return [r for r in rows if r["setting"].startswith(setting)]
 
 
 def test_the_real_clips_hold_grips_through_a_clip_and_start_mid_grasp(real_rows):
@@ -91,14 +95,14 @@ def test_the_real_clips_hold_grips_through_a_clip_and_start_mid_grasp(real_rows)
 @pytest.mark.parametrize("glove", [g[0] for g in DERIVED_GLOVES])
 def test_default_keeps_rest_dark_on_every_glove(real_rows, glove):
     """The inverted glove failed this (rest read as 0.45 pressure everywhere) before it got the raw-count default."""
-    row, = [r for r in real_rows[2] if r["glove"] == glove]
+    row, = [r for r in _rows(real_rows[2]) if r["glove"] == glove]
     assert row["v2_rest_leakage_mean"] <= TARGETS["rest_leakage_mean"], row
     assert row["v2_rest_leakage_worst"] <= TARGETS["rest_leakage_worst"], row
     assert row["v2_quiet_false_contact"] <= TARGETS["quiet_false_contact"], row
 
 
 def test_an_inverted_glove_reads_as_the_direct_one(real_rows):
-    rows = {r["glove"].split(" ")[0]: r for r in real_rows[2]}
+    rows = {r["glove"].split(" ")[0]: r for r in _rows(real_rows[2])}
     for key in ("v2_rest_leakage_mean", "v2_held_grip_kept", "v2_held_grip_kept_start", "v2_quiet_false_contact"):
         assert rows["inverted"][key] == pytest.approx(rows["real"][key], abs=0.01), key
 
@@ -110,3 +114,18 @@ def test_derived_clips_keep_the_truth_of_the_original_presses():
     assert [c.clip for c in half] == [c.clip for c in clips] and lays["left"].value["max"] == 1023
     rest = glove_truths(clips, "left", live)[2].rest[3]
     assert np.allclose(half[2].hand("left")[:, 0, 3] - rest, (clips[2].hand("left")[:, 0, 3] - rest) / 2, atol=0.5)
+
+
+@pytest.mark.parametrize("glove", [g[0] for g in DERIVED_GLOVES])
+def test_the_glove_s_own_rest_keeps_held_grips_on_every_glove(real_rows, glove):
+    """baseline = "shift" on a rest reference pooled over the glove's OTHER clips (leave-one-out, as a user's
+    reference is built from recordings other than the one normalised): every v2 target, every glove. The
+    default, each cell's rest from its own clip, keeps 0.43-0.90 of the held grip (issue 43)."""
+    row, = [r for r in _rows(real_rows[2], "shift") if r["glove"] == glove]
+    assert row["v2_held_grip_kept"] >= TARGETS["held_grip_kept"], row
+    assert row["v2_held_grip_kept_held_cells"] >= TARGETS["held_grip_kept"], row
+    assert row["v2_rest_leakage_mean"] <= TARGETS["rest_leakage_mean"], row
+    assert row["v2_rest_leakage_worst"] <= TARGETS["rest_leakage_worst"], row
+    assert row["v2_quiet_false_contact"] <= TARGETS["quiet_false_contact"], row
+    default, = [r for r in _rows(real_rows[2]) if r["glove"] == glove]
+    assert default["v2_held_grip_kept_held_cells"] < 0.9          # what the glove's rest is for
