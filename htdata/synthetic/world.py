@@ -109,20 +109,19 @@ def contact_windows(timing: str, rng: np.random.Generator, ramp: float) -> tuple
     """The contacts of one hand for a varied `timing` (TIMINGS), as (start, end) episode fractions."""
     full = ramp + 0.02                   # a start this far before 0 is already at full force at u = 0
     if timing == "late":                 # a long idle lead-in; some hold on past the end
-        a = rng.uniform(0.50, 0.70)
-        return ((a, a + rng.uniform(0.30, 0.50)),)
+        a = rng.uniform(0.42, 0.58)
+        return ((a, a + rng.uniform(0.40, 0.60)),)
     if timing == "mid_grasp":            # the recording starts while the hand holds
-        return ((-full, rng.uniform(0.30, 0.55)),)
-    if timing == "two_contacts":
-        a1 = rng.uniform(0.04, 0.12)
-        b1 = a1 + rng.uniform(0.18, 0.26)
-        a2 = b1 + rng.uniform(0.14, 0.24)
-        return ((a1, b1), (a2, a2 + rng.uniform(0.30, 0.50)))
+        return ((-full, rng.uniform(0.40, 0.60)),)
+    if timing == "two_contacts":         # one near each end, idle between
+        a1 = rng.uniform(0.0, 0.06)
+        a2 = rng.uniform(0.62, 0.72)
+        return ((a1, a1 + rng.uniform(0.22, 0.32)), (a2, a2 + rng.uniform(0.25, 0.40)))
     if timing == "held_to_end":          # the recording stops while the hand still holds
-        return ((rng.uniform(0.35, 0.70), 1.0 + full),)
+        return ((rng.uniform(0.35, 0.60), 1.0 + full),)
     if timing == "early":                # a long idle tail
         a = rng.uniform(0.0, 0.08)
-        return ((a, a + rng.uniform(0.25, 0.40)),)
+        return ((a, a + rng.uniform(0.40, 0.55)),)
     raise ValueError(f"contact_windows: no windows for timing {timing!r}")
 
 

@@ -314,8 +314,8 @@ def test_each_timing_places_contact_where_it_says(seed):
     n = 90
     assert touch["mid_grasp"][0] and not touch["mid_grasp"][-1]            # starts holding
     assert touch["held_to_end"][-1] and not touch["held_to_end"][: n // 4].any()   # stops holding
-    assert not touch["late"][: int(0.45 * n)].any() and touch["late"].any()        # a long idle lead-in
-    assert not touch["early"][int(0.5 * n):].any() and touch["early"].any()        # a long idle tail
+    assert not touch["late"][: int(0.4 * n)].any() and touch["late"].any()         # a long idle lead-in
+    assert not touch["early"][int(0.65 * n):].any() and touch["early"].any()       # a long idle tail
     assert _runs(touch["two_contacts"]) == 2
     for timing in ("classic", "late", "early", "mid_grasp", "held_to_end"):
         assert _runs(touch[timing]) == 1, timing
@@ -346,6 +346,7 @@ def test_the_sample_corpus_gives_every_task_every_timing_and_a_clock_cannot_tell
     from htdata.synthetic.corpus import OPENTOUCH_LAYOUT, TA_LAYOUTS, CorpusConfig, plan_corpus
 
     layouts = {n: load_layout(n) for n in [OPENTOUCH_LAYOUT, *TA_LAYOUTS.values()]}
+    share: dict[str, list] = {t: [] for t in TIMINGS}
     for seed in range(3):
         plan = plan_corpus(CorpusConfig(out="unused", seed=seed, progress=False))
         for task in TASKS:
@@ -358,8 +359,13 @@ def test_the_sample_corpus_gives_every_task_every_timing_and_a_clock_cannot_tell
                 label = world.contact_grids(layouts[names[hand]], hand).reshape(n, -1).max(1) > THRESHOLD
                 if label.any():                  # the gate's streams: those with contact
                     rows.append((ep.spec.task, (np.arange(n) + 0.5) / n, label))
+                    share[ep.spec.timing].append(label.mean())
         train = [r for r in rows if r[0] not in ("cup_grasp", "palm_push")]
         clock = position_clock(np.concatenate([r[1] for r in train]), np.concatenate([r[2] for r in train]))
         held = [r for r in rows if r[0] == "cup_grasp"]
         score = clock[position_bin(np.concatenate([r[1] for r in held]))]
         assert auroc(score, np.concatenate([r[2] for r in held])) <= 0.65, seed
+    # only WHEN contact happens varies, not how much: every timing touches about as long as the classic one
+    # (a world with less contact would make the checks against all zeros harder for a reason not theirs)
+    classic = np.mean(share["classic"])
+    assert all(abs(np.mean(v) - classic) < 0.15 for v in share.values()), {t: np.mean(v) for t, v in share.items()}
