@@ -192,31 +192,39 @@ class HandTouch(nn.Module):
         with self._grad_context("encoder"):
             return self.encoder(x)
 
-    def rgb_fill(self, rgb: torch.Tensor, hand: torch.Tensor, coverage: torch.Tensor) -> torch.Tensor | None:
+    def rgb_features(self, rgb: torch.Tensor):
+        """The frozen RGB encoder's backbone output for a frame batch (None without vision): pass it to
+        `rgb_fill` and `fuse` / `visual_tokens` so one backbone pass serves both (the same numbers as two)."""
+        return self.rgb_encoder.features(rgb) if self.cfg.vision else None
+
+    def rgb_fill(self, rgb: torch.Tensor, hand: torch.Tensor, coverage: torch.Tensor,
+                 features=None) -> torch.Tensor | None:
         """The frozen RGB encoder's own coarse contact map of the frame, upsampled to the canvas and
         zeroed off the glove: what hidden pixels start from with cfg.rgb_prior (None without it).
-        Needs an encoder with a per-hand readout (`predict`, e.g. TactileGridRGB)."""
+        Needs an encoder with a per-hand readout (`predict`, e.g. TactileGridRGB). `features`:
+        `rgb_features(rgb)` when the caller has it."""
         if not (self.cfg.rgb_prior and self.cfg.vision):
             return None
         backbone = self.rgb_encoder.backbone      # has `predict`: checked in __init__
         with torch.no_grad():
-            coarse = backbone.predict(backbone(to_unit_float(rgb)), _hand_ids(hand).to(rgb.device))
+            feats = backbone(to_unit_float(rgb)) if features is None else features
+            coarse = backbone.predict(feats, _hand_ids(hand).to(rgb.device))
             return nn.functional.interpolate(coarse.float(), size=coverage.shape[-2:]) * (coverage > 0)
 
-    def visual_tokens(self, rgb: torch.Tensor) -> torch.Tensor:
-        """(B,3,224,224) uint8 or [0,1] -> (B,M,D)."""
-        return self.rgb_proj(self.rgb_encoder(rgb))
+    def visual_tokens(self, rgb: torch.Tensor, features=None) -> torch.Tensor:
+        """(B,3,224,224) uint8 or [0,1] -> (B,M,D); `features`: `rgb_features(rgb)` when the caller has it."""
+        return self.rgb_proj(self.rgb_encoder(rgb) if features is None else self.rgb_encoder.tokens(features))
 
     def _with_hand(self, tokens: torch.Tensor, hand: torch.Tensor) -> torch.Tensor:
         return torch.cat([self.hand_token(_hand_ids(hand).to(tokens.device))[:, None], tokens], dim=1)
 
-    def fuse(self, tokens: torch.Tensor, rgb: torch.Tensor, hand: torch.Tensor) -> torch.Tensor:
+    def fuse(self, tokens: torch.Tensor, rgb: torch.Tensor, hand: torch.Tensor, features=None) -> torch.Tensor:
         """Tactile tokens (B,N,D) + hand token cross-attend to the RGB frame's tokens -> (B,N,D).
         Without vision (ablation) they attend to the hand token alone: same layers, no RGB."""
         if not self.cfg.vision:
             x = self._with_hand(tokens, hand)
             return self.fusion(x, x[:, :1])[:, 1:]
-        vis = self.visual_tokens(rgb)
+        vis = self.visual_tokens(rgb, features)
         if self.cfg.rgb_skip:
             if vis.shape[1] != tokens.shape[1]:
                 raise ConfigError(f"model.rgb_skip needs one RGB token per tactile token: the RGB encoder "
@@ -241,8 +249,9 @@ class HandTouch(nn.Module):
         return self.decoder(z) * coverage, indices, losses, stats
 
     def _inpaint(self, tactile, coverage, mask, rgb, hand):
-        tokens = self.encode(tactile, mask, self.rgb_fill(rgb, hand, coverage))
-        return self.quantise_decode(self.fuse(tokens, rgb, hand), coverage)
+        feats = self.rgb_features(rgb)
+        tokens = self.encode(tactile, mask, self.rgb_fill(rgb, hand, coverage, feats))
+        return self.quantise_decode(self.fuse(tokens, rgb, hand, feats), coverage)
 
     def predicted_tokens(self, rgb_window, past_tokens, hand):
         """Encoded past frames (B,T-1,N,D) + RGB v_{T-2..T} -> predicted t_T tokens (B,N,D), before VQ."""

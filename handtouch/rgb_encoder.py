@@ -126,8 +126,16 @@ class RGBEncoder(nn.Module):
         return self
 
     def forward(self, rgb: torch.Tensor) -> torch.Tensor:
+        return self.tokens(self.features(rgb))
+
+    def features(self, rgb: torch.Tensor):
+        """The frozen backbone's raw output for a frame batch: computed once, it feeds both the tokens
+        (`tokens`) and a readout's coarse map (TactileGridRGB.predict), which took a backbone pass each."""
         with torch.no_grad():
-            out = self.backbone(to_unit_float(rgb))
+            return self.backbone(to_unit_float(rgb))
+
+    def tokens(self, out) -> torch.Tensor:
+        """`features` output -> tokens (B,M,C)."""
         if isinstance(out, (tuple, list)):
             out = out[0]
         if out.dim() == 4:

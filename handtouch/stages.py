@@ -161,10 +161,11 @@ class MaskedFusion(Stage):
         target = covered(batch[keys.TACTILE], cov)
         b = target.shape[0]
         # one encoder call: the masked maps (for fusion) and the whole maps (replay)
-        fill = model.rgb_fill(batch[keys.RGB], batch[keys.HAND], cov)   # hidden pixels' RGB prior, if on
+        feats = model.rgb_features(batch[keys.RGB])                     # one backbone pass for both uses
+        fill = model.rgb_fill(batch[keys.RGB], batch[keys.HAND], cov, feats)   # hidden pixels' RGB prior, if on
         tokens = model.encode(torch.cat([target, target]), torch.cat([mask, torch.zeros_like(mask)]),
                               None if fill is None else torch.cat([fill, torch.zeros_like(fill)]))
-        fused = model.fuse(tokens[:b], batch[keys.RGB], batch[keys.HAND])
+        fused = model.fuse(tokens[:b], batch[keys.RGB], batch[keys.HAND], feats)
         maps, _, vq_l, stats = model.quantise_decode(torch.cat([fused, tokens[b:]]), torch.cat([cov, cov]))
         pred = maps[:b]
         terms = {"visible": masked_mse(pred, target, cov * (1 - mask)),

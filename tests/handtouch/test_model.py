@@ -491,3 +491,22 @@ def test_rgb_skip_adds_the_rgb_token_of_each_cell_before_the_fusion():
         assert torch.allclose(model.fuse(tokens, b["rgb"], b["hand"]), expected)
     with pytest.raises(ValueError, match="one RGB token per tactile token"):
         tiny_model(rgb_skip=True, patch=16).fuse(torch.randn(2, 196, 32), b["rgb"], b["hand"])  # 196 vs 49
+
+
+def test_one_backbone_pass_serves_the_rgb_prior_and_the_visual_tokens():
+    """rgb_to_tactile (and stage 2) run the frozen backbone once per frame batch and hand its output to both
+    the prior and the tokens: the same numbers as a pass each, one pass fewer."""
+    model = grid_rgb_model(rgb_prior=True).eval()
+    b = frame_batch(3)
+    cov, hand, rgb = b["coverage"], b["hand"], b["rgb"]
+    calls = []
+    bb = model.rgb_encoder.backbone
+    hook = bb.register_forward_hook(lambda *a: calls.append(1))
+    with torch.no_grad():
+        shared = model.rgb_to_tactile(rgb, cov, hand)
+        assert len(calls) == 1
+        blank = torch.zeros_like(cov)
+        tokens = model.encode(blank, torch.ones_like(blank), model.rgb_fill(rgb, hand, cov))
+        twice = model.quantise_decode(model.fuse(tokens, rgb, hand), cov)[0]
+        assert len(calls) == 3 and torch.equal(shared, twice)
+    hook.remove()
