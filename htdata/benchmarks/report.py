@@ -101,6 +101,13 @@ def _rgb(r: dict) -> list[str]:
         lines += table(r["jpeg_reduced"], [("method", "method"), ("ms_per_frame", "ms/frame"),
                                            ("mean_abs_error", "mean abs error"), ("max_abs_error", "max abs error")])
         lines += _candidate_lines(r["jpeg_reduced_verdicts"], r["candidate_rule"], "jpeg_full_decode+cv2_area")
+    if r.get("video_scale"):
+        lines += [f"Video sources scaled in the decoder ({r['video_scale'][0]['source_size']} centre squares as "
+                  "H.264 yuv420p, decoded by PyAV; per frame the YUV -> RGB conversion + resize after the decode; "
+                  "errors against the full-size RGB conversion's reference):", ""]
+        lines += table(r["video_scale"], [("method", "method"), ("ms_per_frame", "ms/frame"),
+                                          ("mean_abs_error", "mean abs error"), ("max_abs_error", "max abs error")])
+        lines += _candidate_lines(r["video_scale_verdicts"], r["candidate_rule"], "video_rgb24+cv2_area")
     lines += [f"**Defaults: JPEG q{r['default_quality']}, {r['default_resize']}** (computed from the tables "
               f"above) — {r['reason']}.", ""]
     return lines

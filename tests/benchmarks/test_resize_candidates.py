@@ -67,6 +67,8 @@ def test_cubic2x_area_error_is_near_cv2_area_on_a_decoded_frame(decoded_frames):
         ref = _reference(sq, 224)
         area = _mean_err(cv2.resize(sq, (224, 224), interpolation=cv2.INTER_AREA), ref)
         cand = interp_then_box(sq, 224)
+        from htdata.source.rgb import to_square_224
+        assert np.array_equal(to_square_224(f, interpolation="cubic2x_area"), cand)   # the pipeline's option
         assert cand.shape == (224, 224, 3) and cand.dtype == np.uint8
         assert _mean_err(cand, ref) <= 1.15 * area
         # and far below plain linear, which aliases
