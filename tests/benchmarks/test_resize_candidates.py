@@ -104,3 +104,21 @@ def test_candidate_verdicts_apply_the_issue_rule():
     v = {r["method"]: r for r in candidate_verdicts(rows)}
     assert [m for m, r in v.items() if r["meets"]] == ["fast_same"]
     assert v["cv2_area"]["time_ratio"] == 1.0 and not v["cv2_area"]["meets"]
+
+
+def test_cubic2x_area_16s_rounds_once_and_clips_the_undershoot(decoded_frames):
+    from htdata.benchmarks.rgb import cubic2x_area_16s
+
+    for f in decoded_frames:
+        sq = np.ascontiguousarray(_square(f))
+        big = cv2.resize(sq.astype(np.float32), (448, 448), interpolation=cv2.INTER_CUBIC)
+        exact = np.clip(cv2.resize(big, (224, 224), interpolation=cv2.INTER_AREA), 0, 255)
+        out = cubic2x_area_16s(sq)
+        assert out.dtype == np.uint8 and out.shape == (224, 224, 3)
+        assert np.abs(out.astype(np.float32) - exact).max() <= 0.52       # 1/64 fixed point, one rounding
+        ref = _reference(sq, 224)
+        assert _mean_err(out, ref) <= _mean_err(cv2.resize(sq, (224, 224), interpolation=cv2.INTER_AREA), ref)
+    edge = np.zeros((480, 480, 3), np.uint8)
+    edge[:, 240:] = 255                     # a hard edge: cubic undershoots below 0 beside it
+    out = cubic2x_area_16s(edge).astype(int)
+    assert out[:, :100].max() == 0 and out[:, 130:].min() == 255
