@@ -91,3 +91,14 @@ def test_the_default_interpolation_is_still_area():
     from htdata.source.rgbsettings import RgbConfig
 
     assert RgbConfig().interpolation == "area"
+
+
+def test_the_schema_allows_exactly_the_interpolations():
+    import json
+    from pathlib import Path
+
+    from htdata.resources import SCHEMAS_DIR
+    from htdata.source.rgb import INTERPOLATIONS
+
+    schema = json.loads((Path(SCHEMAS_DIR) / "pipeline.schema.json").read_text())
+    assert schema["properties"]["rgb"]["properties"]["interpolation"]["enum"] == list(INTERPOLATIONS)
