@@ -93,9 +93,32 @@ def _rgb(r: dict) -> list[str]:
     lines += ["Resize vs a reference (Lanczos to 4x the target, then 4x4 box average); errors in [0,1] units:", ""]
     lines += table(r["resize"], [("method", "method"), ("ms_per_frame", "ms/frame"),
                                  ("mean_abs_error", "mean abs error"), ("max_abs_error", "max abs error")])
+    if r.get("resize_verdicts"):
+        lines += _candidate_lines(r["resize_verdicts"], r["candidate_rule"], "cv2_area")
+    if r.get("jpeg_reduced"):
+        lines += ["JPEG sources decoded at 1/2 scale in the DCT (the source frames re-encoded as JPEG q95; decode + "
+                  "centre square + resize per frame; errors against the full decode's reference):", ""]
+        lines += table(r["jpeg_reduced"], [("method", "method"), ("ms_per_frame", "ms/frame"),
+                                           ("mean_abs_error", "mean abs error"), ("max_abs_error", "max abs error")])
+        lines += _candidate_lines(r["jpeg_reduced_verdicts"], r["candidate_rule"], "jpeg_full_decode+cv2_area")
+    if r.get("video_scale"):
+        lines += [f"Video sources scaled in the decoder ({r['video_scale'][0]['source_size']} centre squares as "
+                  "H.264 yuv420p, decoded by PyAV; per frame the YUV -> RGB conversion + resize after the decode; "
+                  "errors against the full-size RGB conversion's reference):", ""]
+        lines += table(r["video_scale"], [("method", "method"), ("ms_per_frame", "ms/frame"),
+                                          ("mean_abs_error", "mean abs error"), ("max_abs_error", "max abs error")])
+        lines += _candidate_lines(r["video_scale_verdicts"], r["candidate_rule"], "video_rgb24+cv2_area")
     lines += [f"**Defaults: JPEG q{r['default_quality']}, {r['default_resize']}** (computed from the tables "
               f"above) — {r['reason']}.", ""]
     return lines
+
+
+def _candidate_lines(verdicts: list[dict], rule: str, base: str) -> list[str]:
+    parts = [f"{v['method']} {v['time_ratio']:.2f}x time, {v['error_ratio']:.2f}x error"
+             for v in verdicts if v["method"] != base]
+    met = [v["method"] for v in verdicts if v["meets"]]
+    return [f"Against {base} ({rule}): " + "; ".join(parts) + ". "
+            + (f"Meeting it: {', '.join(met)}." if met else "None meets it."), ""]
 
 
 def _raster(d: dict) -> list[str]:

@@ -209,8 +209,14 @@ def test_defaults_are_computed_from_the_measured_tables(quick_run):
     rgb = r["rgb"]
     good = [row["quality"] for row in rgb["jpeg"] if row["psnr_db"] >= 40.0]
     assert rgb["default_quality"] == (min(good) if good else max(rgb["jpeg"], key=lambda x: x["psnr_db"])["quality"])
-    options = [row for row in rgb["resize"] if row["method"] in ("cv2_area", "cv2_linear", "cv2_cubic", "cv2_nearest")]
+    from htdata.benchmarks.rgb import PIPELINE_RESIZE
+    from htdata.source.rgb import INTERPOLATIONS
+    assert set(PIPELINE_RESIZE) == set(INTERPOLATIONS)   # the rule sees every [rgb] interpolation option
+    options = [row for row in rgb["resize"] if row["method"] in PIPELINE_RESIZE.values()]
+    assert len(options) == len(PIPELINE_RESIZE)
     assert rgb["default_resize"] == min(options, key=lambda row: row["mean_abs_error"])["method"]
+    assert not any(v["meets"] for v in rgb["resize_verdicts"] if v["method"] == "cv2_area")
+    assert {r["method"] for r in rgb["video_scale"]} >= {"video_rgb24+cv2_area", "swscale_area"}
     assert ("the same" in rgb["reason"]) == ((rgb["default_quality"], rgb["default_resize"])
                                              == (rgb["code_default_quality"], rgb["code_default_resize"]))
 

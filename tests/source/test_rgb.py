@@ -65,3 +65,40 @@ def test_bad_frames_rejected(bad):
 def test_bad_options_rejected(kwargs):
     with pytest.raises(ValueError):
         to_square_224(np.zeros((4, 4, 3), np.uint8), **kwargs)
+
+
+def test_cubic2x_area_is_cubic_to_twice_the_target_then_the_2x2_box():
+    # issue #47's opt-in resize: the default stays INTER_AREA (RGB bytes of a default ingest unchanged)
+    rng = np.random.default_rng(3)
+    frame = cv2.GaussianBlur(rng.integers(0, 256, (480, 640, 3), dtype=np.uint8), (0, 0), 1.5)
+    sq = np.ascontiguousarray(frame[:, 80:560])
+    big = cv2.resize(sq, (448, 448), interpolation=cv2.INTER_CUBIC)
+    expected = cv2.resize(big, (224, 224), interpolation=cv2.INTER_AREA)
+    out = to_square_224(frame, interpolation="cubic2x_area")
+    assert out.shape == (224, 224, 3) and out.flags["C_CONTIGUOUS"]
+    np.testing.assert_array_equal(out, expected)
+    assert np.abs(out.astype(int) - to_square_224(frame).astype(int)).mean() < 1.0
+
+
+@pytest.mark.parametrize("side", [224, 300, 447])
+def test_cubic2x_area_is_plain_area_under_twice_the_target(side):
+    rng = np.random.default_rng(side)
+    frame = rng.integers(0, 256, (side, side, 3), dtype=np.uint8)
+    np.testing.assert_array_equal(to_square_224(frame, interpolation="cubic2x_area"), to_square_224(frame))
+
+
+def test_the_default_interpolation_is_still_area():
+    from htdata.source.rgbsettings import RgbConfig
+
+    assert RgbConfig().interpolation == "area"
+
+
+def test_the_schema_allows_exactly_the_interpolations():
+    import json
+    from pathlib import Path
+
+    from htdata.resources import SCHEMAS_DIR
+    from htdata.source.rgb import INTERPOLATIONS
+
+    schema = json.loads((Path(SCHEMAS_DIR) / "pipeline.schema.json").read_text())
+    assert schema["properties"]["rgb"]["properties"]["interpolation"]["enum"] == list(INTERPOLATIONS)
