@@ -161,15 +161,21 @@ def gate(tables: dict[str, FrameTable], ood_task: str, stress_task: str | None,
         groups["stress"] = (tables["ood"].of_tasks([stress_task]), False, f"held-out stress test {stress_task}")
     test = tables["test"].select(contact_streams(tables["test"].episode, tables["test"].hand, tables["test"].label))
     clock = position_clock(test.position, test.label) if test.position is not None and len(test) else None
-    span = max(1, round(LAG_SPAN_S * fps))
+    span, side = max(1, round(LAG_SPAN_S * fps)), max(1, round(LAG_SIDE_S * fps))
     checks, report = [], {}
     for name, (table, required, where) in groups.items():
         scores = timing_scores(table, clock)
         checks += timing_checks(scores, where, required, phase_required=required and name != "test")
         entry = {"where": where, "required": required, "timing": scores, "rmse": rmse_report(table),
                  "clock": None if clock is None else clock.tolist()}
-        if table.frame is not None:
-            entry["lag"] = lag_curve(table, span, max(1, round(LAG_SIDE_S * fps)))
-            checks += [lag_check(entry["lag"], where, fps, required), lag_peak_check(entry["lag"], where, fps, required)]
+        if table.frame is not None:     # each part's curve: its peak required, its best shift reported
+            entry["lag"] = lag_curve(table, span, side)
+            checks += [lag_check(entry["lag"], where, fps, required=False),
+                       lag_peak_check(entry["lag"], where, fps, required)]
         report[name] = entry
+    gated = [groups[g][0] for g in ("test", "ood")]
+    if all(t.frame is not None for t in gated):   # the lag is the pipeline's: its check pools the gated streams
+        where = f"test and {groups['ood'][2]}"
+        report["lag"] = {"where": where, "curve": lag_curve(FrameTable.concat(*gated), span, side)}
+        checks.append(lag_check(report["lag"]["curve"], where, fps, required=True))
     return checks, report

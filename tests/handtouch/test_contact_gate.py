@@ -65,4 +65,4 @@ def test_a_model_that_reads_aligned_rgb_passes_and_the_table_is_the_parts(tmp_pa
 def test_the_same_model_fails_where_the_stored_rgb_says_nothing_about_the_touch(tmp_path, monkeypatch):
     _, (checks, report) = _gate(_dataset(tmp_path / "broken", monkeypatch, aligned=False))
     held = [c for c in checks if "held-out (ood) held" in c["check"]]
-    assert len(held) == 5 and not all(c["ok"] for c in held), report["ood"]["timing"]   # 3 AUROC + 2 lag
+    assert len(held) == 6 and not all(c["ok"] for c in held), report["ood"]["timing"]   # 3 AUROC, 2 lag, pooled lag

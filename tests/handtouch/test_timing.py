@@ -279,3 +279,30 @@ def test_the_lag_curve_of_a_model_that_does_not_follow_contact_in_time_has_no_pe
     flat = lag_curve(_timing_table(ep, fr, pos, label, {"aligned": np.full(len(label), 0.5),
                                                          "mispaired": follows}), 30, 15)
     assert flat["side_auroc"] == flat["best_auroc"] and not lag_peak_check(flat, "test", 30.0)["ok"]
+
+
+@pytest.mark.parametrize("lag", [0, 6])
+def test_the_gate_s_lag_check_pools_test_and_held_out_streams(lag):
+    """One required lag check on the test and held-out streams together (the lag is the pipeline's); each
+    part's best shift is reported, each part's peak required."""
+    rng = np.random.default_rng(12)
+    parts = {}
+    for name, task, first in (("test", "seen", 0), ("ood", "cup", 100)):
+        ep, fr, pos, label = _clock_world(rng, episodes=8, frames=90, varied=True)
+        late = np.zeros(len(label))
+        for e in np.unique(ep):
+            rows = np.flatnonzero(ep == e)
+            late[rows] = np.concatenate([np.zeros(lag), label[rows][:len(rows) - lag]]) if lag else label[rows]
+        mass = late + rng.normal(0, 0.1, len(label))
+        t = _timing_table(ep + first, fr, pos, label, {"aligned": mass, "mispaired": rng.permutation(mass),
+                                                       "phase_matched": rng.permutation(mass)})
+        t.task = np.array([task] * len(label))
+        parts[name] = t
+    checks, report = gate(parts, "cup", None)
+    pooled = [c for c in checks if c["check"].startswith("lag:") and "test and held-out (ood) cup" in c["check"]]
+    assert len(pooled) == 1 and pooled[0]["required"] and pooled[0]["ok"] == (lag == 0)
+    assert report["lag"]["curve"]["best_shift"] == -lag
+    per_part = [c for c in checks if c["check"].startswith("lag: predicted and measured") and c not in pooled]
+    assert len(per_part) == 2 and not any(c["required"] for c in per_part)
+    if lag:
+        assert "the RGB lags the glove by 6 frames" in pooled[0]["check"]
