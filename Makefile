@@ -78,7 +78,7 @@ task-transfer: ingest
 # Printed first, so the wait is known up front (measured on an idle 2-core machine; a busy one takes longer).
 demo-intro:
 	@echo "make demo: install (2-3 min the first time), sample recordings + ingest + split + validate + preview"
-	@echo "  (~1 min), then the HandTouch smoke (~5 min): about 8 min on an idle 2-core machine, more when it is busy"
+	@echo "  (~1 min), then the HandTouch smoke (~3-4 min): about 7 min on an idle 2-core machine, more when it is busy"
 
 demo: demo-intro preview train-smoke
 	@echo "demo done: $(DATA)/dataset, $(DATA)/preview.png, runs/smoke/results.md"

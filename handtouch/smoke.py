@@ -125,13 +125,13 @@ from htdata.format.table import MANIFEST_FILE
 ENCODERS = ("vit",)
 HEARTBEAT_S = 5.0     # a progress line at least this often (the issue asked for <= 10 s)
 # Expected seconds per phase for the whole-run ETA when OUT has no earlier results.json to take them
-# from. Probes, ViT, CNN, evaluation and controls: the idle 2-core CI run (docs/HANDTOUCH.md, "How long
-# it takes"); data and the held-out gate: rough idle-machine guesses from the loaded runs of issue 36.
-# Only a starting point: the ETA rescales them by this run's measured speed as phases finish.
-PHASE_SECONDS = {"data_sample": 50.0, "data_ingest": 80.0, "data_split": 3.0, "split_check": 0.5,
-                 "eval_prepare": 15.0, "rgb_pretrain": 45.0, "train_vit": 75.0, "train_cnn": 95.0,
-                 "train_resnet18": 85.0, "eval": 15.0, "checks": 3.0, "rgb_control": 15.0, "heldout_gate": 40.0,
-                 "report": 3.0}
+# from: seed 0 from nothing on the idle 2-core machine (docs/HANDTOUCH.md, "How long it takes, now");
+# the CNN and ResNet-18 from the earlier CI runs. Only a starting point: the ETA rescales them by this
+# run's measured speed as phases finish.
+PHASE_SECONDS = {"data_sample": 20.0, "data_ingest": 15.0, "data_split": 1.0, "split_check": 0.5,
+                 "eval_prepare": 13.0, "rgb_pretrain": 44.0, "train_vit": 77.0, "train_cnn": 95.0,
+                 "train_resnet18": 85.0, "eval": 7.0, "checks": 1.0, "rgb_control": 10.0, "heldout_gate": 25.0,
+                 "report": 1.0}
 UNTIMED_PHASES = ("data_sample", "data_ingest", "rgb_pretrain")    # ~0 s when their output is cached
 # The probes the smoke trains: the aligned one (the frozen RGB encoder) and the controls that can fail
 # the run. The shifted probe is reported only (rgb_pretrain.REQUIRED_CONTROLS says why): 17 s of a 244 s
