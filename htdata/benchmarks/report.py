@@ -1,4 +1,8 @@
-"""results.json -> REPORT.md: one markdown table per benchmark, targets checked in words."""
+"""results.json -> REPORT.md: one markdown table per benchmark, targets checked in words.
+
+Long because it holds one small renderer per benchmark section, each a few lines: one idea, and
+splitting it by section would scatter the report's order over many files.
+"""
 
 from __future__ import annotations
 
@@ -91,26 +95,27 @@ def _rgb(r: dict) -> list[str]:
     lines += table(r["jpeg"], [("quality", "JPEG quality"), ("bytes_per_frame", "bytes/frame"), ("psnr_db", "PSNR dB"),
                                ("encode_ms", "encode ms"), ("decode_ms", "decode ms")])
     lines += ["Resize vs a reference (Lanczos to 4x the target, then 4x4 box average); errors in [0,1] units:", ""]
-    lines += table(r["resize"], [("method", "method"), ("ms_per_frame", "ms/frame"),
-                                 ("mean_abs_error", "mean abs error"), ("max_abs_error", "max abs error")])
+    lines += table(r["resize"], _RESIZE_COLUMNS)
     if r.get("resize_verdicts"):
         lines += _candidate_lines(r["resize_verdicts"], r["candidate_rule"], "cv2_area")
     if r.get("jpeg_reduced"):
         lines += ["JPEG sources decoded at 1/2 scale in the DCT (the source frames re-encoded as JPEG q95; decode + "
                   "centre square + resize per frame; errors against the full decode's reference):", ""]
-        lines += table(r["jpeg_reduced"], [("method", "method"), ("ms_per_frame", "ms/frame"),
-                                           ("mean_abs_error", "mean abs error"), ("max_abs_error", "max abs error")])
+        lines += table(r["jpeg_reduced"], _RESIZE_COLUMNS)
         lines += _candidate_lines(r["jpeg_reduced_verdicts"], r["candidate_rule"], "jpeg_full_decode+cv2_area")
     if r.get("video_scale"):
         lines += [f"Video sources scaled in the decoder ({r['video_scale'][0]['source_size']} centre squares as "
                   "H.264 yuv420p, decoded by PyAV; per frame the YUV -> RGB conversion + resize after the decode; "
                   "errors against the full-size RGB conversion's reference):", ""]
-        lines += table(r["video_scale"], [("method", "method"), ("ms_per_frame", "ms/frame"),
-                                          ("mean_abs_error", "mean abs error"), ("max_abs_error", "max abs error")])
+        lines += table(r["video_scale"], _RESIZE_COLUMNS)
         lines += _candidate_lines(r["video_scale_verdicts"], r["candidate_rule"], "video_rgb24+cv2_area")
     lines += [f"**Defaults: JPEG q{r['default_quality']}, {r['default_resize']}** (computed from the tables "
               f"above) — {r['reason']}.", ""]
     return lines
+
+
+_RESIZE_COLUMNS = [("method", "method"), ("ms_per_frame", "ms/frame"), ("mean_abs_error", "mean abs error"),
+                   ("max_abs_error", "max abs error")]
 
 
 def _candidate_lines(verdicts: list[dict], rule: str, base: str) -> list[str]:

@@ -2,6 +2,9 @@
 
 Frames are decoded source frames of the sample corpus at camera resolution
 (bench.py reads them through the adapters), i.e. what `htdata ingest` sees.
+
+Imports inside functions: the JPEG header reader and the sample H.264 writer, only when the rows that
+decode JPEG at reduced scale or resize in the video decoder are measured.
 """
 
 from __future__ import annotations

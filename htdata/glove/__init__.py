@@ -10,6 +10,7 @@
     baselinefit.py  fitting the per-taxel baseline and noise floor (first frames, or the whole episode)
     normalisesettings.py  a pipeline's [normalise.<layout>] tables over each layout's value block
     restlevel.py    quiet (resting) frames; the per-glove calibration file
+    restreference.py  the glove's own rest, pooled over its recordings (`htdata layouts rest`, baseline "shift")
     contact.py      when a hand is in contact, from its calibration
     rawhealth.py    taxel health from the raw rows, in glove units
     calibration.py  the per-episode calibration a normalisation used, stored with the data

@@ -8,6 +8,7 @@
 - `formats`: writers of each source layout (OpenTouch-style HDF5,
   TouchAnything-style folders, htdata-native folders);
 - `corpus`: plans the episodes of a corpus and writes them through `formats`;
+- `controls`: broken control corpora (RGB of another episode, behind the glove, played backwards);
 - `state`: the hidden state of one hand over time (what the glove painter and the renderer read);
 - `rawglove`: a raw-count knit glove (two hands, 32x32, float16 counts) with the ground truth behind it;
   `rawlayout` its wiring and layouts, `rawgrip` its grips, `restwander` the slow wander of its cells at rest;

@@ -12,15 +12,8 @@ writers in `htdata.synthetic.formats`, reproducing each source's quirks:
   npz for some episodes, epoch-second `ts`, split.json at the root.
 - native: 100 Hz tactile on the glove's own clock vs 30 Hz video, clock offset.
 
-`mispair_rgb` (`htdata sample --mispair-rgb`) writes a deliberately broken control corpus:
-each episode's video shows the world of another episode of its format (half the format's
-list away, so another task), each frame at a random moment of it. Its tactile data is the
-corpus's own; only the pairing is wrong, as a pipeline that mixed up episodes would store
-it. For proving that a trainer's checks catch such a pipeline (`make train-smoke-mispaired`).
-Two more broken controls keep each episode's own world: `rgb_lag_frames` (`--rgb-lag-frames K`)
-stores video that lags the glove by K video frames (frame i shows the moment K frames earlier), as a
-pipeline with an uncorrected clock offset would (`make train-smoke-lagged`); `reverse_rgb`
-(`--reverse-rgb`) stores each episode's video played backwards (`make train-smoke-reversed`).
+`mispair_rgb`, `rgb_lag_frames` and `reverse_rgb` write a deliberately broken control corpus
+(htdata.synthetic.controls: RGB of another episode, behind the glove, played backwards).
 """
 
 from __future__ import annotations
@@ -38,6 +31,7 @@ from htdata.fileio import write_json_atomic
 from htdata.glove.glovevalue import is_inverted
 from htdata.glove.layouts import load_layout
 from htdata.source.adapters import ADAPTERS
+from htdata.synthetic.controls import control_video, mark_controls
 from htdata.synthetic.formats import (
     NativeHand,
     NativeRecording,
@@ -221,33 +215,9 @@ def plan_corpus(cfg: CorpusConfig) -> list[PlannedEpisode]:
     planners = {"opentouch": _plan_opentouch, "touchanything": _plan_touchanything, "native": _plan_native}
     out = []
     for fmt in cfg.formats:
-        episodes = planners[fmt](int(cfg.seed), plan[fmt])
-        if cfg.mispair_rgb and len(episodes) > 1:
-            for i, ep in enumerate(episodes):      # half the list away: another task in every format
-                ep.extra["rgb_from"] = episodes[(i + max(len(episodes) // 2, 1)) % len(episodes)].spec
-        for ep in episodes:
-            if cfg.rgb_lag_frames:
-                ep.extra["rgb_lag_frames"] = int(cfg.rgb_lag_frames)
-            if cfg.reverse_rgb:
-                ep.extra["reverse_rgb"] = True
-        out += episodes
+        out += mark_controls(planners[fmt](int(cfg.seed), plan[fmt]), cfg.mispair_rgb, cfg.rgb_lag_frames,
+                             cfg.reverse_rgb)
     return out
-
-
-def _video(ep: PlannedEpisode, world: World, times, size: tuple[int, int], seed: int):
-    """The frames the episode's camera stores: its own world at `times` (None: the video frame times), or
-    in a control corpus (module docstring) that world K frames earlier (`extra["rgb_lag_frames"]`),
-    played backwards (`extra["reverse_rgb"]`), or another episode's world (`extra["rgb_from"]`), each
-    frame at a random moment of that episode."""
-    other = ep.extra.get("rgb_from")
-    times = ep.spec.frame_times() if times is None else np.asarray(times, np.float64)
-    if other is None:
-        if ep.extra.get("reverse_rgb"):
-            times = times[0] + times[-1] - times
-        return world.render_frames(times - ep.extra.get("rgb_lag_frames", 0) / ep.spec.fps, size)
-    n = len(times)
-    rng = np.random.default_rng(_episode_seed(seed, "mispair-rgb", ep.fmt, ep.name))
-    return World(other).render_frames(rng.uniform(0.0, other.duration_s, n), size)
 
 
 # ---- raw units ----------------------------------------------------------------
@@ -297,7 +267,7 @@ def _write_opentouch(out: Path, episodes: list[PlannedEpisode], seed: int, bar) 
             t0 = int(rng.integers(10**12, 2 * 10**12))           # device clock, ns
             ts = t0 + np.round(ep.spec.frame_times() * 1e9).astype(np.int64) + rng.integers(-200_000, 200_000, ep.spec.n_frames)
             clips.append(OpenTouchClip(ep.name, np.sort(ts), opentouch_raw(contact, rng),
-                                       _video(ep, world, None, OPENTOUCH_IMAGE, seed)))
+                                       control_video(ep, world, None, OPENTOUCH_IMAGE, seed)))
             task = TASKS[ep.spec.task]
             rows.append({"id": f"{scene}::{ep.name}", "action": ep.spec.task, "grip_type": task.anchor,
                          "object_name": task.shape, "object_category": "synthetic",
@@ -327,7 +297,7 @@ def _write_touchanything(out: Path, episodes: list[PlannedEpisode], seed: int, b
         ts = t0 + ep.spec.frame_times() + rng.normal(0, 0.002, ep.spec.n_frames)
         write_touchanything_episode(
             out / "touchanything" / ep.name,
-            TouchAnythingEpisode(grids["left"], grids["right"], _video(ep, world, video_times, TA_IMAGE, seed),
+            TouchAnythingEpisode(grids["left"], grids["right"], control_video(ep, world, video_times, TA_IMAGE, seed),
                                  np.maximum.accumulate(ts)))
         split.setdefault(ep.extra["split"], []).append(f"TouchAnything/{ep.name}")
         frames += ep.spec.n_frames
@@ -354,7 +324,7 @@ def _write_native(out: Path, episodes: list[PlannedEpisode], seed: int, bar) -> 
         video_times = ep.spec.frame_times()
         write_native_recording(out / "native" / ep.name, NativeRecording(
             task=ep.spec.task, scene=ep.spec.scene,
-            video_frames=_video(ep, world, video_times, NATIVE_IMAGE, seed),
+            video_frames=control_video(ep, world, video_times, NATIVE_IMAGE, seed),
             video_timestamps_ns=video_start + np.round(video_times * 1e9).astype(np.int64),
             hands=hands, operator="synthetic", notes="htdata sample corpus",
             video_storage=ep.extra["video_storage"], extra={"seed": ep.spec.seed}))
