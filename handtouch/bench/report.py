@@ -268,7 +268,8 @@ def render_lag_curves(report: dict, path: str | Path, fps: float = 30.0) -> np.n
         groups.append((f"pooled, the check: {report['lag']['where']}", report["lag"]["curve"]))
     if not groups:
         raise ValueError("render_lag_curves: the report has no lag curves")
-    w, h, left, bottom, top = 720, 360, 56, 56, 30
+    legend_h = 20 * len(groups) + 8
+    w, h, left, bottom, top = 720, 360 + legend_h, 56, 56 + legend_h, 30
     img = np.full((h, w, 3), 255, np.uint8)
     shifts = groups[0][1]["shifts"]
     lo, hi = shifts[0], shifts[-1]
@@ -288,7 +289,7 @@ def render_lag_curves(report: dict, path: str | Path, fps: float = 30.0) -> np.n
         _text(img, f"{s}", (x - 8, h - bottom + 16), 0.38, black)
     cv2.line(img, xy(0, 1.0), xy(0, 0.4), grey, 1)
     _text(img, f"shift of measured contact (frames at {fps:g} fps; negative: the RGB lags the glove)",
-          (left, h - 14), 0.42, black)
+          (left, h - bottom + 38), 0.42, black)
     _text(img, "contact-timing AUROC with measured contact shifted (grey: chance 0.5, no shift)", (left, 18), 0.42,
           black)
     colours = [(200, 90, 30), (40, 40, 220), (40, 160, 40), (150, 60, 150)]
@@ -299,7 +300,9 @@ def render_lag_curves(report: dict, path: str | Path, fps: float = 30.0) -> np.n
             cv2.polylines(img, [np.array(pts, np.int32)], False, colour, 2, cv2.LINE_AA)
         if curve.get("best_shift") is not None:
             cv2.circle(img, xy(curve["best_shift"], curve["best_auroc"]), 5, colour, -1, cv2.LINE_AA)
-        _text(img, f"{where}: best {curve.get('best_shift')}", (w - 300, top + 18 + 18 * k), 0.42, colour)
+        y = h - legend_h + 14 + 20 * k        # the legend, under the axis: it hides no curve
+        cv2.line(img, (left, y - 4), (left + 24, y - 4), colour, 3)
+        _text(img, f"{where}: best shift {curve.get('best_shift')} frames", (left + 32, y), 0.42, black)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(path), img):
