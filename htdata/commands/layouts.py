@@ -172,16 +172,22 @@ def _cells(cells: list, limit: int = 12) -> str:
     return ": " + ", ".join(f"[{r}, {c}]" for r, c in cells[:limit]) + more
 
 
-def suggest(args: argparse.Namespace) -> int:
-    """`htdata layouts suggest RECORDING... OUT.json`."""
+def recordings_and_out(args: argparse.Namespace, action: str, suffix: str) -> tuple[list[str], Path]:
+    """`RECORDING... OUT` of suggest / rest: at least one recording, OUT with `suffix`, new unless --force."""
     if len(args.paths) < 2:
-        raise ArgumentError("suggest needs at least one RECORDING and the OUT.json to write")
+        raise ArgumentError(f"{action} needs at least one RECORDING and the OUT{suffix} to write")
     *recordings, out = args.paths
     out = Path(out)
-    if out.suffix != ".json":
-        raise ArgumentError(f"OUT must be a .json file, got {out}")
+    if out.suffix != suffix:
+        raise ArgumentError(f"OUT must be a {suffix} file, got {out}")
     if out.exists() and not args.force:
         raise ArgumentError(f"{out} exists (use --force to overwrite it)")
+    return recordings, out
+
+
+def suggest(args: argparse.Namespace) -> int:
+    """`htdata layouts suggest RECORDING... OUT.json`."""
+    recordings, out = recordings_and_out(args, "suggest", ".json")
     scanned = scan_recordings(recordings, args.pipeline, args.hand)
     hands = sorted({s.hand for s in scanned})
     if not scanned:
@@ -265,14 +271,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 def rest(args: argparse.Namespace, dirs: tuple) -> int:
     """`htdata layouts rest LAYOUT RECORDING... OUT.npz`."""
-    if len(args.paths) < 2:
-        raise ArgumentError("rest needs at least one RECORDING and the OUT.npz to write")
-    *recordings, out = args.paths
-    out = Path(out)
-    if out.suffix != ".npz":
-        raise ArgumentError(f"OUT must be a .npz file, got {out}")
-    if out.exists() and not args.force:
-        raise ArgumentError(f"{out} exists (use --force to overwrite it)")
+    recordings, out = recordings_and_out(args, "rest", ".npz")
     layout = load_layout(Path(args.layout) if args.layout.endswith(".json") else args.layout, dirs)
     scanned = scan_recordings(recordings, args.pipeline, layout.hand, layout.path, keep_rows=True)
     if not scanned:
