@@ -289,9 +289,13 @@ def heldout_gate(model, args: argparse.Namespace) -> tuple[list[dict], dict]:
     """The held-out gate's checks and report (handtouch.contact_gate) for `model`."""
     cfg = GateConfig(max_frames=args.gate_frames, seed=args.seed)
     tables = {p: score_part(model, args.dataset, SPLIT_NAME, p, cfg) for p in ("test", "ood")}
-    fps = episode_fps(args.dataset)
-    return gate(tables, args.ood_task, args.stress_task or None, float(np.median(fps[fps > 0])) if (fps > 0).any()
-                else 30.0)
+    return gate(tables, args.ood_task, args.stress_task or None, typical_fps(args.dataset))
+
+
+def typical_fps(dataset) -> float:
+    """The median episode fps (30 where no episode has one): the lag check's frames <-> seconds."""
+    fps = episode_fps(dataset)
+    return float(np.median(fps[fps > 0])) if (fps > 0).any() else 30.0
 
 
 def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
@@ -357,9 +361,7 @@ def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
     examples = timer.run("report", collect_examples, models[handtouch], prepared["test"], count=4)
     timer.run("report", render_predictions, examples, args.out / "predictions.png",
               title=f"{handtouch} on test: the 4 windows with the most contact")
-    fps = episode_fps(args.dataset)
-    timer.run("report", render_lag_curves, gate_report, args.out / "lag.png",
-              float(np.median(fps[fps > 0])) if (fps > 0).any() else 30.0)
+    timer.run("report", render_lag_curves, gate_report, args.out / "lag.png", typical_fps(args.dataset))
     seconds = timer.total()
 
     meta = {"dataset": args.dataset, "split": SPLIT_NAME, "ood_task": args.ood_task, "stress_task": args.stress_task,
