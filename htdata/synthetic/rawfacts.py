@@ -51,7 +51,7 @@ from scipy.ndimage import binary_dilation, label
 from htdata.glove.layouts import parse_layout
 from htdata.synthetic.rawglove import corpus_clips, glove_layout
 
-# The real-glove measures' truth (../shared/real_glove/README.md), one home for the facts below, the
+# The real-glove measures' truth (the README of the real-glove folder a caller names), one home for the facts below, the
 # real-glove bench (benchmarks/realglove.py, version 1) and version 2 (benchmarks/realglovev2.py).
 PRESSED = 15.0          # counts over the cell's rest (v1: its own 10th percentile): pressed
 QUIET = 5.0             # ... below this: quiet
