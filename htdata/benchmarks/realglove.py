@@ -77,6 +77,9 @@ TARGETS = {"rest_leakage_mean": 0.02, "rest_leakage_worst": 0.05, "held_grip_kep
            "held_grip_kept_start": 0.90, "quiet_false_contact": 0.02, "contact_share_error": 0.10,
            "moving_precision": 0.90, "suggest_blocks": 9, "suggest_precision": 0.90, "suggest_recall": 0.90}
 NOISE_K = RAW_COUNT_DEFAULTS["noise_k"]
+POOLED = ("pooled",)     # the plan of the default row: baseline "shift" on the rest pooled over every clip given
+DEFAULT_TOGETHER = "default, clips ingested together (the glove's rest)"
+DEFAULT_ALONE = "default, one recording alone (no [normalise] table)"
 # every baseline option beside the default (no [normalise] table): floored (as by default) where a floor can be fitted
 BASELINE_ROWS = tuple((b, NOISE_K if b in NOISE_K_BASELINES else 0.0) for b in BASELINES)
 
@@ -156,7 +159,9 @@ def normalise_rows(clips: list[RealClip], layouts: dict[str, Layout], baselines:
     default and then every baseline (`baselines` True), none (False) or those named; version 1's measures and
     version 2's side by side, both against the original presses."""
     chosen = BASELINE_ROWS if baselines is True else [r for r in BASELINE_ROWS if baselines and r[0] in baselines]
-    plans = [("default (no [normalise] table)", None)] + [(f"{b}" + (" on the glove's rest (leave-one-out)" if b == "shift"
+    # the default: clips ingested together pool the glove's rest (htdata.ingest.gloverest); one recording alone
+    # gets the raw-count default (its cells' rest from itself)
+    plans = [(DEFAULT_TOGETHER, POOLED), (DEFAULT_ALONE, None)] + [(f"{b}" + (" on the glove's rest (leave-one-out)" if b == "shift"
                                                                  else "") + (f", noise_k={k:g}" if k else ""), (b, k))
                                                           for b, k in chosen]
     rasters = {h: Rasteriser(layouts[h]) for h in HANDS}
@@ -172,8 +177,11 @@ def normalise_rows(clips: list[RealClip], layouts: dict[str, Layout], baselines:
             total, total2, leaks, leaks2, seconds, frames = {}, {}, [], [], 0.0, 0
             for clip in clips:
                 for h in HANDS:
-                    cfg = config_for(glayouts[h], plan)
-                    if cfg.baseline == "shift":    # the glove's rest from its OTHER clips: the check can fail
+                    cfg = config_for(glayouts[h], ("shift", NOISE_K) if plan is POOLED else plan)
+                    if plan is POOLED:             # what an ingest of all the clips does by default
+                        cfg = left_out_reference(cfg, [counts[(c.clip, h)] for c in clips],
+                                                 Path(tmp.name) / f"{glove[0]}-{h}-all.npz")
+                    elif cfg.baseline == "shift":  # the glove's rest from its OTHER clips: the check can fail
                         cfg = left_out_reference(cfg, [counts[(c.clip, h)] for c in clips if c.clip != clip.clip],
                                                  Path(tmp.name) / f"{glove[0]}-{h}-{clip.clip}.npz")
                     t0 = time.perf_counter()
@@ -235,6 +243,8 @@ def dataset_rows(clips: list[RealClip], layouts: dict[str, Layout], work: Path,
            layout_dirs=(str(work / "layouts"),), command="htdata bench (real glove)")
     ingest_s = time.perf_counter() - t0
     by_id = {f"nat-clip_{c.clip}": c for c in (truth_clips or clips)}
+    # version 2's truth: presses above the glove's rest (pooled over the original clips), not the clip's own
+    truths = {h: glove_truths(truth_clips or clips, h, layouts[h].live_mask) for h in HANDS}
     shares, cut_pressed, cut_frames = [], 0, 0
     with DatasetReader(out) as reader:
         per_episode, _ = episode_stats(reader, cache_dir=None)
@@ -243,7 +253,7 @@ def dataset_rows(clips: list[RealClip], layouts: dict[str, Layout], work: Path,
             clip = by_id[rec["episode_id"]]
             contact = np.zeros(len(clip.counts), bool)
             for h in HANDS:
-                truth = HandTruth.of(clip.hand(h), layouts[h].live_mask).contact
+                truth = truths[h][clip.clip].pressed.sum(axis=1) >= CONTACT_CELLS
                 hs = st["hands"][h]
                 shares.append({"clip": clip.clip, "hand": h, "truth": float(truth.mean()),
                                "stats": hs["contact_frames"] / max(hs["frames"], 1)})

@@ -57,7 +57,7 @@ from htdata.format.tactilesettings import TactileConfig
 from htdata.glove.codecrule import CodecChoice
 from htdata.glove.codecsettings import CodecConfig
 from htdata.glove.layouts import nearest_hint
-from htdata.glove.normalise import NormaliseConfig
+from htdata.glove.normalise import RAW_COUNT_DEFAULTS, NormaliseConfig
 from htdata.glove.normalisesettings import NormaliseSettings
 from htdata.resources import PIPELINES_DIR, validate_json
 from htdata.settings import apply_settings, parse_setting  # noqa: F401  (parse_setting: an old name of this module)
@@ -197,6 +197,19 @@ class PipelineConfig:
         """A copy whose [codec] carries `choice` (a CodecChoice for this pipeline's compression)."""
         cfg = copy.deepcopy(self)
         cfg.codec = self.codec.with_choice(choice, self.tactile.compression, self.path or self.name)
+        return cfg
+
+    def with_glove_rests(self, references: dict[str, Path]) -> "PipelineConfig":
+        """A copy with a `[normalise.<id>]` table per layout id in `references`: baseline "shift" on that rest
+        reference file, the raw-count default's noise_k (htdata.ingest.gloverest: the glove's own rest)."""
+        cfg = copy.deepcopy(self)
+        for lid, path in references.items():
+            if lid in cfg.normalise:
+                raise ConfigError(f"{self.path or self.name}: layout {lid} has a [normalise.{lid}] table: its rest "
+                                  f"is the table's, not a pooled one")
+            cfg.normalise[lid] = NormaliseConfig(baseline="shift", noise_k=float(RAW_COUNT_DEFAULTS["noise_k"]),
+                                                 taxel_calibration=str(path))
+            cfg.normalise_given[lid] = ("baseline", "noise_k", "taxel_calibration")
         return cfg
 
     def codec_settings(self) -> CodecSettings:

@@ -24,6 +24,7 @@ from htdata.glove.layouts import load_layout
 from htdata.ingest.append import kept_unavailable, plan_append
 from htdata.ingest.commit import check_compatible, commit
 from htdata.ingest.executors import make_executor
+from htdata.ingest.gloverest import pool_glove_rests, with_glove_rests
 from htdata.ingest.plan import (
     Source,
     UnitTask,
@@ -175,6 +176,11 @@ def _ingest(sources, nv: NewVersion, workers, executor, address, retries, progre
         check_compatible(parent, sources)
         # pipeline (CLI) order, then episode id: the order units are numbered in
         pairs = [(r, s) for s, rs in zip(sources, refs) for r in sorted(rs, key=lambda r: r.episode_id)]
+        # a raw-count glove without a [normalise] table: its rest pooled over this run's recordings of it
+        rests = pool_glove_rests(pairs, out, parent, _progress_line if progress else None)
+        if rests:
+            sources = with_glove_rests(sources, rests, pairs)
+            pairs = [(r, s) for s, rs in zip(sources, refs) for r in sorted(rs, key=lambda r: r.episode_id)]
         settings = {id(s): s.pipeline.to_dict() for s in sources}
         plan = plan_append(parent, [r for r, _ in pairs], [settings[id(s)] for _, s in pairs])
         source_of = {r.episode_id: s for r, s in pairs}
@@ -194,6 +200,7 @@ def _ingest(sources, nv: NewVersion, workers, executor, address, retries, progre
                               discovered={r.episode_id for rs in refs for r in rs}, t_start=t_start)
         report["notes"] += checked.notes + sum_notes
         report["notes"] += raw_count_default_notes([(r, source_of[r.episode_id]) for r in plan.todo])
+        report["notes"] += [r.note(sorted({s.pipeline.name for s in sources})) for r in rests.values()]
         if nv.note:
             report["notes"].append(nv.note)
         write_bytes_atomic(out / INGEST_REPORT, dumps(report))   # explains a run that commits nothing too
@@ -208,6 +215,10 @@ def _ingest(sources, nv: NewVersion, workers, executor, address, retries, progre
     report["timing"]["commit_cpu_s"] = time.process_time() - cpu_ran
     write_bytes_atomic(out / INGEST_REPORT, dumps(report))
     return report
+
+
+def _progress_line(text: str) -> None:
+    print(f"htdata ingest: {text}", file=sys.stderr, flush=True)
 
 
 def raw_count_default_notes(pairs: list[tuple]) -> list[str]:

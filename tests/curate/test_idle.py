@@ -117,3 +117,40 @@ def test_many_shards_are_summed_up_in_one_line(tmp_path, capsys):
     shard_lines = [line for line in out if "stop listing" in line]
     assert len(shard_lines) == 1 and "would stop listing 25 shards (" in shard_lines[0]
     assert sum("re-pack" in line for line in out) == 1 and "would re-pack 5 work units (0 .. 4;" in "\n".join(out)
+
+
+# --------------------------------------------------------------------------- a less sensitive glove
+
+def _light_glove(frames: int = 240) -> np.ndarray:
+    """(T,16,16) raw counts of a quiet glove (noise 0.5 counts): idle, light presses of +9 counts on 24 cells
+    (below the press level, 0.015 of 1023 = 15 counts), a firm press of +120, light again, idle."""
+    rng = np.random.default_rng(5)
+    raw = 550 + rng.uniform(-20, 20, (16, 16)) + rng.normal(0, 0.5, (frames, 16, 16))
+    cells = (slice(8, 12), slice(0, 6))
+    raw[40:200, cells[0], cells[1]] += 9.0
+    raw[90:150, cells[0], cells[1]] += 111.0
+    return np.round(raw * 2) / 2          # half-count steps, as a float16 glove
+
+
+def test_trim_idle_keeps_light_presses_of_a_less_sensitive_glove(tmp_path):
+    """The press level is a share of full scale: on a glove whose presses read half the counts, light presses
+    fall under it while they stand far above the glove's own noise floor. A trim drops frames, so it keeps
+    every frame the hand touches (taxels above their floor: the rule scales with the glove); stats' contact
+    (the press level) is the control that would cut them."""
+    from tests.factories import ingest_cli
+    from tests.factories.knitglove import draft_layout, write_glove_only
+    gloves = tmp_path / "gloves"
+    gloves.mkdir()
+    (gloves / "knit_right_16x16.json").write_text(json.dumps(draft_layout()))
+    write_glove_only(tmp_path / "raw" / "rec", "knit_right_16x16", _light_glove())
+    out = tmp_path / "ds"
+    assert ingest_cli("--layouts", gloves, "--pipeline", "native", tmp_path / "raw", out) == 0
+    with DatasetReader(out) as reader:
+        entry = stats.episode_stats(reader, cache_dir=None)[0][0]
+        cut, = idle.plan_idle(reader, idle.IdleConfig(keep_margin_s=0.0), cache_dir=None)
+    hand = entry["hands"]["right"]
+    contact, touch = np.flatnonzero(hand["frame_contact"]), np.flatnonzero(hand["frame_touch"])
+    assert (contact.min(), contact.max()) == (90, 149)            # the control: only the firm press is contact
+    assert touch.min() <= 41 and touch.max() >= 198               # every light press is a touch
+    assert cut.keep is not None and cut.keep.start <= 41 and cut.keep.stop >= 199, cut
+    assert cut.keep.start >= 35 and cut.keep.stop <= 205, cut     # ... and the idle head and tail still go

@@ -1,0 +1,119 @@
+"""The glove's own rest by default (issue 43 item 2; htdata/ingest/gloverest.py).
+
+A raw-count knit glove (tests/factories/knitglove.py: per-taxel offsets that belong to the glove,
+each recording's rest level shifted) is recorded four times; in one recording the palm is held
+pressed by GRIP counts from the first frame to the last. Ingested alone, that recording's rest is
+read from itself (the raw-count default) and the held grip vanishes; ingested with the glove's
+other recordings, the rest comes from the glove and the grip stays pressed. The control is the
+same recording ingested alone, through the same command.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from htdata.glove.restreference import MIN_RECORDINGS
+from htdata.inspect.stats import episode_stats
+from htdata.read.reader import DatasetReader
+from htdata.store.manifest import load_manifest
+from tests.factories import ingest_cli
+from tests.factories.knitglove import draft_layout, knit_counts, write_glove_only
+
+GRIP = 80.0                       # counts: a firm grip on a glove whose presses reach +150..+400
+LAYOUT = "knit_right_16x16"
+# 32 of the layout's 144 live cells: a grip presses a minority of a glove (the common-mode shift is a median)
+HELD = (slice(None), slice(8, 12), slice(0, 8))
+
+
+def _recordings(root: Path, seeds: list[int], held: int | None = None) -> Path:
+    for s in seeds:
+        counts = knit_counts(seed=s, rest_shift=3.0 * s)
+        if s == held:
+            counts[HELD] += GRIP                       # part of the palm, pressed through the whole recording
+        write_glove_only(root / f"rec_{s}", LAYOUT, counts)
+    return root
+
+
+def _layouts(tmp_path: Path) -> Path:
+    d = tmp_path / "gloves"
+    d.mkdir(exist_ok=True)
+    (d / f"{LAYOUT}.json").write_text(json.dumps(draft_layout(LAYOUT)))
+    return d
+
+
+def _contact(out: Path) -> dict[str, float]:
+    with DatasetReader(out) as reader:
+        per_episode, _ = episode_stats(reader, cache_dir=None)
+        return {rec["episode_id"]: st["hands"]["right"]["contact_frames"] / st["hands"]["right"]["frames"]
+                for rec, st in zip(reader.episodes, per_episode)}
+
+
+def _report(out: Path) -> dict:
+    return json.loads((out / "reports" / "ingest.json").read_text())
+
+
+def _calibrations(out: Path) -> dict:
+    return load_manifest(out)["calibrations"]
+
+
+def test_a_grip_held_through_a_recording_stays_pressed_when_the_glove_s_recordings_are_ingested_together(tmp_path):
+    layouts = _layouts(tmp_path)
+    together = _recordings(tmp_path / "together", [0, 1, 2, 3], held=3)
+    alone = _recordings(tmp_path / "alone", [3], held=3)
+    assert ingest_cli("--layouts", layouts, "--pipeline", "native", together, tmp_path / "ds") == 0
+    assert ingest_cli("--layouts", layouts, "--pipeline", "native", alone, tmp_path / "ds1") == 0
+    held_together = _contact(tmp_path / "ds")["nat-rec_3"]
+    held_alone = _contact(tmp_path / "ds1")["nat-rec_3"]
+    # presses come and go (half the frames); the held grip adds contact in every other frame
+    assert held_together > 0.95, held_together
+    assert held_alone < 0.75, held_alone
+    notes = " ".join(_report(tmp_path / "ds")["notes"])
+    assert "pooled over 4 recordings" in notes and LAYOUT in notes
+    assert {c["baseline"] for c in _calibrations(tmp_path / "ds").values()} == {"shift"}
+    assert {c["baseline"] for c in _calibrations(tmp_path / "ds1").values()} == {"drift"}   # one recording alone
+
+
+def test_fewer_recordings_than_the_pool_needs_keep_the_per_recording_default(tmp_path):
+    layouts = _layouts(tmp_path)
+    raw = _recordings(tmp_path / "raw", list(range(MIN_RECORDINGS - 1)))
+    assert ingest_cli("--layouts", layouts, "--pipeline", "native", raw, tmp_path / "ds") == 0
+    assert {c["baseline"] for c in _calibrations(tmp_path / "ds").values()} == {"drift"}
+    assert "glove's own" not in " ".join(_report(tmp_path / "ds")["notes"])
+
+
+def test_an_append_reuses_the_dataset_s_glove_rest_and_keeps_committed_episodes(tmp_path):
+    layouts = _layouts(tmp_path)
+    raw = _recordings(tmp_path / "raw", [0, 1, 2])
+    out = tmp_path / "ds"
+    assert ingest_cli("--layouts", layouts, "--pipeline", "native", raw, out) == 0
+    before = _calibrations(out)
+    _recordings(raw, [4], held=4)                        # a new session, its grip held throughout
+    assert ingest_cli("--layouts", layouts, "--pipeline", "native", raw, out) == 0
+    report = _report(out)
+    after = _calibrations(out)
+    assert set(before) <= set(after)                     # the committed episodes' calibration is kept
+    assert {c["taxel_calibration_sha256"] for c in after.values()} == \
+        {c["taxel_calibration_sha256"] for c in before.values()}   # one reference for old and new episodes
+    assert "reused from the dataset" in " ".join(report["notes"])
+    assert _contact(out)["nat-rec_4"] > 0.95
+
+
+def test_the_pooled_reference_is_the_median_of_each_recording_s_rest(tmp_path):
+    """The file the ingest normalised with is the glove's rest, not any one recording's: compare it with the
+    rest each recording shows on its own (10th percentile), which the held recording's palm does not share."""
+    layouts = _layouts(tmp_path)
+    raw = _recordings(tmp_path / "raw", [0, 1, 2], held=2)
+    out = tmp_path / "ds"
+    assert ingest_cli("--layouts", layouts, "--pipeline", "native", raw, out) == 0
+    ref_file, = (out / ".work").glob(f"glove-rest-{LAYOUT}-*.npz")
+    ref = np.load(ref_file)["offset"]
+    own = []
+    for s in (0, 1, 2):
+        counts = knit_counts(seed=s, rest_shift=3.0 * s)
+        counts[HELD] += GRIP if s == 2 else 0.0
+        own.append(np.percentile(counts, 10, axis=0))
+    assert np.allclose(ref, np.median(np.stack(own), axis=0), atol=0.51)   # float16 counts: half-count steps
+    assert np.median(own[2][8:12, 0:8] - ref[8:12, 0:8]) > GRIP - 10   # the held grip is not the glove's rest
