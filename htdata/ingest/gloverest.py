@@ -29,8 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from htdata.errors import DatasetError, EpisodeError
-from htdata.format.table import WORK_DIR
 from htdata.fileio import write_bytes_atomic
+from htdata.format.table import WORK_DIR
 from htdata.glove.calibration import episode_normaliser
 from htdata.glove.layouts import Layout, load_layout
 from htdata.glove.normalise import RAW_COUNT_DEFAULTS
