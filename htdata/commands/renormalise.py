@@ -61,6 +61,8 @@ def run(args: argparse.Namespace) -> int:
     except (NoSuchEpisode, DatasetLocked, FileNotFoundError, ValueError) as exc:
         print(f"htdata renormalise: error: {exc}", file=sys.stderr)
         return 2
+    for line in plan.notes:                  # as the ingest notes: which glove rest a raw-count glove got
+        print(f"note: {line}", file=sys.stderr)
     for lines in plan.warnings.values():     # as the ingest warns: a raw-count glove's rest read as pressure
         for line in lines:
             print(line, file=sys.stderr)

@@ -1,10 +1,8 @@
 """`htdata trim DATASET --idle`: drop the head and tail of each episode where no hand touches anything.
 
-A frame is in contact when any hand touches, by the hand's contact rule
-without its press level (htdata/glove/contact.py `touch_frames`: taxels above
-their noise floor, which scales with the glove, so a less sensitive glove's
-light presses are kept; the per-frame touches of the stats cache,
-htdata/inspect/stats.py, so a dataset whose stats are cached is planned
+A frame is in contact when any hand is, by the hand's contact rule
+(htdata/glove/contact.py: from its calibration, the per-frame contact of the stats
+cache, htdata/inspect/stats.py, so a dataset whose stats are cached is planned
 without reading a shard). `min_contact` = X applies the old rule instead:
 any taxel of any hand above X (the per-frame maxima of the same cache). Each episode keeps
 its frames from the first contact minus `keep_margin_s` to the last contact
@@ -73,9 +71,7 @@ def contact_frames(stats: dict, min_contact: float | None) -> np.ndarray:
     for h in stats["hands"].values():
         idx = np.asarray(h["frame_index"], np.int64)
         readable[idx] = True
-        if min_contact is None and "frame_touch" in h:     # a trim drops frames: it keeps every light touch
-            contact[idx] |= np.asarray(h["frame_touch"], bool)
-        elif min_contact is None and "frame_contact" in h:
+        if min_contact is None and "frame_contact" in h:
             contact[idx] |= np.asarray(h["frame_contact"], bool)
         else:   # the old rule (asked for, or stats computed before the contact rules)
             level = THRESHOLD if min_contact is None else min_contact

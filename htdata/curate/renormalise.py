@@ -19,6 +19,7 @@ units (htdata/write/repack.py); everything else is reused; `dry_run` plans only.
 
 from __future__ import annotations
 
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -49,8 +50,10 @@ from htdata.glove.health import record_entry
 from htdata.glove.layouts import Layout, load_layout
 from htdata.glove.normalise import Normaliser
 from htdata.glove.normalisesettings import NormaliseSettings
+from htdata.glove.pooledrest import GloveRest, reused_rest, spread, write_work_reference
 from htdata.glove.rasterise import Rasteriser
 from htdata.glove.restlevel import rest_level_warning
+from htdata.glove.restreference import MIN_RECORDINGS, pooled_reference, recording_rest
 from htdata.read.rawstream import apply_paired, paired_row, paired_source_row
 from htdata.read.reader import DatasetReader
 from htdata.store.confine import inside
@@ -68,6 +71,7 @@ class RenormalisePlan:
     repacked_units: list[int] = field(default_factory=list)
     calibrations: dict[str, dict] = field(default_factory=dict)   # new id -> manifest entry
     warnings: dict[str, list[str]] = field(default_factory=dict)  # episode -> lines (the ingest's rest-level warning)
+    notes: list[str] = field(default_factory=list)                 # the glove rests given (htdata.glove.pooledrest)
 
     def lines(self, dry_run: bool = False) -> list[str]:
         would = "would " if dry_run else ""
@@ -156,6 +160,59 @@ def first_paired_rows(reader: DatasetReader, eid: str, hand: str, frames: int) -
     return np.stack(rows)
 
 
+def paired_rows(reader: DatasetReader, eid: str, hand: str) -> tuple[np.ndarray, float, np.ndarray]:
+    """(paired raw rows, glove fps, their source row numbers) of the whole episode, each source row once
+    (what the ingest fits the baselines chosen by activity on)."""
+    first, n = reader.episode_range(eid)
+    rows, numbers, times = [], [], []
+    for i in range(first, first + n):
+        members = reader.sample(i, (JSON_MEMBER, tactile_member(hand), raw_member(hand)))
+        if has_hand(members, hand):   # RGB-only samples hold no rows
+            where = f"{eid} frame {i - first}"
+            number = paired_source_row(members, hand, where)
+            if numbers and number == numbers[-1]:
+                continue
+            rows.append(paired_row(members, hand, where))
+            numbers.append(number)
+            meta = decode_member(JSON_MEMBER, members[JSON_MEMBER], where)
+            times.append(int(meta["t_tactile_ns"][hand]))
+    step = float(np.median(np.diff(times))) if len(times) > 1 else 0.0
+    return np.stack(rows), (1e9 / step if step > 0 else 30.0), np.asarray(numbers, np.int64)
+
+
+def _stores_raw_rows(snap: Snapshot, pos: int, hand: str) -> bool:
+    rows = snap.index[snap.index["episode"] == pos]
+    mapped = hand_present(rows, hand)
+    return bool(mapped.any()) and bool(np.all(rows[SIZE_FIELDS[raw_member(hand)]][mapped] > 0))
+
+
+def dataset_glove_rests(work: Path, snap: Snapshot, reader: DatasetReader,
+                        normalising: NormaliseSettings) -> tuple[NormaliseSettings, list[GloveRest]]:
+    """`normalising` with the glove's own rest for each raw-count layout it leaves to the default (as an ingest
+    of many recordings gives it: htdata/ingest/gloverest.py): the reference the dataset's episodes already
+    have, else one pooled over the raw rows the dataset stores of at least MIN_RECORDINGS episodes of the
+    glove. The reference files go to `work`'s work folder."""
+    found = {}
+    for lid, layout in sorted(dataset_layouts(snap).items()):
+        if normalising.default_note(layout) is None:
+            continue
+        had = reused_rest(work, snap, layout)
+        if had is not None:
+            found[lid] = had
+            continue
+        hands = [(ep["episode_id"], h) for pos, ep in enumerate(snap.episodes)
+                 for h, used in sorted(ep["layouts"].items()) if used == lid and _stores_raw_rows(snap, pos, h)]
+        if len(hands) < MIN_RECORDINGS:
+            continue
+        rests = [recording_rest(paired_rows(reader, eid, h)[0], layout.value["convention"])
+                 for eid, h in spread(hands)]
+        found[lid] = GloveRest(lid, write_work_reference(work, lid, pooled_reference(rests)), len(rests),
+                               pooled_over="episodes of the dataset (their stored raw rows)")
+    if not found:
+        return normalising, []
+    return normalising.with_glove_rests({lid: r.path for lid, r in found.items()}), list(found.values())
+
+
 class Recalibration:
     """The SampleRewrite of a renormalise: new maps (and bend vectors) for the changed episode hands."""
 
@@ -193,23 +250,7 @@ class Recalibration:
         return first_paired_rows(self.reader, eid, hand, self.normalising.fit_frames)
 
     def _paired_rows(self, eid: str, hand: str) -> tuple[np.ndarray, float, np.ndarray]:
-        """(paired raw rows, glove fps, their source row numbers) of the whole episode, each source row once
-        (what the ingest fits the baselines chosen by activity on)."""
-        first, n = self.reader.episode_range(eid)
-        rows, numbers, times = [], [], []
-        for i in range(first, first + n):
-            members = self.reader.sample(i, (JSON_MEMBER, tactile_member(hand), raw_member(hand)))
-            if has_hand(members, hand):   # RGB-only samples hold no rows
-                where = f"{eid} frame {i - first}"
-                number = paired_source_row(members, hand, where)
-                if numbers and number == numbers[-1]:
-                    continue
-                rows.append(paired_row(members, hand, where))
-                numbers.append(number)
-                meta = decode_member(JSON_MEMBER, members[JSON_MEMBER], where)
-                times.append(int(meta["t_tactile_ns"][hand]))
-        step = float(np.median(np.diff(times))) if len(times) > 1 else 0.0
-        return np.stack(rows), (1e9 / step if step > 0 else 30.0), np.asarray(numbers, np.int64)
+        return paired_rows(self.reader, eid, hand)
 
     def members(self, episode_id: str, frame: int, members: dict[str, bytes]) -> dict[str, bytes]:
         if episode_id not in self.plan.changes:
@@ -278,8 +319,13 @@ class Recalibration:
 def renormalise(root, normalising: NormaliseSettings, patterns: list[str] | None, dry_run: bool, force: bool,
                 command: str) -> tuple[RenormalisePlan, dict | None]:
     """Plan (and unless `dry_run`, write) a version whose maps follow the calibrations of `normalising` (a pipeline's NormaliseSettings)."""
-    with NewVersion(root, command) as nv:
+    with NewVersion(root, command) as nv, tempfile.TemporaryDirectory(prefix="htdata-renormalise-") as tmp:
+        # the glove's own rest where the settings leave a raw-count glove to the default (a dry run writes
+        # its reference files to a temporary folder, not into the dataset)
+        normalising, rests = dataset_glove_rests(Path(tmp) if dry_run else nv.root, nv.parent, nv.reader(),
+                                                 normalising)
         plan = plan_renormalise(nv.parent, normalising, patterns, force)
+        plan.notes = [r.note([normalising.name]) for r in rests]
         if not plan.changes:
             return plan, None
         rest_level_warnings(nv.reader(), nv.parent, normalising, plan)

@@ -26,20 +26,9 @@ to go by, so the old threshold stays (the sample corpus's gloves have none:
 their numbers are unchanged).
 
 The same rule serves `htdata stats` (contact fraction, region contact),
-the dataset card and the preview's frame choice. `htdata trim --idle`, which
-drops frames, keeps every frame the hand touches by the lighter
-`touch_frames` rule (the floor alone: it scales with the glove's own noise);
+`htdata trim --idle`, the dataset card and the preview's frame choice;
 `htdata trim --idle --min-contact X` still applies the old per-taxel
 threshold X to the frame maxima.
-
-What does not scale with the glove: PRESS is a share of full scale, measured
-on the real knit glove. On a glove with the same presses at half the counts
-(and half the noise) stats reads less contact. Measured on the development
-clips (`htdata bench --only realglove`): no estimate of a glove's
-sensitivity from its recordings is close enough. A hand that steadies an
-object holds several cells near the press level, so moving the level by 3%
-moves that hand's contact share by 0.10; the noise of these gloves lies below
-their float16 step, and their press range depends on the task.
 """
 
 from __future__ import annotations
@@ -62,7 +51,7 @@ MIN_AREA_SHARE = 0.01
 # calibrated rule: the least rise above rest that is a press, in full-scale units: 15 of 1023 counts on a knit glove,
 # whose rest wanders by several counts over a clip while a grip presses its cells by 15 to ~460 counts.
 PRESS = 0.015
-RULE_VERSION = 3           # part of the stats cache key (3: frame_touch, the trim's rule)
+RULE_VERSION = 2           # part of the stats cache key
 
 
 @dataclass(frozen=True)
@@ -86,15 +75,6 @@ class ContactRule:
     def frames(self, x: np.ndarray, floor: np.ndarray | None = None) -> np.ndarray:
         """(T, L) normalised values -> (T,) bool: the hand is in contact."""
         return self.taxels(x, floor).sum(axis=1) >= self.min_taxels
-
-    def touch_frames(self, x: np.ndarray) -> np.ndarray:
-        """(T, L) normalised values -> (T,) bool: the hand touches anything, however lightly: `min_taxels`
-        taxels above their noise floor, without the press level (what `htdata trim --idle` keeps).
-
-        The floor is k x each taxel's own rest spread, so this rule scales with the glove: a glove with half
-        the counts has half the spread and reads the same presses as touches. The press level (PRESS of full
-        scale) does not scale: see the module docstring."""
-        return (np.asarray(x) > self.level).sum(axis=1) >= self.min_taxels
 
     def describe(self) -> str:
         if self.basis == "calibrated":

@@ -18,6 +18,14 @@ from htdata.glove.glovevalue import is_raw_count
 from htdata.glove.layouts import nearest_hint
 from htdata.glove.normalise import NOISE_K_BASELINES, RAW_COUNT_DEFAULTS, NormaliseConfig
 
+GLOVE_REST_KEYS = ("baseline", "noise_k", "taxel_calibration")   # the keys a pooled glove rest's table sets
+
+
+def glove_rest_config(path: str | Path) -> NormaliseConfig:
+    """The `[normalise.<id>]` table of a glove's pooled rest (htdata.glove.pooledrest): baseline "shift" on the
+    reference file at `path`, the raw-count default's noise_k (it sets GLOVE_REST_KEYS)."""
+    return NormaliseConfig(baseline="shift", noise_k=float(RAW_COUNT_DEFAULTS["noise_k"]), taxel_calibration=str(path))
+
 
 @dataclass(frozen=True)
 class NormaliseSettings:
@@ -54,6 +62,11 @@ class NormaliseSettings:
                 f"baseline = \"{d['baseline']}\" (each cell's {d['baseline_percentile']:g}th percentile per "
                 f"{d['drift_window_s']:g} s window), noise_k = {d['noise_k']:g} (a per-cell floor); docs/INGEST.md "
                 f"\"Raw-count gloves\"")
+
+    def with_glove_rests(self, references: dict[str, Path]) -> "NormaliseSettings":
+        """A copy with the pooled glove rest's table (`glove_rest_config`) for each layout id in `references`."""
+        normalise, given = add_glove_rests(self.normalise, self.normalise_given, references, self.path or self.name)
+        return dataclasses.replace(self, normalise=normalise, normalise_given=given)
 
     def normalise_for(self, layout) -> NormaliseConfig:
         """The config for `layout` (a glove.layouts.Layout): its `[normalise.<id>]` table over its value block."""
@@ -109,3 +122,15 @@ class NormaliseSettings:
         if problems:
             raise ConfigError(f"{self.path or self.name}: {'; '.join(problems)}. Fix the id, or list it in the "
                               f"pipeline's shared_layouts = [...] when it is meant for other sources{why}")
+
+
+def add_glove_rests(normalise: dict, given: dict, references: dict[str, Path], where: str) -> tuple[dict, dict]:
+    """(normalise, normalise_given) with the pooled glove rest's table for each layout id in `references`; a layout
+    whose table the pipeline sets is refused (its rest is the table's)."""
+    normalise, given = dict(normalise), dict(given)
+    for lid, path in references.items():
+        if lid in normalise:
+            raise ConfigError(f"{where}: layout {lid} has a [normalise.{lid}] table: its rest is the table's, "
+                              f"not a pooled one")
+        normalise[lid], given[lid] = glove_rest_config(path), GLOVE_REST_KEYS
+    return normalise, given

@@ -57,8 +57,8 @@ from htdata.format.tactilesettings import TactileConfig
 from htdata.glove.codecrule import CodecChoice
 from htdata.glove.codecsettings import CodecConfig
 from htdata.glove.layouts import nearest_hint
-from htdata.glove.normalise import RAW_COUNT_DEFAULTS, NormaliseConfig
-from htdata.glove.normalisesettings import NormaliseSettings
+from htdata.glove.normalise import NormaliseConfig
+from htdata.glove.normalisesettings import NormaliseSettings, add_glove_rests
 from htdata.resources import PIPELINES_DIR, validate_json
 from htdata.settings import apply_settings, parse_setting  # noqa: F401  (parse_setting: an old name of this module)
 from htdata.source.adapters import ADAPTERS
@@ -200,16 +200,11 @@ class PipelineConfig:
         return cfg
 
     def with_glove_rests(self, references: dict[str, Path]) -> "PipelineConfig":
-        """A copy with a `[normalise.<id>]` table per layout id in `references`: baseline "shift" on that rest
-        reference file, the raw-count default's noise_k (htdata.ingest.gloverest: the glove's own rest)."""
+        """A copy with the pooled glove rest's `[normalise.<id>]` table for each layout id in `references`
+        (htdata.glove.normalisesettings.glove_rest_config; htdata.ingest.gloverest)."""
         cfg = copy.deepcopy(self)
-        for lid, path in references.items():
-            if lid in cfg.normalise:
-                raise ConfigError(f"{self.path or self.name}: layout {lid} has a [normalise.{lid}] table: its rest "
-                                  f"is the table's, not a pooled one")
-            cfg.normalise[lid] = NormaliseConfig(baseline="shift", noise_k=float(RAW_COUNT_DEFAULTS["noise_k"]),
-                                                 taxel_calibration=str(path))
-            cfg.normalise_given[lid] = ("baseline", "noise_k", "taxel_calibration")
+        cfg.normalise, cfg.normalise_given = add_glove_rests(self.normalise, self.normalise_given, references,
+                                                             self.path or self.name)
         return cfg
 
     def codec_settings(self) -> CodecSettings:

@@ -279,7 +279,6 @@ def hand_stats(x: np.ndarray, frames: list[int], glove: Glove, layout_id: str, r
         "layout": layout_id, "frames": int(len(x)), "contact_frames": int(in_contact.sum()),
         "contact_frames_threshold": int((x > CONTACT_THRESHOLD).any(axis=1).sum()) if len(x) else 0,
         "contact_rule": rule.to_dict(), "frame_contact": in_contact.astype(int).tolist(),
-        "frame_touch": (rule.touch_frames(x) if len(x) else np.zeros(0, bool)).astype(int).tolist(),
         "values_from": "raw" if raw is not None else "maps",
         "zeros": zeros, "hist": hist.tolist(), "max": float(x.max()) if x.size else 0.0,
         "taxel_sum": x.sum(axis=0).tolist(), "taxel_sumsq": (x * x).sum(axis=0).tolist(),

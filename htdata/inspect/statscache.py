@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 SCALAR = (int, float, str, bool, type(None))
-ARRAYS = ("frame_contact", "frame_touch", "frame_index", "frame_max", "hist", "raw_hist", "taxel_sum", "taxel_sumsq")
+ARRAYS = ("frame_contact", "frame_index", "frame_max", "hist", "raw_hist", "taxel_sum", "taxel_sumsq")
 CELL_LISTS = ("unexercised_cells", "unmapped_moving_cells")
 
 

@@ -117,3 +117,29 @@ def test_the_pooled_reference_is_the_median_of_each_recording_s_rest(tmp_path):
         own.append(np.percentile(counts, 10, axis=0))
     assert np.allclose(ref, np.median(np.stack(own), axis=0), atol=0.51)   # float16 counts: half-count steps
     assert np.median(own[2][8:12, 0:8] - ref[8:12, 0:8]) > GRIP - 10   # the held grip is not the glove's rest
+
+
+def test_renormalise_gives_a_dataset_the_glove_s_rest_from_its_stored_rows(tmp_path, capsys):
+    """Three recordings appended one at a time each got the per-recording default (one recording alone);
+    `htdata renormalise` with the same pipeline pools the glove's rest over the raw rows the dataset stores
+    (the recordings may be archived by then), after a dry run that writes nothing; a second run changes nothing."""
+    from htdata.cli import main as cli_main
+    layouts = _layouts(tmp_path)
+    out = tmp_path / "ds"
+    for s in (0, 1, 2):
+        _recordings(tmp_path / f"session_{s}", [s], held=2)
+        assert ingest_cli("--layouts", layouts, "--pipeline", "native", tmp_path / f"session_{s}", out) == 0
+    assert {c["baseline"] for c in _calibrations(out).values()} == {"drift"}
+    assert _contact(out)["nat-rec_2"] < 0.75
+    capsys.readouterr()
+    assert cli_main(["renormalise", str(out), "--pipeline", "native", "--dry-run"]) == 0
+    text = capsys.readouterr()
+    assert "pooled over 3 episodes of the dataset" in text.err and "would renormalise" in text.out
+    assert not list((out / ".work").glob("glove-rest-*"))          # a dry run writes nothing into the dataset
+    assert cli_main(["renormalise", str(out), "--pipeline", "native"]) == 0
+    assert {c["baseline"] for c in _calibrations(out).values()} >= {"shift"}
+    assert _contact(out)["nat-rec_2"] > 0.95
+    capsys.readouterr()
+    assert cli_main(["renormalise", str(out), "--pipeline", "native"]) == 0
+    text = capsys.readouterr()
+    assert "reused from the dataset" in text.err and "nothing changed" in text.out
