@@ -11,6 +11,7 @@
     normalisesettings.py  a pipeline's [normalise.<layout>] tables over each layout's value block
     restlevel.py    quiet (resting) frames; the per-glove calibration file
     restreference.py  the glove's own rest, pooled over its recordings (`htdata layouts rest`, baseline "shift")
+    pooledrest.py   a dataset's pooled glove rest: the one its episodes have, written where a run normalises with it
     contact.py      when a hand is in contact, from its calibration
     rawhealth.py    taxel health from the raw rows, in glove units
     calibration.py  the per-episode calibration a normalisation used, stored with the data

@@ -107,6 +107,12 @@ class NormaliseConfig:
         return self.baseline in KNOTTED_BASELINES
 
     @property
+    def rest_from_glove(self) -> bool:
+        """True when the rest is the glove's reference (a taxel calibration file) plus each recording's
+        common-mode shift: baseline "shift" (htdata.glove.restreference, htdata.glove.pooledrest)."""
+        return self.baseline == "shift"
+
+    @property
     def has_noise_floor(self) -> bool:
         """True when a floor is subtracted (noise_k or noise_floor > 0: `has_noise_floor`)."""
         return has_noise_floor(self.noise_k, self.noise_floor)

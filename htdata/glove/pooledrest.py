@@ -22,7 +22,7 @@ import numpy as np
 from htdata.errors import DatasetError
 from htdata.fileio import write_bytes_atomic
 from htdata.format.table import WORK_DIR
-from htdata.glove.calibration import episode_normaliser
+from htdata.glove.calibration import config_of, episode_normaliser
 from htdata.glove.layouts import Layout
 from htdata.glove.normalise import RAW_COUNT_DEFAULTS
 from htdata.glove.restreference import rest_reference_bytes
@@ -64,8 +64,8 @@ def dataset_reference(snap, layout: Layout) -> tuple[np.ndarray, str] | None:
     cals = snap.manifest.get("calibrations", {})
     for ep in snap.episodes:
         for hand, lid in sorted((ep.get("layouts") or {}).items()):
-            entry = cals.get((ep.get("calibration") or {}).get(hand), {})
-            if lid == layout.layout_id and entry.get("baseline") == "shift" and entry.get("taxel_calibration_sha256"):
+            entry = cals.get((ep.get("calibration") or {}).get(hand))
+            if lid == layout.layout_id and entry is not None and config_of(entry).rest_from_glove:
                 try:
                     offset = episode_normaliser(snap.manifest, ep, hand, layout).offset
                 except (DatasetError, ValueError) as exc:

@@ -3,6 +3,7 @@ htdata/commands/ingest.py).
 
     pipeline.py ingest pipelines as data: pipelines/*.toml -> PipelineConfig (checked, with --set overrides)
     plan.py     sources, discovery, layouts resolved once per run, one work unit per episode, who hashes what
+    gloverest.py  a raw-count glove's rest pooled over the run's recordings of it (the default with >= 3)
     append.py   against the current version: reuse / relabel / re-ingest / keep; the parent's parts
                 (reused units are re-packed by htdata/write/repack.py, shared with curate)
     chunk.py    one chunk of glove rows: read, check, normalise, out-of-range policy, raw rows per frame
