@@ -14,8 +14,9 @@ outside itself.
 An append reuses the reference the dataset's episodes of that glove were normalised with
 (htdata.glove.pooledrest): old and new episodes share one rest, and an appended recording
 never re-normalises what is committed. A dataset whose first ingest had too few recordings of a
-glove keeps the per-recording default for it until a command pools enough of them (an ingest
-holding them, or `htdata renormalise`, which pools over the raw rows the dataset stores).
+glove keeps the per-recording default for it, appends included (an append never changes how
+committed episodes were normalised), until `htdata renormalise` pools the glove's rest over the
+raw rows the dataset stores.
 Pooling reads at most POOL_MAX recordings per glove, spread over the episode ids.
 """
 
@@ -58,6 +59,11 @@ def _recording_rows(ref, source, hand: str) -> np.ndarray:
                                           np.float32) for a in range(0, n, ROW_CHUNK)])
 
 
+def _in_dataset(parent, layout_id: str) -> bool:
+    """The parent version holds episodes of the layout (normalised without a pooled rest, when it has none)."""
+    return parent is not None and any(layout_id in (ep.get("layouts") or {}).values() for ep in parent.episodes)
+
+
 def pool_glove_rests(pairs: list[tuple], out: Path, parent, progress=None) -> dict[str, GloveRest]:
     """The glove rest of every raw-count layout without a table among the (ref, source) pairs: reused from the
     parent's records, else pooled over the pairs' recordings when there are at least MIN_RECORDINGS of it.
@@ -68,8 +74,8 @@ def pool_glove_rests(pairs: list[tuple], out: Path, parent, progress=None) -> di
         if had is not None:
             found[layout_id] = had
             continue
-        if len(hands) < MIN_RECORDINGS:
-            continue
+        if len(hands) < MIN_RECORDINGS or _in_dataset(parent, layout_id):
+            continue    # too few to pool; or committed episodes keep their rest (renormalise pools over them)
         chosen = spread(sorted(hands, key=lambda x: (x[0].episode_id, x[2])))
         if progress is not None:
             progress(f"the glove rest of {layout_id}: pooling {len(chosen)} of its {len(hands)} recordings")

@@ -143,3 +143,17 @@ def test_renormalise_gives_a_dataset_the_glove_s_rest_from_its_stored_rows(tmp_p
     assert cli_main(["renormalise", str(out), "--pipeline", "native"]) == 0
     text = capsys.readouterr()
     assert "reused from the dataset" in text.err and "nothing changed" in text.out
+
+
+def test_an_append_never_changes_how_committed_episodes_were_normalised(tmp_path):
+    """Two recordings (too few to pool) then a third in the same folder: the append ingests only the new one,
+    with the per-recording default the committed ones have (renormalise pools them: test above)."""
+    layouts = _layouts(tmp_path)
+    raw = _recordings(tmp_path / "raw", [0, 1])
+    out = tmp_path / "ds"
+    assert ingest_cli("--layouts", layouts, "--pipeline", "native", raw, out) == 0
+    _recordings(raw, [2])
+    assert ingest_cli("--layouts", layouts, "--pipeline", "native", raw, out) == 0
+    report = _report(out)
+    assert (report["units_run"], report["episodes_unchanged"]) == (1, 2), report
+    assert {c["baseline"] for c in _calibrations(out).values()} == {"drift"}
