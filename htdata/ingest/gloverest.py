@@ -99,6 +99,14 @@ def with_glove_rests(sources: list, rests: dict[str, GloveRest], pairs: list[tup
         uses.setdefault(id(source), set()).update(load_layout(p).layout_id for p in ref.layout_files.values())
     out = []
     for s in sources:
-        mine = {lid: r.path for lid, r in rests.items() if lid in uses.get(id(s), set())}
+        mine = {lid: r.path for lid, r in rests.items()          # a pipeline with its own table keeps it
+                if lid in uses.get(id(s), set()) and lid not in s.pipeline.normalise}
         out.append(s if not mine else type(s)(pipeline=s.pipeline.with_glove_rests(mine), root=s.root))
     return out
+
+
+def rest_notes(sources: list, rests: dict[str, GloveRest]) -> list[str]:
+    """One note per pooled glove rest, naming the pipelines normalised with it."""
+    return [r.note(sorted({s.pipeline.name for s in sources if lid in s.pipeline.normalise
+                           and s.pipeline.normalise[lid].taxel_calibration == str(r.path)}))
+            for lid, r in rests.items()]

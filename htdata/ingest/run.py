@@ -24,7 +24,7 @@ from htdata.glove.layouts import load_layout
 from htdata.ingest.append import kept_unavailable, plan_append
 from htdata.ingest.commit import check_compatible, commit
 from htdata.ingest.executors import make_executor
-from htdata.ingest.gloverest import pool_glove_rests, with_glove_rests
+from htdata.ingest.gloverest import pool_glove_rests, rest_notes, with_glove_rests
 from htdata.ingest.plan import (
     Source,
     UnitTask,
@@ -200,7 +200,7 @@ def _ingest(sources, nv: NewVersion, workers, executor, address, retries, progre
                               discovered={r.episode_id for rs in refs for r in rs}, t_start=t_start)
         report["notes"] += checked.notes + sum_notes
         report["notes"] += raw_count_default_notes([(r, source_of[r.episode_id]) for r in plan.todo])
-        report["notes"] += [r.note(sorted({s.pipeline.name for s in sources})) for r in rests.values()]
+        report["notes"] += rest_notes(sources, rests)
         if nv.note:
             report["notes"].append(nv.note)
         write_bytes_atomic(out / INGEST_REPORT, dumps(report))   # explains a run that commits nothing too

@@ -157,3 +157,22 @@ def test_an_append_never_changes_how_committed_episodes_were_normalised(tmp_path
     report = _report(out)
     assert (report["units_run"], report["episodes_unchanged"]) == (1, 2), report
     assert {c["baseline"] for c in _calibrations(out).values()} == {"drift"}
+
+
+def test_a_pipeline_with_its_own_table_keeps_it_beside_one_that_pools(tmp_path):
+    """Two sources of one glove in one ingest: the pipeline that sets [normalise.<layout>] keeps its table; the
+    one that leaves the glove to the default gets the pooled rest; the note names only that one."""
+    layouts = _layouts(tmp_path)
+    pooled = _recordings(tmp_path / "pooled", [0, 1, 2])
+    tabled = _recordings(tmp_path / "tabled", [3, 4, 5])
+    toml = (Path(__file__).parents[2] / "pipelines" / "native.toml").read_text().replace(
+        'name = "native"', 'name = "native_tabled"', 1)
+    toml += f'\n[normalise.{LAYOUT}]\nbaseline = "percentile"\nnoise_k = 5\n'
+    (tmp_path / "tabled.toml").write_text(toml)
+    out = tmp_path / "ds"
+    assert ingest_cli("--layouts", layouts, "--pipeline", f"native={pooled}",
+                      "--pipeline", f"{tmp_path / 'tabled.toml'}={tabled}", out) == 0
+    baselines = sorted(c["baseline"] for c in _calibrations(out).values())
+    assert baselines == ["percentile", "shift"], baselines
+    note, = [n for n in _report(out)["notes"] if "glove's own" in n]
+    assert "'native'" in note and "native_tabled" not in note
