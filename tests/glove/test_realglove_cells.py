@@ -12,7 +12,7 @@ from __future__ import annotations
 import pytest
 
 from htdata.benchmarks.realclips import load_real_glove
-from htdata.benchmarks.realglovecells import moving_cell_rows, suggest_rows
+from htdata.benchmarks.realglovecells import crosstalk_rows, moving_cell_rows, suggest_rows
 from tests.factories.realglove import real_glove_dir
 
 
@@ -47,3 +47,13 @@ def test_suggest_cuts_the_connected_glove_into_blocks_that_match_its_live_cells(
         assert r["blocks"] >= 9, where
         assert r["precision"] >= 0.90, f"{where}: cell precision {r['precision']:.3f}"
         assert r["recall"] >= 0.90, f"{where}: cell recall {r['recall']:.3f}"
+
+
+def test_health_crosstalk_flags_are_not_presses_along_a_strip_edge(real):
+    """`stats --health` cross-talk on the real glove and each glove derived from it: >= 0.90 of the flags are true
+    cross-talk (nothing pressed within the strip beside the line; issue 43 found 222 presses flagged)."""
+    rows = crosstalk_rows(*real)
+    assert {r["glove"] for r in rows} and all(r["hand"] in ("left", "right") for r in rows)
+    for r in rows:
+        if r["flagged"]:
+            assert r["precision"] >= 0.90, f"{r['glove']}, {r['hand']} hand: {r['true']} of {r['flagged']} true"
