@@ -37,6 +37,7 @@ from htdata.errors import ArgumentError
 from htdata.fileio import write_bytes_atomic
 from htdata.format.table import CANVAS
 from htdata.glove.activity import describe_cells, rule_text, unmapped_moving
+from htdata.glove.glovevalue import CONVENTIONS
 from htdata.glove.layouts import LAYOUTS_ENV, Layout, list_layouts, load_canonical, load_layout
 from htdata.glove.layoutsuggest import layout_id_from_name, layout_json_text, suggest_layout
 from htdata.glove.rasterise import Rasteriser
@@ -196,7 +197,7 @@ def suggest(args: argparse.Namespace) -> int:
         raise ArgumentError(f"the recordings hold both hands ({', '.join(hands)}): choose one with --hand")
     layout_id = args.layout_id or layout_id_from_name(out.stem)
     doc, summary = suggest_layout([s.activity for s in scanned], hands[0], layout_id,
-                                  all(s.integral for s in scanned), recordings, args.max_value)
+                                  all(s.integral for s in scanned), recordings, args.max_value, args.convention)
     write_bytes_atomic(output_path(out, "layouts suggest"), layout_json_text(doc).encode())
     print(f"{summary['moving']} moving cell(s) in {summary['recordings']} recording hand(s), {summary['frames']} "
           f"frames (median noise {summary['noise']:.4g}, wander {summary['wander']:.4g}, moving = range > {summary['threshold']:.4g}); "
@@ -207,6 +208,7 @@ def suggest(args: argparse.Namespace) -> int:
         turn = f", rotate {b['rotate']}" if b.get("rotate") else ""
         print(f"    {b['name']:10s} rows {b['rows'][0]}-{b['rows'][1]} cols {b['cols'][0]}-{b['cols'][1]} "
               f"-> {b['place']} (placeholder{turn})")
+    print(f"{'WARNING: ' if summary['direction_unclear'] else ''}{summary['direction']}")
     print(f"wrote {out}: a STARTING POINT. Set each block's place and orientation, then "
           f"`htdata layouts render {out} out.png` and `htdata layouts check {out} --against "
           f"{' '.join(recordings)}`")
@@ -249,6 +251,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--layout-id", help="layout id to write (default: from OUT's file name)")
     p.add_argument("--max", type=float, dest="max_value",
                    help="full-scale raw value for value.max (default: the largest value seen)")
+    p.add_argument("--convention", choices=CONVENTIONS,
+                   help="the glove's direction for value.convention: counts rise (direct) or fall (inverted) with "
+                        "pressure (default: as the recordings show it)")
     p.add_argument("--force", action="store_true", help="overwrite OUT.json")
     p = sub.add_parser("rest", help="write the glove's own rest: each cell's rest pooled over its recordings "
                                     "(a taxel calibration for baseline = \"shift\")")

@@ -1,5 +1,11 @@
 """A starting layout from recordings: blocks around the cells that move (`htdata layouts suggest`).
 
+The glove's direction is read first (htdata.glove.activity.seen_direction: read
+the wrong way, every press "only falls" below its rest like cross-talk) and
+written as value.convention; when the recordings do not tell, "direct" is
+written and the summary and the notes say it is a guess to check (or the
+user states it: --convention). The cells are then read in the pressure
+direction (an inverted glove's activity `mirrored`).
 Per recording (each against its own noise and wander over the whole grid,
 htdata.glove.activity's rule without the contact floor: a lightly pressed
 taxel is still a sensor) the cells that move and do not only fall below
@@ -39,8 +45,9 @@ import re
 import numpy as np
 
 from htdata.errors import ArgumentError
-from htdata.glove.activity import CellActivity, moving_cells, rule_text
+from htdata.glove.activity import CellActivity, SeenDirection, moving_cells, rule_text, seen_direction
 from htdata.glove.blockcuts import cut_blocks, grow_blocks, split_strips
+from htdata.glove.glovevalue import convention_name, is_inverted
 from htdata.glove.layouts import load_canonical, parse_layout
 
 SUPPORT_MIN = 2          # seed cells moved in at least this many recordings ...
@@ -140,20 +147,37 @@ def suggested_boxes(support: np.ndarray, recordings: int) -> list[tuple[int, int
     return boxes
 
 
+def direction_note(convention: str, stated: bool, seen: SeenDirection) -> str:
+    """The layout notes' / summary's sentence on value.convention: stated, seen, or a guess to check."""
+    if stated:
+        return f"value.convention {convention} as stated (--convention; the recordings: {seen.text()})"
+    if seen.inverted is not None:
+        return f"value.convention {convention} as the recordings show ({seen.text()})"
+    return (f"value.convention {convention} is a GUESS, CHECK IT: the recordings do not show which way the counts "
+            f"go with pressure ({seen.text()}); press one taxel, watch its raw count rise (direct) or fall "
+            f"(inverted), and set it (or rerun with --convention)")
+
+
 def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, integral: bool, sources: list[str],
-                   max_value: float | None = None) -> tuple[dict, dict]:
+                   max_value: float | None = None, convention: str | None = None) -> tuple[dict, dict]:
     """(layout document, summary) for the cells that move in any of `activities` (one per recording hand).
 
     Each recording is judged on its own (its own noise, its own range): a glove's rest level may differ
-    between recordings, and pooling them would make that difference look like movement.
+    between recordings, and pooling them would make that difference look like movement. The direction
+    (value.convention) is `convention` when the user states it, else the one the recordings show
+    (activity.seen_direction; "direct" when they do not tell, and the notes say so); the cells are read in
+    the pressure direction, so an inverted glove gets the blocks a direct one would.
     """
     grid = activities[0].grid
     if any(a.grid != grid for a in activities):
         raise ArgumentError(f"recordings have different grids: {sorted({a.grid for a in activities})}")
     step = 1.0 if integral else None
+    seen = seen_direction(activities, step)
+    inverted = is_inverted(convention) if convention else bool(seen.inverted)
+    direction = direction_note(convention_name(inverted), bool(convention), seen)
     support = np.zeros(grid, np.int64)
     noises, wanders, thresholds = [], [], []
-    for a in activities:
+    for a in (a.mirrored() if inverted else a for a in activities):
         found = moving_cells(a, np.ones(grid, bool), None, step)    # cross-talk (only falls) set apart
         support[found.cells[:, 0], found.cells[:, 1]] += 1
         noises.append(found.noise)
@@ -177,7 +201,7 @@ def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, in
     lines = np.argwhere(mask & ~inside)
     targets = _assign_places(boxes)
     top = float(max_value) if max_value is not None else max(float(a.hi[a.count > 0].max()) for a in activities)
-    value = {"convention": "direct", "max": int(top) if integral and top == int(top) else top}
+    value = {"convention": convention_name(inverted), "max": int(top) if integral and top == int(top) else top}
     if integral:
         value["step"] = 1
     blocks = []
@@ -197,10 +221,11 @@ def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, in
                      f"assigned by size, not anatomy: set each block's place and orientation (rotate, flip_x, "
                      f"flip_y; docs/LAYOUTS.md), split blocks that span several places, mark sensorless cells "
                      f"inside blocks as dead_cells and non-pressure cells as bend_cells, and set value.max to "
-                     f"the glove's full-scale raw value (here: the largest value seen, {top:g}).")}
+                     f"the glove's full-scale raw value (here: the largest value seen, {top:g}). {direction}.")}
     parse_layout(doc, f"suggested layout {layout_id}")   # always a loadable starting point
     summary = {"moving": moving, "noise": noise, "wander": wander, "threshold": threshold, "frames": frames,
                "left_out": lines.tolist(),
-               "recordings": len(activities),
+               "recordings": len(activities), "convention": value["convention"], "direction": direction,
+               "direction_unclear": not convention and seen.inverted is None,
                "inside_blocks_not_moving": int((inside & ~mask).sum())}
     return doc, summary
