@@ -46,7 +46,7 @@ import numpy as np
 
 from htdata.errors import ArgumentError
 from htdata.glove.activity import CellActivity, SeenDirection, moving_cells, rule_text, seen_direction
-from htdata.glove.blockcuts import cut_blocks, grow_blocks, split_strips
+from htdata.glove.blockcuts import cut_blocks, grow_blocks, join_lengthwise, split_strips
 from htdata.glove.glovevalue import convention_name, is_inverted
 from htdata.glove.layouts import load_canonical, parse_layout
 
@@ -141,7 +141,7 @@ def suggested_boxes(support: np.ndarray, recordings: int) -> list[tuple[int, int
     if not seeds:            # no area moved in two recordings: each was pressed once, so one is enough
         seeds = cut_blocks(sensor_areas(support >= 1))
     most = len(load_canonical().places)
-    boxes = split_strips(grow_blocks(seeds, support >= 1, support), most)
+    boxes = split_strips(join_lengthwise(grow_blocks(seeds, support >= 1, support)), most)
     if len(boxes) > most:
         boxes = sorted(sorted(boxes, key=lambda b: -(b[1] - b[0] + 1) * (b[3] - b[2] + 1))[:most])
     return boxes

@@ -67,3 +67,37 @@ def test_the_direction_is_a_guess_said_so_when_the_recordings_do_not_tell(tmp_pa
                  "--convention", "inverted"]) == 0
     assert load_layout(tmp_path / "stated.json").value["convention"] == "inverted"
     assert "as stated (--convention" in capsys.readouterr().out
+
+
+# in how many of five pour clips each cell of the real right glove's ring strip moved (rows 4-11, cols 17-31 of its
+# grid: the palm's edge columns, the strip's 4 rows 6-9 between unsensed rows): the strip's second pair of rows
+# moves less, and the cut where the blocks narrow used to split the strip lengthwise into two 2-row strips
+RING_STRIP_SUPPORT = np.array([
+    [5, 4, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0], [5, 5, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+    [5, 5, 4, 5, 5, 4, 2, 4, 4, 5, 3, 5, 4, 4, 1], [5, 5, 5, 4, 5, 3, 3, 5, 2, 5, 3, 5, 3, 4, 1],
+    [5, 4, 4, 4, 5, 3, 1, 5, 1, 5, 3, 3, 4, 3, 1], [4, 4, 4, 3, 5, 3, 2, 5, 0, 5, 3, 5, 2, 3, 1],
+    [5, 5, 1, 1, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0], [5, 5, 2, 3, 5, 5, 5, 5, 3, 5, 2, 4, 3, 5, 5]])
+
+
+def test_a_strip_is_cut_across_into_places_never_lengthwise():
+    from htdata.glove.layoutsuggest import suggested_boxes
+
+    support = np.zeros((12, 20), np.int64)
+    support[2:10, 2:17] = RING_STRIP_SUPPORT
+    support[2:10, 0:2] = 5                                 # the palm beside it
+    strip = [b for b in suggested_boxes(support, 5) if b[2] >= 4]
+    # every block of the strip spans its four rows (4-7); the strip's 13 columns cut across into three places
+    assert [(b[0], b[1]) for b in strip] == [(4, 7)] * 3
+    assert [b[2] for b in strip] == [4, 8, 13] and strip[-1][3] == 16
+
+
+def test_join_lengthwise_joins_thin_blocks_side_by_side_only_where_nothing_else_lies():
+    from htdata.glove.blockcuts import join_lengthwise
+
+    # two 2-row halves of a 4x12 strip, the lower one cut in two: one strip
+    assert join_lengthwise([(0, 1, 0, 11), (2, 3, 0, 5), (2, 3, 7, 11)]) == [(0, 3, 0, 11)]
+    # a thin column beside a block whose joined box would cover a third block: left alone
+    boxes = [(0, 9, 10, 11), (0, 3, 6, 9), (5, 9, 4, 7)]
+    assert join_lengthwise(boxes) == sorted(boxes)
+    # wide blocks side by side are not a strip cut lengthwise
+    assert join_lengthwise([(0, 3, 0, 11), (4, 7, 0, 11)]) == [(0, 3, 0, 11), (4, 7, 0, 11)]
