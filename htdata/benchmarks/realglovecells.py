@@ -13,8 +13,11 @@ clips and over the short ones (SHORT_FRAMES frames or fewer) separately:
   cells reported as cross-talk (they only fall below rest) with the same
   precision;
 - `suggest_rows`: `htdata layouts suggest` from the clips of one hand (as a
-  user passes several recordings): blocks, and the cell precision / recall of
-  the suggested layout's live cells against the layout's live cells;
+  user passes several recordings; all, the short ones, the pour clips):
+  blocks, the cell precision / recall of the suggested layout's live cells
+  against the layout's live cells, the README's recall (of the live cells
+  pressed, version-2 truth, in >= 2 of the clips given), the regions it
+  names as uncovered and the share of the live cells it missed inside them;
   `suggest_leave_one_out_rows` repeats it with each clip left out in turn;
 - `crosstalk_rows`: the taxels `htdata stats --health` calls cross-talk
   (htdata/glove/rawhealth.py on each clip's raw rows, as stats runs it per
@@ -46,6 +49,7 @@ from htdata.glove.rawhealth import classify_raw
 TRUTH_RANGE = 20.0      # counts: a flagged cell that moves more than this in the clip really moves
 QUIET_RANGE = 10.0      # counts: a cell ranging less than this must never be flagged
 SHORT_FRAMES = 300      # a short clip (135-300 frames: little rest wander to see)
+PRESSED_IN_CLIP = 3     # frames: a live cell pressed in so many frames of a clip was pressed in it (README's forgotten sensor)
 STRIP_REACH = 3         # lines beside a cross-talk flag's line that must not be pressed: a 4-line strip from its edge
 
 
@@ -95,22 +99,41 @@ def moving_cell_rows(clips: list[RealClip], layouts: dict[str, Layout]) -> list[
     return rows
 
 
+def pressed_in_clips(truths: dict[int, GloveTruth], chosen: list[RealClip], live: np.ndarray) -> np.ndarray:
+    """(H, W) in how many of `chosen` clips each live cell is pressed (version-2 truth) in PRESSED_IN_CLIP frames."""
+    out = np.zeros(live.shape, np.int64)
+    out[live] = sum((truths[c.clip].pressed.sum(axis=0) >= PRESSED_IN_CLIP).astype(np.int64) for c in chosen)
+    return out
+
+
 def suggest_rows(clips: list[RealClip], layouts: dict[str, Layout]) -> list[dict]:
-    """One row per (hand, clips): `layouts suggest` from those clips against the layout's live cells."""
+    """One row per (hand, clips): `layouts suggest` from those clips against the layout's live cells, the README's
+    recall (of the live cells pressed in >= 2 of the clips given), and how many of the live cells it missed lie
+    in the regions it names as uncovered."""
     rows = []
     for hand in HANDS:
         truth = layouts[hand].live_mask
-        for name, chosen in (("all", clips), ("short", [c for c in clips if len(c.counts) <= SHORT_FRAMES])):
+        truths = glove_truths(clips, hand, truth)
+        for name, chosen in (("all", clips), ("short", [c for c in clips if len(c.counts) <= SHORT_FRAMES]),
+                             ("pour", [c for c in clips if c.label.startswith("Pour")])):
             if not chosen:
                 continue
             acts = [_activity(c.hand(hand)) for c in chosen]
             doc, summary = suggest_layout(acts, hand, f"suggested_{hand}", False, [f"clip_{c.clip}" for c in chosen])
             got = parse_layout(doc, "suggested").live_mask
             tp = int((got & truth).sum())
+            pressed = pressed_in_clips(truths, chosen, truth) >= 2
+            named = np.zeros(truth.shape, bool)
+            for r0, r1, c0, c1 in summary["uncovered"]:
+                named[r0:r1 + 1, c0:c1 + 1] = True
+            missed = truth & ~got
             rows.append({"hand": hand, "clips": f"{name} ({len(chosen)})", "blocks": len(doc["blocks"]),
                          "precision": _share(tp, int(got.sum())), "recall": _share(tp, int(truth.sum())),
-                         "live": int(got.sum()), "true_live": int(truth.sum()),
-                         "left_out": len(summary["left_out"]),
+                         "recall_pressed": _share(int((got & pressed).sum()), int(pressed.sum())),
+                         "live": int(got.sum()), "true_live": int(truth.sum()), "pressed_live": int(pressed.sum()),
+                         "left_out": len(summary["left_out"]), "uncovered_regions": len(summary["uncovered"]),
+                         "missed_named": _share(int((missed & named).sum()), int(missed.sum())),
+                         "convention": doc["value"]["convention"],
                          "boxes": [(b["rows"][0], b["rows"][1], b["cols"][0], b["cols"][1]) for b in doc["blocks"]]})
     return rows
 
@@ -209,7 +232,10 @@ def cells_markdown(d: dict) -> list[str]:
     lines += ["", "Suggested blocks (`layouts suggest` from the clips of a hand) against the layout's live cells", ""]
     lines += table(d["suggest"], [
         ("hand", "hand"), ("clips", "clips"), ("blocks", "blocks"), ("precision", "cell precision"),
-        ("recall", "cell recall"), ("live", "live cells"), ("true_live", "true live"), ("left_out", "moving left out")])
+        ("recall", "cell recall"), ("recall_pressed", "recall of live cells pressed in >= 2 clips"),
+        ("live", "live cells"), ("true_live", "true live"), ("pressed_live", "pressed live"),
+        ("left_out", "moving left out"), ("uncovered_regions", "uncovered regions named"),
+        ("missed_named", "missed live cells in them"), ("convention", "convention")])
     if d["suggest_leave_one_out"]:
         lines += ["", "The same with one clip left out, each in turn (least / median / largest)", ""]
         lines += table(d["suggest_leave_one_out"], [

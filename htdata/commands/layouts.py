@@ -209,6 +209,7 @@ def suggest(args: argparse.Namespace) -> int:
         print(f"    {b['name']:10s} rows {b['rows'][0]}-{b['rows'][1]} cols {b['cols'][0]}-{b['cols'][1]} "
               f"-> {b['place']} (placeholder{turn})")
     print(f"{'WARNING: ' if summary['direction_unclear'] else ''}{summary['direction']}")
+    print(f"not seen: {summary['unseen']}")
     print(f"wrote {out}: a STARTING POINT. Set each block's place and orientation, then "
           f"`htdata layouts render {out} out.png` and `htdata layouts check {out} --against "
           f"{' '.join(recordings)}`")

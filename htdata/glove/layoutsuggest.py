@@ -134,10 +134,68 @@ def _assign_places(boxes: list[tuple[int, int, int, int]]) -> list[tuple[str, in
     return [out[i] for i in range(len(boxes))]
 
 
+UNSEEN_WIDTH = 3          # an uncovered region is at least this many lines across (thinner: the gap between strips)
+
+
+def seed_support(recordings: int) -> int:
+    """In how many recordings a cell must move to seed a block (module docstring)."""
+    return SUPPORT_MIN if recordings >= SUPPORT_FROM else 1
+
+
+def _largest_rectangle(mask: np.ndarray, least: int) -> tuple[int, int, int, int] | None:
+    """(r0, r1, c0, c1) of the largest all-True rectangle of `mask` at least `least` cells both ways (row by row
+    column heights, every rectangle under each histogram), None when there is none."""
+    best, found = 0, None
+    height = np.zeros(mask.shape[1], np.int64)
+    for r, row in enumerate(mask):
+        height = np.where(row, height + 1, 0)
+        for c0 in range(len(height)):
+            h = int(height[c0])
+            for c1 in range(c0, len(height)):
+                h = min(h, int(height[c1]))
+                if h < least:
+                    break
+                if c1 - c0 + 1 >= least and h * (c1 - c0 + 1) > best:
+                    best, found = h * (c1 - c0 + 1), (r - h + 1, r, c0, c1)
+    return found
+
+
+def uncovered_regions(boxes: list[tuple[int, int, int, int]], grid: tuple[int, int]) -> list[tuple[int, int, int, int]]:
+    """Rectangles (r0, r1, c0, c1) inside the blocks' outline (their bounding box: the glove as far as the
+    recordings show it) that no block covers: a finger strip or palm part the recordings did not press often
+    enough to find, or no sensor at all (the user knows which). The largest first, each at least UNSEEN_WIDTH
+    lines across both ways (narrower: the unsensed lines between strips), none overlapping a block."""
+    left = np.zeros(grid, bool)
+    left[min(b[0] for b in boxes):max(b[1] for b in boxes) + 1, min(b[2] for b in boxes):max(b[3] for b in boxes) + 1] = True
+    for r0, r1, c0, c1 in boxes:
+        left[r0:r1 + 1, c0:c1 + 1] = False
+    out = []
+    while (found := _largest_rectangle(left, UNSEEN_WIDTH)) is not None:
+        r0, r1, c0, c1 = found
+        out.append(found)
+        left[r0:r1 + 1, c0:c1 + 1] = False
+    return out
+
+
+def unseen_text(regions: list[tuple[int, int, int, int]], places: list[str], least: int) -> str:
+    """The summary's / notes' sentence on what the recordings did not show: the uncovered regions, and the places
+    of a full canonical hand that got no block (`least`: recordings a block's cells must move in)."""
+    canon = sorted(load_canonical().places)
+    missing = [p for p in canon if p not in places and not (p.startswith("palm.") and "palm" in places)]
+    where = "; ".join(f"rows {r0}-{r1}, cols {c0}-{c1}" for r0, r1, c0, c1 in regions)
+    text = (f"no block covers {len(regions)} region(s) inside the blocks' outline: {where} (if one holds sensors, "
+            f"record presses there: a block needs cells that move in {least} recording(s))" if regions
+            else "the blocks cover their outline")
+    if missing:
+        text += (f"; {len(canon) - len(missing)} of the {len(canon)} places of a full hand have a block, none for "
+                 f"{', '.join(missing)} (places by size: press every finger and the palm to find them all)")
+    return text
+
+
 def suggested_boxes(support: np.ndarray, recordings: int) -> list[tuple[int, int, int, int]]:
     """Block boxes from `support` (in how many of `recordings` each cell moved; module docstring), at most one
     per place of the canonical hand (the largest kept)."""
-    seeds = cut_blocks(sensor_areas(support >= (SUPPORT_MIN if recordings >= SUPPORT_FROM else 1)))
+    seeds = cut_blocks(sensor_areas(support >= seed_support(recordings)))
     if not seeds:            # no area moved in two recordings: each was pressed once, so one is enough
         seeds = cut_blocks(sensor_areas(support >= 1))
     most = len(load_canonical().places)
@@ -200,6 +258,8 @@ def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, in
         inside[r0:r1 + 1, c0:c1 + 1] = True
     lines = np.argwhere(mask & ~inside)
     targets = _assign_places(boxes)
+    uncovered = uncovered_regions(boxes, grid)
+    unseen = unseen_text(uncovered, [t for t, _ in targets], seed_support(len(activities)))
     top = float(max_value) if max_value is not None else max(float(a.hi[a.count > 0].max()) for a in activities)
     value = {"convention": convention_name(inverted), "max": int(top) if integral and top == int(top) else top}
     if integral:
@@ -221,11 +281,13 @@ def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, in
                      f"assigned by size, not anatomy: set each block's place and orientation (rotate, flip_x, "
                      f"flip_y; docs/LAYOUTS.md), split blocks that span several places, mark sensorless cells "
                      f"inside blocks as dead_cells and non-pressure cells as bend_cells, and set value.max to "
-                     f"the glove's full-scale raw value (here: the largest value seen, {top:g}). {direction}.")}
+                     f"the glove's full-scale raw value (here: the largest value seen, {top:g}). {direction}. "
+                     f"Not seen: {unseen}.")}
     parse_layout(doc, f"suggested layout {layout_id}")   # always a loadable starting point
     summary = {"moving": moving, "noise": noise, "wander": wander, "threshold": threshold, "frames": frames,
                "left_out": lines.tolist(),
                "recordings": len(activities), "convention": value["convention"], "direction": direction,
                "direction_unclear": not convention and seen.inverted is None,
+               "uncovered": [list(map(int, b)) for b in uncovered], "unseen": unseen,
                "inside_blocks_not_moving": int((inside & ~mask).sum())}
     return doc, summary

@@ -101,3 +101,41 @@ def test_join_lengthwise_joins_thin_blocks_side_by_side_only_where_nothing_else_
     assert join_lengthwise(boxes) == sorted(boxes)
     # wide blocks side by side are not a strip cut lengthwise
     assert join_lengthwise([(0, 3, 0, 11), (4, 7, 0, 11)]) == [(0, 3, 0, 11), (4, 7, 0, 11)]
+
+
+def test_suggest_names_the_part_of_the_glove_no_recording_pressed(tmp_path, sample_clips, capsys):
+    """Recordings that never press the little finger's strip (rows 0-3, cols 19-30 of the sample glove): no block
+    lies there, and the summary, the printed lines and the notes name that region and the places left empty."""
+    rng = np.random.default_rng(0)
+    recs = []
+    for k, clip in enumerate(sample_clips):
+        x = clip.counts["right"].astype(np.float32)
+        rest = x[np.argmin(x.mean(axis=(1, 2))), 0:4, 19:31]
+        x[:, 0:4, 19:31] = rest + rng.normal(0, 0.5, (len(x), 4, 12))      # the strip at rest all along
+        recs.append(_save(tmp_path, f"rec_{k}", x))
+    out = tmp_path / "part.json"
+    assert main(["layouts", "suggest", *recs, str(out), "--hand", "right"]) == 0
+    printed = capsys.readouterr().out
+    layout = load_layout(out)
+    assert not layout.live_mask[0:4, 19:31].any()
+    regions = [r for r in printed.splitlines() if r.startswith("not seen:")]
+    assert len(regions) == 1 and "no block covers" in regions[0]
+    named = np.zeros(layout.grid, bool)
+    for r0, r1, c0, c1 in ((int(a), int(b), int(c), int(d)) for a, b, c, d in
+                           __import__("re").findall(r"rows (\d+)-(\d+), cols (\d+)-(\d+)", regions[0])):
+        named[r0:r1 + 1, c0:c1 + 1] = True
+    # the strip inside the blocks' outline (the blocks reach column 28 here) is named whole, and no block is
+    outline = max(b.cols[1] for b in layout.blocks)
+    assert outline >= 26 and named[0:4, 19:outline + 1].all() and not (named & layout.live_mask).any()
+    assert "no block covers" in layout.notes
+
+
+def test_the_places_of_a_full_hand_without_a_block_are_named():
+    from htdata.glove.layouts import load_canonical
+    from htdata.glove.layoutsuggest import unseen_text
+
+    text = unseen_text([(0, 3, 19, 30)], ["palm", "thumb.distal", "index.distal"], 2)
+    assert "rows 0-3, cols 19-30" in text and "6 of the 18 places of a full hand have a block" in text
+    missing = text.split("none for ")[1].split(" (")[0].split(", ")
+    assert len(missing) == 12 and "thumb.proximal" in missing and not any(p.startswith("palm") for p in missing)
+    assert "places of a full hand" not in unseen_text([], sorted(load_canonical().places), 2)
