@@ -36,7 +36,7 @@ from htdata.commands.outputs import output_path
 from htdata.errors import ArgumentError
 from htdata.fileio import write_bytes_atomic
 from htdata.format.table import CANVAS
-from htdata.glove.activity import describe_cells, rule_text, unmapped_moving
+from htdata.glove.activity import describe_cells, live_moving, rule_text, unmapped_moving
 from htdata.glove.glovevalue import CONVENTIONS
 from htdata.glove.layouts import LAYOUTS_ENV, Layout, list_layouts, load_canonical, load_layout
 from htdata.glove.layoutsuggest import layout_id_from_name, layout_json_text, suggest_layout
@@ -133,10 +133,12 @@ def check_against(layout: Layout, recordings: list[str], pipeline: str) -> int:
         raise ArgumentError(f"no {layout.hand}-hand rows in {', '.join(recordings)} (layout {layout.layout_id} is "
                             f"for the {layout.hand} hand)")
     findings: set[tuple[int, int]] = set()
+    pressed = np.zeros(layout.grid, bool)
     for s in scanned:
         if s.activity.grid != tuple(layout.grid):
             raise ArgumentError(f"{s.recording} [{s.episode_id}]: {s.hand} rows are {s.activity.grid[0]}x"
                                 f"{s.activity.grid[1]}, layout {layout.layout_id} is {layout.grid[0]}x{layout.grid[1]}")
+        pressed[tuple(live_moving(s.activity, layout).cells.T)] = True
         found = unmapped_moving(s.activity, layout)
         head = (f"{s.recording} [{s.episode_id}] {s.hand} hand: {found.frames} frames, noise {found.noise:.4g}, "
                 f"wander {found.wander:.4g}, moving = range > {found.threshold:.4g}")
@@ -152,12 +154,25 @@ def check_against(layout: Layout, recordings: list[str], pipeline: str) -> int:
         for (r, c), v in zip(found.cells.tolist(), found.ranges):
             print(f"    {f'[{r}, {c}]':>9s} {v:9.4g} {s.activity.lo[r, c]:9.4g} {s.activity.hi[r, c]:9.4g} "
                   f"{s.activity.cell_noise[r, c]:8.3g} {wander[r, c]:8.3g}")
+    print(_unpressed_blocks_line(layout, pressed))
     if findings:
         print(f"FINDING: {len(findings)} distinct cell(s) outside every block move in {len(scanned)} recording "
               f"hand(s) and are not drawn: add them to a block, or list them in unused_cells of "
               f"{layout.path or layout.layout_id}")
         return 1
     return 0
+
+
+def _unpressed_blocks_line(layout: Layout, pressed: np.ndarray) -> str:
+    """The blocks none of whose live cells moved in any recording: what the recordings cannot check (not a
+    finding: an idle finger is no fault, but its blocks' cells and orientation stay untested)."""
+    live = np.asarray(layout.live_mask, bool)
+    idle = [f"{b.name} ({b.place}, rows {b.rows[0]}-{b.rows[1]}, cols {b.cols[0]}-{b.cols[1]})" for b in layout.blocks
+            if not (pressed & live)[b.rows[0]:b.rows[1] + 1, b.cols[0]:b.cols[1] + 1].any()]
+    if not idle:
+        return f"every one of the {len(layout.blocks)} blocks was pressed in some recording"
+    return (f"not pressed: {len(idle)} of {len(layout.blocks)} blocks moved in no recording (record presses there to "
+            f"check them): {', '.join(idle)}")
 
 
 def _ranged(cells: np.ndarray, ranges: np.ndarray, limit: int = 12) -> str:

@@ -339,6 +339,13 @@ def unmapped_moving(activity: CellActivity, layout) -> MovingCells:
                         full_scale=layout.value.get("max"), inverted=is_inverted(layout.value.get("convention")))
 
 
+def live_moving(activity: CellActivity, layout) -> MovingCells:
+    """The layout's live cells that move (rise, in its direction) by the one rule, against its live cells, with its
+    step, full scale and direction: the taxels a recording pressed."""
+    return moving_cells(activity, layout.live_mask, layout.live_mask, layout.value.get("step"),
+                        full_scale=layout.value.get("max"), inverted=is_inverted(layout.value.get("convention")))
+
+
 def describe_cells(cells, ranges, limit: int = 12) -> str:
     """"[r, c] range, ..." for the first `limit` cells, with how many more."""
     items = [f"[{int(r)}, {int(c)}] {float(v):.4g}" for (r, c), v in zip(list(cells)[:limit], list(ranges)[:limit])]

@@ -103,16 +103,22 @@ def test_join_lengthwise_joins_thin_blocks_side_by_side_only_where_nothing_else_
     assert join_lengthwise([(0, 3, 0, 11), (4, 7, 0, 11)]) == [(0, 3, 0, 11), (4, 7, 0, 11)]
 
 
-def test_suggest_names_the_part_of_the_glove_no_recording_pressed(tmp_path, sample_clips, capsys):
-    """Recordings that never press the little finger's strip (rows 0-3, cols 19-30 of the sample glove): no block
-    lies there, and the summary, the printed lines and the notes name that region and the places left empty."""
+def _little_finger_never_pressed(tmp_path, clips) -> list[str]:
+    """The sample clips' right hand with the little finger's strip (rows 0-3, cols 19-30) at rest all along."""
     rng = np.random.default_rng(0)
     recs = []
-    for k, clip in enumerate(sample_clips):
+    for k, clip in enumerate(clips):
         x = clip.counts["right"].astype(np.float32)
         rest = x[np.argmin(x.mean(axis=(1, 2))), 0:4, 19:31]
-        x[:, 0:4, 19:31] = rest + rng.normal(0, 0.5, (len(x), 4, 12))      # the strip at rest all along
+        x[:, 0:4, 19:31] = rest + rng.normal(0, 0.5, (len(x), 4, 12))
         recs.append(_save(tmp_path, f"rec_{k}", x))
+    return recs
+
+
+def test_suggest_names_the_part_of_the_glove_no_recording_pressed(tmp_path, sample_clips, capsys):
+    """Recordings that never press the little finger's strip: no block lies there, and the summary, the printed
+    lines and the notes name that region."""
+    recs = _little_finger_never_pressed(tmp_path, sample_clips)
     out = tmp_path / "part.json"
     assert main(["layouts", "suggest", *recs, str(out), "--hand", "right"]) == 0
     printed = capsys.readouterr().out
@@ -139,3 +145,22 @@ def test_the_places_of_a_full_hand_without_a_block_are_named():
     missing = text.split("none for ")[1].split(" (")[0].split(", ")
     assert len(missing) == 12 and "thumb.proximal" in missing and not any(p.startswith("palm") for p in missing)
     assert "places of a full hand" not in unseen_text([], sorted(load_canonical().places), 2)
+
+
+def _not_pressed(printed: str) -> set[str]:
+    lines = [r for r in printed.splitlines() if r.startswith("not pressed:")]
+    assert len(lines) <= 1
+    return set(__import__("re").findall(r"(\w+) \(\w+\.\w+, rows", lines[0])) if lines else set()
+
+
+def test_check_against_names_the_blocks_no_recording_pressed(tmp_path, sample_clips, capsys):
+    from htdata.synthetic.rawglove import glove_layout
+
+    layout = tmp_path / "sample_right.json"
+    layout.write_text(json.dumps(glove_layout("right").to_dict()))
+    whole = [_save(tmp_path, f"all_{k}", c.counts["right"]) for k, c in enumerate(sample_clips)]
+    main(["layouts", "check", str(layout), "--against", *whole])
+    idle = _not_pressed(capsys.readouterr().out)           # the sample clips never press the ring finger's tip
+    assert len(idle) <= 2 and not any(b.startswith("little") for b in idle)
+    main(["layouts", "check", str(layout), "--against", *_little_finger_never_pressed(tmp_path, sample_clips)])
+    assert _not_pressed(capsys.readouterr().out) == idle | {"little_proximal", "little_middle", "little_distal"}
