@@ -138,6 +138,26 @@ def suggest_rows(clips: list[RealClip], layouts: dict[str, Layout]) -> list[dict
     return rows
 
 
+def suggest_glove_rows(clips: list[RealClip], layouts: dict[str, Layout]) -> list[dict]:
+    """One row per (derived glove, hand): `layouts suggest` from all its clips, with the same truth (the original
+    presses), and the direction it wrote against the glove's (value.convention)."""
+    rows = []
+    for glove in DERIVED_GLOVES[1:]:
+        g_clips, g_layouts = derived_clips(glove, clips, layouts)
+        for hand in HANDS:
+            truth = layouts[hand].live_mask
+            pressed = pressed_in_clips(glove_truths(clips, hand, truth), clips, truth) >= 2
+            doc, _ = suggest_layout([_activity(c.hand(hand)) for c in g_clips], hand, f"suggested_{hand}", False,
+                                    [f"clip_{c.clip}" for c in g_clips])
+            got = parse_layout(doc, "suggested").live_mask
+            rows.append({"glove": glove[0], "hand": hand, "blocks": len(doc["blocks"]),
+                         "precision": _share(int((got & truth).sum()), int(got.sum())),
+                         "recall_pressed": _share(int((got & pressed).sum()), int(pressed.sum())),
+                         "convention": doc["value"]["convention"],
+                         "convention_right": doc["value"]["convention"] == g_layouts[hand].value["convention"]})
+    return rows
+
+
 def suggest_leave_one_out_rows(clips: list[RealClip], layouts: dict[str, Layout]) -> list[dict]:
     """One row per hand: `layouts suggest` from every clip but one, for each clip left out (how the targets
     hold on a set of clips it was not developed on): least / median / largest blocks, precision and recall."""
@@ -218,6 +238,7 @@ def cells_rows(clips: list[RealClip], layouts: dict[str, Layout], leave_one_out:
     """Every table's rows (results.json): moving cells, suggest, and suggest with each clip left out."""
     return {"moving_cells": moving_cell_rows(clips, layouts), "suggest": suggest_rows(clips, layouts),
             "suggest_leave_one_out": suggest_leave_one_out_rows(clips, layouts) if leave_one_out else [],
+            "suggest_gloves": suggest_glove_rows(clips, layouts),
             "crosstalk": crosstalk_rows(clips, layouts)}
 
 
@@ -243,6 +264,11 @@ def cells_markdown(d: dict) -> list[str]:
             ("precision_min", "precision min"), ("precision_median", "precision median"),
             ("recall_min", "recall min"), ("recall_median", "recall median"), ("recall_max", "recall max"),
             ("meet_targets", "subsets meeting all targets")])
+    lines += ["", "The same from all clips of each glove derived from them (truth: the original presses)", ""]
+    lines += table(d.get("suggest_gloves", []), [
+        ("glove", "glove"), ("hand", "hand"), ("blocks", "blocks"), ("precision", "cell precision"),
+        ("recall_pressed", "recall of live cells pressed in >= 2 clips"), ("convention", "convention written"),
+        ("convention_right", "the glove's")])
     lines += ["", f"`htdata stats --health` cross-talk flags (taxel-episodes) and their precision: true cross-talk = "
                   f"nothing pressed (version-2 truth) within {STRIP_REACH} lines beside the line in its block "
                   f"(target >= 0.90)", ""]

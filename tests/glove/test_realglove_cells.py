@@ -12,7 +12,7 @@ from __future__ import annotations
 import pytest
 
 from htdata.benchmarks.realclips import load_real_glove
-from htdata.benchmarks.realglovecells import crosstalk_rows, moving_cell_rows, suggest_rows
+from htdata.benchmarks.realglovecells import crosstalk_rows, moving_cell_rows, suggest_glove_rows, suggest_rows
 from tests.factories.realglove import real_glove_dir
 
 
@@ -64,3 +64,15 @@ def test_health_crosstalk_flags_are_not_presses_along_a_strip_edge(real):
     for r in rows:
         if r["flagged"]:
             assert r["precision"] >= 0.90, f"{r['glove']}, {r['hand']} hand: {r['true']} of {r['flagged']} true"
+
+
+def test_suggest_sees_each_derived_gloves_direction_and_finds_its_blocks(real):
+    """The inverted glove (1023 - raw) gets value.convention inverted and the direct glove's blocks; every derived
+    glove gets its own direction. The drifting, low-rest glove is left out of the block targets: its rest wander
+    (+6 counts over every clip) raises suggest's threshold (an open gap, not this test's subject)."""
+    rows = {(r["glove"].split()[0], r["hand"]): r for r in suggest_glove_rows(*real)}
+    assert all(r["convention_right"] for r in rows.values()), rows
+    assert rows[("inverted", "left")]["convention"] == "inverted"
+    for (glove, hand), r in rows.items():
+        if glove != "low":
+            assert r["blocks"] >= 9 and r["precision"] >= 0.90 and r["recall_pressed"] >= 0.90, (glove, hand, r)
