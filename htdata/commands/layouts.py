@@ -36,7 +36,8 @@ from htdata.commands.outputs import output_path
 from htdata.errors import ArgumentError
 from htdata.fileio import write_bytes_atomic
 from htdata.format.table import CANVAS
-from htdata.glove.activity import describe_cells, rule_text, unmapped_moving
+from htdata.glove.activity import describe_cells, live_moving, rule_text, unmapped_moving
+from htdata.glove.glovevalue import CONVENTIONS
 from htdata.glove.layouts import LAYOUTS_ENV, Layout, list_layouts, load_canonical, load_layout
 from htdata.glove.layoutsuggest import layout_id_from_name, layout_json_text, suggest_layout
 from htdata.glove.rasterise import Rasteriser
@@ -132,10 +133,12 @@ def check_against(layout: Layout, recordings: list[str], pipeline: str) -> int:
         raise ArgumentError(f"no {layout.hand}-hand rows in {', '.join(recordings)} (layout {layout.layout_id} is "
                             f"for the {layout.hand} hand)")
     findings: set[tuple[int, int]] = set()
+    pressed = np.zeros(layout.grid, bool)
     for s in scanned:
         if s.activity.grid != tuple(layout.grid):
             raise ArgumentError(f"{s.recording} [{s.episode_id}]: {s.hand} rows are {s.activity.grid[0]}x"
                                 f"{s.activity.grid[1]}, layout {layout.layout_id} is {layout.grid[0]}x{layout.grid[1]}")
+        pressed[tuple(live_moving(s.activity, layout).cells.T)] = True
         found = unmapped_moving(s.activity, layout)
         head = (f"{s.recording} [{s.episode_id}] {s.hand} hand: {found.frames} frames, noise {found.noise:.4g}, "
                 f"wander {found.wander:.4g}, moving = range > {found.threshold:.4g}")
@@ -151,12 +154,25 @@ def check_against(layout: Layout, recordings: list[str], pipeline: str) -> int:
         for (r, c), v in zip(found.cells.tolist(), found.ranges):
             print(f"    {f'[{r}, {c}]':>9s} {v:9.4g} {s.activity.lo[r, c]:9.4g} {s.activity.hi[r, c]:9.4g} "
                   f"{s.activity.cell_noise[r, c]:8.3g} {wander[r, c]:8.3g}")
+    print(_unpressed_blocks_line(layout, pressed))
     if findings:
         print(f"FINDING: {len(findings)} distinct cell(s) outside every block move in {len(scanned)} recording "
               f"hand(s) and are not drawn: add them to a block, or list them in unused_cells of "
               f"{layout.path or layout.layout_id}")
         return 1
     return 0
+
+
+def _unpressed_blocks_line(layout: Layout, pressed: np.ndarray) -> str:
+    """The blocks none of whose live cells moved in any recording: what the recordings cannot check (not a
+    finding: an idle finger is no fault, but its blocks' cells and orientation stay untested)."""
+    live = np.asarray(layout.live_mask, bool)
+    idle = [f"{b.name} ({b.place}, rows {b.rows[0]}-{b.rows[1]}, cols {b.cols[0]}-{b.cols[1]})" for b in layout.blocks
+            if not (pressed & live)[b.rows[0]:b.rows[1] + 1, b.cols[0]:b.cols[1] + 1].any()]
+    if not idle:
+        return f"every one of the {len(layout.blocks)} blocks was pressed in some recording"
+    return (f"not pressed: {len(idle)} of {len(layout.blocks)} blocks moved in no recording (record presses there to "
+            f"check them): {', '.join(idle)}")
 
 
 def _ranged(cells: np.ndarray, ranges: np.ndarray, limit: int = 12) -> str:
@@ -196,7 +212,7 @@ def suggest(args: argparse.Namespace) -> int:
         raise ArgumentError(f"the recordings hold both hands ({', '.join(hands)}): choose one with --hand")
     layout_id = args.layout_id or layout_id_from_name(out.stem)
     doc, summary = suggest_layout([s.activity for s in scanned], hands[0], layout_id,
-                                  all(s.integral for s in scanned), recordings, args.max_value)
+                                  all(s.integral for s in scanned), recordings, args.max_value, args.convention)
     write_bytes_atomic(output_path(out, "layouts suggest"), layout_json_text(doc).encode())
     print(f"{summary['moving']} moving cell(s) in {summary['recordings']} recording hand(s), {summary['frames']} "
           f"frames (median noise {summary['noise']:.4g}, wander {summary['wander']:.4g}, moving = range > {summary['threshold']:.4g}); "
@@ -207,6 +223,8 @@ def suggest(args: argparse.Namespace) -> int:
         turn = f", rotate {b['rotate']}" if b.get("rotate") else ""
         print(f"    {b['name']:10s} rows {b['rows'][0]}-{b['rows'][1]} cols {b['cols'][0]}-{b['cols'][1]} "
               f"-> {b['place']} (placeholder{turn})")
+    print(f"{'WARNING: ' if summary['direction_unclear'] else ''}{summary['direction']}")
+    print(f"not seen: {summary['unseen']}")
     print(f"wrote {out}: a STARTING POINT. Set each block's place and orientation, then "
           f"`htdata layouts render {out} out.png` and `htdata layouts check {out} --against "
           f"{' '.join(recordings)}`")
@@ -249,6 +267,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--layout-id", help="layout id to write (default: from OUT's file name)")
     p.add_argument("--max", type=float, dest="max_value",
                    help="full-scale raw value for value.max (default: the largest value seen)")
+    p.add_argument("--convention", choices=CONVENTIONS,
+                   help="the glove's direction for value.convention: counts rise (direct) or fall (inverted) with "
+                        "pressure (default: as the recordings show it)")
     p.add_argument("--force", action="store_true", help="overwrite OUT.json")
     p = sub.add_parser("rest", help="write the glove's own rest: each cell's rest pooled over its recordings "
                                     "(a taxel calibration for baseline = \"shift\")")

@@ -94,6 +94,8 @@ WANDER_BLOCK = 16        # frames per block mean (half a second at 30 fps)
 WANDER_QUIET_K = 6.0     # a cell's block is quiet up to its p10 + this many robust spreads of its lower half
 MOVING_MIN_FULL_SCALE = CONTACT_THRESHOLD   # x full scale (value.max): the least a cell must move (contact level)
 REST_SHARE = 0.10        # the glove's quietest share of blocks: where each cell's rest level is read
+DIRECTION_RATIO = 2.0    # read one way, a glove's presses "only fall" in this many times more cells than read the
+DIRECTION_MIN_CELLS = 8  # other way, and in at least this many cells (MIN_BLOCK_CELLS): else the direction is unclear
 _NOISE_FROM_ABS_DIFF2 = math.sqrt(math.pi / 12.0)
 
 
@@ -144,6 +146,17 @@ class CellActivity:
                 means = np.nanmean(rows[:full].reshape(-1, WANDER_BLOCK, *self.grid), axis=1)
             self._blocks.extend(means)
         self._open = rows[full:].copy()
+
+    def mirrored(self) -> "CellActivity":
+        """The activity of the rows turned upside down (-rows): an inverted glove's rows in the pressure direction
+        (glovevalue.toward_pressure, up to its offset `top`, which no moving-cell rule reads: they use ranges,
+        noise and levels against the cell's own rest)."""
+        out = CellActivity(self.grid)
+        out.frames, out.count, out.abs_diff, out.diffs = self.frames, self.count.copy(), self.abs_diff.copy(), self.diffs.copy()
+        out.lo, out.hi = -self.hi, -self.lo
+        out._tail, out._open = -self._tail, -self._open
+        out._blocks = [-b for b in self._blocks]
+        return out
 
     @property
     def range(self) -> np.ndarray:
@@ -285,10 +298,51 @@ def moving_cells(activity: CellActivity, mask: np.ndarray, reference: np.ndarray
                        wander=float(wander), crosstalk=xcells, crosstalk_ranges=xranges)
 
 
+@dataclass(frozen=True)
+class SeenDirection:
+    """Which way a glove's counts go with pressure, as recordings show it (`seen_direction`)."""
+
+    inverted: bool | None      # None: the recordings do not tell
+    falls_as_direct: int       # cells that only fall below rest when the counts are read as rising with pressure
+    falls_as_inverted: int     # ... when read as falling with pressure
+
+    def text(self) -> str:
+        return (f"{self.falls_as_direct} cell(s) only fall below rest read as direct, {self.falls_as_inverted} read "
+                f"as inverted")
+
+
+def seen_direction(activities: list[CellActivity], step: float | None) -> SeenDirection:
+    """The direction of a glove without a layout, from its recordings (each against its own noise and rest).
+
+    Read in the wrong direction, every press "only falls" below its rest, like cross-talk; read in the right one,
+    only the cells beside a press do. So the direction whose only-falling cells are DIRECTION_RATIO times fewer
+    than the other's (which are at least DIRECTION_MIN_CELLS) is the glove's; otherwise it is unclear (a single
+    recording gripped throughout can look either way).
+    """
+    def falls(acts: list[CellActivity]) -> int:
+        return sum(len(moving_cells(a, np.ones(a.grid, bool), None, step).crosstalk) for a in acts)
+
+    as_direct, as_inverted = falls(activities), falls([a.mirrored() for a in activities])
+    inverted = None
+    if max(as_direct, as_inverted) >= DIRECTION_MIN_CELLS:
+        if as_inverted >= DIRECTION_RATIO * as_direct:
+            inverted = False
+        elif as_direct >= DIRECTION_RATIO * as_inverted:
+            inverted = True
+    return SeenDirection(inverted, as_direct, as_inverted)
+
+
 def unmapped_moving(activity: CellActivity, layout) -> MovingCells:
     """Cells outside every block (not bend, not unused) that move, measured against the layout's live cells,
     with the layout's step, full scale (value.max) and direction (value.convention)."""
     return moving_cells(activity, layout.unmapped_mask, layout.live_mask, layout.value.get("step"),
+                        full_scale=layout.value.get("max"), inverted=is_inverted(layout.value.get("convention")))
+
+
+def live_moving(activity: CellActivity, layout) -> MovingCells:
+    """The layout's live cells that move (rise, in its direction) by the one rule, against its live cells, with its
+    step, full scale and direction: the taxels a recording pressed."""
+    return moving_cells(activity, layout.live_mask, layout.live_mask, layout.value.get("step"),
                         full_scale=layout.value.get("max"), inverted=is_inverted(layout.value.get("convention")))
 
 

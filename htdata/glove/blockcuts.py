@@ -22,7 +22,9 @@ in some recording and moved in at least GROW_SUPPORT x as many recordings as
 the block's own cells (hysteresis: a block found on cells that moved in
 several recordings continues over cells pressed once; a raw row that moved
 once beside a block pressed in many recordings, a row shifting with a hard
-press, does not). `split_strips` cuts a strip k times as long as it is wide
+press, does not). `join_lengthwise` joins a strip that was cut lengthwise
+(a line or two pressed along one edge of a finger strip, issue 43: the
+strip is then two thin blocks side by side) back into one. `split_strips` cuts a strip k times as long as it is wide
 into k near-square blocks (while the blocks still find places): the
 canonical hand draws a finger over three places, one block per place.
 """
@@ -162,6 +164,44 @@ def grow_blocks(boxes: list[Box], moved: np.ndarray, support: np.ndarray) -> lis
                     boxes[k] = b = nb
                     grown = True
     return sorted(tuple(b) for b in boxes)
+
+
+def _touching(thin: Box, other: Box, axis: int, side: int) -> bool:
+    """`other` lies against `thin`'s long side (`axis` 0: above / below it, 1: left / right; `side` -1 or 1) and
+    overlaps it along its length."""
+    lo, hi = (0, 1) if axis == 0 else (2, 3)
+    along = (2, 3) if axis == 0 else (0, 1)
+    against = other[hi] == thin[lo] - 1 if side < 0 else other[lo] == thin[hi] + 1
+    return against and other[along[0]] <= thin[along[1]] and thin[along[0]] <= other[along[1]]
+
+
+def join_lengthwise(boxes: list[Box]) -> list[Box]:
+    """Boxes joined where a strip was cut LENGTHWISE: a box thinner than STRIP_MIN_WIDTH (a line or two of a strip
+    pressed on its own, e.g. along one edge) and the boxes against its long side on one side are one box, when
+    that box overlaps no other. A strip is then cut only across, into places along the finger (`split_strips`)."""
+    out = list(boxes)
+    joined = True
+    while joined:
+        joined = False
+        for thin in sorted(out, key=lambda b: min(b[1] - b[0], b[3] - b[2])):
+            h, w = thin[1] - thin[0] + 1, thin[3] - thin[2] + 1
+            if min(h, w) >= STRIP_MIN_WIDTH:
+                continue
+            axis = 0 if w > h else 1            # its long side runs along a row (0) or a column (1)
+            for side in (1, -1):
+                mates = [b for b in out if b != thin and _touching(thin, b, axis, side)]
+                if not mates:
+                    continue
+                group = [thin, *mates]
+                union = (min(b[0] for b in group), max(b[1] for b in group),
+                         min(b[2] for b in group), max(b[3] for b in group))
+                if not any(_overlaps(union, b) for b in out if b not in group):
+                    out = [b for b in out if b not in group] + [union]
+                    joined = True
+                    break
+            if joined:
+                break
+    return sorted(out)
 
 
 def split_strips(boxes: list[Box], most: int) -> list[Box]:

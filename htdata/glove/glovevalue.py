@@ -23,6 +23,11 @@ def is_inverted(convention: str | None) -> bool:
     return convention == "inverted"
 
 
+def convention_name(inverted: bool) -> str:
+    """The `value.convention` of a glove whose counts fall with pressure (`inverted`) or rise with it."""
+    return CONVENTIONS[0] if inverted else CONVENTIONS[1]
+
+
 def is_raw_count(max_value) -> bool:
     """True for a raw-count glove (full scale above 1, either direction)."""
     return float(max_value) > 1.0

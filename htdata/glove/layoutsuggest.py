@@ -1,5 +1,11 @@
 """A starting layout from recordings: blocks around the cells that move (`htdata layouts suggest`).
 
+The glove's direction is read first (htdata.glove.activity.seen_direction: read
+the wrong way, every press "only falls" below its rest like cross-talk) and
+written as value.convention; when the recordings do not tell, "direct" is
+written and the summary and the notes say it is a guess to check (or the
+user states it: --convention). The cells are then read in the pressure
+direction (an inverted glove's activity `mirrored`).
 Per recording (each against its own noise and wander over the whole grid,
 htdata.glove.activity's rule without the contact floor: a lightly pressed
 taxel is still a sensor) the cells that move and do not only fall below
@@ -39,8 +45,9 @@ import re
 import numpy as np
 
 from htdata.errors import ArgumentError
-from htdata.glove.activity import CellActivity, moving_cells, rule_text
-from htdata.glove.blockcuts import cut_blocks, grow_blocks, split_strips
+from htdata.glove.activity import CellActivity, SeenDirection, moving_cells, rule_text, seen_direction
+from htdata.glove.blockcuts import cut_blocks, grow_blocks, join_lengthwise, split_strips
+from htdata.glove.glovevalue import convention_name, is_inverted
 from htdata.glove.layouts import load_canonical, parse_layout
 
 SUPPORT_MIN = 2          # seed cells moved in at least this many recordings ...
@@ -127,33 +134,108 @@ def _assign_places(boxes: list[tuple[int, int, int, int]]) -> list[tuple[str, in
     return [out[i] for i in range(len(boxes))]
 
 
+UNSEEN_WIDTH = 3          # an uncovered region is at least this many lines across (thinner: the gap between strips)
+
+
+def seed_support(recordings: int) -> int:
+    """In how many recordings a cell must move to seed a block (module docstring)."""
+    return SUPPORT_MIN if recordings >= SUPPORT_FROM else 1
+
+
+def _largest_rectangle(mask: np.ndarray, least: int) -> tuple[int, int, int, int] | None:
+    """(r0, r1, c0, c1) of the largest all-True rectangle of `mask` at least `least` cells both ways (row by row
+    column heights, every rectangle under each histogram), None when there is none."""
+    best, found = 0, None
+    height = np.zeros(mask.shape[1], np.int64)
+    for r, row in enumerate(mask):
+        height = np.where(row, height + 1, 0)
+        for c0 in range(len(height)):
+            h = int(height[c0])
+            for c1 in range(c0, len(height)):
+                h = min(h, int(height[c1]))
+                if h < least:
+                    break
+                if c1 - c0 + 1 >= least and h * (c1 - c0 + 1) > best:
+                    best, found = h * (c1 - c0 + 1), (r - h + 1, r, c0, c1)
+    return found
+
+
+def uncovered_regions(boxes: list[tuple[int, int, int, int]], grid: tuple[int, int]) -> list[tuple[int, int, int, int]]:
+    """Rectangles (r0, r1, c0, c1) inside the blocks' outline (their bounding box: the glove as far as the
+    recordings show it) that no block covers: a finger strip or palm part the recordings did not press often
+    enough to find, or no sensor at all (the user knows which). The largest first, each at least UNSEEN_WIDTH
+    lines across both ways (narrower: the unsensed lines between strips), none overlapping a block."""
+    left = np.zeros(grid, bool)
+    left[min(b[0] for b in boxes):max(b[1] for b in boxes) + 1, min(b[2] for b in boxes):max(b[3] for b in boxes) + 1] = True
+    for r0, r1, c0, c1 in boxes:
+        left[r0:r1 + 1, c0:c1 + 1] = False
+    out = []
+    while (found := _largest_rectangle(left, UNSEEN_WIDTH)) is not None:
+        r0, r1, c0, c1 = found
+        out.append(found)
+        left[r0:r1 + 1, c0:c1 + 1] = False
+    return out
+
+
+def unseen_text(regions: list[tuple[int, int, int, int]], places: list[str], least: int) -> str:
+    """The summary's / notes' sentence on what the recordings did not show: the uncovered regions, and the places
+    of a full canonical hand that got no block (`least`: recordings a block's cells must move in)."""
+    canon = sorted(load_canonical().places)
+    missing = [p for p in canon if p not in places and not (p.startswith("palm.") and "palm" in places)]
+    where = "; ".join(f"rows {r0}-{r1}, cols {c0}-{c1}" for r0, r1, c0, c1 in regions)
+    text = (f"no block covers {len(regions)} region(s) inside the blocks' outline: {where} (if one holds sensors, "
+            f"record presses there: a block needs cells that move in {least} recording(s))" if regions
+            else "the blocks cover their outline")
+    if missing:
+        text += (f"; {len(canon) - len(missing)} of the {len(canon)} places of a full hand have a block, none for "
+                 f"{', '.join(missing)} (places by size: press every finger and the palm to find them all)")
+    return text
+
+
 def suggested_boxes(support: np.ndarray, recordings: int) -> list[tuple[int, int, int, int]]:
     """Block boxes from `support` (in how many of `recordings` each cell moved; module docstring), at most one
     per place of the canonical hand (the largest kept)."""
-    seeds = cut_blocks(sensor_areas(support >= (SUPPORT_MIN if recordings >= SUPPORT_FROM else 1)))
+    seeds = cut_blocks(sensor_areas(support >= seed_support(recordings)))
     if not seeds:            # no area moved in two recordings: each was pressed once, so one is enough
         seeds = cut_blocks(sensor_areas(support >= 1))
     most = len(load_canonical().places)
-    boxes = split_strips(grow_blocks(seeds, support >= 1, support), most)
+    boxes = split_strips(join_lengthwise(grow_blocks(seeds, support >= 1, support)), most)
     if len(boxes) > most:
         boxes = sorted(sorted(boxes, key=lambda b: -(b[1] - b[0] + 1) * (b[3] - b[2] + 1))[:most])
     return boxes
 
 
+def direction_note(convention: str, stated: bool, seen: SeenDirection) -> str:
+    """The layout notes' / summary's sentence on value.convention: stated, seen, or a guess to check."""
+    if stated:
+        return f"value.convention {convention} as stated (--convention; the recordings: {seen.text()})"
+    if seen.inverted is not None:
+        return f"value.convention {convention} as the recordings show ({seen.text()})"
+    return (f"value.convention {convention} is a GUESS, CHECK IT: the recordings do not show which way the counts "
+            f"go with pressure ({seen.text()}); press one taxel, watch its raw count rise (direct) or fall "
+            f"(inverted), and set it (or rerun with --convention)")
+
+
 def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, integral: bool, sources: list[str],
-                   max_value: float | None = None) -> tuple[dict, dict]:
+                   max_value: float | None = None, convention: str | None = None) -> tuple[dict, dict]:
     """(layout document, summary) for the cells that move in any of `activities` (one per recording hand).
 
     Each recording is judged on its own (its own noise, its own range): a glove's rest level may differ
-    between recordings, and pooling them would make that difference look like movement.
+    between recordings, and pooling them would make that difference look like movement. The direction
+    (value.convention) is `convention` when the user states it, else the one the recordings show
+    (activity.seen_direction; "direct" when they do not tell, and the notes say so); the cells are read in
+    the pressure direction, so an inverted glove gets the blocks a direct one would.
     """
     grid = activities[0].grid
     if any(a.grid != grid for a in activities):
         raise ArgumentError(f"recordings have different grids: {sorted({a.grid for a in activities})}")
     step = 1.0 if integral else None
+    seen = seen_direction(activities, step)
+    inverted = is_inverted(convention) if convention else bool(seen.inverted)
+    direction = direction_note(convention_name(inverted), bool(convention), seen)
     support = np.zeros(grid, np.int64)
     noises, wanders, thresholds = [], [], []
-    for a in activities:
+    for a in (a.mirrored() if inverted else a for a in activities):
         found = moving_cells(a, np.ones(grid, bool), None, step)    # cross-talk (only falls) set apart
         support[found.cells[:, 0], found.cells[:, 1]] += 1
         noises.append(found.noise)
@@ -176,8 +258,10 @@ def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, in
         inside[r0:r1 + 1, c0:c1 + 1] = True
     lines = np.argwhere(mask & ~inside)
     targets = _assign_places(boxes)
+    uncovered = uncovered_regions(boxes, grid)
+    unseen = unseen_text(uncovered, [t for t, _ in targets], seed_support(len(activities)))
     top = float(max_value) if max_value is not None else max(float(a.hi[a.count > 0].max()) for a in activities)
-    value = {"convention": "direct", "max": int(top) if integral and top == int(top) else top}
+    value = {"convention": convention_name(inverted), "max": int(top) if integral and top == int(top) else top}
     if integral:
         value["step"] = 1
     blocks = []
@@ -197,10 +281,13 @@ def suggest_layout(activities: list[CellActivity], hand: str, layout_id: str, in
                      f"assigned by size, not anatomy: set each block's place and orientation (rotate, flip_x, "
                      f"flip_y; docs/LAYOUTS.md), split blocks that span several places, mark sensorless cells "
                      f"inside blocks as dead_cells and non-pressure cells as bend_cells, and set value.max to "
-                     f"the glove's full-scale raw value (here: the largest value seen, {top:g}).")}
+                     f"the glove's full-scale raw value (here: the largest value seen, {top:g}). {direction}. "
+                     f"Not seen: {unseen}.")}
     parse_layout(doc, f"suggested layout {layout_id}")   # always a loadable starting point
     summary = {"moving": moving, "noise": noise, "wander": wander, "threshold": threshold, "frames": frames,
                "left_out": lines.tolist(),
-               "recordings": len(activities),
+               "recordings": len(activities), "convention": value["convention"], "direction": direction,
+               "direction_unclear": not convention and seen.inverted is None,
+               "uncovered": [list(map(int, b)) for b in uncovered], "unseen": unseen,
                "inside_blocks_not_moving": int((inside & ~mask).sum())}
     return doc, summary

@@ -34,7 +34,8 @@ gets at most one class, in this order:
   sensor drifting (issue 27). Shorter episodes say so ("drift_assessed":
   false, and the health map's legend);
 - crosstalk: lights up (rise > CROSSTALK_RISE of full scale) along a raw
-  row / column with nothing pressed beside the line (health._crosstalk).
+  row / column with nothing pressed beside the line: no rise over half that
+  within health.CROSSTALK_REACH lines (health._crosstalk).
 
 Not faults, reported beside them: "unexercised" = never rose and never
 exercised (an idle finger); "unmapped" = the layout's unmapped cells
@@ -65,7 +66,7 @@ DRIFT_SHARE = 0.01           # rest level moving more than this (10 counts of 10
 DRIFT_MIN_FRAMES = 1800      # 60 s at 30 fps: shorter clips cannot tell drift from wander and grip changes
 DRIFT_GRIP_LEVEL = 0.01      # a quarter whose quiet mean sits this far above the episode's low is gripped
 DRIFT_REST_PCT = 25          # a taxel's rest level in a quarter: this percentile of its quiet frames
-CROSSTALK_RISE = 0.02
+CROSSTALK_RISE = health.CONTACT_LEVEL   # health._crosstalk lights a taxel above it
 DEFAULT_STEP_SHARE = 1e-3    # step when the layout gives none
 
 THRESHOLDS = {"saturated": f"rest >= {SATURATED_REST:.0%} of full scale",
@@ -74,7 +75,8 @@ THRESHOLDS = {"saturated": f"rest >= {SATURATED_REST:.0%} of full scale",
               "noisy": f"high-frequency level > {NOISY_MIN_STEPS} steps and {NOISY_RATIO:g}x its neighbours'",
               "drifting": f"rest level (quiet frames) moves > {DRIFT_SHARE:.0%} of full scale, first vs last quarter "
                           f"of clips >= {DRIFT_MIN_FRAMES} frames",
-              "crosstalk": f"a raw row/column rises > {CROSSTALK_RISE:.0%} of full scale with nothing pressed beside it",
+              "crosstalk": f"a raw row/column rises > {CROSSTALK_RISE:.0%} of full scale with nothing rising "
+                           f"{health.CROSSTALK_SIDE_LEVEL:.0%} within {health.CROSSTALK_REACH} lines beside it",
               "unexercised": f"never rose {DEAD_RISE:.0%} of full scale, neighbours never pressed",
               "unmapped": f"outside every block and unused_cells, {rule_text()}"}
 
@@ -131,7 +133,7 @@ def classify_raw(raw: np.ndarray, layout, taxels: TaxelGrid | None = None) -> di
     saturated = rest >= SATURATED_REST
     flat = (p99 - p1) <= STUCK_STEPS * step + 1e-7
     stuck = flat & (np.abs(p50 - glove_rest) > STUCK_SHARE) & ~saturated
-    crosstalk = _crosstalk(np.where(rise > CROSSTALK_RISE, rise, 0.0), taxels)
+    crosstalk = _crosstalk(rise, taxels)     # lit above health.CONTACT_LEVEL (= CROSSTALK_RISE); lighter rises beside count
     exercised = _exercised_raw(rise, taxels, crosstalk)
     never = np.percentile(rise, 99, axis=0) < DEAD_RISE
     hf = nanpercentile_columns(np.abs(np.diff(x, n=2, axis=0)), 75)

@@ -106,6 +106,25 @@ def test_a_crosstalk_row_is_found():
     assert rows == {row}
 
 
+def test_a_press_along_the_edge_of_a_pressed_area_is_not_crosstalk():
+    """The finding of issue 43: a press whose edge line passes the contact level while the lines beside it (the
+    rest of a strip 4 lines wide) are pressed more lightly is a press, not a ghost line; a ghost line lit the
+    same way with nothing beside it is still found."""
+    _, clips = corpus_clips(0)
+    raw = clips[0].counts["right"].astype(np.float32)
+    quietest = np.argsort(raw[:, LAYOUT.live_mask].mean(axis=1))[:30]
+    clean = raw[np.random.default_rng(3).choice(quietest, 300)]    # the glove at rest: its noise, no press
+    row, cols = 16, np.arange(10, 19)                      # palm_upper_radial, rows 12-22
+    press, ghost = clean.copy(), clean.copy()
+    for k in range(6):
+        t = 30 + 40 * k
+        press[t:t + 24, row:row + 3, cols[0]:cols[-1] + 1] += 14.0   # the strip pressed lightly (under contact)
+        press[t + 9:t + 15, row, cols] += 16.0                     # its edge line passes contact at the peak
+        ghost[t + 9:t + 15, row, cols] += 30.0
+    assert not {r for r, _ in _found(classify_raw(press, LAYOUT), "crosstalk")} & {row, row + 1, row + 2}
+    assert {r for r, _ in _found(classify_raw(ghost, LAYOUT), "crosstalk")} == {row}
+
+
 def test_unmapped_cells_move_by_the_one_rule_and_unused_cells_are_honoured():
     units, clips = corpus_clips(0)
     clip, unit = clips[1], units["right"]
