@@ -49,6 +49,10 @@ changed inputs are re-ingested, edited labels updated; episodes whose source is 
 (`htdata rm` removes them). An interrupted ingest resumes where it stopped. Failures (file,
 episode, frame) are listed on stderr and in OUT/reports/ingest.json; exit 1 when an episode
 failed (unless --allow-failures), 2 for a usage error, 3 when a work unit kept failing.
+A raw-count glove (layout value.max > 1) that the pipeline leaves without a [normalise.<layout>]
+table gets its rest from the glove: pooled over the run's recordings of it when there are 3 or
+more (an append reuses the dataset's), each recording's own otherwise; the ingest notes which
+(docs/INGEST.md "The glove's own rest").
 Defaults: one worker per CPU, the process pool, 1 retry.
 
 Examples:

@@ -23,7 +23,9 @@ wander around it read as contact). `noise_k` sets a per-taxel floor of k
 robust spreads (rest window, or the episode's rest: below), `noise_floor` a
 constant one in unit values; values up to the floor read 0.
 A layout of raw counts (value.max > 1, either direction: htdata.glove.glovevalue) without a [normalise.<id>]
-table gets RAW_COUNT_DEFAULTS (each cell's 10th percentile per 60 s window + noise_k 5), not baseline "none".
+table gets RAW_COUNT_DEFAULTS (each cell's 10th percentile per 60 s window + noise_k 5), not baseline "none";
+an ingest holding 3 or more recordings of the glove gives it the glove's own rest instead (baseline "shift"
+on a reference pooled over them: htdata.ingest.gloverest).
 
 Streaming: fitted once (`fit_baseline`: first chunk; `fit_episode`), then `apply` chunk by chunk, same
 as on the whole. `fitted()` / `restore()` carry the fitted arrays into the episode record and back

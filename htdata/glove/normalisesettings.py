@@ -60,8 +60,9 @@ class NormaliseSettings:
         return (f"layout {layout.layout_id} holds raw counts (value.max {float(value['max']):g}) and pipeline "
                 f"{self.name!r} has no [normalise.{layout.layout_id}] table: the raw-count default applies, "
                 f"baseline = \"{d['baseline']}\" (each cell's {d['baseline_percentile']:g}th percentile per "
-                f"{d['drift_window_s']:g} s window), noise_k = {d['noise_k']:g} (a per-cell floor); docs/INGEST.md "
-                f"\"Raw-count gloves\"")
+                f"{d['drift_window_s']:g} s window), noise_k = {d['noise_k']:g} (a per-cell floor): each cell's rest "
+                f"from its own recording, as fewer than 3 of the glove's recordings are pooled (docs/INGEST.md "
+                f"\"The glove's own rest\")")
 
     def with_glove_rests(self, references: dict[str, Path]) -> "NormaliseSettings":
         """A copy with the pooled glove rest's table (`glove_rest_config`) for each layout id in `references`."""

@@ -81,7 +81,8 @@ def test_fewer_recordings_than_the_pool_needs_keep_the_per_recording_default(tmp
     raw = _recordings(tmp_path / "raw", list(range(MIN_RECORDINGS - 1)))
     assert ingest_cli("--layouts", layouts, "--pipeline", "native", raw, tmp_path / "ds") == 0
     assert {c["baseline"] for c in _calibrations(tmp_path / "ds").values()} == {"drift"}
-    assert "glove's own" not in " ".join(_report(tmp_path / "ds")["notes"])
+    notes = " ".join(_report(tmp_path / "ds")["notes"])
+    assert "pooled over" not in notes and "fewer than 3 of the glove's recordings" in notes
 
 
 def test_an_append_reuses_the_dataset_s_glove_rest_and_keeps_committed_episodes(tmp_path):
