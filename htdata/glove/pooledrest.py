@@ -27,6 +27,7 @@ from htdata.glove.layouts import Layout
 from htdata.glove.normalise import RAW_COUNT_DEFAULTS
 from htdata.glove.restreference import rest_reference_bytes
 
+REST_FILE_PREFIX = "glove-rest-"   # DATASET/.work/glove-rest-<layout>-<sha12>.npz
 POOL_MAX = 32       # recordings pooled per glove at most: the reference is a median, more only cost time
 
 
@@ -78,7 +79,7 @@ def dataset_reference(snap, layout: Layout) -> tuple[np.ndarray, str] | None:
 def write_work_reference(root: Path, layout_id: str, reference: np.ndarray) -> Path:
     """The reference as a taxel calibration file in the dataset's work folder, named by its content."""
     data = rest_reference_bytes(reference)
-    path = Path(root) / WORK_DIR / f"glove-rest-{layout_id}-{hashlib.sha256(data).hexdigest()[:12]}.npz"
+    path = Path(root) / WORK_DIR / f"{REST_FILE_PREFIX}{layout_id}-{hashlib.sha256(data).hexdigest()[:12]}.npz"
     if not path.is_file():
         path.parent.mkdir(parents=True, exist_ok=True)
         write_bytes_atomic(path, data)

@@ -27,8 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from htdata.errors import EpisodeError
+from htdata.format.table import WORK_DIR
 from htdata.glove.layouts import Layout, load_layout
-from htdata.glove.pooledrest import GloveRest, reused_rest, spread, write_work_reference
+from htdata.glove.pooledrest import REST_FILE_PREFIX, GloveRest, reused_rest, spread, write_work_reference
 from htdata.glove.restreference import MIN_RECORDINGS, pooled_reference, recording_rest
 from htdata.source.adapters import get_adapter
 
@@ -110,3 +111,15 @@ def rest_notes(sources: list, rests: dict[str, GloveRest]) -> list[str]:
     return [r.note(sorted({s.pipeline.name for s in sources if lid in s.pipeline.normalise
                            and s.pipeline.normalise[lid].taxel_calibration == str(r.path)}))
             for lid, r in rests.items()]
+
+
+def identity_settings(pipeline) -> dict:
+    """`pipeline.to_dict()` with each pooled rest's file named by its content alone: the work folder moves
+    with the dataset, so its path is no part of an episode's input fingerprint (an append to a moved
+    dataset reuses its episodes); the name carries the layout id and the reference's sha256."""
+    d = pipeline.to_dict()
+    for table in d.get("normalise", {}).values():
+        path = Path(table["taxel_calibration"]) if isinstance(table, dict) and table.get("taxel_calibration") else None
+        if path is not None and path.parent.name == WORK_DIR and path.name.startswith(REST_FILE_PREFIX):
+            table["taxel_calibration"] = path.name
+    return d

@@ -24,7 +24,7 @@ from htdata.glove.layouts import load_layout
 from htdata.ingest.append import kept_unavailable, plan_append
 from htdata.ingest.commit import check_compatible, commit
 from htdata.ingest.executors import make_executor
-from htdata.ingest.gloverest import pool_glove_rests, rest_notes, with_glove_rests
+from htdata.ingest.gloverest import identity_settings, pool_glove_rests, rest_notes, with_glove_rests
 from htdata.ingest.plan import (
     Source,
     UnitTask,
@@ -181,7 +181,7 @@ def _ingest(sources, nv: NewVersion, workers, executor, address, retries, progre
         if rests:
             sources = with_glove_rests(sources, rests, pairs)
             pairs = [(r, s) for s, rs in zip(sources, refs) for r in sorted(rs, key=lambda r: r.episode_id)]
-        settings = {id(s): s.pipeline.to_dict() for s in sources}
+        settings = {id(s): identity_settings(s.pipeline) for s in sources}
         plan = plan_append(parent, [r for r, _ in pairs], [settings[id(s)] for _, s in pairs])
         source_of = {r.episode_id: s for r, s in pairs}
         lists, real = ChecksumLists(), RealPaths()

@@ -177,3 +177,18 @@ def test_a_pipeline_with_its_own_table_keeps_it_beside_one_that_pools(tmp_path):
     assert baselines == ["percentile", "shift"], baselines
     note, = [n for n in _report(out)["notes"] if "glove's own" in n]
     assert "'native'" in note and "native_tabled" not in note
+
+
+def test_an_append_to_a_moved_dataset_reuses_its_episodes(tmp_path):
+    """The pooled rest's file lives in the dataset's work folder, which moves with it: its path is no part of
+    an episode's input fingerprint, so an append after a move ingests only the new recording."""
+    layouts = _layouts(tmp_path)
+    raw = _recordings(tmp_path / "raw", [0, 1, 2])
+    assert ingest_cli("--layouts", layouts, "--pipeline", "native", raw, tmp_path / "ds") == 0
+    moved = tmp_path / "elsewhere" / "ds"
+    moved.parent.mkdir()
+    (tmp_path / "ds").rename(moved)
+    _recordings(raw, [3])
+    assert ingest_cli("--layouts", layouts, "--pipeline", "native", raw, moved) == 0
+    report = _report(moved)
+    assert (report["units_run"], report["episodes_unchanged"]) == (1, 3), report
