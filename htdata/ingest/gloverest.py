@@ -34,6 +34,7 @@ from htdata.glove.restreference import MIN_RECORDINGS, pooled_reference, recordi
 from htdata.source.adapters import get_adapter
 
 ROW_CHUNK = 4096
+REST_BYTES = 64 << 20     # raw rows read per recording for its rest, at most (float32)
 
 
 def _defaulted_hands(pairs: list[tuple]) -> dict[str, tuple[Layout, list[tuple]]]:
@@ -49,15 +50,33 @@ def _defaulted_hands(pairs: list[tuple]) -> dict[str, tuple[Layout, list[tuple]]
     return out
 
 
-def _recording_rows(ref, source, hand: str) -> np.ndarray:
-    """(T,H,W) every raw row of one episode hand, in the glove's units, read through the source's adapter."""
+def _recording_rows(ref, source, hand: str, grid: tuple[int, int]) -> np.ndarray:
+    """(T,H,W) the raw rows of one episode hand, in the glove's units, read through the source's adapter: every
+    row, or at most REST_BYTES of them evenly spaced (a rest is a low percentile: a long recording's every
+    row adds nothing, and must not cost its whole length in memory)."""
     adapter = get_adapter(source.pipeline.adapter.name)
     with adapter.open(ref, source.pipeline.adapter.params) as streams:
         n = len(streams.tactile_timestamps_ns[hand])
         if n == 0:
             raise EpisodeError(ref, None, f"{hand} hand has no glove rows")
-        return np.concatenate([np.asarray(streams.read_tactile(hand, np.arange(a, min(n, a + ROW_CHUNK))),
-                                          np.float32) for a in range(0, n, ROW_CHUNK)])
+        most = max(1, REST_BYTES // (4 * grid[0] * grid[1]))
+        rows = np.arange(n) if n <= most else np.unique(np.linspace(0, n - 1, most).round().astype(np.int64))
+        return np.concatenate([np.asarray(streams.read_tactile(hand, rows[a:a + ROW_CHUNK]), np.float32)
+                               for a in range(0, len(rows), ROW_CHUNK)])
+
+
+def _recording_rests(layout: Layout, chosen: list[tuple]) -> list[np.ndarray]:
+    """Each chosen (ref, source, hand)'s per-cell rest. A recording that cannot be read, or whose rows do not fit
+    the layout, is left out here: its own work unit fails it and names the file, as without pooling."""
+    rests = []
+    for ref, source, hand in chosen:
+        try:
+            rows = _recording_rows(ref, source, hand, tuple(layout.grid))
+        except (EpisodeError, OSError, ValueError):
+            continue
+        if rows.shape[1:] == tuple(layout.grid):
+            rests.append(recording_rest(rows, layout.value["convention"]))
+    return rests
 
 
 def _in_dataset(parent, layout_id: str) -> bool:
@@ -80,13 +99,9 @@ def pool_glove_rests(pairs: list[tuple], out: Path, parent, progress=None) -> di
         chosen = spread(sorted(hands, key=lambda x: (x[0].episode_id, x[2])))
         if progress is not None:
             progress(f"the glove rest of {layout_id}: pooling {len(chosen)} of its {len(hands)} recordings")
-        rests = []
-        for ref, source, hand in chosen:
-            rows = _recording_rows(ref, source, hand)
-            if rows.shape[1:] != tuple(layout.grid):
-                raise EpisodeError(ref, None, f"{hand} rows are {rows.shape[1]}x{rows.shape[2]}, layout "
-                                              f"{layout_id} is {layout.grid[0]}x{layout.grid[1]}")
-            rests.append(recording_rest(rows, layout.value["convention"]))
+        rests = _recording_rests(layout, chosen)
+        if len(rests) < MIN_RECORDINGS:
+            continue
         found[layout_id] = GloveRest(layout_id, write_work_reference(out, layout_id, pooled_reference(rests)),
                                      len(rests))
     return found

@@ -192,3 +192,32 @@ def test_an_append_to_a_moved_dataset_reuses_its_episodes(tmp_path):
     assert ingest_cli("--layouts", layouts, "--pipeline", "native", raw, moved) == 0
     report = _report(moved)
     assert (report["units_run"], report["episodes_unchanged"]) == (1, 3), report
+
+
+def test_a_recording_that_cannot_be_read_fails_alone_and_the_others_still_pool(tmp_path):
+    """Pooling reads recordings before the units run: a damaged one is left out of the pool, and its own unit
+    fails it by name, as an ingest without pooling would."""
+    layouts = _layouts(tmp_path)
+    raw = _recordings(tmp_path / "raw", [0, 1, 2, 3], held=3)
+    damaged, = (raw / "rec_1").glob("*.npz")
+    damaged.write_bytes(damaged.read_bytes()[:200])
+    out = tmp_path / "ds"
+    assert ingest_cli("--layouts", layouts, "--pipeline", "native", raw, out) == 1     # an episode failed
+    report = _report(out)
+    assert [f["episode_id"] for f in report["failures"]] == ["nat-rec_1"], report["failures"]
+    assert "pooled over 3 recordings" in " ".join(report["notes"])
+    assert _contact(out)["nat-rec_3"] > 0.95
+
+
+def test_pooling_reads_a_bounded_number_of_rows_of_a_long_recording(tmp_path, monkeypatch):
+    """A rest is a low percentile: pooling reads at most REST_BYTES of a recording's rows, evenly spaced, so a
+    long (or hostile) recording costs bounded memory in the driver."""
+    from htdata.ingest import gloverest
+    seen = []
+    real = gloverest.recording_rest
+    monkeypatch.setattr(gloverest, "REST_BYTES", 4 * 16 * 16 * 50)             # 50 rows of a 16x16 glove
+    monkeypatch.setattr(gloverest, "recording_rest", lambda rows, conv: seen.append(len(rows)) or real(rows, conv))
+    layouts = _layouts(tmp_path)
+    raw = _recordings(tmp_path / "raw", [0, 1, 2])
+    assert ingest_cli("--layouts", layouts, "--workers", "0", "--pipeline", "native", raw, tmp_path / "ds") == 0
+    assert seen == [50, 50, 50]                                                 # of 240 rows each
