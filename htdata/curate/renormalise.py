@@ -113,8 +113,7 @@ def plan_renormalise(snap: Snapshot, normalising: NormaliseSettings, patterns: l
             plan.unchanged += 1
             continue
         rows = snap.index[snap.index["episode"] == pos]
-        mapped = {h: hand_present(rows, h) for h in hands}   # RGB-only samples have no map
-        if any(not np.all(rows[SIZE_FIELDS[raw_member(h)]][mapped[h]] > 0) for h in hands):
+        if not all(raw_rows_stored(rows, h) for h in hands):
             no_raw.append(eid)
         plan.changes[eid] = hands
     if no_raw:
@@ -180,10 +179,10 @@ def paired_rows(reader: DatasetReader, eid: str, hand: str) -> tuple[np.ndarray,
     return np.stack(rows), (1e9 / step if step > 0 else 30.0), np.asarray(numbers, np.int64)
 
 
-def _stores_raw_rows(snap: Snapshot, pos: int, hand: str) -> bool:
-    rows = snap.index[snap.index["episode"] == pos]
+def raw_rows_stored(rows: np.ndarray, hand: str) -> bool:
+    """Every sample of these index rows that holds the hand (RGB-only samples hold no map) stores its raw row."""
     mapped = hand_present(rows, hand)
-    return bool(mapped.any()) and bool(np.all(rows[SIZE_FIELDS[raw_member(hand)]][mapped] > 0))
+    return bool(np.all(rows[SIZE_FIELDS[raw_member(hand)]][mapped] > 0))
 
 
 def dataset_glove_rests(work: Path, snap: Snapshot, reader: DatasetReader,
@@ -200,8 +199,11 @@ def dataset_glove_rests(work: Path, snap: Snapshot, reader: DatasetReader,
         if had is not None:
             found[lid] = had
             continue
-        hands = [(ep["episode_id"], h) for pos, ep in enumerate(snap.episodes)
-                 for h, used in sorted(ep["layouts"].items()) if used == lid and _stores_raw_rows(snap, pos, h)]
+        hands = []
+        for pos, ep in enumerate(snap.episodes):
+            rows = snap.index[snap.index["episode"] == pos]
+            hands += [(ep["episode_id"], h) for h, used in sorted(ep["layouts"].items())
+                      if used == lid and hand_present(rows, h).any() and raw_rows_stored(rows, h)]
         if len(hands) < MIN_RECORDINGS:
             continue
         rests = [recording_rest(paired_rows(reader, eid, h)[0], layout.value["convention"])

@@ -62,11 +62,12 @@ def dataset_reference(snap, layout: Layout) -> tuple[np.ndarray, str] | None:
     calibration has baseline "shift" on a reference) and that episode's id; None when none was."""
     if snap is None:
         return None
-    cals = snap.manifest.get("calibrations", {})
+    # each calibration record read once (a dataset has few, and thousands of episodes name them)
+    pooled = {cid for cid, entry in snap.manifest.get("calibrations", {}).items()
+              if entry.get("layout") == layout.layout_id and config_of(entry).rest_from_glove}
     for ep in snap.episodes:
         for hand, lid in sorted((ep.get("layouts") or {}).items()):
-            entry = cals.get((ep.get("calibration") or {}).get(hand))
-            if lid == layout.layout_id and entry is not None and config_of(entry).rest_from_glove:
+            if lid == layout.layout_id and (ep.get("calibration") or {}).get(hand) in pooled:
                 try:
                     offset = episode_normaliser(snap.manifest, ep, hand, layout).offset
                 except (DatasetError, ValueError) as exc:
