@@ -41,6 +41,7 @@ import numpy as np
 from htdata.benchmarks.realclips import HANDS, RealClip, load_real_glove
 from htdata.benchmarks.realglovecells import cells_markdown, cells_rows
 from htdata.benchmarks.realglovev2 import (
+    DECLARED_PRESS_GLOVES,
     DERIVED_GLOVES,
     config_for,
     derived_clips,
@@ -48,6 +49,7 @@ from htdata.benchmarks.realglovev2 import (
     derived_layout,
     glove_truths,
     hand_counts_v2,
+    sensitivity_rows,
     v2_summary,
 )
 from htdata.benchmarks.tables import table
@@ -280,9 +282,10 @@ def realglove_rows(folder: str | Path | None, work: Path, quick: bool = False) -
     work.mkdir(parents=True, exist_ok=True)
     return {"folder": str(folder), "clips": len(clips), "frames": int(sum(len(c.counts) for c in clips)),
             "targets": TARGETS, "normalise": normalise_rows(clips, layouts),
+            "sensitivity": sensitivity_rows(clips, layouts),
             "dataset": dataset_rows(clips, layouts, work), "dataset_gloves": [
                 {"glove": g[0], **dataset_rows(*derived_clips(g, clips, layouts), work / f"glove_{k}", clips)}
-                for k, g in enumerate(DERIVED_GLOVES[1:], 1)],
+                for k, g in enumerate(DERIVED_GLOVES[1:] + DECLARED_PRESS_GLOVES, 1)],
             **cells_rows(clips, layouts, leave_one_out=not quick)}
 
 
@@ -316,12 +319,20 @@ def realglove_markdown(d: dict) -> list[str]:
                   f"with >= {CONTACT_CELLS} pressed cells (target 0).", ""]
     lines += table(ds["contact_share"], [("clip", "clip"), ("hand", "hand"), ("truth", "contact share, truth"),
                                          ("stats", "htdata stats")])
-    lines += ["", "The same default ingest of each derived glove, against the original presses:", ""]
+    lines += ["", "The same default ingest of each derived glove, against the original presses (rows with value.press: "
+                  "the layout declares the glove's sensitivity):", ""]
     lines += table([{"glove": g["glove"], "left": g["contact_share_error"]["left"],
                      "right": g["contact_share_error"]["right"], "cut": g["idle_cut_frames"],
                      "cut_pressed": g["idle_cut_pressed_frames"]} for g in d.get("dataset_gloves", [])],
                    [("glove", "glove"), ("left", "contact share worst error, left"), ("right", "right"),
                     ("cut", "trim --idle cuts"), ("cut_pressed", "of them >= 7 pressed cells")])
+    lines += ["", f"What the clips say about each glove's sensitivity (medians over clips, counts; the truth's press level "
+                  f"is {PRESSED:g} counts on the real glove, {PRESSED / 2:g} on the half-sensitive one). A level "
+                  f"read off the rest spread (x a constant fitted to the real left hand) or the press range would have "
+                  f"to agree with it within a few per cent (the -+5% rows above):", ""]
+    lines += table(d.get("sensitivity", []), [("glove", "glove"), ("hand", "hand"), ("rest_spread", "rest spread"),
+                                             ("rise_p99", "99th percentile rise"),
+                                             ("press_from_spread", "press level from the spread")])
     lines += ["", f"Moving cells and `layouts suggest` (htdata/benchmarks/realglovecells.py; targets: flag precision "
                   f">= {t['moving_precision']:.2f} with no flag under {MOVING_STILL:g} counts; suggest >= "
                   f"{t['suggest_blocks']} blocks per hand, cell precision and recall >= {t['suggest_precision']:.2f})"

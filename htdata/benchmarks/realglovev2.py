@@ -94,6 +94,14 @@ DERIVED_GLOVES: tuple[DerivedGlove, ...] = (
     ("inverted (1023 - raw)", _inverted, {"convention": "inverted"}),
     ("low rest, drifting (-300, +6 over the clip)", _low_rest_drifting, {}),
 )
+# The same gloves with a declared sensitivity (`value.press`, raw units): the half-sensitive glove at half the
+# truth's PRESSED counts, and the real glove at PRESSED -+5%, which shows how closely the level must be known
+# (the default's 1.5% of full scale is 15.3 counts).
+DECLARED_PRESS_GLOVES: tuple[DerivedGlove, ...] = (
+    ("half-sensitive, value.press 7.5", _half_sensitive, {"press": PRESSED / 2}),
+    ("real glove, value.press 14.25 (-5%)", None, {"press": PRESSED * 0.95}),
+    ("real glove, value.press 15.75 (+5%)", None, {"press": PRESSED * 1.05}),
+)
 
 
 def derived_counts(glove: DerivedGlove, raw: np.ndarray, truth: GloveTruth, live: np.ndarray) -> np.ndarray:
@@ -166,3 +174,29 @@ def derived_clips(glove: DerivedGlove, clips: list[RealClip],
         [derived_counts(glove, c.hand(h), truths[h][c.clip], layouts[h].live_mask) for h in HANDS], axis=1))
         for c in clips]
     return out, {h: derived_layout(glove, layouts[h]) for h in HANDS}
+
+
+def sensitivity_rows(clips: list[RealClip], layouts: dict[str, Layout],
+                     gloves: tuple[DerivedGlove, ...] = DERIVED_GLOVES[:3]) -> list[dict]:
+    """What the recordings say about each glove hand's sensitivity, per glove and hand (medians over clips, in
+    counts): the rest spread (the 25th percentile over live cells of (median - 10th percentile) / 1.2816, as
+    the noise floor's glove spread), the 99th percentile rise above the v2 rest, and the press level that
+    spread x a constant would give were the constant fitted to the real left hand. The question it answers:
+    could the press level (PRESSED counts on the real glove) be read off the recordings?"""
+    rows, fitted = [], None
+    for glove in gloves:
+        clips_g, layouts_g = derived_clips(glove, clips, layouts) if glove[1] is not None else (clips, layouts)
+        for hand in HANDS:
+            live = layouts_g[hand].live_mask
+            truths = glove_truths(clips_g, hand, live)
+            spread, rise = [], []
+            for c in clips_g:
+                x = np.asarray(c.hand(hand), np.float32)[:, live]
+                cell = (np.percentile(x, 50, axis=0) - np.percentile(x, TRUTH_PERCENTILE, axis=0)) / 1.2816
+                spread.append(float(np.percentile(cell, 25)))
+                rise.append(float(np.percentile(x - truths[c.clip].rest, 99)))
+            s = float(np.median(spread))
+            fitted = fitted or PRESSED / s          # the real glove's left hand: the first row
+            rows.append({"glove": glove[0], "hand": hand, "rest_spread": s, "rise_p99": float(np.median(rise)),
+                         "press_from_spread": fitted * s})
+    return rows

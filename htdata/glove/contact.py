@@ -1,11 +1,12 @@
 """When a glove hand is "in contact": one rule per episode hand, from its calibration.
 
     calibrated  (the calibration has a noise floor: noise_k > 0 or noise_floor > 0)
-                a taxel is in contact when it is pressed: more than PRESS of full scale
-                above its rest (its baseline), and more than LEVEL_STEPS quantisation
-                steps (`value.step / max`, 0 when the layout gives no step) above its
-                noise floor. Values are floor-subtracted, so with the taxel's floor f:
-                value > max(2 steps, PRESS - f) (x the calibration's scale);
+                a taxel is in contact when it is pressed: more than the glove's press
+                level above its rest (its baseline: `value.press` raw units, default
+                DEFAULT_PRESS_SHARE of full scale, htdata.glove.glovevalue), and more than
+                LEVEL_STEPS quantisation steps (`value.step / max`, 0 when the layout gives
+                no step) above its noise floor. Values are floor-subtracted, so with the
+                taxel's floor f: value > max(2 steps, press - f) (x the calibration's scale);
                 a frame is in contact when at least max(MIN_AREA_TAXELS, MIN_AREA_SHARE x the
                 hand's live taxels) taxels are (3 on a 169-taxel glove, 7 on a 692-taxel one).
     threshold   (no noise floor: the clean-world gloves, and the old rule on request)
@@ -20,8 +21,8 @@ floor now and then is noise). The floor says where rest ends, not where a
 touch begins: a real knit glove's hand that only steadies an object has
 dozens of cells 5-15 counts above rest in most frames, while a press moves a
 cell by 15 to ~460 counts (the real knit glove's recordings, issue 34: `htdata bench --real-glove DIR`), so a touch is a
-rise of PRESS above rest (when the per-taxel floor is known; without it,
-the floor alone). Without a floor there is nothing glove-specific
+rise of the press level above rest (when the per-taxel floor is known; without it,
+the floor alone). A glove less sensitive than a knit glove declares its own level (`value.press`). Without a floor there is nothing glove-specific
 to go by, so the old threshold stays (the sample corpus's gloves have none:
 their numbers are unchanged).
 
@@ -37,6 +38,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from htdata.glove.glovevalue import press_share
 from htdata.glove.normalise import has_noise_floor
 
 THRESHOLD = 0.02           # the old rule: a taxel above this is contact (validate's contact threshold)
@@ -48,10 +50,7 @@ LEVEL_STEPS = 2
 # ... and in 0.18% of resting frames 3 scattered taxels are above that at once (none reach 6): a big glove
 # needs a bigger area, or one stray frame keeps a whole idle tail in `trim --idle`.
 MIN_AREA_SHARE = 0.01
-# calibrated rule: the least rise above rest that is a press, in full-scale units: 15 of 1023 counts on a knit glove,
-# whose rest wanders by several counts over a clip while a grip presses its cells by 15 to ~460 counts.
-PRESS = 0.015
-RULE_VERSION = 2           # part of the stats cache key
+RULE_VERSION = 3           # part of the stats cache key (3: the press level is the layout's value.press)
 
 
 @dataclass(frozen=True)
@@ -78,7 +77,7 @@ class ContactRule:
 
     def describe(self) -> str:
         if self.basis == "calibrated":
-            pressed = f"pressed more than {PRESS:g} of full scale above rest and " if self.press else ""
+            pressed = f"pressed more than {self.press:.4g} of full scale above rest (value.press) and " if self.press else ""
             return (f"at least {self.min_taxels} taxels {pressed}more than {LEVEL_STEPS} quantisation steps above "
                     f"their noise floor (value > {self.level:.4g})")
         return f"any taxel > {self.level:g}" if self.min_taxels == 1 else \
@@ -98,14 +97,14 @@ def min_area(live_taxels: int) -> int:
 
 def rule_for(calibration: dict | None, layout_value: dict | None = None, live_taxels: int = 0) -> ContactRule:
     """The contact rule of an episode hand from its manifest calibration entry (None: none recorded), its
-    layout's value block (the quantisation step) and its number of live taxels."""
+    layout's value block (the quantisation step, the press level) and its number of live taxels."""
     if calibration and has_noise_floor(float(calibration.get("noise_k", 0) or 0),
                                        float(calibration.get("noise_floor", 0) or 0)):
         step = float((layout_value or {}).get("step") or 0.0)
         top = float(calibration.get("max_value") or (layout_value or {}).get("max") or 1.0)
         scale = float(calibration.get("scale") or 1.0)
         return ContactRule("calibrated", round(LEVEL_STEPS * step / top * scale, 9), min_area(live_taxels),
-                           round(PRESS * scale, 9))
+                           round(press_share(layout_value, top) * scale, 9))
     return OLD_RULE
 
 

@@ -1,11 +1,17 @@
 """What a glove's value block says about its counts: the one owner of the rules every other module reads.
 
-A layout's `value` ({"convention", "max"}) and a calibration (`convention`, `max_value`) say:
+A layout's `value` ({"convention", "max"}, optional "step", "press") and a calibration (`convention`,
+`max_value`) say:
 
 - direction: "direct" counts rise with pressure, "inverted" counts fall with it (OpenTouch: 3072 = no load);
 - a raw-count glove: full scale above 1 (an ADC's counts, either direction): its cells rest far from the
   no-pressure end with per-cell offsets, so it needs a rest of its own (the raw-count default,
-  htdata.glove.normalise.RAW_COUNT_DEFAULTS); a glove in [0, 1] is read as given.
+  htdata.glove.normalise.RAW_COUNT_DEFAULTS); a glove in [0, 1] is read as given;
+- sensitivity: `press`, the least rise above rest (raw units) that is a press, which decides contact
+  (htdata.glove.contact); without it DEFAULT_PRESS_SHARE of full scale, a knit glove's 15 of 1023 counts.
+  It is the glove's to declare: on the real knit glove's recordings a level 5% off moves the contact share
+  of a hand that steadies an object by up to 0.2 (`htdata bench --only realglove`), and neither the glove's
+  rest noise nor its press range pins it that closely (docs/INGEST.md, "Contact on a less sensitive glove").
 
 Rules that assume "a press raises a cell" (rest level, wander, moving cells, health, validate's rest check)
 turn counts toward pressure here first, so an inverted glove gets the same answers as a direct one.
@@ -16,6 +22,10 @@ from __future__ import annotations
 import numpy as np
 
 CONVENTIONS = ("inverted", "direct")
+# the least rise above rest that is a press, as a share of full scale, where `value.press` is not given: 15 of
+# 1023 counts on a knit glove, whose rest wanders by several counts over a clip while a grip presses its cells
+# by 15 to ~460 counts
+DEFAULT_PRESS_SHARE = 0.015
 
 
 def is_inverted(convention: str | None) -> bool:
@@ -47,3 +57,12 @@ def pressure_share(raw, convention: str | None, top) -> np.ndarray:
 def least_pressure(lo, hi, convention: str | None):
     """Of a cell's lowest and highest raw reading, the one with the least pressure (its rest side)."""
     return hi if is_inverted(convention) else lo
+
+
+def press_share(value: dict | None, top=None) -> float:
+    """The least rise above rest that is a press, as a share of full scale `top` (default: `value["max"]`):
+    `value["press"] / top` where the layout declares it, else DEFAULT_PRESS_SHARE."""
+    value = value or {}
+    if value.get("press") is None:
+        return DEFAULT_PRESS_SHARE
+    return float(value["press"]) / float(top if top is not None else value["max"])

@@ -231,6 +231,10 @@ def parse_layout(doc: dict, where: str = "<layout>", canonical: CanonicalHand | 
         region[...] = i
         blocks.append(b)
 
+    press = doc["value"].get("press")
+    if press is not None and not float(press) < float(doc["value"]["max"]):
+        raise ConfigError(f"{where}: value.press {press!r} must be below value.max {doc['value']['max']!r} "
+                          f"(the least rise above rest that is a press, in raw units)")
     dead = _cells(doc.get("dead_cells", []), grid, "dead_cells", where)     # optional: none by default
     bend = _cells(doc.get("bend_cells", []), grid, "bend_cells", where)
     if len(dead) and (owner[dead[:, 0], dead[:, 1]] < 0).any():

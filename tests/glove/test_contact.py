@@ -21,6 +21,21 @@ def test_a_flickering_handful_is_not_contact_under_a_calibrated_rule():
     assert OLD_RULE.frames(x).all()
 
 
+def test_the_press_level_is_the_glove_s_own_where_its_layout_declares_it():
+    """`value.press` (raw units) sets the least rise that is a press; without it 1.5% of full scale."""
+    cal = {"noise_k": 5.0, "noise_floor": 0.0, "max_value": FULL_SCALE, "scale": 2.0}
+    default = rule_for(cal, STEP, 700)
+    half = rule_for(cal, {**STEP, "press": 0.0075 * FULL_SCALE}, 700)
+    assert default.press == pytest.approx(0.015 * 2.0) and half.press == pytest.approx(0.0075 * 2.0)
+    x = np.zeros((3, 700), np.float32)
+    x[1, :10] = 0.02                               # 10 taxels 1% of full scale (x scale 2) above rest
+    x[2, :10] = 0.04
+    floor = np.zeros(700, np.float32)              # the press counts from the floor-free rest
+    assert default.frames(x, floor).tolist() == [False, False, True]
+    assert half.frames(x, floor).tolist() == [False, True, True]
+    assert "0.015 of full scale" in half.describe()
+
+
 def test_a_calibration_without_a_floor_keeps_the_old_rule():
     assert rule_for({"noise_k": 0.0, "noise_floor": 0.0}, STEP) == OLD_RULE
     assert rule_for(None) == OLD_RULE

@@ -169,6 +169,18 @@ def test_rejects_out_of_grid_block():
         parse_layout(doc, "my_glove.json")
 
 
+def test_a_press_level_must_lie_below_full_scale():
+    doc = _doc()
+    doc["value"]["press"] = doc["value"]["max"]
+    with pytest.raises(ValueError, match=r"my_glove\.json: value\.press .* must be below value\.max"):
+        parse_layout(doc, "my_glove.json")
+    doc["value"]["press"] = 0
+    with pytest.raises(ValueError, match=r"my_glove\.json: value/press"):
+        parse_layout(doc, "my_glove.json")
+    doc["value"]["press"] = 7.5
+    assert parse_layout(doc, "my_glove.json").value["press"] == 7.5
+
+
 def test_rejects_schema_violations():
     doc = _doc()
     doc["value"]["convention"] = "sideways"

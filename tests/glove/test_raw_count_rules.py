@@ -25,7 +25,7 @@ from htdata.benchmarks.realglove import (
     normalise_rows,
     write_native_clips,
 )
-from htdata.benchmarks.realglovev2 import DERIVED_GLOVES
+from htdata.benchmarks.realglovev2 import DECLARED_PRESS_GLOVES, DERIVED_GLOVES, derived_clips
 from tests.factories.realglove import real_glove_dir
 
 
@@ -76,6 +76,17 @@ def test_stats_contact_share_follows_the_pressed_cells(short_dataset):
 
 def test_trim_idle_never_cuts_a_pressed_frame(short_dataset):
     _, _, _, d = short_dataset
+    assert d["idle_cut_pressed_frames"] == 0, d
+
+
+def test_a_less_sensitive_glove_that_declares_its_press_level_reads_the_same_contact(short_dataset):
+    """The same presses at half the counts, with the layout's `value.press` at half the truth's level: stats and
+    trim --idle hold the targets against the original presses (the truth of the original clips)."""
+    clips, layouts, work, _ = short_dataset
+    half = next(g for g in DECLARED_PRESS_GLOVES if g[0].startswith("half-sensitive"))
+    d = dataset_rows(*derived_clips(half, clips, layouts), work / "half_declared", clips)
+    for hand, err in d["contact_share_error"].items():
+        assert err <= TARGETS["contact_share_error"], (hand, d["contact_share"])
     assert d["idle_cut_pressed_frames"] == 0, d
 
 
