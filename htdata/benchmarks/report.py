@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from htdata.benchmarks.driver import driver_markdown
 from htdata.benchmarks.export import export_markdown
+from htdata.benchmarks.htbenchsize import size_markdown
 from htdata.benchmarks.lag import lag_markdown
 from htdata.benchmarks.maps import maps_markdown
 from htdata.benchmarks.raw import raw_markdown
@@ -39,6 +40,7 @@ HEADINGS = {
     "rawglove": "## Raw-count glove: baselines, noise floors and contact against the truth",
     "view": "## htdata view --save: seconds and memory vs episode length",
     "realglove": "## Real glove: the raw-count rules on real recordings",
+    "size": "## The dataset at HT-Bench's size: every command's time, memory and bytes written",
 }
 TARGET_OVERHEAD_PCT = 15.0  # issue #22: share of our in-worker time the bare bound does not spend
 TARGET_SCALING = 1.9        # 1 -> 2 workers, opentouch and touchanything (#22); 0.95 N for 1 -> N
@@ -349,7 +351,7 @@ RENDERERS = {"machine": _machine, "codecs": _codecs, "rgb": _rgb, "raster": _ras
              "scaling": _scaling, "driver": driver_markdown, "rss": _rss, "loader": _loader, "index": _index, "validate": _validate,
              "append": _append, "stats": _stats, "lag": lag_markdown, "raw": raw_markdown, "maps": maps_markdown,
              "export": export_markdown, "rawglove": rawglove_markdown, "view": view_markdown,
-             "realglove": realglove_markdown}
+             "realglove": realglove_markdown, "size": size_markdown}
 
 
 def _discovered(name: str, results: dict) -> list[str]:

@@ -34,6 +34,7 @@ from htdata.benchmarks.codecs import codec_rows, real_maps
 from htdata.benchmarks.dataloader import dataloader_rows
 from htdata.benchmarks.driver import driver_rows
 from htdata.benchmarks.export import export_rows
+from htdata.benchmarks.htbenchsize import size_rows
 from htdata.benchmarks.index import index_rows
 from htdata.benchmarks.ingest import adapter_rows, ingest_run, peak_rss_rows, write_long_touchanything
 from htdata.benchmarks.lag import lag_rows
@@ -59,7 +60,7 @@ from htdata.workers import usable_cores
 
 SECTION_GROUP = "htdata.bench_sections"
 BUILTIN_SECTIONS = ("codecs", "rgb", "raster", "ingest", "scaling", "driver", "rss", "loader", "index", "validate",
-                    "append", "stats", "lag", "raw", "maps", "export", "rawglove", "view", "realglove")
+                    "append", "stats", "lag", "raw", "maps", "export", "rawglove", "view", "realglove", "size")
 # Top-level keys of results.json that are not sections: no section may take these names.
 RESERVED_KEYS = ("command", "quick", "created", "config", "machine", "timings_s", "errors", "plugins", "seconds",
                  "gpu_check")
@@ -91,6 +92,7 @@ class BenchConfig:
     loader_windows: int = 100
     dataloader_items: int = 2000           # items per timed DataLoader epoch
     index_rows: tuple[int, ...] = (1_000_000, 10_000_000)
+    size_samples: tuple[int, ...] = (1_000_000, 3_000_000)   # the replicated dataset (htbenchsize.py), samples
     validate_workers: tuple[int, ...] = (1, 2)
     append_sizes: tuple[int, ...] = (20, 200)    # episodes before the one appended (an order of magnitude apart)
     view_lengths: tuple[int, ...] = (150, 600)   # episodes saved with `htdata view --save` (600: issue #38's target)
@@ -102,7 +104,7 @@ class BenchConfig:
         return cls(out=out, quick=True, seed=seed, scale="tiny", scaling_scale="tiny", ingest_reps=1,
                    scaling_reps=1, revision=None, codec_maps_per_glove=8, rgb_frames=2,
                    raster_frames=8, rss_lengths=(20, 40), loader_random=20, loader_windows=5, dataloader_items=64,
-                   index_rows=(10_000,), append_sizes=(2, 20), view_lengths=(20, 40), driver_scales=("tiny", "small"),
+                   index_rows=(10_000,), size_samples=(5_000,), append_sizes=(2, 20), view_lengths=(20, 40), driver_scales=("tiny", "small"),
                    driver_sources=("opentouch",))
 
     def validate(self) -> "BenchConfig":
@@ -132,6 +134,8 @@ class BenchConfig:
             raise ArgumentError(f"rss_lengths must be >= 2 increasing lengths >= 2 frames, got {self.rss_lengths}")
         if len(self.append_sizes) < 2 or min(self.append_sizes) < 1:
             raise ArgumentError(f"append_sizes must be >= 2 dataset sizes >= 1, got {self.append_sizes}")
+        if not self.size_samples or min(self.size_samples) < 1:
+            raise ArgumentError(f"size_samples must be positive, got {self.size_samples}")
         if not self.index_rows or min(self.index_rows) < 1:
             raise ArgumentError(f"index_rows must be positive, got {self.index_rows}")
         if self.sections is not None:
@@ -317,6 +321,9 @@ class Sections:
 
     def view(self) -> dict:
         return view_rows(self.cfg.work, self.cfg.view_lengths, again=not self.cfg.quick)
+
+    def size(self) -> dict:
+        return size_rows(self.cfg.work / "size", self.cfg.size_samples)
 
     def realglove(self) -> dict:
         return realglove_rows(self.cfg.real_glove, self.cfg.work / "realglove", self.cfg.quick)

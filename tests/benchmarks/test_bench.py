@@ -11,6 +11,7 @@ isolation are exercised as an installed plugin would be.
 import importlib.util
 import json
 import math
+import os
 import sys
 import textwrap
 
@@ -173,6 +174,11 @@ def test_quick_bench_content_is_consistent(quick_run):
     for row in (small, large):   # the append ran only the new episode and kept every other one as committed
         assert row["units_run"] == 1 and row["episodes_unchanged"] == row["episodes_before"]
         assert 0 < row["bytes_shards"] < row["bytes_written"]
+    (size,) = r["size"]["sizes"]                    # the replicated dataset: one unit per recording copy
+    assert size["samples"] >= BenchConfig.quick_config(out).size_samples[0] and size["episodes"] == size["units"]
+    written = {c["command"].split(" (")[0]: c["bytes_written"] for c in size["commands"]}
+    assert written["open"] == written["log"] == written["diff"] == written["gc --dry-run"] == 0   # readers, dry runs
+    assert written["rm one episode"] > 0 and written["trim one episode"] > written["rm one episode"]  # + its shard
     stats = r["stats"]
     assert stats["tactile_decode"]["frames"] == stats["runs"]["incremental"]["frames"] > 0
     assert stats["runs"]["warm"]["episodes_computed"] == 0 and stats["runs"]["incremental"]["episodes_computed"] == 1
@@ -319,3 +325,16 @@ def test_gpu_check_results_beside_the_report_get_their_own_section():
     assert "NVIDIA H100 80GB HBM3 with 16 CPU cores" in section
     assert "| 128 | 16 | no | 2972 | 23.2 | 0% | 99% | 100% | 32.3 | 75% |" in section   # 32.3 of 43.1 ms
     assert "skipped: 330 s spent" in section
+
+
+def test_a_hard_link_writes_no_bytes_but_a_rewritten_file_does(tmp_path):
+    """The HT-Bench-size section's byte count: new names for existing inodes (a copy's shards) write nothing."""
+    from htdata.benchmarks.htbenchsize import _files, bytes_written
+    (tmp_path / "a").write_bytes(b"x" * 100)
+    before = _files(tmp_path)
+    os.link(tmp_path / "a", tmp_path / "b")
+    (tmp_path / "c").write_bytes(b"y" * 7)
+    assert bytes_written(before, _files(tmp_path)) == 7
+    (tmp_path / "a").unlink()
+    (tmp_path / "a").write_bytes(b"z" * 30)             # a rewrite under an old name
+    assert bytes_written(before, _files(tmp_path)) == 37
