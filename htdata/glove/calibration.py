@@ -8,7 +8,8 @@ episodes use (`"calibrations": {id: entry}`; `revision` counts, per layout,
 the distinct calibrations the dataset has had, 1 for the first). Each
 episode record names its calibration per hand and, when the calibration
 fits per-episode arrays (a baseline, a noise floor from the rest window),
-carries them as base64 little-endian float32 (`calibration_fit`), so
+carries them as base64 little-endian float32 (`calibration_fit`; "zlib:" + the
+base64 of its zlib stream where that saves a quarter or more, `encode_array`), so
 `episode_normaliser` rebuilds the exact normaliser the ingest used and the
 stored raw rows (members raw_<hand>.npy) reproduce the stored maps without
 the sources (htdata.curate.renormalise).
@@ -30,8 +31,10 @@ document's, whose sha256 the manifest lists) at 1/200th of the hashing
 from __future__ import annotations
 
 import base64
+import binascii
 import hashlib
 import json
+import zlib
 
 import numpy as np
 
@@ -73,13 +76,42 @@ def config_of(entry: dict) -> NormaliseConfig:
     return NormaliseConfig(**{k: v for k, v in entry.items() if k in fields}).validate()
 
 
+ZLIB_PREFIX = "zlib:"
+# A fitted array is stored compressed only where that saves at least this share: the pooled rest's shift knots
+# (one value over the grid per knot) and the taxel calibration's gain shrink ~100x, and they made 97% of a raw
+# glove's episode record, rewritten with every version (bench section "size"); a per-cell floor does not.
+ZLIB_MIN_SAVING = 0.25
+MAX_FIT_BYTES = 256 << 20    # a fitted array never decompresses past this (a record is data, not a zip bomb)
+
+
 def encode_array(arr: np.ndarray) -> str:
-    return base64.b64encode(np.ascontiguousarray(arr, dtype="<f4").tobytes()).decode("ascii")
+    """float32 little-endian bytes as base64, or ZLIB_PREFIX + the base64 of their zlib stream when that is at
+    least ZLIB_MIN_SAVING smaller (deterministic: the same array, the same text)."""
+    raw = np.ascontiguousarray(arr, dtype="<f4").tobytes()
+    packed = zlib.compress(raw, 6)
+    if len(packed) <= (1 - ZLIB_MIN_SAVING) * len(raw):
+        return ZLIB_PREFIX + base64.b64encode(packed).decode("ascii")
+    return base64.b64encode(raw).decode("ascii")
+
+
+def _array_bytes(text: str, where: str) -> bytes:
+    """The float32 bytes of an `encode_array` text (DatasetError naming `where` when they do not decode)."""
+    packed = isinstance(text, str) and text.startswith(ZLIB_PREFIX)
+    unpack = zlib.decompressobj()
+    try:
+        data = base64.b64decode(text[len(ZLIB_PREFIX):] if packed else text, validate=True)
+        if packed:
+            data = unpack.decompress(data, MAX_FIT_BYTES + 1)
+    except (binascii.Error, ValueError, TypeError, zlib.error) as exc:
+        raise DatasetError(f"{where}: not a base64 (or zlib: base64) float32 array ({exc})") from exc
+    if packed and (len(data) > MAX_FIT_BYTES or not unpack.eof):
+        raise DatasetError(f"{where}: its zlib stream is incomplete or inflates past {MAX_FIT_BYTES} bytes")
+    return data
 
 
 def decode_array(text: str, shape: tuple[int, ...], where: str) -> np.ndarray:
-    """base64 float32 -> array of `shape`; a leading -1 takes any whole number of (shape[1:]) items."""
-    data = base64.b64decode(text.encode("ascii"), validate=True)
+    """`encode_array` text -> array of `shape`; a leading -1 takes any whole number of (shape[1:]) items."""
+    data = _array_bytes(text, where)
     item = 4 * int(np.prod(shape[1:] if shape and shape[0] == -1 else shape))
     if (shape and shape[0] == -1 and (not data or len(data) % max(item, 1))) or \
             (not (shape and shape[0] == -1) and len(data) != item):

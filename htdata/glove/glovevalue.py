@@ -9,9 +9,9 @@ A layout's `value` ({"convention", "max"}, optional "step", "press") and a calib
   htdata.glove.normalise.RAW_COUNT_DEFAULTS); a glove in [0, 1] is read as given;
 - sensitivity: `press`, the least rise above rest (raw units) that is a press, which decides contact
   (htdata.glove.contact); without it DEFAULT_PRESS_SHARE of full scale, a knit glove's 15 of 1023 counts.
-  It is the glove's to declare: on the real knit glove's recordings a level 5% off moves the contact share
-  of a hand that steadies an object by up to 0.2 (`htdata bench --only realglove`), and neither the glove's
-  rest noise nor its press range pins it that closely (docs/INGEST.md, "Contact on a less sensitive glove").
+  It is the glove's to declare: on the real knit glove's recordings a level 5% off takes the worst contact-share
+  error of a hand that steadies an object from 0.08 to 0.14-0.17 (`htdata bench --only realglove`), and neither
+  the glove's rest spread nor its press range pins it that closely (docs/INGEST.md, "Contact on a less sensitive glove").
 
 Rules that assume "a press raises a cell" (rest level, wander, moving cells, health, validate's rest check)
 turn counts toward pressure here first, so an inverted glove gets the same answers as a direct one.

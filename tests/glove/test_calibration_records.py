@@ -9,7 +9,6 @@ hand's taxels from the raw rows against the digest the ingest recorded.
 
 from __future__ import annotations
 
-import base64
 import hashlib
 import json
 import re
@@ -21,9 +20,9 @@ import pytest
 
 import htdata
 from htdata.cli import main as cli
-from htdata.errors import RecordMismatch
+from htdata.errors import DatasetError, RecordMismatch
 from htdata.format.table import MANIFEST_FILE
-from htdata.glove.calibration import fit_digest
+from htdata.glove.calibration import decode_array, encode_array, fit_digest
 from htdata.glove.layouts import load_layout
 from htdata.store.manifest import load_manifest
 from htdata.synthetic.formats.touchanything import TouchAnythingEpisode, write_touchanything_episode
@@ -76,8 +75,8 @@ def _reseal_episodes(root: Path, edit) -> None:
 
 def _scale_left_baseline(records: list[dict], reseal_digest: bool = False) -> None:
     fit = records[0]["calibration_fit"]["left"]
-    arr = np.frombuffer(base64.b64decode(fit["baseline"]), "<f4") * np.float32(0.5)
-    fit["baseline"] = base64.b64encode(arr.astype("<f4").tobytes()).decode()
+    arr = decode_array(fit["baseline"], (-1,), "test") * np.float32(0.5)     # plain or zlib: base64
+    fit["baseline"] = encode_array(arr)
     if reseal_digest:
         records[0]["calibration_fit_sha256"]["left"] = fit_digest(fit)
 
@@ -188,3 +187,22 @@ def test_trim_and_renormalise_keep_the_taxel_digests_true(raw_dataset, tmp_path)
     report = validate_dataset(copy, deep=True)
     assert report["ok"], _failures(report)
     assert report["checks"]["content"]["checked"]["taxel_digests"] == 4
+
+
+def test_fitted_arrays_are_compressed_only_where_it_pays_and_always_decode():
+    """A knot of one value over the grid (the pooled rest's shift) shrinks ~100x; a per-cell floor stays plain
+    base64 (a stranger reads it with base64 + numpy); both decode exactly, and a damaged stream names its record."""
+    from htdata.glove.calibration import ZLIB_PREFIX
+    knots = np.repeat(np.float32([0.01, -0.02, 0.03])[:, None, None], 32 * 32, axis=1).reshape(3, 32, 32)
+    floor = np.random.default_rng(0).uniform(0.001, 0.003, (32, 32)).astype(np.float32)
+    packed, plain = encode_array(knots), encode_array(floor)
+    assert packed.startswith(ZLIB_PREFIX) and len(packed) < knots.nbytes / 50
+    assert not plain.startswith(ZLIB_PREFIX)
+    assert np.array_equal(decode_array(packed, (-1, 32, 32), "ep"), knots)
+    assert np.array_equal(decode_array(plain, (32, 32), "ep"), floor)
+    with pytest.raises(DatasetError, match="ep calibration_fit.baseline: its zlib stream is incomplete"):
+        decode_array(packed[:-8], (-1, 32, 32), "ep calibration_fit.baseline")
+    with pytest.raises(DatasetError, match="ep calibration_fit.baseline: not a base64"):
+        decode_array(ZLIB_PREFIX + "%%%%", (-1, 32, 32), "ep calibration_fit.baseline")
+    with pytest.raises(DatasetError, match="bytes, expected 32x32 float32"):
+        decode_array(packed, (32, 32), "ep")
