@@ -54,7 +54,7 @@ from .bench.metrics import MapMetrics
 from .distributed import torch_threads
 from .progress import Rate, with_steps_after
 from .rgb_encoder import TactileGridRGB, load_rgb_encoder, to_unit_float
-from .train import lr_at
+from .steploop import lr_at
 
 log = logging.getLogger("handtouch.rgb_pretrain")
 PAIRINGS = ("aligned", "shifted", "shuffled")

@@ -37,7 +37,7 @@ from htdata.fileio import write_json_atomic
 from htdata.read import keys
 from htdata.read.torchdata import ItemConstants, TactileFrameDataset, TactileWindowDataset
 
-from .checkpoint import CHECKPOINT_FORMAT, read_checkpoint, rng_state, save_checkpoint, set_rng_state  # noqa: F401
+from .checkpoint import CHECKPOINT_FORMAT, read_checkpoint, rng_state, save_checkpoint, set_rng_state
 from .config import WINDOW, TrainConfig, load_train_config, model_config_from_dict
 from .distributed import DistEnv, StepBatchSampler, barrier, init_distributed, shutdown, torch_threads, wrap
 from .model import HandTouch, covered, masked_mse
@@ -45,7 +45,7 @@ from .progress import with_steps_after
 from .resources import config_file
 from .rgb_encoder import load_rgb_encoder
 from .stages import FRAMES, WINDOWS, Stage, StageLoss, build_stages
-from .steploop import StageRun, lr_at, make_optimizer, to_device, train_steps  # noqa: F401  (lr_at: a name of this module)
+from .steploop import StageRun, make_optimizer, to_device, train_steps
 
 log = logging.getLogger("handtouch.train")
 

@@ -8,8 +8,9 @@ DeprecationWarning naming its new place:
   `install()` puts a finder on sys.meta_path that answers an old name with the
   module at its new place (the same module object, so monkeypatching and
   isinstance checks agree);
-- old names of a package that kept its name (`from htdata.format import SHARDS_DIR`,
-  `htdata.curate.rm_episodes`): the package's `__getattr__` calls `moved_name`;
+- old names of a package or module that kept its name (`from htdata.format import SHARDS_DIR`,
+  `htdata.curate.rm_episodes`, `from htdata.format.table import CANVAS`): its `__getattr__` calls
+  `moved_name`; a module never re-exports a moved name silently (tests/project/test_layering.py);
 - old keyword arguments (`TactileFrameDataset(root, map_source="auto")`): the function is
   wrapped by `renamed_keyword`, which hands the value on under its new name.
 
@@ -68,9 +69,19 @@ MOVED_NAMES = {
                                     "htdata.source.adapters.params", "htdata.source.adapters.streamchecks"),
     # the third house pass: the crash-safe writes went below every package (htdata/fileio.py); the store kept sha256_file
     "htdata.store.fsutil": "htdata.fileio",
+    # the fourth house pass: names that a module re-exported silently from where they moved
+    "htdata.format.table": "htdata.format.canvas",
+    "htdata.glove.layouts": "htdata.glove.canonical",
+    "htdata.source.lag": "htdata.source.syncsettings",
+    "htdata.ingest.pipeline": "htdata.settings",
+    "htdata.curate.edit": "htdata.store.episodeids",
+    "htdata.curate.split": ("htdata.store.splitrule", "htdata.store.splitfiles"),
+    "htdata.read.reader": "htdata.store.splitfiles",
+    "htdata.read.torchdata": ("htdata.read.itemoptions", "htdata.read.torchitems"),
 }
 # old name -> new name, for names that were renamed as they moved (looked up before the name itself)
-RENAMED = {("htdata.source.adapters.base", "check_adapter_params"): "check_declared_params"}
+RENAMED = {("htdata.source.adapters.base", "check_adapter_params"): "check_declared_params",
+           ("htdata.read.torchdata", "_ItemBuilder"): "ItemBuilder"}
 
 
 def new_name(fullname: str) -> str | None:

@@ -1,7 +1,7 @@
 """The on-disk format: what a writer and a reader must agree on.
 
     canvas.py     the canvas side and the hand names
-    table.py      file names of a dataset, canvas, hands, the member table and the index dtype
+    table.py      file names of a dataset, the member table and the index dtype
     codec.py      member codecs (EXR float maps, JPEG RGB, npy raw rows, PNG masks, JSON)
     exrzip.py     the ZIP EXR map writer, built byte by byte (OpenEXR's file layout, ISA-L's deflate)
     imageheader.py JPEG and EXR sizes read from the header bytes, checked before a decoder allocates them

@@ -52,18 +52,17 @@ except ModuleNotFoundError as exc:   # the data core installs without torch
     raise ModuleNotFoundError(f"{__name__} needs torch: pip install 'htdata[torch]' (torch==2.13.0)") from exc
 from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
-from htdata._moved import renamed_keyword
+from htdata._moved import moved_name, renamed_keyword
 from htdata.errors import ArgumentError
+from htdata.format.canvas import CANVAS
 from htdata.format.mapstorage import hand_present, has_hand
-from htdata.format.table import CANVAS, HANDS, RGB_MEMBER, SIZE_FIELDS
+from htdata.format.table import HANDS, RGB_MEMBER, SIZE_FIELDS
 from htdata.read import keys
-from htdata.read.itemoptions import FRAME_KINDS, ItemOptions, item_options, streamed_only  # noqa: F401 (FRAME_KINDS: a name here)
+from htdata.read.itemoptions import MEMBERS, ItemOptions, item_options, streamed_only
 from htdata.read.onerror import READ_ERRORS, SkipPolicy
 from htdata.read.rawstream import MAP_SOURCE_WORDS
 from htdata.read.reader import DatasetReader
-from htdata.read.torchitems import MEMBERS, ItemBuilder, ItemConstants, expand_batch  # noqa: F401  (names of this module)
-
-_ItemBuilder = ItemBuilder   # the name older code imports
+from htdata.read.torchitems import ItemBuilder, ItemConstants
 
 HAND_NAMES = HANDS   # hand id -> name (HAND_IDS inverted: left=0, right=1)
 
@@ -111,9 +110,9 @@ def _explain_no_pairs(reader: DatasetReader, rows: np.ndarray, hands: tuple[str,
 
 
 class _ItemDataset(Dataset):
-    """Map-style dataset over `self.items` rows, built by an `_ItemBuilder`."""
+    """Map-style dataset over `self.items` rows, built by an `ItemBuilder`."""
 
-    _builder: "_ItemBuilder"
+    _builder: ItemBuilder
     items: np.ndarray
 
     @property
@@ -364,3 +363,8 @@ class TactileStream(IterableDataset):
             for k, hand in enumerate(hands):
                 yield builder.put_members(builder.ids(row, index, hand), None if maps[k] is None else maps[k][None],
                                           None if rgb is None else rgb[k])
+
+
+def __getattr__(name: str):
+    """An old name of this module, at its new home (htdata/_moved.py MOVED_NAMES), with a DeprecationWarning."""
+    return moved_name(__name__, name)

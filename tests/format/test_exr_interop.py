@@ -16,8 +16,8 @@ import numpy as np
 import OpenEXR
 import pytest
 
+from htdata.format.canvas import MAP_SHAPE
 from htdata.format.codec import decode_tactile, encode_tactile
-from htdata.format.table import MAP_SHAPE
 
 oiio = pytest.importorskip("OpenImageIO")
 

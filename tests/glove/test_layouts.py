@@ -9,7 +9,7 @@ import os
 import numpy as np
 import pytest
 
-from htdata.format.table import CANVAS
+from htdata.format.canvas import CANVAS
 from htdata.glove import layouts as L
 from htdata.glove.layouts import LAYOUTS_ENV, list_layouts, load_canonical, load_layout, parse_layout
 

@@ -210,7 +210,7 @@ def test_stream_items_equal_frame_items_and_do_not_alias(dataset):
 
 
 def test_put_rgb_matches_transpose():
-    from htdata.read.torchdata import _ItemBuilder
+    from htdata.read.torchitems import ItemBuilder as _ItemBuilder
 
     rgb = np.random.default_rng(0).integers(0, 256, (224, 224, 3), dtype=np.uint8)
     builder = _ItemBuilder.__new__(_ItemBuilder)
@@ -305,7 +305,7 @@ def test_tactile_only_items_equal_the_tactile_of_full_items(dataset):
 
 
 def test_constants_sent_once_give_the_same_batches(dataset):
-    from htdata.read.torchdata import expand_batch
+    from htdata.read.torchitems import expand_batch
 
     full = TactileFrameDataset(dataset)
     once = TactileFrameDataset(dataset, constants="once")
