@@ -35,6 +35,7 @@ from torch.utils.data import DataLoader, Dataset
 from htdata.errors import ArgumentError, ConfigError
 from htdata.fileio import write_json_atomic
 from htdata.read import keys
+from htdata.read.itemoptions import ItemOptions
 from htdata.read.torchdata import ItemConstants, TactileFrameDataset, TactileWindowDataset
 
 from .checkpoint import CHECKPOINT_FORMAT, read_checkpoint, rng_state, save_checkpoint, set_rng_state
@@ -77,13 +78,13 @@ def load_data(cfg: TrainConfig) -> TrainData:
 
     split = cfg.split or None
     train_part = cfg.train_part if split else None
-    frames = TactileFrameDataset(cfg.data_root, split=split, part=train_part, constants="once")
-    tactile = TactileFrameDataset(cfg.data_root, split=split, part=train_part, constants="once",
-                                  members=(keys.TACTILE,))
-    windows = (TactileWindowDataset(cfg.data_root, window=WINDOW, split=split, part=train_part)
+    once = ItemOptions(split=split, part=train_part, constants="once")
+    frames = TactileFrameDataset(cfg.data_root, options=once)
+    tactile = TactileFrameDataset(cfg.data_root, options=once.replace(members=(keys.TACTILE,)))
+    windows = (TactileWindowDataset(cfg.data_root, window=WINDOW, options=ItemOptions(split=split, part=train_part))
                if any(s.data == WINDOWS for s in build_stages(cfg)) else None)
     if split:
-        eval_frames = TactileFrameDataset(cfg.data_root, split=split, part=cfg.eval_part)
+        eval_frames = TactileFrameDataset(cfg.data_root, options=ItemOptions(split=split, part=cfg.eval_part))
         source = f"part {cfg.eval_part!r} of split {split!r}"
     else:
         eval_frames = TactileFrameDataset(cfg.data_root)   # items with their constants: a batch as-is
