@@ -19,6 +19,8 @@ SEAMS = {
     "htdata/source/adapters/base.py": None,       # the adapter contract
     "htdata/write/repack.py": None,               # repack
     "htdata/store/snapshot.py": None,             # snapshot and commit_parts
+    "htdata/format/shardio.py": ("ShardWriter",),  # the shard writer
+    "htdata/glove/normalisesettings.py": None,    # the normaliser's config as a pipeline gives it
 }
 SECTIONS = {"Args": ("Args:",), "Returns": ("Returns:", "Yields:"), "Raises": ("Raises:",)}
 
