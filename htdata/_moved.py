@@ -81,6 +81,8 @@ MOVED_NAMES = {
     "htdata.curate.split": ("htdata.store.splitrule", "htdata.store.splitfiles"),
     "htdata.read.reader": "htdata.store.splitfiles",
     "htdata.read.torchdata": ("htdata.read.itemoptions", "htdata.read.torchitems"),
+    # the tactile value rule and the EXR codec, a module of their own beside the registry
+    "htdata.format.codec": "htdata.format.tactilecodec",
 }
 # old name -> new name, for names that were renamed as they moved (looked up before the name itself)
 RENAMED = {("htdata.source.adapters.base", "check_adapter_params"): "check_declared_params",

@@ -21,7 +21,7 @@ import scipy.sparse as sp
 
 from htdata.errors import ArgumentError, ConfigError
 from htdata.format.canvas import CANVAS
-from htdata.format.codec import to_half
+from htdata.format.tactilecodec import to_half
 from htdata.glove.layouts import Block, CanonicalHand, Layout, load_canonical, load_layout
 
 MODES = ("nearest", "bilinear")

@@ -30,8 +30,8 @@ import numpy as np
 
 from htdata.errors import DatasetError
 from htdata.format.canvas import MAP_SHAPE
-from htdata.format.codec import decode_exr_pixels
 from htdata.format.table import HANDS, JSON_MEMBER, SIZE_FIELDS, raw_member, tactile_member
+from htdata.format.tactilecodec import decode_exr_pixels
 from htdata.glove.calibration import episode_normaliser
 from htdata.glove.canonical import parse_canonical
 from htdata.glove.contact import OLD_RULE, THRESHOLD, ContactRule, episode_rule

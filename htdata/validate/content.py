@@ -19,9 +19,10 @@ from htdata.format.canvas import CANVAS, MAP_SHAPE
 
 # Maps are checked as stored (half or float pixels, before conversion): decode_exr_pixels; every other
 # member decodes through the member table like every reader.
-from htdata.format.codec import decode_exr_pixels, decode_png_u8
+from htdata.format.codec import decode_png_u8
 from htdata.format.imageheader import DeclaredShapeError
 from htdata.format.table import HANDS, JSON_MEMBER, RGB_MEMBER, bend_member, decode_member, raw_member, tactile_member
+from htdata.format.tactilecodec import decode_exr_pixels
 from htdata.store.confine import inside
 from htdata.validate.geometry import CoverageGeometry
 from htdata.validate.report import Check, Recorder

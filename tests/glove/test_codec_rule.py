@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from htdata.benchmarks.codecs import codec_rows
-from htdata.format.codec import decode_tactile, encode_tactile
 from htdata.format.table import CodecSettings, decode_sample, encode_sample
+from htdata.format.tactilecodec import decode_tactile, encode_tactile
 from htdata.glove.codecrule import (
     ANALYTIC_MAX_ERROR,
     SIZE_ORDER,
