@@ -83,6 +83,8 @@ MOVED_NAMES = {
     "htdata.read.torchdata": ("htdata.read.itemoptions", "htdata.read.torchitems"),
     # the tactile value rule and the EXR codec, a module of their own beside the registry
     "htdata.format.codec": "htdata.format.tactilecodec",
+    # the normaliser's settings, a module of their own beside the normaliser
+    "htdata.glove.normalise": "htdata.glove.normaliseconfig",
 }
 # old name -> new name, for names that were renamed as they moved (looked up before the name itself)
 RENAMED = {("htdata.source.adapters.base", "check_adapter_params"): "check_declared_params",

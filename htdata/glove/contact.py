@@ -37,7 +37,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from htdata.glove.normalise import has_noise_floor
+from htdata.glove.normaliseconfig import has_noise_floor
 
 THRESHOLD = 0.02           # the old rule: a taxel above this is contact (validate's contact threshold)
 MIN_AREA_TAXELS = 3        # calibrated rule: taxels above their floor for a frame to be in contact

@@ -5,7 +5,7 @@ A layout's `value` ({"convention", "max"}) and a calibration (`convention`, `max
 - direction: "direct" counts rise with pressure, "inverted" counts fall with it (OpenTouch: 3072 = no load);
 - a raw-count glove: full scale above 1 (an ADC's counts, either direction): its cells rest far from the
   no-pressure end with per-cell offsets, so it needs a rest of its own (the raw-count default,
-  htdata.glove.normalise.RAW_COUNT_DEFAULTS); a glove in [0, 1] is read as given.
+  htdata.glove.normaliseconfig.RAW_COUNT_DEFAULTS); a glove in [0, 1] is read as given.
 
 Rules that assume "a press raises a cell" (rest level, wander, moving cells, health, validate's rest check)
 turn counts toward pressure here first, so an inverted glove gets the same answers as a direct one.

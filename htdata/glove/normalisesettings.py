@@ -16,7 +16,7 @@ from pathlib import Path
 from htdata.errors import ConfigError
 from htdata.glove.glovevalue import is_raw_count
 from htdata.glove.layouts import nearest_hint
-from htdata.glove.normalise import NOISE_K_BASELINES, RAW_COUNT_DEFAULTS, NormaliseConfig
+from htdata.glove.normaliseconfig import NOISE_K_BASELINES, RAW_COUNT_DEFAULTS, NormaliseConfig
 
 GLOVE_REST_KEYS = ("baseline", "noise_k", "taxel_calibration")   # the keys a pooled glove rest's table sets
 

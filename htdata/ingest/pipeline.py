@@ -58,7 +58,7 @@ from htdata.format.tactilesettings import TactileConfig
 from htdata.glove.codecrule import CodecChoice
 from htdata.glove.codecsettings import CodecConfig
 from htdata.glove.layouts import nearest_hint
-from htdata.glove.normalise import NormaliseConfig
+from htdata.glove.normaliseconfig import NormaliseConfig
 from htdata.glove.normalisesettings import NormaliseSettings, add_glove_rests
 from htdata.resources import PIPELINES_DIR, validate_json
 from htdata.settings import apply_settings

@@ -26,7 +26,7 @@ from htdata.glove.codecrule import (
 )
 from htdata.glove.codecsettings import CodecConfig
 from htdata.glove.layouts import load_layout
-from htdata.glove.normalise import NormaliseConfig
+from htdata.glove.normaliseconfig import NormaliseConfig
 from htdata.glove.rasterise import Rasteriser
 from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 

@@ -14,7 +14,8 @@ from htdata.cli import main as cli
 from htdata.format.table import INDEX_FILE, LEGACY_INDEX_DTYPE, MANIFEST_FILE, raw_member, tactile_member
 from htdata.glove.calibration import calibration_id, episode_normaliser
 from htdata.glove.layouts import load_layout
-from htdata.glove.normalise import NormaliseConfig, Normaliser
+from htdata.glove.normalise import Normaliser
+from htdata.glove.normaliseconfig import NormaliseConfig
 from htdata.read.itemoptions import ItemOptions
 from htdata.read.reader import DatasetReader
 from htdata.store.manifest import load_episodes, load_index, load_manifest

@@ -23,6 +23,8 @@ SEAMS = {
     "htdata/glove/normalisesettings.py": None,    # the normaliser's config as a pipeline gives it
     "htdata/format/codec.py": None,               # the codec registry and the codecs of members not maps
     "htdata/format/tactilecodec.py": None,        # the tactile value rule and the EXR codec
+    "htdata/glove/normalise.py": None,            # the normaliser
+    "htdata/glove/normaliseconfig.py": None,      # and its config
 }
 SECTIONS = {"Args": ("Args:",), "Returns": ("Returns:", "Yields:"), "Raises": ("Raises:",)}
 

@@ -81,6 +81,7 @@ def test_the_house_pass_moves_warn_and_name_the_new_module(old, new):
     ("htdata.read.torchdata", "FRAME_KINDS", "htdata.read.itemoptions", "FRAME_KINDS"),
     ("htdata.read.torchdata", "_ItemBuilder", "htdata.read.torchitems", "ItemBuilder"),
     ("htdata.format.codec", "check_served_maps", "htdata.format.tactilecodec", "check_served_maps"),
+    ("htdata.glove.normalise", "RAW_COUNT_DEFAULTS", "htdata.glove.normaliseconfig", "RAW_COUNT_DEFAULTS"),
 ])
 def test_a_module_hands_on_the_names_it_no_longer_re_exports(module, name, target, new):
     if module == "htdata.read.torchdata":
