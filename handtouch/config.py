@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from htdata.errors import ConfigError
-from htdata.format.table import CANVAS
+from htdata.format.canvas import CANVAS
 from htdata.settings import apply_settings, parse_setting
 
 # model.encoder -> (tactile decoder, quantised latent). "vit" is HandTouch; the others are the

@@ -31,6 +31,7 @@ import numpy as np
 import torch
 
 from htdata.read import keys
+from htdata.read.itemoptions import ItemOptions
 from htdata.read.metadata import DatasetMetadata
 from htdata.read.torchdata import TactileFrameDataset
 
@@ -69,7 +70,7 @@ _IDS = (keys.HAND, keys.EPISODE, keys.FRAME, keys.TASK)
 def _decode(dataset_root, split: str, part: str, cfg: GateConfig) -> dict[str, torch.Tensor]:
     """The part's subsampled frames, written item by item into preallocated compact tensors (RGB uint8,
     maps float16, coverage uint8): no batch stacking, a third of float32's memory traffic."""
-    ds = TactileFrameDataset(str(dataset_root), split=split, part=part)
+    ds = TactileFrameDataset(str(dataset_root), options=ItemOptions(split=split, part=part))
     if len(ds) < 2:
         raise SystemExit(f"contact gate: part {part!r} of split {split!r} has {len(ds)} frames; need >= 2")
     idx = subsample(len(ds), cfg.max_frames, cfg.seed)

@@ -17,7 +17,7 @@ import math
 import torch
 import torch.nn as nn
 
-from htdata.format.table import CANVAS
+from htdata.format.canvas import CANVAS
 
 from .config import ModelConfig
 from .encoders import ResidualStack, transformer_stack

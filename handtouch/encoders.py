@@ -11,7 +11,7 @@ from __future__ import annotations
 import torch
 import torch.nn as nn
 
-from htdata.format.table import CANVAS
+from htdata.format.canvas import CANVAS
 
 from .config import CNN_GRID, RESNET_GRID, ModelConfig
 

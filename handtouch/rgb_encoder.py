@@ -23,7 +23,7 @@ import torch
 import torch.nn as nn
 
 from htdata.errors import ConfigError
-from htdata.format.table import CANVAS
+from htdata.format.canvas import CANVAS
 from htdata.store.fsutil import sha256_file
 
 log = logging.getLogger("handtouch.rgb_encoder")

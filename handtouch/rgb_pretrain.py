@@ -46,6 +46,7 @@ import torch.nn.functional as F
 from htdata.errors import ArgumentError, ConfigError, DatasetError
 from htdata.fileio import write_bytes_atomic
 from htdata.read import keys
+from htdata.read.itemoptions import ItemOptions
 from htdata.read.metadata import DatasetMetadata
 from htdata.read.torchdata import TactileFrameDataset
 
@@ -54,7 +55,7 @@ from .bench.metrics import MapMetrics
 from .distributed import torch_threads
 from .progress import Rate, with_steps_after
 from .rgb_encoder import TactileGridRGB, load_rgb_encoder, to_unit_float
-from .train import lr_at
+from .steploop import lr_at
 
 log = logging.getLogger("handtouch.rgb_pretrain")
 PAIRINGS = ("aligned", "shifted", "shuffled")
@@ -121,7 +122,7 @@ def load_items(dataset_root, split: str | None, part: str | None, cfg: RGBPretra
     """Decode a seeded subsample of a part's frames (htdata.read.torchdata) into ProbeItems."""
 
 
-    ds = TactileFrameDataset(str(dataset_root), split=split, part=part)
+    ds = TactileFrameDataset(str(dataset_root), options=ItemOptions(split=split, part=part))
     if len(ds) < 2:
         raise ArgumentError(f"{dataset_root}: part {part!r} of split {split!r} has {len(ds)} frames; "
                             "the RGB pretraining needs at least 2")
@@ -246,7 +247,7 @@ def content_record(manifest: dict) -> dict:
 def cache_key(dataset_root, split: str | None, part: str, cfg: RGBPretrainConfig) -> str:
     """The dataset content the probes read + the train items + this config -> 16 hex digits."""
 
-    items = TactileFrameDataset(str(dataset_root), split=split, part=part).items
+    items = TactileFrameDataset(str(dataset_root), options=ItemOptions(split=split, part=part)).items
     doc = {"content": content_record(DatasetMetadata(dataset_root).manifest), "split": split, "part": part,
            "items": hashlib.sha256(np.ascontiguousarray(items).tobytes()).hexdigest(),
            "config": dataclasses.asdict(cfg), "arch": ARCH}

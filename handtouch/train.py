@@ -35,9 +35,10 @@ from torch.utils.data import DataLoader, Dataset
 from htdata.errors import ArgumentError, ConfigError
 from htdata.fileio import write_json_atomic
 from htdata.read import keys
+from htdata.read.itemoptions import ItemOptions
 from htdata.read.torchdata import ItemConstants, TactileFrameDataset, TactileWindowDataset
 
-from .checkpoint import CHECKPOINT_FORMAT, read_checkpoint, rng_state, save_checkpoint, set_rng_state  # noqa: F401
+from .checkpoint import CHECKPOINT_FORMAT, read_checkpoint, rng_state, save_checkpoint, set_rng_state
 from .config import WINDOW, TrainConfig, load_train_config, model_config_from_dict
 from .distributed import DistEnv, StepBatchSampler, barrier, init_distributed, shutdown, torch_threads, wrap
 from .model import HandTouch, covered, masked_mse
@@ -45,7 +46,7 @@ from .progress import with_steps_after
 from .resources import config_file
 from .rgb_encoder import load_rgb_encoder
 from .stages import FRAMES, WINDOWS, Stage, StageLoss, build_stages
-from .steploop import StageRun, lr_at, make_optimizer, to_device, train_steps  # noqa: F401  (lr_at: a name of this module)
+from .steploop import StageRun, make_optimizer, to_device, train_steps
 
 log = logging.getLogger("handtouch.train")
 
@@ -77,13 +78,13 @@ def load_data(cfg: TrainConfig) -> TrainData:
 
     split = cfg.split or None
     train_part = cfg.train_part if split else None
-    frames = TactileFrameDataset(cfg.data_root, split=split, part=train_part, constants="once")
-    tactile = TactileFrameDataset(cfg.data_root, split=split, part=train_part, constants="once",
-                                  members=(keys.TACTILE,))
-    windows = (TactileWindowDataset(cfg.data_root, window=WINDOW, split=split, part=train_part)
+    once = ItemOptions(split=split, part=train_part, constants="once")
+    frames = TactileFrameDataset(cfg.data_root, options=once)
+    tactile = TactileFrameDataset(cfg.data_root, options=once.replace(members=(keys.TACTILE,)))
+    windows = (TactileWindowDataset(cfg.data_root, window=WINDOW, options=ItemOptions(split=split, part=train_part))
                if any(s.data == WINDOWS for s in build_stages(cfg)) else None)
     if split:
-        eval_frames = TactileFrameDataset(cfg.data_root, split=split, part=cfg.eval_part)
+        eval_frames = TactileFrameDataset(cfg.data_root, options=ItemOptions(split=split, part=cfg.eval_part))
         source = f"part {cfg.eval_part!r} of split {split!r}"
     else:
         eval_frames = TactileFrameDataset(cfg.data_root)   # items with their constants: a batch as-is

@@ -8,10 +8,13 @@ DeprecationWarning naming its new place:
   `install()` puts a finder on sys.meta_path that answers an old name with the
   module at its new place (the same module object, so monkeypatching and
   isinstance checks agree);
-- old names of a package that kept its name (`from htdata.format import SHARDS_DIR`,
-  `htdata.curate.rm_episodes`): the package's `__getattr__` calls `moved_name`;
+- old names of a package or module that kept its name (`from htdata.format import SHARDS_DIR`,
+  `htdata.curate.rm_episodes`, `from htdata.format.table import CANVAS`): its `__getattr__` calls
+  `moved_name`; a module never re-exports a moved name silently (tests/project/test_layering.py);
 - old keyword arguments (`TactileFrameDataset(root, map_source="auto")`): the function is
-  wrapped by `renamed_keyword`, which hands the value on under its new name.
+  wrapped by `renamed_keyword`, which hands the value on under its new name;
+- old keywords that one options object holds now (`TactileFrameDataset(root, split="main")`):
+  `folded_keywords` builds the object from them and hands it on.
 
 `REMOVED_IN` is the one place that says when all of it goes;
 tests/project/test_moved.py fails once htdata's version reaches it, so the shim cannot
@@ -24,6 +27,7 @@ import functools
 import importlib
 import importlib.abc
 import importlib.util
+import inspect
 import sys
 import warnings
 
@@ -68,9 +72,23 @@ MOVED_NAMES = {
                                     "htdata.source.adapters.params", "htdata.source.adapters.streamchecks"),
     # the third house pass: the crash-safe writes went below every package (htdata/fileio.py); the store kept sha256_file
     "htdata.store.fsutil": "htdata.fileio",
+    # the fourth house pass: names that a module re-exported silently from where they moved
+    "htdata.format.table": "htdata.format.canvas",
+    "htdata.glove.layouts": "htdata.glove.canonical",
+    "htdata.source.lag": "htdata.source.syncsettings",
+    "htdata.ingest.pipeline": "htdata.settings",
+    "htdata.curate.edit": "htdata.store.episodeids",
+    "htdata.curate.split": ("htdata.store.splitrule", "htdata.store.splitfiles"),
+    "htdata.read.reader": "htdata.store.splitfiles",
+    "htdata.read.torchdata": ("htdata.read.itemoptions", "htdata.read.torchitems"),
+    # the tactile value rule and the EXR codec, a module of their own beside the registry
+    "htdata.format.codec": "htdata.format.tactilecodec",
+    # the normaliser's settings, a module of their own beside the normaliser
+    "htdata.glove.normalise": "htdata.glove.normaliseconfig",
 }
 # old name -> new name, for names that were renamed as they moved (looked up before the name itself)
-RENAMED = {("htdata.source.adapters.base", "check_adapter_params"): "check_declared_params"}
+RENAMED = {("htdata.source.adapters.base", "check_adapter_params"): "check_declared_params",
+           ("htdata.read.torchdata", "_ItemBuilder"): "ItemBuilder"}
 
 
 def new_name(fullname: str) -> str | None:
@@ -122,6 +140,46 @@ def renamed_keyword(old: str, new: str, values: dict | None = None):
                 kwargs[new] = words.get(value, value) if isinstance(value, str) else value
                 warnings.warn(f"{name}({old}={value!r}) is deprecated: write {new}={kwargs[new]!r} "
                               f"({old}= goes in htdata {'.'.join(map(str, REMOVED_IN))})",
+                              DeprecationWarning, stacklevel=2)
+            return fn(*args, **kwargs)
+        return call
+    return wrap
+
+
+def folded_keywords(into: str, fold, names: tuple[str, ...], positional: tuple[str, ...] = ()):
+    """Decorator: the wrapped function's old keywords `names` (deprecated) reach it as one `into=` object.
+
+    Args:
+        into: the keyword-only parameter that holds them now (an options object).
+        fold: `fold(into_value_or_None, {old keyword: value})` -> the object handed on as `into=`; it raises
+            when the two cannot be combined.
+        names: the old keywords.
+        positional: the old signature's parameters after the ones the function still takes by position, in
+            order: a call giving them by position is read as giving them by keyword (then folded, or handed on).
+
+    Returns:
+        The decorator. A call with none of the old keywords runs the function unchanged, without a warning.
+    """
+    def wrap(fn):
+        name = fn.__qualname__.removesuffix(".__init__")
+        kept = sum(p.kind is p.POSITIONAL_OR_KEYWORD for p in inspect.signature(fn).parameters.values())
+
+        @functools.wraps(fn)
+        def call(*args, **kwargs):
+            if len(args) > kept:   # the old signature took these by position
+                if len(args) > kept + len(positional):
+                    raise TypeError(f"{name}() takes at most {kept + len(positional)} positional arguments")
+                for key, value in zip(positional, args[kept:]):
+                    if key in kwargs:
+                        raise TypeError(f"{name}() got multiple values for argument {key!r}")
+                    kwargs[key] = value
+                args = args[:kept]
+            given = {k: kwargs.pop(k) for k in names if k in kwargs}
+            if given:
+                kwargs[into] = fold(kwargs.get(into), given)
+                written = ", ".join(f"{k}={v!r}" for k, v in given.items())
+                warnings.warn(f"{name}({written}) is deprecated: pass {into}={type(kwargs[into]).__name__}"
+                              f"({written}) (the keywords go in htdata {'.'.join(map(str, REMOVED_IN))})",
                               DeprecationWarning, stacklevel=2)
             return fn(*args, **kwargs)
         return call

@@ -29,6 +29,7 @@ from handtouch.config import WINDOW
 from htdata.errors import ArgumentError
 from htdata.read import keys
 from htdata.read.torchdata import TactileFrameDataset, TactileWindowDataset
+from htdata.read.itemoptions import ItemOptions
 
 NUM_PARTS = 6          # part ids 1..6 (thumb, index, middle, ring, little, palm)
 
@@ -60,8 +61,8 @@ def load_part(dataset_root: str | Path, split_name: str | None, part: str) -> Ev
     """Open a committed dataset's part through htdata.read.torchdata (split None = whole dataset)."""
 
     root = str(dataset_root)
-    return EvalPart(frames=TactileFrameDataset(root, split=split_name, part=part),
-                    windows=TactileWindowDataset(root, window=WINDOW, split=split_name, part=part))
+    return EvalPart(frames=TactileFrameDataset(root, options=ItemOptions(split=split_name, part=part)),
+                    windows=TactileWindowDataset(root, window=WINDOW, options=ItemOptions(split=split_name, part=part)))
 
 
 def subsample(n: int, max_items: int, seed: int) -> np.ndarray:

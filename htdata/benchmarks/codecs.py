@@ -19,8 +19,8 @@ from htdata.benchmarks.maplayouts import RULE as LAYOUT_RULE
 from htdata.benchmarks.maplayouts import layout_rows, pick_layout
 from htdata.benchmarks.sources import discover, episode_maps
 from htdata.errors import ArgumentError
-from htdata.format.codec import check_tactile_values, decode_exr, decode_png16, encode_exr, encode_png16
-from htdata.format.table import MAP_SHAPE
+from htdata.format.canvas import MAP_SHAPE
+from htdata.format.tactilecodec import check_tactile_values, decode_exr, decode_png16, encode_exr, encode_png16
 from htdata.format.tactilesettings import TactileConfig
 from htdata.glove.codecrule import RULE, GloveStep, glove_step, pick_codec, resolve_codec
 from htdata.glove.layouts import Layout, load_layout

@@ -23,6 +23,7 @@ from torch.utils.data import DataLoader, Subset
 
 from htdata.format.mapstorage import MapStorage
 from htdata.read import keys
+from htdata.read.itemoptions import ItemOptions
 from htdata.read.metadata import DatasetMetadata
 from htdata.read.torchdata import TactileFrameDataset
 
@@ -38,7 +39,7 @@ def ipc_bytes(item: dict) -> int:
 
 def _epoch_rate(root: Path, workers: int, maps_from: str, items: int, batch_size: int, seed: int,
                 options: dict | None = None) -> float:
-    dataset = TactileFrameDataset(root, maps_from=maps_from, **(options or {}))
+    dataset = TactileFrameDataset(root, options=ItemOptions(maps_from=maps_from, **(options or {})))
     pick = np.random.default_rng(seed).permutation(len(dataset))[:items].tolist()
     loader = DataLoader(Subset(dataset, pick), batch_size=batch_size, shuffle=True, num_workers=workers,
                         persistent_workers=workers > 0, generator=torch.Generator().manual_seed(seed))
@@ -66,7 +67,7 @@ def dataloader_rows(root: Path, workers: tuple[int, int] = (1, 2), reps: int = 2
             for w in (lo, hi):
                 rates[w].append(_epoch_rate(root, w, source, items, batch_size, seed + rep, options))
         ratios = [b / a for a, b in zip(rates[lo], rates[hi])]
-        dataset = TactileFrameDataset(root, maps_from=source, **options)
+        dataset = TactileFrameDataset(root, options=ItemOptions(maps_from=source, **options))
         rows.append({"item": kind, "maps_from": source, "ipc_bytes_per_item": ipc_bytes(dataset[0]),
                      "items": min(items, len(dataset)), "batch_size": batch_size,
                      "workers_lo": lo, "workers_hi": hi, "reps": reps,

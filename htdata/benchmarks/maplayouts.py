@@ -3,7 +3,7 @@
 The codec table (codecs.py) picks the pixel type; this one asks what else the member's layout could
 cost less with, for the maps the ingest stores by default (issue 26): compression RLE / ZIPS / ZIP /
 PIZ; a data window around the covered pixels (display window 224x224, readers place the window:
-htdata/format/codec.py, tests/format/test_exr_interop.py); half pixels where the exactness rule allows them;
+htdata/format/tactilecodec.py, tests/format/test_exr_interop.py); half pixels where the exactness rule allows them;
 three writers: htdata's own ZIP writer (htdata/format/exrzip.py: what the ingest writes, ISA-L deflate), the
 OpenEXR binding (every other variant, and "_binding": its ZIP, libdeflate) and OpenImageIO's; and,
 per variant but OpenImageIO's, the maps per second with the encode in 2 threads (both writers
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.format.codec import check_tactile_values, decode_exr, encode_exr
+from htdata.format.tactilecodec import check_tactile_values, decode_exr, encode_exr
 from htdata.glove.codecrule import ANALYTIC_MAX_ERROR
 
 COMPRESSIONS = ("rle", "zips", "zip", "piz")

@@ -35,6 +35,7 @@ from htdata.format.table import HANDS, JSON_MEMBER, SHARDS_DIR, tactile_member
 from htdata.format.tactilesettings import TactileConfig
 from htdata.glove.layouts import LAYOUTS_ENV
 from htdata.ingest.episode import EpisodeStream
+from htdata.read.itemoptions import ItemOptions
 from htdata.read.reader import DatasetReader
 from htdata.synthetic.rawglove import write_rawglove
 
@@ -125,7 +126,8 @@ def read_speeds(stored: Path, rendered: Path, limit: int, reps: int) -> dict:
     """Items/s and samples/s, stored maps decoded vs rendered from raw, alternating runs, medians."""
     from htdata.read.torchdata import TactileFrameDataset
 
-    datasets = {"stored": TactileFrameDataset(stored, maps_from="stored"), "rendered": TactileFrameDataset(rendered)}
+    datasets = {"stored": TactileFrameDataset(stored, options=ItemOptions(maps_from="stored")),
+                "rendered": TactileFrameDataset(rendered)}
     readers = {"stored": DatasetReader(stored), "rendered": DatasetReader(rendered)}
     items = min(limit, len(datasets["stored"]))
     samples = min(limit, len(readers["stored"]))

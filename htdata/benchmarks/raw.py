@@ -20,8 +20,8 @@ import numpy as np
 
 from htdata.benchmarks.ingest import ingest_run
 from htdata.benchmarks.tables import table
-from htdata.format.codec import decode_tactile
 from htdata.format.table import HANDS, SIZE_FIELDS, raw_member, tactile_member
+from htdata.format.tactilecodec import decode_tactile
 from htdata.read.rawstream import RawMapRenderer
 from htdata.read.reader import DatasetReader
 from htdata.store.manifest import load_index

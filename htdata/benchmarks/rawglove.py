@@ -38,7 +38,8 @@ import numpy as np
 from htdata.benchmarks.rawglovecells import moving_cell_rows, suggest_rows
 from htdata.benchmarks.tables import table
 from htdata.glove.contact import rule_for
-from htdata.glove.normalise import NormaliseConfig, Normaliser
+from htdata.glove.normalise import Normaliser
+from htdata.glove.normaliseconfig import NormaliseConfig
 from htdata.synthetic.rawglove import (
     FPS,
     FULL_SCALE,

@@ -55,7 +55,8 @@ from htdata.benchmarks.realglovev2 import (
 from htdata.benchmarks.tables import table
 from htdata.curate.idle import IdleConfig, plan_idle
 from htdata.glove.layouts import Layout
-from htdata.glove.normalise import BASELINES, NOISE_K_BASELINES, RAW_COUNT_DEFAULTS, NormaliseConfig, Normaliser
+from htdata.glove.normalise import Normaliser
+from htdata.glove.normaliseconfig import BASELINES, NOISE_K_BASELINES, RAW_COUNT_DEFAULTS, NormaliseConfig
 from htdata.glove.rasterise import Rasteriser
 from htdata.glove.restreference import pooled_reference, recording_rest, write_rest_reference
 from htdata.ingest.pipeline import load_pipeline

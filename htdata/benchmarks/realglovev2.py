@@ -26,7 +26,7 @@ import numpy as np
 
 from htdata.benchmarks.realclips import HANDS, RealClip
 from htdata.glove.layouts import Layout
-from htdata.glove.normalise import NormaliseConfig
+from htdata.glove.normaliseconfig import NormaliseConfig
 from htdata.glove.rasterise import Rasteriser
 from htdata.synthetic.rawfacts import (  # the truth's one home (rawfacts.py)
     MID_GRASP,

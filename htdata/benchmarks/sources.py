@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.format.codec import encode_rgb, encode_tactile
+from htdata.format.codec import encode_rgb
+from htdata.format.tactilecodec import encode_tactile
 from htdata.ingest import Source
 from htdata.ingest.episode import EpisodeStream
 from htdata.ingest.pipeline import PipelineConfig, load_pipeline

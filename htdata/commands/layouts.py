@@ -35,7 +35,7 @@ import numpy as np
 from htdata.commands.outputs import output_path
 from htdata.errors import ArgumentError
 from htdata.fileio import write_bytes_atomic
-from htdata.format.table import CANVAS
+from htdata.format.canvas import CANVAS
 from htdata.glove.activity import describe_cells, live_moving, rule_text, unmapped_moving
 from htdata.glove.glovevalue import CONVENTIONS
 from htdata.glove.layouts import LAYOUTS_ENV, Layout, list_layouts, load_canonical, load_layout

@@ -16,8 +16,8 @@ import sys
 from pathlib import Path
 
 from htdata.curate import renormalise
-from htdata.curate.edit import NoSuchEpisode
 from htdata.ingest.pipeline import load_pipeline
+from htdata.store.episodeids import NoSuchEpisode
 from htdata.store.lock import DatasetLocked
 
 EPILOG = """\

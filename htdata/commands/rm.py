@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from htdata.curate import edit as curate_edit
+from htdata.store.episodeids import NoSuchEpisode
 from htdata.store.lock import DatasetLocked
 
 EPILOG = """\
@@ -35,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     command = "htdata rm " + " ".join(args.episodes)
     try:
         edit, manifest = curate_edit.remove_episodes(args.dataset, args.episodes, args.dry_run, command)
-    except (curate_edit.NoSuchEpisode, DatasetLocked, FileNotFoundError, ValueError) as exc:
+    except (NoSuchEpisode, DatasetLocked, FileNotFoundError, ValueError) as exc:
         print(f"htdata rm: error: {exc}", file=sys.stderr)
         return 2
     report(edit, manifest, args.dry_run)

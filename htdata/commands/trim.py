@@ -13,6 +13,7 @@ from pathlib import Path
 from htdata.commands.rm import report
 from htdata.curate import edit as curate_edit
 from htdata.curate import idle
+from htdata.store.episodeids import NoSuchEpisode
 from htdata.store.lock import DatasetLocked
 from htdata.store.versions import current_version
 
@@ -63,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     command = f"htdata trim {args.episode} --frames {args.frames}"
     try:
         edit, manifest = curate_edit.trim_episode(args.dataset, args.episode, args.frames, args.dry_run, command)
-    except (curate_edit.NoSuchEpisode, DatasetLocked, FileNotFoundError, ValueError) as exc:
+    except (NoSuchEpisode, DatasetLocked, FileNotFoundError, ValueError) as exc:
         print(f"htdata trim: error: {exc}", file=sys.stderr)
         return 2
     report(edit, manifest, args.dry_run)

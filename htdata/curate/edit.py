@@ -17,8 +17,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from htdata._moved import moved_name
 from htdata.errors import ArgumentError
-from htdata.store.episodeids import NoSuchEpisode, resolve_episodes  # noqa: F401 (NoSuchEpisode: importable from here)
+from htdata.store.episodeids import resolve_episodes
 from htdata.store.parts import Part
 from htdata.store.snapshot import Snapshot
 from htdata.write.newversion import NewVersion
@@ -141,3 +142,8 @@ def trim_episode(root, episode: str, frames: str, dry_run: bool, command: str) -
             return Edit(parent=snap.version), None
         edit, plan = plan_edit(snap, [], {eid: kept})
         return edit, None if dry_run else apply_edit(nv, plan)
+
+
+def __getattr__(name: str):
+    """An old name of this module, at its new home (htdata/_moved.py MOVED_NAMES), with a DeprecationWarning."""
+    return moved_name(__name__, name)

@@ -34,24 +34,13 @@ import json
 from collections import defaultdict
 from pathlib import Path
 
+from htdata._moved import moved_name
 from htdata.curate.splitversions import SplitResult, write_versioned_split
 from htdata.fileio import write_json_atomic
 from htdata.format.table import EPISODES_FILE, MANIFEST_FILE
 from htdata.store.manifest import parse_episodes, parse_manifest
-from htdata.store.splitfiles import PARTS, count_parts, list_splits, split_path  # noqa: F401
-
-# The rule and the split files are names of this module too (`htdata split`'s one face).
-from htdata.store.splitrule import (  # noqa: F401
-    NAME_PATTERN,
-    RULE,
-    SplitConfig,
-    SplitError,
-    assign_episodes,
-    build_split,
-    check_ood_tasks,
-    episode_uniform,
-    test_counts,
-)
+from htdata.store.splitfiles import PARTS, split_path
+from htdata.store.splitrule import SplitConfig, SplitError, build_split
 from htdata.store.versions import manifest_path as current_manifest_path
 
 
@@ -161,3 +150,8 @@ def format_summary(doc: dict, path: Path) -> str:
     for c in doc["corrections"]:
         lines.append(f"  correction: {c['episode_id']} -> {c['part']} ({c['reason']})")
     return "\n".join(lines)
+
+
+def __getattr__(name: str):
+    """An old name of this module, at its new home (htdata/_moved.py MOVED_NAMES), with a DeprecationWarning."""
+    return moved_name(__name__, name)

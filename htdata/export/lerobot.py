@@ -58,26 +58,24 @@ import numpy as np
 from htdata.errors import DatasetError
 from htdata.export.lerobot_meta import CHUNKS_SIZE, DATA_FILE_MB, DATA_PATH, VIDEO_PATH, part_of, write_meta
 from htdata.export.lerobot_out import check_out, write_marker
-from htdata.export.lerobot_plan import (  # noqa: F401
+from htdata.export.lerobot_plan import (
     PRESENT_KEY,
     RGB_KEY,
     SOURCE_KEY,
     LeRobotExportConfig,
-    RawSlot,
     _episode_schedule,
     _frames_out,
     _Plan,
-    _ticks,
     features,
     map_key,
     plan_export,
-    raw_key,
 )
 from htdata.export.lerobot_stats import FeatureStats, VideoStats
 from htdata.export.lerobot_window import EpisodeWindows, TiledStats, sample_rows, window_features, window_keys
 from htdata.export.videoencode import VideoWriter
+from htdata.format.canvas import CANVAS
 from htdata.format.mapstorage import MapStorage
-from htdata.format.table import CANVAS, JSON_MEMBER, RGB_MEMBER, decode_member, raw_member, tactile_member
+from htdata.format.table import JSON_MEMBER, RGB_MEMBER, decode_member, raw_member, tactile_member
 from htdata.read.rawstream import RawMapRenderer, paired_row
 from htdata.read.reader import DatasetReader
 

@@ -15,7 +15,8 @@ import numpy as np
 
 from htdata.errors import ArgumentError, DatasetError
 from htdata.export.lerobot_window import check_window
-from htdata.format.table import CANVAS, HANDS, JSON_MEMBER, RGB_MEMBER, SIZE_FIELDS, decode_member
+from htdata.format.canvas import CANVAS
+from htdata.format.table import HANDS, JSON_MEMBER, RGB_MEMBER, SIZE_FIELDS, decode_member
 from htdata.read.reader import DatasetReader
 from htdata.store import storage
 

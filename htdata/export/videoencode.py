@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from htdata.errors import DatasetError
-from htdata.format.table import CANVAS
+from htdata.format.canvas import CANVAS
 
 VIDEO_TIME_BASE = Fraction(1, 90000)   # mp4's usual clock: 11 us steps, well inside LeRobot's 1e-4 s tolerance
 

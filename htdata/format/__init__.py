@@ -1,8 +1,9 @@
 """The on-disk format: what a writer and a reader must agree on.
 
     canvas.py     the canvas side and the hand names
-    table.py      file names of a dataset, canvas, hands, the member table and the index dtype
-    codec.py      member codecs (EXR float maps, JPEG RGB, npy raw rows, PNG masks, JSON)
+    table.py      file names of a dataset, the member table and the index dtype
+    codec.py      the member codecs' registry (MEMBER_CODECS) and JPEG RGB, npy raw rows, PNG masks, JSON
+    tactilecodec.py  the tactile value rule and the EXR map codec (half / float pixels)
     exrzip.py     the ZIP EXR map writer, built byte by byte (OpenEXR's file layout, ISA-L's deflate)
     imageheader.py JPEG and EXR sizes read from the header bytes, checked before a decoder allocates them
     shardio.py    tar shards: sample keys, the shard writer and member-range reads

@@ -5,7 +5,7 @@ data window: a decoder allocates what the header declares (GBs) before it
 finds out the data is not there. `jpeg_size` and `exr_windows` read the
 declared size from the first few hundred bytes (a few microseconds), so the
 callers refuse what cannot be right before decoding: a shard member that is
-not 224x224 (htdata/format/codec.py), a source frame beyond
+not 224x224 (htdata/format/codec.py, tactilecodec.py), a source frame beyond
 MAX_SOURCE_FRAME_PIXELS (htdata/source/rgb.py).
 """
 

@@ -203,8 +203,17 @@ class ShardWriter:
     """Write the samples of one work unit into `shard-UUUUUU-KKK.tar` files.
 
     Use as a context manager: on an exception the open shard's temp file is
-    removed and finished shards stay. `samples_per_shard` and optional
-    `max_shard_bytes` bound a shard; a sample is never split.
+    removed and finished shards stay. A sample is never split across shards.
+
+    Args:
+        directory: the dataset's shards/ folder (created if missing).
+        unit: the work unit whose shards these are (names shard-UUUUUU-KKK.tar).
+        samples_per_shard: samples per shard (>= 1).
+        max_shard_bytes: also start a new shard before this size would be passed (None: no bound).
+        fsync: fsync each finished shard and its folder (False only for throwaway output: benchmarks).
+
+    Raises:
+        ValueError: samples_per_shard < 1, max_shard_bytes below 4 tar blocks, or a unit out of range.
     """
 
     def __init__(self, directory: str | os.PathLike, unit: int, samples_per_shard: int,
@@ -247,7 +256,19 @@ class ShardWriter:
         self._count = 0
 
     def add_sample(self, key: str, members: dict[str, bytes]) -> SampleRecord:
-        """Append one sample; `members` maps suffix ("json", "rgb.jpg", ...) to bytes."""
+        """Append one sample, finishing the open shard first when it is full.
+
+        Args:
+            key: the sample key (sample_key: `<episode>__<frame>`), never the previous sample's.
+            members: suffix (table.MEMBER_ORDER: "json", "rgb.jpg", ...) -> non-empty bytes; "json" required.
+
+        Returns:
+            Where the sample went: its shard, offset and member sizes (also kept in `self.samples`).
+
+        Raises:
+            ValueError: the writer is closed, or a bad key, member name or member, or a repeated key.
+            FileExistsError: the next shard's name exists already (a finished shard is never overwritten).
+        """
         if self._closed:
             raise ValueError(f"unit {self.unit}: ShardWriter already closed")
         parse_key(key)
@@ -315,7 +336,14 @@ class ShardWriter:
         self._closed = True
 
     def close(self) -> list[ShardRecord]:
-        """Finish the open shard; returns all shard records of the unit."""
+        """Finish the open shard (linked to its final name); closing twice is harmless.
+
+        Returns:
+            Every shard record of the unit, in part order.
+
+        Raises:
+            FileExistsError: the open shard's final name exists already.
+        """
         if not self._closed:
             if self._out is not None:
                 self._finish_current()

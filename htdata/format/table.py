@@ -1,9 +1,9 @@
 """The on-disk format of an htdata dataset, in one place (docs/FORMAT.md "Dataset on disk").
 
 Everything a writer and a reader must agree on lives here: the file names of
-a committed dataset, the canvas and hand names, the member table and the
-index dtype derived from it. Like webdataset's `writer.make_handlers` /
-`autodecode`, ONE table maps a member suffix to its index column and codec;
+a committed dataset, the member table and the index dtype derived from it
+(the canvas side and the hand names: canvas.py, which the codecs need).
+Like webdataset's `writer.make_handlers` / `autodecode`, ONE table maps a member suffix to its index column and codec;
 `encode_sample` / `decode_sample` walk it, so adding a stored member is one
 row in MEMBERS (plus its codec kind in `htdata.format.codec.MEMBER_CODECS` when the
 kind is new). Member order in the table is the order inside a sample's tar
@@ -26,10 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from htdata._moved import moved_name
 from htdata.errors import DatasetError
-
-# CANVAS, HANDS, MAP_SHAPE are names of the table too; they live in canvas.py because the codecs need them.
-from htdata.format.canvas import CANVAS, HANDS, MAP_SHAPE  # noqa: F401
+from htdata.format.canvas import HANDS
 from htdata.format.codec import MEMBER_CODECS
 
 FORMAT = "htdata"
@@ -181,3 +180,8 @@ def decode_sample(members: dict[str, bytes], where: str) -> dict:
         else:
             out[m.field][m.hand] = value
     return out
+
+
+def __getattr__(name: str):
+    """An old name of this module, at its new home (htdata/_moved.py MOVED_NAMES), with a DeprecationWarning."""
+    return moved_name(__name__, name)

@@ -5,7 +5,7 @@ An ingest pipeline (htdata/ingest/pipeline.py) holds one as its `tactile`. Keys 
 schemas/pipeline.schema.json (`[tactile]`) and `validate` (the rule between maps, keep_raw and raster_mode).
 
     [tactile]
-    compression = "zip"       # EXR compression of the maps (htdata/format/codec.py)
+    compression = "zip"       # EXR compression of the maps (htdata/format/tactilecodec.py)
     raster_mode = "nearest"   # taxels -> map (htdata/glove/rasterise.py)
     keep_bend = true          # bend_<hand>.npy where the layout has bend cells
     keep_raw = true           # raw_<hand>.npy: every glove row as read (source dtype), full rate

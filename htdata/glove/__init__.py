@@ -6,7 +6,8 @@
     layoutsuggest.py a starting layout from the cells that move in recordings (`htdata layouts suggest`)
     blockcuts.py    rectangular blocks cut from a connected mask of moving cells (for layoutsuggest)
     glovevalue.py   what a glove's value block says: direction, raw-count glove (the one owner of those rules)
-    normalise.py    glove units -> [0,1]: the settings and the Normaliser that applies them
+    normalise.py    glove units -> [0,1]: the Normaliser that applies a config
+    normaliseconfig.py  the normaliser's settings (NormaliseConfig): baselines, floors, defaults, checked once
     baselinefit.py  fitting the per-taxel baseline and noise floor (first frames, or the whole episode)
     normalisesettings.py  a pipeline's [normalise.<layout>] tables over each layout's value block
     restlevel.py    quiet (resting) frames; the per-glove calibration file

@@ -39,7 +39,8 @@ import zlib
 import numpy as np
 
 from htdata.errors import DatasetError, RecordMismatch
-from htdata.glove.normalise import NormaliseConfig, Normaliser
+from htdata.glove.normalise import Normaliser
+from htdata.glove.normaliseconfig import NormaliseConfig
 from htdata.glove.normalisesettings import NormaliseSettings
 
 

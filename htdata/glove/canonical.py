@@ -13,7 +13,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from htdata.format.table import CANONICAL_FILE, CANVAS
+from htdata.format.canvas import CANVAS
+from htdata.format.table import CANONICAL_FILE
 from htdata.resources import LAYOUTS_DIR, validate_json
 
 PART_NAMES: dict[int, str] = {1: "thumb", 2: "index", 3: "middle", 4: "ring", 5: "little", 6: "palm"}

@@ -41,7 +41,7 @@ from htdata.glove.normalisesettings import NormaliseSettings
 SETTINGS = ("auto", "exr_half", "exr_float")      # pipeline [codec] tactile
 PIXEL_TYPES = ("half", "float")
 # max |decoded - map| over maps in [0,1], per EXR pixel type: float16 rounds to nearest with
-# spacing 2**-11 just below 1.0 (htdata/format/codec.py); float32 maps stored as float32 are exact.
+# spacing 2**-11 just below 1.0 (htdata/format/tactilecodec.py); float32 maps stored as float32 are exact.
 ANALYTIC_MAX_ERROR = {"half": 2.0 ** -12, "float": 0.0}
 # Smallest first at one compression: half stores 2 bytes per pixel, float 4 (checked on the
 # sample corpus's maps by tests/format/test_codec.py, measured by the bench's codec table).

@@ -39,7 +39,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from htdata.glove.glovevalue import press_share
-from htdata.glove.normalise import has_noise_floor
+from htdata.glove.normaliseconfig import has_noise_floor
 
 THRESHOLD = 0.02           # the old rule: a taxel above this is contact (validate's contact threshold)
 MIN_AREA_TAXELS = 3        # calibrated rule: taxels above their floor for a frame to be in contact

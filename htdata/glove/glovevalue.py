@@ -6,7 +6,7 @@ A layout's `value` ({"convention", "max"}, optional "step", "press") and a calib
 - direction: "direct" counts rise with pressure, "inverted" counts fall with it (OpenTouch: 3072 = no load);
 - a raw-count glove: full scale above 1 (an ADC's counts, either direction): its cells rest far from the
   no-pressure end with per-cell offsets, so it needs a rest of its own (the raw-count default,
-  htdata.glove.normalise.RAW_COUNT_DEFAULTS); a glove in [0, 1] is read as given;
+  htdata.glove.normaliseconfig.RAW_COUNT_DEFAULTS); a glove in [0, 1] is read as given;
 - sensitivity: `press`, the least rise above rest (raw units) that is a press, which decides contact
   (htdata.glove.contact); without it DEFAULT_PRESS_SHARE of full scale, a knit glove's 15 of 1023 counts.
   It is the glove's to declare: on the real knit glove's recordings a level 5% off takes the worst contact-share

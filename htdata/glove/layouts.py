@@ -27,17 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata._moved import moved_name
 from htdata.errors import ConfigError, LayoutNotFound
 from htdata.format.table import CANONICAL_FILE
-from htdata.glove.canonical import (  # noqa: F401 (names of
-    GROUPS,
-    PART_NAMES,
-    CanonicalHand,
-    Rect,
-    frozen,
-    load_canonical,  # this module too)
-    parse_canonical,
-)
+from htdata.glove.canonical import GROUPS, CanonicalHand, frozen, load_canonical
 from htdata.resources import LAYOUTS_DIR, validate_json
 
 LAYOUTS_ENV = "HTDATA_LAYOUTS"
@@ -342,3 +335,8 @@ def list_layouts(dirs: tuple | list = ()) -> list[str]:
         if d.is_dir():
             ids.update(p.stem for p in d.glob("*.json") if p.name != CANONICAL_FILE)
     return sorted(ids)
+
+
+def __getattr__(name: str):
+    """An old name of this module, at its new home (htdata/_moved.py MOVED_NAMES), with a DeprecationWarning."""
+    return moved_name(__name__, name)

@@ -42,145 +42,33 @@ The formula, in full (raw-count gloves, "direct": rest ~550, full scale 1023):
 puts every raw value above it (all of them: rest is 550) out of range.
 
 Fitting the baseline and noise floor (from the first frames, or on the whole episode for the
-baselines chosen by activity: quietest, percentile, drift) is htdata.glove.baselinefit's job.
+baselines chosen by activity: quietest, percentile, drift) is htdata.glove.baselinefit's job; the
+settings (`NormaliseConfig`, its baselines and defaults) are htdata/glove/normaliseconfig.py.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-
 import numpy as np
 
-from htdata.errors import ConfigError, DatasetError
+from htdata._moved import moved_name
+from htdata.errors import DatasetError
 from htdata.glove.baselinefit import drift_baseline_at, fit_first_frames, fit_whole_episode
-from htdata.glove.glovevalue import CONVENTIONS, is_inverted, is_raw_count, pressure_share
+from htdata.glove.glovevalue import is_inverted, pressure_share
+from htdata.glove.normaliseconfig import NormaliseConfig
 from htdata.glove.restlevel import load_taxel_calibration
-
-BASELINES = ("none", "first_frame", "rest_window", "quietest", "percentile", "drift", "shift")
-# baselines fitted on the whole episode (`fit_episode`), not on its first chunk
-EPISODE_BASELINES = ("quietest", "percentile", "drift", "shift")
-# "shift": the glove's own rest comes from its taxel calibration file (a rest reference pooled over the
-# glove's recordings: htdata.glove.restreference); per episode only the common-mode shift is fitted, so a
-# grip held through a whole recording stays pressed (issue 43). Needs taxel_calibration.
-# A raw-count glove (value.max > 1, counts rising or falling with pressure) without a [normalise.<id>] table: "none" would read its rest level
-# (~557 of 1023 on a knit glove) as 0.55 pressure everywhere (issue 27). Each cell's own rest (its 10th percentile per
-# minute: a press only raises a cell) and a per-cell noise floor hold a grip a real glove's mean level cannot see
-# (issue 34). Measured in `make bench`, "real glove" (docs/INGEST.md).
-RAW_COUNT_DEFAULTS = {"baseline": "drift", "baseline_percentile": 10.0, "drift_window_s": 60.0, "noise_k": 5.0}
-NOISE_K_BASELINES = ("rest_window", *EPISODE_BASELINES)
-KNOTTED_BASELINES = ("drift", "shift")   # NormaliseConfig.knotted   # the baselines a noise_k floor is measured against
-
-
-def has_noise_floor(noise_k: float, noise_floor: float) -> bool:
-    """The one test of whether a calibration subtracts a noise floor: k x the rest spread, or a constant one."""
-    return noise_k > 0 or noise_floor > 0
-
-
-@dataclass
-class NormaliseConfig:
-    convention: str = "direct"
-    max_value: float = 1.0
-    baseline: str = "none"
-    rest_frames: int = 10     # frames averaged (median) for baseline="rest_window"
-    clip: bool = True
-    scale: float = 1.0
-    noise_floor: float = 0.0  # constant floor in unit values (after the baseline)
-    noise_k: float = 0.0      # + k x robust spread of the rest window, per taxel
-    rest_seconds: float = 1.0  # span length of baseline="quietest" (and of the noise spread of the episode baselines)
-    baseline_percentile: float = 5.0  # baseline="percentile": per-taxel percentile over the episode
-    drift_window_s: float = 30.0      # baseline="drift": window of the running rest level
-    shift_window_s: float = 2.0       # baseline="shift": window of the common-mode shift (a median over the
-    #                                   glove's cells: a short window is steady and follows slow wander)
-    # A per-glove calibration measured once: an .npz with per-taxel `offset` (rest, raw units) and `gain`
-    # (multiplier after the offset, 1 = nominal: a taxel twice as sensitive has 0.5), each (H,W). The pipeline resolves the path and fills in its sha256
-    # (NormaliseSettings.normalise_for); the arrays travel in each episode record's calibration_fit.
-    taxel_calibration: str = ""
-    taxel_calibration_sha256: str = ""
-
-    @property
-    def per_episode(self) -> bool:
-        """True when the baseline is fitted on the whole episode (`Normaliser.fit_episode`)."""
-        return self.baseline in EPISODE_BASELINES
-
-    @property
-    def knotted(self) -> bool:
-        """True when the baseline moves along the episode: knots (K,H,W) at row positions, so `apply` needs
-        the raw rows' positions (baseline "drift", and "shift" whose common-mode shift follows the glove)."""
-        return self.baseline in KNOTTED_BASELINES
-
-    @property
-    def rest_from_glove(self) -> bool:
-        """True when the rest is the glove's reference (a taxel calibration file) plus each recording's
-        common-mode shift: baseline "shift" (htdata.glove.restreference, htdata.glove.pooledrest)."""
-        return self.baseline == "shift"
-
-    @property
-    def has_noise_floor(self) -> bool:
-        """True when a floor is subtracted (noise_k or noise_floor > 0: `has_noise_floor`)."""
-        return has_noise_floor(self.noise_k, self.noise_floor)
-
-    @property
-    def fits(self) -> bool:
-        """True when the calibration has per-episode fitted arrays (baseline / noise floor)."""
-        return self.baseline != "none" or self.noise_k > 0 or bool(self.taxel_calibration_sha256)
-
-    def validate(self, where: str = "normalise") -> "NormaliseConfig":
-        if self.convention not in CONVENTIONS:
-            raise ConfigError(f"{where}: convention must be one of {CONVENTIONS}, got {self.convention!r}")
-        if not (isinstance(self.max_value, (int, float)) and np.isfinite(self.max_value)
-                and self.max_value > 0):
-            raise ConfigError(f"{where}: max_value must be a finite number > 0, got {self.max_value!r}")
-        if self.baseline not in BASELINES:
-            raise ConfigError(f"{where}: baseline must be one of {BASELINES}, got {self.baseline!r}")
-        if not isinstance(self.rest_frames, int) or self.rest_frames < 1:
-            raise ConfigError(f"{where}: rest_frames must be an integer >= 1, got {self.rest_frames!r}")
-        if not (isinstance(self.scale, (int, float)) and np.isfinite(self.scale) and self.scale > 0):
-            raise ConfigError(f"{where}: scale must be a finite number > 0, got {self.scale!r}")
-        if not isinstance(self.clip, bool):
-            raise ConfigError(f"{where}: clip must be true or false, got {self.clip!r}")
-        for name in ("noise_floor", "noise_k"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
-                    and 0 <= value):
-                raise ConfigError(f"{where}: {name} must be a finite number >= 0, got {value!r}")
-        if self.noise_floor >= 1:
-            raise ConfigError(f"{where}: noise_floor must be < 1 (unit values), got {self.noise_floor!r}")
-        if self.baseline == "shift" and not self.taxel_calibration and not self.taxel_calibration_sha256:
-            raise ConfigError(f"{where}: baseline = \"shift\" fits only a recording's common-mode shift from the "
-                              f"glove's rest reference: set taxel_calibration to one (htdata layouts rest writes it)")
-        if self.noise_k > 0 and self.baseline not in NOISE_K_BASELINES:
-            raise ConfigError(f"{where}: noise_k needs baseline = \"rest_window\" (the floor is k x the rest "
-                              f"window's spread) or one of {EPISODE_BASELINES}, got baseline = {self.baseline!r}")
-        for name, lo, hi in (("rest_seconds", 0.0, None), ("baseline_percentile", 0.0, 100.0),
-                             ("drift_window_s", 0.0, None), ("shift_window_s", 0.0, None)):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
-                    and value > lo and (hi is None or value <= hi)):
-                raise ConfigError(f"{where}: {name} must be a finite number > {lo:g}"
-                                  f"{'' if hi is None else f' and <= {hi:g}'}, got {value!r}")
-        return self
-
-    @classmethod
-    def from_layout_value(cls, value: dict) -> "NormaliseConfig":
-        """Default config from a layout's `value` block ({"convention", "max"}): RAW_COUNT_DEFAULTS for raw
-        counts (max > 1 in either direction: the values rest far from the no-pressure end), else no baseline."""
-        extra = RAW_COUNT_DEFAULTS if is_raw_count(value["max"]) else {}
-        return cls(convention=value["convention"], max_value=float(value["max"]), **extra).validate()
-
-    def to_dict(self) -> dict:
-        """The settings; the activity-baseline fields only when they differ from their defaults, so the
-        calibration ids (a hash of this) of pipelines written before they existed stay the same."""
-        d = asdict(self)
-        del d["taxel_calibration"]        # where the file was is not its identity: its sha256 is
-        for name in ("rest_seconds", "baseline_percentile", "drift_window_s", "shift_window_s",
-                     "taxel_calibration_sha256"):
-            if d[name] == type(self).__dataclass_fields__[name].default:
-                del d[name]
-        return d
 
 
 class Normaliser:
-    """Apply a NormaliseConfig to raw grids (T,H,W) of one glove layout."""
+    """Apply a NormaliseConfig to raw grids (T,H,W) of one glove layout.
+
+    Args:
+        cfg: the layout's settings (validated here).
+        layout: a glove.layouts.Layout (its live_mask, layout_id and value block's step).
+
+    Raises:
+        ConfigError: `cfg` is invalid (NormaliseConfig.validate), or its taxel calibration file does not
+            read or fit the layout's grid (restlevel.load_taxel_calibration).
+    """
 
     def __init__(self, cfg: NormaliseConfig, layout):
         self.cfg = cfg.validate()
@@ -209,7 +97,17 @@ class Normaliser:
         return arr
 
     def to_unit(self, raw: np.ndarray) -> np.ndarray:
-        """Convention + max (+ the calibration file's per-taxel offset and gain), before baseline/scale/clip."""
+        """Convention + max (+ the calibration file's per-taxel offset and gain), before baseline/scale/clip.
+
+        Args:
+            raw: (T,H,W) raw grids.
+
+        Returns:
+            (T,H,W) float32 unit values, not yet clipped.
+
+        Raises:
+            RuntimeError: the config names a taxel calibration whose arrays are not loaded (restore()).
+        """
         if self.cfg.taxel_calibration_sha256 and self.offset is None:
             raise RuntimeError(f"layout {self.layout_id}: the taxel calibration file is not loaded (restore())")
         with np.errstate(invalid="ignore", over="ignore"):
@@ -220,7 +118,14 @@ class Normaliser:
             return pressure_share(raw, self.cfg.convention, top)
 
     def out_of_range(self, raw) -> tuple[np.ndarray, np.ndarray]:
-        """(below, above): per frame, how many live finite taxels of `raw` lie below 0 / above max_value."""
+        """Per frame, how many live finite taxels of `raw` lie below 0 / above max_value (raw units).
+
+        Args:
+            raw: (T,H,W) raw grids.
+
+        Returns:
+            (below, above), each (T,) int64.
+        """
         live = self._check(raw)[:, self.live_mask]
         with np.errstate(invalid="ignore"):
             below = (live < 0.0).sum(axis=1)
@@ -228,7 +133,18 @@ class Normaliser:
         return below.astype(np.int64), above.astype(np.int64)
 
     def fit_baseline(self, first_chunk) -> np.ndarray:
-        """Fix the per-taxel baseline from the episode's first frames (idempotent per episode)."""
+        """Fix the per-taxel baseline from the episode's first frames (idempotent per episode).
+
+        Args:
+            first_chunk: (T,H,W) raw grids, the episode's first rows.
+
+        Returns:
+            The (H,W) baseline (the fitted one, for baselines fitted on the whole episode).
+
+        Raises:
+            RuntimeError: a whole-episode baseline not fitted yet (fit_episode first).
+            ValueError: zero frames, or grids of another shape.
+        """
         if self.cfg.baseline == "none":
             return self.baseline
         if self.cfg.per_episode:
@@ -247,8 +163,16 @@ class Normaliser:
     def fit_episode(self, raw, fps: float, rows=None) -> np.ndarray:
         """Fit baseline="quietest" / "percentile" / "drift" (and the noise floor) on a whole episode's rows.
 
-        `raw` (T,H,W) are the episode's rows in time order, `rows` their
-        positions (default 0..T-1, the positions `apply(rows=)` gets for drift).
+        Args:
+            raw: (T,H,W) the episode's rows in time order.
+            fps: the rows' rate (windows in seconds become rows).
+            rows: their positions (default 0..T-1, the positions `apply(rows=)` gets for drift).
+
+        Returns:
+            The baseline: (H,W), or (K,H,W) knots for a knotted baseline.
+
+        Raises:
+            ValueError: zero frames, fps not > 0, or grids of another shape.
         """
         if not self.cfg.per_episode:
             return self.fit_baseline(raw)
@@ -266,11 +190,26 @@ class Normaliser:
         return self.baseline
 
     def baseline_at(self, rows) -> np.ndarray:
-        """(T,H,W) drift baseline at raw row positions `rows` (linear between knots, continued past the ends)."""
+        """The drift baseline at raw row positions (linear between knots, continued past the ends).
+
+        Args:
+            rows: (T,) row positions.
+
+        Returns:
+            (T,H,W) float32 baselines.
+        """
         return drift_baseline_at(self.baseline, self.knot_rows, rows)
 
     def fitted(self) -> dict[str, np.ndarray]:
-        """The per-episode fitted arrays ({} when the config fits nothing): "baseline", "noise_floor"."""
+        """The per-episode fitted arrays, what an episode's calibration record carries.
+
+        Returns:
+            {"baseline", "noise_floor"} (+ "knot_rows" when knotted, "offset" and "gain" with a calibration
+            file); {} when the config fits nothing.
+
+        Raises:
+            RuntimeError: nothing fitted yet.
+        """
         if not self.cfg.fits:
             return {}
         if self.baseline is None:
@@ -283,7 +222,17 @@ class Normaliser:
         return out
 
     def restore(self, fitted: dict[str, np.ndarray]) -> "Normaliser":
-        """Set the arrays `fitted()` returned (an episode's calibration), instead of fitting them."""
+        """Set the arrays `fitted()` returned (an episode's calibration), instead of fitting them.
+
+        Args:
+            fitted: name -> array, as `fitted()` returned them (read back from a dataset).
+
+        Returns:
+            self.
+
+        Raises:
+            DatasetError: an array of the wrong shape, a missing one, or knots and knot rows that disagree.
+        """
         for name, arr in fitted.items():
             arr = np.asarray(arr, dtype=np.float32)
             if name == "knot_rows" or (name == "baseline" and self.cfg.knotted):
@@ -315,8 +264,19 @@ class Normaliser:
         """raw (T,H,W) -> (values (T,H,W) float32, finite_mask (T,) bool).
 
         Finite live taxels of values are in [0,1]; non-finite live taxels are
-        set to NaN and their frame is False in finite_mask. `rows`: the raw
-        rows' positions in the episode (needed by baseline="drift" only).
+        set to NaN and their frame is False in finite_mask.
+
+        Args:
+            raw: (T,H,W) raw grids, a chunk of the episode.
+            rows: the raw rows' positions in the episode (needed by knotted baselines only).
+
+        Returns:
+            (values (T,H,W) float32, finite_mask (T,) bool).
+
+        Raises:
+            ValueError: rows missing or of another length (knotted baselines), grids of another shape, or
+                with clip=false a finite value outside [0,1].
+            RuntimeError: the baseline is not fitted yet.
         """
         arr = self._check(raw)
         if self.cfg.knotted and self.baseline is not None:
@@ -354,3 +314,6 @@ class Normaliser:
         return v.astype(np.float32, copy=False), finite_mask
 
 
+def __getattr__(name: str):
+    """An old name of this module, at its new home (htdata/_moved.py MOVED_NAMES), with a DeprecationWarning."""
+    return moved_name(__name__, name)

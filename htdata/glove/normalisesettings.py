@@ -16,20 +16,29 @@ from pathlib import Path
 from htdata.errors import ConfigError
 from htdata.glove.glovevalue import is_raw_count
 from htdata.glove.layouts import nearest_hint
-from htdata.glove.normalise import NOISE_K_BASELINES, RAW_COUNT_DEFAULTS, NormaliseConfig
+from htdata.glove.normaliseconfig import NOISE_K_BASELINES, RAW_COUNT_DEFAULTS, NormaliseConfig
 
 GLOVE_REST_KEYS = ("baseline", "noise_k", "taxel_calibration")   # the keys a pooled glove rest's table sets
 
 
 def glove_rest_config(path: str | Path) -> NormaliseConfig:
     """The `[normalise.<id>]` table of a glove's pooled rest (htdata.glove.pooledrest): baseline "shift" on the
-    reference file at `path`, the raw-count default's noise_k (it sets GLOVE_REST_KEYS)."""
+    reference file at `path`, the raw-count default's noise_k (it sets GLOVE_REST_KEYS).
+
+    Args:
+        path: the pooled rest's reference file (a taxel calibration).
+
+    Returns:
+        The table, not yet laid over a layout's value block (`NormaliseSettings.normalise_for` does that).
+    """
     return NormaliseConfig(baseline="shift", noise_k=float(RAW_COUNT_DEFAULTS["noise_k"]), taxel_calibration=str(path))
 
 
 @dataclass(frozen=True)
 class NormaliseSettings:
-    """Args:
+    """A pipeline's normalisation settings; `normalise_for(layout)` gives one glove's NormaliseConfig.
+
+    Args:
         name: the pipeline's name (named in calibration origins and errors).
         path: the pipeline file it came from ("" when built in code); relative calibration files resolve beside it.
         normalise: layout id -> its `[normalise.<id>]` table.
@@ -50,7 +59,14 @@ class NormaliseSettings:
 
     def default_note(self, layout) -> str | None:
         """One line when `layout` holds raw counts and has no `[normalise.<id>]` table, so the raw-count default
-        (RAW_COUNT_DEFAULTS) applies to it (None otherwise): the ingest says once per layout what it chose."""
+        (RAW_COUNT_DEFAULTS) applies to it (None otherwise): the ingest says once per layout what it chose.
+
+        Args:
+            layout: a glove.layouts.Layout in use.
+
+        Returns:
+            The note, or None.
+        """
         if layout.layout_id in self.normalise:
             return None
         value = layout.value
@@ -65,12 +81,32 @@ class NormaliseSettings:
                 f"\"The glove's own rest\")")
 
     def with_glove_rests(self, references: dict[str, Path]) -> "NormaliseSettings":
-        """A copy with the pooled glove rest's table (`glove_rest_config`) for each layout id in `references`."""
+        """A copy with the pooled glove rest's table (`glove_rest_config`) for each layout id in `references`.
+
+        Args:
+            references: layout id -> its pooled rest's reference file.
+
+        Returns:
+            The new settings.
+
+        Raises:
+            ConfigError: a layout in `references` has its own `[normalise.<id>]` table (add_glove_rests).
+        """
         normalise, given = add_glove_rests(self.normalise, self.normalise_given, references, self.path or self.name)
         return dataclasses.replace(self, normalise=normalise, normalise_given=given)
 
     def normalise_for(self, layout) -> NormaliseConfig:
-        """The config for `layout` (a glove.layouts.Layout): its `[normalise.<id>]` table over its value block."""
+        """The config for `layout`: its `[normalise.<id>]` table over its value block.
+
+        Args:
+            layout: a glove.layouts.Layout.
+
+        Returns:
+            The checked NormaliseConfig (a taxel calibration file resolved, its sha256 filled in).
+
+        Raises:
+            ConfigError: the taxel calibration file is not found, or the config is invalid (NormaliseConfig.validate).
+        """
         base = NormaliseConfig.from_layout_value(layout.value)
         if layout.layout_id not in self.normalise:
             return base
@@ -101,8 +137,16 @@ class NormaliseSettings:
         A `[normalise.<id>]` table (from the file or `--set normalise.<id>.*`) whose id no recording uses,
         or a `[layouts]` entry for a hand no recording has (`used_hands`; None skips that check), is an
         error naming the ids in use and the nearest one: a typo would otherwise leave the glove on its
-        layout's defaults without a word. Ids in `shared_layouts` are exempt. `why` is appended (e.g. the
-        recordings that could not be planned).
+        layout's defaults without a word. Ids in `shared_layouts` are exempt.
+
+        Args:
+            used_ids: the layout ids the recordings of `scope` use.
+            used_hands: the hands they have (None: not checked).
+            scope: what was planned, named in the message ("source DIR", "dataset DIR version N").
+            why: appended to the message (e.g. the recordings that could not be planned).
+
+        Raises:
+            ConfigError: a table or `[layouts]` entry names nothing in use (all of them, one message).
         """
         shared = set(self.shared_layouts)
         problems = []
@@ -127,7 +171,20 @@ class NormaliseSettings:
 
 def add_glove_rests(normalise: dict, given: dict, references: dict[str, Path], where: str) -> tuple[dict, dict]:
     """(normalise, normalise_given) with the pooled glove rest's table for each layout id in `references`; a layout
-    whose table the pipeline sets is refused (its rest is the table's)."""
+    whose table the pipeline sets is refused (its rest is the table's).
+
+    Args:
+        normalise: layout id -> NormaliseConfig, the pipeline's tables.
+        given: layout id -> the keys each table sets.
+        references: layout id -> its pooled rest's reference file.
+        where: the pipeline, named in the error.
+
+    Returns:
+        New (normalise, given) dicts; the arguments are not changed.
+
+    Raises:
+        ConfigError: a layout in `references` has its own table.
+    """
     normalise, given = dict(normalise), dict(given)
     for lid, path in references.items():
         if lid in normalise:

@@ -24,7 +24,7 @@ from htdata.fileio import write_bytes_atomic
 from htdata.format.table import WORK_DIR
 from htdata.glove.calibration import config_of, episode_normaliser
 from htdata.glove.layouts import Layout
-from htdata.glove.normalise import RAW_COUNT_DEFAULTS
+from htdata.glove.normaliseconfig import RAW_COUNT_DEFAULTS
 from htdata.glove.restreference import rest_reference_bytes
 
 REST_FILE_PREFIX = "glove-rest-"   # DATASET/.work/glove-rest-<layout>-<sha12>.npz

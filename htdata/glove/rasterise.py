@@ -20,8 +20,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from htdata.errors import ArgumentError, ConfigError
-from htdata.format.codec import to_half
-from htdata.format.table import CANVAS
+from htdata.format.canvas import CANVAS
+from htdata.format.tactilecodec import to_half
 from htdata.glove.layouts import Block, CanonicalHand, Layout, load_canonical, load_layout
 
 MODES = ("nearest", "bilinear")

@@ -45,7 +45,7 @@ from typing import Any, Callable, Iterable, Iterator
 
 from htdata.errors import ArgumentError
 from htdata.ingest.encodepool import THREADS_ENV
-from htdata.workers import resolve_workers, usable_cores  # noqa: F401 (usable_cores: its old home, importable here)
+from htdata.workers import resolve_workers, usable_cores
 
 EXECUTORS = ("process", "ray")
 

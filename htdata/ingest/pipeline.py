@@ -50,6 +50,7 @@ import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from htdata._moved import moved_name
 from htdata.errors import ConfigError
 from htdata.format.mapstorage import MapStorage
 from htdata.format.table import CodecSettings
@@ -57,10 +58,10 @@ from htdata.format.tactilesettings import TactileConfig
 from htdata.glove.codecrule import CodecChoice
 from htdata.glove.codecsettings import CodecConfig
 from htdata.glove.layouts import nearest_hint
-from htdata.glove.normalise import NormaliseConfig
+from htdata.glove.normaliseconfig import NormaliseConfig
 from htdata.glove.normalisesettings import NormaliseSettings, add_glove_rests
 from htdata.resources import PIPELINES_DIR, validate_json
-from htdata.settings import apply_settings, parse_setting  # noqa: F401  (parse_setting: an old name of this module)
+from htdata.settings import apply_settings
 from htdata.source.adapters import ADAPTERS
 from htdata.source.adapters.params import check_declared_params
 from htdata.source.rgbsettings import RgbConfig
@@ -321,3 +322,8 @@ def load_pipeline(name_or_path: str | Path) -> PipelineConfig:
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{path}: invalid TOML: {e}") from e
     return PipelineConfig.from_dict(data, where=str(path))
+
+
+def __getattr__(name: str):
+    """An old name of this module, at its new home (htdata/_moved.py MOVED_NAMES), with a DeprecationWarning."""
+    return moved_name(__name__, name)

@@ -28,11 +28,8 @@ from htdata.errors import ArgumentError
 from htdata.fileio import write_bytes_atomic
 from htdata.format.mapstorage import MapStorage
 from htdata.format.table import HANDS, RGB_MEMBER, SIZE_FIELDS
-from htdata.glove.layouts import parse_canonical
-from htdata.inspect.cardplots import (  # noqa: F401 (names of card)
-    _count_label,
-    _label_fingers,
-    _y_ticks,
+from htdata.glove.canonical import parse_canonical
+from htdata.inspect.cardplots import (
     bar_chart,
     histogram_chart,
     region_heatmap,

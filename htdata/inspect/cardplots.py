@@ -11,7 +11,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from htdata.format.table import CANVAS
+from htdata.format.canvas import CANVAS
 from htdata.inspect.preview import BAR_H, draw_colour_bar, region_outline
 
 BG = (255, 255, 255)            # BGR, white plots for a white page

@@ -29,12 +29,14 @@ from functools import cached_property
 import numpy as np
 
 from htdata.errors import DatasetError
-from htdata.format.codec import decode_exr_pixels
-from htdata.format.table import HANDS, JSON_MEMBER, MAP_SHAPE, SIZE_FIELDS, raw_member, tactile_member
+from htdata.format.canvas import MAP_SHAPE
+from htdata.format.table import HANDS, JSON_MEMBER, SIZE_FIELDS, raw_member, tactile_member
+from htdata.format.tactilecodec import decode_exr_pixels
 from htdata.glove.calibration import episode_normaliser
+from htdata.glove.canonical import parse_canonical
 from htdata.glove.contact import OLD_RULE, THRESHOLD, ContactRule, episode_rule
 from htdata.glove.health import TaxelGrid, classify
-from htdata.glove.layouts import CanonicalHand, Layout, parse_canonical, parse_layout
+from htdata.glove.layouts import CanonicalHand, Layout, parse_layout
 from htdata.glove.rasterise import Rasteriser
 from htdata.glove.rawhealth import classify_raw
 from htdata.read.rawstream import paired_row, paired_source_row

@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from htdata.errors import ArgumentError
-from htdata.format.table import CANVAS
+from htdata.format.canvas import CANVAS
 from htdata.glove import health, rawhealth
 from htdata.glove.health import CLASSES
 from htdata.inspect.episodestats import Glove

@@ -39,9 +39,10 @@ import cv2
 import numpy as np
 
 from htdata.errors import ArgumentError
-from htdata.format.table import CANVAS, HANDS, JSON_MEMBER, RGB_MEMBER, SIZE_FIELDS, decode_member
+from htdata.format.canvas import CANVAS
+from htdata.format.table import HANDS, JSON_MEMBER, RGB_MEMBER, SIZE_FIELDS, decode_member
 from htdata.glove.canonical import PART_NAMES
-from htdata.inspect.outline import region_outline  # noqa: F401  (preview.region_outline stays a name of this module)
+from htdata.inspect.outline import region_outline
 from htdata.inspect.stats import default_cache_dir, episode_stats, positive_value_quantile
 from htdata.read.reader import DatasetReader
 

@@ -31,7 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from htdata.errors import ArgumentError, HtdataError
-from htdata.format.table import CANVAS, JSON_MEMBER, RGB_MEMBER, bend_member, raw_member, tactile_member
+from htdata.format.canvas import CANVAS
+from htdata.format.table import JSON_MEMBER, RGB_MEMBER, bend_member, raw_member, tactile_member
 from htdata.inspect.preview import contrast_scale
 from htdata.inspect.viewlayout import (
     ENTITY_EPISODE,

@@ -1,14 +1,16 @@
 """What the torch datasets share: which samples make items, from which version, and what an item carries.
 
-`TactileFrameDataset`, `TactileWindowDataset` and `TactileStream` (htdata/read/torchdata.py) take the
-same keywords (split, part, hands, rgb_float, version, frames, maps_from, members, constants; on_error,
-which only a stream can honour beyond "raise");
-`ItemOptions` holds them, checked once, and the item builder (htdata/read/torchitems.py) reads only it.
-The keywords keep working; `options=` hands one object to several datasets instead:
+`TactileFrameDataset`, `TactileWindowDataset` and `TactileStream` (htdata/read/torchdata.py) take one
+`ItemOptions` as `options=` (its fields are documented once, on the class), checked once; the item
+builder (htdata/read/torchitems.py) reads only it. One object serves several datasets:
 
     opts = ItemOptions(split="main", part="train", members=("tactile",))
     frames = TactileFrameDataset(root, options=opts)
     windows = TactileWindowDataset(root, window=3, options=opts)
+
+The datasets' old keywords (`split=`, `part=`, ...) still work, with a DeprecationWarning, until
+htdata/_moved.py's REMOVED_IN (`keywords_as_options`); `ds.torch.frames(split=..., part=...)`
+(htdata/read/torchviews.py) takes the fields as keywords and builds the object.
 
 No torch here: an options object can be built (and checked) where torch is not installed.
 """
@@ -68,7 +70,11 @@ def check_constants(constants: str) -> str:
 
 @dataclass(frozen=True)
 class ItemOptions:
-    """Args:
+    """Which samples of which version make a torch dataset's items, and what an item carries.
+
+    The one signature of the torch datasets (`options=`); every field is checked when the object is built.
+
+    Args:
         split: the split whose `part` is read (None: every sample).
         part: the part of `split` ("train", "val", ...).
         hands: the hands that make items ("left", "right").
@@ -81,6 +87,9 @@ class ItemOptions:
         constants: "item" (coverage, regions and ids in every item) or "once" (`constants()`, `expand_batch`).
         on_error: a sample that does not read or decode (htdata/read/onerror.py): "raise", "warn" (skip it with
             one warning line naming it) or "skip"; a stream (TactileStream) only: a map-style dataset raises.
+
+    Raises:
+        ArgumentError: a field out of its range (hands, frames, members, constants, on_error).
     """
     split: str | None = None
     part: str | None = None
@@ -114,20 +123,44 @@ def streamed_only(options: ItemOptions, dataset: str) -> ItemOptions:
     return options
 
 
-def item_options(options: ItemOptions | None, **keywords) -> ItemOptions:
-    """A dataset's options: `options` as given, or built from its keywords; ArgumentError for both at once.
+# ItemOptions' fields: the keywords the torch datasets took before `options=` (deprecated there)
+FIELDS = tuple(f.name for f in dataclasses.fields(ItemOptions))
+
+
+def item_options(options: ItemOptions | None) -> ItemOptions:
+    """The options a dataset reads: `options`, or the defaults when None.
 
     Args:
         options: the object passed as `options=` (None: none).
-        **keywords: the dataset's keywords that ItemOptions holds, as the call gave them (defaults included).
+
+    Returns:
+        An ItemOptions.
+
+    Raises:
+        ArgumentError: `options` is neither None nor an ItemOptions.
     """
     if options is None:
-        return ItemOptions(**keywords)
+        return ItemOptions()
     if not isinstance(options, ItemOptions):
         raise ArgumentError(f"options must be an htdata.read.itemoptions.ItemOptions, got {type(options).__name__}")
-    defaults = ItemOptions()
-    given = sorted(k for k, v in keywords.items() if getattr(ItemOptions(**{k: v}), k) != getattr(defaults, k))
-    if given:
-        raise ArgumentError(f"pass either options= or its keywords, not both (also given: {', '.join(given)}); "
-                            f"options.replace({given[0]}=...) changes one")
     return options
+
+
+def keywords_as_options(options: ItemOptions | None, keywords: dict) -> ItemOptions:
+    """A dataset's old keywords (deprecated: htdata/_moved.py `folded_keywords`) as its ItemOptions.
+
+    Args:
+        options: the object the call also passed as `options=` (None: none).
+        keywords: the ItemOptions fields the call gave as keywords.
+
+    Returns:
+        ItemOptions(**keywords).
+
+    Raises:
+        ArgumentError: both `options=` and keywords were given.
+    """
+    if options is not None:
+        given = ", ".join(sorted(keywords))
+        raise ArgumentError(f"pass either options= or its keywords, not both (also given: {given}); "
+                            f"options.replace({sorted(keywords)[0]}=...) changes one")
+    return ItemOptions(**keywords)

@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from htdata.errors import ArgumentError, DatasetError
-from htdata.format.codec import check_served_maps
 from htdata.format.mapstorage import EXACT_RASTER, MapStorage
 from htdata.format.table import JSON_MEMBER, MANIFEST_FILE, decode_member, raw_member
+from htdata.format.tactilecodec import check_served_maps
 from htdata.glove.calibration import episode_normaliser, refuse_mismatched
 from htdata.glove.layouts import load_layout
 from htdata.glove.rasterise import Rasteriser

@@ -30,6 +30,7 @@ import os
 from collections import OrderedDict
 from collections.abc import Iterator
 
+from htdata._moved import moved_name
 from htdata.errors import ArgumentError, DatasetError
 from htdata.format.mapstorage import MapStorage
 from htdata.format.shardio import BLOCK, describe_header, header_matches, sample_key
@@ -47,10 +48,9 @@ from htdata.format.table import (
 from htdata.read.metadata import DatasetMetadata, OutOfRange, collected_guard
 from htdata.read.onerror import READ_ERRORS, SkipPolicy
 from htdata.read.rawstream import RawMapRenderer, check_records
-from htdata.read.samplerow import SampleRow, member_layout  # noqa: F401 (member_layout: a name here)
+from htdata.read.samplerow import SampleRow, member_layout
 from htdata.store import storage
 from htdata.store.confine import inside
-from htdata.store.splitfiles import SplitRejected  # noqa: F401 (its old home: importable from here)
 
 MAX_OPEN_SHARDS = 128   # an LRU of open shard files; one-episode units make many small shards
 _SIZE_POS = tuple(INDEX_DTYPE.names.index(SIZE_FIELDS[s]) for s in MEMBER_ORDER)
@@ -385,3 +385,8 @@ class DatasetReader:
                     raise
                 continue
             yield i, out
+
+
+def __getattr__(name: str):
+    """An old name of this module, at its new home (htdata/_moved.py MOVED_NAMES), with a DeprecationWarning."""
+    return moved_name(__name__, name)

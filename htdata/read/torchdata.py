@@ -7,6 +7,9 @@
 - TactileStream: IterableDataset reading shards front to back; shards are
   split across DataLoader workers and DDP ranks deterministically.
 
+Every dataset takes one `options=ItemOptions(...)` (htdata/read/itemoptions.py: its fields, documented
+there once, below as `field=`); the old keywords warn until htdata/_moved.py's REMOVED_IN.
+
 Which samples: `frames="paired"` (default) = samples with the hand's map AND
 an RGB frame, what the HandTouch stages train on; `frames="tactile"` adds
 the tactile-only samples of glove-only recordings (e.g. for stage-1
@@ -30,7 +33,7 @@ map; `constants="once"` (frame datasets and streams) ships per-layout
 constants once (`dataset.constants()`, rebuilt on the device by
 `expand_batch`) and packs the ids into one `ids` tensor.
 
-Every dataset takes `version=N` to read a committed older version (default:
+Every dataset's options take `version=N` to read a committed older version (default:
 the current one). Each dataset holds a DatasetReader whose file handles open lazily per
 process, so DataLoader workers (fork or spawn) each open their own files.
 Item tensors: tactile (1,224,224) f32, coverage (1,224,224) f32, regions
@@ -52,20 +55,23 @@ except ModuleNotFoundError as exc:   # the data core installs without torch
     raise ModuleNotFoundError(f"{__name__} needs torch: pip install 'htdata[torch]' (torch==2.13.0)") from exc
 from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
-from htdata._moved import renamed_keyword
+from htdata._moved import folded_keywords, moved_name, renamed_keyword
 from htdata.errors import ArgumentError
+from htdata.format.canvas import CANVAS
 from htdata.format.mapstorage import hand_present, has_hand
-from htdata.format.table import CANVAS, HANDS, RGB_MEMBER, SIZE_FIELDS
+from htdata.format.table import HANDS, RGB_MEMBER, SIZE_FIELDS
 from htdata.read import keys
-from htdata.read.itemoptions import FRAME_KINDS, ItemOptions, item_options, streamed_only  # noqa: F401 (FRAME_KINDS: a name here)
+from htdata.read.itemoptions import FIELDS, ItemOptions, item_options, keywords_as_options, streamed_only
 from htdata.read.onerror import READ_ERRORS, SkipPolicy
 from htdata.read.rawstream import MAP_SOURCE_WORDS
 from htdata.read.reader import DatasetReader
-from htdata.read.torchitems import MEMBERS, ItemBuilder, ItemConstants, expand_batch  # noqa: F401  (names of this module)
-
-_ItemBuilder = ItemBuilder   # the name older code imports
+from htdata.read.torchitems import ItemBuilder, ItemConstants
 
 HAND_NAMES = HANDS   # hand id -> name (HAND_IDS inverted: left=0, right=1)
+# The datasets' signatures before `options=` (their keywords warn until htdata/_moved.py's REMOVED_IN)
+_OLD_FRAME_ARGS = ("split", "part", "hands", "rgb_float", "version", "frames", "maps_from", "members", "constants")
+_OLD_WINDOW_ARGS = _OLD_FRAME_ARGS[:-1]
+_OLD_STREAM_ARGS = _OLD_FRAME_ARGS[:4] + ("shuffle_seed",) + _OLD_FRAME_ARGS[4:] + ("on_error",)
 
 
 def _tactile_present(rows: np.ndarray, hand: str, frames: str = "paired") -> np.ndarray:
@@ -107,13 +113,13 @@ def _explain_no_pairs(reader: DatasetReader, rows: np.ndarray, hands: tuple[str,
     if tactile:
         raise ArgumentError(f"{reader.root}: none of the {len(rows)} selected samples pairs an RGB frame with "
                             f"{'/'.join(hands)} tactile ({tactile} hand frames have tactile only: a glove-only "
-                            f"dataset?); pass frames=\"tactile\" for tactile-only items")
+                            f"dataset?); pass options=ItemOptions(frames=\"tactile\") for tactile-only items")
 
 
 class _ItemDataset(Dataset):
-    """Map-style dataset over `self.items` rows, built by an `_ItemBuilder`."""
+    """Map-style dataset over `self.items` rows, built by an `ItemBuilder`."""
 
-    _builder: "_ItemBuilder"
+    _builder: ItemBuilder
     items: np.ndarray
 
     @property
@@ -134,27 +140,18 @@ class TactileFrameDataset(_ItemDataset):
 
     Args:
         root: the dataset folder or URL.
-        split: the split whose `part` is read (None: every sample).
-        part: the part of `split` ("train", "val", ...).
-        hands: the hands that make items ("left", "right").
-        rgb_float: RGB as float32 in [0,1] instead of uint8.
-        version: the committed version to read (None: the current one).
-        frames: "paired" (samples with the hand's map and an RGB frame) or "tactile" (+ tactile-only).
-        maps_from: "best", "stored" or "raw": where maps come from (module docstring; old name `map_source`).
-        members: what an item carries: a subset of ("tactile", "rgb").
-        constants: "item" (coverage, regions and ids in every item) or "once" (`constants()`, `expand_batch`).
-        options: all of the above in one htdata.read.itemoptions.ItemOptions (instead of the keywords).
+        options: which samples, which version, what an item carries (htdata.read.itemoptions.ItemOptions;
+            None: its defaults). Its `on_error` must be "raise".
+
+    Raises:
+        ArgumentError: `options` is not an ItemOptions or asks to skip samples; no sample selected pairs
+            an RGB frame with a map under frames="paired" while tactile-only ones exist.
     """
 
     @renamed_keyword("map_source", "maps_from", MAP_SOURCE_WORDS)
-    def __init__(self, root, split: str | None = None, part: str | None = None,
-                 hands=HANDS, rgb_float: bool = False, version: int | None = None, frames: str = "paired",
-                 maps_from: str = "best", members=MEMBERS, constants: str = "item", *,
-                 options: ItemOptions | None = None):
-        o = self.options = item_options(options, split=split, part=part, hands=hands, rgb_float=rgb_float,
-                                        version=version, frames=frames, maps_from=maps_from, members=members,
-                                        constants=constants)
-        streamed_only(o, "TactileFrameDataset")
+    @folded_keywords("options", keywords_as_options, FIELDS, _OLD_FRAME_ARGS)
+    def __init__(self, root, *, options: ItemOptions | None = None):
+        o = self.options = streamed_only(item_options(options), "TactileFrameDataset")
         self.hands = o.hands
         self._builder = ItemBuilder(root, o)
         reader = self._builder.reader
@@ -174,26 +171,20 @@ class TactileWindowDataset(_ItemDataset):
     Args:
         root: the dataset folder or URL.
         window: frames per item (>= 1), consecutive samples of one episode ending at frame T.
-        split: the split whose `part` is read (None: every sample).
-        part: the part of `split` ("train", "val", ...).
-        hands: the hands that make items ("left", "right").
-        rgb_float: RGB as float32 in [0,1] instead of uint8.
-        version: the committed version to read (None: the current one).
-        frames: "paired" (samples with the hand's map and an RGB frame) or "tactile" (+ tactile-only).
-        maps_from: "best", "stored" or "raw": where maps come from (module docstring; old name `map_source`).
-        members: what an item carries: a subset of ("tactile", "rgb").
-        options: all of the above in one htdata.read.itemoptions.ItemOptions (instead of the keywords);
-            its `constants` must be "item" (a window carries its constants).
+        options: which samples, which version, what an item carries (htdata.read.itemoptions.ItemOptions;
+            None: its defaults). Its `constants` must be "item" (a window carries its constants), its
+            `on_error` "raise".
+
+    Raises:
+        ArgumentError: `window` < 1; `options` is not an ItemOptions, or its constants / on_error as above.
     """
 
     @renamed_keyword("map_source", "maps_from", MAP_SOURCE_WORDS)
-    def __init__(self, root, window: int = 3, split: str | None = None, part: str | None = None,
-                 hands=HANDS, rgb_float: bool = False, version: int | None = None, frames: str = "paired",
-                 maps_from: str = "best", members=MEMBERS, *, options: ItemOptions | None = None):
+    @folded_keywords("options", keywords_as_options, FIELDS, _OLD_WINDOW_ARGS)
+    def __init__(self, root, window: int = 3, *, options: ItemOptions | None = None):
         if window < 1:
             raise ArgumentError(f"window must be >= 1, got {window}")
-        o = self.options = item_options(options, split=split, part=part, hands=hands, rgb_float=rgb_float,
-                                        version=version, frames=frames, maps_from=maps_from, members=members)
+        o = self.options = item_options(options)
         if o.constants != "item":
             raise ArgumentError(f"TactileWindowDataset items carry their constants: options.constants must be "
                                 f"'item', got {o.constants!r}")
@@ -264,31 +255,18 @@ class TactileStream(IterableDataset):
 
     Args:
         root: the dataset folder or URL.
-        split: the split whose `part` is read (None: every sample).
-        part: the part of `split` ("train", "val", ...).
-        hands: the hands that make items ("left", "right").
-        rgb_float: RGB as float32 in [0,1] instead of uint8.
+        options: which samples, which version, what an item carries (htdata.read.itemoptions.ItemOptions;
+            None: its defaults); with `on_error` "warn" or "skip" a shard that does not open is skipped whole.
         shuffle_seed: permute the shard order per epoch with this seed (None: file order).
-        version: the committed version to read (None: the current one).
-        frames: "paired" (samples with the hand's map and an RGB frame) or "tactile" (+ tactile-only).
-        maps_from: "best", "stored" or "raw": where maps come from (module docstring; old name `map_source`).
-        members: what an item carries: a subset of ("tactile", "rgb").
-        constants: "item" (coverage, regions and ids in every item) or "once" (`constants()`, `expand_batch`).
-        on_error: a sample that does not read or decode (htdata/read/onerror.py): "raise" (default), "warn"
-            (skip it with one warning line naming it) or "skip"; a shard that does not open is skipped whole.
-        options: all of the above but `shuffle_seed` in one htdata.read.itemoptions.ItemOptions (instead of
-            the keywords).
+
+    Raises:
+        ArgumentError: `options` is not an ItemOptions.
     """
 
     @renamed_keyword("map_source", "maps_from", MAP_SOURCE_WORDS)
-    def __init__(self, root, split: str | None = None, part: str | None = None,
-                 hands=HANDS, rgb_float: bool = False,
-                 shuffle_seed: int | None = None, version: int | None = None, frames: str = "paired",
-                 maps_from: str = "best", members=MEMBERS, constants: str = "item", on_error: str = "raise", *,
-                 options: ItemOptions | None = None):
-        o = self.options = item_options(options, split=split, part=part, hands=hands, rgb_float=rgb_float,
-                                        version=version, frames=frames, maps_from=maps_from, members=members,
-                                        constants=constants, on_error=on_error)
+    @folded_keywords("options", keywords_as_options, FIELDS, _OLD_STREAM_ARGS)
+    def __init__(self, root, *, options: ItemOptions | None = None, shuffle_seed: int | None = None):
+        o = self.options = item_options(options)
         self.hands = o.hands
         self.frames = o.frames
         self._builder = ItemBuilder(root, o)
@@ -364,3 +342,8 @@ class TactileStream(IterableDataset):
             for k, hand in enumerate(hands):
                 yield builder.put_members(builder.ids(row, index, hand), None if maps[k] is None else maps[k][None],
                                           None if rgb is None else rgb[k])
+
+
+def __getattr__(name: str):
+    """An old name of this module, at its new home (htdata/_moved.py MOVED_NAMES), with a DeprecationWarning."""
+    return moved_name(__name__, name)

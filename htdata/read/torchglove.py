@@ -27,8 +27,8 @@ except ModuleNotFoundError as exc:   # the data core installs without torch
     raise ModuleNotFoundError(f"{__name__} needs torch: pip install 'htdata[torch]' (torch==2.13.0)") from exc
 
 from htdata.errors import ArgumentError
-from htdata.format.codec import check_served_maps
 from htdata.format.table import HANDS, JSON_MEMBER, SIZE_FIELDS, decode_member, raw_member
+from htdata.format.tactilecodec import check_served_maps
 from htdata.read import keys
 from htdata.read.itemoptions import ItemOptions
 from htdata.read.keys import HAND_IDS

@@ -31,9 +31,10 @@ try:
 except ModuleNotFoundError as exc:   # the data core installs without torch
     raise ModuleNotFoundError(f"{__name__} needs torch: pip install 'htdata[torch]' (torch==2.13.0)") from exc
 
-from htdata.format.table import CANVAS, JSON_MEMBER, MEMBER_ORDER, RGB_MEMBER, decode_member, raw_member, tactile_member
+from htdata.format.canvas import CANVAS
+from htdata.format.table import JSON_MEMBER, MEMBER_ORDER, RGB_MEMBER, decode_member, raw_member, tactile_member
 from htdata.read import keys
-from htdata.read.itemoptions import CONSTANTS, MEMBERS, ItemOptions, check_constants, check_members  # noqa: F401
+from htdata.read.itemoptions import ItemOptions
 from htdata.read.keys import HAND_IDS
 from htdata.read.rawstream import MapServing, RawMapRenderer
 from htdata.read.reader import DatasetReader, SampleRow

@@ -4,9 +4,9 @@
     train = ds.torch.frames(split="main", part="train")      # TactileFrameDataset
     clips = ds.torch.windows(window=3, split="main", part="train")
 
-Each method builds the dataset for the reader's own root and version and
-passes every other keyword on (see htdata/read/torchdata.py and torchglove.py);
-an `options=` object (htdata/read/itemoptions.py) gets the reader's version.
+Each method builds the dataset for the reader's own root and version: the keywords that are
+ItemOptions' fields (htdata/read/itemoptions.py) become its `options=`, or an `options=` object
+given gets the reader's version; the rest go on as they are (htdata/read/torchdata.py, torchglove.py).
 
 Imports inside functions: torch is an optional extra (`pip install 'htdata[torch]'`),
 so the torch datasets are imported when one is asked for, never when a reader opens.
@@ -14,6 +14,7 @@ so the torch datasets are imported when one is asked for, never when a reader op
 
 from __future__ import annotations
 
+from htdata.read.itemoptions import FIELDS, item_options, keywords_as_options
 from htdata.read.reader import DatasetReader
 
 
@@ -52,13 +53,25 @@ class TorchDatasets:
         self.version = version
 
     def _versioned(self, kwargs: dict) -> dict:
-        """`kwargs` reading this version: as `version=`, or inside the `options=` object when one is given."""
+        """`kwargs` with their ItemOptions fields as one `options=` object reading this version.
+
+        Args:
+            kwargs: a method's keywords: ItemOptions fields, or `options=`, and the dataset's own.
+
+        Returns:
+            The keywords for the dataset: `options=` and its own.
+
+        Raises:
+            TypeError: `version=` given (the view reads its own version).
+            ArgumentError: fields and `options=` together, or an `options=` that is not an ItemOptions.
+        """
         if "version" in kwargs:
             raise TypeError(f"got multiple values for keyword argument 'version' (this view reads version "
                             f"{self.version}: open the dataset at the version wanted)")
-        if kwargs.get("options") is not None:
-            return {**kwargs, "options": kwargs["options"].replace(version=self.version)}
-        return {**kwargs, "version": self.version}
+        fields = {k: kwargs.pop(k) for k in FIELDS if k in kwargs}
+        options = kwargs.pop("options", None)
+        options = keywords_as_options(options, fields) if fields else item_options(options)
+        return {**kwargs, "options": options.replace(version=self.version)}
 
     def frames(self, **kwargs):
         """TactileFrameDataset: one item per (frame, hand present).

@@ -44,10 +44,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from htdata._moved import moved_name
 from htdata.glove.layouts import load_layout
 from htdata.glove.normalise import Normaliser
 from htdata.glove.normalisesettings import NormaliseSettings
-from htdata.source.syncsettings import LAG_MODES, SyncConfig  # noqa: F401  (LAG_MODES: a name of this module)
+from htdata.source.syncsettings import SyncConfig
 
 THUMB = 32                  # grey thumbnails THUMB x THUMB
 COMPONENTS = 16             # principal components of the thumbnails used to find look-alikes
@@ -326,3 +327,8 @@ def episode_lag(ref, adapter, params: dict, normalising: NormaliseSettings, sync
                            f"min_confidence {sync.min_confidence:g}", est)
     return LagDecision("estimate", int(est.lag_ns), True,
                        f"applied: confidence {est.confidence:.2f} >= min_confidence {sync.min_confidence:g}", est)
+
+
+def __getattr__(name: str):
+    """An old name of this module, at its new home (htdata/_moved.py MOVED_NAMES), with a DeprecationWarning."""
+    return moved_name(__name__, name)

@@ -53,19 +53,45 @@ class Snapshot:
         return self.manifest.get("version")
 
     def parts(self) -> list[Part]:
+        """The version's work units as Parts (htdata/store/parts.py), what a writer carries or re-packs.
+
+        Returns:
+            One Part per unit, in shard order.
+        """
         return parts_of_version(self.manifest, self.episodes, self.index)
 
     def episode_ids(self) -> list[str]:
+        """The version's episode ids.
+
+        Returns:
+            The ids, in the version's episode order.
+        """
         return [e["episode_id"] for e in self.episodes]
 
     def next_unit(self) -> int:
-        """First work-unit number no version of this dataset has used (shard names stay unique)."""
+        """First work-unit number no version of this dataset has used (shard names stay unique).
+
+        Returns:
+            The larger of the manifest's `next_unit` and one past its highest shard's unit.
+        """
         used = [unit_of_shard(s["name"]) for s in self.manifest["shards"]]
         return max([int(self.manifest.get("next_unit", 0))] + [u + 1 for u in used])
 
 
 def open_snapshot(root: str | os.PathLike, version: int | None = None) -> Snapshot:
-    """The current version (or `version`) of the committed dataset at `root`."""
+    """The current version (or `version`) of the committed dataset at `root`.
+
+    Args:
+        root: the dataset root, a local path or an fsspec URL.
+        version: the version to open (None: the current one).
+
+    Returns:
+        Its Snapshot (the index memory-mapped).
+
+    Raises:
+        FileNotFoundError: no such version (or no dataset) at `root`.
+        ValueError: a manifest, episode file or index that does not read (DatasetStateError, DatasetError).
+    """
     manifest = load_manifest(root, version=version)
     return Snapshot(root=Path(root), manifest=manifest, episodes=load_episodes(root, manifest),
                     index=load_index(root, mmap=True, manifest=manifest))
@@ -76,6 +102,12 @@ def current_snapshot(root: str | os.PathLike) -> Snapshot | None:
 
     A folder with committed version files is a dataset even when dataset.json
     is missing or damaged (the pointer is a cache of the newest version file).
+
+    Args:
+        root: the dataset root, a local path or an fsspec URL.
+
+    Returns:
+        The current version's Snapshot, or None.
     """
 
     if current_version(root) is None and not storage.exists(storage.join(root, MANIFEST_FILE)):
@@ -99,14 +131,32 @@ def _check_shards_on_disk(root: Path, shards: list[dict]) -> None:
 def commit_parts(root: str | os.PathLike, parts: list[Part], fields: dict, parent: Snapshot | None,
                  command: str, splits: SplitMaker | None = None, next_unit: int | None = None,
                  created: str | None = None, htdata_version: str | None = None) -> dict:
-    """Write a new version made of `parts`; returns its manifest.
+    """Write a new version made of `parts`; returns its manifest. Only write/ calls it (NewVersion), holding
+    the writer lock.
 
-    `fields` holds sources / layouts / canonical / codec (missing ones come
-    from the parent) and "calibrations" (new ones; the parent's are kept for
-    the episodes that still name them, htdata.glove.calibration.merge_calibrations). `splits(episodes, episodes_sha256)` returns the new
-    version's split files (name -> bytes); by default the parent's splits are
-    carried over (htdata.curate.splitversions.py). `next_unit` = first unit number
-    free after this version.
+    Args:
+        root: the dataset root (local).
+        parts: the new version's work units, carried or new, in order.
+        fields: sources / layouts / canonical / codec (missing ones: the parent's) and new "calibrations" (the
+            parent's are kept for the episodes that still name them, glove.calibration.merge_calibrations).
+        parent: the version this one is built on (None: the first).
+        command: the command line, kept in the version's change record.
+        splits: `splits(episodes, episodes_sha256)` -> {name: split file bytes} (None: the parent's, carried:
+            htdata/curate/splitversions.py).
+        next_unit: the first unit number free after this version (at least past every listed shard).
+        created: the version's time (None: now, UTC).
+        htdata_version: the writer's version string (None: this htdata's).
+
+    Returns:
+        The committed manifest (as versions/vN.json holds it).
+
+    Raises:
+        FileNotFoundError: a listed shard is missing.
+        DatasetError: a listed shard's size differs from its record.
+        ValueError: an episode names a layout or calibration not provided; a record or the manifest
+            does not match its schema.
+        RuntimeError: the parent is no longer the current version (store/versions.write_version).
+        FileExistsError: the version file exists already.
     """
     root = Path(root)
     built = assemble(parts)

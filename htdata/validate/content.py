@@ -15,23 +15,16 @@ from pathlib import Path
 
 import numpy as np
 
+from htdata.format.canvas import CANVAS, MAP_SHAPE
+
 # Maps are checked as stored (half or float pixels, before conversion): decode_exr_pixels; every other
 # member decodes through the member table like every reader.
-from htdata.format.codec import decode_exr_pixels, decode_png_u8
+from htdata.format.codec import decode_png_u8
 from htdata.format.imageheader import DeclaredShapeError
-from htdata.format.table import (
-    CANVAS,
-    HANDS,
-    JSON_MEMBER,
-    MAP_SHAPE,
-    RGB_MEMBER,
-    bend_member,
-    decode_member,
-    raw_member,
-    tactile_member,
-)
+from htdata.format.table import HANDS, JSON_MEMBER, RGB_MEMBER, bend_member, decode_member, raw_member, tactile_member
+from htdata.format.tactilecodec import decode_exr_pixels
 from htdata.store.confine import inside
-from htdata.validate.geometry import CoverageGeometry, coverage_geometries, coverage_geometry  # noqa: F401
+from htdata.validate.geometry import CoverageGeometry
 from htdata.validate.report import Check, Recorder
 from htdata.validate.sensors import accumulate, hand_key
 

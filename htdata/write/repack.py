@@ -39,9 +39,27 @@ class KeptEpisode:
 class SampleRewrite(Protocol):
     """Changes some episodes' members while re-packing (htdata.curate.renormalise.Recalibration)."""
 
-    def members(self, episode_id: str, frame: int, members: dict[str, bytes]) -> dict[str, bytes]: ...
+    def members(self, episode_id: str, frame: int, members: dict[str, bytes]) -> dict[str, bytes]:
+        """One sample's members as they go into the new shard.
 
-    def record(self, record: dict) -> dict: ...
+        Args:
+            episode_id: the sample's episode.
+            frame: its frame number in the parent (before a trim renumbers it).
+            members: suffix -> encoded bytes, as read (json already renumbered).
+
+        Returns:
+            The members to write (the same dict when this episode is not changed).
+        """
+
+    def record(self, record: dict) -> dict:
+        """One episode's record as the new version lists it.
+
+        Args:
+            record: the episode record after the copy (num_frames, taxel digests set).
+
+        Returns:
+            The record to list.
+        """
 
 
 def clear_uncommitted(root: Path, next_unit: int) -> list[str]:
@@ -50,13 +68,28 @@ def clear_uncommitted(root: Path, next_unit: int) -> list[str]:
     New units of this write then take the same numbers a run that never
     crashed would, so a re-run gives the same dataset. The caller holds the
     writer lock (no other writer can be making them right now).
+
+    Args:
+        root: the dataset root (local).
+        next_unit: the parent's next free unit number (Snapshot.next_unit).
+
+    Returns:
+        The names of the files deleted.
     """
     return _clear_units(root, lambda unit: unit >= next_unit)
 
 
 def clear_unit(root: Path, unit: int) -> list[str]:
     """Delete the shard files (temp ones too) of one unit no version lists: a unit is written whole, never
-    on top of an earlier try's shards. The caller holds the writer lock."""
+    on top of an earlier try's shards. The caller holds the writer lock.
+
+    Args:
+        root: the dataset root (local).
+        unit: the unit about to be (re)written.
+
+    Returns:
+        The names of the files deleted.
+    """
     return _clear_units(root, lambda u: u == unit)
 
 
@@ -75,7 +108,22 @@ def repack_unit(reader: DatasetReader, kept: list[KeptEpisode], unit: int, sampl
     """Write `kept` episodes' samples (read through `reader`) into unit `unit`'s shards.
 
     The shards go to the reader's dataset, or to `out_root`'s (merge writes B's samples into OUT).
-    `rewrite`, when given, sees every sample's members and every episode record on the way.
+    Members are copied as stored; a trimmed episode's json is renumbered and its taxel digests re-derived.
+
+    Args:
+        reader: the parent version the samples are read from.
+        kept: the episodes to copy, each with the frames kept, in order.
+        unit: the new unit number (its shards must not exist: clear_unit first).
+        samples_per_shard: samples per new shard (samples_per_shard_of the part re-packed).
+        out_root: the dataset the shards go to (None: the reader's).
+        rewrite: changes members and records on the way (None: a byte-for-byte copy).
+
+    Returns:
+        The new Part: its shards, samples and episode records.
+
+    Raises:
+        ValueError: a kept frame outside its episode.
+        FileExistsError: a shard of `unit` already exists (shardio.ShardWriter).
     """
     out_dir = Path(out_root if out_root is not None else reader.root) / SHARDS_DIR
     records = []
@@ -108,7 +156,12 @@ def repack_unit(reader: DatasetReader, kept: list[KeptEpisode], unit: int, sampl
 
 
 class TaxelRecount:
-    """The taxel digests of a trimmed episode's kept frames, from their raw rows under its calibration."""
+    """The taxel digests of a trimmed episode's kept frames, from their raw rows under its calibration.
+
+    Args:
+        reader: the parent version (the episode's calibration and layouts).
+        episode_id: the trimmed episode; its record has `taxels_sha256`.
+    """
 
     def __init__(self, reader: DatasetReader, episode_id: str):
         self.renderer, self.pos = RawMapRenderer(reader), reader.episode_position(episode_id)
@@ -116,6 +169,11 @@ class TaxelRecount:
         self.live: dict[str, list] = {h: [] for h in reader.episodes[self.pos]["taxels_sha256"]}
 
     def add(self, members: dict[str, bytes]) -> None:
+        """Count one kept sample's taxels.
+
+        Args:
+            members: the sample's members (its raw rows, where stored).
+        """
         for hand, blocks in self.live.items():
             if raw_member(hand) in members:
                 normaliser, _ = self.renderer.parts_for(self.pos, hand)
@@ -123,12 +181,26 @@ class TaxelRecount:
                 blocks.append(values[:, normaliser.live_mask])
 
     def finish(self, record: dict) -> dict:
-        """The record with the kept frames' digests (none where no raw rows are stored to derive them)."""
+        """The record with the kept frames' digests (none where no raw rows are stored to derive them).
+
+        Args:
+            record: the episode record as copied.
+
+        Returns:
+            A new record whose `taxels_sha256` covers only the kept frames (left out when none were counted).
+        """
         digests = {h: taxel_digest(b) for h, b in self.live.items() if b}
         record = {k: v for k, v in record.items() if k != "taxels_sha256"}
         return {**record, "taxels_sha256": digests} if digests else record
 
 
 def samples_per_shard_of(part: Part) -> int:
-    """Shard size to re-pack a part with: its largest shard's sample count (at least 1)."""
+    """Shard size to re-pack a part with: its largest shard's sample count (at least 1).
+
+    Args:
+        part: the parent's part being re-packed.
+
+    Returns:
+        The samples per shard for its new unit.
+    """
     return max([1] + [int(s["samples"]) for s in part.shards])

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from htdata.benchmarks.maplayouts import BYTES_BUDGET, TIE, layout_rows, pick_layout, variants
-from htdata.format.codec import decode_exr
+from htdata.format.tactilecodec import decode_exr
 
 pytest.importorskip("OpenImageIO")
 

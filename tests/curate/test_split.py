@@ -11,6 +11,7 @@ import pytest
 from htdata.cli import main as cli_main
 from htdata.curate import split as sp
 from htdata.resources import validate_json
+from htdata.store import splitrule
 
 
 def _episodes(spec: dict[str, int], prefix: str = "ep", frames: int = 10, start: int = 0) -> list[dict]:
@@ -43,10 +44,10 @@ def _config(**kw) -> sp.SplitConfig:
 
 
 def test_episode_uniform_is_seeded_and_in_unit_interval():
-    us = [sp.episode_uniform(0, f"e{i}") for i in range(2000)]
+    us = [splitrule.episode_uniform(0, f"e{i}") for i in range(2000)]
     assert all(0.0 <= u < 1.0 for u in us)
-    assert sp.episode_uniform(0, "e1") == sp.episode_uniform(0, "e1")
-    assert sp.episode_uniform(0, "e1") != sp.episode_uniform(1, "e1")
+    assert splitrule.episode_uniform(0, "e1") == splitrule.episode_uniform(0, "e1")
+    assert splitrule.episode_uniform(0, "e1") != splitrule.episode_uniform(1, "e1")
     # roughly uniform: each decile holds 10% +- 3%
     counts = [sum(int(u * 10) == d for u in us) for d in range(10)]
     assert all(140 <= c <= 260 for c in counts), counts
@@ -102,7 +103,7 @@ def test_updating_a_split_never_moves_an_existing_episode_and_fills_each_task_sh
             assert abs(after["tasks"][task]["test"]["episodes"] - fresh["tasks"][task]["test"]["episodes"]) <= 1
         # a task's test episodes are its smallest-u ones (from scratch)
         for task in ("grasp", "wipe", "lift"):
-            us = sorted((sp.episode_uniform(seed, e["episode_id"]), _parts(fresh)[e["episode_id"]])
+            us = sorted((splitrule.episode_uniform(seed, e["episode_id"]), _parts(fresh)[e["episode_id"]])
                         for e in more if e["task"] == task)
             parts = [p for _, p in us]
             assert parts == sorted(parts, key=lambda p: p != "test")
@@ -131,17 +132,17 @@ def test_every_task_keeps_train_and_test_and_the_total_stays_near_the_ratio():
 
 
 def test_test_counts_shares_the_aim_by_largest_remainder_within_bounds():
-    assert sp.test_counts({"a": 10, "b": 10, "c": 10}, 0.1) == {"a": 1, "b": 1, "c": 1}
-    assert sp.test_counts({"a": 25, "b": 5}, 0.2) == {"a": 5, "b": 1}
-    assert sp.test_counts({"a": 3, "b": 1}, 0.999) == {"a": 2, "b": 0}   # a task keeps a train episode
-    assert sp.test_counts({"a": 2, "b": 2, "c": 2}, 0.01) == {"a": 1, "b": 1, "c": 1}
-    assert sum(sp.test_counts({f"t{i}": 7 + i for i in range(9)}, 0.25).values()) == round(0.25 * 99)
+    assert splitrule.test_counts({"a": 10, "b": 10, "c": 10}, 0.1) == {"a": 1, "b": 1, "c": 1}
+    assert splitrule.test_counts({"a": 25, "b": 5}, 0.2) == {"a": 5, "b": 1}
+    assert splitrule.test_counts({"a": 3, "b": 1}, 0.999) == {"a": 2, "b": 0}   # a task keeps a train episode
+    assert splitrule.test_counts({"a": 2, "b": 2, "c": 2}, 0.01) == {"a": 1, "b": 1, "c": 1}
+    assert sum(splitrule.test_counts({f"t{i}": 7 + i for i in range(9)}, 0.25).values()) == round(0.25 * 99)
 
 
 def test_all_below_threshold_keeps_the_largest_u_in_train():
     eps = _episodes({"pour": 1, "grasp": 3})
     doc = sp.build_split(eps, _config(test_ratio=0.999), "0" * 64)
-    grasp = sorted((sp.episode_uniform(0, e["episode_id"]), e["episode_id"])
+    grasp = sorted((splitrule.episode_uniform(0, e["episode_id"]), e["episode_id"])
                    for e in eps if e["task"] == "grasp")
     assert doc["parts"]["train"]["episodes"] == [grasp[-1][1]]
 

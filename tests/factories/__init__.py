@@ -36,9 +36,11 @@ import cv2
 import h5py
 import numpy as np
 
-from htdata.format.codec import DEFAULT_CODEC_INFO, encode_rgb, encode_tactile
+from htdata.format.canvas import CANVAS
+from htdata.format.codec import DEFAULT_CODEC_INFO, encode_rgb
 from htdata.format.shardio import ShardWriter, sample_key
-from htdata.format.table import CANVAS, MANIFEST_FILE
+from htdata.format.table import MANIFEST_FILE
+from htdata.format.tactilecodec import encode_tactile
 from htdata.resources import PIPELINES_DIR
 from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, UnitResult, write_layout_files
 from htdata.store.parts import part_from_unit

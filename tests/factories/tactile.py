@@ -19,8 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from htdata.format.codec import DEFAULT_CODEC_INFO, encode_exr, encode_rgb, encode_tactile
+from htdata.format.codec import DEFAULT_CODEC_INFO, encode_rgb
 from htdata.format.shardio import ShardWriter, sample_key
+from htdata.format.tactilecodec import encode_exr, encode_tactile
 from htdata.glove.layouts import load_canonical, load_layout
 from htdata.glove.rasterise import Rasteriser
 from htdata.store.manifest import CanonicalArtifact, LayoutArtifact, UnitResult

@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from htdata.benchmarks.codecs import TACTILE_CODECS, codec_benchmark
-from htdata.format.codec import check_tactile_values, decode_rgb, decode_tactile, encode_rgb, encode_tactile
+from htdata.format.codec import decode_rgb, encode_rgb
+from htdata.format.tactilecodec import check_tactile_values, decode_tactile, encode_tactile
 
 HALF_MAX_ERR = 2.5e-4  # float16 spacing below 1.0 is 2**-11; round to nearest -> 2**-12
 

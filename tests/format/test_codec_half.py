@@ -1,4 +1,4 @@
-"""codec.to_half (cv2 F16C conversion) must equal numpy's astype(float16) bit for bit,
+"""tactilecodec.to_half (cv2 F16C conversion) must equal numpy's astype(float16) bit for bit,
 so EXR members hold the very half bits of the numpy path."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import OpenEXR
 import pytest
 
-from htdata.format.codec import encode_exr, encode_tactile, to_half
+from htdata.format.tactilecodec import encode_exr, encode_tactile, to_half
 
 
 def numpy_half_bits(x: np.ndarray) -> np.ndarray:

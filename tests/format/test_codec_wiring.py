@@ -2,7 +2,7 @@
 
 import json
 
-from htdata.format.codec import decode_exr_pixels
+from htdata.format.tactilecodec import decode_exr_pixels
 from htdata.read.reader import DatasetReader
 from htdata.validate import validate_dataset
 from tests.factories import PIPELINES_DIR, ingest_cli, make_native, make_touchanything

@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 from htdata.errors import DatasetError
-from htdata.format.codec import decode_exr_pixels, decode_rgb, decode_tactile, encode_exr, encode_rgb, encode_tactile
+from htdata.format.codec import decode_rgb, encode_rgb
 from htdata.format.imageheader import DeclaredShapeError, exr_windows, jpeg_size
+from htdata.format.tactilecodec import decode_exr_pixels, decode_tactile, encode_exr, encode_tactile
 from tests.factories.hostile import forged_exr, forged_jpeg, peak_rss_mb
 
 

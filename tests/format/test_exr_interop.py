@@ -16,8 +16,8 @@ import numpy as np
 import OpenEXR
 import pytest
 
-from htdata.format.codec import decode_tactile, encode_tactile
-from htdata.format.table import MAP_SHAPE
+from htdata.format.canvas import MAP_SHAPE
+from htdata.format.tactilecodec import decode_tactile, encode_tactile
 
 oiio = pytest.importorskip("OpenImageIO")
 
@@ -79,7 +79,7 @@ def test_our_decoder_reads_an_oiio_written_exr(tmp_path):
 def test_a_data_window_reads_back_as_the_full_canvas_everywhere(tmp_path, pixel_type, which):
     """A map stored with only its covered pixels' data window (display window 224x224): OpenEXR placed by
     dataWindow, OpenImageIO's display-window read and our decoder all give the whole canvas back."""
-    from htdata.format.codec import covered_window, encode_exr
+    from htdata.format.tactilecodec import covered_window, encode_exr
 
     tactile = {"sparse": _maps()[0], "empty": np.zeros(MAP_SHAPE, np.float32),
                "corner": np.pad(np.full((3, 5), 0.75, np.float32), ((221, 0), (0, 219)))}[which]

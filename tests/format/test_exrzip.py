@@ -20,8 +20,8 @@ import OpenEXR
 import pytest
 from isal import isal_zlib
 
-from htdata.format.codec import encode_exr, encode_tactile
 from htdata.format.exrzip import DEFLATE_LEVEL, LINES_PER_CHUNK, encode_zip_exr, zip_filter
+from htdata.format.tactilecodec import encode_exr, encode_tactile
 
 
 def _binding(pixels: np.ndarray) -> bytes:

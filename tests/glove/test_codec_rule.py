@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from htdata.benchmarks.codecs import codec_rows
-from htdata.format.codec import decode_tactile, encode_tactile
 from htdata.format.table import CodecSettings, decode_sample, encode_sample
+from htdata.format.tactilecodec import decode_tactile, encode_tactile
 from htdata.glove.codecrule import (
     ANALYTIC_MAX_ERROR,
     SIZE_ORDER,
@@ -26,7 +26,7 @@ from htdata.glove.codecrule import (
 )
 from htdata.glove.codecsettings import CodecConfig
 from htdata.glove.layouts import load_layout
-from htdata.glove.normalise import NormaliseConfig
+from htdata.glove.normaliseconfig import NormaliseConfig
 from htdata.glove.rasterise import Rasteriser
 from htdata.ingest.pipeline import PipelineConfig, load_pipeline
 

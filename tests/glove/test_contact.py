@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from htdata.glove.contact import MIN_AREA_TAXELS, OLD_RULE, min_area, rule_for
+from htdata.read.itemoptions import ItemOptions
 from htdata.synthetic.rawglove import CLIPS, FULL_SCALE, corpus_clips, glove_layout, write_rawglove
 
 STEP = {"convention": "direct", "max": FULL_SCALE, "step": 1}
@@ -113,7 +114,8 @@ def test_glove_only_dataset_says_why_paired_items_are_none(datasets):
 
     with pytest.raises(ValueError, match='glove-only dataset.*frames="tactile"'):
         TactileFrameDataset(datasets["default"])
-    assert len(TactileFrameDataset(datasets["default"], frames="tactile")) == 2 * sum(n for _, n, _ in CLIPS)
+    tactile = TactileFrameDataset(datasets["default"], options=ItemOptions(frames="tactile"))
+    assert len(tactile) == 2 * sum(n for _, n, _ in CLIPS)
 
 
 def test_card_of_a_glove_only_dataset_states_its_contact_rule_and_draws_no_sync_plots(datasets, tmp_path):

@@ -9,8 +9,9 @@ import os
 import numpy as np
 import pytest
 
-from htdata.format.table import CANVAS
+from htdata.format.canvas import CANVAS
 from htdata.glove import layouts as L
+from htdata.glove.canonical import parse_canonical
 from htdata.glove.layouts import LAYOUTS_ENV, list_layouts, load_canonical, load_layout, parse_layout
 
 SHIPPED = ["opentouch_right_16x16", "touchanything_left_21x21", "touchanything_right_21x21"]
@@ -82,7 +83,7 @@ def test_canonical_rejects_overlap():
     doc = copy.deepcopy(load_canonical().to_dict())
     doc["places"]["index.middle"]["rect"] = list(doc["places"]["index.distal"]["rect"])
     with pytest.raises(ValueError, match="overlap"):
-        L.parse_canonical(doc, "broken.json")
+        parse_canonical(doc, "broken.json")
 
 
 # --------------------------------------------------------------------------- shipped layouts

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from htdata.glove.baselinefit import quietest_span
-from htdata.glove.normalise import NormaliseConfig, Normaliser
+from htdata.glove.normalise import Normaliser
+from htdata.glove.normaliseconfig import NormaliseConfig
 
 
 def layout(h=4, w=4, dead=((0, 0),)):
@@ -162,7 +163,7 @@ def test_one_noise_floor_test_for_the_normaliser_and_the_contact_rule(noise_k, n
     """`has_noise_floor` decides it for the Normaliser (subtract the floor, never below one step) and the
     contact rule read from a manifest entry alike."""
     from htdata.glove.contact import rule_for
-    from htdata.glove.normalise import has_noise_floor
+    from htdata.glove.normaliseconfig import has_noise_floor
 
     cfg = NormaliseConfig(max_value=10.0, baseline="rest_window" if noise_k else "none", noise_k=noise_k,
                           noise_floor=noise_floor).validate()

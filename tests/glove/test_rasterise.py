@@ -9,8 +9,8 @@ import pytest
 import scipy.sparse as sp
 
 from htdata.benchmarks.raster import raster_benchmark
-from htdata.format.codec import to_half
-from htdata.format.table import CANVAS
+from htdata.format.canvas import CANVAS
+from htdata.format.tactilecodec import to_half
 from htdata.glove.layouts import GROUPS, load_canonical, load_layout
 from htdata.glove.rasterise import BILINEAR_ROUNDTRIP_BOUND, MODES, Rasteriser
 

@@ -17,7 +17,8 @@ import pytest
 
 from htdata.errors import ArgumentError, ConfigError
 from htdata.glove.layouts import load_layout
-from htdata.glove.normalise import NormaliseConfig, Normaliser
+from htdata.glove.normalise import Normaliser
+from htdata.glove.normaliseconfig import NormaliseConfig
 from htdata.glove.restreference import pooled_reference, recording_rest, write_rest_reference
 
 GRID = (4, 8)

@@ -7,7 +7,7 @@ import numpy as np
 import torch
 
 from handtouch.contact_gate import GateConfig, gate, score_part
-from htdata.format.table import CANVAS
+from htdata.format.canvas import CANVAS
 from tests import factories
 from tests.factories import commit_split, episode_table, write_synthetic_dataset
 

@@ -26,7 +26,7 @@ from handtouch.rgb_pretrain import (
     save_probe,
 )
 from htdata.curate.edit import remove_episodes
-from htdata.format.table import CANVAS
+from htdata.format.canvas import CANVAS
 from htdata.read.metadata import DatasetMetadata
 from htdata.store.snapshot import commit_parts, open_snapshot
 from htdata.store.splitfiles import split_path

@@ -9,7 +9,7 @@ import pytest
 
 from handtouch.rgb_pretrain import RGBPretrainConfig
 from handtouch.task_transfer import item_parts, main, markdown, transfer_table
-from htdata.format.table import CANVAS
+from htdata.format.canvas import CANVAS
 from htdata.store.manifest import load_episodes
 from tests import factories
 from tests.factories import episode_table, write_synthetic_dataset

@@ -28,13 +28,13 @@ from handtouch.stages import (
     StepInfo,
     build_stages,
 )
+from handtouch.steploop import lr_at
 from handtouch.train import (
     JsonlLog,
     TrainData,
     build_model,
     load_data,
     load_model,
-    lr_at,
     main,
     read_checkpoint,
     run_stage,

@@ -160,7 +160,7 @@ def test_with_overrides_parses_values_and_validates():
 
 
 def test_set_values_parse_as_toml_but_dates_stay_text():
-    from htdata.ingest.pipeline import parse_setting
+    from htdata.settings import parse_setting
 
     assert parse_setting("sync.max_skew_ms=20") == ("sync.max_skew_ms", 20)
     assert parse_setting("tactile.keep_raw=false") == ("tactile.keep_raw", False)

@@ -14,7 +14,9 @@ from htdata.cli import main as cli
 from htdata.format.table import INDEX_FILE, LEGACY_INDEX_DTYPE, MANIFEST_FILE, raw_member, tactile_member
 from htdata.glove.calibration import calibration_id, episode_normaliser
 from htdata.glove.layouts import load_layout
-from htdata.glove.normalise import NormaliseConfig, Normaliser
+from htdata.glove.normalise import Normaliser
+from htdata.glove.normaliseconfig import NormaliseConfig
+from htdata.read.itemoptions import ItemOptions
 from htdata.read.reader import DatasetReader
 from htdata.store.manifest import load_episodes, load_index, load_manifest
 from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
@@ -259,7 +261,7 @@ def test_loader_maps_from_raw_rows_match_the_stored_maps(native_counts):
     from htdata.read.torchdata import TactileFrameDataset, TactileStream
 
     out, _, _ = native_counts
-    raw, stored = TactileFrameDataset(out), TactileFrameDataset(out, maps_from="stored")
+    raw, stored = TactileFrameDataset(out), TactileFrameDataset(out, options=ItemOptions(maps_from="stored"))
     assert raw._builder.serving.rendered and not stored._builder.serving.rendered   # best: nearest mode + raw rows
     diffs = [float((raw[i]["tactile"] - stored[i]["tactile"]).abs().max()) for i in range(len(raw))]
     half = json.loads((out / "dataset.json").read_text())["codec"]["tactile"]["pixel_type"] == "half"
@@ -267,7 +269,7 @@ def test_loader_maps_from_raw_rows_match_the_stored_maps(native_counts):
     streamed = torch.stack([x["tactile"] for x in TactileStream(out)])
     assert torch.equal(streamed, torch.stack([raw[i]["tactile"] for i in range(len(raw))]))
     with pytest.raises(ValueError, match="maps_from"):
-        TactileFrameDataset(out, maps_from="exr")
+        TactileFrameDataset(out, options=ItemOptions(maps_from="exr"))
 
 
 def stuck_taxel_dataset(tmp_path) -> tuple[Path, tuple[int, int]]:

@@ -51,7 +51,7 @@ def test_nan_raw_rows_are_refused_where_the_map_is_rendered(tmp_path):
 
 
 def test_nan_stored_map_is_refused_when_decoded():
-    from htdata.format.codec import decode_tactile, encode_exr
+    from htdata.format.tactilecodec import decode_tactile, encode_exr
 
     bad = np.zeros((224, 224), np.float32)
     bad[5, 5] = np.nan

@@ -118,7 +118,7 @@ def test_card_renders_in_headless_chromium(tmp_path):
 
 
 def test_histogram_y_ticks_read_as_counts_and_stay_apart():
-    from htdata.inspect.card import _count_label, _y_ticks
+    from htdata.inspect.cardplots import _count_label, _y_ticks
 
     linear = _y_ticks(np.array([0, 2, 4]), log=False)
     assert linear == [(0.0, 0.0), (0.5, 2.0), (1.0, 4.0)]
@@ -132,7 +132,7 @@ def test_histogram_y_ticks_read_as_counts_and_stay_apart():
 
 
 def test_region_map_names_the_digits_and_the_health_legend_names_no_sensor():
-    from htdata.inspect.card import _label_fingers
+    from htdata.inspect.cardplots import _label_fingers
     from htdata.inspect.healthmap import _legend
 
     region_map = np.zeros((224, 224), np.uint8)

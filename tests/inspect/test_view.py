@@ -17,7 +17,7 @@ import htdata
 import tests.factories as factories
 from htdata.cli import main as cli_main
 from htdata.errors import DatasetError
-from htdata.format.codec import encode_exr
+from htdata.format.tactilecodec import encode_exr
 from htdata.glove.canonical import PART_NAMES
 from htdata.inspect import preview, view, viewlayout
 from htdata.store.episodeids import NoSuchEpisode

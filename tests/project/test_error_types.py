@@ -14,7 +14,6 @@ import pytest
 from handtouch.config import load_train_config
 from htdata import errors
 from htdata.commands.version_arg import parse_version
-from htdata.curate.edit import NoSuchEpisode
 from htdata.curate.merge import MergeConflict
 from htdata.errors import ArgumentError, ConfigError, DatasetError, HtdataError, RecordMismatch
 from htdata.format.table import MEMBER_ORDER, decode_member
@@ -22,6 +21,7 @@ from htdata.ingest.pipeline import load_pipeline
 from htdata.inspect.preview import render_contact_sheet
 from htdata.resources import PIPELINES_DIR
 from htdata.settings import parse_setting
+from htdata.store.episodeids import NoSuchEpisode
 from htdata.store.manifest import IndexDtypeError, parse_manifest
 from htdata.store.splitrule import SplitError
 from tests.factories import PREVIEW_EPISODES, ingest_cli, write_synthetic_dataset

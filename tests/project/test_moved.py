@@ -69,6 +69,28 @@ def test_the_house_pass_moves_warn_and_name_the_new_module(old, new):
     assert any(w.category is DeprecationWarning and new in str(w.message) for w in caught)
 
 
+@pytest.mark.parametrize("module, name, target, new", [
+    ("htdata.format.table", "CANVAS", "htdata.format.canvas", "CANVAS"),
+    ("htdata.glove.layouts", "parse_canonical", "htdata.glove.canonical", "parse_canonical"),
+    ("htdata.source.lag", "LAG_MODES", "htdata.source.syncsettings", "LAG_MODES"),
+    ("htdata.ingest.pipeline", "parse_setting", "htdata.settings", "parse_setting"),
+    ("htdata.curate.edit", "NoSuchEpisode", "htdata.store.episodeids", "NoSuchEpisode"),
+    ("htdata.curate.split", "episode_uniform", "htdata.store.splitrule", "episode_uniform"),
+    ("htdata.curate.split", "list_splits", "htdata.store.splitfiles", "list_splits"),
+    ("htdata.read.reader", "SplitRejected", "htdata.store.splitfiles", "SplitRejected"),
+    ("htdata.read.torchdata", "FRAME_KINDS", "htdata.read.itemoptions", "FRAME_KINDS"),
+    ("htdata.read.torchdata", "_ItemBuilder", "htdata.read.torchitems", "ItemBuilder"),
+    ("htdata.format.codec", "check_served_maps", "htdata.format.tactilecodec", "check_served_maps"),
+    ("htdata.glove.normalise", "RAW_COUNT_DEFAULTS", "htdata.glove.normaliseconfig", "RAW_COUNT_DEFAULTS"),
+])
+def test_a_module_hands_on_the_names_it_no_longer_re_exports(module, name, target, new):
+    if module == "htdata.read.torchdata":
+        pytest.importorskip("torch")
+    with pytest.warns(DeprecationWarning, match=f"{module}.{name} is deprecated: it moved to {target}.{new}"):
+        value = getattr(importlib.import_module(module), name)
+    assert value is getattr(importlib.import_module(target), new)
+
+
 @pytest.mark.parametrize("package", ["htdata.format", "htdata.curate", "htdata.source.adapters.base"])
 def test_a_name_that_never_existed_is_an_attribute_error(package):
     module = importlib.import_module(package)

@@ -10,6 +10,7 @@ import pytest
 
 from htdata.cli import main as cli
 from htdata.format.table import RGB_MEMBER, raw_member, tactile_member
+from htdata.read.itemoptions import ItemOptions
 from htdata.read.reader import DatasetReader
 from htdata.read.torchdata import TactileFrameDataset, TactileStream, TactileWindowDataset
 from htdata.store.manifest import load_episodes
@@ -90,11 +91,11 @@ def test_a_glove_only_recording_ingests_as_tactile_only_samples(tmp_path):
     assert cli(["validate", str(out), "--deep"]) == 0
     with pytest.raises(ValueError, match='glove-only dataset.*frames="tactile"'):   # says why, not length 0
         TactileFrameDataset(out)
-    tactile = TactileFrameDataset(out, frames="tactile")                # e.g. stage-1 tokeniser data
+    tactile = TactileFrameDataset(out, options=ItemOptions(frames="tactile"))   # e.g. stage-1 tokeniser data
     assert len(tactile) == rows
     item = tactile[0]
     assert not bool(item["has_rgb"]) and int(item["rgb"].max()) == 0 and item["tactile"].shape == (1, 224, 224)
-    assert len(list(TactileStream(out, frames="tactile"))) == rows
+    assert len(list(TactileStream(out, options=ItemOptions(frames="tactile")))) == rows
     with pytest.raises(ValueError, match="glove-only dataset"):
         len(TactileStream(out))
 
@@ -103,7 +104,7 @@ def test_frames_option_is_checked(tmp_path):
     recording(tmp_path / "raw" / "rec", frames=4)
     out = ingest(tmp_path, tmp_path / "raw")
     with pytest.raises(ValueError, match="frames must be one of"):
-        TactileFrameDataset(out, frames="all")
+        TactileFrameDataset(out, options=ItemOptions(frames="all"))
 
 
 def test_preview_stats_and_card_read_rgb_only_and_tactile_only_samples(tmp_path):

@@ -94,7 +94,7 @@ def test_a_resealed_map_outside_0_1_is_a_named_error_and_a_named_fail(ds, value)
     """Issue 44 item 6: a stored map of 1e38 (a float EXR) or -1 was served by the reader, and validate
     aborted with "'list' argument must have no negative elements". Written in the dataset's own pixel type
     (half here: 60000 is its 1e38), so that only the value rule can object."""
-    from htdata.format.codec import EXR_PIXEL_TYPES, encode_exr
+    from htdata.format.tactilecodec import EXR_PIXEL_TYPES, encode_exr
 
     reader = htdata.open(ds)
     hand = next(h for h in ("left", "right") if f"tactile_{h}.exr" in reader.read_sample(1)[2])

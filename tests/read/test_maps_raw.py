@@ -19,6 +19,7 @@ from htdata.errors import DatasetError
 from htdata.format.mapstorage import MapStorage
 from htdata.format.table import HANDS, SHARDS_DIR, tactile_member
 from htdata.ingest.pipeline import load_pipeline
+from htdata.read.itemoptions import ItemOptions
 from htdata.read.reader import DatasetReader
 from htdata.synthetic.corpus import CorpusConfig, write_corpus
 from htdata.validate.validator import validate_dataset
@@ -96,11 +97,12 @@ def test_torch_datasets_serve_the_same_maps(pair):
     wa, wb = TactileWindowDataset(stored, window=3), TactileWindowDataset(rendered, window=3)
     assert np.array_equal(wa.items, wb.items)
     assert np.array_equal(wa[5]["tactile"].numpy(), wb[5]["tactile"].numpy())
-    sa, sb = list(TactileStream(stored, frames="tactile")), list(TactileStream(rendered, frames="tactile"))
+    tactile = ItemOptions(frames="tactile")
+    sa, sb = list(TactileStream(stored, options=tactile)), list(TactileStream(rendered, options=tactile))
     assert len(sa) == len(sb) == len(fa)
     assert all(np.array_equal(x["tactile"].numpy(), y["tactile"].numpy()) for x, y in zip(sa, sb))
     with pytest.raises(ValueError, match="stores no tactile maps"):
-        TactileFrameDataset(rendered, maps_from="stored")
+        TactileFrameDataset(rendered, options=ItemOptions(maps_from="stored"))
 
 
 def test_validate_deep_passes_and_checks_the_rendered_maps(pair):

@@ -78,7 +78,7 @@ def test_the_stream_skips_a_sample_that_does_not_decode_and_map_style_datasets_r
     bad_items = int((frames[:, 0] == BAD).sum())
     caplog.clear()
     with caplog.at_level(logging.WARNING, logger="htdata.read"):
-        items = list(torchdata.TactileStream(damaged, on_error="warn"))
+        items = list(torchdata.TactileStream(damaged, options=ItemOptions(on_error="warn")))
     assert bad_items >= 1 and len(items) == len(frames) - bad_items
     assert BAD not in {int(i["index"]) for i in items} and len(caplog.records) == 1
     for kind in (torchdata.TactileFrameDataset, torchdata.TactileWindowDataset):

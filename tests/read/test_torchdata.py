@@ -1,9 +1,12 @@
 
+import warnings
+
 import numpy as np
 import pytest
 import torch
 from torch.utils.data import DataLoader
 
+from htdata.read.itemoptions import ItemOptions
 from htdata.read.torchdata import (
     TactileFrameDataset,
     TactileStream,
@@ -61,16 +64,16 @@ def test_frame_dataset_items_and_tensors(dataset):
 
 
 def test_frame_dataset_hands_split_and_rgb_float(dataset):
-    assert len(TactileFrameDataset(dataset, hands=("left",))) == 4 + 1
-    train = TactileFrameDataset(dataset, split="main", part="train")
+    assert len(TactileFrameDataset(dataset, options=ItemOptions(hands=("left",)))) == 4 + 1
+    train = TactileFrameDataset(dataset, options=ItemOptions(split="main", part="train"))
     assert len(train) == 6 and {int(train[i]["episode"]) for i in range(len(train))} == {0, 2}
-    val = TactileFrameDataset(dataset, split="main", part="val", rgb_float=True)
+    val = TactileFrameDataset(dataset, options=ItemOptions(split="main", part="val", rgb_float=True))
     rgb = val[0]["rgb"]
     assert rgb.dtype == torch.float32 and 0.0 <= float(rgb.min()) and float(rgb.max()) <= 1.0
     with pytest.raises(ValueError, match="hands"):
-        TactileFrameDataset(dataset, hands=("middle",))
+        TactileFrameDataset(dataset, options=ItemOptions(hands=("middle",)))
     with pytest.raises(ValueError, match="choose a part"):
-        TactileFrameDataset(dataset, split="main")
+        TactileFrameDataset(dataset, options=ItemOptions(split="main"))
 
 
 def test_window_dataset_never_crosses_episodes(dataset):
@@ -116,7 +119,7 @@ def test_stream_covers_every_item_once_with_workers(dataset):
     frames = _collect(DataLoader(TactileFrameDataset(dataset), batch_size=5))
     assert serial == frames  # in order with one consumer
     assert sorted(parallel) == sorted(frames) and len(stream) == len(frames)
-    val = TactileStream(dataset, split="main", part="val", hands=("right",))
+    val = TactileStream(dataset, options=ItemOptions(split="main", part="val", hands=("right",)))
     assert [int(x["index"]) for x in val] == [5, 6, 7, 8]
 
 
@@ -166,7 +169,7 @@ def _reference_item(reader, index, hand):
 
 def test_frame_items_equal_reader_decode(dataset):
     ds = TactileFrameDataset(dataset)
-    floats = TactileFrameDataset(dataset, rgb_float=True)
+    floats = TactileFrameDataset(dataset, options=ItemOptions(rgb_float=True))
     for i in range(len(ds)):
         item, fitem = ds[i], floats[i]
         hand = ("left", "right")[int(item["hand"])]
@@ -178,8 +181,8 @@ def test_frame_items_equal_reader_decode(dataset):
 
 
 def test_window_items_equal_stacked_frames(dataset):
-    ds = TactileWindowDataset(dataset, window=2, rgb_float=True)
-    frames = TactileFrameDataset(dataset, rgb_float=True)
+    ds = TactileWindowDataset(dataset, window=2, options=ItemOptions(rgb_float=True))
+    frames = TactileFrameDataset(dataset, options=ItemOptions(rgb_float=True))
     by_key = {(int(f["index"]), int(f["hand"])): f for f in frames}
     assert len(ds) == 4 + 2 * 3
     for i in range(len(ds)):
@@ -210,10 +213,10 @@ def test_stream_items_equal_frame_items_and_do_not_alias(dataset):
 
 
 def test_put_rgb_matches_transpose():
-    from htdata.read.torchdata import _ItemBuilder
+    from htdata.read.torchitems import ItemBuilder
 
     rgb = np.random.default_rng(0).integers(0, 256, (224, 224, 3), dtype=np.uint8)
-    builder = _ItemBuilder.__new__(_ItemBuilder)
+    builder = ItemBuilder.__new__(ItemBuilder)
     out = np.empty((3, 224, 224), np.uint8)
     builder.put_rgb(out, rgb)
     assert np.array_equal(out, rgb.transpose(2, 0, 1))
@@ -238,10 +241,10 @@ def test_corrupt_tactile_member_error_names_the_sample(dataset, tmp_path):
     data = bytearray(shard.read_bytes())
     data[row.offset + rel + 512:row.offset + rel + 512 + size] = bytes(size)
     shard.write_bytes(bytes(data))
-    ds = TactileFrameDataset(copy, hands=("right",))
+    ds = TactileFrameDataset(copy, options=ItemOptions(hands=("right",)))
     with pytest.raises(ValueError, match=f"{key}.tactile_right.exr: undecodable EXR"):
         ds[2]
-    windows = TactileWindowDataset(copy, window=3, hands=("right",))
+    windows = TactileWindowDataset(copy, window=3, options=ItemOptions(hands=("right",)))
     with pytest.raises(ValueError, match=f"{key}.tactile_right.exr"):
         windows[0]
     assert int(ds[1]["frame"]) == 1   # other samples still read
@@ -273,17 +276,18 @@ def test_datasets_read_an_older_version(tmp_path):
     root = write_synthetic_dataset(tmp_path / "ds", MIXED_HANDS_EPISODES, seed=SEED, coverages=coverages())
     remove_episodes(root, ["ep_b"], dry_run=False, command="rm")
     assert len(TactileFrameDataset(root)) == 5 + 1
-    old = TactileFrameDataset(root, version=1)
+    old = TactileFrameDataset(root, options=ItemOptions(version=1))
     assert len(old) == 5 + 8 + 1 and old.reader.version == 1
-    assert len(TactileWindowDataset(root, window=2, version=1)) > len(TactileWindowDataset(root, window=2))
-    assert len(list(TactileStream(root, version=1))) == len(old)
+    assert len(TactileWindowDataset(root, window=2, options=ItemOptions(version=1))) > \
+        len(TactileWindowDataset(root, window=2))
+    assert len(list(TactileStream(root, options=ItemOptions(version=1)))) == len(old)
 
 
 # ---- what an item carries (htdata/read/torchitems.py) ------------------------------------
 def test_tactile_only_items_equal_the_tactile_of_full_items(dataset):
     full = TactileFrameDataset(dataset)
-    tactile = TactileFrameDataset(dataset, members=("tactile",))
-    rgb_only = TactileFrameDataset(dataset, members=("rgb",))
+    tactile = TactileFrameDataset(dataset, options=ItemOptions(members=("tactile",)))
+    rgb_only = TactileFrameDataset(dataset, options=ItemOptions(members=("rgb",)))
     assert len(tactile) == len(full) == len(rgb_only)
     for i in range(len(full)):
         a, t, r = full[i], tactile[i], rgb_only[i]
@@ -291,24 +295,24 @@ def test_tactile_only_items_equal_the_tactile_of_full_items(dataset):
         assert torch.equal(t["tactile"], a["tactile"]) and torch.equal(r["rgb"], a["rgb"])
         assert int(t["index"]) == int(a["index"]) and int(t["hand"]) == int(a["hand"])
     # windows and streams honour the same choice
-    win_full, win_t = TactileWindowDataset(dataset, window=2), TactileWindowDataset(dataset, window=2,
-                                                                                     members=("tactile",))
+    win_full = TactileWindowDataset(dataset, window=2)
+    win_t = TactileWindowDataset(dataset, window=2, options=ItemOptions(members=("tactile",)))
     assert "rgb" not in win_t[0] and torch.equal(win_t[0]["tactile"], win_full[0]["tactile"])
-    stream_t = list(TactileStream(dataset, members=("tactile",)))
+    stream_t = list(TactileStream(dataset, options=ItemOptions(members=("tactile",))))
     assert [torch.equal(s["tactile"], full[i]["tactile"]) for i, s in enumerate(stream_t)] == [True] * len(full)
-    stream_r = list(TactileStream(dataset, members=("rgb",)))
+    stream_r = list(TactileStream(dataset, options=ItemOptions(members=("rgb",))))
     assert [torch.equal(s["rgb"], full[i]["rgb"]) for i, s in enumerate(stream_r)] == [True] * len(full)
     with pytest.raises(ValueError, match="members"):
-        TactileFrameDataset(dataset, members=("depth",))
+        TactileFrameDataset(dataset, options=ItemOptions(members=("depth",)))
     with pytest.raises(ValueError, match="constants"):
-        TactileFrameDataset(dataset, constants="never")
+        TactileFrameDataset(dataset, options=ItemOptions(constants="never"))
 
 
 def test_constants_sent_once_give_the_same_batches(dataset):
-    from htdata.read.torchdata import expand_batch
+    from htdata.read.torchitems import expand_batch
 
     full = TactileFrameDataset(dataset)
-    once = TactileFrameDataset(dataset, constants="once")
+    once = TactileFrameDataset(dataset, options=ItemOptions(constants="once"))
     item = once[0]
     assert set(item) == {"tactile", "rgb", "ids"} and item["ids"].shape == (8,) and item["ids"].dtype == torch.int64
     constants = once.constants()
@@ -321,8 +325,9 @@ def test_constants_sent_once_give_the_same_batches(dataset):
         assert set(a) == set(b)
         for k in a:
             assert a[k].dtype == b[k].dtype and torch.equal(a[k], b[k]), k
-    stream = list(DataLoader(TactileStream(dataset, constants="once", members=("tactile",)), batch_size=5))
-    frames = list(DataLoader(TactileFrameDataset(dataset, members=("tactile",)), batch_size=5))
+    once = ItemOptions(constants="once", members=("tactile",))
+    stream = list(DataLoader(TactileStream(dataset, options=once), batch_size=5))
+    frames = list(DataLoader(TactileFrameDataset(dataset, options=ItemOptions(members=("tactile",))), batch_size=5))
     for a, b in zip(frames, stream):
         b = expand_batch(b, constants)
         assert all(torch.equal(a[k], b[k]) for k in a)
@@ -334,37 +339,35 @@ def test_the_old_map_source_keyword_warns_and_still_chooses_the_maps(dataset):
     for old, new in (("auto", "best"), ("stored", "stored"), ("raw", "raw")):
         with pytest.warns(DeprecationWarning, match=f"map_source='{old}'.*maps_from='{new}'"):
             ds = TactileFrameDataset(dataset, map_source=old)
-        assert ds._builder.serving == TactileFrameDataset(dataset, maps_from=new)._builder.serving
+        assert ds._builder.serving == TactileFrameDataset(dataset, options=ItemOptions(maps_from=new))._builder.serving
     with pytest.warns(DeprecationWarning, match="map_source"):
         stream = TactileStream(dataset, map_source="stored")
     with pytest.warns(DeprecationWarning, match="map_source"):
         windows = TactileWindowDataset(dataset, window=2, map_source="auto")
     assert torch.equal(next(iter(stream))["tactile"], best[0]["tactile"])
     assert np.array_equal(windows.items, TactileWindowDataset(dataset, window=2).items)
-    assert TactileFrameDataset(dataset, maps_from="raw")._builder.serving.raw_required
+    assert TactileFrameDataset(dataset, options=ItemOptions(maps_from="raw"))._builder.serving.raw_required
     with pytest.raises(TypeError, match="map_source= and maps_from="):
         TactileFrameDataset(dataset, map_source="auto", maps_from="best")
     with pytest.raises(ValueError, match="maps_from must be one of .*the old map_source='auto' is 'best'"):
-        TactileFrameDataset(dataset, maps_from="auto")
+        TactileFrameDataset(dataset, options=ItemOptions(maps_from="auto"))
 
 
 # ---- one options object for the three datasets (htdata/read/itemoptions.py) ----------------
-def test_one_options_object_selects_the_same_items_as_the_keywords(dataset):
+def test_one_options_object_serves_the_three_datasets(dataset):
     from htdata.errors import ArgumentError
-    from htdata.read.itemoptions import ItemOptions
 
     opts = ItemOptions(split="main", part="val", hands=["right"], members=("tactile",), rgb_float=True)
     assert opts.hands == ("right",) and opts.replace(part="train").part == "train"
-    keywords = dict(split="main", part="val", hands=("right",), members=("tactile",), rgb_float=True)
-    frames, by_kw = TactileFrameDataset(dataset, options=opts), TactileFrameDataset(dataset, **keywords)
-    assert np.array_equal(frames.items, by_kw.items) and frames.options == by_kw.options == opts
-    assert torch.equal(frames[0]["tactile"], by_kw[0]["tactile"]) and "rgb" not in frames[0]
+    frames = TactileFrameDataset(dataset, options=opts)
+    assert frames.options is opts and len(frames) and "rgb" not in frames[0]
+    assert {int(h) for _, h in frames.items} == {1}
     windows = TactileWindowDataset(dataset, window=2, options=opts)
-    assert np.array_equal(windows.items, TactileWindowDataset(dataset, window=2, **keywords).items)
+    assert windows.options is opts and set(windows.items[:, 0]) <= set(frames.items[:, 0])
     stream = [(int(x["index"]), int(x["hand"])) for x in TactileStream(dataset, options=opts)]
     assert stream == [tuple(r) for r in frames.items.tolist()]
-    with pytest.raises(ArgumentError, match="not both .*also given: part"):
-        TactileFrameDataset(dataset, part="train", options=opts)
+    with pytest.raises(ArgumentError, match="options must be an htdata.read.itemoptions.ItemOptions, got dict"):
+        TactileFrameDataset(dataset, options={"split": "main"})
     with pytest.raises(ArgumentError, match="options.constants must be 'item'"):
         TactileWindowDataset(dataset, window=2, options=opts.replace(constants="once"))
     with pytest.raises(ArgumentError, match="hands must be"):
@@ -373,10 +376,41 @@ def test_one_options_object_selects_the_same_items_as_the_keywords(dataset):
         ItemOptions(frames="all")
 
 
+def test_the_old_keywords_warn_and_make_the_same_options(dataset):
+    """The nine keywords of before (htdata/_moved.py folded_keywords) work until REMOVED_IN, warning."""
+    from htdata.errors import ArgumentError
+
+    opts = ItemOptions(split="main", part="val", hands=("right",), members=("tactile",), rgb_float=True)
+    keywords = dict(split="main", part="val", hands=("right",), members=("tactile",), rgb_float=True)
+    with pytest.warns(DeprecationWarning, match=r"TactileFrameDataset\(split='main', .*\) is deprecated: "
+                                                r"pass options=ItemOptions\(split='main'"):
+        by_kw = TactileFrameDataset(dataset, **keywords)
+    assert by_kw.options == opts and np.array_equal(by_kw.items, TactileFrameDataset(dataset, options=opts).items)
+    with pytest.warns(DeprecationWarning, match="TactileWindowDataset"):
+        assert TactileWindowDataset(dataset, window=2, **keywords).options == opts
+    with pytest.warns(DeprecationWarning, match="TactileStream"):
+        assert TactileStream(dataset, shuffle_seed=3, **keywords).options == opts
+    # the old signatures took them by position too (the stream's fifth: shuffle_seed)
+    with pytest.warns(DeprecationWarning):
+        assert TactileFrameDataset(dataset, "main", "val").options == ItemOptions(split="main", part="val")
+    with pytest.warns(DeprecationWarning):
+        assert TactileWindowDataset(dataset, 2, "main", "val").options == ItemOptions(split="main", part="val")
+    with pytest.warns(DeprecationWarning):
+        stream = TactileStream(dataset, "main", "val", ("right",), False, 7)
+    assert stream.shuffle_seed == 7 and stream.options == ItemOptions(split="main", part="val", hands=("right",))
+    with pytest.raises(ArgumentError, match="not both .*also given: part"):
+        TactileFrameDataset(dataset, part="train", options=opts)
+    with pytest.raises(TypeError, match="got multiple values for argument 'split'"):
+        TactileFrameDataset(dataset, "main", split="main")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")       # no old keyword: no warning
+        assert TactileFrameDataset(dataset).options == ItemOptions()
+
+
 def test_the_torch_view_puts_its_version_into_an_options_object(tmp_path):
     import htdata
     from htdata.curate.edit import remove_episodes
-    from htdata.read.itemoptions import ItemOptions
+    from htdata.errors import ArgumentError
 
     root = write_synthetic_dataset(tmp_path / "ds", MIXED_HANDS_EPISODES, seed=SEED, coverages=coverages())
     remove_episodes(root, ["ep_b"], dry_run=False, command="rm")
@@ -385,3 +419,9 @@ def test_the_torch_view_puts_its_version_into_an_options_object(tmp_path):
     assert old.frames(options=ItemOptions()).reader.version == 1 and len(old.frames()) == 5 + 8 + 1
     with pytest.raises(TypeError, match="version"):
         old.frames(version=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")       # the view takes the fields as keywords: not the deprecated path
+        left = old.windows(window=2, hands=("left",))
+    assert left.options == ItemOptions(hands=("left",), version=1)
+    with pytest.raises(ArgumentError, match="not both"):
+        old.stream(options=ItemOptions(), part="train")

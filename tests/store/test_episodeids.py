@@ -20,8 +20,8 @@ def test_a_miss_names_the_count_and_the_near_ids():
         "no episode matches 'zzz' (1 episodes in main/test)"      # nothing near: no hint
 
 
-def test_ids_and_globs_resolve_in_dataset_order_and_curate_keeps_the_names():
+def test_ids_and_globs_resolve_in_dataset_order_and_curate_uses_the_resolver():
     assert resolve_episodes(IDS, ["ot-*", "ep_1"]) == ["ep_1", "ot-kitchen-demo_08", "ot-kitchen-demo_09"]
     with pytest.raises(NoSuchEpisode, match="did you mean: ep_17, ep_1"):
         resolve_episodes(IDS, ["ep_7"])
-    assert edit.NoSuchEpisode is NoSuchEpisode and edit.resolve_episodes is resolve_episodes
+    assert edit.resolve_episodes is resolve_episodes

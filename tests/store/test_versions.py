@@ -5,9 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from htdata.curate.edit import NoSuchEpisode, parse_frames, remove_episodes, resolve_episodes, trim_episode
+from htdata.curate.edit import parse_frames, remove_episodes, resolve_episodes, trim_episode
 from htdata.format.table import MANIFEST_FILE
 from htdata.read.reader import DatasetReader
+from htdata.store.episodeids import NoSuchEpisode
 from htdata.store.parts import assemble
 from htdata.store.snapshot import commit_parts, open_snapshot
 from htdata.store.versions import diff_episodes, list_versions, version_manifest_file

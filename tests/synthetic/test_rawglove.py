@@ -8,7 +8,8 @@ import pytest
 from htdata.benchmarks.rawglove import config_for, normalise_clip, score
 from htdata.glove.baselinefit import quietest_span
 from htdata.glove.calibration import calibration_id, episode_normaliser, fit_record
-from htdata.glove.normalise import NormaliseConfig, Normaliser
+from htdata.glove.normalise import Normaliser
+from htdata.glove.normaliseconfig import NormaliseConfig
 from htdata.synthetic.rawglove import (
     FULL_SCALE,
     REST,

@@ -15,9 +15,9 @@ from htdata.benchmarks.validation import validate_benchmark
 from htdata.cli import main as cli_main
 from htdata.curate.split import make_split, split_path
 from htdata.errors import ArgumentError
-from htdata.format.codec import encode_exr
 from htdata.format.shardio import BLOCK
 from htdata.format.table import EPISODES_FILE, FORMAT_VERSION, INDEX_FILE, MANIFEST_FILE, SHARDS_DIR
+from htdata.format.tactilecodec import encode_exr
 from htdata.store.manifest import load_episodes, load_index
 from htdata.store.versions import VERSIONS_DIR
 from htdata.validate import group_rows, validate_dataset

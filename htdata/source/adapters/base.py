@@ -61,6 +61,9 @@ class EpisodeStreams(abc.ABC):
     `iter_rgb` yields (rgb index, HxWx3 uint8 RGB) in file order, streamed;
     `read_tactile(hand, indices)` returns (len, H, W) raw glove units in the SOURCE dtype
     (the raw members store them bit for bit; normalisation converts to float32).
+
+    Args:
+        ref: the episode discovery found (kept as `self.ref`, named by every error).
     """
 
     def __init__(self, ref: EpisodeRef):
@@ -74,11 +77,29 @@ class EpisodeStreams(abc.ABC):
 
     @abc.abstractmethod
     def iter_rgb(self) -> Iterator[tuple[int, np.ndarray]]:
-        ...
+        """The episode's RGB frames in file order, decoded one at a time.
+
+        Yields:
+            (index into `rgb_timestamps_ns`, HxWx3 uint8 RGB); nothing when `has_video` is False.
+
+        Raises:
+            EpisodeError: a frame that does not decode (naming `self.ref`).
+        """
 
     @abc.abstractmethod
     def read_tactile(self, hand: str, indices: np.ndarray) -> np.ndarray:
-        ...
+        """Rows of one hand's glove stream, as recorded.
+
+        Args:
+            hand: "left" or "right", a key of `tactile_timestamps_ns`.
+            indices: (K,) positions into `tactile_timestamps_ns[hand]`, any order.
+
+        Returns:
+            (K, H, W) raw glove units in the source's dtype, row k for indices[k].
+
+        Raises:
+            EpisodeError: no stream for `hand` (`_check_hand`), or rows that do not read.
+        """
 
     def close(self) -> None:
         """Release open files; safe to call twice."""
@@ -111,13 +132,48 @@ class EpisodeStreams(abc.ABC):
 
 @runtime_checkable
 class Adapter(Protocol):
+    """What the ingest calls on a source format (`ADAPTERS` in adapters/__init__.py); `name` is its key."""
+
     name: str
 
-    def discover(self, root: Path, params: dict) -> list[EpisodeRef]: ...
+    def discover(self, root: Path, params: dict) -> list[EpisodeRef]:
+        """Every episode under `root`, or the first failure raised.
 
-    def discover_all(self, root: Path, params: dict) -> tuple[list[EpisodeRef], list[EpisodeError]]: ...
+        Args:
+            root: the source folder.
+            params: the pipeline's `[adapter.params]` (declared in the adapter's PARAMS).
 
-    def open(self, ref: EpisodeRef, params: dict) -> EpisodeStreams: ...
+        Returns:
+            The episodes found, sorted naturally by episode id.
+
+        Raises:
+            EpisodeError: a file or episode that could not be discovered.
+        """
+
+    def discover_all(self, root: Path, params: dict) -> tuple[list[EpisodeRef], list[EpisodeError]]:
+        """Every episode under `root` that can be discovered, and one failure per one that cannot.
+
+        Args:
+            root: the source folder.
+            params: the pipeline's `[adapter.params]`.
+
+        Returns:
+            (episodes sorted naturally by id, failures): a bad file fails alone, never the source.
+        """
+
+    def open(self, ref: EpisodeRef, params: dict) -> EpisodeStreams:
+        """Open one discovered episode for reading (in a worker: `ref` was pickled).
+
+        Args:
+            ref: an episode this adapter's discovery returned.
+            params: the pipeline's `[adapter.params]`.
+
+        Returns:
+            The episode's streams, timestamps filled; the caller closes them.
+
+        Raises:
+            EpisodeError: the episode's files do not open or disagree with `ref`.
+        """
 
 
 class FileDiscovery(abc.ABC):
@@ -136,21 +192,72 @@ class FileDiscovery(abc.ABC):
     recording_files: str   # what discovery_files looks for, in a user's words ("OpenTouch HDF5 files (*.hdf5)")
 
     def discovery_context(self, root: Path, params: dict):
+        """What every file's discovery shares (an annotation table, a split file); read once per source.
+
+        Args:
+            root: the source folder.
+            params: the pipeline's `[adapter.params]`.
+
+        Returns:
+            Anything `discover_file` takes as `context` (None here: nothing shared). An exception
+            raised here fails the whole source.
+        """
         return None
 
     @abc.abstractmethod
     def discovery_files(self, root: Path, params: dict) -> list[Path]:
-        ...
+        """The files under `root` that each hold one or more episodes (sourcetree.walk_source lists them).
+
+        Args:
+            root: the source folder.
+            params: the pipeline's `[adapter.params]`.
+
+        Returns:
+            The files, in a stable order; empty when the source holds none of this format.
+        """
 
     @abc.abstractmethod
     def discover_file(self, path: Path, root: Path, params: dict, context) -> list[EpisodeRef]:
-        ...
+        """The episodes of one file, from its metadata only (no frame decoded).
+
+        Args:
+            path: one of `discovery_files`.
+            root: the source folder (episode ids and source refs are relative to it).
+            params: the pipeline's `[adapter.params]`.
+            context: what `discovery_context` returned.
+
+        Returns:
+            The file's episodes (ids through discovery.sanitise_id, fingerprints from discovery.fingerprint_files).
+
+        Raises:
+            Exception: any error for a file that cannot be read; `discover_all` makes it that file's failure.
+        """
 
     def discover_all(self, root: Path, params: dict) -> tuple[list[EpisodeRef], list[EpisodeError]]:
+        """Run `discover_file` on every file, a failing file reported and the rest discovered (discovery.py).
+
+        Args:
+            root: the source folder.
+            params: the pipeline's `[adapter.params]`.
+
+        Returns:
+            (episodes sorted naturally by id, one EpisodeError per file or duplicate episode id that failed).
+        """
         return discover_all(self, root, params)
 
     def discover(self, root: Path, params: dict) -> list[EpisodeRef]:
-        """Strict form: every ref, or the first file's failure raised."""
+        """Strict form: every ref, or the first file's failure raised.
+
+        Args:
+            root: the source folder.
+            params: the pipeline's `[adapter.params]`.
+
+        Returns:
+            The episodes, sorted naturally by id.
+
+        Raises:
+            EpisodeError: the first failure `discover_all` found.
+        """
         refs, failures = self.discover_all(root, params)
         if failures:
             raise failures[0]
