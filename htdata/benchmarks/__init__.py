@@ -13,6 +13,7 @@
     revisions.py   the same ingest under another revision of htdata, side by side
     loader.py      read paths of a committed dataset vs the bare decode bound
     dataloader.py  TactileFrameDataset through a torch DataLoader at 1 and N workers
+    htbenchsize.py "size": a dataset at HT-Bench's size by replication; every metadata command's time, memory, bytes
     index.py       index.npy at scale: open time and memory of a 1M / 10M-row index
     codecs.py      tactile map codecs on real maps, against each glove's quantisation step
     maplayouts.py  how one EXR map member is written, measured side by side on real maps

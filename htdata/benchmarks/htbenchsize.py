@@ -31,8 +31,13 @@ import sys
 import time
 from pathlib import Path
 
+from htdata.benchmarks.maps import _layouts_on_path
 from htdata.format.table import SHARDS_DIR
+from htdata.ingest.pipeline import load_pipeline
+from htdata.ingest.plan import Source
+from htdata.ingest.run import ingest
 from htdata.store.parts import Part, parts_of_version
+from htdata.synthetic.rawglove import write_rawglove
 from htdata.write.newversion import NewVersion
 
 BASE_FRAMES = 306          # frames of one sample raw-glove recording (htdata/synthetic/rawglove.py)
@@ -41,12 +46,6 @@ HT_BENCH_SAMPLES = 7_800_000
 
 def base_dataset(work: Path) -> Path:
     """The sample raw-count glove's recordings ingested with the default pipeline (maps stored)."""
-    from htdata.benchmarks.maps import _layouts_on_path
-    from htdata.ingest.pipeline import load_pipeline
-    from htdata.ingest.plan import Source
-    from htdata.ingest.run import ingest
-    from htdata.synthetic.rawglove import write_rawglove
-
     src, out = work / "rawglove_src", work / "base"
     if not (src / "truth.json").exists():
         write_rawglove(src)
