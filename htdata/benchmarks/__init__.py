@@ -17,7 +17,8 @@
     index.py       index.npy at scale: open time and memory of a 1M / 10M-row index
     codecs.py      tactile map codecs on real maps, against each glove's quantisation step
     maplayouts.py  how one EXR map member is written, measured side by side on real maps
-    maps.py        maps stored or rendered from raw rows: bytes against read speed
+    maps.py        maps stored or rendered from raw rows: bytes against read speed; glove-only ingest, stored vs raw
+    mapcost.py     where a glove-only ingest's time goes when it stores its maps, and what would reach 0.8x raw
     raw.py         what keeping every raw glove row costs, what rendering maps from them gains
     raster.py      rasterisation mode x glove layout: render speed vs taxel round-trip error
     rawglove.py    "raw-count glove": baselines and noise floors scored against the generator's truth

@@ -29,6 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from htdata.benchmarks.ingest import ingest_run
+from htdata.benchmarks.mapcost import encode_costs, glove_cost_markdown, projections, stored_maps
+from htdata.benchmarks.realclips import load_real_glove
+from htdata.benchmarks.realglove import write_native_clips
 from htdata.benchmarks.sources import discover
 from htdata.benchmarks.tables import fmt, table
 from htdata.format.table import HANDS, JSON_MEMBER, SHARDS_DIR, tactile_member
@@ -201,43 +204,69 @@ def _cpu_s() -> float:
     return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
-def glove_only_row(work: Path, reps: int) -> dict:
-    """A glove-only recording (the raw-count glove: no video, so nothing but tactile to decode) ingested with
-    maps stored and with maps = "raw", 1 worker, alternating `reps` times (medians): the EXR encode's
-    whole cost, with no RGB decode to hide it. Bytes per frame for both. CPU seconds (this process and
-    the ingest's workers) beside the wall-clock speed: on a shared machine the encode threads may find
-    no spare core, and the CPU the maps cost is the part of the ratio that load does not move."""
-    src = work / "rawglove_src"
-    if not (src / "truth.json").exists():
-        write_rawglove(src)
+def glove_only_row(work: Path, reps: int, recording: tuple[str, str, Path, Path] | None = None) -> dict:
+    """A glove-only recording (no video, so nothing but tactile to decode) ingested with maps stored and with
+    maps = "raw", 1 worker, alternating `reps` times (medians): the EXR encode's whole cost, with no RGB
+    decode to hide it. Bytes per frame for both. CPU seconds (this process and the ingest's workers) beside
+    the wall-clock speed: on a shared machine the encode threads may find no spare core, and the CPU the
+    maps cost is the part of the ratio that load does not move. Then where the stored run's extra time
+    goes per frame and what would reach the target (mapcost.py).
+
+    `recording`: (name of its datasets under `work`, label, native recordings folder, layouts folder);
+    None: the sample raw-count glove.
+    """
+    if recording is None:
+        src = work / "rawglove_src"
+        if not (src / "truth.json").exists():
+            write_rawglove(src)
+        recording = ("glove_only", "raw-count glove, no video (htdata/synthetic/rawglove.py)", src, src / "layouts")
+    tag, label, src, layouts = recording
     runs: dict[str, list[dict]] = {"stored": [], "raw": []}
-    with _layouts_on_path(src / "layouts"):
+    with _layouts_on_path(layouts):
         for _ in range(max(1, reps)):
             for choice in runs:
                 before = _cpu_s()
-                run = ingest_run([("native", src)], work / f"glove_only_{choice}", 1, (f"tactile.maps={choice}",))
+                run = ingest_run([("native", src)], work / f"{tag}_{choice}", 1, (f"tactile.maps={choice}",))
                 runs[choice].append({**run, "cpu_s": _cpu_s() - before})
-        sizes = {c: bytes_per_frame(work / f"glove_only_{c}") for c in runs}
+        sizes = {c: bytes_per_frame(work / f"{tag}_{c}") for c in runs}
     med = {c: {k: statistics.median(r[k] for r in rs) for k in ("frames_per_s", "worker_s", "cpu_s")}
            for c, rs in runs.items()}
-    return {"recording": "raw-count glove, no video (htdata/synthetic/rawglove.py)", "frames": runs["raw"][0]["frames"],
-            "reps": max(1, reps), "frames_per_s_stored": med["stored"]["frames_per_s"],
-            "frames_per_s_raw": med["raw"]["frames_per_s"],
-            "speed_ratio": med["stored"]["frames_per_s"] / med["raw"]["frames_per_s"],
-            "cpu_s_stored": med["stored"]["cpu_s"], "cpu_s_raw": med["raw"]["cpu_s"],
-            "worker_s_stored": med["stored"]["worker_s"], "worker_s_raw": med["raw"]["worker_s"],
-            "encode_s_stored": statistics.median(r["stages_s"]["encode"] for r in runs["stored"]),
-            "rasterise_s_stored": statistics.median(r["stages_s"]["rasterise"] for r in runs["stored"]),
-            "bytes_per_frame_stored": sizes["stored"]["total"], "bytes_per_frame_raw": sizes["raw"]["total"]}
+    row = {"recording": label, "frames": runs["raw"][0]["frames"],
+           "reps": max(1, reps), "frames_per_s_stored": med["stored"]["frames_per_s"],
+           "frames_per_s_raw": med["raw"]["frames_per_s"],
+           "speed_ratio": med["stored"]["frames_per_s"] / med["raw"]["frames_per_s"],
+           "cpu_s_stored": med["stored"]["cpu_s"], "cpu_s_raw": med["raw"]["cpu_s"],
+           "worker_s_stored": med["stored"]["worker_s"], "worker_s_raw": med["raw"]["worker_s"],
+           "encode_s_stored": statistics.median(r["stages_s"]["encode"] for r in runs["stored"]),
+           "rasterise_s_stored": statistics.median(r["stages_s"]["rasterise"] for r in runs["stored"]),
+           "bytes_per_frame_stored": sizes["stored"]["total"], "bytes_per_frame_raw": sizes["raw"]["total"]}
+    pixel_type = DatasetReader(work / f"{tag}_stored").manifest["codec"]["tactile"].get("pixel_type", "half")
+    row["costs"] = encode_costs(stored_maps(work / f"{tag}_stored"), pixel_type, reps=max(1, reps))
+    row["projections"] = projections(row, row["costs"])
+    return row
 
 
-def maps_rows(corpus: Path, work: Path, adapters: tuple[str, ...], quick: bool) -> dict:
+def real_glove_row(folder: Path | None, work: Path, reps: int, quick: bool) -> dict:
+    """`glove_only_row` on the real clips of a real-glove folder given by an explicit path (htdata bench
+    --real-glove DIR), written as native glove-only recordings; quick: the 3 shortest clips."""
+    if folder is None:
+        return {"skipped": "no real-glove folder given (htdata bench --real-glove DIR)"}
+    clips, layouts = load_real_glove(folder)
+    if quick:
+        clips = sorted(clips, key=lambda c: len(c.counts))[:3]
+    rec_dir = write_native_clips(clips, layouts, work / "maps_realglove")
+    label = f"{len(clips)} real clips, no video ({folder})"
+    return glove_only_row(work, reps, ("glove_only_real", label, rec_dir, work / "maps_realglove" / "layouts"))
+
+
+def maps_rows(corpus: Path, work: Path, adapters: tuple[str, ...], quick: bool, real_glove: Path | None = None) -> dict:
     rows = [adapter_row(name, corpus / name, work, 60 if quick else 400, 1 if quick else 3) for name in adapters]
     default, why = pick_default(rows)
     t = TactileConfig()   # what "auto" (the default) resolves to for a new dataset of the shipped pipelines
     return {"rows": rows, "rule": RULE, "default": default, "why": why, "pipeline_setting": t.maps.value,
             "pipeline_default": t.maps.resolved(None).record,
-            "frames_at_scale": FRAMES_AT_SCALE, "glove_only": glove_only_row(work, 1 if quick else 3)}
+            "frames_at_scale": FRAMES_AT_SCALE, "glove_only": glove_only_row(work, 1 if quick else 3),
+            "glove_only_real": real_glove_row(real_glove, work, 1 if quick else 3, quick)}
 
 
 def maps_markdown(d: dict) -> list[str]:
@@ -258,17 +287,21 @@ def maps_markdown(d: dict) -> list[str]:
                                ("stored_over_rendered_difference", "max |stored - rendered|"),
                                ("stored_pixel_type", "stored EXR pixels")])
     if "glove_only" in d:
-        lines += ["Glove-only recording, maps stored vs maps = \"raw\" (1 worker, alternating runs, medians; "
+        rows = [d["glove_only"]] + [r for r in (d.get("glove_only_real"),) if r and "skipped" not in r]
+        lines += ["Glove-only recordings, maps stored vs maps = \"raw\" (1 worker, alternating runs, medians; "
                   "target: stored >= 0.8x the raw speed):", ""]
-        lines += table([d["glove_only"]], [("recording", "recording"), ("frames", "frames"),
-                                           ("frames_per_s_stored", "frames/s, stored"),
-                                           ("frames_per_s_raw", "frames/s, raw"), ("speed_ratio", "stored / raw"),
-                                           ("cpu_s_stored", "CPU s, stored"), ("cpu_s_raw", "CPU s, raw"),
-                                           ("worker_s_stored", "in-worker s, stored"), ("worker_s_raw", "in-worker s, raw"),
-                                           ("encode_s_stored", "encode wait s, stored"),
-                                           ("rasterise_s_stored", "rasterise s, stored"),
-                                           ("bytes_per_frame_stored", "B/frame, stored"),
-                                           ("bytes_per_frame_raw", "B/frame, raw")])
+        lines += table(rows, [("recording", "recording"), ("frames", "frames"),
+                              ("frames_per_s_stored", "frames/s, stored"),
+                              ("frames_per_s_raw", "frames/s, raw"), ("speed_ratio", "stored / raw"),
+                              ("cpu_s_stored", "CPU s, stored"), ("cpu_s_raw", "CPU s, raw"),
+                              ("worker_s_stored", "in-worker s, stored"), ("worker_s_raw", "in-worker s, raw"),
+                              ("encode_s_stored", "encode wait s, stored"),
+                              ("rasterise_s_stored", "rasterise s, stored"),
+                              ("bytes_per_frame_stored", "B/frame, stored"),
+                              ("bytes_per_frame_raw", "B/frame, raw")])
+        if "skipped" in (d.get("glove_only_real") or {}):
+            lines += [f"Real clips: not measured ({d['glove_only_real']['skipped']}).", ""]
+        lines += glove_cost_markdown([r for r in rows if "projections" in r])
     same = "equals" if d["default"] == d["pipeline_default"] else "DIFFERS FROM"
     lines += ["Exact = every map rendered from raw rows equals, bit for bit, the float32 map the ingest computes "
               "before any codec (the same episodes through EpisodeStream); max |stored - rendered| is the stored "

@@ -311,7 +311,7 @@ class Sections:
         return raw_rows(self.corpus, self.cfg.work, bench_sources(), self.dataset, self.cfg.quick)
 
     def maps(self) -> dict:
-        return maps_rows(self.corpus, self.cfg.work, bench_sources(), self.cfg.quick)
+        return maps_rows(self.corpus, self.cfg.work, bench_sources(), self.cfg.quick, self.cfg.real_glove)
 
     def export(self) -> dict:
         return export_rows(self.dataset, self.cfg.work)

@@ -146,6 +146,8 @@ def test_quick_bench_content_is_consistent(quick_run):
     assert glove["frames"] > 0 and glove["bytes_per_frame_stored"] > glove["bytes_per_frame_raw"] > 0
     assert glove["speed_ratio"] == pytest.approx(glove["frames_per_s_stored"] / glove["frames_per_s_raw"])
     assert glove["cpu_s_stored"] > 0 and glove["cpu_s_raw"] > 0
+    assert glove["costs"]["maps"] > 0 and 0 < glove["projections"]["ceiling_one_core"] <= 1
+    assert "skipped" in r["maps"]["glove_only_real"]     # no --real-glove DIR: not measured, and said
     scaling = r["scaling"]
     cores = max(2, usable_cores())                  # 1 -> N workers on the machine's cores
     assert {s["adapter"] for s in scaling["summary"]} == {"opentouch", "touchanything", "native"}
