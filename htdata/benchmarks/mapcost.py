@@ -27,9 +27,9 @@ import numpy as np
 from isal import isal_zlib
 
 from htdata.benchmarks.tables import table
-from htdata.format.tactilecodec import decode_exr_pixels, encode_tactile
 from htdata.format.exrzip import DEFLATE_LEVEL, LINES_PER_CHUNK, zip_filter
 from htdata.format.table import HANDS, tactile_member
+from htdata.format.tactilecodec import decode_exr_pixels, encode_tactile
 from htdata.read.reader import DatasetReader
 
 TARGET = 0.8      # issue 47: stored >= 0.8x the maps = "raw" speed
