@@ -17,8 +17,9 @@ O(samples) or O(shard bytes) by design, measured per sample in the other section
 measured read metadata, or decode one base episode (`trim`, `view`).
 
 Each command runs as its own process (`htdata ...`, by this interpreter), timed from outside: wall seconds, the
-child's peak resident memory (`os.wait4`), and the bytes of the files it created or changed in the
-dataset (a hard link to an existing file counts 0: it writes no data).
+process's own peak resident memory (its VmHWM, written at exit; its worker processes are not counted), and
+the bytes of the files it created or changed in the dataset (a hard link to an existing file counts 0: it
+writes no data).
 """
 
 from __future__ import annotations
@@ -40,7 +41,6 @@ from htdata.store.parts import Part, parts_of_version
 from htdata.synthetic.rawglove import write_rawglove
 from htdata.write.newversion import NewVersion
 
-BASE_FRAMES = 306          # frames of one sample raw-glove recording (htdata/synthetic/rawglove.py)
 HT_BENCH_SAMPLES = 7_800_000
 
 
