@@ -129,9 +129,6 @@ def region_scores(terms: PixelTerms, region, *, name: str = "prediction") -> Fra
 
 def frame_scores(pred, target, region, *, name: str = "prediction") -> FrameScores:
     """Score a batch: pred/target (B,1,H,W) values, region (B,1,H,W) weights in {0,1}."""
-    if _frames(region, "region").shape != _frames(pred, name).shape:
-        raise ValueError(f"{name}: shapes differ: pred {tuple(torch.as_tensor(pred).shape)}, "
-                         f"region {tuple(torch.as_tensor(region).shape)}")
     return region_scores(pixel_terms(pred, target, name=name), region, name=name)
 
 
