@@ -1,8 +1,8 @@
 """What the torch datasets share: which samples make items, from which version, and what an item carries.
 
-`TactileFrameDataset`, `TactileWindowDataset` and `TactileStream` (htdata/read/torchdata.py) take one
-`ItemOptions` as `options=` (its fields are documented once, on the class), checked once; the item
-builder (htdata/read/torchitems.py) reads only it. One object serves several datasets:
+`TactileFrameDataset`, `TactileWindowDataset`, `TactileStream` (htdata/read/torchdata.py) and
+`GloveRateWindowDataset` (htdata/read/torchglove.py) take one `ItemOptions` as `options=` (its fields are
+documented once, on the class), checked once; the item builder (htdata/read/torchitems.py) reads only it. One object serves several datasets:
 
     opts = ItemOptions(split="main", part="train", members=("tactile",))
     frames = TactileFrameDataset(root, options=opts)

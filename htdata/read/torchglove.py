@@ -12,7 +12,9 @@ raster mode. Item: tactile (window,1,224,224) f32, t_ns (window,) int64
 frame and index of the paired sample. Samples whose paired row has fewer
 than `window - 1` rows before it in the episode are not items (no padding).
 Building the item list reads every selected sample's JSON member once;
-each worker keeps the streams of the two episodes it read last.
+each worker keeps the streams of the two episodes it read last. Which samples
+and which version: one `options=ItemOptions(...)`, as the other torch datasets
+(htdata/read/itemoptions.py); the old keywords warn until htdata/_moved.py's REMOVED_IN.
 """
 
 from __future__ import annotations
@@ -26,17 +28,20 @@ try:
 except ModuleNotFoundError as exc:   # the data core installs without torch
     raise ModuleNotFoundError(f"{__name__} needs torch: pip install 'htdata[torch]' (torch==2.13.0)") from exc
 
+from htdata._moved import folded_keywords
 from htdata.errors import ArgumentError
-from htdata.format.table import HANDS, JSON_MEMBER, SIZE_FIELDS, decode_member, raw_member
+from htdata.format.table import JSON_MEMBER, SIZE_FIELDS, decode_member, raw_member
 from htdata.format.tactilecodec import check_served_maps
 from htdata.read import keys
-from htdata.read.itemoptions import ItemOptions
+from htdata.read.itemoptions import ItemOptions, item_options, keywords_as_options, streamed_only
 from htdata.read.keys import HAND_IDS
 from htdata.read.rawstream import RawStream, episode_stream
 from htdata.read.torchdata import HAND_NAMES, _ItemDataset
 from htdata.read.torchitems import ItemBuilder
 
 KEEP_STREAMS = 2
+# the signature before `options=` (these keywords warn until htdata/_moved.py's REMOVED_IN)
+_OLD_ARGS = ("split", "part", "hands", "version")
 
 
 class GloveRateWindowDataset(_ItemDataset):
@@ -45,25 +50,34 @@ class GloveRateWindowDataset(_ItemDataset):
     Args:
         root: the dataset folder or URL.
         window: glove rows per item (>= 1), ending at each sample's paired row.
-        split: the split whose `part` is read (None: every sample).
-        part: the part of `split` ("train", "val", ...).
-        hands: the hands that make items ("left", "right").
-        version: the committed version to read (None: the current one).
+        options: which samples, from which version (htdata.read.itemoptions.ItemOptions; None: its defaults).
+            It reads `split`, `part`, `hands` and `version`; an item is always the tactile maps rendered from
+            the raw rows with its constants, so `rgb_float`, `frames` and the RGB member do not apply, and
+            `maps_from="stored"`, `members` without "tactile", `constants="once"` and an `on_error` other
+            than "raise" are refused.
+
+    Raises:
+        ArgumentError: `window` < 1; `options` is not an ItemOptions, or asks for what is refused above.
     """
 
-    def __init__(self, root, window: int = 4, split: str | None = None, part: str | None = None,
-                 hands=HANDS, version: int | None = None):
+    @folded_keywords("options", keywords_as_options, _OLD_ARGS, _OLD_ARGS)
+    def __init__(self, root, window: int = 4, *, options: ItemOptions | None = None):
         if window < 1:
             raise ArgumentError(f"window must be >= 1, got {window}")
+        o = streamed_only(item_options(options), "GloveRateWindowDataset")
+        if o.maps_from == "stored" or keys.TACTILE not in o.members or o.constants != "item":
+            raise ArgumentError(f"GloveRateWindowDataset items are tactile maps rendered from the raw rows, with "
+                                f"their constants: options cannot ask maps_from='stored', members without "
+                                f"'tactile' or constants='once' (got maps_from={o.maps_from!r}, "
+                                f"members={o.members}, constants={o.constants!r})")
         self.window = window
-        # the torch datasets' options: maps always rendered from the raw rows, never an RGB frame
-        self.options = ItemOptions(split=split, part=part, hands=hands, version=version, maps_from="raw",
-                                   members=("tactile",))
-        self.hands = self.options.hands
-        self._builder = ItemBuilder(root, self.options)
+        self.options = o
+        self.hands = o.hands
+        # the builder renders every map from the raw rows and decodes no RGB frame
+        self._builder = ItemBuilder(root, o.replace(maps_from="raw", members=(keys.TACTILE,)))
         reader = self._builder.reader
         items = []   # (sample index, hand id, position of the paired row in the episode stream)
-        for pos in reader.episode_positions(split, part):
+        for pos in reader.episode_positions(o.split, o.part):
             first, n = reader.episode_range(pos)
             for hand in self.hands:
                 if hand not in reader.episodes[pos]["hands"]:

@@ -118,11 +118,11 @@ class TorchDatasets:
 
         Args:
             window: glove rows per item, ending at the row paired with a frame.
-            **kwargs: GloveRateWindowDataset's other arguments (split, part, hands, ...).
+            **kwargs: GloveRateWindowDataset's other arguments (split, part, hands, or options=).
 
         Returns:
             htdata.read.torchglove.GloveRateWindowDataset over this root and version.
         """
         from htdata.read.torchglove import GloveRateWindowDataset
 
-        return GloveRateWindowDataset(self.root, window=window, version=self.version, **kwargs)
+        return GloveRateWindowDataset(self.root, window=window, **self._versioned(kwargs))

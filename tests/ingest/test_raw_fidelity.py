@@ -5,12 +5,14 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from htdata.cli import main as cli
+from htdata.errors import ArgumentError
 from htdata.format.table import INDEX_FILE, LEGACY_INDEX_DTYPE, MANIFEST_FILE, raw_member, tactile_member
 from htdata.glove.calibration import calibration_id, episode_normaliser
 from htdata.glove.layouts import load_layout
@@ -308,6 +310,7 @@ def test_glove_rate_windows_follow_the_full_rate_stream(native_counts):
 
     out, values, ts = native_counts
     windows = GloveRateWindowDataset(out, window=4)
+    assert windows.options == ItemOptions()
     reader = DatasetReader(out)
     assert len(windows) == len(reader) - 1          # frame 0's paired row (row 0) has no 3 rows before it
     item = windows[len(windows) - 1]
@@ -322,6 +325,33 @@ def test_glove_rate_windows_follow_the_full_rate_stream(native_counts):
     normaliser, raster = renderer.parts_for(0, "right")
     expect = raster.render(normaliser.apply(values[end - 3:end + 1], rows=np.arange(end - 3, end + 1))[0])
     assert np.array_equal(item["tactile"][:, 0].numpy(), expect)
+
+
+def test_glove_rate_windows_take_item_options(native_counts):
+    """One `options=ItemOptions` as the other torch datasets; the old keywords warn and make the same object."""
+    import htdata
+    from htdata.read.torchglove import GloveRateWindowDataset
+
+    out, _, _ = native_counts
+    opts = ItemOptions(hands=("right",), version=1)
+    windows = GloveRateWindowDataset(out, window=2, options=opts)
+    assert windows.options is opts and len(windows) == len(DatasetReader(out)) - 1
+    with pytest.warns(DeprecationWarning, match=r"GloveRateWindowDataset\(hands=\('right',\), version=1\) is "
+                                                r"deprecated: pass options=ItemOptions"):
+        by_kw = GloveRateWindowDataset(out, window=2, hands=("right",), version=1)
+    assert by_kw.options == opts and np.array_equal(by_kw.items, windows.items)
+    with pytest.warns(DeprecationWarning):
+        assert GloveRateWindowDataset(out, 2, None, None, ("right",)).options == ItemOptions(hands=("right",))
+    with pytest.raises(ArgumentError, match="not both"):
+        GloveRateWindowDataset(out, window=2, options=opts, hands=("left",))
+    for refused in (dict(maps_from="stored"), dict(members=("rgb",)), dict(constants="once"), dict(on_error="skip")):
+        with pytest.raises(ArgumentError):
+            GloveRateWindowDataset(out, window=2, options=ItemOptions(**refused))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")       # the view takes the fields as keywords: not the deprecated path
+        viewed = htdata.open(out).torch.glove_windows(window=2, hands=("right",))
+    assert viewed.options == ItemOptions(hands=("right",), version=viewed.reader.version)
+    assert np.array_equal(viewed.items, windows.items)
 
 
 def test_merge_keeps_the_calibrations_of_both_datasets(tmp_path, native_counts):
