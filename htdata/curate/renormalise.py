@@ -39,7 +39,6 @@ from htdata.format.table import (
     tactile_member,
 )
 from htdata.glove.calibration import (
-    calibration_id,
     episode_calibrations,
     episode_normaliser,
     fit_digests,
@@ -88,10 +87,10 @@ def dataset_layouts(snap: Snapshot) -> dict[str, Layout]:
             for lid, entry in snap.manifest["layouts"].items()}
 
 
-def plan_renormalise(snap: Snapshot, normalising: NormaliseSettings, patterns: list[str] | None = None,
-                     force: bool = False) -> RenormalisePlan:
-    """Which episode hands get a new calibration; refuses episodes stored without raw rows (naming them)."""
-    layouts = dataset_layouts(snap)
+def plan_renormalise(snap: Snapshot, layouts: dict[str, Layout], normalising: NormaliseSettings,
+                     patterns: list[str] | None = None, force: bool = False) -> RenormalisePlan:
+    """Which episode hands get a new calibration; refuses episodes stored without raw rows (naming them).
+    `layouts`: the version's (dataset_layouts)."""
     chosen = set(resolve_episodes(snap.episode_ids(), patterns) if patterns else snap.episode_ids())
     # A [normalise.<id>] (or --set normalise.<id>.*) no chosen episode uses would change nothing: a typo.
     scope = f"dataset {snap.root} version {snap.version}" + (f" (episodes {', '.join(patterns)})" if patterns else "")
@@ -99,16 +98,19 @@ def plan_renormalise(snap: Snapshot, normalising: NormaliseSettings, patterns: l
                                  for lid in ep["layouts"].values()}, None, scope)
     plan = RenormalisePlan(parent=snap.version)
     no_raw = []
+    resolved: dict[str, tuple[str, dict]] = {}   # layout id -> (new calibration id, its entry): once per layout
     for pos, ep in enumerate(snap.episodes):
         eid = ep["episode_id"]
         hands = {}
         for hand in ep["hands"] if eid in chosen else ():
-            layout = layouts[ep["layouts"][hand]]
-            new = calibration_id(layout.layout_id, normalising.normalise_for(layout))
+            lid = ep["layouts"][hand]
+            if lid not in resolved:      # one layout: one calibration, {id: entry}
+                (resolved[lid],) = episode_calibrations(normalising, {hand: layouts[lid]}).items()
+            new, entry = resolved[lid]
             old = (ep.get("calibration") or {}).get(hand)
             if new != old or force:
                 hands[hand] = (old, new)
-                plan.calibrations.update(episode_calibrations(normalising, {hand: layout}))
+                plan.calibrations[new] = entry
         if not hands:
             plan.unchanged += 1
             continue
@@ -126,11 +128,10 @@ def plan_renormalise(snap: Snapshot, normalising: NormaliseSettings, patterns: l
     return plan
 
 
-def rest_level_warnings(reader: DatasetReader, snap: Snapshot, normalising: NormaliseSettings,
-                        plan: RenormalisePlan) -> None:
+def rest_level_warnings(reader: DatasetReader, snap: Snapshot, layouts: dict[str, Layout],
+                        normalising: NormaliseSettings, plan: RenormalisePlan) -> None:
     """Fill plan.warnings as an ingest would warn: a raw-count glove whose rest reads as pressure under the new
     settings (baseline "none"), judged on the episode hand's first stored paired rows."""
-    layouts = dataset_layouts(snap)
     records = {ep["episode_id"]: ep for ep in snap.episodes}
     for eid, hands in plan.changes.items():
         for hand in hands:
@@ -185,14 +186,14 @@ def raw_rows_stored(rows: np.ndarray, hand: str) -> bool:
     return bool(np.all(rows[SIZE_FIELDS[raw_member(hand)]][mapped] > 0))
 
 
-def dataset_glove_rests(work: Path, snap: Snapshot, reader: DatasetReader,
+def dataset_glove_rests(work: Path, snap: Snapshot, layouts: dict[str, Layout], reader: DatasetReader,
                         normalising: NormaliseSettings) -> tuple[NormaliseSettings, list[GloveRest]]:
     """`normalising` with the glove's own rest for each raw-count layout it leaves to the default (as an ingest
     of many recordings gives it: htdata/ingest/gloverest.py): the reference the dataset's episodes already
     have, else one pooled over the raw rows the dataset stores of at least MIN_RECORDINGS episodes of the
     glove. The reference files go to `work`'s work folder."""
     found = {}
-    for lid, layout in sorted(dataset_layouts(snap).items()):
+    for lid, layout in sorted(layouts.items()):
         if normalising.default_note(layout) is None:
             continue
         had = reused_rest(work, snap, layout)
@@ -218,9 +219,10 @@ def dataset_glove_rests(work: Path, snap: Snapshot, reader: DatasetReader,
 class Recalibration:
     """The SampleRewrite of a renormalise: new maps (and bend vectors) for the changed episode hands."""
 
-    def __init__(self, reader: DatasetReader, snap: Snapshot, normalising: NormaliseSettings, plan: RenormalisePlan):
+    def __init__(self, reader: DatasetReader, snap: Snapshot, layouts: dict[str, Layout],
+                 normalising: NormaliseSettings, plan: RenormalisePlan):
         self.reader, self.snap, self.normalising, self.plan = reader, snap, normalising, plan
-        self.layouts = dataset_layouts(snap)
+        self.layouts = layouts
         codec = snap.manifest["codec"]["tactile"]
         self.raster_mode = codec.get("raster_mode", "nearest")
         self.settings = CodecSettings(tactile_compression=codec.get("compression", "zip"),
@@ -322,24 +324,28 @@ def renormalise(root, normalising: NormaliseSettings, patterns: list[str] | None
                 command: str) -> tuple[RenormalisePlan, dict | None]:
     """Plan (and unless `dry_run`, write) a version whose maps follow the calibrations of `normalising` (a pipeline's NormaliseSettings)."""
     with NewVersion(root, command) as nv, tempfile.TemporaryDirectory(prefix="htdata-renormalise-") as tmp:
+        # the version's layouts, loaded once; `normalising` (after the glove rests below) resolves each once,
+        # and the plan, its warnings and the rewrite read those
+        layouts = dataset_layouts(nv.parent)
         # the glove's own rest where the settings leave a raw-count glove to the default (a dry run writes
         # its reference files to a temporary folder, not into the dataset)
-        normalising, rests = dataset_glove_rests(Path(tmp) if dry_run else nv.root, nv.parent, nv.reader(),
-                                                 normalising)
-        plan = plan_renormalise(nv.parent, normalising, patterns, force)
+        normalising, rests = dataset_glove_rests(Path(tmp) if dry_run else nv.root, nv.parent, layouts,
+                                                 nv.reader(), normalising)
+        plan = plan_renormalise(nv.parent, layouts, normalising, patterns, force)
         plan.notes = [r.note([normalising.name]) for r in rests]
         if not plan.changes:
             return plan, None
-        rest_level_warnings(nv.reader(), nv.parent, normalising, plan)
+        rest_level_warnings(nv.reader(), nv.parent, layouts, normalising, plan)
         if dry_run:
             return plan, None
-        return plan, _write(nv, normalising, plan)
+        return plan, _write(nv, layouts, normalising, plan)
 
 
-def _write(nv: NewVersion, normalising: NormaliseSettings, plan: RenormalisePlan) -> dict:
+def _write(nv: NewVersion, layouts: dict[str, Layout], normalising: NormaliseSettings,
+           plan: RenormalisePlan) -> dict:
     """Re-pack the units holding changed episodes under the new calibrations and commit them (the manifest);
     a failure (bad settings for some frame) leaves no shard of this attempt behind (NewVersion)."""
-    rewrite = Recalibration(nv.reader(), nv.parent, normalising, plan)
+    rewrite = Recalibration(nv.reader(), nv.parent, layouts, normalising, plan)
     parts = []
     for part in nv.parent.parts():
         if part.unit not in plan.repacked_units:

@@ -1,15 +1,19 @@
 """A pipeline's normalisation settings, apart from the rest of the pipeline: the `[normalise.<layout>]`
 tables over each layout's value block, and the rule that every table names a layout in use.
 
-The ingest builds them from its pipeline (htdata/ingest/pipeline.py `normalise_settings`);
-`htdata renormalise` needs nothing else of a pipeline, so curation reads these without importing
-ingest's configuration.
+The ingest builds them from its pipeline (htdata/ingest/pipeline.py `normalise_settings`, one object per
+pipeline state); `htdata renormalise` needs nothing else of a pipeline, so curation reads these without
+importing ingest's configuration. A settings object resolves each layout once (`normalise_for`: the table
+over the value block, the calibration file found and hashed, the result checked) and every later call for
+that layout reads the resolved config: the ingest's episodes and renormalise's plan, warnings and rewrite
+share one NormaliseConfig per layout, never one each.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -56,6 +60,9 @@ class NormaliseSettings:
     shared_layouts: list[str] = field(default_factory=list)
     settings: tuple[str, ...] = ()
     fit_frames: int = 64   # [tactile] chunk_frames' default
+    # (layout id, its value block) -> the resolved config (normalise_for); a new object starts empty
+    _resolved: dict[tuple[str, str], NormaliseConfig] = field(default_factory=dict, init=False, repr=False,
+                                                              compare=False)
 
     def default_note(self, layout) -> str | None:
         """One line when `layout` holds raw counts and has no `[normalise.<id>]` table, so the raw-count default
@@ -102,11 +109,19 @@ class NormaliseSettings:
             layout: a glove.layouts.Layout.
 
         Returns:
-            The checked NormaliseConfig (a taxel calibration file resolved, its sha256 filled in).
+            The checked NormaliseConfig (a taxel calibration file resolved, its sha256 filled in): the same object
+            for every call with this layout (resolved at the first), so callers read it and never change it.
 
         Raises:
             ConfigError: the taxel calibration file is not found, or the config is invalid (NormaliseConfig.validate).
         """
+        key = (layout.layout_id, json.dumps(layout.value, sort_keys=True, default=str))
+        if key not in self._resolved:
+            self._resolved[key] = self._resolve(layout)
+        return self._resolved[key]
+
+    def _resolve(self, layout) -> NormaliseConfig:
+        """`normalise_for`'s work, done once per layout (its docstring)."""
         base = NormaliseConfig.from_layout_value(layout.value)
         if layout.layout_id not in self.normalise:
             return base

@@ -40,9 +40,8 @@ REST_BYTES = 64 << 20     # raw rows read per recording for its rest, at most (f
 def _defaulted_hands(pairs: list[tuple]) -> dict[str, tuple[Layout, list[tuple]]]:
     """layout id -> (layout, [(ref, source, hand)]) for every raw-count layout without a table among the pairs."""
     out: dict[str, tuple[Layout, list[tuple]]] = {}
-    settings: dict[int, object] = {}
     for ref, source in pairs:
-        normalising = settings.setdefault(id(source), source.pipeline.normalise_settings())
+        normalising = source.pipeline.normalise_settings()     # one per pipeline: each layout resolved once
         for hand, path in sorted(ref.layout_files.items()):
             layout = load_layout(path)
             if normalising.default_note(layout) is not None:

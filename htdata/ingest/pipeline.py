@@ -150,6 +150,8 @@ class PipelineConfig:
     shared_layouts: list[str] = field(default_factory=list)
     path: str = ""   # where it was loaded from (not part of the config's identity)
     settings: tuple[str, ...] = ()   # the --set items applied (with_overrides), to name them in errors
+    # (what normalising reads of this pipeline, its NormaliseSettings): built once per state (normalise_settings)
+    _normalising: tuple | None = field(default=None, init=False, repr=False, compare=False)
 
     def validate(self) -> "PipelineConfig":
         where = self.path or f"pipeline {self.name!r}"
@@ -172,11 +174,22 @@ class PipelineConfig:
         return self
 
     def normalise_settings(self) -> NormaliseSettings:
-        """What normalising needs of this pipeline (htdata.glove.normalisesettings), e.g. for `htdata renormalise`."""
-        return NormaliseSettings(name=self.name, path=self.path, normalise=self.normalise,
-                                 normalise_given=self.normalise_given, layouts=self.layouts,
-                                 shared_layouts=self.shared_layouts, settings=self.settings,
-                                 fit_frames=self.tactile.chunk_frames)
+        """What normalising needs of this pipeline (htdata.glove.normalisesettings), e.g. for `htdata renormalise`.
+
+        One object while the fields it is made of stay as they are, so each layout's `[normalise]` is resolved
+        once per run (NormaliseSettings.normalise_for), not once per episode; a change to those fields (a copy
+        made by `with_glove_rests`, `--set`) makes a new one.
+        """
+        made_of = (self.name, self.path, self.normalise, self.normalise_given, self.layouts, self.shared_layouts,
+                   self.settings, self.tactile.chunk_frames)
+        key = repr(made_of)
+        if self._normalising is None or self._normalising[0] != key:
+            self._normalising = (key, NormaliseSettings(
+                name=self.name, path=self.path, normalise=dict(self.normalise),
+                normalise_given=dict(self.normalise_given), layouts=dict(self.layouts),
+                shared_layouts=list(self.shared_layouts), settings=self.settings,
+                fit_frames=self.tactile.chunk_frames))
+        return self._normalising[1]
 
     def check_layout_names(self, used_ids: set[str], used_hands: set[str] | None, scope: str,
                            why: str = "") -> None:

@@ -224,10 +224,9 @@ def _progress_line(text: str) -> None:
 def raw_count_default_notes(pairs: list[tuple]) -> list[str]:
     """One note per raw-count layout without a `[normalise.<id>]` table among the (ref, source) pairs ingested
     now: which default normalisation it got."""
-    settings = {}
     notes = []
     for ref, source in pairs:
-        normalising = settings.setdefault(id(source), source.pipeline.normalise_settings())
+        normalising = source.pipeline.normalise_settings()     # one per pipeline: each layout resolved once
         for path in sorted(set(ref.layout_files.values())):
             line = normalising.default_note(load_layout(path))
             if line and line not in notes:

@@ -204,3 +204,23 @@ def test_toml_integers_in_the_sync_section_become_floats(tmp_path):
     cfg = load_pipeline(write(tmp_path, MINIMAL + "[sync]\nmax_skew_ms = 12\nlag = 40\nmax_lag_ms = 300\n"))
     assert cfg.to_dict()["sync"] == {"max_skew_ms": 12.0, "policy": "nearest", "lag": 40.0, "max_lag_ms": 300.0}
     assert all(isinstance(v, float) for k, v in cfg.to_dict()["sync"].items() if k != "policy")
+
+
+def test_normalise_is_resolved_once_per_layout_while_the_pipeline_stays_as_it_is(monkeypatch):
+    """One NormaliseSettings per pipeline state, and each layout's config resolved once in it (issue 48: it was
+    rebuilt on every `normalise_for`, once per episode); a changed table makes a new one."""
+    from htdata.glove.layouts import load_layout
+    from htdata.glove.normalisesettings import NormaliseSettings
+
+    lid = "opentouch_right_16x16"
+    cfg, layout = load_pipeline("opentouch"), load_layout(lid)
+    resolved, real = [], NormaliseSettings._resolve
+    monkeypatch.setattr(NormaliseSettings, "_resolve",
+                        lambda self, lay: resolved.append(lay.layout_id) or real(self, lay))
+    first = cfg.normalise_for(layout)
+    assert cfg.normalise_settings() is cfg.normalise_settings()
+    assert cfg.normalise_for(load_layout(lid)) is first and resolved == [lid]     # another load of the same layout
+    changed = cfg.with_overrides([f"normalise.{lid}.noise_floor=0.1"])
+    assert changed.normalise_for(layout).noise_floor == 0.1 and first.noise_floor == 0 and resolved == [lid, lid]
+    cfg.normalise[lid].max_value = 4000.0     # a table changed in place: a new settings object, resolved again
+    assert cfg.normalise_for(layout).max_value == 4000 and first.max_value == 3072 and len(resolved) == 3

@@ -182,6 +182,19 @@ def test_renormalise_to_a_new_calibration_and_back(tmp_path, native_counts, caps
     assert cli(["validate", str(out), "--deep"]) == 0
 
 
+def test_renormalise_resolves_each_layout_once(native_counts, monkeypatch):
+    """`[normalise]` is resolved once per layout per run: the plan, its calibrations, the rest-level warnings
+    and the rewrite read one config (they resolved it four times, issue 48)."""
+    from htdata.glove.normalisesettings import NormaliseSettings
+
+    out, _, _ = native_counts
+    resolved, real = [], NormaliseSettings._resolve
+    monkeypatch.setattr(NormaliseSettings, "_resolve",
+                        lambda self, layout: resolved.append(layout.layout_id) or real(self, layout))
+    assert cli(["renormalise", str(out), "--pipeline", "native", "--set", f"normalise.{LAYOUT}.baseline=none"]) == 0
+    assert load_manifest(out)["version"] == 2 and resolved == [LAYOUT]
+
+
 def test_renormalise_refuses_episodes_without_raw_rows(tmp_path, capsys):
     pipeline = small_pipeline(tmp_path, "opentouch")
     pipeline.write_text(pipeline.read_text() + "\n[tactile]\nkeep_raw = false\nmaps = \"stored\"\n"
