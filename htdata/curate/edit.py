@@ -20,10 +20,9 @@ from dataclasses import dataclass, field
 from htdata._moved import moved_name
 from htdata.errors import ArgumentError
 from htdata.store.episodeids import resolve_episodes
-from htdata.store.parts import Part
 from htdata.store.snapshot import Snapshot
 from htdata.write.newversion import NewVersion
-from htdata.write.repack import KeptEpisode, samples_per_shard_of
+from htdata.write.repack import KeptEpisode
 
 
 def parse_frames(spec: str, n: int, episode: str) -> range:
@@ -90,7 +89,7 @@ def plan_edit(snap: Snapshot, remove: list[str], trim: dict[str, range]) -> tupl
                 kept.append(KeptEpisode(record=_trimmed_record(rec, trim[eid], snap.version), frames=trim[eid]))
                 edit.frames_removed += n - len(trim[eid])
             else:
-                kept.append(KeptEpisode(record=rec, frames=range(n)))
+                kept.append(KeptEpisode.whole(rec))
         if kept:
             edit.repacked_units.append(part.unit)
         edit.dropped_shards += [s["name"] for s in part.shards]
@@ -114,13 +113,8 @@ def _trimmed_record(rec: dict, frames: range, version: int | None) -> dict:
 
 def apply_edit(nv: NewVersion, plan: list) -> dict:
     """Write the planned version (re-packing touched units into new ones) in `nv`; returns its manifest."""
-    parts: list[Part] = []
-    for part, kept in plan:
-        if kept is None:
-            parts.append(part)
-        elif kept:
-            parts.append(nv.repack(nv.reader(), kept, samples_per_shard_of(part)))
-    return nv.commit(parts)
+    kept_of = {part.unit: kept for part, kept in plan}     # plan_edit's, over nv.parent: None = untouched
+    return nv.commit(nv.carry_or_repack(lambda part: part if kept_of[part.unit] is None else kept_of[part.unit]))
 
 
 def remove_episodes(root, patterns: list[str], dry_run: bool, command: str) -> tuple[Edit, dict | None]:

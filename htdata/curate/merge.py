@@ -45,7 +45,7 @@ from htdata.store.parts import Part
 from htdata.store.snapshot import Snapshot, open_snapshot
 from htdata.store.versions import content_view, list_versions, version_manifest_file
 from htdata.write.newversion import NewVersion
-from htdata.write.repack import KeptEpisode, samples_per_shard_of
+from htdata.write.repack import KeptEpisode
 
 MERGE_MARKER = ".merge.json"   # written by a merge into an empty OUT, removed after its commit
 
@@ -199,21 +199,20 @@ def merge(a_root, b_root, out_root, command: str) -> MergeReport:
                 place_shard(a.root / SHARDS_DIR / s["name"], out / SHARDS_DIR / s["name"], s["sha256"], report,
                             resuming)
             parts.append(part)
-        reader_b = DatasetReader(b.root, version=b.version)
-        for part in b.parts():
+
+        def choose_b(part: Part) -> Part | list[KeptEpisode] | None:
             kept = [e for e in part.episodes if e["episode_id"] not in dup]
             if not kept:
-                continue
+                return None
             if len(kept) < len(part.episodes):   # re-pack B's unit without the duplicate, into OUT (an
                 # interrupted run's try at that unit is redone: NewVersion.repack writes a unit whole)
-                parts.append(nv.repack(reader_b, [KeptEpisode(e, range(int(e["num_frames"]))) for e in kept],
-                                       samples_per_shard_of(part)))
-            else:
-                renamed = _renamed(part, nv.take_unit())
-                for old, new in zip(part.shards, renamed.shards):
-                    place_shard(b.root / SHARDS_DIR / old["name"], out / SHARDS_DIR / new["name"], old["sha256"],
-                                report, resuming)
-                parts.append(renamed)
+                return [KeptEpisode.whole(e) for e in kept]
+            renamed = _renamed(part, nv.take_unit())
+            for old, new in zip(part.shards, renamed.shards):
+                place_shard(b.root / SHARDS_DIR / old["name"], out / SHARDS_DIR / new["name"], old["sha256"],
+                            report, resuming)
+            return renamed
+        parts += nv.carry_or_repack(choose_b, parent=b, reader=DatasetReader(b.root, version=b.version))
         crash_point("merge_shards_placed")
         copy_layout_files(a, out)
         copy_layout_files(b, out)

@@ -58,7 +58,7 @@ from htdata.read.reader import DatasetReader
 from htdata.store.confine import inside
 from htdata.store.snapshot import Snapshot
 from htdata.write.newversion import NewVersion
-from htdata.write.repack import KeptEpisode, samples_per_shard_of
+from htdata.write.repack import KeptEpisode
 
 
 @dataclass
@@ -346,11 +346,6 @@ def _write(nv: NewVersion, layouts: dict[str, Layout], normalising: NormaliseSet
     """Re-pack the units holding changed episodes under the new calibrations and commit them (the manifest);
     a failure (bad settings for some frame) leaves no shard of this attempt behind (NewVersion)."""
     rewrite = Recalibration(nv.reader(), nv.parent, layouts, normalising, plan)
-    parts = []
-    for part in nv.parent.parts():
-        if part.unit not in plan.repacked_units:
-            parts.append(part)
-            continue
-        kept = [KeptEpisode(record=rec, frames=range(int(rec["num_frames"]))) for rec in part.episodes]
-        parts.append(nv.repack(nv.reader(), kept, samples_per_shard_of(part), rewrite=rewrite))
+    parts = nv.carry_or_repack(lambda part: [KeptEpisode.whole(rec) for rec in part.episodes]
+                               if part.unit in plan.repacked_units else part, rewrite=rewrite)
     return nv.commit(parts, {"calibrations": plan.calibrations})

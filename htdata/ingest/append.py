@@ -27,7 +27,7 @@ from pathlib import Path
 from htdata.store.parts import Part
 from htdata.store.snapshot import Snapshot
 from htdata.write.newversion import NewVersion
-from htdata.write.repack import KeptEpisode, samples_per_shard_of
+from htdata.write.repack import KeptEpisode
 
 # Pipeline sections that do not shape a sample (packing and naming only).
 NOT_SAMPLE_SETTINGS = ("name", "shards")
@@ -110,14 +110,12 @@ def parent_parts(plan: AppendPlan, ingested: set[str], nv: NewVersion) -> list[P
     if plan.parent is None:
         return []
     gone = plan.replaced & ingested
-    parts = []
-    for part in plan.parent.parts():
+
+    def choose(part: Part) -> Part | list[KeptEpisode]:
         records = [relabel(e, plan.relabelled[e["episode_id"]]) if e["episode_id"] in plan.relabelled else e
                    for e in part.episodes]
         kept = [e for e in records if e["episode_id"] not in gone]
         if len(kept) == len(records):
-            parts.append(Part(unit=part.unit, shards=part.shards, rows=part.rows, episodes=records))
-        elif kept:
-            parts.append(nv.repack(nv.reader(), [KeptEpisode(e, range(int(e["num_frames"]))) for e in kept],
-                                   samples_per_shard_of(part)))
-    return parts
+            return Part(unit=part.unit, shards=part.shards, rows=part.rows, episodes=records)
+        return [KeptEpisode.whole(e) for e in kept]      # none kept: the part leaves
+    return nv.carry_or_repack(choose, parent=plan.parent)

@@ -10,7 +10,8 @@ this order, through `NewVersion`:
 3. number new work units from the parent's `next_unit` (shard names stay unique across versions);
    the first write clears the shards of units at or past it that no version lists (an interrupted
    write's leftovers), so a re-run takes the numbers a run that never crashed would;
-4. carry the parent's parts, or re-pack the touched ones into new units (`repack`, byte for byte);
+4. carry the parent's parts, or re-pack the touched ones into new units (`repack`, byte for byte):
+   one walk, `carry_or_repack`, in which the writer only says what becomes of each part;
 5. `commit`: htdata/store/snapshot.py `commit_parts`, the version file linked into place last.
 
 A write killed after its version file was linked but before dataset.json was rewritten has
@@ -32,6 +33,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 from htdata.errors import AlreadyCommitted
@@ -41,7 +43,14 @@ from htdata.store.lock import WriterLock
 from htdata.store.parts import Part
 from htdata.store.snapshot import Snapshot, SplitMaker, commit_parts, current_snapshot, open_snapshot
 from htdata.store.versions import list_versions, restore_pointer, version_manifest_file
-from htdata.write.repack import KeptEpisode, SampleRewrite, clear_uncommitted, clear_unit, repack_unit
+from htdata.write.repack import (
+    KeptEpisode,
+    SampleRewrite,
+    clear_uncommitted,
+    clear_unit,
+    repack_unit,
+    samples_per_shard_of,
+)
 
 PARENTS = ("current", "optional", "none")
 
@@ -157,6 +166,38 @@ class NewVersion:
         unit = self.take_unit()
         clear_unit(self.root, unit)    # a resumed write's earlier try at this unit
         return repack_unit(reader, kept, unit, samples_per_shard, out_root=self.root, rewrite=rewrite)
+
+    def carry_or_repack(self, choose: Callable[[Part], "Part | list[KeptEpisode] | None"],
+                        parent: Snapshot | None = None, reader: DatasetReader | None = None,
+                        rewrite: SampleRewrite | None = None) -> list[Part]:
+        """The walk over a version's parts that every writer makes: each part in order, carried or re-packed.
+
+        Args:
+            choose: `choose(part)` says what of `part` the new version holds: a Part (carried: `part` itself,
+                or one with new records over the same shards), a list of KeptEpisode (re-packed into a new unit
+                of this write with the part's samples per shard, `repack`), or None / [] (nothing of it).
+            parent: the version walked (default: this write's parent).
+            reader: the reader the re-packed samples come from (default: `reader()`, the parent's).
+            rewrite: changes samples while re-packing (htdata.curate.renormalise.Recalibration).
+
+        Returns:
+            The parts, in the walked version's order.
+
+        Raises:
+            ValueError: no version to walk (this write has no parent and none was given).
+        """
+        walked = self.parent if parent is None else parent
+        if walked is None:
+            raise ValueError(f"{self.root}: this write has no parent version to walk")
+        parts = []
+        for part in walked.parts():
+            chosen = choose(part)
+            if isinstance(chosen, Part):
+                parts.append(chosen)
+            elif chosen:
+                parts.append(self.repack(reader or self.reader(), chosen, samples_per_shard_of(part),
+                                         rewrite=rewrite))
+        return parts
 
     def commit(self, parts: list[Part], fields: dict | None = None, splits: SplitMaker | None = None) -> dict:
         """Commit `parts` as the new version (htdata/store/snapshot.py `commit_parts`); returns its manifest.

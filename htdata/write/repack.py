@@ -31,9 +31,26 @@ from htdata.store.parts import SHARD_NAME_RE, Part, part_from_unit, unit_of_shar
 
 @dataclass
 class KeptEpisode:
-    """One episode to copy: its record (without computed fields) and the frames kept, in order."""
+    """One episode to copy: its record (without computed fields) and the frames kept, in order.
+
+    Args:
+        record: the episode's record as the new version lists it.
+        frames: source frame numbers within the episode; renumbered from 0 when not 0..n-1.
+    """
     record: dict
     frames: range           # source frame numbers within the episode; renumbered from 0 when not 0..n-1
+
+    @classmethod
+    def whole(cls, record: dict) -> "KeptEpisode":
+        """Every frame of the episode `record` describes (its `num_frames`).
+
+        Args:
+            record: the episode's record.
+
+        Returns:
+            KeptEpisode(record, range(num_frames)).
+        """
+        return cls(record, range(int(record["num_frames"])))
 
 
 class SampleRewrite(Protocol):

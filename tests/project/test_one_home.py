@@ -17,3 +17,31 @@ def test_create_exclusively_is_written_once():
     other_uses = {"htdata/fileio.py", "htdata/curate/merge.py", "htdata/benchmarks/htbenchsize.py"}
     found = [str(p.relative_to(ROOT)) for p in (ROOT / "htdata").rglob("*.py") if pattern.search(p.read_text())]
     assert sorted(set(found) - other_uses) == [], f"os.link outside htdata/fileio.py: {found}"
+
+
+REPACK_CALL = re.compile(r"\.repack\(")                                   # nv.repack(reader, kept, ...)
+WHOLE_EPISODE = re.compile(r"range\(int\([^)]*num_frames")              # KeptEpisode(e, range(int(e["num_frames"])))
+
+
+def walks_of_its_own(text: str) -> list[str]:
+    """Lines of a module outside htdata/write that re-pack parts or list an episode's every frame themselves."""
+    return [line.strip() for line in text.splitlines() if REPACK_CALL.search(line) or WHOLE_EPISODE.search(line)]
+
+
+def test_the_walk_patterns_catch_a_writer_of_its_own():
+    planted = """
+    for part in nv.parent.parts():
+        kept = [KeptEpisode(e, range(int(e["num_frames"]))) for e in part.episodes]
+        parts.append(nv.repack(nv.reader(), kept, samples_per_shard_of(part)))
+"""
+    assert len(walks_of_its_own(planted)) == 2
+    assert not walks_of_its_own("parts = nv.carry_or_repack(lambda part: [KeptEpisode.whole(r) for r in part.episodes])")
+
+
+def test_the_parents_parts_are_walked_by_newversion_only():
+    """`NewVersion.carry_or_repack` is the one walk that carries or re-packs a version's parts and
+    `KeptEpisode.whole` the one "every frame of an episode" (issue 48: four writers looped over their parent's
+    parts themselves, and wrote the whole-episode range three times)."""
+    found = {str(p.relative_to(ROOT)): hits for p in sorted((ROOT / "htdata").rglob("*.py"))
+             if (ROOT / "htdata" / "write") not in p.parents and (hits := walks_of_its_own(p.read_text()))}
+    assert not found, f"use NewVersion.carry_or_repack and KeptEpisode.whole (htdata/write): {found}"

@@ -124,3 +124,23 @@ def test_the_lock_is_taken_first_and_a_missing_dataset_releases_it(tmp_path, dat
         with NewVersion(empty, "rm"):
             pass
     assert not (empty / LOCK_FILE).exists()
+
+
+def test_carry_or_repack_walks_the_parents_parts_in_order(dataset, tmp_path):
+    """The one walk over a version's parts: each part carried, re-packed into a new unit, or left out."""
+    with NewVersion(dataset, "test") as nv:
+        parts = nv.parent.parts()
+        assert len(parts) == 2
+        before = shard_files(dataset)
+        carried = nv.carry_or_repack(lambda p: p)
+        assert [(p.unit, p.episode_ids) for p in carried] == [(p.unit, p.episode_ids) for p in parts]
+        assert shard_files(dataset) == before                  # carrying writes nothing
+        walked = nv.carry_or_repack(lambda p: [KeptEpisode.whole(e) for e in p.episodes] if p.unit == parts[1].unit
+                                    else None)
+        nv.commit(walked)
+    assert len(walked) == 1 and walked[0].unit == nv.first_unit
+    assert walked[0].episode_ids == parts[1].episode_ids and walked[0].rows == parts[1].rows
+    assert list_versions(dataset) == [1, 2]
+    with NewVersion(tmp_path / "new", "test", parent="none") as nv:
+        with pytest.raises(ValueError, match="no parent version to walk"):
+            nv.carry_or_repack(lambda p: p)
