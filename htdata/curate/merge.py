@@ -193,12 +193,13 @@ def merge(a_root, b_root, out_root, command: str) -> MergeReport:
             if not is_lock_file(tmp.name):   # a lock temp file belongs to a writer trying the lock now
                 tmp.unlink(missing_ok=True)
         (out / SHARDS_DIR).mkdir(exist_ok=True)
-        parts = []
-        for part in a.parts():
+
+        def carry_a(part: Part) -> Part:     # A's parts keep their units: their shards are placed as named
             for s in part.shards:
                 place_shard(a.root / SHARDS_DIR / s["name"], out / SHARDS_DIR / s["name"], s["sha256"], report,
                             resuming)
-            parts.append(part)
+            return part
+        parts = nv.carry_or_repack(carry_a, parent=a)
 
         def choose_b(part: Part) -> Part | list[KeptEpisode] | None:
             kept = [e for e in part.episodes if e["episode_id"] not in dup]
