@@ -137,7 +137,7 @@ def rest_level_warnings(reader: DatasetReader, snap: Snapshot, layouts: dict[str
         for hand in hands:
             layout = layouts[records[eid]["layouts"][hand]]
             cfg = normalising.normalise_for(layout)
-            if cfg.baseline != "none" or cfg.taxel_calibration_sha256:
+            if cfg.subtracts_rest:
                 continue
             rows = first_paired_rows(reader, eid, hand, normalising.fit_frames).astype(np.float32)
             with np.errstate(invalid="ignore"):

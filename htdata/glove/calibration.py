@@ -73,8 +73,7 @@ def episode_calibrations(normalising: NormaliseSettings, layouts: dict) -> dict[
 
 def config_of(entry: dict) -> NormaliseConfig:
     """A manifest calibration entry -> its NormaliseConfig (validated)."""
-    fields = NormaliseConfig.__dataclass_fields__
-    return NormaliseConfig(**{k: v for k, v in entry.items() if k in fields}).validate()
+    return NormaliseConfig.from_record(entry).validate()
 
 
 ZLIB_PREFIX = "zlib:"

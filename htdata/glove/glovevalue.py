@@ -38,6 +38,11 @@ def convention_name(inverted: bool) -> str:
     return CONVENTIONS[0] if inverted else CONVENTIONS[1]
 
 
+def full_scale(value: dict | None) -> float:
+    """A layout value block's full scale: its `max` (1.0 where the block or its max is missing: a glove in [0, 1])."""
+    return float((value or {}).get("max") or 1.0)
+
+
 def is_raw_count(max_value) -> bool:
     """True for a raw-count glove (full scale above 1, either direction)."""
     return float(max_value) > 1.0

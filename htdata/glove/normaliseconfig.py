@@ -104,6 +104,18 @@ class NormaliseConfig:
         return has_noise_floor(self.noise_k, self.noise_floor)
 
     @property
+    def raw_counts(self) -> bool:
+        """True for a raw-count glove (full scale above 1: glovevalue.is_raw_count), which needs a rest of its own."""
+        return is_raw_count(self.max_value)
+
+    @property
+    def subtracts_rest(self) -> bool:
+        """True when the normaliser takes a rest level off the counts (a baseline, or a per-glove calibration
+        file); False for baseline "none" without one, where a raw-count glove's rest reads as pressure
+        (htdata.glove.restlevel's warning, validate's rest-level check)."""
+        return self.baseline != "none" or bool(self.taxel_calibration_sha256)
+
+    @property
     def fits(self) -> bool:
         """True when the calibration has per-episode fitted arrays (baseline / noise floor)."""
         return self.baseline != "none" or self.noise_k > 0 or bool(self.taxel_calibration_sha256)
@@ -154,6 +166,21 @@ class NormaliseConfig:
                 raise ConfigError(f"{where}: {name} must be a finite number > {lo:g}"
                                   f"{'' if hi is None else f' and <= {hi:g}'}, got {value!r}")
         return self
+
+    @classmethod
+    def from_record(cls, entry: dict | None) -> "NormaliseConfig":
+        """The config a manifest calibration entry records, read as written (not checked: `validate` does that),
+        so validate/, inspect/ and curate/ ask it (`raw_counts`, `subtracts_rest`) instead of the entry's keys.
+
+        Args:
+            entry: a manifest `calibrations` entry; None or {} for an episode hand that names none.
+
+        Returns:
+            Its NormaliseConfig: the fields it holds, the others at their defaults (its other keys, such as
+            layout, from and revision, are not settings and are left out).
+        """
+        fields = cls.__dataclass_fields__
+        return cls(**{k: v for k, v in (entry or {}).items() if k in fields})
 
     @classmethod
     def from_layout_value(cls, value: dict) -> "NormaliseConfig":

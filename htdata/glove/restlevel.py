@@ -49,7 +49,7 @@ def rest_level_warning(hand: str, layout, cfg, lo: np.ndarray, hi: np.ndarray) -
     `lo` / `hi`: (H,W) per-cell min / max raw values of the episode (htdata.glove.activity.CellActivity);
     the rest level is the median over live cells of the lowest pressure each cell read.
     """
-    if cfg.baseline != "none" or cfg.taxel_calibration_sha256:
+    if cfg.subtracts_rest:
         return None
     live = np.asarray(layout.live_mask, bool)
     raw = least_pressure(lo, hi, cfg.convention)[live]

@@ -31,6 +31,7 @@ import numpy as np
 
 from htdata.format.table import HANDS, RGB_MEMBER, SIZE_FIELDS, bend_member, raw_member
 from htdata.glove.canonical import PART_NAMES
+from htdata.glove.glovevalue import full_scale, is_raw_count
 from htdata.inspect.outline import region_outline
 from htdata.inspect.preview import hatch_mask
 
@@ -105,8 +106,8 @@ def plan_episode(reader, pos: int, contrast: str, vmax: float) -> ViewPlan:
     hands = tuple(h for h in HANDS if h in ep["layouts"])
     raw_max = {}
     for hand in hands:
-        top = float((reader.layout(ep["layouts"][hand]).get("value") or {}).get("max") or 1.0)
-        if top > 1.0 and stored(raw_member(hand)):
+        top = full_scale(reader.layout(ep["layouts"][hand]).get("value"))
+        if is_raw_count(top) and stored(raw_member(hand)):
             raw_max[hand] = top
     return ViewPlan(dataset=str(reader.root), version=int(reader.version), position=pos, episode=ep, first=first,
                     num_frames=n, rgb=stored(RGB_MEMBER), contrast=contrast, vmax=vmax, hands=hands,

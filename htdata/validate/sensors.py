@@ -10,7 +10,7 @@ contact-area and pressure histograms of the report's stats.
 `check_taxel_health` warns about episode hands with many faulty taxels
 (htdata/glove/health.py), from the stats cache or, with --deep, computed.
 `check_rest_level` FAILS ("rest_level") an episode hand of raw counts
-(direct, max_value > 1) calibrated with baseline "none" whose covered pixels
+(NormaliseConfig.raw_counts) whose config subtracts no rest (baseline "none") and whose covered pixels
 never read below REST_FAIL_LEVEL: its rest level (~557 of 1023 on a knit
 glove) is read as pressure in every frame; the message names the setting.
 
@@ -24,8 +24,9 @@ import warnings
 
 import numpy as np
 
-from htdata.glove.glovevalue import is_raw_count, toward_pressure
+from htdata.glove.glovevalue import toward_pressure
 from htdata.glove.health import WARN_SHARE, flagged_share
+from htdata.glove.normaliseconfig import NormaliseConfig
 from htdata.inspect.stats import cached_episode_stats, episode_stats
 from htdata.read.reader import DatasetReader
 from htdata.validate.geometry import CoverageGeometry
@@ -117,17 +118,16 @@ def check_rest_level(sensor: dict, episodes: list[dict], calibrations: dict, che
     for name in sorted(k for k in sensor if not k.startswith("_")):
         eid, hand = name.rsplit(":", 1)
         cal = calibrations.get((by_id.get(eid, {}).get("calibration") or {}).get(hand, ""), {})
-        raw_counts = is_raw_count(cal.get("max_value", 1.0))
-        if not raw_counts or cal.get("baseline") != "none" or cal.get("taxel_calibration_sha256") \
-                or not sensor[name]["region_means"]:
+        cfg = NormaliseConfig.from_record(cal)      # the rules are the config's (raw_counts, subtracts_rest)
+        if not cfg.raw_counts or cfg.subtracts_rest or not sensor[name]["region_means"]:
             continue
         with np.errstate(invalid="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)      # a frame with no region: skipped
             rest = float(np.nanmin(np.nanmean(np.stack(sensor[name]["region_means"])[:, 1:], axis=1)))
         if rest >= REST_FAIL_LEVEL:
-            lid, top = cal.get("layout", "?"), float(cal.get("max_value", 1.0))
-            raw = rest * top / float(cal.get("scale", 1.0))
-            raw = float(toward_pressure(raw, cal.get("convention"), top))
+            lid, top = cal.get("layout", "?"), float(cfg.max_value)
+            raw = rest * top / float(cfg.scale)
+            raw = float(toward_pressure(raw, cfg.convention, top))
             check.fail("rest_level", f"episode {eid}: {hand} hand (layout {lid}): rest level {raw:.4g} of {top:g}: "
                        f"covered pixels read >= {rest:.2f} even in the quietest frame with baseline = \"none\" "
                        f"(the rest is read as pressure); set a baseline "

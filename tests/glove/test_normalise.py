@@ -175,3 +175,17 @@ def test_one_noise_floor_test_for_the_normaliser_and_the_contact_rule(noise_k, n
         v, _ = n.apply(np.full((1, 4, 4), 5.0, np.float32))
         assert v[0, 1, 1] == pytest.approx(0.4 if floored else 0.5)          # 0.5 - max(0.05, one step)
     assert rule_for(cfg.to_dict(), lay.value, 16).basis == ("calibrated" if floored else "threshold")
+
+
+def test_a_calibration_record_is_read_through_its_config():
+    """validate/, inspect/ and curate/ read a manifest calibration entry as NormaliseConfig.from_record and ask it
+    the rules (tests/project/test_glove_rule_owner.py refuses the entry's keys read there)."""
+    entry = {"layout": "g", "convention": "inverted", "max_value": 3072, "baseline": "none", "clip": True,
+             "scale": 1.0, "noise_floor": 0.0, "noise_k": 0.0, "rest_frames": 10, "from": "pipeline 'p'",
+             "fitted_per_episode": False, "revision": 1}
+    cfg = NormaliseConfig.from_record(entry)
+    assert (cfg.convention, cfg.max_value, cfg.baseline) == ("inverted", 3072, "none")
+    assert cfg.raw_counts and not cfg.subtracts_rest and cfg.validate() is cfg
+    assert NormaliseConfig.from_record({**entry, "baseline": "drift", "noise_k": 5.0}).subtracts_rest
+    assert NormaliseConfig.from_record({**entry, "taxel_calibration_sha256": "ab" * 32}).subtracts_rest
+    assert not NormaliseConfig.from_record(None).raw_counts and NormaliseConfig.from_record({}) == NormaliseConfig()

@@ -1,7 +1,9 @@
-"""Each glove rule has one owner (issue 48): direction and "a raw-count glove" are htdata/glove/glovevalue.py's.
+"""Each glove rule has one owner (issue 48): direction and "a raw-count glove" are htdata/glove/glovevalue.py's,
+"the normaliser takes a rest off" (and a calibration record read as a config) htdata/glove/normaliseconfig.py's.
 
 A module that restates them (tests a convention string, or full scale > 1, itself) drifts from the owner: an
-inverted glove then reads as direct in one rule and not another (issue 43).
+inverted glove then reads as direct in one rule and not another (issue 43). The modules that read manifest
+records (validate/, inspect/, curate/, ...) ask `NormaliseConfig.from_record(entry)` instead of the entry's keys.
 """
 
 from __future__ import annotations
@@ -13,7 +15,8 @@ ROOT = Path(__file__).resolve().parents[2]
 OWNER = ROOT / "htdata" / "glove" / "glovevalue.py"
 RESTATED = (re.compile(r"""[!=]=\s*["'](inverted|direct)["']"""),            # convention == "inverted"
             re.compile(r"""["'](inverted|direct)["']\s*[!=]="""),
-            re.compile(r"""(max|max_value)["'][^)\n]*\)\)?\s*>\s*1(\.0)?\b"""))     # float(value["max"]) > 1
+            re.compile(r"""(max|max_value)["'][^)\n]*\)\)?\s*>\s*1(\.0)?\b"""),     # float(value["max"]) > 1
+            re.compile(r"""\b(top|full_scale|max_value|raw_max)\s*>\s*1(\.0)?\b"""))    # top > 1.0 (inspect's view)
 
 
 def restatements(text: str) -> list[str]:
@@ -24,6 +27,7 @@ def test_the_patterns_catch_a_restated_rule():
     assert restatements('    if value["convention"] == "inverted":\n')
     assert restatements('raw = cal.get("convention") == "direct" and float(cal.get("max_value", 1.0)) > 1.0\n')
     assert restatements('extra = X if float(value["max"]) > 1 else {}\n')
+    assert restatements('        if top > 1.0 and stored(raw_member(hand)):\n')
     assert not restatements('if is_raw_count(value["max"]):\n')
 
 
@@ -48,3 +52,39 @@ def test_the_real_glove_truth_has_one_home():
              [*(ROOT / "htdata" / "benchmarks").rglob("*.py"), *(ROOT / "htdata" / "synthetic").rglob("*.py")])
              if p != TRUTH_OWNER and defines.search(p.read_text())}
     assert not found, f"import them from htdata.synthetic.rawfacts: {found}"
+
+
+CONFIG_OWNER = ROOT / "htdata" / "glove" / "normaliseconfig.py"
+HAS_REST = re.compile(r"""["']none["']\s*or\b.*taxel_calibration""")    # baseline != "none" or ...sha256
+RECORD_READERS = ("validate", "inspect", "curate", "export", "read", "commands", "store", "write")
+RECORD_KEYS = re.compile(r"""\.get\(["'](convention|max_value|baseline|taxel_calibration_sha256|noise_k|noise_floor)["']"""
+                         r"""|\[["'](max_value|baseline|taxel_calibration_sha256|noise_k|noise_floor)["']\]""")
+
+
+def config_rules_restated(text: str, reads_records: bool) -> list[str]:
+    """Lines that restate "the normaliser takes a rest off", or (in a module reading manifest records) read a
+    calibration record's rule keys themselves."""
+    return [line.strip() for line in text.splitlines()
+            if HAS_REST.search(line) or (reads_records and RECORD_KEYS.search(line))]
+
+
+def test_the_patterns_catch_a_restated_config_rule():
+    planted = """
+        raw_counts = is_raw_count(cal.get("max_value", 1.0))
+        if not raw_counts or cal.get("baseline") != "none" or cal.get("taxel_calibration_sha256"):
+            continue
+        if cfg.baseline != "none" or cfg.taxel_calibration_sha256:
+"""
+    assert len(config_rules_restated(planted, reads_records=True)) == 3
+    assert len(config_rules_restated(planted, reads_records=False)) == 2
+    assert not config_rules_restated("cfg = NormaliseConfig.from_record(cal)\nif cfg.subtracts_rest:\n", True)
+
+
+def test_no_module_restates_a_config_rule_outside_its_owner():
+    found = {}
+    for p in sorted((ROOT / "htdata").rglob("*.py")):
+        reads_records = p.relative_to(ROOT / "htdata").parts[0] in RECORD_READERS
+        if p != CONFIG_OWNER and (hits := config_rules_restated(p.read_text(), reads_records)):
+            found[str(p.relative_to(ROOT))] = hits
+    assert not found, f"use htdata.glove.normaliseconfig.NormaliseConfig (from_record, raw_counts, subtracts_rest): " \
+                      f"{found}"
