@@ -34,8 +34,8 @@ from pathlib import Path
 from htdata.errors import ArgumentError, HtdataError
 from htdata.faults import crash_point
 from htdata.fileio import write_bytes_atomic
-from htdata.format.table import SHARDS_DIR
-from htdata.inspect.stats import STATS_DIR, episode_key
+from htdata.format.table import SHARDS_DIR, STATS_DIR
+from htdata.inspect.stats import episode_key
 from htdata.read.reader import DatasetReader
 from htdata.store.gcrecord import tombstone_file
 from htdata.store.lock import WriterLock

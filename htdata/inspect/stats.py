@@ -331,6 +331,7 @@ def cached_episode_stats(reader: DatasetReader, cache_dir=None) -> dict[int, dic
     return out
 
 
-__all__ = ["STATS_DIR", "STATS_SCHEMA", "GROUPINGS", "episode_key", "episode_stats", "summarise", "dataset_stats",
+# its own names only: STATS_DIR is htdata.format.table's (tests/project/test_layering.py)
+__all__ = ["STATS_SCHEMA", "GROUPINGS", "episode_key", "episode_stats", "summarise", "dataset_stats",
            "stats_benchmark", "cached_episode_stats", "write_health_map",
            "positive_value_quantile", "default_cache_dir"]

@@ -15,6 +15,8 @@ circle, it does not remove it):
 - Each package's `__init__.py` docstring names every module and sub-package in it (one line each).
 - No silent re-export (`# noqa: F401`): an old home hands a moved name on through htdata/_moved.py
   (a DeprecationWarning and a deadline) or lets it go; only the availability checks below may keep one.
+  Nor through `__all__`: a module's `__all__` lists the names it defines, not ones it imports; a package's
+  `__init__.py` is the exception, its `__all__` its public API (its docstring's "Python use").
 """
 
 from __future__ import annotations
@@ -389,3 +391,38 @@ def test_silent_reexports_finds_a_planted_one():
     assert silent_reexports(planted) == [
         "htdata.read.x:1: from htdata.format.canvas import CANVAS  # noqa: F401 (an old name here)",
         "htdata.read.y:1: from htdata.format.canvas import (  # noqa"]
+
+
+def reexports_via_all(sources: dict[str, str]) -> list[str]:
+    """`module: name` for each name a module's `__all__` lists that it imports instead of defining (a package's
+    `__init__` excepted: its `__all__` is the package's public API, gathered from its modules)."""
+    out = []
+    for module, text in sources.items():
+        tree = ast.parse(text)
+        imported, listed = set(), []
+        for node in tree.body:
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                imported.update((a.asname or a.name).split(".")[0] for a in node.names)
+            elif isinstance(node, (ast.Assign, ast.AugAssign, ast.AnnAssign)):
+                targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+                if any(isinstance(t, ast.Name) and t.id == "__all__" for t in targets) and node.value is not None:
+                    listed += [e.value for e in ast.walk(node.value)
+                               if isinstance(e, ast.Constant) and isinstance(e.value, str)]
+        out += [f"{module}: {name}" for name in listed if name in imported]
+    return out
+
+
+def test_no_reexport_through_all():
+    sources = {m: ALL[m].read_text() for m in ALL if ALL[m].name != "__init__.py"}
+    offenders = reexports_via_all(sources)
+    assert not offenders, ("names a module's __all__ lists but imports from elsewhere: import them from their "
+                           f"home (or hand an old name on with htdata/_moved.py): {offenders}")
+
+
+def test_reexports_via_all_finds_a_planted_one():
+    planted = {"htdata.inspect.x": "from htdata.format.table import HANDS, STATS_DIR\nimport numpy as np\n\n"
+                                   "LIMIT = 3\n\ndef own():\n    return HANDS\n\n"
+                                   "__all__ = [\"LIMIT\", \"STATS_DIR\", \"own\"]\n__all__ += [\"np\"]\n",
+               "htdata.inspect.y": "from htdata.format.table import HANDS\n\n__all__ = [\"helper\"]\n\n"
+                                   "def helper():\n    return HANDS\n"}
+    assert reexports_via_all(planted) == ["htdata.inspect.x: STATS_DIR", "htdata.inspect.x: np"]

@@ -318,7 +318,8 @@ def test_a_write_built_on_a_stale_parent_is_refused(tmp_path):
 
 def test_gc_also_drops_stats_cache_entries_no_kept_version_uses(tmp_path):
     from htdata.curate.gc import collect
-    from htdata.inspect.stats import STATS_DIR, episode_key, episode_stats
+    from htdata.format.table import STATS_DIR
+    from htdata.inspect.stats import episode_key, episode_stats
     from tests.factories.tactile import clean_series, write_taxel_dataset
 
     glove = "opentouch_right_16x16"
