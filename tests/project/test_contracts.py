@@ -2,13 +2,15 @@
 
 A public function or method of a module below needs `Args:` when it takes parameters (besides self / cls),
 `Returns:` (or `Yields:`) when its body returns or yields a value, `Raises:` when its body raises; a class's
-constructor arguments go in the class docstring (or `__init__`'s). Properties and private names are left
-out. A missing section is found here, not by the next reader of the code.
+constructor arguments go in the class docstring (or `__init__`'s). `Args:` names every parameter (`*args`,
+`**kwargs` as written or bare). Properties and private names are left out. A missing section, or a parameter
+the section leaves out, is found here, not by the next reader of the code.
 """
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -39,12 +41,38 @@ def _own_nodes(fn: ast.AST):
                      if not isinstance(c, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef, ast.Lambda)))
 
 
-def needed(fn: ast.FunctionDef, method: bool) -> set[str]:
-    """The sections `fn`'s docstring needs."""
+def parameters(fn: ast.FunctionDef, method: bool) -> list[str]:
+    """`fn`'s parameters (self / cls of a method left out)."""
     a = fn.args
     params = [p.arg for p in a.posonlyargs + a.args + a.kwonlyargs] + [p.arg for p in (a.vararg, a.kwarg) if p]
-    if method and params[:1] in (["self"], ["cls"]):
-        params = params[1:]
+    return params[1:] if method and params[:1] in (["self"], ["cls"]) else params
+
+
+_ENTRY = re.compile(r"^\*{0,2}([A-Za-z_]\w*)\s*(\([^)]*\))?:")
+
+
+def args_named(doc: str) -> set[str]:
+    """The names the `Args:` sections of `doc` describe (an entry: `name:` or `name (type):` one indent in)."""
+    names, lines = set(), doc.splitlines()
+    for i, line in enumerate(lines):
+        if line.strip() != "Args:":
+            continue
+        indent, entry = len(line) - len(line.lstrip()), None
+        for body in lines[i + 1:]:
+            if not body.strip():
+                continue
+            depth = len(body) - len(body.lstrip())
+            if depth <= indent:
+                break
+            entry = depth if entry is None else entry
+            if depth == entry and (m := _ENTRY.match(body.strip())):
+                names.add(m.group(1))
+    return names
+
+
+def needed(fn: ast.FunctionDef, method: bool) -> set[str]:
+    """The sections `fn`'s docstring needs."""
+    params = parameters(fn, method)
     nodes = list(_own_nodes(fn))
     returns = any(isinstance(n, ast.Return) and n.value is not None
                   and not (isinstance(n.value, ast.Constant) and n.value.value is None) for n in nodes)
@@ -54,8 +82,12 @@ def needed(fn: ast.FunctionDef, method: bool) -> set[str]:
 
 
 def _lacks(fn: ast.FunctionDef, where: str, doc: str, method: bool) -> list[str]:
-    return [f"{where}:{fn.lineno}: no {s}" for s in sorted(needed(fn, method))
-            if not any(word in doc for word in SECTIONS[s])]
+    out = [f"{where}:{fn.lineno}: no {s}" for s in sorted(needed(fn, method))
+           if not any(word in doc for word in SECTIONS[s])]
+    if "Args" in needed(fn, method) and "Args:" in doc:
+        named = args_named(doc)
+        out += [f"{where}:{fn.lineno}: Args leaves out {p}" for p in parameters(fn, method) if p not in named]
+    return out
 
 
 def missing_sections(source: str, where: str, classes: set[str] | None = None) -> list[str]:
@@ -136,3 +168,46 @@ class Thing:
         "m takes:5: no Args", "m takes:5: no Raises", "m takes:5: no Returns",
         "m Thing():28: no Args", "m Thing.grow:35: no Returns"]
     assert missing_sections(source, "m", classes={"Other"}) == []
+
+
+def test_missing_sections_finds_a_parameter_args_leaves_out():
+    source = '''
+def partly(x, y, *rest, flag=False, **options):
+    """Takes x and y.
+
+    Args:
+        x: a thing.
+          y: a continuation line, not an entry.
+        flag (bool): a switch.
+        **options: the rest.
+
+    Returns:
+        x.
+    """
+    return x
+
+def wholly(x, y=1):
+    """Takes both.
+
+    Args:
+        x: a thing.
+        y: another.
+    """
+
+class Thing:
+    """A thing.
+
+    Args:
+        size: how big.
+    """
+
+    def __init__(self, size, colour):
+        """Builds it.
+
+        Args:
+            colour: which.
+        """
+'''
+    assert missing_sections(source, "m") == ["m partly:2: Args leaves out y", "m partly:2: Args leaves out rest"]
+    assert missing_sections(source.replace("        colour: which.", "        hue: which."), "m") == [
+        "m partly:2: Args leaves out y", "m partly:2: Args leaves out rest", "m Thing():31: Args leaves out colour"]
