@@ -177,7 +177,8 @@ class NewVersion:
                 or one with new records over the same shards), a list of KeptEpisode (re-packed into a new unit
                 of this write with the part's samples per shard, `repack`), or None / [] (nothing of it).
             parent: the version walked (default: this write's parent).
-            reader: the reader the re-packed samples come from (default: `reader()`, the parent's).
+            reader: the reader the re-packed samples come from (default: `reader()`, this write's parent's;
+                give one when `parent` is another dataset's version, as merge does).
             rewrite: changes samples while re-packing (htdata.curate.renormalise.Recalibration).
 
         Returns:
