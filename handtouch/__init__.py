@@ -14,10 +14,11 @@
     train.py          the trainer: stage 1 (reconstruct) -> 2 (masked + RGB) -> 3 (predict t_T)
     checkpoint.py     stage checkpoints, written atomically, resumed exactly
     distributed.py    one process or torchrun (DDP)
-    progress.py       a progress line every few seconds (the smoke's heartbeat)
+    progress.py       a progress line every few seconds (the smoke's heartbeat), and its phase timer
     smoke.py          the end-to-end smoke run (`make train-smoke`)
     smokedata.py      the smoke's data: corpus, dataset, split (a held-out task + a stress task), leak check
     smokechecks.py    the smoke's checks of what HandTouch learned, and its exit status
+    smokeprep.py      the smoke's evaluation inputs and control probe, built in a second process beside training
     contact_gate.py   the held-out gate: contact timing on a frame's own RGB and on another episode's
     compare.py        the paper's comparison of encoders on HT-Bench
     rgb_pretrain.py   an RGB encoder trained on the run's data, and the misalignment control

@@ -38,8 +38,9 @@ from handtouch.bench.items import EvalConfig, prepare
 from handtouch.bench.references import CopyLastModel, ZerosModel
 from handtouch.bench.report import COLUMNS, FULL_COLUMNS, markdown_table
 from handtouch.config import load_train_config
+from handtouch.progress import PhaseTimer
 from handtouch.rgb_pretrain import RGBPretrainConfig, ensure_probes
-from handtouch.smoke import PhaseTimer, jsonable
+from handtouch.smoke import jsonable
 from handtouch.smokechecks import codebook_perplexity as perplexity  # the smoke check's own measure
 from handtouch.train import load_model, train
 from htdata.fileio import write_json_atomic, write_text_atomic

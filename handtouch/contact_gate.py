@@ -1,6 +1,6 @@
 """The smoke's held-out gate: a model's contact timing on its own frame and on another episode's.
 
-`score_part` decodes the frames of a split part (a seeded subsample of at most
+`score_part` decodes the frames of a split part (`decode_part`) (a seeded subsample of at most
 `GateConfig.max_frames`), runs the model's RGB-to-tactile on each frame's own RGB, on the RGB of
 a random frame of another episode of the part (rgb_pretrain.partners, "shuffled": the test-part
 controls' pairing) and on the RGB of another episode's frame at the same relative moment (the
@@ -67,7 +67,7 @@ class GateConfig:
 _IDS = (keys.HAND, keys.EPISODE, keys.FRAME, keys.TASK)
 
 
-def _decode(dataset_root, split: str, part: str, cfg: GateConfig) -> dict[str, torch.Tensor]:
+def decode_part(dataset_root, split: str, part: str, cfg: GateConfig) -> dict[str, torch.Tensor]:
     """The part's subsampled frames, written item by item into preallocated compact tensors (RGB uint8,
     maps float16, coverage uint8): no batch stacking, a third of float32's memory traffic."""
     ds = TactileFrameDataset(str(dataset_root), options=ItemOptions(split=split, part=part))
@@ -112,11 +112,13 @@ def phase_partners(episode: np.ndarray, task: np.ndarray, position: np.ndarray, 
     return out
 
 
-def score_part(model, dataset_root, split: str, part: str, cfg: GateConfig | None = None) -> FrameTable:
+def score_part(model, dataset_root, split: str, part: str, cfg: GateConfig | None = None,
+               frames: dict[str, torch.Tensor] | None = None) -> FrameTable:
     """The FrameTable of one part: each frame scored on its own RGB, on another episode's at a random
-    moment and on another episode's at the same relative moment."""
+    moment and on another episode's at the same relative moment. `frames`: the part's
+    `decode_part(dataset_root, split, part, cfg)`, decoded earlier (the smoke does it beside training)."""
     cfg = cfg or GateConfig()
-    flat = _decode(dataset_root, split, part, cfg)
+    flat = decode_part(dataset_root, split, part, cfg) if frames is None else frames
     meta = DatasetMetadata(dataset_root)
     episode, frame = flat[keys.EPISODE].numpy(), flat[keys.FRAME].numpy()
     lengths = np.array([max(int(ep.get("num_frames") or 0), 1) for ep in meta.episodes])

@@ -22,6 +22,9 @@ fast this run has been so far: the ratio of measured to expected seconds over th
 finished phases the plan marks as timed, and the running one once it is over its time
 (cache-dependent phases such as building data, which take ~0 s when reused, are not
 timed: they would say nothing about speed).
+
+`PhaseTimer` runs a script's phases one after another, names each to the heartbeat and
+keeps its wall seconds (the smoke's and `make compare`'s meta.seconds).
 """
 
 from __future__ import annotations
@@ -166,3 +169,24 @@ class Rate:
         dt = max(time.perf_counter() - self.t0, 1e-9)
         ran = step - self.first_step
         return {"what": what, "step": step, "steps": steps, "steps_per_s": ran / dt, "samples_per_s": ran * batch / dt}
+
+
+class PhaseTimer:
+    """Wall seconds per named phase, in run order; each phase named to the heartbeat as it starts."""
+
+    def __init__(self, heartbeat: Heartbeat | None = None):
+        self.seconds: dict[str, float] = {}
+        self.t0 = time.perf_counter()
+        self.heartbeat = heartbeat
+
+    def run(self, name: str, fn, *args, **kwargs):
+        if self.heartbeat is not None:
+            self.heartbeat.phase(name)
+        t = time.perf_counter()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t
+
+    def total(self) -> dict[str, float]:
+        return {**self.seconds, "total": time.perf_counter() - self.t0}

@@ -13,6 +13,9 @@
 3. train HandTouch (vit) and the CNN baseline with the SAME config and budget
    (configs/smoke.toml, only model.encoder overridden; `--encoders vit,cnn,resnet18`
    adds ResNet-18, ~85 s more; every baseline and ablation: `make compare`);
+   meanwhile a spawned process builds the evaluation inputs on the core training leaves idle
+   (handtouch.smokeprep: HT-Bench's items and references, the probes' control scores, the gate's
+   frames); phase eval_prepare is the wait for them;
 4. HT-Bench on the test and ood parts (at most --max-items items per part) for
    the trained models and the reference predictors (zeros-ref, copy-last-ref);
    the held-out gate (handtouch.contact_gate) on the frames of test and of each held-out task;
@@ -65,7 +68,6 @@ import dataclasses
 import json
 import os
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -73,25 +75,22 @@ import torch
 
 from handtouch.bench.evaluate import evaluate
 from handtouch.bench.examples import collect_examples
-from handtouch.bench.items import EvalConfig, load_part, prepare
-from handtouch.bench.references import CopyLastModel, ZerosModel
+from handtouch.bench.items import EvalConfig
+from handtouch.bench.references import ZerosModel
 from handtouch.bench.report import render_lag_curves, render_predictions, write_results
 from handtouch.config import ENCODERS as MODEL_ENCODERS
 from handtouch.config import load_train_config
 from handtouch.contact_gate import GateConfig, gate, score_part
 from handtouch.distributed import free_cores
 from handtouch.model import MODEL_NAMES
-from handtouch.progress import Heartbeat, RunPlan
+from handtouch.progress import Heartbeat, PhaseTimer, RunPlan
 from handtouch.resources import config_file
 from handtouch.rgb_pretrain import (
     PAIRINGS,
-    REQUIRED_CONTROLS,
     RGBPretrainConfig,
     control_checks,
-    control_scores,
     ensure_probes,
     episode_fps,
-    load_items,
     model_control_checks,
     paired_rgb2tactile,
     probes_cached,
@@ -117,6 +116,7 @@ from handtouch.smokedata import (
     split_leak_check,
     toml_str,
 )
+from handtouch.smokeprep import CONTROL_PROBE_THREADS, INPUTS_FILE, EvalInputs, InputsRequest
 from handtouch.train import load_model, train
 from htdata.format.table import MANIFEST_FILE
 
@@ -130,14 +130,14 @@ HEARTBEAT_S = 5.0     # a progress line at least this often (the issue asked for
 # the CNN and ResNet-18 from the earlier CI runs. Only a starting point: the ETA rescales them by this
 # run's measured speed as phases finish.
 PHASE_SECONDS = {"data_sample": 20.0, "data_ingest": 15.0, "data_split": 1.0, "split_check": 0.5,
-                 "eval_prepare": 13.0, "rgb_pretrain": 44.0, "train_vit": 77.0, "train_cnn": 95.0,
+                 "eval_prepare": 1.0, "rgb_pretrain": 44.0, "train_vit": 77.0, "train_cnn": 95.0,
                  "train_resnet18": 85.0, "eval": 7.0, "checks": 1.0, "rgb_control": 10.0, "heldout_gate": 25.0,
                  "report": 1.0}
 UNTIMED_PHASES = ("data_sample", "data_ingest", "rgb_pretrain")    # ~0 s when their output is cached
-# The probes the smoke trains: the aligned one (the frozen RGB encoder) and the controls that can fail
-# the run. The shifted probe is reported only (rgb_pretrain.REQUIRED_CONTROLS says why): 17 s of a 244 s
-# smoke; `python -m handtouch.task_transfer --controls` trains it.
-SMOKE_PROBES = ("aligned", *REQUIRED_CONTROLS)
+# The probes the smoke trains: the aligned one (the frozen RGB encoder) before training, and beside
+# training the controls that can fail the run (handtouch.smokeprep). The shifted probe is reported only
+# (rgb_pretrain.REQUIRED_CONTROLS says why): 17 s of a 244 s smoke; `python -m handtouch.task_transfer
+# --controls` trains it.
 
 
 def train_encoder(config: Path, encoder: str, dataset: Path, out_dir: Path, extra: list[str],
@@ -162,11 +162,11 @@ def train_encoder(config: Path, encoder: str, dataset: Path, out_dir: Path, extr
     return load_model(ckpts[max(cfg.stages)]), load_model(ckpts[1]), metrics
 
 
-def misalignment_control(args, probes: dict, pre_cfg: RGBPretrainConfig, model, prepared: dict) -> dict:
-    """Probe scores per part and pairing, and `model`'s RGB-to-tactile under eval-time mis-pairing (test)."""
-    parts = {p: load_items(args.dataset, SPLIT_NAME, p, pre_cfg) for p in prepared}
+def misalignment_control(args, probe_scores: dict, pre_cfg: RGBPretrainConfig, model, prepared: dict) -> dict:
+    """The probes' scores per part and pairing (rgb_pretrain.control_scores, built beside training) and
+    `model`'s RGB-to-tactile under eval-time mis-pairing (test)."""
     fps = episode_fps(args.dataset)
-    return {"probe": control_scores(probes, parts, pre_cfg),
+    return {"probe": probe_scores,
             "model": {"test": {p: paired_rgb2tactile(model, prepared["test"], fps, p, pre_cfg.shift_seconds,
                                                      pre_cfg.seed) for p in PAIRINGS[1:]}},
             "model_name": model.name}
@@ -235,35 +235,14 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
-class PhaseTimer:
-    """Wall seconds per named phase, in run order; each phase named to the heartbeat as it starts."""
-
-    def __init__(self, heartbeat: Heartbeat | None = None):
-        self.seconds: dict[str, float] = {}
-        self.t0 = time.perf_counter()
-        self.heartbeat = heartbeat
-
-    def run(self, name: str, fn, *args, **kwargs):
-        if self.heartbeat is not None:
-            self.heartbeat.phase(name)
-        t = time.perf_counter()
-        try:
-            return fn(*args, **kwargs)
-        finally:
-            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t
-
-    def total(self) -> dict[str, float]:
-        return {**self.seconds, "total": time.perf_counter() - self.t0}
-
-
 def run_plan(args: argparse.Namespace) -> RunPlan:
     """The phases this run will go through, each with its expected seconds: OUT/results.json's from
     the last run when there is one (same machine), else PHASE_SECONDS; data phases whose output is
     already there expect 0."""
-    models = [MODEL_NAMES[e] for e in args.encoders] + [ZerosModel.name, CopyLastModel.name]
-    phases = ["data_sample", "data_ingest", "data_split", "split_check", "eval_prepare", "rgb_pretrain",
-              *(f"train_{e}" for e in args.encoders), *(f"eval_{m}" for m in models), "checks", "rgb_control",
-              "heldout_gate", "report"]
+    models = [MODEL_NAMES[e] for e in args.encoders]
+    phases = ["data_sample", "data_ingest", "data_split", "split_check", "rgb_pretrain",
+              *(f"train_{e}" for e in args.encoders), "eval_prepare", *(f"eval_{m}" for m in models), "checks",
+              "rgb_control", "heldout_gate", "report"]
     try:
         last = json.loads((args.out / "results.json").read_text())["meta"]["seconds"]
     except (OSError, ValueError, KeyError, TypeError):
@@ -285,10 +264,11 @@ def main(argv=None) -> int:
         return _run(args, heartbeat)
 
 
-def heldout_gate(model, args: argparse.Namespace) -> tuple[list[dict], dict]:
-    """The held-out gate's checks and report (handtouch.contact_gate) for `model`."""
+def heldout_gate(model, args: argparse.Namespace, frames: dict) -> tuple[list[dict], dict]:
+    """The held-out gate's checks and report (handtouch.contact_gate) for `model` on the parts' decoded
+    `frames` (contact_gate.decode_part)."""
     cfg = GateConfig(max_frames=args.gate_frames, seed=args.seed)
-    tables = {p: score_part(model, args.dataset, SPLIT_NAME, p, cfg) for p in ("test", "ood")}
+    tables = {p: score_part(model, args.dataset, SPLIT_NAME, p, cfg, frames[p]) for p in ("test", "ood")}
     return gate(tables, args.ood_task, args.stress_task or None, typical_fps(args.dataset))
 
 
@@ -317,23 +297,25 @@ def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
     timer.run("data_split", make_split, args.dataset, held_out, args.seed)
     checks = [timer.run("split_check", split_leak_check, args.dataset)]
 
-    parts = {p: load_part(args.dataset, SPLIT_NAME, p) for p in ("test", "ood")}
-    # decoded once, same items / masks / SSIM reference for every model
-    threads = {"eval_prepare": eval_threads()}
-    prepared = timer.run("eval_prepare", prepare, parts, cfg=EvalConfig(max_items=args.max_items, seed=args.seed))
     # the probes keep their config's threads whatever the load: the count is part of their cache key and of
     # their float summation order, so a busy machine must not change the RGB encoder the run trains on
     pre_cfg = RGBPretrainConfig(seed=args.seed)
-    threads["rgb_pretrain"] = pre_cfg.threads
-    if probes_cached(args.dataset, SPLIT_NAME, args.out / "rgb_encoder", pre_cfg, pairings=SMOKE_PROBES):
+    threads = {"rgb_pretrain": pre_cfg.threads, "eval_inputs": 1}
+    if probes_cached(args.dataset, SPLIT_NAME, args.out / "rgb_encoder", pre_cfg, pairings=("aligned",)):
         heartbeat.plan.expect("rgb_pretrain", 0.0)
-    # probes train on RGBPretrainConfig.threads (2): nothing else of ours runs meanwhile
+    # the aligned probe trains on RGBPretrainConfig.threads (2): nothing else of ours runs meanwhile
     probes = timer.run("rgb_pretrain", ensure_probes, args.dataset, SPLIT_NAME, args.out / "rgb_encoder", pre_cfg,
-                       pairings=SMOKE_PROBES, progress=heartbeat.report)
+                       pairings=("aligned",), progress=heartbeat.report)
     # the aligned probe is the frozen RGB encoder, and its coarse contact map is the RGB prior of
     # hidden pixels (docs/HANDTOUCH.md, "RGB prior"); a user's --set rgb_encoder=FILE comes later and wins
     # (with --set model.rgb_prior=false unless FILE has a readout)
     sets = [f"rgb_encoder={toml_str(probes['aligned'].resolve())}", "model.rgb_prior=true", *args.set]
+    # the evaluation inputs (same items, masks and references for every model), built on the core training
+    # leaves idle (handtouch.smokeprep)
+    background = EvalInputs.start(InputsRequest(
+        args.dataset, SPLIT_NAME, EvalConfig(max_items=args.max_items, seed=args.seed), pre_cfg,
+        GateConfig(max_frames=args.gate_frames, seed=args.seed), probes, args.out / "rgb_encoder",
+        args.out / INPUTS_FILE))
     models, stage1_models, train_metrics = {}, {}, {}
     for enc in args.encoders:
         print(f"smoke: training encoder={enc}", flush=True)
@@ -341,22 +323,25 @@ def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
                                            args.out / "train" / enc, sets, heartbeat.report)
         models[model.name], stage1_models[model.name], train_metrics[model.name] = model, stage1, metrics
     handtouch = next(iter(models))
+    inputs = timer.run("eval_prepare", background.result)    # the wait for them: ~0 s when training took longer
+    prepared, probes = inputs.prepared, inputs.probes
     threads["evaluation"] = eval_threads()
     print(f"smoke: threads {threads} (training: its config's); OMP_WAIT_POLICY="
           f"{os.environ.get('OMP_WAIT_POLICY', 'unset')}", flush=True)
 
     results = {}
-    for model in [*models.values(), ZerosModel(), CopyLastModel()]:
+    for model in models.values():
         results[model.name] = timer.run(f"eval_{model.name}", evaluate, model, prepared)
+    results.update(inputs.references)      # all zeros and copy-last, scored beside training
     stage1_rmse = timer.run("checks", reconstruction_rmse, stage1_models[handtouch], prepared["test"])
     zeros_rmse = results[ZerosModel.name]["test"]["reconstruction"]["f_covered"]["rmse"]   # same items
     perplexity = timer.run("checks", codebook_perplexity, models[handtouch], prepared["test"])
     checks += learning_checks(stage1_rmse, zeros_rmse, results[handtouch]["test"]["retrieval"], perplexity)
     checks.append(rgb_check(results, handtouch, "test"))
-    control = timer.run("rgb_control", misalignment_control, args, probes, pre_cfg, models[handtouch], prepared)
+    control = timer.run("rgb_control", misalignment_control, args, inputs.probe, pre_cfg, models[handtouch], prepared)
     checks += control_checks(control["probe"], "test")
     checks += model_control_checks(control["model"], "test")
-    gate_checks, gate_report = timer.run("heldout_gate", heldout_gate, models[handtouch], args)
+    gate_checks, gate_report = timer.run("heldout_gate", heldout_gate, models[handtouch], args, inputs.gate)
     checks += gate_checks
     examples = timer.run("report", collect_examples, models[handtouch], prepared["test"], count=4)
     timer.run("report", render_predictions, examples, args.out / "predictions.png",
@@ -371,9 +356,11 @@ def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
             "handtouch": handtouch, "stage1_reconstruction_rmse": stage1_rmse,
             "zeros_reconstruction_rmse": zeros_rmse, "codebook_perplexity": perplexity, "checks": checks,
             "heldout_gate": gate_report,
-            "rgb_encoder": {"pretrain": dataclasses.asdict(pre_cfg), "probes": probes},
+            "rgb_encoder": {"pretrain": dataclasses.asdict(pre_cfg), "probes": probes,
+                            "control_probe_threads": CONTROL_PROBE_THREADS},
             "misalignment_control": control,
-            "train_metrics": train_metrics, "seconds": seconds, "threads": threads}
+            "train_metrics": train_metrics, "seconds": seconds, "threads": threads,
+            "eval_inputs_beside_training": inputs.seconds}
     write_results(args.out, results, jsonable(meta))
     written = [args.out / "results.json", args.out / "results.md"]
     print((args.out / "results.md").read_text())

@@ -1,0 +1,132 @@
+"""The smoke's evaluation inputs, built in a second process while the model trains.
+
+Training runs on one compute thread and one loader worker (configs/smoke.toml: `threads = 1`,
+`workers = 1`), so the second core of the 2-core budget is mostly idle for its ~75 s. What
+the later phases read depends only on the dataset, the split and the RGB probes, not on
+the model being trained:
+    probes      the control probes (rgb_pretrain.REQUIRED_CONTROLS: the shuffled one), trained
+                here on CONTROL_PROBE_THREADS; only the aligned probe, the frozen RGB encoder
+                training needs, is trained before it,
+    prepared    HT-Bench's decoded items, masks and SSIM/retrieval references (bench.items.prepare),
+    references  HT-Bench's scores of the reference predictors (all zeros, copy-last) on them,
+    probe       the RGB probes' control scores per part and pairing (rgb_pretrain.control_scores),
+    gate        the held-out gate's decoded frames per part (contact_gate.decode_part).
+`EvalInputs.start` builds them on that core, in a *spawned* process with one torch thread
+(spawned, so that no thread of ours is running when the trainer's DataLoader forks its
+worker), and `EvalInputs.result` waits for them. They come back through one file in the
+run folder, written by torch.save and deleted once read. The values are the ones the
+smoke computed in its own process before (same items, seeds and code), but for the thread
+counts: the SSIM reference's float sums (which differed between an idle and a busy machine
+before too) and the control probe's, whose weights depend on its thread count: 1 here, so
+it is a cache key apart from a 2-thread one (rgb_pretrain.cache_key).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import multiprocessing
+import os
+import time
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from handtouch.bench.evaluate import evaluate
+from handtouch.bench.items import EvalConfig, load_part, prepare
+from handtouch.bench.references import CopyLastModel, ZerosModel
+from handtouch.contact_gate import GateConfig, decode_part
+from handtouch.rgb_pretrain import REQUIRED_CONTROLS, RGBPretrainConfig, control_scores, ensure_probes, load_items
+
+PARTS = ("test", "ood")
+INPUTS_FILE = ".eval_inputs.pt"
+# One core beside training. A control's only duty is to score far from the aligned probe (shuffled
+# 0.78 of all zeros against aligned 0.42 + CONTROL_MARGIN 0.11 at seed 0), which its thread count
+# does not change; two threads here would oversubscribe the core training runs on.
+CONTROL_PROBE_THREADS = 1
+
+
+@dataclass(frozen=True)
+class InputsRequest:
+    """What the child builds: the dataset and split, the evaluation / probe / gate settings."""
+    dataset: Path
+    split: str
+    eval_cfg: EvalConfig
+    pre_cfg: RGBPretrainConfig
+    gate_cfg: GateConfig
+    probes: dict[str, Path]     # the probes trained so far: {"aligned": path}
+    probe_dir: Path             # the probes' cache folder (rgb_pretrain.ensure_probes)
+    out_file: Path
+
+    @property
+    def control_cfg(self) -> RGBPretrainConfig:
+        return dataclasses.replace(self.pre_cfg, threads=CONTROL_PROBE_THREADS)
+
+
+def build_inputs(req: InputsRequest) -> dict:
+    """The child's work (module docstring); -> {"file", "seconds": {what: wall s}}.
+
+    Raises what the readers raise (a damaged shard names its file), re-raised in the parent by `result`.
+    """
+    torch.set_num_threads(1)      # the core training leaves idle, not both
+    seconds, t = {}, time.perf_counter()
+    probes = {**req.probes, **ensure_probes(req.dataset, req.split, req.probe_dir, req.control_cfg,
+                                            pairings=REQUIRED_CONTROLS)}
+    seconds["control_probes"], t = time.perf_counter() - t, time.perf_counter()
+    prepared = prepare({p: load_part(req.dataset, req.split, p) for p in PARTS}, cfg=req.eval_cfg)
+    seconds["prepared"], t = time.perf_counter() - t, time.perf_counter()
+    references = {m.name: evaluate(m, prepared) for m in (ZerosModel(), CopyLastModel())}
+    seconds["references"], t = time.perf_counter() - t, time.perf_counter()
+    items = {p: load_items(req.dataset, req.split, p, req.pre_cfg) for p in PARTS}
+    probe = control_scores(probes, items, req.pre_cfg)
+    del items
+    seconds["probe"], t = time.perf_counter() - t, time.perf_counter()
+    gate = {p: decode_part(req.dataset, req.split, p, req.gate_cfg) for p in PARTS}
+    seconds["gate"], t = time.perf_counter() - t, time.perf_counter()
+    tmp = req.out_file.with_name(req.out_file.name + ".tmp")
+    torch.save({"prepared": prepared, "references": references, "probe": probe, "gate": gate, "probes": probes},
+               tmp)
+    os.replace(tmp, req.out_file)
+    seconds["write"] = time.perf_counter() - t
+    return {"file": str(req.out_file), "seconds": seconds}
+
+
+@dataclass
+class Inputs:
+    prepared: dict
+    references: dict             # {reference model name: evaluate(...)}
+    probe: dict
+    gate: dict
+    probes: dict[str, Path]      # every probe: the aligned one and the controls
+    seconds: dict[str, float]    # the child's wall seconds per input, beside training
+
+
+class EvalInputs:
+    """One background build of the evaluation inputs (module docstring)."""
+
+    def __init__(self, pool: ProcessPoolExecutor, future: Future, out_file: Path):
+        self._pool, self._future, self._out_file = pool, future, out_file
+        self._t0 = time.perf_counter()
+
+    @classmethod
+    def start(cls, req: InputsRequest) -> "EvalInputs":
+        pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
+        return cls(pool, pool.submit(build_inputs, req), req.out_file)
+
+    def result(self) -> Inputs:
+        """Wait for the child and load what it built. Raises SystemExit naming the child's error."""
+        try:
+            done = self._future.result()
+        except Exception as exc:     # the child's own exception, re-raised here with its message
+            raise SystemExit(f"smoke: preparing the evaluation inputs beside training failed: "
+                             f"{type(exc).__name__}: {exc}") from exc
+        finally:
+            self._pool.shutdown()
+        try:
+            # our own file of this run; mmap: pages are read as the phases use them
+            data = torch.load(done["file"], weights_only=False, mmap=True)
+        finally:
+            self._out_file.unlink(missing_ok=True)
+        return Inputs(data["prepared"], data["references"], data["probe"], data["gate"], data["probes"],
+                      {**done["seconds"], "since_start": time.perf_counter() - self._t0})
