@@ -130,7 +130,7 @@ HEARTBEAT_S = 5.0     # a progress line at least this often (the issue asked for
 # the CNN and ResNet-18 from the earlier CI runs. Only a starting point: the ETA rescales them by this
 # run's measured speed as phases finish.
 PHASE_SECONDS = {"data_sample": 20.0, "data_ingest": 15.0, "data_split": 1.0, "split_check": 0.5,
-                 "eval_prepare": 1.0, "rgb_pretrain": 44.0, "train_vit": 77.0, "train_cnn": 95.0,
+                 "eval_prepare": 1.0, "rgb_pretrain": 26.0, "train_vit": 77.0, "train_cnn": 95.0,
                  "train_resnet18": 85.0, "eval": 7.0, "checks": 1.0, "rgb_control": 10.0, "heldout_gate": 25.0,
                  "report": 1.0}
 UNTIMED_PHASES = ("data_sample", "data_ingest", "rgb_pretrain")    # ~0 s when their output is cached
@@ -316,14 +316,17 @@ def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
         args.dataset, SPLIT_NAME, EvalConfig(max_items=args.max_items, seed=args.seed), pre_cfg,
         GateConfig(max_frames=args.gate_frames, seed=args.seed), probes, args.out / "rgb_encoder",
         args.out / INPUTS_FILE))
-    models, stage1_models, train_metrics = {}, {}, {}
-    for enc in args.encoders:
-        print(f"smoke: training encoder={enc}", flush=True)
-        model, stage1, metrics = timer.run(f"train_{enc}", train_encoder, args.config, enc, args.dataset,
-                                           args.out / "train" / enc, sets, heartbeat.report)
-        models[model.name], stage1_models[model.name], train_metrics[model.name] = model, stage1, metrics
-    handtouch = next(iter(models))
-    inputs = timer.run("eval_prepare", background.result)    # the wait for them: ~0 s when training took longer
+    try:     # a failed or interrupted run stops the child (close), rather than waiting for it
+        models, stage1_models, train_metrics = {}, {}, {}
+        for enc in args.encoders:
+            print(f"smoke: training encoder={enc}", flush=True)
+            model, stage1, metrics = timer.run(f"train_{enc}", train_encoder, args.config, enc, args.dataset,
+                                               args.out / "train" / enc, sets, heartbeat.report)
+            models[model.name], stage1_models[model.name], train_metrics[model.name] = model, stage1, metrics
+        handtouch = next(iter(models))
+        inputs = timer.run("eval_prepare", background.result)    # the wait for them: ~0 s when training took longer
+    finally:
+        background.close()
     prepared, probes = inputs.prepared, inputs.probes
     threads["evaluation"] = eval_threads()
     print(f"smoke: threads {threads} (training: its config's); OMP_WAIT_POLICY="

@@ -27,7 +27,7 @@ import dataclasses
 import multiprocessing
 import os
 import time
-from concurrent.futures import Future, ProcessPoolExecutor
+import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -103,30 +103,54 @@ class Inputs:
 
 
 class EvalInputs:
-    """One background build of the evaluation inputs (module docstring)."""
+    """One background build of the evaluation inputs (module docstring). `close` stops a child still
+    running (a failed or interrupted run must not leave it working, nor wait for it)."""
 
-    def __init__(self, pool: ProcessPoolExecutor, future: Future, out_file: Path):
-        self._pool, self._future, self._out_file = pool, future, out_file
+    def __init__(self, process, conn, out_file: Path):
+        self._process, self._conn, self._out_file = process, conn, out_file
         self._t0 = time.perf_counter()
 
     @classmethod
     def start(cls, req: InputsRequest) -> "EvalInputs":
-        pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
-        return cls(pool, pool.submit(build_inputs, req), req.out_file)
+        ctx = multiprocessing.get_context("spawn")
+        parent_end, child_end = ctx.Pipe(duplex=False)
+        process = ctx.Process(target=_child, args=(req, child_end), name="smoke-eval-inputs", daemon=True)
+        process.start()
+        child_end.close()
+        return cls(process, parent_end, req.out_file)
 
     def result(self) -> Inputs:
         """Wait for the child and load what it built. Raises SystemExit naming the child's error."""
         try:
-            done = self._future.result()
-        except Exception as exc:     # the child's own exception, re-raised here with its message
-            raise SystemExit(f"smoke: preparing the evaluation inputs beside training failed: "
-                             f"{type(exc).__name__}: {exc}") from exc
-        finally:
-            self._pool.shutdown()
+            status, payload = self._conn.recv()
+        except EOFError:        # the child died without a word (killed, out of memory)
+            self._process.join()
+            status, payload = "error", f"the process ended with exit code {self._process.exitcode}"
+        self._process.join()
+        if status != "ok":
+            raise SystemExit(f"smoke: preparing the evaluation inputs beside training failed: {payload}")
         try:
             # our own file of this run; mmap: pages are read as the phases use them
-            data = torch.load(done["file"], weights_only=False, mmap=True)
+            data = torch.load(payload["file"], weights_only=False, mmap=True)
         finally:
             self._out_file.unlink(missing_ok=True)
         return Inputs(data["prepared"], data["references"], data["probe"], data["gate"], data["probes"],
-                      {**done["seconds"], "since_start": time.perf_counter() - self._t0})
+                      {**payload["seconds"], "since_start": time.perf_counter() - self._t0})
+
+    def close(self) -> None:
+        if self._process.is_alive():
+            self._process.terminate()
+            self._process.join()
+        self._conn.close()
+        self._out_file.unlink(missing_ok=True)
+        self._out_file.with_name(self._out_file.name + ".tmp").unlink(missing_ok=True)
+
+
+def _child(req: InputsRequest, conn) -> None:
+    """The spawned process: build_inputs, then one message ("ok", result) or ("error", what failed)."""
+    try:
+        conn.send(("ok", build_inputs(req)))
+    except BaseException as exc:     # every failure reaches the parent as words, not a silent exit
+        conn.send(("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
+    finally:
+        conn.close()

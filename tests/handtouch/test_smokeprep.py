@@ -71,3 +71,11 @@ def test_a_failure_in_the_child_is_named_in_the_parent(dataset, tmp_path):
     with pytest.raises(SystemExit, match="beside training failed: .*no_such_split"):
         EvalInputs.start(req).result()
     assert not (tmp_path / ".inputs.pt").exists()
+
+
+def test_close_stops_a_child_still_building_and_leaves_no_file(dataset, tmp_path):
+    aligned = ensure_probes(dataset, "s", tmp_path / "probes", TINY, pairings=("aligned",))
+    background = EvalInputs.start(_request(dataset, tmp_path, aligned))
+    background.close()                      # at once: the child is still importing or building
+    assert not background._process.is_alive() and background._process.exitcode is not None
+    assert not (tmp_path / ".inputs.pt").exists() and not (tmp_path / ".inputs.pt.tmp").exists()
