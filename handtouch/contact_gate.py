@@ -1,10 +1,11 @@
 """The smoke's held-out gate: a model's contact timing on its own frame and on another episode's.
 
-`score_part` decodes the frames of a split part (`decode_part`) (a seeded subsample of at most
-`GateConfig.max_frames`), runs the model's RGB-to-tactile on each frame's own RGB, on the RGB of
-a random frame of another episode of the part (rgb_pretrain.partners, "shuffled": the test-part
-controls' pairing) and on the RGB of another episode's frame at the same relative moment (the
-phase-matched control: `phase_partners`), and keeps per frame what handtouch.bench.timing needs
+`score_part` takes the decoded frames of a split part (`decode_part`: a seeded subsample of at
+most `GateConfig.max_frames`; the smoke decodes them beside training), runs the model's
+RGB-to-tactile on each frame's own RGB, on the RGB of a random frame of another episode of the
+part (rgb_pretrain.partners, "shuffled": the test-part controls' pairing) and on the RGB of
+another episode's frame at the same relative moment (the phase-matched control:
+`phase_partners`), and keeps per frame what handtouch.bench.timing needs
 (the contact label, the predicted contact mass, the squared errors, the frame and its relative
 position). `gate` turns the tables of the parts into the checks and the report:
 
