@@ -42,7 +42,7 @@ from pathlib import Path
 from htdata.errors import DatasetError, EpisodeError
 from htdata.ingest.plan import failure_entry
 from htdata.ingest.workdir import clear_unit_files
-from htdata.source.adapters.sourcetree import RealPaths
+from htdata.source.adapters.sourcetree import RealPaths, plain_path
 
 LIST_NAMES = ("SHA256SUMS",)
 LIST_SUFFIX = ".sha256"
@@ -114,10 +114,14 @@ class _Names:
     def __call__(self, path: str, root: Path) -> tuple[str, str]:
         key = (path, root)
         if key not in self._names:
-            try:
-                rel = Path(path).relative_to(root).as_posix()
-            except ValueError:
-                rel = str(path)
+            prefix = str(root) + "/"
+            if plain_path(path) and path.startswith(prefix) and prefix != "//":   # pathlib's answer, no Path made
+                rel = path[len(prefix):]
+            else:
+                try:
+                    rel = Path(path).relative_to(root).as_posix()
+                except ValueError:
+                    rel = str(path)
             self._names[key] = (self._real(path), rel)
         return self._names[key]
 
