@@ -136,6 +136,7 @@ def walk_source(root: Path | str, match) -> list[Path]:
 def relpath_inside(folder: Path, rel: str, where: str) -> Path:
     """Resolve `rel` under `folder`, refusing paths that escape it."""
     path = (folder / rel).resolve()
-    if os.path.commonpath([path, folder.resolve()]) != str(folder.resolve()):
+    real_folder = str(folder.resolve())        # once: a recording names 3-5 files, each resolved from "/"
+    if os.path.commonpath([path, real_folder]) != real_folder:
         raise ValueError(f"{where}: path {rel!r} leaves the recording folder")
     return path
