@@ -52,8 +52,9 @@ _LINE = re.compile(r"([0-9a-fA-F]{64}) [ *](.+)")
 def read_checksum_lists(root: Path) -> dict[str, tuple[str, str]]:
     """{absolute file path: (sha256, "LIST:line")} from every checksum list under `root`."""
     found: dict[str, tuple[str, str]] = {}
-    lists = sorted(p for p in Path(root).rglob("*") if p.is_file()
-                   and (p.name in LIST_NAMES or p.name.endswith(LIST_SUFFIX)))
+    # the name first: a stat only for a list's name, not for every file of the tree (a JPEG folder: one a frame)
+    lists = sorted(p for p in Path(root).rglob("*") if (p.name in LIST_NAMES or p.name.endswith(LIST_SUFFIX))
+                   and p.is_file())
     for lst in lists:
         for n, line in enumerate(lst.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
             line = line.rstrip("\n")
