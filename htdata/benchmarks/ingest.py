@@ -35,7 +35,8 @@ from htdata.synthetic.formats import TouchAnythingEpisode, write_touchanything_e
 from htdata.synthetic.world import EpisodeSpec, World
 
 STAGES = ("hash", "decode", "resize", "normalise", "rasterise", "encode", "write", "other")
-DRIVER_PHASES = ("plan_s", "run_s", "commit_s", "plan_cpu_s", "run_cpu_s", "commit_cpu_s")
+DRIVER_PHASES = ("plan_s", "run_s", "commit_s", "plan_cpu_s", "run_cpu_s", "commit_cpu_s",
+                 "rest_s", "rest_cpu_s", "rest_recordings", "rest_gloves")    # rest: the glove rest pooled (plan)
 
 
 def ingest_run(pipelines: list[tuple[str, Path]], out: Path, workers: int, settings: tuple[str, ...] = ()) -> dict:

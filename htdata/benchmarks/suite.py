@@ -87,6 +87,7 @@ class BenchConfig:
     ingest_workers: tuple[int, ...] = field(default_factory=lambda: (1, max(2, usable_cores())))
     driver_scales: tuple[str, str] = ("tiny", "medium")   # the driver's serial work at two corpus sizes
     driver_sources: tuple[str, ...] | None = None         # None: every source format
+    driver_episode_frames: tuple[int, int] | None = None  # None: the scales' episodes; (lo, hi): long ones
     rss_lengths: tuple[int, ...] = (150, 600, 2400)
     loader_random: int = 400
     loader_windows: int = 100
@@ -171,13 +172,16 @@ def bench_sources() -> tuple[str, ...]:
     return FORMATS
 
 
-def ensure_corpus(cfg: BenchConfig, scale: str | None = None, formats: tuple[str, ...] = FORMATS) -> Path:
-    """The deterministic sample corpus (`formats` of it); reused when a complete one of the same scale/seed exists."""
+def ensure_corpus(cfg: BenchConfig, scale: str | None = None, formats: tuple[str, ...] = FORMATS,
+                  episode_frames: tuple[int, int] | None = None) -> Path:
+    """The deterministic sample corpus (`formats`, `episode_frames`); reused when a complete one of it exists."""
 
     scale = scale or cfg.scale
     formats = tuple(f for f in FORMATS if f in formats)
-    root = cfg.work / (f"raw_{scale}_{cfg.seed}" + ("" if formats == FORMATS else "_" + "_".join(formats)))
-    corpus = CorpusConfig(out=root, seed=cfg.seed, scale=scale, formats=formats, progress=False, overwrite=True)
+    root = cfg.work / (f"raw_{scale}_{cfg.seed}" + ("" if formats == FORMATS else "_" + "_".join(formats))
+                       + ("" if episode_frames is None else "_frames{}-{}".format(*episode_frames)))
+    corpus = CorpusConfig(out=root, seed=cfg.seed, scale=scale, formats=formats, progress=False, overwrite=True,
+                          episode_frames=episode_frames)
     if not corpus_complete(corpus):
         write_corpus(corpus)
     return root
@@ -276,9 +280,10 @@ class Sections:
         corpora = []
         for scale in self.cfg.driver_scales:
             self.log(f"sample corpus ({scale})")
-            corpora.append(ensure_corpus(self.cfg, scale, FORMATS if self.cfg.driver_sources is None else sources))
+            corpora.append(ensure_corpus(self.cfg, scale, FORMATS if self.cfg.driver_sources is None else sources,
+                                         self.cfg.driver_episode_frames))
         return driver_rows(tuple(corpora), self.cfg.driver_scales, self.cfg.work, sources,
-                           max(self.cfg.ingest_workers), self.cfg.scaling_reps)
+                           max(self.cfg.ingest_workers), self.cfg.scaling_reps, self.cfg.driver_episode_frames)
 
     def rss(self) -> list:
         return peak_rss_rows(self.cfg.work, self.cfg.rss_lengths)

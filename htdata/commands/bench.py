@@ -12,6 +12,8 @@ import sys
 import time
 from pathlib import Path
 
+from htdata.commands.sample import episode_frames_arg
+
 NEEDS_TORCH = "htdata bench needs torch (its loader sections time the torch datasets): pip install 'htdata[bench]'"
 
 EPILOG = """\
@@ -33,6 +35,11 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the sample corpus and of random access")
     parser.add_argument("--only", default=None, metavar="A,B",
                         help="comma-separated sections to run (default: all, discovered ones included)")
+    parser.add_argument("--driver-scales", default=None, metavar="A,B",
+                        help="section driver: the two sample corpus scales, smaller first (default tiny,medium)")
+    parser.add_argument("--driver-episode-frames", type=episode_frames_arg, default=None, metavar="N|LO,HI",
+                        help="section driver: episodes of LO..HI frames in both corpora (htdata sample "
+                             "--episode-frames), e.g. 300,330 for the projection at real episode lengths")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     parser.add_argument("--real-glove", type=Path, default=None, metavar="DIR",
                         help="real raw-count recordings for section realglove (clips/manifest.jsonl, clips/*.npz, "
@@ -52,6 +59,10 @@ def run(args: argparse.Namespace) -> int:
     if args.only is not None:
         cfg.sections = tuple(s.strip() for s in args.only.split(",") if s.strip())
     cfg.real_glove = args.real_glove
+    if getattr(args, "driver_scales", None):
+        cfg.driver_scales = tuple(s.strip() for s in args.driver_scales.split(","))
+    if getattr(args, "driver_episode_frames", None):
+        cfg.driver_episode_frames = args.driver_episode_frames
     t_start = time.perf_counter()
 
     def log(message: str) -> None:

@@ -54,6 +54,18 @@ def _formats(text: str) -> tuple[str, ...]:
     return items
 
 
+def episode_frames_arg(text: str) -> tuple[int, int]:
+    """"N" or "LO,HI": video frames per episode."""
+    try:
+        parts = [int(v) for v in text.split(",")]
+    except ValueError:
+        parts = []
+    if len(parts) not in (1, 2) or not 2 <= parts[0] <= parts[-1] <= 100_000:
+        raise argparse.ArgumentTypeError(f"--episode-frames takes N or LO,HI with 2 <= LO <= HI <= 100000, "
+                                         f"got {text!r}")
+    return parts[0], parts[-1]
+
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.epilog = EPILOG
     parser.add_argument("out", help="output folder (created if missing)")
@@ -63,6 +75,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                              "medium: 3x small (~140 episodes, ~9k frames: the ingest benchmark's worker scaling)")
     parser.add_argument("--formats", type=_formats, default=FORMATS,
                         help=f"comma list of formats to write (default {','.join(FORMATS)})")
+    parser.add_argument("--episode-frames", type=episode_frames_arg, default=None, metavar="N|LO,HI",
+                        help="video frames per episode (drawn in LO..HI per episode) instead of the scale's "
+                             "~40-90; same episodes otherwise (e.g. 300,330: the driver bench's long episodes). "
+                             "Without it the corpus is byte-identical to earlier ones")
     parser.add_argument("--overwrite", action="store_true", help="replace existing OUT/<format> folders")
     parser.add_argument("--reuse", action="store_true",
                         help=f"exit 0 without writing if OUT holds a finished corpus ({COMPLETE_MARKER}) of the "
@@ -91,7 +107,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     cfg = CorpusConfig(out=args.out, seed=args.seed, scale=args.scale, formats=tuple(args.formats),
                        overwrite=args.overwrite, progress=not args.quiet, mispair_rgb=args.mispair_rgb,
-                       rgb_lag_frames=args.rgb_lag_frames, reverse_rgb=args.reverse_rgb)
+                       rgb_lag_frames=args.rgb_lag_frames, reverse_rgb=args.reverse_rgb,
+                       episode_frames=getattr(args, "episode_frames", None))
     if getattr(args, "raw_glove", False):
         return _raw_glove(args)
     try:

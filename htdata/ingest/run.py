@@ -177,7 +177,11 @@ def _ingest(sources, nv: NewVersion, workers, executor, address, retries, progre
         # pipeline (CLI) order, then episode id: the order units are numbered in
         pairs = [(r, s) for s, rs in zip(sources, refs) for r in sorted(rs, key=lambda r: r.episode_id)]
         # a raw-count glove without a [normalise] table: its rest pooled over this run's recordings of it
+        t_rest, cpu_rest = time.perf_counter(), time.process_time()    # bounded: POOL_MAX recordings a glove
         rests = pool_glove_rests(pairs, out, parent, _progress_line if progress else None)
+        rest_timing = {"rest_s": time.perf_counter() - t_rest, "rest_cpu_s": time.process_time() - cpu_rest,
+                       "rest_recordings": sum(r.recordings for r in rests.values()),
+                       "rest_gloves": sum(1 for r in rests.values() if r.recordings)}
         if rests:
             sources = with_glove_rests(sources, rests, pairs)
             pairs = [(r, s) for s, rs in zip(sources, refs) for r in sorted(rs, key=lambda r: r.episode_id)]
@@ -206,7 +210,7 @@ def _ingest(sources, nv: NewVersion, workers, executor, address, retries, progre
         write_bytes_atomic(out / INGEST_REPORT, dumps(report))   # explains a run that commits nothing too
         if parent is None:
             check_ingested_something(report, out)
-        report["timing"].update(plan_s=t_run - t_start, run_s=t_ran - t_run,
+        report["timing"].update(rest_timing, plan_s=t_run - t_start, run_s=t_ran - t_run,
                                 plan_cpu_s=cpu_run - cpu_start, run_cpu_s=cpu_ran - cpu_run)
         report["version"] = _commit_or_keep(nv, sources, records, plan, report)
     report["timing"]["total_s"] = time.perf_counter() - t_start

@@ -42,7 +42,7 @@ from pathlib import Path
 from htdata.errors import DatasetError, EpisodeError
 from htdata.ingest.plan import failure_entry
 from htdata.ingest.workdir import clear_unit_files
-from htdata.source.adapters.sourcetree import RealPaths
+from htdata.source.adapters.sourcetree import RealPaths, plain_path
 
 LIST_NAMES = ("SHA256SUMS",)
 LIST_SUFFIX = ".sha256"
@@ -52,8 +52,9 @@ _LINE = re.compile(r"([0-9a-fA-F]{64}) [ *](.+)")
 def read_checksum_lists(root: Path) -> dict[str, tuple[str, str]]:
     """{absolute file path: (sha256, "LIST:line")} from every checksum list under `root`."""
     found: dict[str, tuple[str, str]] = {}
-    lists = sorted(p for p in Path(root).rglob("*") if p.is_file()
-                   and (p.name in LIST_NAMES or p.name.endswith(LIST_SUFFIX)))
+    # the name first: a stat only for a list's name, not for every file of the tree (a JPEG folder: one a frame)
+    lists = sorted(p for p in Path(root).rglob("*") if (p.name in LIST_NAMES or p.name.endswith(LIST_SUFFIX))
+                   and p.is_file())
     for lst in lists:
         for n, line in enumerate(lst.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
             line = line.rstrip("\n")
@@ -114,10 +115,14 @@ class _Names:
     def __call__(self, path: str, root: Path) -> tuple[str, str]:
         key = (path, root)
         if key not in self._names:
-            try:
-                rel = Path(path).relative_to(root).as_posix()
-            except ValueError:
-                rel = str(path)
+            prefix = str(root) + "/"
+            if plain_path(path) and path.startswith(prefix) and prefix != "//":   # pathlib's answer, no Path made
+                rel = path[len(prefix):]
+            else:
+                try:
+                    rel = Path(path).relative_to(root).as_posix()
+                except ValueError:
+                    rel = str(path)
             self._names[key] = (self._real(path), rel)
         return self._names[key]
 

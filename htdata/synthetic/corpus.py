@@ -107,6 +107,8 @@ class CorpusConfig:
     mispair_rgb: bool = False     # the control corpus (module docstring): RGB of another episode
     rgb_lag_frames: int = 0       # a control corpus: video K frames behind the glove
     reverse_rgb: bool = False     # a control corpus: each episode's video played backwards
+    # (lo, hi) video frames per episode instead of the scale's range (None: the scale's; byte-identical)
+    episode_frames: tuple[int, int] | None = None
 
     def validate(self) -> "CorpusConfig":
         self.out = Path(self.out)
@@ -122,6 +124,11 @@ class CorpusConfig:
             raise ArgumentError("one broken control at a time: --mispair-rgb, --rgb-lag-frames or --reverse-rgb")
         if not 0 <= int(self.seed) < 2**32:
             raise ArgumentError(f"seed must be in [0, 2**32), got {self.seed}")
+        if self.episode_frames is not None:
+            lo, hi = (int(v) for v in self.episode_frames)
+            if not 2 <= lo <= hi <= 100_000:
+                raise ArgumentError(f"episode_frames must be 2 <= lo <= hi <= 100000, got {self.episode_frames}")
+            self.episode_frames = (lo, hi)
         return self
 
 
@@ -215,7 +222,8 @@ def plan_corpus(cfg: CorpusConfig) -> list[PlannedEpisode]:
     planners = {"opentouch": _plan_opentouch, "touchanything": _plan_touchanything, "native": _plan_native}
     out = []
     for fmt in cfg.formats:
-        out += mark_controls(planners[fmt](int(cfg.seed), plan[fmt]), cfg.mispair_rgb, cfg.rgb_lag_frames,
+        spec = plan[fmt] if cfg.episode_frames is None else {**plan[fmt], "frames": cfg.episode_frames}
+        out += mark_controls(planners[fmt](int(cfg.seed), spec), cfg.mispair_rgb, cfg.rgb_lag_frames,
                              cfg.reverse_rgb)
     return out
 
@@ -355,6 +363,8 @@ def corpus_identity(cfg: CorpusConfig) -> dict:
         ident["rgb_lag_frames"] = int(cfg.rgb_lag_frames)
     if cfg.reverse_rgb:
         ident["reverse_rgb"] = True
+    if cfg.episode_frames is not None:
+        ident["episode_frames"] = list(cfg.episode_frames)
     return ident
 
 

@@ -157,8 +157,11 @@ def test_quick_bench_content_is_consistent(quick_run):
     (d,) = driver["summary"]
     assert d["adapter"] == "opentouch" and (d["small"]["scale"], d["big"]["scale"]) == ("tiny", "small")
     assert d["big"]["frames"] > d["small"]["frames"] > 0 and d["workers"] == cores
+    # the slope of the serial seconds without the pooled glove rest (bounded: in the fixed seconds)
     assert d["serial_growth_s_per_frame"] == pytest.approx(
-        (d["big"]["serial_s"] - d["small"]["serial_s"]) / (d["big"]["frames"] - d["small"]["frames"]))
+        (d["big"]["unbounded_s"] - d["small"]["unbounded_s"]) / (d["big"]["frames"] - d["small"]["frames"]))
+    assert all(0 <= d[k]["unbounded_s"] <= d[k]["serial_s"] + 1e-9 for k in ("small", "big"))
+    assert driver["episode_frames"] is None                  # the scales' own episodes unless asked
     assert d["projection"]["frames"] == 10_000_000 and d["projection"]["wall_hours"] > 0
     assert [(d["item"], d["maps_from"], d["workers_hi"]) for d in r["loader"]["dataloader"]] == [
         ("full", "best", cores), ("full", "stored", cores), ("tactile", "best", cores)]
@@ -309,6 +312,38 @@ def test_driver_growth_and_projection_arithmetic():
     assert slow["wall_hours"] == pytest.approx((serial + 1000.0) / 3600)
     with pytest.raises(ValueError, match="two corpus sizes"):
         growth(small, small)
+
+
+def test_driver_growth_leaves_the_bounded_glove_rest_out_of_the_slope():
+    """The pooled glove rest reads at most POOL_MAX recordings a glove: the bigger size's rest seconds are no
+    growth; they come back as a fixed term, per pooled recording x POOL_MAX per glove. Without it (older runs,
+    no rest keys) the growth is the plain slope."""
+    from htdata.benchmarks.driver import growth, size_row
+    from htdata.glove.pooledrest import POOL_MAX
+
+    def run(frames, units, plan_cpu, rest_cpu, recordings):
+        return {"frames": frames, "units": units, "plan_s": plan_cpu, "commit_s": 0.1, "plan_cpu_s": plan_cpu,
+                "commit_cpu_s": 0.1, "run_cpu_s": 0.0, "rest_s": rest_cpu, "rest_cpu_s": rest_cpu,
+                "rest_recordings": recordings, "rest_gloves": 1 if recordings else 0, "worker_s": 1.0,
+                "worker_cpu_s": 1.0}
+
+    small, big = size_row([run(600, 2, 0.2, 0.0, 0)], "tiny"), size_row([run(6600, 22, 0.6, 0.3, 12)], "small")
+    g = growth(small, big)
+    assert g["serial_cpu_growth_s_per_frame"] == pytest.approx(0.1 / 6000)          # 0.4 - 0.3 of rest
+    assert g["serial_cpu_growth_s_per_unit"] == pytest.approx(0.1 / 20)
+    assert g["serial_cpu_rest_fixed_s"] == pytest.approx(0.3 / 12 * POOL_MAX)
+    assert g["serial_cpu_fixed_s"] == pytest.approx(0.3 - 0.1 / 6000 * 600 + 0.3 / 12 * POOL_MAX)
+    plain = growth({k: v for k, v in small.items() if not k.startswith(("rest", "unbounded"))},
+                   {k: v for k, v in big.items() if not k.startswith(("rest", "unbounded"))})
+    assert plain["serial_cpu_growth_s_per_frame"] == pytest.approx(0.4 / 6000) and plain["serial_cpu_rest_fixed_s"] == 0
+
+
+def test_bench_driver_options_are_checked(tmp_path):
+    """--driver-episode-frames takes N or LO,HI (htdata sample's rule); --driver-scales two scales, smaller first."""
+    with pytest.raises(SystemExit):
+        cli_main(["bench", "--quick", "--out", str(tmp_path), "--only", "driver", "--driver-episode-frames", "9,3"])
+    assert cli_main(["bench", "--quick", "--out", str(tmp_path), "--only", "driver", "--driver-scales",
+                     "small,tiny"]) == 2
 
 
 def test_gpu_check_results_beside_the_report_get_their_own_section():

@@ -72,6 +72,10 @@ def test_a_grip_held_through_a_recording_stays_pressed_when_the_glove_s_recordin
     assert held_alone < 0.75, held_alone
     notes = " ".join(_report(tmp_path / "ds")["notes"])
     assert "pooled over 4 recordings" in notes and LAYOUT in notes
+    # the report times the pooling (the driver bench takes it out of the driver's growth: bounded by POOL_MAX)
+    timing = _report(tmp_path / "ds")["timing"]
+    assert (timing["rest_recordings"], timing["rest_gloves"]) == (4, 1) and 0 < timing["rest_s"] <= timing["plan_s"]
+    assert _report(tmp_path / "ds1")["timing"]["rest_recordings"] == 0
     assert {c["baseline"] for c in _calibrations(tmp_path / "ds").values()} == {"shift"}
     assert {c["baseline"] for c in _calibrations(tmp_path / "ds1").values()} == {"drift"}   # one recording alone
 

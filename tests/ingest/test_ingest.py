@@ -413,6 +413,7 @@ TIMING_KEYS = {"frames", "total_s", "worker_s", "worker_cpu_s", "hash_s", "decod
                "encode_s", "write_s", "other_s"}
 DRIVER_KEYS = {"plan_s", "run_s", "commit_s"}
 DRIVER_CPU_KEYS = {"plan_cpu_s", "run_cpu_s", "commit_cpu_s"}     # the driver process's own CPU per phase
+REST_KEYS = {"rest_s", "rest_cpu_s", "rest_recordings", "rest_gloves"}   # the pooled glove rest (part of plan)
 
 
 def test_progress_events_arrive_per_episode_from_the_process_pool(tmp_path, monkeypatch):
@@ -470,8 +471,9 @@ def test_report_has_stage_timing(tmp_path):
     pipe = small_pipeline(tmp_path, "touchanything")
     assert ingest_cli("--pipeline", pipe, raw, out) == 0
     timing = json.loads((out / "reports" / "ingest.json").read_text())["timing"]
-    assert set(timing) == TIMING_KEYS | DRIVER_KEYS | DRIVER_CPU_KEYS
+    assert set(timing) == TIMING_KEYS | DRIVER_KEYS | DRIVER_CPU_KEYS | REST_KEYS
     assert timing["frames"] == 11
+    assert 0 <= timing["rest_s"] <= timing["plan_s"] and timing["rest_recordings"] == timing["rest_gloves"] == 0
     assert all(timing[k] >= 0 for k in DRIVER_CPU_KEYS)
     # the driver's phases add up to the wall time, and the units ran inside run_s
     assert sum(timing[k] for k in DRIVER_KEYS) == pytest.approx(timing["total_s"])

@@ -18,6 +18,7 @@ from htdata.synthetic.corpus import (
     WORLD_VERSION,
     CorpusConfig,
     corpus_complete,
+    corpus_identity,
     plan_corpus,
     write_corpus,
 )
@@ -357,3 +358,32 @@ def test_mispaired_corpus_has_the_same_touch_and_another_episodes_video(tiny, tm
         a, b = _video_frames(rec / "ego.mp4"), _video_frames(ours / "ego.mp4")
         assert len(a) == len(b)
         assert np.mean([np.abs(x.astype(int) - y.astype(int)).mean() for x, y in zip(a, b)]) > 3
+
+
+def test_episode_frames_sets_every_episode_s_length_and_nothing_else():
+    """`--episode-frames LO,HI` (the driver bench's long episodes): each planned episode's frames drawn in LO..HI,
+    the same episodes otherwise; without it the plan (and so the corpus) is the scale's, and its marker unchanged."""
+    base = plan_corpus(CorpusConfig(out=Path("x"), scale="tiny"))
+    long = plan_corpus(CorpusConfig(out=Path("x"), scale="tiny", episode_frames=(300, 330)))
+    assert [(e.fmt, e.name, e.spec.task, e.spec.scene) for e in long] == [
+        (e.fmt, e.name, e.spec.task, e.spec.scene) for e in base]
+    assert all(300 <= e.spec.n_frames <= 330 for e in long) and all(e.spec.n_frames < 60 for e in base)
+    assert {e.spec.n_frames for e in plan_corpus(CorpusConfig(out=Path("x"), scale="tiny",
+                                                                episode_frames=(120, 120)))} == {120}
+    assert "episode_frames" not in corpus_identity(CorpusConfig(out=Path("x"), scale="tiny").validate())
+    assert corpus_identity(CorpusConfig(out=Path("x"), scale="tiny", episode_frames=(300, 330)).validate())[
+        "episode_frames"] == [300, 330]
+    for bad in ((1, 5), (40, 30), (10, 200_000)):
+        with pytest.raises(ValueError, match="episode_frames"):
+            CorpusConfig(out=Path("x"), episode_frames=bad).validate()
+
+
+def test_sample_cli_episode_frames(tmp_path, capsys):
+    """The CLI's N or LO,HI, refused with a usage error when malformed; a dry run prints the lengths."""
+    assert htdata_main(["sample", str(tmp_path / "a"), "--scale", "tiny", "--formats", "native", "--dry-run",
+                        "--episode-frames", "300"]) == 0
+    lengths = [int(line.split("\t")[4]) for line in capsys.readouterr().out.splitlines()]
+    assert lengths == [300, 300]
+    for bad in ("0", "30,20", "x", "1,2,3"):
+        with pytest.raises(SystemExit):
+            htdata_main(["sample", str(tmp_path / "b"), "--episode-frames", bad])

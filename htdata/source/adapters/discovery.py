@@ -8,12 +8,14 @@ source-tree rules of sourcetree.py first.
 from __future__ import annotations
 
 import hashlib
+import os
 import re
+import stat
 from pathlib import Path
 from typing import Iterable
 
 from htdata.errors import EpisodeError
-from htdata.source.adapters.sourcetree import check_source_file
+from htdata.source.adapters.sourcetree import check_source_file, plain_path, real_path
 
 
 def discovery_failure(path: Path, exc: BaseException) -> EpisodeError:
@@ -85,12 +87,53 @@ def fingerprint_files(root: Path, files: Iterable[Path]) -> str:
     h = hashlib.sha1()
     root = Path(root)
     folders: dict = {}                  # each folder resolved once (sourcetree.real_path)
-    for path in sorted(Path(p) for p in files):
-        check_source_file(path, root, folders)   # every file an episode reads passes the source-tree rules
-        st = path.stat()
-        try:
-            rel = path.relative_to(root).as_posix()
-        except ValueError:
-            rel = path.as_posix()
+    names = [os.fspath(p) for p in files]
+    fast = FastFiles(root, folders) if names and all(map(plain_path, names)) and len(
+        {n.startswith("/") for n in names}) == 1 else None
+    # plain paths, all absolute or all relative: split at "/" they sort as Path objects do (by parts)
+    for name in (sorted(names, key=lambda n: n.split("/")) if fast else map(str, sorted(map(Path, names)))):
+        st = fast.checked_stat(name) if fast else None
+        if st is None:                  # the general rule, pathlib's (a symlink, a file it refuses, odd paths)
+            path = Path(name)
+            check_source_file(path, root, folders)   # every file an episode reads passes the source-tree rules
+            st = path.stat()
+        rel = name[len(fast.root) + 1:] if fast and name.startswith(fast.root + "/") else _relative(name, root)
         h.update(f"{rel}\0{st.st_size}\0{st.st_mtime_ns}\n".encode())
     return h.hexdigest()
+
+
+def _relative(name: str, root: Path) -> str:
+    path = Path(name)
+    try:
+        return path.relative_to(root).as_posix()
+    except ValueError:
+        return path.as_posix()
+
+
+class FastFiles:
+    """`check_source_file` + `stat` of plain paths (sourcetree.plain_path) that are no symlink, from one lstat
+    and string operations: discovery fingerprints every file an episode reads, one per frame in a JPEG
+    folder. Anything else (a symlink, an lstat that fails, a file outside the root or not regular) returns
+    None: the caller takes the general path, which raises the same error it always did."""
+
+    def __init__(self, root: Path, folders: dict):
+        self.root = str(root)
+        real = str(real_path(root, folders))
+        self.inside = "/" if real == "/" else real + "/"
+        self.folders: dict[str, str] = {}
+
+    def checked_stat(self, name: str) -> os.stat_result | None:
+        try:
+            st = os.lstat(name)
+        except OSError:
+            return None
+        if not stat.S_ISREG(st.st_mode):       # a symlink (its target decides) or a refused type
+            return None
+        head, _, base = name.rpartition("/")
+        if not head:
+            return None
+        folder = self.folders.get(head)
+        if folder is None:
+            folder = self.folders[head] = str(Path(head).resolve())
+        real = (folder if folder != "/" else "") + "/" + base
+        return st if real.startswith(self.inside) else None

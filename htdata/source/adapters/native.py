@@ -91,7 +91,8 @@ def _npz_rows(path: Path) -> int:
 
 
 def _frame_files(frames_dir: Path) -> list[Path]:
-    return sorted(p for p in frames_dir.iterdir() if p.suffix.lower() in JPEG_SUFFIXES)
+    # one folder's files: by name is the Path order, without comparing Path objects (one file per frame)
+    return sorted((p for p in frames_dir.iterdir() if p.suffix.lower() in JPEG_SUFFIXES), key=lambda p: p.name)
 
 
 # timestamps_ns declaring more rows than this beside the value rows are refused unread (issue 26: a

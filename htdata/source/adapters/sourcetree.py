@@ -13,6 +13,7 @@ episode found twice).
 
 from __future__ import annotations
 
+import errno
 import os
 import stat
 from pathlib import Path
@@ -37,20 +38,51 @@ def real_path(path: Path, folders: dict | None = None) -> Path:
     return full.resolve() if full.is_symlink() else full
 
 
+def plain_path(text: str) -> bool:
+    """`text` is a path as `str(Path(text))` writes it (no "//", "/./", trailing "/" or leading "./"), so
+    string operations on it (split at "/", a prefix test) agree with pathlib's: the driver's per-file fast
+    paths (a JPEG folder holds one file per frame) take only such paths, anything else goes through pathlib."""
+    return (bool(text) and text != "." and "//" not in text and "/./" not in text
+            and not text.endswith(("/", "/.")) and not text.startswith("./"))
+
+
+def _not_a_link(path: str) -> bool:
+    """`not Path(path).is_symlink()`, from one lstat (the same errors ignored, others raised)."""
+    try:
+        return not stat.S_ISLNK(os.lstat(path).st_mode)
+    except OSError as exc:
+        if exc.errno in (errno.ENOENT, errno.ENOTDIR, errno.EBADF, errno.ELOOP):
+            return True
+        raise
+
+
 class RealPaths:
     """`real_path` of many files as strings, each file and each folder resolved once: an ingest's driver
-    names every source file several times (who hashes it, its checksum list line, its record)."""
+    names every source file several times (who hashes it, its checksum list line, its record). A plain
+    path (`plain_path`) is resolved with string operations and one lstat, no Path object made: the same
+    string `str(real_path(Path(path)))` gives."""
 
     def __init__(self):
         self.files: dict[str, str] = {}
         self.folders: dict = {}
+        self._folder_strs: dict[str, str] = {}
 
     def __call__(self, path: Path | str) -> str:
         key = str(path)
         found = self.files.get(key)
         if found is None:
-            found = self.files[key] = str(real_path(Path(key), self.folders))
+            found = self.files[key] = self._resolve(key)
         return found
+
+    def _resolve(self, key: str) -> str:
+        head, _, name = key.rpartition("/")
+        if not (head and plain_path(key)):
+            return str(real_path(Path(key), self.folders))
+        folder = self._folder_strs.get(head)
+        if folder is None:
+            folder = self._folder_strs[head] = str(Path(head).resolve())
+        full = folder + "/" + name if folder != "/" else "/" + name
+        return full if _not_a_link(full) else str(Path(full).resolve())
 
 
 def check_source_file(path: Path | str, root: Path | str | None, folders: dict | None = None) -> Path:
@@ -104,6 +136,7 @@ def walk_source(root: Path | str, match) -> list[Path]:
 def relpath_inside(folder: Path, rel: str, where: str) -> Path:
     """Resolve `rel` under `folder`, refusing paths that escape it."""
     path = (folder / rel).resolve()
-    if os.path.commonpath([path, folder.resolve()]) != str(folder.resolve()):
+    real_folder = str(folder.resolve())        # once: a recording names 3-5 files, each resolved from "/"
+    if os.path.commonpath([path, real_folder]) != real_folder:
         raise ValueError(f"{where}: path {rel!r} leaves the recording folder")
     return path
