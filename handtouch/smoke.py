@@ -8,8 +8,8 @@
    split validator's record checks on that split (a held-out task leak fails the run);
 2. the frozen RGB encoder: trained on the train part's frames to predict their
    coarse contact maps (handtouch.rgb_pretrain; cached under OUT/rgb_encoder),
-   plus the same probe on RGB shifted >= 1 s and on RGB of other episodes (the
-   misalignment control); `--set rgb_encoder=FILE` trains with your own weights;
+   plus, beside training (step 3), the same probe on RGB of other episodes (the misalignment
+   control); `--set rgb_encoder=FILE` trains with your own weights;
 3. train HandTouch (vit) and the CNN baseline with the SAME config and budget
    (configs/smoke.toml, only model.encoder overridden; `--encoders vit,cnn,resnet18`
    adds ResNet-18, ~85 s more; every baseline and ablation: `make compare`);
@@ -134,10 +134,6 @@ PHASE_SECONDS = {"data_sample": 20.0, "data_ingest": 15.0, "data_split": 1.0, "s
                  "train_resnet18": 85.0, "eval": 7.0, "checks": 1.0, "rgb_control": 10.0, "heldout_gate": 25.0,
                  "report": 1.0}
 UNTIMED_PHASES = ("data_sample", "data_ingest", "rgb_pretrain")    # ~0 s when their output is cached
-# The probes the smoke trains: the aligned one (the frozen RGB encoder) before training, and beside
-# training the controls that can fail the run (handtouch.smokeprep). The shifted probe is reported only
-# (rgb_pretrain.REQUIRED_CONTROLS says why): 17 s of a 244 s smoke; `python -m handtouch.task_transfer
-# --controls` trains it.
 
 
 def train_encoder(config: Path, encoder: str, dataset: Path, out_dir: Path, extra: list[str],
@@ -303,7 +299,9 @@ def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
     threads = {"rgb_pretrain": pre_cfg.threads, "eval_inputs": 1}
     if probes_cached(args.dataset, SPLIT_NAME, args.out / "rgb_encoder", pre_cfg, pairings=("aligned",)):
         heartbeat.plan.expect("rgb_pretrain", 0.0)
-    # the aligned probe trains on RGBPretrainConfig.threads (2): nothing else of ours runs meanwhile
+    # the aligned probe trains on RGBPretrainConfig.threads (2): nothing else of ours runs meanwhile. The
+    # controls that can fail the run train beside training (handtouch.smokeprep); the shifted probe is
+    # reported only (rgb_pretrain.REQUIRED_CONTROLS says why): `python -m handtouch.task_transfer --controls`
     probes = timer.run("rgb_pretrain", ensure_probes, args.dataset, SPLIT_NAME, args.out / "rgb_encoder", pre_cfg,
                        pairings=("aligned",), progress=heartbeat.report)
     # the aligned probe is the frozen RGB encoder, and its coarse contact map is the RGB prior of
