@@ -138,6 +138,7 @@ def score_part(model, dataset_root, split: str, part: str, cfg: GateConfig | Non
     if isinstance(model, torch.nn.Module):
         model.eval()
     with torch.inference_mode():
+        features = rgb_features(model, flat[keys.RGB], cfg.batch_size)
         for s in range(0, len(keep), cfg.batch_size):
             rows = slice(s, s + cfg.batch_size)
             i = torch.from_numpy(keep[rows])
@@ -148,11 +149,22 @@ def score_part(model, dataset_root, split: str, part: str, cfg: GateConfig | Non
             sq["zeros"][rows] = (tac.pow(2) * cov).flatten(1).sum(1).double().numpy()
             for pairing, rgb_rows in (("aligned", i), ("mispaired", torch.from_numpy(src[keep[rows]])),
                                       (PHASE_MATCHED, torch.from_numpy(phase_src[keep[rows]]))):
-                pred = model.rgb_to_tactile(flat[keys.RGB][rgb_rows], cov, hand).float()
+                rgb = flat[keys.RGB][rgb_rows]
+                pred = (model.rgb_to_tactile(rgb, cov, hand) if features is None else
+                        model.rgb_to_tactile(rgb, cov, hand, features=features[rgb_rows])).float()
                 mass[pairing][rows] = contact_mass(pred, cov).double().numpy()
                 sq[pairing][rows] = ((pred - tac).pow(2) * cov).flatten(1).sum(1).double().numpy()
     return FrameTable(episode[keep], flat[keys.HAND].numpy()[keep], task_names[task_of_row[keep]],
                       label, count, mass, sq, frame[keep], position[keep])
+
+
+def rgb_features(model, rgb: torch.Tensor, batch_size: int) -> torch.Tensor | None:
+    """The frozen RGB backbone's output for every frame of a part, once (a model with `rgb_features`
+    returning one tensor, as HandTouch's does), or None: the model then encodes each frame it is fed."""
+    if not callable(getattr(model, "rgb_features", None)) or len(rgb) == 0:
+        return None
+    parts = [model.rgb_features(rgb[s:s + batch_size]) for s in range(0, len(rgb), batch_size)]
+    return torch.cat(parts) if all(isinstance(p, torch.Tensor) for p in parts) else None
 
 
 def gate(tables: dict[str, FrameTable], ood_task: str, stress_task: str | None,

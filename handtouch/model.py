@@ -248,8 +248,8 @@ class HandTouch(nn.Module):
         z, indices, losses, stats = self.latent(tokens)
         return self.decoder(z) * coverage, indices, losses, stats
 
-    def _inpaint(self, tactile, coverage, mask, rgb, hand):
-        feats = self.rgb_features(rgb)
+    def _inpaint(self, tactile, coverage, mask, rgb, hand, features=None):
+        feats = self.rgb_features(rgb) if features is None else features
         tokens = self.encode(tactile, mask, self.rgb_fill(rgb, hand, coverage, feats))
         return self.quantise_decode(self.fuse(tokens, rgb, hand, feats), coverage)
 
@@ -286,9 +286,11 @@ class HandTouch(nn.Module):
     def inpaint(self, tactile, coverage, mask, rgb, hand) -> torch.Tensor:
         return self._inpaint(covered(tactile, coverage), coverage, mask, rgb, hand)[0]
 
-    def rgb_to_tactile(self, rgb, coverage, hand) -> torch.Tensor:
+    def rgb_to_tactile(self, rgb, coverage, hand, features=None) -> torch.Tensor:
+        """`features`: `rgb_features(rgb)` when the caller has them (the held-out gate scores each frame's
+        RGB under three pairings: one backbone pass per frame, not three)."""
         blank = torch.zeros_like(coverage, dtype=torch.float32)
-        return self._inpaint(blank, coverage, torch.ones_like(blank), rgb, hand)[0]
+        return self._inpaint(blank, coverage, torch.ones_like(blank), rgb, hand, features)[0]
 
     def predict_next(self, rgb_window, tactile_window, coverage, hand) -> torch.Tensor:
         past = covered(tactile_window, coverage[:, None])

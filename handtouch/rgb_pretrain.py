@@ -41,7 +41,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from htdata.errors import ArgumentError, ConfigError, DatasetError
 from htdata.fileio import write_bytes_atomic
@@ -50,11 +49,11 @@ from htdata.read.itemoptions import ItemOptions
 from htdata.read.metadata import DatasetMetadata
 from htdata.read.torchdata import TactileFrameDataset
 
-from .bench.items import iterate_batches, subsample
 from .bench.metrics import MapMetrics
 from .distributed import torch_threads
+from .probeitems import ProbeItems, load_items
 from .progress import Rate, with_steps_after
-from .rgb_encoder import TactileGridRGB, load_rgb_encoder, to_unit_float
+from .rgb_encoder import TactileGridRGB, load_rgb_encoder
 from .steploop import lr_at
 
 log = logging.getLogger("handtouch.rgb_pretrain")
@@ -96,50 +95,6 @@ class RGBPretrainConfig:
             raise ConfigError(f"rgb pretrain: shift_seconds must be > 0, got {self.shift_seconds}")
         TactileGridRGB(**self.arch)   # unknown / bad arch keys fail here
         return self
-
-
-@dataclass
-class ProbeItems:
-    """Decoded frames for the probe: full-size RGB / maps are not kept for training items."""
-    rgb: torch.Tensor        # (N,3,S,S) float [0,1], pooled to the encoder's input size
-    cells: torch.Tensor      # (N,1,G,G) mean contact over the covered pixels of each canvas cell
-    weight: torch.Tensor     # (N,1,G,G) 1 where the cell has a covered pixel
-    hand: torch.Tensor       # (N,) long
-    episode: np.ndarray      # (N,) episode positions
-    frame: np.ndarray        # (N,) frame numbers
-    fps: np.ndarray          # (N,) the item's episode fps
-
-
-def coarse_target(tactile: torch.Tensor, coverage: torch.Tensor, grid: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """(B,1,H,W) map + coverage -> per-cell mean over covered pixels (B,1,G,G), cell has-coverage weight."""
-    cov = (coverage > 0.5).float()
-    mass = F.adaptive_avg_pool2d(torch.where(cov > 0, tactile.float(), torch.zeros(())), grid)
-    frac = F.adaptive_avg_pool2d(cov, grid)
-    return mass / frac.clamp_min(1e-6), (frac > 0).float()
-
-
-def load_items(dataset_root, split: str | None, part: str | None, cfg: RGBPretrainConfig) -> ProbeItems:
-    """Decode a seeded subsample of a part's frames (htdata.read.torchdata) into ProbeItems."""
-
-
-    ds = TactileFrameDataset(str(dataset_root), options=ItemOptions(split=split, part=part))
-    if len(ds) < 2:
-        raise ArgumentError(f"{dataset_root}: part {part!r} of split {split!r} has {len(ds)} frames; "
-                            "the RGB pretraining needs at least 2")
-    fps_of = np.array([float(ep.get("fps") or 0.0) for ep in ds.reader.episodes])
-    size, grid = cfg.arch["size"], cfg.arch["grid"]
-    rgb, cells, weight, hand, episode, frame = [], [], [], [], [], []
-    for b in iterate_batches(ds, subsample(len(ds), cfg.max_items, cfg.seed), 64):
-        rgb.append(F.adaptive_avg_pool2d(to_unit_float(b[keys.RGB]), size))
-        c, w = coarse_target(b[keys.TACTILE], b[keys.COVERAGE], grid)
-        cells.append(c)
-        weight.append(w)
-        hand.append(b[keys.HAND].reshape(-1).long())
-        episode.append(b[keys.EPISODE].reshape(-1).numpy())
-        frame.append(b[keys.FRAME].reshape(-1).numpy())
-    episode = np.concatenate(episode)
-    return ProbeItems(torch.cat(rgb), torch.cat(cells), torch.cat(weight), torch.cat(hand), episode,
-                      np.concatenate(frame), fps_of[episode])
 
 
 def partners(episode: np.ndarray, frame: np.ndarray, fps: np.ndarray, pairing: str,
@@ -263,14 +218,18 @@ def probes_cached(dataset_root, split: str | None, out_dir, cfg: RGBPretrainConf
 
 def ensure_probes(dataset_root, split: str | None, out_dir, cfg: RGBPretrainConfig | None = None,
                   part: str = "train", pairings=PAIRINGS,
-                  progress: Callable[[dict], None] | None = None) -> dict[str, Path]:
-    """Train (or reuse) one probe per pairing -> {pairing: path of its encoder file} (`progress`: train_probe)."""
+                  progress: Callable[[dict], None] | None = None,
+                  items: ProbeItems | None = None) -> dict[str, Path]:
+    """Train (or reuse) one probe per pairing -> {pairing: path of its encoder file} (`progress`: train_probe).
+
+    `items`: the part's `load_items(dataset_root, split, part, cfg)`, decoded already (the smoke
+    decodes them once for the aligned probe and the control); None: decoded here if a probe is missing."""
     cfg = (cfg or RGBPretrainConfig()).validate()
     folder = Path(out_dir) / cache_key(dataset_root, split, part, cfg)
     paths = {p: folder / f"{p}.pt" for p in pairings}
     missing = [p for p, path in paths.items() if not path.is_file()]
     if missing:
-        items = load_items(dataset_root, split, part, cfg)
+        items = load_items(dataset_root, split, part, cfg) if items is None else items
         for k, p in enumerate(missing):
             log.info("rgb pretrain: training the %s probe on %d items", p, len(items.hand))
             report = with_steps_after(progress, (len(missing) - k - 1) * cfg.steps)   # the probes still to train

@@ -80,8 +80,9 @@ from handtouch.bench.references import ZerosModel
 from handtouch.bench.report import render_lag_curves, render_predictions, write_results
 from handtouch.config import ENCODERS as MODEL_ENCODERS
 from handtouch.config import load_train_config
-from handtouch.contact_gate import GateConfig, gate, score_part
+from handtouch.contact_gate import GateConfig
 from handtouch.distributed import free_cores
+from handtouch.gatebeside import GateJob, typical_fps
 from handtouch.model import MODEL_NAMES
 from handtouch.progress import Heartbeat, PhaseTimer, RunPlan
 from handtouch.resources import config_file
@@ -89,7 +90,6 @@ from handtouch.rgb_pretrain import (
     PAIRINGS,
     RGBPretrainConfig,
     control_checks,
-    ensure_probes,
     episode_fps,
     model_control_checks,
     paired_rgb2tactile,
@@ -116,7 +116,14 @@ from handtouch.smokedata import (
     split_leak_check,
     toml_str,
 )
-from handtouch.smokeprep import CONTROL_PROBE_THREADS, INPUTS_FILE, EvalInputs, InputsRequest
+from handtouch.smokeprep import (
+    CONTROL_PROBE_THREADS,
+    INPUTS_FILE,
+    TRAIN_ITEMS_FILE,
+    EvalInputs,
+    InputsRequest,
+    aligned_probe,
+)
 from handtouch.train import load_model, train
 from htdata.format.table import MANIFEST_FILE
 
@@ -260,20 +267,6 @@ def main(argv=None) -> int:
         return _run(args, heartbeat)
 
 
-def heldout_gate(model, args: argparse.Namespace, frames: dict) -> tuple[list[dict], dict]:
-    """The held-out gate's checks and report (handtouch.contact_gate) for `model` on the parts' decoded
-    `frames` (contact_gate.decode_part)."""
-    cfg = GateConfig(max_frames=args.gate_frames, seed=args.seed)
-    tables = {p: score_part(model, args.dataset, SPLIT_NAME, p, cfg, frames[p]) for p in ("test", "ood")}
-    return gate(tables, args.ood_task, args.stress_task or None, typical_fps(args.dataset))
-
-
-def typical_fps(dataset) -> float:
-    """The median episode fps (30 where no episode has one): the lag check's frames <-> seconds."""
-    fps = episode_fps(dataset)
-    return float(np.median(fps[fps > 0])) if (fps > 0).any() else 30.0
-
-
 def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
     """Long because it is the smoke's script, phase after phase, as the module docstring lists them."""
     torch.manual_seed(args.seed)
@@ -302,8 +295,8 @@ def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
     # the aligned probe trains on RGBPretrainConfig.threads (2): nothing else of ours runs meanwhile. The
     # controls that can fail the run train beside training (handtouch.smokeprep); the shifted probe is
     # reported only (rgb_pretrain.REQUIRED_CONTROLS says why): `python -m handtouch.task_transfer --controls`
-    probes = timer.run("rgb_pretrain", ensure_probes, args.dataset, SPLIT_NAME, args.out / "rgb_encoder", pre_cfg,
-                       pairings=("aligned",), progress=heartbeat.report)
+    probes, train_items = timer.run("rgb_pretrain", aligned_probe, args.dataset, SPLIT_NAME, pre_cfg,
+                                    args.out / "rgb_encoder", args.out / TRAIN_ITEMS_FILE, heartbeat.report)
     # the aligned probe is the frozen RGB encoder, and its coarse contact map is the RGB prior of
     # hidden pixels (docs/HANDTOUCH.md, "RGB prior"); a user's --set rgb_encoder=FILE comes later and wins
     # (with --set model.rgb_prior=false unless FILE has a readout)
@@ -313,7 +306,7 @@ def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
     background = EvalInputs.start(InputsRequest(
         args.dataset, SPLIT_NAME, EvalConfig(max_items=args.max_items, seed=args.seed), pre_cfg,
         GateConfig(max_frames=args.gate_frames, seed=args.seed), probes, args.out / "rgb_encoder",
-        args.out / INPUTS_FILE))
+        args.out / INPUTS_FILE, train_items))
     try:     # a failed or interrupted run stops the child (close), rather than waiting for it
         models, stage1_models, train_metrics = {}, {}, {}
         for enc in args.encoders:
@@ -326,23 +319,33 @@ def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
     finally:
         background.close()
     prepared, probes = inputs.prepared, inputs.probes
-    threads["evaluation"] = eval_threads()
+    # the held-out gate beside the evaluation where two cores are free, each on one (handtouch.gatebeside)
+    free = eval_threads()
+    gate_job = GateJob.start(models[handtouch], args, inputs.gate, beside=free >= 2)
+    if gate_job.beside:
+        torch.set_num_threads(free - 1)
+    threads["evaluation"] = torch.get_num_threads()
+    threads["heldout_gate"] = 1 if gate_job.beside else threads["evaluation"]
     print(f"smoke: threads {threads} (training: its config's); OMP_WAIT_POLICY="
           f"{os.environ.get('OMP_WAIT_POLICY', 'unset')}", flush=True)
 
-    results = {}
-    for model in models.values():
-        results[model.name] = timer.run(f"eval_{model.name}", evaluate, model, prepared)
-    results.update(inputs.references)      # all zeros and copy-last, scored beside training
-    stage1_rmse = timer.run("checks", reconstruction_rmse, stage1_models[handtouch], prepared["test"])
-    zeros_rmse = results[ZerosModel.name]["test"]["reconstruction"]["f_covered"]["rmse"]   # same items
-    perplexity = timer.run("checks", codebook_perplexity, models[handtouch], prepared["test"])
-    checks += learning_checks(stage1_rmse, zeros_rmse, results[handtouch]["test"]["retrieval"], perplexity)
-    checks.append(rgb_check(results, handtouch, "test"))
-    control = timer.run("rgb_control", misalignment_control, args, inputs.probe, pre_cfg, models[handtouch], prepared)
-    checks += control_checks(control["probe"], "test")
-    checks += model_control_checks(control["model"], "test")
-    gate_checks, gate_report = timer.run("heldout_gate", heldout_gate, models[handtouch], args, inputs.gate)
+    try:     # a failed or interrupted run stops the gate's process (close)
+        results = {}
+        for model in models.values():
+            results[model.name] = timer.run(f"eval_{model.name}", evaluate, model, prepared)
+        results.update(inputs.references)      # all zeros and copy-last, scored beside training
+        stage1_rmse = timer.run("checks", reconstruction_rmse, stage1_models[handtouch], prepared["test"])
+        zeros_rmse = results[ZerosModel.name]["test"]["reconstruction"]["f_covered"]["rmse"]   # same items
+        perplexity = timer.run("checks", codebook_perplexity, models[handtouch], prepared["test"])
+        checks += learning_checks(stage1_rmse, zeros_rmse, results[handtouch]["test"]["retrieval"], perplexity)
+        checks.append(rgb_check(results, handtouch, "test"))
+        control = timer.run("rgb_control", misalignment_control, args, inputs.probe, pre_cfg, models[handtouch],
+                            prepared)
+        checks += control_checks(control["probe"], "test")
+        checks += model_control_checks(control["model"], "test")
+        gate_checks, gate_report = timer.run("heldout_gate", gate_job.result)   # the wait, when beside
+    finally:
+        gate_job.close()
     checks += gate_checks
     examples = timer.run("report", collect_examples, models[handtouch], prepared["test"], count=4)
     timer.run("report", render_predictions, examples, args.out / "predictions.png",
@@ -361,7 +364,8 @@ def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
                             "control_probe_threads": CONTROL_PROBE_THREADS},
             "misalignment_control": control,
             "train_metrics": train_metrics, "seconds": seconds, "threads": threads,
-            "eval_inputs_beside_training": inputs.seconds}
+            "eval_inputs_beside_training": inputs.seconds,
+            "heldout_gate_seconds": {"own": gate_job.seconds, "beside_evaluation": gate_job.beside}}
     write_results(args.out, results, jsonable(meta))
     written = [args.out / "results.json", args.out / "results.md"]
     print((args.out / "results.md").read_text())

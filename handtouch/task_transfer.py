@@ -35,7 +35,8 @@ from htdata.read.metadata import DatasetMetadata
 from htdata.store.splitrule import assign_episodes
 
 from .config import parse_override
-from .rgb_pretrain import PAIRINGS, ProbeItems, RGBPretrainConfig, load_items, probe_score, save_probe, train_probe
+from .probeitems import ProbeItems, load_items
+from .rgb_pretrain import PAIRINGS, RGBPretrainConfig, probe_score, save_probe, train_probe
 
 
 def subset(items: ProbeItems, mask: np.ndarray) -> ProbeItems:

@@ -8,6 +8,7 @@ import pytest
 import torch
 
 from handtouch.distributed import torch_threads
+from handtouch.probeitems import load_items
 from handtouch.rgb_encoder import TactileGridRGB, load_rgb_encoder
 from handtouch.rgb_pretrain import (
     CONTROL_MARGIN,
@@ -19,7 +20,6 @@ from handtouch.rgb_pretrain import (
     control_checks,
     control_scores,
     ensure_probes,
-    load_items,
     model_control_checks,
     partners,
     probes_cached,

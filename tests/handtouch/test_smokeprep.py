@@ -6,12 +6,14 @@ import dataclasses
 import pytest
 import torch
 
+from handtouch import probeitems
 from handtouch.bench.evaluate import evaluate
 from handtouch.bench.items import EvalConfig, load_part, prepare
 from handtouch.bench.references import CopyLastModel, ZerosModel
 from handtouch.contact_gate import GateConfig, decode_part
-from handtouch.rgb_pretrain import RGBPretrainConfig, control_scores, ensure_probes, load_items
-from handtouch.smokeprep import CONTROL_PROBE_THREADS, EvalInputs, InputsRequest
+from handtouch.probeitems import load_items
+from handtouch.rgb_pretrain import RGBPretrainConfig, control_scores, ensure_probes
+from handtouch.smokeprep import CONTROL_PROBE_THREADS, EvalInputs, InputsRequest, aligned_probe
 from tests.factories import commit_split, episode_table, write_synthetic_dataset
 
 EPISODES = episode_table(*[(f"ep{i}", "grab", "lab", "R", 10) for i in range(6)],
@@ -79,3 +81,36 @@ def test_close_stops_a_child_still_building_and_leaves_no_file(dataset, tmp_path
     background.close()                      # at once: the child is still importing or building
     assert not background._process.is_alive() and background._process.exitcode is not None
     assert not (tmp_path / ".inputs.pt").exists() and not (tmp_path / ".inputs.pt.tmp").exists()
+
+
+def _state(path):
+    return torch.load(path, weights_only=False)["state_dict"]
+
+
+def test_the_train_items_decoded_once_give_the_probes_decoded_twice(dataset, tmp_path):
+    """aligned_probe decodes the train items on worker processes and hands them to the child through a
+    file: the aligned and control probes are the ones trained on items each decoded itself."""
+    items_file = tmp_path / ".items.pt"
+    aligned, handed = aligned_probe(dataset, "s", TINY, tmp_path / "probes", items_file)
+    assert handed == items_file and items_file.is_file()
+    got = EvalInputs.start(dataclasses.replace(_request(dataset, tmp_path, aligned), train_items=handed)).result()
+    assert not items_file.exists()                                  # removed once the child is done
+    own = tmp_path / "own"
+    want = {**ensure_probes(dataset, "s", own, TINY, pairings=("aligned",)),
+            **ensure_probes(dataset, "s", own, dataclasses.replace(TINY, threads=CONTROL_PROBE_THREADS),
+                            pairings=("shuffled",))}
+    for pairing in ("aligned", "shuffled"):
+        a, b = _state(got.probes[pairing]), _state(want[pairing])
+        assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a), pairing
+    # both cached now: nothing to decode, no file for the child
+    assert aligned_probe(dataset, "s", TINY, tmp_path / "probes", items_file) == (aligned, None)
+    assert not items_file.exists()
+
+
+def test_probe_items_are_the_same_from_worker_processes(dataset, monkeypatch):
+    monkeypatch.setattr(probeitems, "PROBE_BATCH", 7)      # 40 train frames: 6 batches over 2 workers
+    one, two = load_items(dataset, "s", "train", TINY), load_items(dataset, "s", "train", TINY, workers=2)
+    assert len(one.hand) == 40
+    for k in ("rgb", "cells", "weight", "hand", "episode", "frame", "fps"):
+        a, b = getattr(one, k), getattr(two, k)
+        assert (torch.equal(a, b) if isinstance(a, torch.Tensor) else (a == b).all()), k
