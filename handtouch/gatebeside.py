@@ -10,14 +10,17 @@ here after the evaluation, as before. The values are the same computation on one
 two (float sums in another order: the gate's figures agree to ~1e-7).
 
 The process is forked, not spawned: it starts with the trained model, the decoded frames and the
-dataset's records already in memory. It prints nothing (another thread of ours, the heartbeat, may
-hold the console's lock at the fork) and sends its result, or its error as words, through a pipe.
+dataset's records already in memory. It prints nothing and writes its console to /dev/null (another
+thread of ours, the heartbeat, may hold the console's lock at the fork, and its buffer may hold lines
+the parent prints itself) and sends its result, or its error as words, through a pipe.
 """
 
 from __future__ import annotations
 
 import argparse
 import multiprocessing
+import os
+import sys
 import time
 import traceback
 
@@ -94,6 +97,9 @@ class GateJob:
 def _child(model, args: argparse.Namespace, frames: dict, conn) -> None:
     """The forked process: the gate on one thread, then one message (status, result or error, seconds)."""
     t = time.perf_counter()
+    # the console's buffers as the fork left them (maybe mid-write by the heartbeat, maybe holding its
+    # unflushed lines) are never touched: exiting flushes these instead
+    sys.stdout = sys.stderr = open(os.devnull, "w")
     try:
         torch.set_num_threads(1)
         conn.send(("ok", heldout_gate(model, args, frames), time.perf_counter() - t))
