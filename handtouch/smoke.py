@@ -7,7 +7,8 @@
    the gate is on; palm_push, whose palm-only touch no training task has, the stress test); the
    split validator's record checks on that split (a held-out task leak fails the run);
 2. the frozen RGB encoder: trained on the train part's frames to predict their
-   coarse contact maps (handtouch.rgb_pretrain; cached under OUT/rgb_encoder),
+   coarse contact maps (handtouch.rgb_pretrain; cached under OUT/rgb_encoder; the frames
+   decoded once, on every free core, for it and the control: smokeprep.aligned_probe),
    plus, beside training (step 3), the same probe on RGB of other episodes (the misalignment
    control); `--set rgb_encoder=FILE` trains with your own weights;
 3. train HandTouch (vit) and the CNN baseline with the SAME config and budget
@@ -18,7 +19,8 @@
    frames); phase eval_prepare is the wait for them;
 4. HT-Bench on the test and ood parts (at most --max-items items per part) for
    the trained models and the reference predictors (zeros-ref, copy-last-ref);
-   the held-out gate (handtouch.contact_gate) on the frames of test and of each held-out task;
+   the held-out gate (handtouch.contact_gate) on the frames of test and of each held-out task,
+   in a forked process beside the evaluation where two cores are free (handtouch.gatebeside);
 5. write OUT/results.json (with the wall time of every phase under
    meta.seconds), OUT/results.md (verdicts of every track against all zeros /
    copy-last first: handtouch.bench.verdicts; the checks; the held-out gate and F-RMSE),

@@ -18,7 +18,9 @@ run folder, written by torch.save and deleted once read. The values are the ones
 smoke computed in its own process before (same items, seeds and code), but for the thread
 counts: the SSIM reference's float sums (which differed between an idle and a busy machine
 before too) and the control probe's, whose weights depend on its thread count: 1 here, so
-it is a cache key apart from a 2-thread one (rgb_pretrain.cache_key).
+it is a cache key apart from a 2-thread one (rgb_pretrain.cache_key). The control probe's
+train items come from the parent (`aligned_probe` decodes them once for both probes and hands
+them over in a file, `InputsRequest.train_items`), not from a second decode on this core.
 """
 
 from __future__ import annotations
@@ -67,7 +69,7 @@ class InputsRequest:
     probes: dict[str, Path]     # the probes trained so far: {"aligned": path}
     probe_dir: Path             # the probes' cache folder (rgb_pretrain.ensure_probes)
     out_file: Path
-    train_items: Path | None = None     # the train part's probe items (decode_train_items), or decode them
+    train_items: Path | None = None     # the train part's probe items (aligned_probe); None: decode them
 
     @property
     def control_cfg(self) -> RGBPretrainConfig:
