@@ -124,7 +124,7 @@ class CellActivity:
         self._block_lo: list[np.ndarray] = []                 # (H,W) least / largest finite value in each block
         self._block_hi: list[np.ndarray] = []
         self._steady: Steady | None = None                    # `steady`, until more rows come
-        self._lo_at: list[np.ndarray] = []                    # (H,W) the frame of each block where it was read
+        self._lo_at: list[np.ndarray] = []                    # (H,W) the row of each block where it was read
         self._hi_at: list[np.ndarray] = []
         self._open = np.zeros((0, *self.grid), np.float32)   # rows of the block not yet full
 
@@ -160,9 +160,8 @@ class CellActivity:
                 blocks = rows[:full].reshape(-1, WANDER_BLOCK, *self.grid)
                 means = np.nanmean(blocks, axis=1)
             self._blocks.extend(means)
-            start = len(self._block_lo) * WANDER_BLOCK
             for which, (vals, at) in enumerate(((self._block_lo, self._lo_at), (self._block_hi, self._hi_at))):
-                v, k = block_extremes(blocks, start, highest=bool(which))
+                v, k = block_extremes(blocks, highest=bool(which))
                 vals.extend(v)
                 at.extend(k)
         self._open = rows[full:].copy()

@@ -120,19 +120,18 @@ def steady(means: np.ndarray, lo: tuple[np.ndarray, np.ndarray], hi: tuple[np.nd
     return Steady(least, most, means - common[:, None], common)
 
 
-def block_extremes(blocks: np.ndarray, start: int, highest: bool) -> tuple[np.ndarray, np.ndarray]:
-    """(values, frames), each (blocks, H, W): every cell's least (largest when `highest`) finite value in each
-    block and the recording frame where it was read (+-inf and the block's first frame: none finite).
+def block_extremes(blocks: np.ndarray, highest: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(values, rows), each (blocks, H, W): every cell's least (largest when `highest`) finite value in each
+    block and the row of the block where it was read (+-inf and row 0: none finite).
 
     Args:
-        blocks: (blocks, frames per block, H, W) raw rows.
-        start: the recording frame of the first row.
+        blocks: (blocks, rows per block, H, W) raw rows.
         highest: the largest value, not the least.
     """
     y = np.where(np.isfinite(blocks), blocks, -np.inf if highest else np.inf)
     k = y.argmax(axis=1) if highest else y.argmin(axis=1)
-    first = start + np.arange(len(blocks))[:, None, None] * blocks.shape[1]
-    return np.take_along_axis(y, k[:, None], axis=1)[:, 0], (first + k).astype(np.int64)
+    small = np.uint8 if blocks.shape[1] <= 256 else np.int64          # a row of a block: one byte a cell kept
+    return np.take_along_axis(y, k[:, None], axis=1)[:, 0], k.astype(small)
 
 
 def steady_of(means: list[np.ndarray], lo: tuple[list, list], hi: tuple[list, list], rows: np.ndarray,
@@ -141,7 +140,7 @@ def steady_of(means: list[np.ndarray], lo: tuple[list, list], hi: tuple[list, li
 
     Args:
         means: (H,W) block means, one per full block.
-        lo: (values, frames) lists of `block_extremes` arrays, one per full block (least values).
+        lo: (values, rows) lists of `block_extremes` arrays, one per full block (least values).
         hi: the same for the largest values.
         rows: (T,H,W) the rows after the last full block.
         block: frames per block (htdata.glove.activity.WANDER_BLOCK).
@@ -152,10 +151,11 @@ def steady_of(means: list[np.ndarray], lo: tuple[list, list], hi: tuple[list, li
     def stack(xs: list) -> np.ndarray:
         return np.stack(xs).reshape(len(xs), -1) if xs else np.zeros((0, cells))
     parts = []
+    first = np.arange(len(means) + 1)[:, None] * block                  # each block's first frame, then the rows'
     for highest, (vals, at) in enumerate((lo, hi)):
-        v, k = block_extremes(rows[None], len(means) * block, bool(highest)) if len(rows) else (
+        v, k = block_extremes(rows[None], bool(highest)) if len(rows) else (
             np.full((1, *grid), -np.inf if highest else np.inf), np.zeros((1, *grid), np.int64))
         parts.append((np.vstack([stack(vals).astype(np.float64), v.reshape(1, -1)]),
-                      np.vstack([stack(at), k.reshape(1, -1)])))
+                      first + np.vstack([stack(at).astype(np.int64), k.reshape(1, -1).astype(np.int64)])))
     st = steady(stack(means).astype(np.float64), parts[0], parts[1], block)
     return Steady(st.lo.reshape(grid), st.hi.reshape(grid), st.blocks, st.common)

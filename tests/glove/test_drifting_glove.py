@@ -46,3 +46,15 @@ def test_a_weak_press_moves_on_a_glove_that_drifts_as_a_whole():
 def test_a_falling_drift_is_taken_out_the_same_way():
     patch = {(r, c) for r in range(4, 8) for c in range(4, 8)}
     assert _moving(_drifting_glove(300, -6.0, seed=1)) == patch
+
+
+def test_the_common_mode_is_the_same_streamed_in_chunks_or_in_one_pass():
+    x = _drifting_glove(333, 6.0, seed=2)               # 20 full blocks and 13 rows after them
+    whole, chunked = CellActivity(GRID), CellActivity(GRID)
+    whole.add(x)
+    for chunk in np.array_split(x, 7):
+        chunked.add(chunk)
+    a, b = whole.steady(), chunked.steady()
+    assert np.array_equal(a.lo, b.lo) and np.array_equal(a.hi, b.hi) and np.allclose(a.common, b.common)
+    assert 4.5 < a.common[-1] - a.common[0] < 6.0        # the ramp between the first and last block centres
+    assert float(np.median(a.range)) < 2.5 < float(np.median(whole.range))   # resting cells: own wander only
