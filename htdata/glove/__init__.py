@@ -3,6 +3,7 @@
     canonical.py    the canonical hand: places, regions, parts of the 224x224 frame
     layouts.py      glove layouts (schemas/layouts/*.json): blocks of raw cells -> canvas places
     activity.py     which raw cells move (noise + rest wander, contact floor), which only fall (cross-talk)
+    commonmode.py   the glove's common-mode wander, taken out before activity judges a cell
     layoutsuggest.py a starting layout from the cells that move in recordings (`htdata layouts suggest`)
     blockcuts.py    rectangular blocks cut from a connected mask of moving cells (for layoutsuggest)
     glovevalue.py   what a glove's value block says: direction, raw-count glove (the one owner of those rules)

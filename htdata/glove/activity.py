@@ -59,6 +59,13 @@ press or on a cross-talk column move 10-20 counts; on long clips of a noisy
 glove the noise and wander term is the larger. On noiseless data without a
 full scale (threshold 0) any change moves.
 
+Range, wander and rest level are read with the GLOVE'S COMMON MODE taken
+out (`CellActivity.steady`, htdata.glove.commonmode: per block, the median
+level of the grid's calmest quarter of cells, linear between blocks): every
+cell of a real glove wanders with the whole glove, and a drift of 6 counts
+over a clip added 6 to every range and 3 x 6 to the threshold, so weakly
+pressed taxels (~15 counts) stopped moving (issue 43, the drifting glove).
+
 A moving cell is CROSS-TALK, not a sensor, when it only falls: it falls
 below its rest by more than the threshold and never rises that far above it
 (in the pressure direction: `inverted` gloves fall when pressed). Its rest
@@ -83,6 +90,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from htdata.glove.commonmode import Steady, block_extremes, steady_of
 from htdata.glove.contact import THRESHOLD as CONTACT_THRESHOLD
 from htdata.glove.glovevalue import is_inverted
 from htdata.glove.restlevel import nanpercentile_columns
@@ -113,6 +121,11 @@ class CellActivity:
         self.diffs = np.zeros(self.grid, np.int64)
         self._tail = np.zeros((0, *self.grid), np.float32)   # the last two rows seen (differences span chunks)
         self._blocks: list[np.ndarray] = []                   # (H,W) mean of each full block of rows
+        self._block_lo: list[np.ndarray] = []                 # (H,W) least / largest finite value in each block
+        self._block_hi: list[np.ndarray] = []
+        self._steady: Steady | None = None                    # `steady`, until more rows come
+        self._lo_at: list[np.ndarray] = []                    # (H,W) the row of each block where it was read
+        self._hi_at: list[np.ndarray] = []
         self._open = np.zeros((0, *self.grid), np.float32)   # rows of the block not yet full
 
     def add(self, rows: np.ndarray) -> None:
@@ -123,6 +136,7 @@ class CellActivity:
         if not len(x):
             return
         finite = np.isfinite(x)
+        self._steady = None
         self.frames += len(x)
         self.count += finite.sum(axis=0)
         np.minimum(self.lo, np.where(finite, x, np.inf).min(axis=0), out=self.lo)
@@ -143,8 +157,13 @@ class CellActivity:
         if full:
             with np.errstate(invalid="ignore"), warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)      # a cell never finite in a block: NaN
-                means = np.nanmean(rows[:full].reshape(-1, WANDER_BLOCK, *self.grid), axis=1)
+                blocks = rows[:full].reshape(-1, WANDER_BLOCK, *self.grid)
+                means = np.nanmean(blocks, axis=1)
             self._blocks.extend(means)
+            for which, (vals, at) in enumerate(((self._block_lo, self._lo_at), (self._block_hi, self._hi_at))):
+                v, k = block_extremes(blocks, highest=bool(which))
+                vals.extend(v)
+                at.extend(k)
         self._open = rows[full:].copy()
 
     def mirrored(self) -> "CellActivity":
@@ -156,12 +175,23 @@ class CellActivity:
         out.lo, out.hi = -self.hi, -self.lo
         out._tail, out._open = -self._tail, -self._open
         out._blocks = [-b for b in self._blocks]
+        out._block_lo, out._block_hi = [-b for b in self._block_hi], [-b for b in self._block_lo]
+        out._lo_at, out._hi_at = list(self._hi_at), list(self._lo_at)
         return out
 
     @property
     def range(self) -> np.ndarray:
         """(H,W) max - min of each cell's finite values (0 for a cell never finite)."""
         return np.where(self.count > 0, self.hi - self.lo, 0.0)
+
+    def steady(self) -> Steady:
+        """Min / max and block means of each cell less the glove's common mode, read on every cell of the grid
+        (htdata.glove.commonmode; taxels and gaps wander together, and a press may cover most of the live
+        cells): what the moving-cell rule reads. Kept until more rows are added."""
+        if self._steady is None:
+            self._steady = steady_of(self._blocks, (self._block_lo, self._lo_at), (self._block_hi, self._hi_at),
+                                     self._open, WANDER_BLOCK)
+        return self._steady
 
     @property
     def cell_noise(self) -> np.ndarray:
@@ -176,13 +206,14 @@ class CellActivity:
         return float(np.median(n[sel])) if sel.any() else 0.0
 
     def cell_wander(self) -> np.ndarray:
-        """(H,W) range of each cell's block means over its quiet blocks (NaN without two; module docstring).
+        """(H,W) range of each cell's block means (less the glove's common mode, `steady`) over its quiet blocks
+        (NaN without two; module docstring).
 
         Every cell at once (`nanpercentile_columns`: numpy's nan-percentiles loop over cells in Python).
         """
         if len(self._blocks) < 2:
             return np.full(self.grid, np.nan)
-        b = np.stack(self._blocks).reshape(len(self._blocks), -1).astype(np.float64)
+        b = self.steady().blocks
         with np.errstate(invalid="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)     # a cell never finite: NaN
             # rest = the cell's lower half (a press only raises a cell: held for most of a clip, it still
@@ -210,7 +241,7 @@ class CellActivity:
         """
         if not self._blocks:
             return np.full(self.grid, np.nan)
-        b = np.stack(self._blocks).reshape(len(self._blocks), -1).astype(np.float64)
+        b = self.steady().blocks
         with np.errstate(invalid="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)     # a cell never finite: NaN
             d = b - nanpercentile_columns(b, 10)
@@ -282,12 +313,13 @@ def moving_cells(activity: CellActivity, mask: np.ndarray, reference: np.ndarray
     pressure direction: up when `inverted`) by more than the threshold are set apart as cross-talk."""
     noise, wander = activity.noise(reference), activity.wander(reference)
     thr = moving_threshold(noise, step, wander, full_scale)
-    rng = activity.range
+    st = activity.steady()                  # the glove's common mode taken out (htdata.glove.commonmode)
+    rng = st.range
     hit = np.asarray(mask, bool) & (rng > thr)
     rest = activity.rest_level(reference)
     with np.errstate(invalid="ignore"):
-        rise = (rest - activity.lo) if inverted else (activity.hi - rest)
-        fall = (activity.hi - rest) if inverted else (rest - activity.lo)
+        rise = (rest - st.lo) if inverted else (st.hi - rest)
+        fall = (st.hi - rest) if inverted else (rest - st.lo)
         # cross-talk: falls below its rest by more than the threshold and never rises that far above it (no rest
         # level, under one block of frames: NaN, never cross-talk); a cell moving by neither alone rises too
         only_falls = hit & (fall > thr) & ~(rise > thr)

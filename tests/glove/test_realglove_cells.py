@@ -68,11 +68,11 @@ def test_health_crosstalk_flags_are_not_presses_along_a_strip_edge(real):
 
 def test_suggest_sees_each_derived_gloves_direction_and_finds_its_blocks(real):
     """The inverted glove (1023 - raw) gets value.convention inverted and the direct glove's blocks; every derived
-    glove gets its own direction. The drifting, low-rest glove is left out of the block targets: its rest wander
-    (+6 counts over every clip) raises suggest's threshold (an open gap, not this test's subject)."""
+    glove gets its own direction, and every one the README's block targets: the drifting, low-rest glove too (its
+    common wander of +6 counts over every clip is taken out before a cell's movement is judged, issue 43)."""
     rows = {(r["glove"].split()[0], r["hand"]): r for r in suggest_glove_rows(*real)}
     assert all(r["convention_right"] for r in rows.values()), rows
     assert rows[("inverted", "left")]["convention"] == "inverted"
+    assert ("low", "left") in rows and ("low", "right") in rows
     for (glove, hand), r in rows.items():
-        if glove != "low":
-            assert r["blocks"] >= 9 and r["precision"] >= 0.90 and r["recall_pressed"] >= 0.90, (glove, hand, r)
+        assert r["blocks"] >= 9 and r["precision"] >= 0.90 and r["recall_pressed"] >= 0.90, (glove, hand, r)
