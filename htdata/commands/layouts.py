@@ -16,7 +16,8 @@ then the shipped schemas/layouts/ (htdata.glove.layouts.layout_dirs).
 
 A RECORDING is a source folder read with --pipeline's adapter (default
 native: a recording folder, or a folder of them) or a .npy of raw rows
-(T,H,W). A cell MOVES when its raw range over a recording exceeds
+(T,H,W). A cell MOVES when its range over a recording, the glove's common
+wander taken out (htdata.glove.commonmode), exceeds
 max(12 x the glove's frame-to-frame noise + 3 x its slow rest wander,
 4 x value.step, 0.02 x value.max) (docs/LAYOUTS.md). `check --against`
 exits 1 when a cell outside every block (and not in unused_cells /
@@ -149,7 +150,8 @@ def check_against(layout: Layout, recordings: list[str], pipeline: str) -> int:
             continue
         findings.update(map(tuple, found.cells.tolist()))
         print(f"{head}: {len(found)} cell(s) outside every block move{crosstalk}:")
-        print(f"    {'cell':>9s} {'range':>9s} {'min':>9s} {'max':>9s} {'noise':>8s} {'wander':>8s}")
+        # range: less the glove's common wander (what the rule reads); min / max: the raw values
+        print(f"    {'cell':>9s} {'range':>9s} {'raw min':>9s} {'raw max':>9s} {'noise':>8s} {'wander':>8s}")
         wander = s.activity.cell_wander()
         for (r, c), v in zip(found.cells.tolist(), found.ranges):
             print(f"    {f'[{r}, {c}]':>9s} {v:9.4g} {s.activity.lo[r, c]:9.4g} {s.activity.hi[r, c]:9.4g} "
