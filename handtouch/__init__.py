@@ -20,7 +20,6 @@
     smokechecks.py    the smoke's checks of what HandTouch learned, and its exit status
     smokeprep.py      the smoke's evaluation inputs and control probe, built in a second process beside training
     contact_gate.py   the held-out gate: contact timing on a frame's own RGB and on another episode's
-    gatebeside.py     the smoke's held-out gate scored in a forked process while it evaluates
     compare.py        the paper's comparison of encoders on HT-Bench
     rgb_pretrain.py   an RGB encoder trained on the run's data, and the misalignment control
     probeitems.py     the RGB probes' items: a part's frames pooled and reduced to what a probe reads

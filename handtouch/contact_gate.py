@@ -53,6 +53,7 @@ from .bench.timing import (
     timing_checks,
     timing_scores,
 )
+from .rgb_encoder import model_rgb_features
 from .rgb_pretrain import episode_fps, partners
 
 
@@ -138,7 +139,7 @@ def score_part(model, dataset_root, split: str, part: str, cfg: GateConfig | Non
     if isinstance(model, torch.nn.Module):
         model.eval()
     with torch.inference_mode():
-        features = rgb_features(model, flat[keys.RGB], cfg.batch_size)
+        features = model_rgb_features(model, flat[keys.RGB], cfg.batch_size)
         for s in range(0, len(keep), cfg.batch_size):
             rows = slice(s, s + cfg.batch_size)
             i = torch.from_numpy(keep[rows])
@@ -156,15 +157,6 @@ def score_part(model, dataset_root, split: str, part: str, cfg: GateConfig | Non
                 sq[pairing][rows] = ((pred - tac).pow(2) * cov).flatten(1).sum(1).double().numpy()
     return FrameTable(episode[keep], flat[keys.HAND].numpy()[keep], task_names[task_of_row[keep]],
                       label, count, mass, sq, frame[keep], position[keep])
-
-
-def rgb_features(model, rgb: torch.Tensor, batch_size: int) -> torch.Tensor | None:
-    """The frozen RGB backbone's output for every frame of a part, once (a model with `rgb_features`
-    returning one tensor, as HandTouch's does), or None: the model then encodes each frame it is fed."""
-    if not callable(getattr(model, "rgb_features", None)) or len(rgb) == 0:
-        return None
-    parts = [model.rgb_features(rgb[s:s + batch_size]) for s in range(0, len(rgb), batch_size)]
-    return torch.cat(parts) if all(isinstance(p, torch.Tensor) for p in parts) else None
 
 
 def gate(tables: dict[str, FrameTable], ood_task: str, stress_task: str | None,

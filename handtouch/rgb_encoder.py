@@ -186,3 +186,14 @@ def load_rgb_encoder(spec: str) -> RGBEncoder:
         raise ConfigError(f"{path}: RGB encoder files must be .pt2 (torch.export) or .pt (state dict)")
     log.info("RGB encoder: %s (%s) sha256=%s", path, info.kind, digest)
     return RGBEncoder(backbone, info)
+
+
+def model_rgb_features(model, rgb: torch.Tensor, batch_size: int) -> torch.Tensor | None:
+    """A model's frozen RGB backbone output for every frame of `rgb`, once, in batches (a model with
+    `rgb_features` returning one tensor, as HandTouch's does: pass its rows as `rgb_to_tactile(...,
+    features=)`), or None: the model then encodes each frame it is fed. Scoring a frame's RGB under
+    several pairings then costs one backbone pass per frame, not one per pairing."""
+    if not callable(getattr(model, "rgb_features", None)) or len(rgb) == 0:
+        return None
+    parts = [model.rgb_features(rgb[s:s + batch_size]) for s in range(0, len(rgb), batch_size)]
+    return torch.cat(parts) if all(isinstance(p, torch.Tensor) for p in parts) else None

@@ -49,11 +49,11 @@ from htdata.read.itemoptions import ItemOptions
 from htdata.read.metadata import DatasetMetadata
 from htdata.read.torchdata import TactileFrameDataset
 
-from .bench.metrics import MapMetrics
+from .bench.metrics import MapMetrics, frame_scores
 from .distributed import torch_threads
 from .probeitems import ProbeItems, load_items
 from .progress import Rate, with_steps_after
-from .rgb_encoder import TactileGridRGB, load_rgb_encoder
+from .rgb_encoder import TactileGridRGB, load_rgb_encoder, model_rgb_features
 from .steploop import lr_at
 
 log = logging.getLogger("handtouch.rgb_pretrain")
@@ -337,21 +337,35 @@ def _flat(prep) -> dict:
     return out
 
 
-def paired_rgb2tactile(model, prep, episode_fps: np.ndarray, pairing: str, shift_seconds: float = 1.0,
-                       seed: int = 0, batch_size: int = 32) -> dict:
+def paired_rgb2tactile(model, prep, episode_fps: np.ndarray, pairings: tuple[str, ...], shift_seconds: float = 1.0,
+                       seed: int = 0, batch_size: int = 32) -> dict[str, dict]:
     """HT-Bench's RGB-to-tactile F-RMSE (covered, per-frame mean) of any model on a prepared part
-    with RGB paired by `pairing` at evaluation time, next to the aligned score on the SAME items
-    (those with a partner). Whether a trained fusion uses the frame at all, for free."""
+    with RGB paired by each of `pairings` at evaluation time, next to the aligned score on the SAME
+    items (those with a partner) -> {pairing: {"rmse", "aligned_rmse", "items"}}. Whether a trained
+    fusion uses the frame at all, for free. Each frame's aligned prediction and RGB backbone pass
+    (rgb_encoder.model_rgb_features) are computed once for every pairing."""
     flat = _flat(prep)
     ep, fr = flat[keys.EPISODE].numpy(), flat[keys.FRAME].numpy()
-    src = partners(ep, fr, episode_fps[ep], pairing, shift_seconds, seed)
-    keep = np.flatnonzero(src >= 0)
-    paired, aligned = MapMetrics(), MapMetrics()
+    src = {p: partners(ep, fr, episode_fps[ep], p, shift_seconds, seed) for p in pairings}
+    paired, aligned = {p: MapMetrics() for p in pairings}, {p: MapMetrics() for p in pairings}
+
+    def rgb_to_tactile(rows: torch.Tensor, cov, hand):
+        rgb = flat[keys.RGB][rows]
+        return (model.rgb_to_tactile(rgb, cov, hand) if features is None else
+                model.rgb_to_tactile(rgb, cov, hand, features=features[rows]))
+
     with torch.inference_mode():
-        for s in range(0, len(keep), batch_size):
-            i = torch.from_numpy(keep[s:s + batch_size])
+        features = model_rgb_features(model, flat[keys.RGB], batch_size)
+        for s in range(0, len(ep), batch_size):
+            rows = np.arange(s, min(s + batch_size, len(ep)))
+            i = torch.from_numpy(rows)
             tac, cov, hand = flat[keys.TACTILE][i].float(), flat[keys.COVERAGE][i].float(), flat[keys.HAND][i]
-            paired.update(model.rgb_to_tactile(flat[keys.RGB][torch.from_numpy(src[i.numpy()])], cov, hand),
-                          tac, cov)
-            aligned.update(model.rgb_to_tactile(flat[keys.RGB][i], cov, hand), tac, cov)
-    return {"rmse": paired.result()["rmse"], "aligned_rmse": aligned.result()["rmse"], "items": int(len(keep))}
+            own = frame_scores(rgb_to_tactile(i, cov, hand), tac, cov)
+            for p in pairings:
+                k = torch.from_numpy(np.flatnonzero(src[p][rows] >= 0))
+                if len(k):
+                    aligned[p].add(own.rows(k))
+                    paired[p].update(rgb_to_tactile(torch.from_numpy(src[p][rows][k.numpy()]), cov[k], hand[k]),
+                                     tac[k], cov[k])
+    return {p: {"rmse": paired[p].result()["rmse"], "aligned_rmse": aligned[p].result()["rmse"],
+                "items": int((src[p] >= 0).sum())} for p in pairings}

@@ -19,8 +19,7 @@
    frames); phase eval_prepare is the wait for them;
 4. HT-Bench on the test and ood parts (at most --max-items items per part) for
    the trained models and the reference predictors (zeros-ref, copy-last-ref);
-   the held-out gate (handtouch.contact_gate) on the frames of test and of each held-out task,
-   in a forked process beside the evaluation where two cores are free (handtouch.gatebeside);
+   the held-out gate (handtouch.contact_gate) on the frames of test and of each held-out task;
 5. write OUT/results.json (with the wall time of every phase under
    meta.seconds), OUT/results.md (verdicts of every track against all zeros /
    copy-last first: handtouch.bench.verdicts; the checks; the held-out gate and F-RMSE),
@@ -82,9 +81,8 @@ from handtouch.bench.references import ZerosModel
 from handtouch.bench.report import render_lag_curves, render_predictions, write_results
 from handtouch.config import ENCODERS as MODEL_ENCODERS
 from handtouch.config import load_train_config
-from handtouch.contact_gate import GateConfig
+from handtouch.contact_gate import GateConfig, gate, score_part
 from handtouch.distributed import free_cores
-from handtouch.gatebeside import GateJob, typical_fps
 from handtouch.model import MODEL_NAMES
 from handtouch.progress import Heartbeat, PhaseTimer, RunPlan
 from handtouch.resources import config_file
@@ -172,8 +170,8 @@ def misalignment_control(args, probe_scores: dict, pre_cfg: RGBPretrainConfig, m
     `model`'s RGB-to-tactile under eval-time mis-pairing (test)."""
     fps = episode_fps(args.dataset)
     return {"probe": probe_scores,
-            "model": {"test": {p: paired_rgb2tactile(model, prepared["test"], fps, p, pre_cfg.shift_seconds,
-                                                     pre_cfg.seed) for p in PAIRINGS[1:]}},
+            "model": {"test": paired_rgb2tactile(model, prepared["test"], fps, PAIRINGS[1:], pre_cfg.shift_seconds,
+                                                 pre_cfg.seed)},
             "model_name": model.name}
 
 
@@ -269,6 +267,20 @@ def main(argv=None) -> int:
         return _run(args, heartbeat)
 
 
+def heldout_gate(model, args: argparse.Namespace, frames: dict) -> tuple[list[dict], dict]:
+    """The held-out gate's checks and report (handtouch.contact_gate) for `model` on the parts' decoded
+    `frames` (contact_gate.decode_part)."""
+    cfg = GateConfig(max_frames=args.gate_frames, seed=args.seed)
+    tables = {p: score_part(model, args.dataset, SPLIT_NAME, p, cfg, frames[p]) for p in ("test", "ood")}
+    return gate(tables, args.ood_task, args.stress_task or None, typical_fps(args.dataset))
+
+
+def typical_fps(dataset) -> float:
+    """The median episode fps (30 where no episode has one): the lag check's frames <-> seconds."""
+    fps = episode_fps(dataset)
+    return float(np.median(fps[fps > 0])) if (fps > 0).any() else 30.0
+
+
 def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
     """Long because it is the smoke's script, phase after phase, as the module docstring lists them."""
     torch.manual_seed(args.seed)
@@ -321,33 +333,23 @@ def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
     finally:
         background.close()
     prepared, probes = inputs.prepared, inputs.probes
-    # the held-out gate beside the evaluation where two cores are free, each on one (handtouch.gatebeside)
-    free = eval_threads()
-    gate_job = GateJob.start(models[handtouch], args, inputs.gate, beside=free >= 2)
-    if gate_job.beside:
-        torch.set_num_threads(free - 1)
-    threads["evaluation"] = torch.get_num_threads()
-    threads["heldout_gate"] = 1 if gate_job.beside else threads["evaluation"]
+    threads["evaluation"] = eval_threads()
     print(f"smoke: threads {threads} (training: its config's); OMP_WAIT_POLICY="
           f"{os.environ.get('OMP_WAIT_POLICY', 'unset')}", flush=True)
 
-    try:     # a failed or interrupted run stops the gate's process (close)
-        results = {}
-        for model in models.values():
-            results[model.name] = timer.run(f"eval_{model.name}", evaluate, model, prepared)
-        results.update(inputs.references)      # all zeros and copy-last, scored beside training
-        stage1_rmse = timer.run("checks", reconstruction_rmse, stage1_models[handtouch], prepared["test"])
-        zeros_rmse = results[ZerosModel.name]["test"]["reconstruction"]["f_covered"]["rmse"]   # same items
-        perplexity = timer.run("checks", codebook_perplexity, models[handtouch], prepared["test"])
-        checks += learning_checks(stage1_rmse, zeros_rmse, results[handtouch]["test"]["retrieval"], perplexity)
-        checks.append(rgb_check(results, handtouch, "test"))
-        control = timer.run("rgb_control", misalignment_control, args, inputs.probe, pre_cfg, models[handtouch],
-                            prepared)
-        checks += control_checks(control["probe"], "test")
-        checks += model_control_checks(control["model"], "test")
-        gate_checks, gate_report = timer.run("heldout_gate", gate_job.result)   # the wait, when beside
-    finally:
-        gate_job.close()
+    results = {}
+    for model in models.values():
+        results[model.name] = timer.run(f"eval_{model.name}", evaluate, model, prepared)
+    results.update(inputs.references)      # all zeros and copy-last, scored beside training
+    stage1_rmse = timer.run("checks", reconstruction_rmse, stage1_models[handtouch], prepared["test"])
+    zeros_rmse = results[ZerosModel.name]["test"]["reconstruction"]["f_covered"]["rmse"]   # same items
+    perplexity = timer.run("checks", codebook_perplexity, models[handtouch], prepared["test"])
+    checks += learning_checks(stage1_rmse, zeros_rmse, results[handtouch]["test"]["retrieval"], perplexity)
+    checks.append(rgb_check(results, handtouch, "test"))
+    control = timer.run("rgb_control", misalignment_control, args, inputs.probe, pre_cfg, models[handtouch], prepared)
+    checks += control_checks(control["probe"], "test")
+    checks += model_control_checks(control["model"], "test")
+    gate_checks, gate_report = timer.run("heldout_gate", heldout_gate, models[handtouch], args, inputs.gate)
     checks += gate_checks
     examples = timer.run("report", collect_examples, models[handtouch], prepared["test"], count=4)
     timer.run("report", render_predictions, examples, args.out / "predictions.png",
@@ -366,8 +368,7 @@ def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
                             "control_probe_threads": CONTROL_PROBE_THREADS},
             "misalignment_control": control,
             "train_metrics": train_metrics, "seconds": seconds, "threads": threads,
-            "eval_inputs_beside_training": inputs.seconds,
-            "heldout_gate_seconds": {"own": gate_job.seconds, "beside_evaluation": gate_job.beside}}
+            "eval_inputs_beside_training": inputs.seconds}
     write_results(args.out, results, jsonable(meta))
     written = [args.out / "results.json", args.out / "results.md"]
     print((args.out / "results.md").read_text())

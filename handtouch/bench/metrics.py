@@ -70,6 +70,10 @@ class FrameScores:
     def valid(self) -> torch.Tensor:
         return self.count > 0
 
+    def rows(self, index) -> "FrameScores":
+        """The scores of the frames `index` selects (an index array or mask over the batch)."""
+        return FrameScores(self.sq_err[index], self.count[index], self.inter[index], self.union[index])
+
     @property
     def rmse(self) -> torch.Tensor:
         """(B,) per-frame RMSE; NaN marks frames with an empty region (never averaged)."""

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import torch
 
+from handtouch.bench.items import EvalConfig, load_part, prepare
 from handtouch.distributed import torch_threads
 from handtouch.probeitems import load_items
 from handtouch.rgb_encoder import TactileGridRGB, load_rgb_encoder
@@ -20,7 +21,9 @@ from handtouch.rgb_pretrain import (
     control_checks,
     control_scores,
     ensure_probes,
+    episode_fps,
     model_control_checks,
+    paired_rgb2tactile,
     partners,
     probes_cached,
     save_probe,
@@ -188,3 +191,43 @@ def test_model_control_checks_need_the_aligned_frame_to_win_by_the_margin():
     assert not any(c["ok"] for c in model_control_checks(scores(0.08, 0.08, 0.08)))
     assert [c["ok"] for c in model_control_checks(scores(0.08, 0.08 + MODEL_MARGIN / 2, 0.12))] == [False, True]
     assert not any(c["ok"] for c in model_control_checks(scores(float("nan"), 0.1, None)))
+
+
+class _Brightness:
+    """RGB-to-tactile from the frame's brightness; with `features`, from a backbone whose output is the brightness
+    (what the once-per-frame features path must reproduce)."""
+
+    name = "brightness"
+
+    def __init__(self, backbone: bool):
+        self.backbone = backbone
+        if backbone:
+            self.rgb_features = lambda rgb: rgb.float().mean((1, 2, 3))
+
+    def rgb_to_tactile(self, rgb, coverage, hand, features=None):
+        level = rgb.float().mean((1, 2, 3)) if features is None else features
+        return ((level - 40) / 200)[:, None, None, None].clamp(0, 1) * coverage
+
+
+def test_paired_rgb2tactile_scores_each_pairing_on_the_items_with_a_partner(tmp_path, monkeypatch):
+    root = _dataset(tmp_path / "ds", monkeypatch, rgb_shift=0)
+    prep = prepare({"test": load_part(root, "s", "test"), "ood": load_part(root, "s", "test")}, cfg=EvalConfig())["test"]
+    fps = episode_fps(root)
+    # >= 2 s away in a 3 s episode: the middle frames have no shifted partner and are left out
+    got = paired_rgb2tactile(_Brightness(backbone=True), prep, fps, ("shifted", "shuffled"), 2.0, seed=3)
+    assert got == paired_rgb2tactile(_Brightness(backbone=False), prep, fps, ("shifted", "shuffled"), 2.0, seed=3)
+    flat = {k: torch.cat([b[k] for b in prep.frames]) for k in prep.frames[0]}
+    model = _Brightness(backbone=False)
+    for pairing in ("shifted", "shuffled"):       # by the definition, one frame at a time
+        src = partners(flat["episode"].numpy(), flat["frame"].numpy(), fps[flat["episode"].numpy()], pairing, 2.0, 3)
+        keep = np.flatnonzero(src >= 0)
+        assert got[pairing]["items"] == len(keep) > 0
+        assert (len(keep) < len(src)) == (pairing == "shifted")
+
+        def rmse(rgb_rows):
+            cov, tac = flat["coverage"][keep].float(), flat["tactile"][keep].float()
+            pred = model.rgb_to_tactile(flat["rgb"][rgb_rows], cov, flat["hand"][keep])
+            return float((((pred - tac) ** 2 * cov).flatten(1).sum(1) / cov.flatten(1).sum(1)).sqrt().mean())
+        assert got[pairing]["aligned_rmse"] == pytest.approx(rmse(keep), rel=1e-5)
+        assert got[pairing]["rmse"] == pytest.approx(rmse(src[keep]), rel=1e-5)
+    assert got["shuffled"]["rmse"] > got["shuffled"]["aligned_rmse"] + 0.05     # the frame is read
