@@ -3,7 +3,7 @@
 A probe keeps, per frame, the RGB pooled to its encoder's input size and each hand's coarse
 contact map (the mean over the covered pixels of each canvas cell), never the full-size frame or
 map: the smoke's ~3,000 train frames fit in ~150 MB. `load_items` decodes them in batches of
-PROBE_BATCH, in this process or in worker processes (the same batches, so the same items).
+PROBE_BATCH.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from htdata.read.torchdata import TactileFrameDataset
 from .bench.items import iterate_batches, subsample
 from .rgb_encoder import to_unit_float
 
-PROBE_BATCH = 64    # frames decoded, pooled and reduced together (one worker task)
+PROBE_BATCH = 64    # frames decoded, pooled and reduced together
 
 @dataclass
 class ProbeItems:
@@ -44,8 +44,7 @@ def coarse_target(tactile: torch.Tensor, coverage: torch.Tensor, grid: int) -> t
     return mass / frac.clamp_min(1e-6), (frac > 0).float()
 
 
-def load_items(dataset_root, split: str | None, part: str | None, cfg,
-               workers: int = 0) -> ProbeItems:
+def load_items(dataset_root, split: str | None, part: str | None, cfg) -> ProbeItems:
     """Decode a seeded subsample of a part's frames (htdata.read.torchdata) into ProbeItems.
 
     Args:
@@ -54,40 +53,24 @@ def load_items(dataset_root, split: str | None, part: str | None, cfg,
         part: the split's part (None: every frame).
         cfg: the probe settings, an rgb_pretrain.RGBPretrainConfig (its arch's input size and grid,
             max_items, seed).
-        workers: decoding processes (0: in this one). Each decodes and pools whole batches of
-            PROBE_BATCH frames, the same batches in the same order, so the items are the same
-            for any count; 2 halve the ~8 s a smoke's train part takes on one core.
     """
     ds = TactileFrameDataset(str(dataset_root), options=ItemOptions(split=split, part=part))
     if len(ds) < 2:
         raise ArgumentError(f"{dataset_root}: part {part!r} of split {split!r} has {len(ds)} frames; "
                             "the RGB pretraining needs at least 2")
     fps_of = np.array([float(ep.get("fps") or 0.0) for ep in ds.reader.episodes])
-    batches = _ProbeBatches(ds, subsample(len(ds), cfg.max_items, cfg.seed), cfg.arch["size"], cfg.arch["grid"])
-    if workers > 0:
-        loader = torch.utils.data.DataLoader(batches, batch_size=None, num_workers=min(workers, len(batches)))
-    else:
-        loader = (batches[i] for i in range(len(batches)))
-    got = list(loader)
-    episode = np.concatenate([b["episode"].numpy() for b in got])
-    return ProbeItems(*(torch.cat([b[k] for b in got]) for k in ("rgb", "cells", "weight", "hand")), episode,
-                      np.concatenate([b["frame"].numpy() for b in got]), fps_of[episode])
-
-
-
-class _ProbeBatches(torch.utils.data.Dataset):
-    """Batch i of the probe's items: PROBE_BATCH frames decoded, the RGB pooled to the encoder's input
-    size and the map reduced to its coarse cells (all the probe keeps), where the batch is decoded."""
-
-    def __init__(self, ds: TactileFrameDataset, indices: np.ndarray, size: int, grid: int):
-        self.ds, self.indices, self.size, self.grid = ds, indices, size, grid
-
-    def __len__(self) -> int:
-        return -(-len(self.indices) // PROBE_BATCH)
-
-    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
-        b = next(iterate_batches(self.ds, self.indices[i * PROBE_BATCH:(i + 1) * PROBE_BATCH], PROBE_BATCH))
-        cells, weight = coarse_target(b[keys.TACTILE], b[keys.COVERAGE], self.grid)
-        return {"rgb": F.adaptive_avg_pool2d(to_unit_float(b[keys.RGB]), self.size), "cells": cells,
-                "weight": weight, "hand": b[keys.HAND].reshape(-1).long(),
-                "episode": b[keys.EPISODE].reshape(-1), "frame": b[keys.FRAME].reshape(-1)}
+    size, grid = cfg.arch["size"], cfg.arch["grid"]
+    # in this process: decoding them in DataLoader workers took 6.2 -> 4.3 s on 2 cores, but the probe trained
+    # on them next ran 35-40% slower in the process that had forked the workers (300 steps: 8.0-8.4 s -> 11.0-11.6 s)
+    rgb, cells, weight, hand, episode, frame = [], [], [], [], [], []
+    for b in iterate_batches(ds, subsample(len(ds), cfg.max_items, cfg.seed), PROBE_BATCH):
+        rgb.append(F.adaptive_avg_pool2d(to_unit_float(b[keys.RGB]), size))
+        c, w = coarse_target(b[keys.TACTILE], b[keys.COVERAGE], grid)
+        cells.append(c)
+        weight.append(w)
+        hand.append(b[keys.HAND].reshape(-1).long())
+        episode.append(b[keys.EPISODE].reshape(-1).numpy())
+        frame.append(b[keys.FRAME].reshape(-1).numpy())
+    episode = np.concatenate(episode)
+    return ProbeItems(torch.cat(rgb), torch.cat(cells), torch.cat(weight), torch.cat(hand), episode,
+                      np.concatenate(frame), fps_of[episode])

@@ -8,7 +8,7 @@
    split validator's record checks on that split (a held-out task leak fails the run);
 2. the frozen RGB encoder: trained on the train part's frames to predict their
    coarse contact maps (handtouch.rgb_pretrain; cached under OUT/rgb_encoder; the frames
-   decoded once, on every free core, for it and the control: smokeprep.aligned_probe),
+   decoded once for it and the control: smokeprep.aligned_probe),
    plus, beside training (step 3), the same probe on RGB of other episodes (the misalignment
    control); `--set rgb_encoder=FILE` trains with your own weights;
 3. train HandTouch (vit) and the CNN baseline with the SAME config and budget

@@ -39,7 +39,6 @@ from handtouch.bench.evaluate import evaluate
 from handtouch.bench.items import EvalConfig, load_part, prepare
 from handtouch.bench.references import CopyLastModel, ZerosModel
 from handtouch.contact_gate import GateConfig, decode_part
-from handtouch.distributed import free_cores
 from handtouch.probeitems import load_items
 from handtouch.rgb_pretrain import (
     REQUIRED_CONTROLS,
@@ -85,9 +84,8 @@ def aligned_probe(dataset: Path, split: str, pre_cfg: RGBPretrainConfig, probe_d
                   progress=None) -> tuple[dict[str, Path], Path | None]:
     """Train (or reuse) the aligned probe -> ({"aligned": its file}, the train items' file for the child or None).
 
-    The train part's probe items are decoded once for both probes that read them: on every free
-    core (probeitems.load_items `workers`: the same items) for the aligned probe, which trains
-    here, and written to `items_file` for the control probe the child trains beside training
+    The train part's probe items are decoded once for both probes that read them: here for the
+    aligned probe, which trains here, and written to `items_file` for the control probe the child trains beside training
     (`InputsRequest.train_items`), which decoded them a second time before: ~6 s of the core
     training shares. None when both probes are cached (nothing reads the items then).
 
@@ -102,7 +100,7 @@ def aligned_probe(dataset: Path, split: str, pre_cfg: RGBPretrainConfig, probe_d
     if all(probes_cached(dataset, split, probe_dir, cfg, pairings=pairings) for cfg, pairings in
            ((pre_cfg, ("aligned",)), (control_cfg(pre_cfg), REQUIRED_CONTROLS))):
         return ensure_probes(dataset, split, probe_dir, pre_cfg, pairings=("aligned",), progress=progress), None
-    items = load_items(dataset, split, "train", pre_cfg, workers=free_cores())
+    items = load_items(dataset, split, "train", pre_cfg)
     tmp = items_file.with_name(items_file.name + ".tmp")
     try:
         items_file.parent.mkdir(parents=True, exist_ok=True)

@@ -6,7 +6,6 @@ import dataclasses
 import pytest
 import torch
 
-from handtouch import probeitems
 from handtouch.bench.evaluate import evaluate
 from handtouch.bench.items import EvalConfig, load_part, prepare
 from handtouch.bench.references import CopyLastModel, ZerosModel
@@ -88,8 +87,8 @@ def _state(path):
 
 
 def test_the_train_items_decoded_once_give_the_probes_decoded_twice(dataset, tmp_path):
-    """aligned_probe decodes the train items on worker processes and hands them to the child through a
-    file: the aligned and control probes are the ones trained on items each decoded itself."""
+    """aligned_probe decodes the train items once and hands them to the child through a file: the aligned
+    and control probes are the ones trained on items each decoded itself."""
     items_file = tmp_path / ".items.pt"
     aligned, handed = aligned_probe(dataset, "s", TINY, tmp_path / "probes", items_file)
     assert handed == items_file and items_file.is_file()
@@ -105,12 +104,3 @@ def test_the_train_items_decoded_once_give_the_probes_decoded_twice(dataset, tmp
     # both cached now: nothing to decode, no file for the child
     assert aligned_probe(dataset, "s", TINY, tmp_path / "probes", items_file) == (aligned, None)
     assert not items_file.exists()
-
-
-def test_probe_items_are_the_same_from_worker_processes(dataset, monkeypatch):
-    monkeypatch.setattr(probeitems, "PROBE_BATCH", 7)      # 40 train frames: 6 batches over 2 workers
-    one, two = load_items(dataset, "s", "train", TINY), load_items(dataset, "s", "train", TINY, workers=2)
-    assert len(one.hand) == 40
-    for k in ("rgb", "cells", "weight", "hand", "episode", "frame", "fps"):
-        a, b = getattr(one, k), getattr(two, k)
-        assert (torch.equal(a, b) if isinstance(a, torch.Tensor) else (a == b).all()), k
