@@ -218,18 +218,14 @@ def probes_cached(dataset_root, split: str | None, out_dir, cfg: RGBPretrainConf
 
 def ensure_probes(dataset_root, split: str | None, out_dir, cfg: RGBPretrainConfig | None = None,
                   part: str = "train", pairings=PAIRINGS,
-                  progress: Callable[[dict], None] | None = None,
-                  items: ProbeItems | None = None) -> dict[str, Path]:
-    """Train (or reuse) one probe per pairing -> {pairing: path of its encoder file} (`progress`: train_probe).
-
-    `items`: the part's `load_items(dataset_root, split, part, cfg)`, decoded already (the smoke
-    decodes them once for the aligned probe and the control); None: decoded here if a probe is missing."""
+                  progress: Callable[[dict], None] | None = None) -> dict[str, Path]:
+    """Train (or reuse) one probe per pairing -> {pairing: path of its encoder file} (`progress`: train_probe)."""
     cfg = (cfg or RGBPretrainConfig()).validate()
     folder = Path(out_dir) / cache_key(dataset_root, split, part, cfg)
     paths = {p: folder / f"{p}.pt" for p in pairings}
     missing = [p for p, path in paths.items() if not path.is_file()]
     if missing:
-        items = load_items(dataset_root, split, part, cfg) if items is None else items
+        items = load_items(dataset_root, split, part, cfg)
         for k, p in enumerate(missing):
             log.info("rgb pretrain: training the %s probe on %d items", p, len(items.hand))
             report = with_steps_after(progress, (len(missing) - k - 1) * cfg.steps)   # the probes still to train

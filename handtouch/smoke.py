@@ -7,8 +7,7 @@
    the gate is on; palm_push, whose palm-only touch no training task has, the stress test); the
    split validator's record checks on that split (a held-out task leak fails the run);
 2. the frozen RGB encoder: trained on the train part's frames to predict their
-   coarse contact maps (handtouch.rgb_pretrain; cached under OUT/rgb_encoder; the frames
-   decoded once for it and the control: smokeprep.aligned_probe),
+   coarse contact maps (handtouch.rgb_pretrain; cached under OUT/rgb_encoder),
    plus, beside training (step 3), the same probe on RGB of other episodes (the misalignment
    control); `--set rgb_encoder=FILE` trains with your own weights;
 3. train HandTouch (vit) and the CNN baseline with the SAME config and budget
@@ -90,6 +89,7 @@ from handtouch.rgb_pretrain import (
     PAIRINGS,
     RGBPretrainConfig,
     control_checks,
+    ensure_probes,
     episode_fps,
     model_control_checks,
     paired_rgb2tactile,
@@ -116,14 +116,7 @@ from handtouch.smokedata import (
     split_leak_check,
     toml_str,
 )
-from handtouch.smokeprep import (
-    CONTROL_PROBE_THREADS,
-    INPUTS_FILE,
-    TRAIN_ITEMS_FILE,
-    EvalInputs,
-    InputsRequest,
-    aligned_probe,
-)
+from handtouch.smokeprep import CONTROL_PROBE_THREADS, INPUTS_FILE, EvalInputs, InputsRequest
 from handtouch.train import load_model, train
 from htdata.format.table import MANIFEST_FILE
 
@@ -309,8 +302,8 @@ def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
     # the aligned probe trains on RGBPretrainConfig.threads (2): nothing else of ours runs meanwhile. The
     # controls that can fail the run train beside training (handtouch.smokeprep); the shifted probe is
     # reported only (rgb_pretrain.REQUIRED_CONTROLS says why): `python -m handtouch.task_transfer --controls`
-    probes, train_items = timer.run("rgb_pretrain", aligned_probe, args.dataset, SPLIT_NAME, pre_cfg,
-                                    args.out / "rgb_encoder", args.out / TRAIN_ITEMS_FILE, heartbeat.report)
+    probes = timer.run("rgb_pretrain", ensure_probes, args.dataset, SPLIT_NAME, args.out / "rgb_encoder", pre_cfg,
+                       pairings=("aligned",), progress=heartbeat.report)
     # the aligned probe is the frozen RGB encoder, and its coarse contact map is the RGB prior of
     # hidden pixels (docs/HANDTOUCH.md, "RGB prior"); a user's --set rgb_encoder=FILE comes later and wins
     # (with --set model.rgb_prior=false unless FILE has a readout)
@@ -320,7 +313,7 @@ def _run(args: argparse.Namespace, heartbeat: Heartbeat) -> int:
     background = EvalInputs.start(InputsRequest(
         args.dataset, SPLIT_NAME, EvalConfig(max_items=args.max_items, seed=args.seed), pre_cfg,
         GateConfig(max_frames=args.gate_frames, seed=args.seed), probes, args.out / "rgb_encoder",
-        args.out / INPUTS_FILE, train_items))
+        args.out / INPUTS_FILE))
     try:     # a failed or interrupted run stops the child (close), rather than waiting for it
         models, stage1_models, train_metrics = {}, {}, {}
         for enc in args.encoders:

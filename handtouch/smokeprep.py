@@ -18,9 +18,7 @@ run folder, written by torch.save and deleted once read. The values are the ones
 smoke computed in its own process before (same items, seeds and code), but for the thread
 counts: the SSIM reference's float sums (which differed between an idle and a busy machine
 before too) and the control probe's, whose weights depend on its thread count: 1 here, so
-it is a cache key apart from a 2-thread one (rgb_pretrain.cache_key). The control probe's
-train items come from the parent (`aligned_probe` decodes them once for both probes and hands
-them over in a file, `InputsRequest.train_items`), not from a second decode on this core.
+it is a cache key apart from a 2-thread one (rgb_pretrain.cache_key).
 """
 
 from __future__ import annotations
@@ -40,17 +38,10 @@ from handtouch.bench.items import EvalConfig, load_part, prepare
 from handtouch.bench.references import CopyLastModel, ZerosModel
 from handtouch.contact_gate import GateConfig, decode_part
 from handtouch.probeitems import load_items
-from handtouch.rgb_pretrain import (
-    REQUIRED_CONTROLS,
-    RGBPretrainConfig,
-    control_scores,
-    ensure_probes,
-    probes_cached,
-)
+from handtouch.rgb_pretrain import REQUIRED_CONTROLS, RGBPretrainConfig, control_scores, ensure_probes
 
 PARTS = ("test", "ood")
 INPUTS_FILE = ".eval_inputs.pt"
-TRAIN_ITEMS_FILE = ".probe_items.pt"
 # One core beside training. A control's only duty is to score far from the aligned probe (shuffled
 # 0.78 of all zeros against aligned 0.42 + CONTROL_MARGIN 0.11 at seed 0), which its thread count
 # does not change; two threads here would oversubscribe the core training runs on.
@@ -68,50 +59,10 @@ class InputsRequest:
     probes: dict[str, Path]     # the probes trained so far: {"aligned": path}
     probe_dir: Path             # the probes' cache folder (rgb_pretrain.ensure_probes)
     out_file: Path
-    train_items: Path | None = None     # the train part's probe items (aligned_probe); None: decode them
 
     @property
     def control_cfg(self) -> RGBPretrainConfig:
-        return control_cfg(self.pre_cfg)
-
-
-def control_cfg(pre_cfg: RGBPretrainConfig) -> RGBPretrainConfig:
-    """The control probe's settings: the aligned probe's on CONTROL_PROBE_THREADS."""
-    return dataclasses.replace(pre_cfg, threads=CONTROL_PROBE_THREADS)
-
-
-def aligned_probe(dataset: Path, split: str, pre_cfg: RGBPretrainConfig, probe_dir: Path, items_file: Path,
-                  progress=None) -> tuple[dict[str, Path], Path | None]:
-    """Train (or reuse) the aligned probe -> ({"aligned": its file}, the train items' file for the child or None).
-
-    The train part's probe items are decoded once for both probes that read them: here for the
-    aligned probe, which trains here, and written to `items_file` for the control probe the child trains beside training
-    (`InputsRequest.train_items`), which decoded them a second time before: ~6 s of the core
-    training shares. None when both probes are cached (nothing reads the items then).
-
-    Args:
-        dataset: the dataset folder.
-        split: the smoke's split.
-        pre_cfg: the aligned probe's settings (the control's differ only in threads).
-        probe_dir: the probes' cache folder.
-        items_file: where the items go for the child (EvalInputs deletes it; so does a failure here).
-        progress: the probe's progress callback (rgb_pretrain.train_probe).
-    """
-    if all(probes_cached(dataset, split, probe_dir, cfg, pairings=pairings) for cfg, pairings in
-           ((pre_cfg, ("aligned",)), (control_cfg(pre_cfg), REQUIRED_CONTROLS))):
-        return ensure_probes(dataset, split, probe_dir, pre_cfg, pairings=("aligned",), progress=progress), None
-    items = load_items(dataset, split, "train", pre_cfg)
-    tmp = items_file.with_name(items_file.name + ".tmp")
-    try:
-        items_file.parent.mkdir(parents=True, exist_ok=True)
-        torch.save(items, tmp)
-        os.replace(tmp, items_file)
-        return ensure_probes(dataset, split, probe_dir, pre_cfg, pairings=("aligned",), progress=progress,
-                             items=items), items_file
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        items_file.unlink(missing_ok=True)
-        raise
+        return dataclasses.replace(self.pre_cfg, threads=CONTROL_PROBE_THREADS)
 
 
 def build_inputs(req: InputsRequest) -> dict:
@@ -121,10 +72,8 @@ def build_inputs(req: InputsRequest) -> dict:
     """
     torch.set_num_threads(1)      # the core training leaves idle, not both
     seconds, t = {}, time.perf_counter()
-    train_items = None if req.train_items is None else torch.load(req.train_items, weights_only=False, mmap=True)
     probes = {**req.probes, **ensure_probes(req.dataset, req.split, req.probe_dir, req.control_cfg,
-                                            pairings=REQUIRED_CONTROLS, items=train_items)}
-    del train_items
+                                            pairings=REQUIRED_CONTROLS)}
     seconds["control_probes"], t = time.perf_counter() - t, time.perf_counter()
     prepared = prepare({p: load_part(req.dataset, req.split, p) for p in PARTS}, cfg=req.eval_cfg)
     seconds["prepared"], t = time.perf_counter() - t, time.perf_counter()
@@ -158,9 +107,8 @@ class EvalInputs:
     """One background build of the evaluation inputs (module docstring). `close` stops a child still
     running (a failed or interrupted run must not leave it working, nor wait for it)."""
 
-    def __init__(self, process, conn, out_file: Path, train_items: Path | None = None):
+    def __init__(self, process, conn, out_file: Path):
         self._process, self._conn, self._out_file = process, conn, out_file
-        self._train_items = train_items     # ours to delete once the child is done with it
         self._t0 = time.perf_counter()
 
     @classmethod
@@ -170,7 +118,7 @@ class EvalInputs:
         process = ctx.Process(target=_child, args=(req, child_end), name="smoke-eval-inputs", daemon=True)
         process.start()
         child_end.close()
-        return cls(process, parent_end, req.out_file, req.train_items)
+        return cls(process, parent_end, req.out_file)
 
     def result(self) -> Inputs:
         """Wait for the child and load what it built. Raises SystemExit naming the child's error."""
@@ -180,7 +128,6 @@ class EvalInputs:
             self._process.join()
             status, payload = "error", f"the process ended with exit code {self._process.exitcode}"
         self._process.join()
-        self._forget_train_items()
         if status != "ok":
             raise SystemExit(f"smoke: preparing the evaluation inputs beside training failed: {payload}")
         try:
@@ -198,11 +145,6 @@ class EvalInputs:
         self._conn.close()
         self._out_file.unlink(missing_ok=True)
         self._out_file.with_name(self._out_file.name + ".tmp").unlink(missing_ok=True)
-        self._forget_train_items()
-
-    def _forget_train_items(self) -> None:
-        if self._train_items is not None:
-            self._train_items.unlink(missing_ok=True)
 
 
 def _child(req: InputsRequest, conn) -> None:

@@ -12,7 +12,7 @@ from handtouch.bench.references import CopyLastModel, ZerosModel
 from handtouch.contact_gate import GateConfig, decode_part
 from handtouch.probeitems import load_items
 from handtouch.rgb_pretrain import RGBPretrainConfig, control_scores, ensure_probes
-from handtouch.smokeprep import CONTROL_PROBE_THREADS, EvalInputs, InputsRequest, aligned_probe
+from handtouch.smokeprep import CONTROL_PROBE_THREADS, EvalInputs, InputsRequest
 from tests.factories import commit_split, episode_table, write_synthetic_dataset
 
 EPISODES = episode_table(*[(f"ep{i}", "grab", "lab", "R", 10) for i in range(6)],
@@ -80,27 +80,3 @@ def test_close_stops_a_child_still_building_and_leaves_no_file(dataset, tmp_path
     background.close()                      # at once: the child is still importing or building
     assert not background._process.is_alive() and background._process.exitcode is not None
     assert not (tmp_path / ".inputs.pt").exists() and not (tmp_path / ".inputs.pt.tmp").exists()
-
-
-def _state(path):
-    return torch.load(path, weights_only=False)["state_dict"]
-
-
-def test_the_train_items_decoded_once_give_the_probes_decoded_twice(dataset, tmp_path):
-    """aligned_probe decodes the train items once and hands them to the child through a file: the aligned
-    and control probes are the ones trained on items each decoded itself."""
-    items_file = tmp_path / ".items.pt"
-    aligned, handed = aligned_probe(dataset, "s", TINY, tmp_path / "probes", items_file)
-    assert handed == items_file and items_file.is_file()
-    got = EvalInputs.start(dataclasses.replace(_request(dataset, tmp_path, aligned), train_items=handed)).result()
-    assert not items_file.exists()                                  # removed once the child is done
-    own = tmp_path / "own"
-    want = {**ensure_probes(dataset, "s", own, TINY, pairings=("aligned",)),
-            **ensure_probes(dataset, "s", own, dataclasses.replace(TINY, threads=CONTROL_PROBE_THREADS),
-                            pairings=("shuffled",))}
-    for pairing in ("aligned", "shuffled"):
-        a, b = _state(got.probes[pairing]), _state(want[pairing])
-        assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a), pairing
-    # both cached now: nothing to decode, no file for the child
-    assert aligned_probe(dataset, "s", TINY, tmp_path / "probes", items_file) == (aligned, None)
-    assert not items_file.exists()
