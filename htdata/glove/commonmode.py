@@ -128,7 +128,8 @@ def block_extremes(blocks: np.ndarray, highest: bool) -> tuple[np.ndarray, np.nd
         blocks: (blocks, rows per block, H, W) raw rows.
         highest: the largest value, not the least.
     """
-    y = np.where(np.isfinite(blocks), blocks, -np.inf if highest else np.inf)
+    finite = np.isfinite(blocks)
+    y = blocks if finite.all() else np.where(finite, blocks, -np.inf if highest else np.inf)   # no copy: the usual case
     k = y.argmax(axis=1) if highest else y.argmin(axis=1)
     small = np.uint8 if blocks.shape[1] <= 256 else np.int64          # a row of a block: one byte a cell kept
     return np.take_along_axis(y, k[:, None], axis=1)[:, 0], k.astype(small)
