@@ -3,7 +3,7 @@ import torch
 
 from handtouch.config import MODULE_NAMES, LossConfig, StageConfig
 from handtouch.model import HandTouch, masked_mse
-from handtouch.rgb_encoder import SmallConvRGB, load_rgb_encoder
+from handtouch.rgb_encoder import SmallConvRGB, load_rgb_encoder, model_rgb_features
 from handtouch.stages import MASK, STAGES
 from tests.factories.model import STAGE_TRAINABLE, frame_batch, make_stage, tiny_cfg, tiny_model
 
@@ -510,3 +510,18 @@ def test_one_backbone_pass_serves_the_rgb_prior_and_the_visual_tokens():
         twice = model.quantise_decode(model.fuse(tokens, rgb, hand), cov)[0]
         assert len(calls) == 3 and torch.equal(shared, twice)
     hook.remove()
+
+
+def test_rgb_to_tactile_from_features_computed_once_is_the_same():
+    """The held-out gate and the misalignment control pass each frame's backbone output once
+    (rgb_encoder.model_rgb_features) instead of the frame per pairing: the same prediction."""
+    b, other = frame_batch(seed=0), frame_batch(seed=1)
+    model = tiny_model().eval()
+    rgb = torch.cat([b["rgb"], other["rgb"]])
+    with torch.no_grad():
+        features = model_rgb_features(model, rgb, batch_size=3)          # batches across the two
+        for rows in (torch.tensor([0, 1]), torch.tensor([3, 0])):
+            want = model.rgb_to_tactile(rgb[rows], b["coverage"], b["hand"])
+            assert torch.allclose(model.rgb_to_tactile(rgb[rows], b["coverage"], b["hand"], features=features[rows]),
+                                  want, atol=1e-6)
+    assert model_rgb_features(object(), rgb, 3) is None                   # a model without a backbone: frames as fed
