@@ -160,8 +160,8 @@ class CellActivity:
                 blocks = rows[:full].reshape(-1, WANDER_BLOCK, *self.grid)
                 means = np.nanmean(blocks, axis=1)
             self._blocks.extend(means)
-            for which, (vals, at) in enumerate(((self._block_lo, self._lo_at), (self._block_hi, self._hi_at))):
-                v, k = block_extremes(blocks, highest=bool(which))
+            for (vals, at), (v, k) in zip(((self._block_lo, self._lo_at), (self._block_hi, self._hi_at)),
+                                          block_extremes(blocks), strict=True):
                 vals.extend(v)
                 at.extend(k)
         self._open = rows[full:].copy()

@@ -120,19 +120,22 @@ def steady(means: np.ndarray, lo: tuple[np.ndarray, np.ndarray], hi: tuple[np.nd
     return Steady(least, most, means - common[:, None], common)
 
 
-def block_extremes(blocks: np.ndarray, highest: bool) -> tuple[np.ndarray, np.ndarray]:
-    """(values, rows), each (blocks, H, W): every cell's least (largest when `highest`) finite value in each
-    block and the row of the block where it was read (+-inf and row 0: none finite).
+def block_extremes(blocks: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """((least, rows), (largest, rows)), each array (blocks, H, W): every cell's least and largest finite value
+    in each block and the row of the block where it was read (+-inf and row 0: none finite).
 
     Args:
         blocks: (blocks, rows per block, H, W) raw rows.
-        highest: the largest value, not the least.
     """
     finite = np.isfinite(blocks)
-    y = blocks if finite.all() else np.where(finite, blocks, -np.inf if highest else np.inf)   # no copy: the usual case
-    k = y.argmax(axis=1) if highest else y.argmin(axis=1)
+    every = finite.all()            # the usual case: no copy, and one finiteness pass for both ends
     small = np.uint8 if blocks.shape[1] <= 256 else np.int64          # a row of a block: one byte a cell kept
-    return np.take_along_axis(y, k[:, None], axis=1)[:, 0], k.astype(small)
+    out = []
+    for highest in (False, True):
+        y = blocks if every else np.where(finite, blocks, -np.inf if highest else np.inf)
+        k = y.argmax(axis=1) if highest else y.argmin(axis=1)
+        out.append((np.take_along_axis(y, k[:, None], axis=1)[:, 0], k.astype(small)))
+    return out[0], out[1]
 
 
 def steady_of(means: list[np.ndarray], lo: tuple[list, list], hi: tuple[list, list], rows: np.ndarray,
@@ -153,8 +156,9 @@ def steady_of(means: list[np.ndarray], lo: tuple[list, list], hi: tuple[list, li
         return np.stack(xs).reshape(len(xs), -1) if xs else np.zeros((0, cells))
     parts = []
     first = np.arange(len(means) + 1)[:, None] * block                  # each block's first frame, then the rows'
+    tail = block_extremes(rows[None]) if len(rows) else None      # the rows after the last full block
     for highest, (vals, at) in enumerate((lo, hi)):
-        v, k = block_extremes(rows[None], bool(highest)) if len(rows) else (
+        v, k = tail[highest] if tail is not None else (
             np.full((1, *grid), -np.inf if highest else np.inf), np.zeros((1, *grid), np.int64))
         parts.append((np.vstack([stack(vals).astype(np.float64), v.reshape(1, -1)]),
                       first + np.vstack([stack(at).astype(np.int64), k.reshape(1, -1).astype(np.int64)])))
