@@ -190,13 +190,14 @@ def save_probe(model: TactileGridRGB, path: Path, meta: dict) -> None:
 
 # The fields of a version record that say which version it is, not what its samples hold (a new version
 # changing only these serves the same bytes; the records' content is in episodes_sha256 / index_sha256).
-VERSION_RECORD_FIELDS = ("version", "parent", "created", "change", "next_unit", "episodes_file", "index_file",
-                         "splits")
+# A format 3 version also names its own files (episodes_file, index_file): content_record drops those too.
+VERSION_RECORD_FIELDS = ("version", "parent", "created", "change", "next_unit", "splits")
+VERSION_FILE_FIELDS = ("episodes_file", "index_file")
 
 
 def content_record(manifest: dict) -> dict:
     """The manifest without its VERSION_RECORD_FIELDS: what decides the samples a reader serves."""
-    return {k: v for k, v in manifest.items() if k not in VERSION_RECORD_FIELDS}
+    return {k: v for k, v in manifest.items() if k not in VERSION_RECORD_FIELDS + VERSION_FILE_FIELDS}
 
 
 def cache_key(dataset_root, split: str | None, part: str, cfg: RGBPretrainConfig) -> str:

@@ -36,6 +36,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "merge": ("htdata.commands.merge", "merge two datasets into a new one without re-encoding"),
     "gc": ("htdata.commands.gc", "delete old versions and shards no kept version lists; --dry-run"),
     "repair": ("htdata.commands.repair", "rewrite dataset.json from the newest version file; --dry-run"),
+    "upgrade": ("htdata.commands.upgrade", "store the current version in today's format, as a new version; --dry-run"),
     "preview": ("htdata.commands.preview", "render a contact sheet: RGB beside left/right tactile maps"),
     "view": ("htdata.commands.view", "scrub one episode in Rerun: RGB, both hands' maps and contact curves in time"),
     "pipelines": ("htdata.commands.pipelines", "list the shipped ingest pipelines, or print one to copy and edit"),
@@ -49,7 +50,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 # `htdata --help` lists the commands by what they are for.
 GROUPS: dict[str, tuple[str, ...]] = {
     "build": ("sample", "ingest", "renormalise", "pipelines", "layouts"),
-    "curate": ("split", "rm", "trim", "merge", "gc", "repair"),
+    "curate": ("split", "rm", "trim", "merge", "gc", "repair", "upgrade"),
     "inspect": ("log", "diff", "stats", "validate", "preview", "view", "card"),
     "share": ("publish", "export"),
     "measure": ("bench",),

@@ -5,25 +5,33 @@
 Exports both revisions (git archive; NEW_REV defaults to the working tree),
 writes the sample corpus once with BASE, ingests it with each revision
 (inline, so scheduling cannot reorder anything) and compares every shard,
-the index and the episode records byte for byte (found through each
-manifest's "episodes_file" / "index_file", so datasets of different format
-versions compare too). dataset.json is compared with its run-dependent
-fields removed. Exit 0 when everything is identical, 1 otherwise.
+the index and the episode records byte for byte (as a reader gets them, through this tree's
+loaders, written out as format 3 stored them: episodes.jsonl lines with sorted keys, index.npy as
+np.save writes it; so datasets of different format versions compare too). dataset.json is
+compared with its run-dependent fields removed (and where it keeps its records: format 3's file
+names, format 4's segments), its shard list as a reader sees it. Exit 0 when everything is
+identical, 1 otherwise.
 """
 
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import sys
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_compare import corpus_formats, export, run_py  # noqa: E402  (a sibling tool)
+from bench_compare import REPO, corpus_formats, export, run_py  # noqa: E402  (a sibling tool)
+
+sys.path.insert(0, str(REPO))
+from htdata.store.manifest import load_index, load_records  # noqa: E402  (this tree reads every format)
 
 RUN_FIELDS = ("created", "sources", "change", "htdata_version", "episodes_file", "index_file", "version",
-              "parent", "next_unit", "splits", "format_version")
+              "parent", "next_unit", "splits", "format_version", "segments")
 
 
 def ingest(tree: Path, raw: Path, out: Path) -> None:
@@ -34,10 +42,13 @@ def ingest(tree: Path, raw: Path, out: Path) -> None:
 
 
 def files(out: Path) -> dict[str, bytes]:
-    manifest = json.loads((out / "dataset.json").read_text())
+    manifest, episodes = load_records(out)
     got = {f"shards/{p.name}": p.read_bytes() for p in sorted((out / "shards").glob("*.tar"))}
-    got["episodes"] = (out / manifest.get("episodes_file", "episodes.jsonl")).read_bytes()
-    got["index"] = (out / manifest.get("index_file", "index.npy")).read_bytes()
+    got["episodes"] = "".join(json.dumps(ep, sort_keys=True) + "\n" for ep in episodes).encode()
+    buf = io.BytesIO()
+    np.save(buf, np.asarray(load_index(out, manifest=json.loads((out / "dataset.json").read_text()))),
+            allow_pickle=False)
+    got["index"] = buf.getvalue()
     got["manifest (run fields removed)"] = json.dumps(
         {k: v for k, v in manifest.items() if k not in RUN_FIELDS}, sort_keys=True).encode()
     return got

@@ -33,11 +33,12 @@ import time
 from pathlib import Path
 
 from htdata.benchmarks.maps import _layouts_on_path
-from htdata.format.table import SHARDS_DIR
+from htdata.format.table import INDEX_DTYPE, SHARDS_DIR
 from htdata.ingest.pipeline import load_pipeline
 from htdata.ingest.plan import Source
 from htdata.ingest.run import ingest
-from htdata.store.parts import Part, parts_of_version
+from htdata.store.parts import Part
+from htdata.store.storage import CACHE_ENV
 from htdata.synthetic.rawglove import write_rawglove
 from htdata.write.newversion import NewVersion
 
@@ -63,9 +64,8 @@ def replicate(base: Path, root: Path, samples: int) -> dict:
     shutil.copytree(base, root, copy_function=os.link)      # the base's own files: links, its versions kept
     t0 = time.perf_counter()
     with NewVersion(root, "htdata bench (HT-Bench size: replicate)") as nv:
-        reader = nv.reader()
-        base_parts = parts_of_version(reader.manifest, reader.episodes, reader.index)
-        parts, rows, k = list(base_parts), len(reader.index), 0
+        base_parts = nv.parent.parts()
+        parts, rows, k = list(base_parts), sum(len(p.rows) for p in base_parts), 0
         while rows < samples:
             part = base_parts[k % len(base_parts)]
             unit = nv.take_unit()
@@ -113,24 +113,26 @@ def bytes_written(before: dict, after: dict) -> int:
     return total
 
 
-def run_command(args: list[str], root: Path, label: str) -> dict:
+def run_command(args: list[str], root: Path, label: str, cache: Path) -> dict:
     """Run `htdata ARGS` in this interpreter (or `python -c CODE ...` for args[0] == "-c"); wall seconds, its
     peak resident memory (the process's own VmHWM, written at exit: a child's ru_maxrss on Linux starts at
-    its parent's, here hundreds of MB) and the bytes it wrote into the dataset."""
-    before = _files(root)
+    its parent's, here hundreds of MB), the bytes it wrote into the dataset and into the local cache
+    `cache` (HTDATA_CACHE: where a reader assembles a large format 4 index once, htdata/store/segments.py)."""
+    before, cached = _files(root), _files(cache) if cache.is_dir() else {}
     peak_file = root.parent / f"{root.name}.peak"
     peak_file.unlink(missing_ok=True)
     cmd = [sys.executable, "-c", PEAK_CODE + (args[1] if args[0] == "-c" else CLI_CODE),
            *(args[2:] if args[0] == "-c" else args)]
     t0 = time.perf_counter()
     done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                          env={**os.environ, PEAK_ENV: str(peak_file)})
+                          env={**os.environ, PEAK_ENV: str(peak_file), CACHE_ENV: str(cache)})
     wall = time.perf_counter() - t0
     if done.returncode != 0:
         tail = done.stdout.decode(errors="replace")[-1500:]
         raise RuntimeError(f"{label}: `{' '.join(cmd)}` exited {done.returncode}:\n{tail}")
     return {"command": label, "wall_s": wall, "peak_mib": int(peak_file.read_text()) / 1024,
-            "bytes_written": bytes_written(before, _files(root))}
+            "bytes_written": bytes_written(before, _files(root)),
+            "cache_bytes_written": bytes_written(cached, _files(cache) if cache.is_dir() else {})}
 
 
 PEAK_ENV = "HTDATA_BENCH_PEAK_FILE"
@@ -149,7 +151,8 @@ def commands(root: Path, work: Path, shape: dict) -> list[tuple[str, list[str]]]
     """The commands measured, in the order they run (each write makes the next version)."""
     v = shape["version"]     # the replicated version; split, rm and trim make v+1, v+2, v+3
     return [
-        ("open (reader: manifest, index mmap, episode records)", ["-c", OPEN_CODE, str(root)]),
+        ("open (reader: manifest, episode records, index)", ["-c", OPEN_CODE, str(root)]),
+        ("open again (a large index: from the cache)", ["-c", OPEN_CODE, str(root)]),
         ("log", ["log", str(root)]),
         (f"split --ood-task {shape['task']}", ["split", str(root), "--ood-task", shape["task"], "--name", "main"]),
         ("rm one episode", ["rm", str(root), shape["first_episode"]]),
@@ -171,8 +174,14 @@ def size_rows(work: Path, sizes: tuple[int, ...]) -> dict:
     for n in sizes:
         root = work / f"ds_{n}"
         shape = replicate(base, root, n)
-        shape["index_bytes"] = (root / json.loads((root / "dataset.json").read_text())["index_file"]).stat().st_size
-        rows = [run_command(args, root, label) for label, args in commands(root, work, shape)]
+        stored = json.loads((root / "dataset.json").read_text())
+        shape["format_version"] = stored["format_version"]
+        shape["index_bytes"] = INDEX_DTYPE.itemsize * int(stored["counts"]["samples"])
+        shape["manifest_bytes"] = len((root / "dataset.json").read_bytes())
+        cache = work / f"cache_{n}"
+        shutil.rmtree(cache, ignore_errors=True)
+        rows = [run_command(args, root, label, cache) for label, args in commands(root, work, shape)]
+        shutil.rmtree(cache, ignore_errors=True)
         out["sizes"].append({**shape, "commands": rows})
         shutil.rmtree(root, ignore_errors=True)
     return out
@@ -182,12 +191,14 @@ def size_markdown(d: dict) -> list[str]:
     lines = [f"Built by replication (htdata/benchmarks/htbenchsize.py): {d['base']}, copied as new work units "
              f"(shards hard-linked, metadata real) up to each size; HT-Bench holds ~{d['ht_bench_samples']:,} "
              f"samples. Each command is its own process, in this order (each write makes the next version); "
-             f"bytes written = files it created or rewrote in the dataset.", ""]
+             f"bytes written = files it created or rewrote in the dataset; cache = what it wrote to the local "
+             f"cache (HTDATA_CACHE: a large format 4 index, assembled once per version).", ""]
     for s in d["sizes"]:
-        lines += [f"{s['samples']:,} samples, {s['episodes']:,} episodes, {s['units']:,} units; index.npy "
-                  f"{s['index_bytes'] / 1e6:.0f} MB; built in {s['build_s']:.0f} s:", "",
-                  "| command | wall s | peak MiB | bytes written |", "|---|---|---|---|"]
-        lines += [f"| {c['command']} | {c['wall_s']:.2f} | {c['peak_mib']:.0f} | {c['bytes_written']:,} |"
-                  for c in s["commands"]]
+        lines += [f"{s['samples']:,} samples, {s['episodes']:,} episodes, {s['units']:,} units, format "
+                  f"{s.get('format_version', 3)}; index {s['index_bytes'] / 1e6:.0f} MB; manifest "
+                  f"{s.get('manifest_bytes', 0) / 1e3:.0f} kB; built in {s['build_s']:.0f} s:", "",
+                  "| command | wall s | peak MiB | bytes written | cache bytes written |", "|---|---|---|---|---|"]
+        lines += [f"| {c['command']} | {c['wall_s']:.2f} | {c['peak_mib']:.0f} | {c['bytes_written']:,} | "
+                  f"{c.get('cache_bytes_written', 0):,} |" for c in s["commands"]]
         lines.append("")
     return lines

@@ -30,6 +30,7 @@ from htdata.glove.layouts import load_layout
 from htdata.ingest import Source, ingest
 from htdata.ingest.pipeline import load_pipeline
 from htdata.store.manifest import load_manifest
+from htdata.store.segments import version_shards
 from htdata.synthetic.corpus import TA_IMAGE, TA_LAYOUTS, VIDEO_FPS, touchanything_raw
 from htdata.synthetic.formats import TouchAnythingEpisode, write_touchanything_episode
 from htdata.synthetic.world import EpisodeSpec, World
@@ -53,7 +54,7 @@ def ingest_run(pipelines: list[tuple[str, Path]], out: Path, workers: int, setti
     wall = time.perf_counter() - t0
     if report["failures"]:
         raise RuntimeError(f"bench ingest into {out} had failures: {report['failures'][:3]}")
-    units = load_manifest(out)["shards"]
+    units = version_shards(out, load_manifest(out))
     timing = report.get("timing") or {}
     frames = int(report["samples"])
     seconds = float(timing.get("total_s", report["seconds"]))

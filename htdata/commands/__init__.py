@@ -22,6 +22,7 @@ Commands parse arguments, call the core modules and print; core modules
     renormalise.py  `htdata renormalise`: new normalisation from the stored raw rows
     gc.py           `htdata gc`: delete old versions after their retention window
     repair.py       `htdata repair`: dataset.json back in line with the version files
+    upgrade.py      `htdata upgrade`: the current version stored again in today's format
     publish.py      `htdata publish`: upload a committed dataset to an fsspec URL
     export.py       `htdata export lerobot`: a LeRobot v3.0 dataset from one version
     bench.py        `htdata bench`: every benchmark side by side

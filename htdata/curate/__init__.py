@@ -7,6 +7,7 @@
     merge.py          `htdata merge`: several datasets into one
     gc.py             `htdata gc`: delete what no kept version lists
     renormalise.py    `htdata renormalise`: new normalisation from the stored raw rows
+    upgrade.py        `htdata upgrade`: the current version again in today's format
 
 Re-packing (copying committed samples into new shards) is htdata/write/repack.py, shared with ingest;
 the split rule is htdata/store/splitrule.py (validate and the trainer apply it too, and import no writer).

@@ -1,4 +1,4 @@
-"""`htdata gc`: delete old versions and the shards no kept version lists (explicit, dry-runnable).
+"""`htdata gc`: delete old versions and the shards and segments no kept version lists (explicit, dry-runnable).
 
 Retention rule (Delta Lake VACUUM / Iceberg remove-orphan-files): a version
 that is not among the `--keep-versions` newest is deleted only once it has
@@ -17,8 +17,11 @@ Before deleting any file of version N, gc writes the tombstone
 tombstone, vN.json (the version disappears from `htdata log`), then its
 folder; a crash in between leaves a `versions/vN/` without vN.json, which
 the next gc removes. The current version and its shards are never deleted
-(checked again right before deleting). Entries of the `htdata stats` cache
-that no kept version's episode uses go too.
+(checked again right before deleting). A segment file (format 4: the
+episode records and index rows versions share, htdata/store/segments.py) goes
+by the shard rule: no kept version lists it, and a dropped version did or it
+is older than the window. Entries of the `htdata stats` cache that no kept
+version's episode uses go too.
 """
 
 from __future__ import annotations
@@ -34,18 +37,22 @@ from pathlib import Path
 from htdata.errors import ArgumentError, HtdataError
 from htdata.faults import crash_point
 from htdata.fileio import write_bytes_atomic
-from htdata.format.table import SHARDS_DIR, STATS_DIR
+from htdata.format.table import SEGMENTS_DIR, SHARDS_DIR, STATS_DIR
 from htdata.inspect.stats import episode_key
 from htdata.read.reader import DatasetReader
+from htdata.store.confine import record_paths
 from htdata.store.gcrecord import tombstone_file
 from htdata.store.lock import WriterLock
 from htdata.store.manifest import load_manifest
+from htdata.store.segments import version_shards
 from htdata.store.versions import VERSIONS_DIR, current_version, list_versions, version_dir, version_manifest_file
 
 DEFAULT_RETENTION_S = 7 * 86400     # Delta Lake's default; Iceberg uses 3 days
 FORCE_BELOW_S = 3600                # a shorter window may break running readers: needs --force
 # what gc may delete in shards/: the format's shard names (format/shardio.py shard_name) and their temp files
 COLLECTABLE = re.compile(r"\.?shard-[0-9]{6}-[0-9]{3}\.tar(\.tmp)?")
+# ... and in segments/: the names htdata/store/segments.py gives (and the temp files of a write cut short)
+SEGMENT_FILE = re.compile(r"[0-9a-f]{16}\.(json|npy)|\.[0-9a-f]{16}\.(json|npy)\..*\.tmp")
 _UNITS = {"s": 1, "m": 60, "h": 3600, "d": 86400}
 
 
@@ -78,6 +85,7 @@ class GcPlan:
     dropped_versions: list[int] = field(default_factory=list)
     dropped_shards: list[tuple[str, int]] = field(default_factory=list)   # (name, bytes)
     dropped_stats: list[tuple[str, int]] = field(default_factory=list)    # stats cache entries (name, bytes)
+    dropped_segments: list[tuple[str, int]] = field(default_factory=list)  # segment files no kept version lists
     window_kept: list[tuple[int, float]] = field(default_factory=list)    # (version, collectable after: epoch s)
     window_kept_shards: int = 0        # unlisted shards younger than the window
     leftover_dirs: list[str] = field(default_factory=list)               # versions/vN/ without vN.json
@@ -86,7 +94,7 @@ class GcPlan:
 
     @property
     def bytes_freed(self) -> int:
-        return sum(b for _, b in self.dropped_shards) + sum(b for _, b in self.dropped_stats)
+        return sum(b for _, b in self.dropped_shards + self.dropped_stats + self.dropped_segments)
 
     def lines(self, dry_run: bool = False) -> list[str]:
         would = "would " if dry_run else ""
@@ -95,6 +103,8 @@ class GcPlan:
         out += [f"{would}delete {d}/ (left by an interrupted gc or write: no version file names it)"
                 for d in self.leftover_dirs]
         out += [f"{would}delete shard {name} ({size} B)" for name, size in self.dropped_shards]
+        if self.dropped_segments:
+            out.append(f"{would}delete {len(self.dropped_segments)} segment files no kept version lists")
         if self.dropped_stats:
             out.append(f"{would}delete {len(self.dropped_stats)} stats cache entries no kept version's episode uses")
         out += [f"keep version {v}: superseded less than {window} ago (retention window), collectable after "
@@ -127,10 +137,10 @@ def plan_gc(root: Path, keep_versions: int, retention_s: float = DEFAULT_RETENTI
         else:
             plan.dropped_versions.append(v)
     plan.kept_versions = [v for v in versions if v not in plan.dropped_versions]
-    listed = {s["name"] for s in current["shards"]}
+    listed = {s["name"] for s in version_shards(root, current)}
     for v in plan.kept_versions:
-        listed |= {s["name"] for s in load_manifest(root, version=v)["shards"]}
-    of_dropped = {s["name"] for v in plan.dropped_versions for s in load_manifest(root, version=v)["shards"]}
+        listed |= {s["name"] for s in version_shards(root, load_manifest(root, version=v))}
+    of_dropped = {s["name"] for v in plan.dropped_versions for s in version_shards(root, load_manifest(root, version=v))}
     shard_dir = root / SHARDS_DIR
     plan.symlinked_shards = shard_dir.is_symlink()
     for path in sorted(shard_dir.iterdir()) if shard_dir.is_dir() and not plan.symlinked_shards else []:
@@ -141,6 +151,9 @@ def plan_gc(root: Path, keep_versions: int, retention_s: float = DEFAULT_RETENTI
             plan.dropped_shards.append((path.name, path.stat().st_size))
         else:
             plan.window_kept_shards += 1
+    plan.dropped_segments = unlisted_segments(root, [current] + [load_manifest(root, version=v)
+                                                                 for v in plan.kept_versions], now - retention_s,
+                                              plan.dropped_versions)
     have = set(versions)
     vdir = root / VERSIONS_DIR
     head = versions[-1] if versions else 0
@@ -149,6 +162,34 @@ def plan_gc(root: Path, keep_versions: int, retention_s: float = DEFAULT_RETENTI
                           and int(d.name[1:]) < head]
     plan.dropped_stats = unused_stats_entries(root, plan.kept_versions or [None])
     return plan
+
+
+def unlisted_segments(root: Path, kept: list[dict], before: float, dropped: list[int]) -> list[tuple[str, int]]:
+    """Files in segments/ (format 4) no kept manifest lists, that gc may delete: (name, bytes).
+
+    A segment is shared by every version that lists it, so one is deleted only when no kept version
+    does, and it either was written before the retention window or a dropped version listed it (a
+    newer one may be a running write's, not yet committed).
+
+    Args:
+        root: the dataset root.
+        kept: the manifests of the versions gc keeps (the current one among them).
+        before: epoch seconds: an unlisted segment written before this is an old leftover.
+        dropped: the versions gc deletes.
+    """
+    folder = root / SEGMENTS_DIR
+    if not folder.is_dir() or folder.is_symlink():
+        return []
+    listed = {rel.split("/", 1)[1] for m in kept for _, rel in record_paths(m) if rel.startswith(f"{SEGMENTS_DIR}/")}
+    of_dropped = {rel.split("/", 1)[1] for v in dropped for _, rel in record_paths(load_manifest(root, version=v))
+                  if rel.startswith(f"{SEGMENTS_DIR}/")}
+    out = []
+    for path in sorted(folder.iterdir()):
+        if path.name in listed or not SEGMENT_FILE.fullmatch(path.name) or path.is_symlink() or not path.is_file():
+            continue
+        if path.name in of_dropped or path.stat().st_mtime < before:
+            out.append((path.name, path.stat().st_size))
+    return out
 
 
 def unused_stats_entries(root: Path, versions: list) -> list[tuple[str, int]]:
@@ -183,7 +224,7 @@ def collect(root, keep_versions: int, dry_run: bool, command: str, retention_s: 
         plan = plan_gc(root, keep_versions, retention_s)
         if dry_run:
             return plan
-        current = {s["name"] for s in load_manifest(root)["shards"]}
+        current = {s["name"] for s in version_shards(root, load_manifest(root))}
         doomed = {name for name, _ in plan.dropped_shards}
         if current & doomed:    # never: plan_gc keeps the current version's shards
             raise RuntimeError(f"gc would delete shards of the current version: {sorted(current & doomed)[:3]}")
@@ -203,6 +244,8 @@ def collect(root, keep_versions: int, dry_run: bool, command: str, retention_s: 
             path = root / SHARDS_DIR / name
             if COLLECTABLE.fullmatch(name) and not path.is_symlink() and not path.parent.is_symlink():
                 path.unlink(missing_ok=True)
+        for name, _ in plan.dropped_segments:
+            (root / SEGMENTS_DIR / name).unlink(missing_ok=True)
         for name, _ in plan.dropped_stats:
             (root / STATS_DIR / name).unlink(missing_ok=True)
         return plan

@@ -38,7 +38,8 @@ from htdata._moved import moved_name
 from htdata.curate.splitversions import SplitResult, write_versioned_split
 from htdata.fileio import write_json_atomic
 from htdata.format.table import EPISODES_FILE, MANIFEST_FILE
-from htdata.store.manifest import parse_episodes, parse_manifest
+from htdata.store.manifest import load_episodes, parse_episodes, parse_manifest
+from htdata.store.segments import segmented
 from htdata.store.splitfiles import PARTS, split_path
 from htdata.store.splitrule import SplitConfig, SplitError, build_split
 from htdata.store.versions import manifest_path as current_manifest_path
@@ -67,7 +68,11 @@ def read_dataset_episodes(dataset: Path) -> tuple[bytes, list[dict]]:
         raise SplitError(str(exc)) from exc
     episodes_path = dataset / manifest.get("episodes_file", EPISODES_FILE)
     try:
-        episodes = parse_episodes(episodes_path.read_text(encoding="utf-8"), str(episodes_path))
+        if segmented(manifest):    # format 4: the records are in its segments (htdata/store/segments.py)
+            episodes_path = Path(manifest_path)
+            episodes = load_episodes(dataset, manifest)
+        else:
+            episodes = parse_episodes(episodes_path.read_text(encoding="utf-8"), str(episodes_path))
     except ValueError as exc:      # names the file and line
         raise SplitError(str(exc)) from exc
     for number, rec in enumerate(episodes, 1):

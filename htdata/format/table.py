@@ -32,16 +32,19 @@ from htdata.format.canvas import HANDS
 from htdata.format.codec import MEMBER_CODECS
 
 FORMAT = "htdata"
-# 3: raw glove rows (members raw_{hand}.npy) + calibrations; 2: versions (htdata/store/versions.py);
-# 1: one unversioned commit. Indexes of 1 and 2 lack the raw size columns (LEGACY_INDEX_DTYPE).
-FORMAT_VERSION = 3
-READABLE_FORMAT_VERSIONS = (1, 2, 3)
+# 4: a version's records as shared immutable segments (htdata/store/segments.py), not its own
+# episodes.jsonl + index.npy; 3: raw glove rows (members raw_{hand}.npy) + calibrations; 2: versions
+# (htdata/store/versions.py); 1: one unversioned commit. Indexes of 1 and 2 lack the raw size columns
+# (LEGACY_INDEX_DTYPE). Samples and shards are the same in 3 and 4.
+FORMAT_VERSION = 4
+READABLE_FORMAT_VERSIONS = (1, 2, 3, 4)
 
 # -- files of a committed dataset -------------------------------------------
 MANIFEST_FILE = "dataset.json"     # written last: its presence means "committed"
 EPISODES_FILE = "episodes.jsonl"
 INDEX_FILE = "index.npy"
 SHARDS_DIR = "shards"
+SEGMENTS_DIR = "segments"          # format 4: the versions' episode records and index rows, shared
 LAYOUTS_DIR = "layouts"
 CANONICAL_FILE = "canonical_hand.json"
 REGIONS_FILE = "regions.png"       # per-place region ids (0 = outside the hand)

@@ -26,6 +26,7 @@ from htdata.format.table import INDEX_DTYPE, MANIFEST_FILE, SHARDS_DIR, WORK_DIR
 from htdata.store.fsutil import sha256_file
 from htdata.store.lock import is_lock_file
 from htdata.store.manifest import load_manifest
+from htdata.store.segments import version_shards
 from htdata.store.versions import list_versions
 
 # Keys a unit record must hold to be reused (records of older versions lack some: their units re-run).
@@ -148,7 +149,7 @@ def committed_shards(out: Path) -> set[str]:
 
     names: set[str] = set()
     for v in list_versions(out):
-        names |= {s["name"] for s in load_manifest(out, validate=False, version=v)["shards"]}
+        names |= {s["name"] for s in version_shards(out, load_manifest(out, validate=False, version=v))}
     return names
 
 

@@ -33,8 +33,9 @@ from htdata.format.table import HANDS, LAYOUTS_DIR, SPLITS_DIR
 from htdata.store import storage
 from htdata.store.confine import inside
 from htdata.store.gcrecord import VersionCollected, collected_error
-from htdata.store.manifest import load_episodes, load_index, load_manifest
+from htdata.store.manifest import load_index, load_manifest, load_records
 from htdata.store.remote import load_cached_index
+from htdata.store.segments import segmented
 from htdata.store.splitfiles import SplitRejected, parse_split_doc
 from htdata.store.versions import list_versions
 
@@ -94,12 +95,14 @@ class DatasetMetadata:
 
     def __init__(self, root: str | os.PathLike, version: int | None = None, validate_manifest: bool = True):
         self.root = os.fspath(root)
-        self.manifest: dict = _load_manifest(self.root, version, validate_manifest)
-        self.version: int | None = self.manifest.get("version")
+        self.stored: dict = _load_manifest(self.root, version, validate_manifest)   # as the version file holds it
+        self.version: int | None = self.stored.get("version")
         with collected_guard(self.root, self.version):
-            self.episodes: list[dict] = load_episodes(self.root, self.manifest)
+            # the manifest as format 3 held it (its shard list), whether stored so or as segments
+            self.manifest, self.episodes = load_records(self.root, self.stored)
         if len(self.episodes) != self.manifest["counts"]["episodes"]:
-            raise DatasetError(f"{self.root}: episodes.jsonl has {len(self.episodes)} records, "
+            held = "its segments hold" if segmented(self.stored) else "episodes.jsonl has"
+            raise DatasetError(f"{self.root}: {held} {len(self.episodes)} records, "
                                f"manifest counts {self.manifest['counts']['episodes']}")
         self.episode_ids: list[str] = [ep["episode_id"] for ep in self.episodes]
         self._episode_pos = {eid: i for i, eid in enumerate(self.episode_ids)}
@@ -156,17 +159,18 @@ class DatasetMetadata:
     # -- index and episodes -----------------------------------------------
     @property
     def index(self) -> np.ndarray:
-        """index.npy rows (format.table.INDEX_DTYPE): memory-mapped when local, cached once when remote.
+        """The index rows (format.table.INDEX_DTYPE): index.npy memory-mapped when local, cached once when remote;
+        a segmented version's assembled from its segments (htdata/store/segments.py).
 
         Raises:
             DatasetError: the index has another number of rows than the manifest counts.
         """
         if self._index is None:
-            if storage.is_url(self.root):
+            if storage.is_url(self.root) and not segmented(self.stored):
                 rows = load_cached_index(self.root, self.manifest)   # one download, keyed by sha256, then mmap
             else:
                 with collected_guard(self.root, self.version):
-                    rows = load_index(self.root, mmap=True, manifest=self.manifest)
+                    rows = load_index(self.root, mmap=True, manifest=self.stored)
             if len(rows) != self.num_samples:
                 raise DatasetError(f"{self.root}: index has {len(rows)} rows, manifest counts {self.num_samples}")
             self._index = rows

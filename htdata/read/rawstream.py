@@ -25,7 +25,7 @@ import numpy as np
 
 from htdata.errors import ArgumentError, DatasetError
 from htdata.format.mapstorage import EXACT_RASTER, MapStorage
-from htdata.format.table import JSON_MEMBER, MANIFEST_FILE, decode_member, raw_member
+from htdata.format.table import JSON_MEMBER, MANIFEST_FILE, SEGMENTS_DIR, decode_member, raw_member
 from htdata.format.tactilecodec import check_served_maps
 from htdata.glove.calibration import episode_normaliser, refuse_mismatched
 from htdata.glove.layouts import load_layout
@@ -46,7 +46,7 @@ def check_records(reader) -> None:
     refuse_mismatched(reader.manifest.get("calibrations", {}), reader.episodes,
                       storage.join(reader.root, MANIFEST_FILE if reader.version is None
                                    else version_manifest_file(reader.version)),
-                      storage.join(reader.root, reader.manifest.get("episodes_file", "episodes.jsonl")),
+                      storage.join(reader.root, reader.manifest.get("episodes_file", SEGMENTS_DIR)),
                       reader.manifest.get("record_digests", ()))
 
 

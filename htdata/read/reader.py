@@ -101,6 +101,7 @@ class DatasetReader:
     # -- the version's records: DatasetMetadata's, handed on ---------------
     root = _meta_property("root")
     manifest = _meta_property("manifest")
+    stored = _meta_property("stored")
     version = _meta_property("version")
     episodes = _meta_property("episodes")
     index = _meta_property("index")

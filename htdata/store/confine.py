@@ -57,6 +57,10 @@ def record_paths(manifest: dict) -> list[tuple[str, object]]:
     for name, entry in (manifest.get("splits") or {}).items():
         if isinstance(entry, dict) and "file" in entry:
             out.append((f"splits.{name}.file", entry["file"]))
+    for i, entry in enumerate(manifest.get("segments") or []):
+        for key in ("records", "index"):
+            if isinstance(entry, dict) and key in entry:
+                out.append((f"segments[{i}].{key}", entry[key]))
     for i, shard in enumerate(manifest.get("shards") or []):
         name = shard.get("name") if isinstance(shard, dict) else None
         if not isinstance(name, str) or "/" in name or "\\" in name or name in ("", ".", ".."):

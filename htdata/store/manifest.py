@@ -5,16 +5,17 @@ parts of its work units (`UnitResult` -> htdata/store/parts.py); dataset.json
 is written LAST through tmp + fsync + rename, so a dataset either has a
 complete manifest or none: readers treat a missing dataset.json as "not committed".
 
-`load_manifest` / `load_episodes` / `load_index` (and `parse_episodes` /
-`parse_index` for callers that hash the bytes they parse) are THE loaders of
-those files: the reader, split, validate and preview all go through them.
+`load_manifest` / `load_records` (`load_episodes`) / `load_index` (and `parse_episodes`,
+htdata/store/indexfile.py's `parse_index`, for callers that hash the bytes they parse) are THE
+loaders of a version, whatever its format: a format 4 version's records come from its segments
+(htdata/store/segments.py), a format 1-3 one's from its episodes.jsonl and index.npy. The reader,
+split, validate and preview all go through them.
 File names, the index dtype and the member table live in htdata/format/table.py.
 """
 
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 import os
 from dataclasses import dataclass
@@ -30,8 +31,6 @@ from htdata.format.table import (
     CANONICAL_FILE,
     EPISODES_FILE,
     FORMAT,
-    INDEX_DTYPE,
-    INDEX_DTYPES,
     INDEX_FILE,
     LAYOUTS_DIR,
     MANIFEST_FILE,
@@ -42,6 +41,8 @@ from htdata.format.table import (
 from htdata.resources import validate_json
 from htdata.store import storage
 from htdata.store.confine import check_manifest_paths, inside
+from htdata.store.indexfile import load_index_file
+from htdata.store.segments import load_segment_index, segmented, segmented_records
 from htdata.store.versions import DatasetStateError, manifest_path
 
 
@@ -161,80 +162,31 @@ def parse_episodes(text: str, where: str) -> list[dict]:
 
 
 def load_episodes(root: str | os.PathLike, manifest: dict | None = None) -> list[dict]:
-    """Episode records of `manifest`'s version (the current version's when None)."""
+    """Episode records of `manifest`'s version (the current version's when None), each with first_sample and
+    shard names: a format 4 version's from its segments, a format 1-3 one's from its episodes.jsonl."""
+    return load_records(root, manifest)[1]
+
+
+def load_records(root: str | os.PathLike, manifest: dict | None = None) -> tuple[dict, list[dict]]:
+    """(manifest as a reader sees it, episode records) of any version: a format 4 manifest with the shard list
+    its segments hold (htdata/store/segments.py), a format 1-3 one as it is.
+
+    Args:
+        root: the dataset root (path or URL).
+        manifest: the version's manifest as stored (None: the current version's).
+    """
     manifest = manifest if manifest is not None else load_manifest(root, validate=False)
+    if segmented(manifest):
+        return segmented_records(root, manifest)
     path = inside(root, manifest.get("episodes_file", EPISODES_FILE), "episodes_file")
-    return parse_episodes(storage.read_text(path), path)
-
-
-class IndexDtypeError(DatasetError):
-    """index.npy is readable but its rows are not INDEX_DTYPE (`found`: their dtype)."""
-
-    def __init__(self, where: str, found: np.dtype):
-        super().__init__(f"{where}: index dtype {found} != {INDEX_DTYPE}")
-        self.found = found
-
-
-def _check_index_dtype(rows: np.ndarray, where: str) -> np.ndarray:
-    """Rows as INDEX_DTYPE: an older format's index (fewer size columns) is converted in memory, sizes 0."""
-    if rows.dtype == INDEX_DTYPE:
-        return rows
-    if rows.dtype not in INDEX_DTYPES.values():
-        raise IndexDtypeError(where, rows.dtype)
-    converted = np.zeros(rows.shape, dtype=INDEX_DTYPE)
-    for name in rows.dtype.names:
-        converted[name] = rows[name]
-    return converted
-
-
-def _check_index_header(f, size: int, where: str) -> None:
-    """Refuse an index.npy whose header declares more rows than its bytes hold, before np.load maps or
-    allocates them (a header declaring 1e11 rows was a bare mmap ValueError, or a 4 TB allocation)."""
-    from numpy.lib import format as npy
-
-    try:
-        version = npy.read_magic(f)
-        shape, _, dtype = (npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0)(f)
-    except Exception as e:
-        raise DatasetError(f"{where}: unreadable index header: {e}") from None
-    rows = 1
-    for d in shape:
-        rows *= int(d)
-    held = size - f.tell()
-    if rows * dtype.itemsize > held:
-        raise DatasetError(f"{where}: index header declares {rows} rows of {dtype.itemsize} bytes but the file "
-                           f"holds {held} bytes of rows: damaged or forged index, refused")
-
-
-def parse_index(data: bytes, where: str) -> np.ndarray:
-    """index.npy bytes -> rows (for callers that hash the bytes they parse)."""
-    _check_index_header(io.BytesIO(data), len(data), where)
-    try:
-        rows = np.load(io.BytesIO(data), allow_pickle=False)
-    except Exception as e:
-        raise DatasetError(f"{where}: unreadable index: {e}") from None
-    return _check_index_dtype(rows, where)
+    return manifest, parse_episodes(storage.read_text(path), path)
 
 
 def load_index(root: str | os.PathLike, mmap: bool = True, manifest: dict | None = None) -> np.ndarray:
-    """`manifest`'s index (the current version's when None) as INDEX_DTYPE; mmap for local datasets."""
+    """`manifest`'s index (the current version's when None) as INDEX_DTYPE: a format 4 version's assembled from
+    its segments (a large one mapped from the local cache), a format 1-3 one's index.npy (mmap when local and
+    `mmap`; a remote one is read whole: DatasetMetadata caches it, htdata/store/remote.py)."""
     manifest = manifest if manifest is not None else load_manifest(root, validate=False)
+    if segmented(manifest):
+        return load_segment_index(root, manifest)
     return load_index_file(inside(root, manifest.get("index_file", INDEX_FILE), "index_file"), mmap)
-
-
-def load_index_file(path: str, mmap: bool = True) -> np.ndarray:
-    """An index.npy file (local path or URL) as INDEX_DTYPE; memory-mapped when local and `mmap`.
-
-    A format 1/2 index is converted to INDEX_DTYPE in memory (not mapped); a
-    new version of such a dataset writes its index in the current dtype.
-    """
-    local = storage.local_path(path)
-    if local is None:
-        return parse_index(storage.read_bytes(path), path)
-    with open(local, "rb") as f:
-        _check_index_header(f, os.fstat(f.fileno()).st_size, path)
-    try:
-        rows = np.load(local, mmap_mode="r" if mmap else None, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as e:
-        raise DatasetError(f"{path}: unreadable index: {e}") from None
-    return _check_index_dtype(rows, path)

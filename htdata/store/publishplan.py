@@ -21,6 +21,7 @@ from htdata.errors import DatasetError
 from htdata.format.table import LAYOUTS_DIR, MANIFEST_FILE, SHARDS_DIR, SPLITS_DIR
 from htdata.store.confine import inside, record_paths
 from htdata.store.manifest import parse_manifest
+from htdata.store.segments import segmented, version_shards
 from htdata.store.versions import DatasetStateError, current_version, list_versions, version_manifest_file
 
 DEFAULT_PARTS = f"{LAYOUTS_DIR}/parts.png"   # what readers open when a canonical record names no parts map
@@ -95,6 +96,9 @@ def _expected(manifest: dict, field: str) -> str | None:
         return manifest["canonical"].get("sha256")
     if head.startswith("splits.") and key == "file":
         return manifest["splits"][head.split(".", 1)[1]].get("sha256")
+    if field.startswith("segments["):
+        entry = manifest["segments"][int(field[9:field.index("]")])]
+        return entry.get(f"{field.rsplit('.', 1)[1]}_sha256")
     if field.startswith("shards["):
         return manifest["shards"][int(field[7:field.index("]")])]["sha256"]
     return None
@@ -106,6 +110,9 @@ def _files(root: Path, manifests: dict[int, dict]) -> list[tuple[str, str | None
     for n in sorted(manifests):
         manifest = manifests[n]
         named = record_paths(manifest)
+        if segmented(manifest):    # format 4: the shards are listed by its segments, read and checked here
+            manifest["shards"] = version_shards(root, manifest)
+            named += [(f"shards[{i}].name", f"{SHARDS_DIR}/{s['name']}") for i, s in enumerate(manifest["shards"])]
         if "parts" not in (manifest.get("canonical") or {}) and (root / DEFAULT_PARTS).is_file():
             named.append(("canonical.parts", DEFAULT_PARTS))
         if n == 0 and (root / SPLITS_DIR).is_dir():     # unversioned: splits/NAME.json, listed by no manifest

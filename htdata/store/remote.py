@@ -63,12 +63,12 @@ from htdata.store.destination import (
     refuse_overlap,
 )
 from htdata.store.fsutil import sha256_file
+from htdata.store.indexfile import load_index_file
 from htdata.store.lock import WriterLock
-from htdata.store.manifest import load_index_file
 from htdata.store.publishplan import PinnedDataset, pin_dataset
+from htdata.store.storage import cache_dir
 from htdata.store.versions import version_manifest_file
 
-CACHE_ENV = "HTDATA_CACHE"
 CHUNK = 1 << 20
 # A caller's check of the pinned version (root, version; 0 = unversioned), raising to refuse the publish.
 VersionCheck = Callable[[Path, int], None]
@@ -82,12 +82,6 @@ class PublishResult:
     bytes: int          # bytes uploaded
     kept: int           # files already at the URL, read back and found right
     seconds: float      # the whole publish: checks, validation, hashing and upload
-
-
-def cache_dir() -> Path:
-    """Local cache root: $HTDATA_CACHE, else ~/.cache/htdata."""
-    env = os.environ.get(CACHE_ENV)
-    return Path(env) if env else Path.home() / ".cache" / "htdata"
 
 
 # -- publish ----------------------------------------------------------------
@@ -255,7 +249,7 @@ def cached_index_path(root_url: str, manifest: dict) -> Path:
     """Local copy of a remote dataset's index.npy, downloaded once.
 
     Kept as CACHE/index/<index_sha256>/index.npy (a dataset folder of its own,
-    so `manifest.load_index_file` opens it). The download is checked against the
+    so `indexfile.load_index_file` opens it). The download is checked against the
     manifest's sha256 before it replaces anything; concurrent readers each
     write their own temp file and the rename is atomic.
     """

@@ -7,8 +7,8 @@ dataset.json loses nothing; repair rewrites it so tools that read the
 pointer directly see the current version again. The one case readers refuse
 is the reverse: dataset.json names a version whose file is gone or garbled
 (deleted by hand). Repair restores that file from dataset.json, a byte copy
-of it, once the version's episode and index files match the sha256 the
-pointer records. Anything else it cannot decide is reported, not guessed.
+of it, once the version's record files (its segments, or format 3's episode
+and index files) match the sha256 the pointer records. Anything else it cannot decide is reported, not guessed.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from pathlib import Path
 
 from htdata.fileio import write_bytes_atomic
 from htdata.format.table import MANIFEST_FILE
+from htdata.store.confine import PathOutsideDataset, inside
 from htdata.store.lock import WriterLock
 from htdata.store.versions import _version_files, version_manifest_file
 
@@ -44,10 +45,17 @@ def _parse(data: bytes) -> dict | None:
 
 
 def _files_match(root: Path, manifest: dict) -> bool:
-    """The version's episode and index files are there with the sha256 the manifest records."""
-    for stem in ("episodes", "index"):
-        path = root / manifest.get(f"{stem}_file", "")
-        if not path.is_file() or hashlib.sha256(path.read_bytes()).hexdigest() != manifest.get(f"{stem}_sha256"):
+    """The version's record files are there with the sha256 the manifest records: its segments (format 4),
+    or its episode and index files (format 3)."""
+    listed = [(e.get(k), e.get(f"{k}_sha256")) for e in manifest.get("segments") or [] for k in ("records", "index")]
+    if "segments" not in manifest:
+        listed = [(manifest.get(f"{stem}_file"), manifest.get(f"{stem}_sha256")) for stem in ("episodes", "index")]
+    for rel, sha in listed:
+        try:
+            path = Path(inside(root, rel, "record file"))    # a pointer never makes repair read outside the dataset
+        except PathOutsideDataset:
+            return False
+        if not path.is_file() or hashlib.sha256(path.read_bytes()).hexdigest() != sha:
             return False
     return True
 
@@ -67,8 +75,8 @@ def plan_repair(root: Path) -> RepairPlan:
                                  version_manifest_file(named), pointer_bytes))
             return plan
         else:
-            plan.problems.append(f"{version_manifest_file(named)} is missing or damaged and its episode/index files do "
-                                 f"not match {MANIFEST_FILE}; restore it from a backup")
+            plan.problems.append(f"{version_manifest_file(named)} is missing or damaged and its record files (segments, "
+                                 f"or episode and index files) do not match {MANIFEST_FILE}; restore it from a backup")
             return plan
     for n in reversed(versions):   # the newest readable version file becomes the pointer
         data = (root / version_manifest_file(n)).read_bytes()

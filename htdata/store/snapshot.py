@@ -17,7 +17,7 @@ import hashlib
 import io
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
@@ -30,8 +30,9 @@ from htdata.format.table import EPISODES_FILE, FORMAT, FORMAT_VERSION, HANDS, MA
 from htdata.glove.calibration import carried_digests, merge_calibrations
 from htdata.resources import validate_json
 from htdata.store import storage
-from htdata.store.manifest import load_episodes, load_index, load_manifest
+from htdata.store.manifest import load_index, load_manifest, load_records
 from htdata.store.parts import Part, assemble, parts_of_version, unit_of_shard
+from htdata.store.segments import segment_parts, segmented, write_segments
 from htdata.store.splitfiles import carried_splits
 from htdata.store.versions import change_record, current_version, diff_episodes, now_utc, summarise, write_version
 
@@ -42,22 +43,34 @@ CARRIED_FIELDS = ("sources", "layouts", "canonical", "codec")
 
 @dataclass
 class Snapshot:
-    """One committed version: its manifest, episode records and index (mmap)."""
+    """One committed version: its manifest (with its shard list), episode records and index (loaded on first use)."""
     root: Path
     manifest: dict
     episodes: list[dict]
-    index: np.ndarray
+    stored: dict | None = None        # the manifest as the version file holds it (None: `manifest`)
+    _index: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def version(self) -> int | None:
         return self.manifest.get("version")
 
+    @property
+    def index(self) -> np.ndarray:
+        """The version's index rows (INDEX_DTYPE), memory-mapped or assembled from its segments on first use."""
+        if self._index is None:
+            self._index = load_index(self.root, mmap=True, manifest=self.stored or self.manifest)
+        return self._index
+
     def parts(self) -> list[Part]:
         """The version's work units as Parts (htdata/store/parts.py), what a writer carries or re-packs.
+
+        A segmented version (format 4) gives them from its segments, without the global index.
 
         Returns:
             One Part per unit, in shard order.
         """
+        if self.stored is not None and segmented(self.stored):
+            return segment_parts(self.root, self.stored)
         return parts_of_version(self.manifest, self.episodes, self.index)
 
     def episode_ids(self) -> list[str]:
@@ -86,15 +99,15 @@ def open_snapshot(root: str | os.PathLike, version: int | None = None) -> Snapsh
         version: the version to open (None: the current one).
 
     Returns:
-        Its Snapshot (the index memory-mapped).
+        Its Snapshot (the index read on first use).
 
     Raises:
         FileNotFoundError: no such version (or no dataset) at `root`.
         ValueError: a manifest, episode file or index that does not read (DatasetStateError, DatasetError).
     """
-    manifest = load_manifest(root, version=version)
-    return Snapshot(root=Path(root), manifest=manifest, episodes=load_episodes(root, manifest),
-                    index=load_index(root, mmap=True, manifest=manifest))
+    stored = load_manifest(root, version=version)
+    manifest, episodes = load_records(root, stored)
+    return Snapshot(root=Path(root), manifest=manifest, episodes=episodes, stored=stored)
 
 
 def current_snapshot(root: str | os.PathLike) -> Snapshot | None:
@@ -117,6 +130,13 @@ def current_snapshot(root: str | os.PathLike) -> Snapshot | None:
 
 def _frames_per_hand(rows: np.ndarray) -> dict[str, int]:
     return {hand: int(np.count_nonzero(hand_present(rows, hand))) for hand in HANDS}   # maps stored or not
+
+
+def _index_sha256(rows: np.ndarray) -> str:
+    """The sha256 of the global index as np.save writes it: what a reader's assembly must give back."""
+    buf = io.BytesIO()
+    np.save(buf, rows, allow_pickle=False)
+    return hashlib.sha256(buf.getvalue()).hexdigest()
 
 
 def _check_shards_on_disk(root: Path, shards: list[dict]) -> None:
@@ -148,7 +168,7 @@ def commit_parts(root: str | os.PathLike, parts: list[Part], fields: dict, paren
         htdata_version: the writer's version string (None: this htdata's).
 
     Returns:
-        The committed manifest (as versions/vN.json holds it).
+        The committed manifest as a reader sees it: versions/vN.json's, with the shard list its segments hold.
 
     Raises:
         FileNotFoundError: a listed shard is missing.
@@ -170,9 +190,6 @@ def commit_parts(root: str | os.PathLike, parts: list[Part], fields: dict, paren
                 raise ValueError(f"episode {ep['episode_id']!r}: layout {layout_id!r} ({hand}) not provided to commit")
     used_layouts = {lid for ep in built.episodes for lid in ep["layouts"].values()}
     episodes_bytes = "".join(json.dumps(ep, sort_keys=True) + "\n" for ep in built.episodes).encode()
-    buf = io.BytesIO()
-    np.save(buf, built.rows, allow_pickle=False)
-    index_bytes = buf.getvalue()
     carried = {k: fields[k] if k in fields else (parent.manifest[k] if parent else None) for k in CARRIED_FIELDS}
     carried["layouts"] = {k: v for k, v in layouts.items() if k in used_layouts}
     used_calibrations = {cid for ep in built.episodes for cid in ep.get("calibration", {}).values()}
@@ -190,9 +207,9 @@ def commit_parts(root: str | os.PathLike, parts: list[Part], fields: dict, paren
         "scenes": sorted({ep["scene"] for ep in built.episodes}),
         "counts": {"episodes": len(built.episodes), "samples": int(len(built.rows)),
                    "shards": len(built.shards), "frames_per_hand": _frames_per_hand(built.rows)},
-        "shards": built.shards,
+        "segments": [],     # written below, once the manifest has been checked
         "episodes_sha256": hashlib.sha256(episodes_bytes).hexdigest(),
-        "index_sha256": hashlib.sha256(index_bytes).hexdigest(),
+        "index_sha256": _index_sha256(built.rows),
         "record_digests": carried_digests(built.episodes),   # what a record of this version may not lack
         "parent": parent.version if parent else None,
         "next_unit": max([next_unit or 0, parent.next_unit() if parent else 0]
@@ -200,9 +217,11 @@ def commit_parts(root: str | os.PathLike, parts: list[Part], fields: dict, paren
         "change": change_record(command, summarise(diff), time),
     }
     # file names are filled by write_version; validate the rest with placeholders
-    validate_json({**manifest, "version": (manifest["parent"] or 0) + 1, "splits": {},
-                   "episodes_file": EPISODES_FILE, "index_file": "index.npy"}, "manifest", where=str(root / MANIFEST_FILE))
+    validate_json({**manifest, "version": (manifest["parent"] or 0) + 1, "splits": {}}, "manifest",
+                  where=str(root / MANIFEST_FILE))
     if splits is None:
         splits = (lambda eps, sha: carried_splits(parent, eps, sha)) if parent else (lambda eps, sha: {})
     split_files = splits(built.episodes, manifest["episodes_sha256"])
-    return write_version(root, manifest, episodes_bytes, index_bytes, split_files)
+    # segments an earlier version wrote are named by their bytes and not written again (store/segments.py)
+    manifest["segments"], _ = write_segments(root, parts, built.episodes)
+    return {**write_version(root, manifest, split_files), "shards": built.shards}

@@ -20,6 +20,15 @@ BACKENDS = {"s3": ("s3fs", "s3"), "s3a": ("s3fs", "s3"), "gs": ("gcsfs", "gcs"),
             "az": ("adlfs", "azure"), "abfs": ("adlfs", "azure"), "abfss": ("adlfs", "azure")}
 
 
+CACHE_ENV = "HTDATA_CACHE"
+
+
+def cache_dir() -> Path:
+    """This machine's cache of derived files (a remote index, an assembled one): $HTDATA_CACHE, else ~/.cache/htdata."""
+    env = os.environ.get(CACHE_ENV)
+    return Path(env) if env else Path.home() / ".cache" / "htdata"
+
+
 def is_url(location: str | os.PathLike) -> bool:
     """True when `location` has a protocol other than plain local files."""
     text = os.fspath(location)

@@ -2,13 +2,15 @@
 
 The Iceberg / Delta Lake idea at the size of a folder. Shards are immutable
 and content-hashed (sha256 in every manifest). A version is a manifest (the
-shards it uses, layouts, codec, counts, change summary, parent) plus its own
-episodes.jsonl, index.npy and split files, all under `versions/`:
+segments it uses, layouts, codec, counts, change summary, parent) plus its own
+split files under `versions/`:
 
     versions/v000003.json            the version's manifest (written once, never rewritten)
-    versions/v000003/episodes.jsonl  its episode records
-    versions/v000003/index.npy       its index
     versions/v000003/splits/NAME.json
+    segments/<sha16>.json, .npy      episode records and index rows, shared by the versions that list
+                                     them (format 4: htdata/store/segments.py)
+    versions/v000003/episodes.jsonl  format 3: the version's own episode records ...
+    versions/v000003/index.npy       ... and index
     dataset.json                     a copy of the CURRENT version's manifest: the pointer
 
 A write puts the version's files in place first, then links
@@ -45,7 +47,7 @@ from pathlib import Path
 from htdata.errors import ArgumentError, HtdataError
 from htdata.faults import crash_point
 from htdata.fileio import write_bytes_atomic, write_bytes_exclusive
-from htdata.format.table import EPISODES_FILE, INDEX_FILE, MANIFEST_FILE, SPLITS_DIR
+from htdata.format.table import MANIFEST_FILE, SPLITS_DIR
 from htdata.store import storage
 from htdata.store.gcrecord import collected_error
 
@@ -230,13 +232,12 @@ def clear_orphans(root: Path, current: int | None) -> None:
             shutil.rmtree(d)
 
 
-def write_version(root: str | os.PathLike, manifest: dict, episodes_bytes: bytes, index_bytes: bytes,
-                  splits: dict[str, bytes] | None = None) -> dict:
-    """Commit `manifest` as version parent + 1; returns it with version/file fields filled in.
+def write_version(root: str | os.PathLike, manifest: dict, splits: dict[str, bytes] | None = None) -> dict:
+    """Commit `manifest` as version parent + 1; returns it with its version and split files filled in.
 
-    The caller fills parent, change, shards, counts ...; this writes
-    versions/vN/{episodes.jsonl,index.npy,splits/*}, then versions/vN.json,
-    then swaps dataset.json. The caller holds the writer lock.
+    The caller fills parent, change, counts, segments (written before: htdata/store/segments.py)...;
+    this writes versions/vN/splits/*, then versions/vN.json, then swaps dataset.json. The caller
+    holds the writer lock.
     """
     root = Path(root)
     current = current_version(root)
@@ -248,16 +249,13 @@ def write_version(root: str | os.PathLike, manifest: dict, episodes_bytes: bytes
     n = (manifest.get("parent") or 0) + 1
     files_dir = root / version_dir(n)
     files_dir.mkdir(parents=True)
-    write_bytes_atomic(files_dir / EPISODES_FILE, episodes_bytes)
-    write_bytes_atomic(files_dir / INDEX_FILE, index_bytes)
     split_entries = {}
     for name, data in sorted((splits or {}).items()):
         (files_dir / SPLITS_DIR).mkdir(exist_ok=True)
         write_bytes_atomic(root / split_file(n, name), data)
         split_entries[name] = {"file": split_file(n, name), "sha256": _sha256(data)}
     manifest = dict(manifest)
-    manifest.update({"version": n, "episodes_file": f"{version_dir(n)}/{EPISODES_FILE}",
-                     "index_file": f"{version_dir(n)}/{INDEX_FILE}", "splits": split_entries})
+    manifest.update({"version": n, "splits": split_entries})
     data = (json.dumps(manifest, indent=2) + "\n").encode()
     crash_point("version_files_written")
     _link_exclusive(root / version_manifest_file(n), data)

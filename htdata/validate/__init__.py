@@ -4,8 +4,10 @@ Checks (each a named section of the report, with counts and every failure
 pinpointed by shard / sample key / episode / frame / expected / found), one
 module each:
 
-- structure (`structure.py`): dataset.json, episodes.jsonl and every sample
-  JSON valid against schemas/; episodes.jsonl and index.npy sha256; every
+- structure (`loaded.py` reads the version, `structure.py` checks it): dataset.json,
+  the episode records and every sample JSON valid against schemas/; the sha256 of
+  every record file (format 4: each segment's, and the records they give against the
+  manifest's episodes_sha256 / index_sha256; format 3: episodes.jsonl, index.npy); every
   listed shard present with its sha256 and size, no extra shard; sample
   counts per shard and per episode; unique keys; each episode's frames
   contiguous and ordered 0..n-1; the tar header at every index offset names

@@ -12,7 +12,7 @@ rendered, is then checked as strongly as a stored one is by the stored-vs-render
 
 from __future__ import annotations
 
-from htdata.format.table import HANDS, JSON_MEMBER, raw_member
+from htdata.format.table import HANDS, JSON_MEMBER, SEGMENTS_DIR, raw_member
 from htdata.glove.calibration import record_errors, taxel_digest
 from htdata.read.rawstream import RawMapRenderer, apply_paired_many
 from htdata.read.reader import DatasetReader
@@ -25,7 +25,7 @@ BATCH = 256
 def check_calibration_records(root, manifest: dict, episodes: list[dict], check: Check) -> bool:
     """Fail "calibration_record" once per mismatching record; True when every record is sound."""
     where = str(manifest_path(root, manifest.get("version")))
-    errors = record_errors(manifest.get("calibrations", {}), episodes, where, manifest.get("episodes_file", "episodes"),
+    errors = record_errors(manifest.get("calibrations", {}), episodes, where, manifest.get("episodes_file", SEGMENTS_DIR),
                            manifest.get("record_digests", ()))
     for line in errors:
         check.fail("calibration_record", line)

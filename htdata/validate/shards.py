@@ -23,11 +23,12 @@ from htdata.store.confine import PathOutsideDataset, inside
 from htdata.store.fsutil import sha256_file
 from htdata.validate.content import check_content
 from htdata.validate.geometry import coverage_geometries
+from htdata.validate.loaded import Loaded
 from htdata.validate.report import Recorder
 from htdata.validate.samplejson import check_sample_json
 from htdata.validate.sensors import hand_key
 from htdata.validate.splits import frame_digest
-from htdata.validate.structure import Loaded, group_rows, read_members
+from htdata.validate.structure import group_rows, read_members
 from htdata.validate.timestamps import empty_timestamps, record_timestamps
 
 

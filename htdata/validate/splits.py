@@ -20,8 +20,8 @@ from htdata.format.table import HANDS, MANIFEST_FILE, RGB_MEMBER, raw_member, ta
 from htdata.resources import validate_json
 from htdata.store.splitfiles import PARTS, list_splits, split_path
 from htdata.store.splitrule import test_counts
+from htdata.validate.loaded import Loaded, load_dataset
 from htdata.validate.report import Check
-from htdata.validate.structure import Loaded, load_dataset
 
 HASHED_MEMBERS = (RGB_MEMBER, *(tactile_member(hand) for hand in HANDS))
 _RAW_OF = {tactile_member(hand): raw_member(hand) for hand in HANDS}

@@ -8,8 +8,8 @@ import numpy as np
 
 from htdata.format.mapstorage import hand_present
 from htdata.format.table import HANDS
+from htdata.validate.loaded import Loaded
 from htdata.validate.sensors import CONTACT_THRESHOLD, HIST_BINS
-from htdata.validate.structure import Loaded
 
 
 def dataset_stats(ds: Loaded, sensor: dict) -> dict:

@@ -1,7 +1,7 @@
 """Structure: manifest, episodes and index agree with each other and with the shards' tar headers.
 
-Dataset level (`load_dataset`, `check_index`, `check_shard_files`): schemas
-of dataset.json and episodes.jsonl, their sha256, counts per shard and per
+Dataset level (`check_index`, `check_shard_files`, on the version loaded.py
+reads and schema-checks): counts per shard and per
 episode, unique keys, each episode contiguous with frames 0..n-1, the hands
 each episode declares. Sample level, called by the shard workers
 (`read_members`): the tar header at every index offset names `key.suffix`
@@ -11,155 +11,25 @@ checked by samplejson.py.
 
 from __future__ import annotations
 
-import hashlib
-from collections import Counter
-from dataclasses import dataclass
-from pathlib import Path
-
 import numpy as np
 
 from htdata.format.mapstorage import MapStorage
 from htdata.format.shardio import BLOCK, member_offsets, parse_header, sample_key
 from htdata.format.table import (
     HANDS,
-    INDEX_DTYPE,
     JSON_MEMBER,
-    MANIFEST_FILE,
     MEMBER_ORDER,
     RGB_MEMBER,
     SHARDS_DIR,
     SIZE_FIELDS,
     tactile_member,
 )
-from htdata.resources import validate_json
 from htdata.store.confine import PathOutsideDataset, inside
-from htdata.store.manifest import IndexDtypeError, load_manifest, parse_episodes, parse_index, parse_manifest
-from htdata.store.versions import list_versions, manifest_path, version_manifest_file
+from htdata.store.manifest import load_manifest
+from htdata.store.segments import version_shards
+from htdata.store.versions import list_versions
+from htdata.validate.loaded import Loaded
 from htdata.validate.report import Check, Recorder
-
-
-@dataclass
-class Loaded:
-    """A committed dataset as validation reads it (manifest bytes kept: splits record their sha256)."""
-    root: Path
-    manifest: dict
-    manifest_bytes: bytes
-    episodes: list[dict]
-    index: np.ndarray
-
-
-def load_dataset(root: Path, check: Check, version: int | None = None) -> Loaded | None:
-    """Read and schema-check manifest, episodes and index of the current version (or `version`).
-
-    None when nothing more can be checked.
-    """
-    manifest = _load_manifest(root, check, version)
-    if manifest is None:
-        return None
-    manifest, manifest_bytes = manifest
-    episodes = _load_episodes(root, manifest, check)
-    if episodes is None:
-        return None
-    index = _load_index(root, manifest, check)
-    if index is None:
-        return None
-    return Loaded(root, manifest, manifest_bytes, episodes, index)
-
-
-def _load_manifest(root: Path, check: Check, version: int | None) -> tuple[dict, bytes] | None:
-    try:
-        mpath = Path(manifest_path(root, version))
-    except FileNotFoundError as exc:      # no such version: names the ones there are
-        check.fail("manifest_missing", str(exc), file=str(root))
-        return None
-    except ValueError as exc:             # dataset.json names a version whose file is gone: names the fix
-        check.fail("manifest_missing", str(exc), file=MANIFEST_FILE)
-        return None
-    rel = str(mpath.relative_to(root)) if mpath.is_relative_to(root) else str(mpath)
-    if not mpath.is_file():
-        if not root.exists():   # a typo in the path: say that, not that a folder lacks a file
-            why = f"{root}: no such folder"
-        elif not root.is_dir():
-            why = f"{root}: is a file, not a dataset folder"
-        else:
-            why = f"{mpath}: no {MANIFEST_FILE} (not a committed dataset)"
-        check.fail("manifest_missing", why, file=str(mpath))
-        return None
-    manifest_bytes = mpath.read_bytes()
-    try:
-        manifest = parse_manifest(manifest_bytes, str(mpath))
-    except ValueError as exc:             # also a truncated version file (JSONDecodeError is a ValueError)
-        check.fail("manifest_schema", f"{rel}: {exc}", file=rel)
-        return None
-    if version is None and "version" in manifest:   # the pointer must be a copy of the newest version file
-        pointer = root / MANIFEST_FILE
-        if not pointer.is_file() or pointer.read_bytes() != manifest_bytes:
-            check.fail("manifest_pointer", f"{MANIFEST_FILE} is missing or differs from "
-                       f"{version_manifest_file(manifest['version'])}, the newest version (edited by hand, or a "
-                       f"write killed before it updated the pointer); `htdata repair {root}` rewrites it",
-                       file=MANIFEST_FILE)
-    check.checked["manifest"] += 1
-    return manifest, manifest_bytes
-
-
-def _read_listed(root: Path, manifest: dict, stem: str, check: Check) -> tuple[Path, bytes] | None:
-    """The file the manifest lists as `{stem}_file`, its sha256 checked against `{stem}_sha256`."""
-    try:
-        path = Path(inside(root, manifest[f"{stem}_file"], f"{stem}_file"))
-    except PathOutsideDataset as exc:   # a symlink out of the dataset: named, never read
-        check.fail("path_outside", str(exc), file=manifest[f"{stem}_file"])
-        return None
-    if not path.is_file():
-        check.fail(f"{stem}_missing", f"{path} missing", file=manifest[f"{stem}_file"])
-        return None
-    data = path.read_bytes()
-    found = hashlib.sha256(data).hexdigest()
-    if found != manifest[f"{stem}_sha256"]:
-        check.fail(f"{stem}_sha256", f"{manifest[f'{stem}_file']}: sha256 differs from the manifest",
-                   file=manifest[f"{stem}_file"], expected=manifest[f"{stem}_sha256"], found=found)
-    return path, data
-
-
-def _load_episodes(root: Path, manifest: dict, check: Check) -> list[dict] | None:
-    listed = _read_listed(root, manifest, "episodes", check)
-    if listed is None:
-        return None
-    epath, ebytes = listed
-    text = ebytes.decode("utf-8", "replace")
-    try:
-        episodes = parse_episodes(text, epath.name)
-    except ValueError as exc:          # names the file and line
-        check.fail("episode_schema", str(exc), file=epath.name)
-        return None
-    # parse_episodes skips blank lines: map each record back to its line for messages
-    line_numbers = [no for no, line in enumerate(text.splitlines(), 1) if line.strip()]
-    for line_no, rec in zip(line_numbers, episodes):
-        try:
-            validate_json(rec, "episode", where=f"{epath.name}:{line_no}")
-        except ValueError as exc:
-            check.fail("episode_schema", str(exc), file=epath.name, line=line_no)
-            return None
-        check.checked["episode_records"] += 1
-    ids = Counter(ep["episode_id"] for ep in episodes)
-    for eid, c in ids.items():
-        if c > 1:
-            check.fail("episode_duplicate", f"episode id {eid!r} appears {c} times", episode=eid)
-    return episodes
-
-
-def _load_index(root: Path, manifest: dict, check: Check) -> np.ndarray | None:
-    listed = _read_listed(root, manifest, "index", check)
-    if listed is None:
-        return None
-    ipath, data = listed
-    try:
-        return parse_index(data, str(ipath))
-    except IndexDtypeError as exc:
-        check.fail("index_dtype", f"{ipath.name}: wrong dtype", file=ipath.name,
-                   expected=str(INDEX_DTYPE), found=str(exc.found))
-    except ValueError as exc:
-        check.fail("index_unreadable", str(exc), file=ipath.name)
-    return None
 
 
 def group_rows(values: np.ndarray, n_groups: int) -> list[np.ndarray]:
@@ -318,7 +188,7 @@ def check_shard_files(ds: Loaded, check: Check) -> None:
     if versioned:
         for v in list_versions(ds.root):
             try:
-                listed |= {s["name"] for s in load_manifest(ds.root, validate=False, version=v)["shards"]}
+                listed |= {s["name"] for s in version_shards(ds.root, load_manifest(ds.root, validate=False, version=v))}
             except (OSError, ValueError) as exc:
                 check.warn("version_unreadable", f"version {v}: {exc}", version=v)
     for entry in ds.manifest["shards"]:

@@ -18,8 +18,9 @@ import numpy as np
 
 from htdata.format.shardio import sample_key
 from htdata.format.table import HANDS
+from htdata.validate.loaded import Loaded
 from htdata.validate.report import Check
-from htdata.validate.structure import Loaded, group_rows
+from htdata.validate.structure import group_rows
 
 FPS_TOLERANCE = 0.05
 GAP_FACTOR = 1.5

@@ -12,13 +12,14 @@ from htdata.store import storage
 from htdata.validate.calibrations import check_calibration_records, check_taxel_digests, has_taxel_digests
 from htdata.validate.content import decode_mask, layout_maps
 from htdata.validate.geometry import coverage_geometries
+from htdata.validate.loaded import Loaded, load_dataset
 from htdata.validate.report import CHECKS, Check
 from htdata.validate.sensors import check_rest_level, check_sensors, check_taxel_health, hand_key, merge_sensor
 from htdata.validate.served import RenderedCheck, check_served_maps, served_rows
 from htdata.validate.shards import run_jobs, shard_jobs
 from htdata.validate.splits import check_split_name, check_splits
 from htdata.validate.stats import dataset_stats
-from htdata.validate.structure import Loaded, check_index, check_shard_files, load_dataset
+from htdata.validate.structure import check_index, check_shard_files
 from htdata.validate.timestamps import check_time, empty_timestamps, merge_timestamps
 from htdata.workers import resolve_workers
 

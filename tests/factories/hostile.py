@@ -78,10 +78,11 @@ def read_members(root: Path, row: int) -> dict[str, bytes]:
     """The members of index row `row` of the current version, read straight from its shard."""
     from htdata.format.shardio import BLOCK, padded
     from htdata.format.table import SHARDS_DIR, SIZE_FIELDS
-    from htdata.store.manifest import load_index
+    from htdata.store.manifest import load_index, load_records
 
-    manifest = _manifest(root)
-    r = load_index(root, mmap=False, manifest=manifest)[row]
+    stored = _manifest(root)
+    manifest, _ = load_records(root, stored)
+    r = load_index(root, mmap=False, manifest=stored)[row]
     out = {}
     with open(Path(root) / SHARDS_DIR / manifest["shards"][int(r["shard"])]["name"], "rb") as f:
         header = int(r["offset"])
@@ -104,8 +105,11 @@ def rewrite_members(root: Path, row: int, replacement: dict[str, bytes]) -> None
     from htdata.format.table import SHARDS_DIR, SIZE_FIELDS
     from htdata.store.manifest import load_episodes, load_index
     from tests.factories import rewrite_manifest
+    from tests.factories.legacy import as_format3
 
     root = Path(root)
+    if "segments" in _manifest(root):
+        as_format3(root)     # the edit re-seals a version's own index.npy: the format 3 records (legacy.py)
     manifest = _manifest(root)
     index = load_index(root, mmap=False, manifest=manifest).copy()
     shard_pos = int(index[row]["shard"])

@@ -95,7 +95,7 @@ def test_every_readable_format_version_has_its_index_dtype_and_loads_as_the_curr
     import io
 
     from htdata.format.table import INDEX_DTYPES, READABLE_FORMAT_VERSIONS, index_dtype
-    from htdata.store.manifest import IndexDtypeError, parse_index
+    from htdata.store.indexfile import IndexDtypeError, parse_index
 
     assert set(INDEX_DTYPES) == set(READABLE_FORMAT_VERSIONS) and INDEX_DTYPE == index_dtype(max(INDEX_DTYPES))
     for version, dtype in INDEX_DTYPES.items():

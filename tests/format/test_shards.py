@@ -1,4 +1,5 @@
 import hashlib
+import io
 import json
 import tarfile
 
@@ -9,7 +10,7 @@ from htdata.benchmarks.index import index_load_benchmark
 from htdata.format.shardio import ShardWriter, member_offsets, parse_key, sample_key
 from htdata.format.table import EPISODES_FILE, INDEX_DTYPE, INDEX_FILE, MANIFEST_FILE
 from htdata.resources import validate_json
-from htdata.store.manifest import UnitResult, load_episodes, load_index, load_manifest
+from htdata.store.manifest import UnitResult, load_index, load_manifest, load_records
 from htdata.store.parts import assemble, part_from_unit
 from htdata.store.versions import version_dir, version_manifest_file
 from tests.factories import write_synthetic_dataset
@@ -130,12 +131,19 @@ def test_max_shard_bytes_never_splits_a_sample(tmp_path):
             assert len(tf.getmembers()) == 3 * s.samples
 
 
+def _stranger_shard_names(root) -> list[str]:
+    """The current version's shards as someone without htdata finds them: dataset.json's segments, each a
+    JSON file listing its units' shards (docs/FORMAT.md)."""
+    manifest = json.loads((root / MANIFEST_FILE).read_text())
+    return [s["name"] for e in manifest["segments"] for u in json.loads((root / e["records"]).read_text())["units"]
+            for s in u["shards"]]
+
+
 def test_webdataset_reads_our_shards(tmp_path):
     import webdataset as wds
 
     root = write_synthetic_dataset(tmp_path / "ds", EPISODES, samples_per_shard=3)
-    manifest = load_manifest(root)
-    urls = [str(root / "shards" / s["name"]) for s in manifest["shards"]]
+    urls = [str(root / "shards" / name) for name in _stranger_shard_names(root)]
     ds = wds.WebDataset(urls, shardshuffle=False, empty_check=False)
     got = [(s["__key__"], sorted(k for k in s if not k.startswith("__"))) for s in ds]
     keys = [f"{e['episode_id']}__{f:06d}" for e in EPISODES for f in range(e["num_frames"])]
@@ -146,20 +154,26 @@ def test_webdataset_reads_our_shards(tmp_path):
 
 def test_commit_writes_consistent_index_and_manifest(tmp_path):
     root = write_synthetic_dataset(tmp_path / "ds", EPISODES, samples_per_shard=3)
-    manifest = load_manifest(root)
-    index = load_index(root, manifest=manifest)
-    episodes = load_episodes(root, manifest)
-    assert index.dtype == INDEX_DTYPE and isinstance(index, np.memmap)
+    stored = load_manifest(root)
+    manifest, episodes = load_records(root, stored)
+    index = load_index(root, manifest=stored)
+    assert index.dtype == INDEX_DTYPE
     assert manifest["counts"] == {"episodes": 3, "samples": 9, "shards": 4,
                                   "frames_per_hand": {"left": 4, "right": 8}}
     assert manifest["tasks"] == ["pour", "wipe"] and manifest["scenes"] == ["kitchen", "office"]
-    assert (manifest["version"], manifest["parent"]) == (1, None)
-    assert manifest["index_file"] == f"{version_dir(1)}/{INDEX_FILE}"
-    assert manifest["episodes_file"] == f"{version_dir(1)}/{EPISODES_FILE}"
+    assert (manifest["version"], manifest["parent"]) == (1, None) and stored["format_version"] == 4
     assert (root / version_manifest_file(1)).read_bytes() == (root / MANIFEST_FILE).read_bytes()
     assert not (root / INDEX_FILE).exists() and not (root / EPISODES_FILE).exists()
-    assert hashlib.sha256((root / manifest["index_file"]).read_bytes()).hexdigest() == manifest["index_sha256"]
-    assert hashlib.sha256((root / manifest["episodes_file"]).read_bytes()).hexdigest() == manifest["episodes_sha256"]
+    assert not (root / version_dir(1) / INDEX_FILE).exists() and "shards" not in stored
+    for entry in stored["segments"]:   # each segment file is sealed by the sha256 its manifest records
+        for key in ("records", "index"):
+            assert hashlib.sha256((root / entry[key]).read_bytes()).hexdigest() == entry[f"{key}_sha256"]
+    assert hashlib.sha256("".join(json.dumps(e, sort_keys=True) + "\n" for e in episodes).encode()).hexdigest() \
+        == stored["episodes_sha256"]
+    buf = io.BytesIO()
+    np.save(buf, np.asarray(index), allow_pickle=False)
+    assert hashlib.sha256(buf.getvalue()).hexdigest() == stored["index_sha256"]
+    assert _stranger_shard_names(root) == [s["name"] for s in manifest["shards"]]
     for s in manifest["shards"]:
         assert hashlib.sha256((root / "shards" / s["name"]).read_bytes()).hexdigest() == s["sha256"]
     assert [s["first_sample"] for s in manifest["shards"]] == [0, 3, 6, 8]

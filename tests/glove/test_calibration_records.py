@@ -9,8 +9,6 @@ hand's taxels from the raw rows against the digest the ingest recorded.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import re
 import shutil
 from pathlib import Path
@@ -28,6 +26,7 @@ from htdata.store.manifest import load_manifest
 from htdata.synthetic.formats.touchanything import TouchAnythingEpisode, write_touchanything_episode
 from htdata.validate.validator import validate_dataset
 from tests.factories import COLOURS, ingest_cli, rewrite_manifest
+from tests.factories.legacy import reseal_records
 
 LEFT = "touchanything_left_21x21"
 
@@ -63,14 +62,8 @@ def _map_sum(root: Path) -> float:
 
 
 def _reseal_episodes(root: Path, edit) -> None:
-    """Apply `edit` to the episode records, then re-seal episodes_sha256 in both manifest files."""
-    manifest = load_manifest(root)
-    path = root / manifest["episodes_file"]
-    records = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    edit(records)
-    path.write_text("".join(json.dumps(r, sort_keys=True) + "\n" for r in records))
-    manifest["episodes_sha256"] = hashlib.sha256(path.read_bytes()).hexdigest()
-    rewrite_manifest(root, manifest)
+    """Apply `edit` to the episode records, re-sealing every sha256 over them (tests/factories/legacy.py)."""
+    reseal_records(root, edit)
 
 
 def _scale_left_baseline(records: list[dict], reseal_digest: bool = False) -> None:
@@ -121,7 +114,7 @@ def test_a_halved_max_value_is_refused_by_open_and_validate(raw_dataset, tmp_pat
 def test_a_scaled_fitted_baseline_is_refused_by_open_and_validate(raw_dataset, tmp_path):
     copy = shutil.copytree(raw_dataset, tmp_path / "ds")
     _reseal_episodes(copy, _scale_left_baseline)
-    with pytest.raises(RecordMismatch, match=r"episodes.*calibration_fit\.left: digest"):
+    with pytest.raises(RecordMismatch, match=r"(episodes|segments).*calibration_fit\.left: digest"):
         htdata.open(copy)
     for deep in (False, True):
         failed = _failures(validate_dataset(copy, deep=deep))

@@ -331,8 +331,9 @@ def cli_subprocess(args, env_extra=None, **kw):
 def dataset_bytes(out: Path) -> dict[str, bytes]:
     manifest = json.loads((out / "dataset.json").read_text())
     files = {p.name: p.read_bytes() for p in (out / "shards").glob("*.tar")}
-    files["index.npy"] = (out / manifest["index_file"]).read_bytes()
-    files["episodes.jsonl"] = (out / manifest["episodes_file"]).read_bytes()
+    for entry in manifest["segments"]:      # the version's records and index rows
+        for key in ("records", "index"):
+            files[entry[key]] = (out / entry[key]).read_bytes()
     return files
 
 

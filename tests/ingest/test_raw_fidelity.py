@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import hashlib
 import io
 import json
+import shutil
 import warnings
 from pathlib import Path
 
@@ -23,6 +23,7 @@ from htdata.read.reader import DatasetReader
 from htdata.store.manifest import load_episodes, load_index, load_manifest
 from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from tests.factories import COLOURS, PERIOD, ingest_cli, make_opentouch, small_pipeline
+from tests.factories.legacy import as_format3, reseal_records
 
 LAYOUT = "opentouch_right_16x16"
 
@@ -241,8 +242,8 @@ def test_noise_settings_are_checked(bad):
         NormaliseConfig(**{"baseline": "rest_window", **bad}).validate()
 
 
-def test_a_format_2_index_is_read_as_the_current_dtype(native_counts):
-    out, _, _ = native_counts
+def test_a_format_2_index_is_read_as_the_current_dtype(native_counts, tmp_path):
+    out = as_format3(shutil.copytree(native_counts[0], tmp_path / "v3"))     # a format 2 index.npy, below
     manifest = json.loads((out / MANIFEST_FILE).read_text())
     index_path = out / manifest["index_file"]
     rows = load_index(out, mmap=False)
@@ -424,10 +425,13 @@ def test_validate_checks_the_maps_the_loaders_serve(native_counts):
     new = calibration_id(cal["layout"], NormaliseConfig(**{k: v for k, v in cal.items()
                                                           if k in NormaliseConfig.__dataclass_fields__}))
     manifest["calibrations"] = {new: cal}
-    episodes = root / manifest["episodes_file"]
-    episodes.write_text(episodes.read_text().replace(old, new))
-    manifest["episodes_sha256"] = hashlib.sha256(episodes.read_bytes()).hexdigest()
     rewrite_manifest(root, manifest)
+
+    def repoint(records):
+        for record in records:
+            record["calibration"] = {h: new if c == old else c for h, c in record["calibration"].items()}
+
+    reseal_records(root, repoint)
     bad = validate_dataset(root, deep=True)
     content = bad["checks"]["content"]
     assert not bad["ok"] and content["failure_counts"].get("served_map", 0) > 0

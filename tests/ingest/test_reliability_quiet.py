@@ -20,9 +20,9 @@ import pytest
 
 import htdata
 from htdata.cli import main
-from htdata.store.manifest import load_manifest
 from htdata.synthetic.formats import NativeHand, NativeRecording, write_native_recording
 from tests.factories import COLOURS, PERIOD, ingest_cli, make_native
+from tests.factories.legacy import reseal_index
 
 
 def native_dataset(tmp_path: Path, *extra) -> Path:
@@ -61,11 +61,7 @@ def test_nan_stored_map_is_refused_when_decoded():
 
 def test_index_row_naming_a_missing_shard_is_one_line(tmp_path):
     root = native_dataset(tmp_path)
-    manifest = load_manifest(root)
-    path = root / manifest["index_file"]
-    rows = np.load(path)
-    rows["shard"][0] = 4000
-    np.save(path, rows)
+    reseal_index(root, lambda rows: rows["shard"].__setitem__(0, 4000))
     with htdata.open(root) as reader, pytest.raises(ValueError, match="names shard 4000, but version 1 has 1 shards"):
         reader.sample(0)
 

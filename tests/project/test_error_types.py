@@ -22,7 +22,8 @@ from htdata.inspect.preview import render_contact_sheet
 from htdata.resources import PIPELINES_DIR
 from htdata.settings import parse_setting
 from htdata.store.episodeids import NoSuchEpisode
-from htdata.store.manifest import IndexDtypeError, parse_manifest
+from htdata.store.indexfile import IndexDtypeError
+from htdata.store.manifest import parse_manifest
 from htdata.store.splitrule import SplitError
 from tests.factories import PREVIEW_EPISODES, ingest_cli, write_synthetic_dataset
 

@@ -1,13 +1,12 @@
-import json
 import os
 import pickle
 
 import numpy as np
 import pytest
 
-from htdata.format.table import INDEX_FILE, MANIFEST_FILE
+from htdata.format.table import MANIFEST_FILE, SEGMENTS_DIR
 from htdata.read.reader import DatasetReader
-from htdata.store.versions import VERSIONS_DIR, version_dir
+from htdata.store.versions import VERSIONS_DIR
 from tests.factories import (
     MIXED_HANDS_EPISODES,
     commit_split,
@@ -17,6 +16,7 @@ from tests.factories import (
     synthetic_tactile,
     write_synthetic_dataset,
 )
+from tests.factories.legacy import reseal_index
 
 EPISODES = MIXED_HANDS_EPISODES
 SEED = 7
@@ -125,10 +125,7 @@ def test_corrupt_index_offset_is_detected(dataset, tmp_path):
 
     copy = tmp_path / "copy"
     shutil.copytree(dataset, copy)
-    index_path = copy / json.loads((copy / MANIFEST_FILE).read_text())["index_file"]
-    rows = np.load(index_path)
-    rows["offset"][1] = rows["offset"][2]
-    np.save(index_path, rows)
+    reseal_index(copy, lambda rows: rows["offset"].__setitem__(1, rows["offset"][2]))
     r = DatasetReader(copy)
     with pytest.raises(ValueError, match="index and shard disagree"):
         r.sample(1)
@@ -181,7 +178,7 @@ def test_storage_helpers_local_and_memory(dataset):
 
     assert storage.exists(storage.join(dataset, MANIFEST_FILE))
     assert VERSIONS_DIR in storage.listdir(dataset)
-    assert INDEX_FILE in storage.listdir(storage.join(dataset, version_dir(1)))
+    assert SEGMENTS_DIR in storage.listdir(dataset)
     fs = fsspec.filesystem("memory")
     fs.pipe("/st/a/x.bin", b"abc")
     assert storage.is_url("memory://st") and not storage.is_url(f"file://{dataset}")

@@ -19,6 +19,7 @@ from htdata.read.reader import DatasetReader
 from htdata.store.confine import PathOutsideDataset
 from htdata.store.manifest import load_manifest
 from tests.factories import rewrite_manifest, write_synthetic_dataset
+from tests.factories.legacy import as_format3
 
 EPISODES = [{"episode_id": f"ep_{i}", "task": "pour", "scene": "lab", "hands": ("right",), "num_frames": 3}
             for i in range(2)]
@@ -29,8 +30,9 @@ def htdata(*args):
 
 
 def escaping_dataset(tmp_path):
-    """A dataset whose version names `../payload/e.jsonl` (a real file, sha256 matching)."""
-    root = write_synthetic_dataset(tmp_path / "ds", EPISODES)
+    """A format 3 dataset whose version names `../payload/e.jsonl` (a real file, sha256 matching); the
+    format 4 cases (a segment file, a shard a segment names) are in tests/store/test_segments.py."""
+    root = as_format3(write_synthetic_dataset(tmp_path / "ds", EPISODES))
     manifest = load_manifest(root)
     payload = tmp_path / "payload"
     payload.mkdir()
@@ -76,7 +78,8 @@ def test_publish_writes_nothing_outside_the_destination(tmp_path):
 
 def test_symlinked_shard_outside_the_root_is_refused(tmp_path):
     root = write_synthetic_dataset(tmp_path / "ds", EPISODES)
-    name = load_manifest(root)["shards"][0]["name"]
+    with DatasetReader(root) as reader:
+        name = reader.manifest["shards"][0]["name"]
     shard = root / "shards" / name
     elsewhere = tmp_path / "elsewhere.tar"
     shard.rename(elsewhere)
@@ -127,7 +130,7 @@ def test_gc_deletes_only_shard_names_never_through_a_symlink(tmp_path):
 
 
 def test_manifest_shard_name_with_a_slash_is_refused(tmp_path):
-    root = write_synthetic_dataset(tmp_path / "ds", EPISODES)
+    root = as_format3(write_synthetic_dataset(tmp_path / "ds", EPISODES))
     manifest = json.loads((root / "dataset.json").read_text())
     manifest["shards"][0]["name"] = "../../x.tar"
     rewrite_manifest(root, manifest)

@@ -21,14 +21,17 @@ from htdata.store.lock import LOCK_FILE, DatasetLocked, WriterLock
 from htdata.validate import validate_dataset
 from tests.factories import SPLIT_EPISODES as EPISODES
 from tests.factories import rewrite_manifest, write_synthetic_dataset
+from tests.factories.legacy import as_format3
 
 
-def _forge_index_rows(root, rows: int) -> None:
-    """Rewrite the current version's index.npy header to declare `rows` rows (data unchanged), re-sealed."""
+def _forge_index_rows(root, rows: int, stored_as: str) -> None:
+    """Rewrite an index file's header to declare `rows` rows (data unchanged), re-sealed in the manifest: the
+    current version's index.npy (format 3) or its first segment's rows (format 4)."""
     from numpy.lib import format as npy
 
     manifest = json.loads((root / "dataset.json").read_text())
-    path = root / manifest["index_file"]
+    entry = manifest["segments"][0] if stored_as == "segments" else manifest
+    path = root / entry["index" if stored_as == "segments" else "index_file"]
     data = path.read_bytes()
     f = io.BytesIO(data)
     npy.read_magic(f)
@@ -37,14 +40,17 @@ def _forge_index_rows(root, rows: int) -> None:
     npy.write_array_header_1_0(head, {"descr": npy.dtype_to_descr(dtype), "fortran_order": False, "shape": (rows,)})
     assert len(head.getvalue()) == f.tell()          # same header length: the rows stay where they were
     path.write_bytes(head.getvalue() + data[f.tell():])
-    manifest["index_sha256"] = hashlib.sha256(path.read_bytes()).hexdigest()
+    entry["index_sha256"] = hashlib.sha256(path.read_bytes()).hexdigest()
     rewrite_manifest(root, manifest)
 
 
-def test_an_index_header_declaring_1e11_rows_is_one_line_naming_the_file(tmp_path, capsys):
+@pytest.mark.parametrize("stored_as", ["index.npy", "segments"])
+def test_an_index_header_declaring_1e11_rows_is_one_line_naming_the_file(tmp_path, capsys, stored_as):
     root = write_synthetic_dataset(tmp_path / "ds", EPISODES[:2])
-    _forge_index_rows(root, 10**11)
-    said = r"index.npy: index header declares 100000000000 rows of \d+ bytes but the file holds \d+ bytes"
+    if stored_as == "index.npy":
+        as_format3(root)
+    _forge_index_rows(root, 10**11, stored_as)
+    said = r"\.npy: index header declares 100000000000 rows of \d+ bytes but the file holds \d+ bytes"
     with pytest.raises(DatasetError, match=said):
         htdata.open(root).sample(0)
     report = validate_dataset(root)

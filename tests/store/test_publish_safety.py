@@ -26,16 +26,17 @@ import pytest
 from htdata.cli import main as cli_main
 from htdata.errors import DatasetError
 from htdata.read.reader import DatasetReader
-from htdata.store import remote
+from htdata.store import remote, storage
 from htdata.store.destination import DestinationRefused
 from htdata.store.versions import list_versions
 from tests.factories import MIXED_HANDS_ONE_LAYOUT_EPISODES as EPISODES
 from tests.factories import commit_split, ingest_cli, make_native, rewrite_manifest, write_synthetic_dataset
+from tests.factories.legacy import as_format3
 
 
 @pytest.fixture(autouse=True)
 def cache(tmp_path, monkeypatch):
-    monkeypatch.setenv(remote.CACHE_ENV, str(tmp_path / "cache"))
+    monkeypatch.setenv(storage.CACHE_ENV, str(tmp_path / "cache"))
 
 
 @pytest.fixture(scope="module")
@@ -56,6 +57,12 @@ def made(tmp_path_factory):
 @pytest.fixture
 def ds(made, tmp_path):
     return Path(shutil.copytree(made["a"], tmp_path / "work" / "ds", symlinks=True))
+
+
+def _shards(root: Path) -> list[dict]:
+    """The current version's shard entries, as a reader sees them (format 4 lists them in its segments)."""
+    with DatasetReader(root) as reader:
+        return reader.manifest["shards"]
 
 
 def tree(folder: Path) -> dict[str, bytes]:
@@ -190,7 +197,7 @@ def test_a_damaged_file_at_the_destination_is_replaced_with_the_recorded_bytes(d
     url = memory_url()
     remote.publish_dataset(ds, url)
     fs, base = fsspec.core.url_to_fs(url)
-    name = json.loads((ds / "dataset.json").read_text())["shards"][1]["name"]
+    name = _shards(ds)[1]["name"]
     good = fs.cat_file(f"{base}/shards/{name}")
     fs.pipe_file(f"{base}/shards/{name}", good[:-7] + b"garbage")
     result = remote.publish_dataset(ds, url)
@@ -245,7 +252,7 @@ def test_a_source_damaged_after_a_first_publish_leaves_the_published_one_intact(
     remote.publish_dataset(ds, url)
     commit_split(ds, "rule", {"train": ["ep_a"], "test": ["ep_c"]})     # something new to publish
     before = remote_tree(url)
-    shard = ds / "shards" / json.loads((ds / "dataset.json").read_text())["shards"][0]["name"]
+    shard = ds / "shards" / _shards(ds)[0]["name"]
     data = bytearray(shard.read_bytes())
     data[700] ^= 0xFF
     shard.write_bytes(bytes(data))
@@ -336,7 +343,7 @@ def _reseal_shard_everywhere(root: Path, name: str, sha: str) -> None:
 @pytest.mark.parametrize("damage, named", [(_wrong_offset, "structure check"), (_wrong_frame_count, "structure check"),
                                            (_miscounted_shard, "structure check"), (_garbled_rgb, "content check")])
 def test_a_version_validate_refuses_is_not_published(ds, capsys, damage, named):
-    damage(ds)
+    damage(as_format3(ds))      # the damages edit a format 3 version's own records (a segment's: test_segments.py)
     url = memory_url()
     rc, err = publish_cli(capsys, ds, url)
     assert rc == 2 and len(err) == 1 and "fails `htdata validate`, not published" in err[0], err
@@ -357,7 +364,7 @@ def test_an_hdfs_url_without_a_jvm_is_one_line(ds, monkeypatch, capsys):
 
 
 def test_a_dataset_written_before_versions_publishes_and_updates_by_its_manifest(tmp_path, ds):
-    old = write_synthetic_dataset(tmp_path / "old", EPISODES, seed=5)
+    old = as_format3(write_synthetic_dataset(tmp_path / "old", EPISODES, seed=5))
     manifest = json.loads((old / "dataset.json").read_text())    # as written before versions existed
     (old / manifest["episodes_file"]).rename(old / "episodes.jsonl")
     (old / manifest["index_file"]).rename(old / "index.npy")
@@ -378,6 +385,7 @@ def test_a_dataset_written_before_versions_publishes_and_updates_by_its_manifest
 
 
 def test_versions_recording_two_sha256_for_one_file_are_refused(ds):
+    as_format3(ds)     # a format 4 version records a shard's sha256 in a segment, sealed by its own sha256
     name = json.loads((ds / "dataset.json").read_text())["shards"][0]["name"]
     manifest = json.loads((ds / "dataset.json").read_text())
     manifest["shards"][0]["sha256"] = "0" * 64        # the newest version only: v1 still records the true one

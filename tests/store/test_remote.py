@@ -1,4 +1,5 @@
 import json
+import shutil
 import uuid
 from pathlib import Path
 
@@ -8,9 +9,11 @@ import pytest
 
 from htdata.cli import main as cli_main
 from htdata.read.reader import DatasetReader
-from htdata.store import remote
+from htdata.store import remote, storage
+from htdata.store.segments import load_segment_index
 from tests.factories import MIXED_HANDS_ONE_LAYOUT_EPISODES as EPISODES
 from tests.factories import commit_split, write_synthetic_dataset
+from tests.factories.legacy import as_format3
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +26,7 @@ def dataset(tmp_path_factory):
 
 @pytest.fixture(autouse=True)
 def cache(tmp_path, monkeypatch):
-    monkeypatch.setenv(remote.CACHE_ENV, str(tmp_path / "cache"))
+    monkeypatch.setenv(storage.CACHE_ENV, str(tmp_path / "cache"))
     return tmp_path / "cache"
 
 
@@ -34,11 +37,11 @@ def fresh_url() -> str:
 def test_publish_round_trip_is_byte_equal(dataset):
     url = fresh_url()
     result = remote.publish_dataset(dataset, url)
-    manifest = json.loads((dataset / "dataset.json").read_text())
     versions = [json.loads(p.read_text()) for p in (dataset / "versions").glob("v*.json")]
-    # shards + each version's (manifest, episodes, index, splits) + layouts + dataset.json
-    assert result.files == (len(manifest["shards"]) + sum(3 + len(v["splits"]) for v in versions)
-                            + len(list((dataset / "layouts").iterdir())) + 1)
+    segment_files = {e[k] for v in versions for e in v["segments"] for k in ("records", "index")}
+    # shards + each version's (manifest, splits) + the segments they list + layouts + dataset.json
+    assert result.files == (len(DatasetReader(dataset).manifest["shards"]) + sum(1 + len(v["splits"]) for v in versions)
+                            + len(segment_files) + len(list((dataset / "layouts").iterdir())) + 1)
     local, far = DatasetReader(dataset), DatasetReader(url)
     assert len(far) == len(local) == 10
     assert far.manifest == local.manifest and far.episodes == local.episodes
@@ -112,7 +115,7 @@ def test_interrupted_update_leaves_the_previous_publish(dataset, monkeypatch, tm
     fs, path = fsspec.core.url_to_fs(url)
     pointer = fs.cat_file(f"{path}/dataset.json")
     with monkeypatch.context() as m:
-        _dropping_after(m, 2)
+        _dropping_after(m, 1)     # version 3 adds a split and its version file (its segments are version 2's)
         with pytest.raises(ConnectionError):
             remote.publish_dataset(copy, url)
     assert fs.cat_file(f"{path}/dataset.json") == pointer    # the URL still holds version 2, readable
@@ -137,7 +140,10 @@ def test_corrupt_local_shard_is_not_published(dataset, tmp_path):
     assert not fs.exists(f"{path}/dataset.json")
 
 
-def test_cached_index_is_reused_without_download(dataset, cache, monkeypatch):
+@pytest.mark.parametrize("stored_as", ["index.npy", "segments"])
+def test_cached_index_is_reused_without_download(dataset, cache, monkeypatch, tmp_path, stored_as):
+    if stored_as == "index.npy":
+        dataset = as_format3(shutil.copytree(dataset, tmp_path / "v3"))
     url = fresh_url()
     remote.publish_dataset(dataset, url)
     first = DatasetReader(url)
@@ -146,31 +152,42 @@ def test_cached_index_is_reused_without_download(dataset, cache, monkeypatch):
     cached = list((cache / "index").glob("*/index.npy"))
     assert len(cached) == 1 and cached[0].parent.name == first.manifest["index_sha256"]
     mtime = cached[0].stat().st_mtime_ns
-    # Remove the remote index: a second open can only work from the cache.
+    # Remove the remote index (a format 4 version's index rows): a second open can only work from the cache.
     fs, path = fsspec.core.url_to_fs(url)
-    fs.rm(f"{path}/{first.manifest['index_file']}")
+    for rel in ([first.stored["index_file"]] if stored_as == "index.npy" else
+                [e["index"] for e in first.stored["segments"]]):
+        fs.rm(f"{path}/{rel}")
     downloads = {"n": 0}
-    real_open = remote.storage.open_binary
+    real_open, real_read = remote.storage.open_binary, remote.storage.read_bytes
 
-    def counting_open(location):
-        if str(location).endswith("index.npy"):
-            downloads["n"] += 1
-        return real_open(location)
+    def counting(real):
+        def counted(location):
+            if str(location).startswith("memory://") and str(location).endswith(".npy"):
+                downloads["n"] += 1
+            return real(location)
+        return counted
 
-    monkeypatch.setattr(remote.storage, "open_binary", counting_open)
+    monkeypatch.setattr(remote.storage, "open_binary", counting(real_open))
+    monkeypatch.setattr(remote.storage, "read_bytes", counting(real_read))
     second = DatasetReader(url)
     assert np.array_equal(np.asarray(second.index), np.asarray(rows))
     assert second.sample(7) == DatasetReader(dataset).sample(7)
     assert downloads["n"] == 0 and cached[0].stat().st_mtime_ns == mtime
 
 
-def test_cached_index_rejects_wrong_sha(dataset, cache):
+@pytest.mark.parametrize("stored_as", ["index.npy", "segments"])
+def test_cached_index_rejects_wrong_sha(dataset, cache, tmp_path, stored_as):
+    if stored_as == "index.npy":
+        dataset = as_format3(shutil.copytree(dataset, tmp_path / "v3"))
     url = fresh_url()
     remote.publish_dataset(dataset, url)
     manifest = json.loads((dataset / "dataset.json").read_text())
     manifest["index_sha256"] = "0" * 64
     with pytest.raises(ValueError, match="sha256"):
-        remote.cached_index_path(url, manifest)
+        if stored_as == "index.npy":
+            remote.cached_index_path(url, manifest)
+        else:
+            load_segment_index(url, manifest)
     assert not [p for p in (cache / "index").rglob("*") if p.is_file()]     # no partial file left behind
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from htdata.curate.edit import parse_frames, remove_episodes, resolve_episodes, trim_episode
-from htdata.format.table import MANIFEST_FILE
+from htdata.format.table import FORMAT_VERSION, MANIFEST_FILE
 from htdata.read.reader import DatasetReader
 from htdata.store.episodeids import NoSuchEpisode
 from htdata.store.parts import assemble
@@ -46,12 +46,12 @@ def test_first_version_and_log_fields(tmp_path):
     root = versioned(tmp_path / "ds")
     assert list_versions(root) == [1]
     manifest = json.loads((root / MANIFEST_FILE).read_text())
-    assert manifest["version"] == 1 and manifest["parent"] is None and manifest["format_version"] == 3
+    assert manifest["version"] == 1 and manifest["parent"] is None and manifest["format_version"] == FORMAT_VERSION
     assert manifest["change"]["command"] == "commit"
     assert manifest["change"]["summary"] == {"episodes_added": 5, "episodes_removed": 0, "episodes_changed": 0,
                                              "frames_added": 25, "frames_removed": 0, "frames": 25}
     assert (root / version_manifest_file(1)).read_bytes() == (root / MANIFEST_FILE).read_bytes()
-    assert manifest["episodes_file"] == "versions/v000001/episodes.jsonl"
+    assert [e["records"].split("/")[0] for e in manifest["segments"]] == ["segments"] * len(manifest["segments"])
     # the same episodes committed again on top: nothing added, nothing removed
     snap = open_snapshot(root)
     again = commit_parts(root, snap.parts(), {}, snap, "again")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 import shutil
 from pathlib import Path
@@ -18,12 +17,13 @@ from htdata.errors import ArgumentError
 from htdata.format.shardio import BLOCK
 from htdata.format.table import EPISODES_FILE, FORMAT_VERSION, INDEX_FILE, MANIFEST_FILE, SHARDS_DIR
 from htdata.format.tactilecodec import encode_exr
-from htdata.store.manifest import load_episodes, load_index
+from htdata.store.manifest import load_episodes, load_index, load_records
 from htdata.store.versions import VERSIONS_DIR
 from htdata.validate import group_rows, validate_dataset
 from tests.factories import FRAME_NS, edit_split, rewrite_manifest, write_synthetic_dataset
 from tests.factories import SPLIT_EPISODES as EPISODES
 from tests.factories.hostile import read_members, rewrite_members
+from tests.factories.legacy import as_format3, reseal_index, reseal_records
 
 
 @pytest.fixture(scope="module")
@@ -43,6 +43,11 @@ def _manifest(root: Path) -> dict:
     return json.loads((root / MANIFEST_FILE).read_text())
 
 
+def _shards(root: Path) -> list[dict]:
+    """The current version's shard entries, as a reader sees them (format 4 lists them in its segments)."""
+    return load_records(root, _manifest(root))[0]["shards"]
+
+
 def _index(root: Path) -> np.ndarray:
     """The current version's index rows (a writable copy)."""
     return load_index(root, mmap=False, manifest=_manifest(root)).copy()
@@ -55,6 +60,7 @@ def _episode_ids(root: Path) -> list[str]:
 def _unversioned(root: Path) -> Path:
     """Turn a (version 1) synthetic dataset into one written before versions existed (format_version 1):
     episodes.jsonl and index.npy at the root, no versions/, a manifest without version fields."""
+    as_format3(root)
     manifest = _manifest(root)
     assert manifest["version"] == 1 and not manifest["splits"]
     (root / manifest["episodes_file"]).rename(root / EPISODES_FILE)
@@ -89,7 +95,7 @@ def test_good_dataset_passes_every_check(ds, capsys):
     report = validate_dataset(ds, split="main", deep=True, workers=1)
     assert report["ok"], json.dumps({k: c["failures"][:3] for k, c in report["checks"].items()}, indent=1)
     s = report["checks"]["structure"]["checked"]
-    assert s["samples"] == 16 and s["shards"] == len(_manifest(ds)["shards"])
+    assert s["samples"] == 16 and s["shards"] == len(_shards(ds))
     assert report["checks"]["content"]["checked"]["samples_decoded"] == 16
     assert report["checks"]["content"]["checked"]["tactile_maps_decoded"] == 20
     assert report["checks"]["splits"]["status"] == "pass"
@@ -129,7 +135,7 @@ def test_parallel_workers_agree_with_serial(ds):
 # -- structure faults -----------------------------------------------------------------------------
 
 def test_flipped_byte_fails_shard_sha256(ds):
-    shard = _manifest(ds)["shards"][1]
+    shard = _shards(ds)[1]
     path = ds / SHARDS_DIR / shard["name"]
     data = bytearray(path.read_bytes())
     data[BLOCK + 700] ^= 0xFF  # inside the first sample's data: headers stay valid
@@ -145,7 +151,7 @@ def test_flipped_byte_fails_shard_sha256(ds):
 
 
 def test_truncated_shard_names_size_and_lost_samples(ds):
-    shard = _manifest(ds)["shards"][0]
+    shard = _shards(ds)[0]
     path = ds / SHARDS_DIR / shard["name"]
     data = path.read_bytes()
     path.write_bytes(data[: len(data) // 2])
@@ -159,7 +165,7 @@ def test_truncated_shard_names_size_and_lost_samples(ds):
 
 
 def test_deleted_shard(ds):
-    shard = _manifest(ds)["shards"][2]
+    shard = _shards(ds)[2]
     (ds / SHARDS_DIR / shard["name"]).unlink()
     report = validate_dataset(ds)
     [fail] = _failures(report, "structure", "shard_missing")
@@ -170,7 +176,7 @@ def test_deleted_shard(ds):
 def test_extra_shard_is_a_failure_before_versions(ds):
     _unversioned(ds)
     assert validate_dataset(ds)["ok"]
-    shutil.copy(ds / SHARDS_DIR / _manifest(ds)["shards"][0]["name"], ds / SHARDS_DIR / "shard-999999-000.tar")
+    shutil.copy(ds / SHARDS_DIR / _shards(ds)[0]["name"], ds / SHARDS_DIR / "shard-999999-000.tar")
     report = validate_dataset(ds)
     [fail] = _failures(report, "structure", "shard_extra")
     assert fail["shard"] == "shard-999999-000.tar"
@@ -178,7 +184,7 @@ def test_extra_shard_is_a_failure_before_versions(ds):
 
 def test_shard_no_version_lists_is_a_warning(ds):
     # versioned: a shard no version lists is an interrupted write's leftover (htdata gc removes it)
-    shutil.copy(ds / SHARDS_DIR / _manifest(ds)["shards"][0]["name"], ds / SHARDS_DIR / "shard-999999-000.tar")
+    shutil.copy(ds / SHARDS_DIR / _shards(ds)[0]["name"], ds / SHARDS_DIR / "shard-999999-000.tar")
     report = validate_dataset(ds)
     assert report["ok"] and not _failures(report, "structure", "shard_extra")
     [warn] = [w for w in report["checks"]["structure"]["warnings"] if w["what"] == "shard_unlisted"]
@@ -197,12 +203,8 @@ def test_index_offset_pointing_at_the_wrong_member(ds):
 
 
 def _write_index(root: Path, index: np.ndarray) -> None:
-    buf = io.BytesIO()
-    np.save(buf, index, allow_pickle=False)
-    manifest = _manifest(root)
-    (root / manifest["index_file"]).write_bytes(buf.getvalue())
-    manifest["index_sha256"] = hashlib.sha256(buf.getvalue()).hexdigest()
-    rewrite_manifest(root, manifest)
+    """Store `index` as the current version's, every sha256 over it re-sealed (tests/factories/legacy.py)."""
+    reseal_index(root, lambda rows: rows.__setitem__(slice(None), index))
 
 
 def test_swapped_index_rows_break_frame_order(ds):
@@ -231,11 +233,33 @@ def test_group_rows_handles_empty_groups():
 
 
 def test_tampered_episodes_file_fails_checksum(ds):
+    as_format3(ds)
     path = ds / _manifest(ds)["episodes_file"]
     path.write_text(path.read_text().replace('"kitchen"', '"garage"', 1))
     report = validate_dataset(ds)
     [fail] = _failures(report, "structure", "episodes_sha256")
     assert fail["file"] == _manifest(ds)["episodes_file"] == "versions/v000001/episodes.jsonl"
+
+
+def test_tampered_segment_records_fail_their_checksum(ds):
+    entry = _manifest(ds)["segments"][0]
+    path = ds / entry["records"]
+    path.write_text(path.read_text().replace('"kitchen"', '"garage"', 1))
+    report = validate_dataset(ds)
+    [fail] = _failures(report, "structure", "segment_damaged")
+    assert entry["records"] in fail["message"] and "sha256" in fail["message"]
+
+
+def test_re_sealed_segment_records_that_disagree_with_the_manifest_fail(ds):
+    # the segment's own sha256 re-sealed, the manifest's episodes_sha256 left as committed
+    manifest = _manifest(ds)
+    committed = manifest["episodes_sha256"]
+    reseal_records(ds, lambda records: records[0].update(scene="garage"))
+    manifest = _manifest(ds)
+    manifest["episodes_sha256"] = committed
+    rewrite_manifest(ds, manifest)
+    report = validate_dataset(ds)
+    assert _failures(report, "structure", "episodes_sha256")
 
 
 def test_missing_manifest_is_reported_not_raised(tmp_path):
@@ -403,9 +427,9 @@ def test_duplicated_frame_across_parts(ds):
 
 
 def test_split_of_another_commit_and_unknown_split(ds):
-    # versioned (format_version 2): a split names the episode file of the version it describes
+    # versioned (format_version 2 of split files): a split names the episode records of the version it describes
     doc = make_split(ds, ["pour"], name="s")
-    assert doc["format_version"] == 2 and FORMAT_VERSION == 3   # split files have their own version
+    assert doc["format_version"] == 2 and FORMAT_VERSION == 4   # split files have their own version
     assert doc["episodes_sha256"] == _manifest(ds)["episodes_sha256"]
     assert validate_dataset(ds, split="s")["ok"]
     edit_split(ds, "s", lambda d: d.update(episodes_sha256="0" * 64))
