@@ -26,6 +26,9 @@ frame, `frame_common`: linear between block centres, so a drift of 6 counts
 over a 135-frame clip leaves no 0.7-count step per block) and block means
 less the common mode: what the moving-cell rule reads. Without two full
 blocks there is no wander to take out and the values are the raw ones.
+`rows_common_mode` gives the common mode at every row of a recording read
+whole: the glove's rest reference takes it out before each cell's rest is
+read (htdata.glove.restreference.recording_rest).
 """
 
 from __future__ import annotations
@@ -100,6 +103,24 @@ def frame_common(common: np.ndarray, frames: np.ndarray, block: int) -> np.ndarr
     first, last = (common[1] - common[0]) / block, (common[-1] - common[-2]) / block
     out = np.where(f < centres[0], common[0] + (f - centres[0]) * first, out)
     return np.where(f > centres[-1], common[-1] + (f - centres[-1]) * last, out)
+
+
+def rows_common_mode(rows: np.ndarray, block: int) -> np.ndarray:
+    """(T,) the common mode at each of a recording's rows, from the means of its full blocks of `block` rows
+    (`block_common_mode`, `frame_common`); zeros without two full blocks.
+
+    Args:
+        rows: (T, cells) raw rows turned toward pressure (NaN: no value).
+        block: rows per block mean (htdata.glove.activity.WANDER_BLOCK).
+    """
+    x = np.asarray(rows, np.float64)
+    n = len(x) // block
+    if n < 2:
+        return np.zeros(len(x))
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)      # a cell never finite in a block: NaN, left out
+        means = np.nanmean(x[:n * block].reshape(n, block, -1), axis=1)
+    return frame_common(block_common_mode(means), np.arange(len(x)), block)
 
 
 def steady(means: np.ndarray, lo: tuple[np.ndarray, np.ndarray], hi: tuple[np.ndarray, np.ndarray],

@@ -10,7 +10,7 @@ A layout's `value` ({"convention", "max"}, optional "step", "press") and a calib
 - sensitivity: `press`, the least rise above rest (raw units) that is a press, which decides contact
   (htdata.glove.contact); without it DEFAULT_PRESS_SHARE of full scale, a knit glove's 15 of 1023 counts.
   It is the glove's to declare: on the real knit glove's recordings a level 5% off takes the worst contact-share
-  error of a hand that steadies an object from 0.08 to 0.14-0.17 (`htdata bench --only realglove`), and neither
+  error of a hand that steadies an object from 0.08 to 0.13-0.18 (`htdata bench --only realglove`), and neither
   the glove's rest spread nor its press range pins it that closely (docs/INGEST.md, "Contact on a less sensitive glove").
 
 Rules that assume "a press raises a cell" (rest level, wander, moving cells, health, validate's rest check)

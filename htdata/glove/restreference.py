@@ -3,9 +3,10 @@
 One recording cannot always show a cell's rest: a grip held through a whole short recording sits
 above it from the first frame to the last, and a rest read from that recording (each cell's low
 percentile, the raw-count default) takes the grip for rest. The glove's other recordings can show
-it: a cell's rest in a recording is its REST_PERCENTILE percentile on the no-pressure side, and the
-glove's reference is the median of that over its recordings, so a grip held in a minority of them
-does not move it.
+it: a cell's rest in a recording is its REST_PERCENTILE percentile on the no-pressure side, read with
+the glove's common wander within the recording taken out (`recording_rest`), and the glove's
+reference is the median of that over its recordings, so a grip held in a minority of them does not
+move it.
 
 Assumes the per-cell offsets are stable between recordings (a glove's cells keep their offsets
 from one session to the next; what moves, the whole glove's level, is the common-mode shift that
@@ -28,6 +29,8 @@ import numpy as np
 
 from htdata.errors import ArgumentError
 from htdata.fileio import write_bytes_atomic
+from htdata.glove.activity import WANDER_BLOCK
+from htdata.glove.commonmode import rows_common_mode
 from htdata.glove.glovevalue import is_inverted
 from htdata.glove.restlevel import nan_quiet, nanpercentile_columns
 
@@ -37,14 +40,32 @@ MIN_RECORDINGS = 3
 
 def recording_rest(rows: np.ndarray, convention: str, q: float = REST_PERCENTILE) -> np.ndarray:
     """(H,W) each cell's rest in one recording's raw rows (T,H,W): its `q` percentile on the no-pressure
-    side (the (100 - q) percentile of a glove whose counts fall with pressure); NaN for a cell never finite."""
+    side (the (100 - q) percentile of a glove whose counts fall with pressure) with the glove's common wander
+    taken out, at the recording's common rest level; NaN for a cell never finite.
+
+    The wander comes out first (htdata.glove.commonmode, on the calmest cells): a cell's low percentile is read
+    where it rests, and a cell that rests only late in a drifting recording would otherwise take the drift
+    for its own offset. The bench's glove rising 6 counts over each clip put the cells its left hands press
+    up to half a count above the others that way, and a count is 7% of the press level. The recording's
+    level (the median over cells of their plain `q` percentiles) is put back: without a drift the rest
+    reads as before, and `shift` fits what moves the whole glove.
+
+    Args:
+        rows: (T>0,H,W) the recording's raw rows, in time order.
+        convention: the glove's `value.convention` (htdata.glove.glovevalue).
+        q: the percentile on the no-pressure side.
+    """
     x = np.asarray(rows, np.float64)
     if x.ndim != 3 or len(x) == 0:
         raise ArgumentError(f"recording_rest: expected raw rows (T>0,H,W), got shape {x.shape}")
-    flat = np.where(np.isfinite(x), x, np.nan).reshape(len(x), -1)
+    sign = -1.0 if is_inverted(convention) else 1.0        # counts toward pressure: the no-pressure side is low
+    flat = sign * np.where(np.isfinite(x), x, np.nan).reshape(len(x), -1)
     with nan_quiet():
-        rest = nanpercentile_columns(flat, 100.0 - q if is_inverted(convention) else q)
-    return np.asarray(rest, np.float32).reshape(x.shape[1:])
+        plain = nanpercentile_columns(flat, q)
+        steady = nanpercentile_columns(flat - rows_common_mode(flat, WANDER_BLOCK)[:, None], q)
+        seen = np.isfinite(plain)
+        rest = steady + (np.median(plain[seen] - steady[seen]) if seen.any() else 0.0)
+    return np.asarray(sign * rest, np.float32).reshape(x.shape[1:])
 
 
 def pooled_reference(rests: list[np.ndarray], minimum: int = MIN_RECORDINGS) -> np.ndarray:

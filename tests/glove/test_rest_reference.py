@@ -91,6 +91,24 @@ def test_the_reference_is_the_median_over_recordings_so_one_held_grip_does_not_m
         recording_rest(np.zeros((0, *GRID)), "direct")
 
 
+@pytest.mark.parametrize("convention", ["direct", "inverted"])
+def test_a_drift_of_the_whole_glove_moves_every_cell_s_rest_alike(convention):
+    """The same recordings, still and rising 6 counts over each (the bench's drifting glove); one cell is pressed
+    through the first 60% of every recording, so it rests only where the drift is highest. The drift may move
+    the glove's rest as a whole (the shift follows it), not one cell against the others: read as a plain 10th
+    percentile that cell sat ~3 counts higher on the drifting glove, a fifth of a press."""
+    rng = np.random.default_rng(3)
+    still = 257 + rng.uniform(-20, 20, GRID) + rng.normal(0, 1.0, (4, 300, *GRID)) + 2.0 * np.arange(4)[:, None, None, None]
+    still[:, :180, 1, 2] += 40.0
+    refs = []
+    for drift in (0.0, 6.0):
+        x = still + np.linspace(0, drift, 300)[None, :, None, None]
+        recs = [np.asarray(1023 - r if convention == "inverted" else r, np.float16).astype(np.float32) for r in x]
+        refs.append(pooled_reference([recording_rest(r, convention) for r in recs]))
+    moved = refs[1] - refs[0]
+    assert np.abs(moved - np.median(moved)).max() < 0.3, np.round(moved - np.median(moved), 2)
+
+
 def test_shift_needs_the_glove_s_rest_and_the_file_is_checked(tmp_path):
     layout = _Layout(np.ones(GRID, bool))
     with pytest.raises(ConfigError, match="taxel_calibration"):
