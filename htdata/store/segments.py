@@ -48,6 +48,9 @@ SEGMENTED_FORMAT = 4            # the first format_version whose versions are se
 SEGMENT_UNITS = 64              # a segment ends after unit u when u % 64 == 63 ...
 MAX_SEGMENT_UNITS = 4 * SEGMENT_UNITS   # ... or when it holds this many (re-packed units renumbered high)
 INDEX_CACHE_MIN_BYTES = 64 << 20        # a larger global index is assembled into the cache and mapped
+# (samples, shards, episodes) per unit of the segments this process has read, by their records' sha256: the
+# index assembly needs only these, not the records again (a segment named by its sha256 never changes)
+_UNIT_COUNTS: dict[str, list[tuple[int, int, int]]] = {}
 
 
 def segmented(manifest: dict) -> bool:
@@ -166,7 +169,21 @@ def read_segment_doc(root: str | os.PathLike, entry: dict, where: str) -> dict:
         found = len(units) if key is None else sum(len(u.get(key, [])) for u in units)
         if found != entry.get(what):
             raise DatasetError(f"{path}: holds {found} {what}, {where} records {entry.get(what)}")
+    if len(_UNIT_COUNTS) > 1 << 16:
+        _UNIT_COUNTS.clear()
+    _UNIT_COUNTS[entry["records_sha256"]] = [
+        (sum(int(s["samples"]) for s in u["shards"]), len(u["shards"]), len(u["episodes"])) for u in units]
     return doc
+
+
+def _unit_counts(root: str, entry: dict, where: str) -> list[tuple[int, int, int]]:
+    """(samples, shards, episodes) of each unit of a segment: from this process's earlier read of its
+    records (checked then, and named by their sha256), or read now."""
+    counts = _UNIT_COUNTS.get(entry.get("records_sha256"))
+    if counts is None:
+        read_segment_doc(root, entry, where)
+        counts = _UNIT_COUNTS[entry["records_sha256"]]
+    return counts
 
 
 def segmented_records(root: str | os.PathLike, manifest: dict,
@@ -195,13 +212,13 @@ def segmented_records(root: str | os.PathLike, manifest: dict,
     return {**manifest, "shards": shards}, episodes
 
 
-def _segment_rows(root: str, entry: dict, doc: dict, where: str) -> np.ndarray:
-    """A segment's index rows, local to each unit, checked against its document."""
+def _segment_rows(root: str, entry: dict, where: str) -> np.ndarray:
+    """A segment's index rows, local to each unit, checked against its records."""
     path, data = _read_checked(root, entry, "index", where)
     rows = parse_index(data, path)
     if len(rows) != entry.get("samples"):
         raise DatasetError(f"{path}: holds {len(rows)} index rows, {where} records {entry.get('samples')}")
-    held = sum(int(s["samples"]) for u in doc["units"] for s in u["shards"])
+    held = sum(n for n, _, _ in _unit_counts(root, entry, where))
     if held != len(rows):
         raise DatasetError(f"{path}: {len(rows)} index rows, but its units' shards hold {held} samples")
     return rows
@@ -221,7 +238,7 @@ def segment_parts(root: str | os.PathLike, manifest: dict, where: str = "the man
     parts = []
     for entry in manifest["segments"]:
         doc = read_segment_doc(root, entry, where)
-        rows = _segment_rows(os.fspath(root), entry, doc, where)
+        rows = _segment_rows(os.fspath(root), entry, where)
         start = 0
         for unit in doc["units"]:
             n = sum(int(s["samples"]) for s in unit["shards"])
@@ -234,11 +251,11 @@ def segment_parts(root: str | os.PathLike, manifest: dict, where: str = "the man
 
 def _global_rows(root: str, entry: dict, where: str, shard_base: int, episode_base: int) -> tuple[np.ndarray, int, int]:
     """A segment's rows with global shard and episode columns; returns them and the next bases."""
-    doc = read_segment_doc(root, entry, where)
-    rows = np.array(_segment_rows(root, entry, doc, where))
-    samples = [sum(int(s["samples"]) for s in u["shards"]) for u in doc["units"]]
-    shards = np.cumsum([shard_base] + [len(u["shards"]) for u in doc["units"]])
-    episodes = np.cumsum([episode_base] + [len(u["episodes"]) for u in doc["units"]])
+    rows = np.array(_segment_rows(root, entry, where))
+    counts = _unit_counts(root, entry, where)
+    samples = [n for n, _, _ in counts]
+    shards = np.cumsum([shard_base] + [k for _, k, _ in counts])
+    episodes = np.cumsum([episode_base] + [e for _, _, e in counts])
     rows["shard"] += np.repeat(shards[:-1], samples).astype(rows["shard"].dtype)
     rows["episode"] += np.repeat(episodes[:-1], samples).astype(rows["episode"].dtype)
     return rows, int(shards[-1]), int(episodes[-1])
