@@ -5,8 +5,10 @@ dataset. Each size gets its own dataset of N small native recordings
 (ingested once, inline), then one more recording is ingested into it. We
 time that second ingest and count the bytes of every file it created or
 changed (shards, version files, the pointer, the report). The target is
-that time and bytes stay nearly flat from N to 10N: only the index and the
-episode file grow with N (they are rewritten per version, O(index)).
+that time and bytes stay nearly flat from N to 10N. Format 3 rewrote the
+index and the episode file per version (O(index)); format 4 writes the
+segment the new unit joins and a manifest of one entry per segment
+(htdata/store/segments.py).
 """
 
 from __future__ import annotations
@@ -61,8 +63,8 @@ def append_row(work: Path, n: int) -> dict:
             "units_run": report["units_run"], "episodes_unchanged": report["episodes_unchanged"],
             "bytes_written": sum(written.values()),
             "bytes_shards": sum(v for k, v in written.items() if k.startswith("shards/")),
-            "bytes_index_and_episodes": sum(v for k, v in written.items()
-                                            if k.endswith(("index.npy", "episodes.jsonl"))),
+            "bytes_index_and_episodes": sum(v for k, v in written.items()     # format 3's files, 4's segments
+                                            if k.endswith(("index.npy", "episodes.jsonl")) or k.startswith("segments/")),
             "files_written": len(written)}
 
 

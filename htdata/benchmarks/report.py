@@ -326,11 +326,11 @@ def _validate(rows: list[dict]) -> list[str]:
 def _append(d: dict) -> list[str]:
     lines = table(d["rows"], [("episodes_before", "episodes before"), ("frames_before", "frames before"),
                               ("seconds", "append s"), ("units_run", "units run"), ("bytes_written", "bytes written"),
-                              ("bytes_shards", "of which shards"), ("bytes_index_and_episodes", "index + episodes"),
+                              ("bytes_shards", "of which shards"), ("bytes_index_and_episodes", "records (segments)"),
                               ("files_written", "files written")])
     return lines + ["", f"10x the dataset: {_fmt(d['time_ratio_large_over_small'])}x the append time, "
-                    f"{_fmt(d['bytes_ratio_large_over_small'])}x the bytes written (target: O(episode) + O(index): "
-                    f"only index + episode records grow with N).", ""]
+                    f"{_fmt(d['bytes_ratio_large_over_small'])}x the bytes written (target: O(episode); format 4 writes the "
+                    f"segment the new unit joins and a manifest of one entry per segment).", ""]
 
 
 def _stats(d: dict) -> list[str]:

@@ -10,7 +10,9 @@ on this object: `reader.meta`). As LeRobot keeps LeRobotDatasetMetadata
 beside LeRobotDataset.
 
 The index is loaded on first use (memory-mapped when local, one download
-into the cache when remote). Pickling drops it; it reloads on first use.
+into the cache when remote; a format 4 version's assembled from its segments,
+a large one once into the local cache and mapped). Pickling drops a mapped
+index (it reloads on first use) and keeps one held in memory.
 
 Errors a caller causes (an unknown version, split, part, episode or layout,
 a position out of range) are htdata.errors.ArgumentError; each is also the
@@ -111,7 +113,9 @@ class DatasetMetadata:
 
     def __getstate__(self):
         state = self.__dict__.copy()
-        state["_index"] = None      # a memory map: reopened on first use
+        if isinstance(state["_index"], np.memmap):
+            state["_index"] = None      # a memory map: reopened on first use
+        # (an index assembled in memory from a version's segments travels along: a worker would assemble it again)
         return state
 
     # -- counts and vocabularies ------------------------------------------

@@ -216,7 +216,7 @@ def commit_parts(root: str | os.PathLike, parts: list[Part], fields: dict, paren
                          + [unit_of_shard(s["name"]) + 1 for s in built.shards]),
         "change": change_record(command, summarise(diff), time),
     }
-    # file names are filled by write_version; validate the rest with placeholders
+    # the version number and its split files are filled in by write_version; validate the rest with placeholders
     validate_json({**manifest, "version": (manifest["parent"] or 0) + 1, "splits": {}}, "manifest",
                   where=str(root / MANIFEST_FILE))
     if splits is None:

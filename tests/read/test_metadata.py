@@ -110,10 +110,14 @@ def test_split_selection(dataset):
     assert meta.sample_indices("main", "val").dtype == np.int64
 
 
-def test_pickled_metadata_reloads_its_index(dataset):
-    meta = DatasetMetadata(dataset)
+def test_pickled_metadata_reloads_a_mapped_index_and_keeps_one_in_memory(dataset, tmp_path):
+    meta = DatasetMetadata(dataset)        # format 4, a small index: assembled in memory from the segments
     before = np.array(meta.index)
     again = pickle.loads(pickle.dumps(meta))
+    assert again._index is not None and np.array_equal(again.index, before)   # a worker does not assemble it again
+    legacy = DatasetMetadata(as_format3(shutil.copytree(dataset, tmp_path / "v3")))
+    assert isinstance(legacy.index, np.memmap)                                  # format 3's index.npy, mapped
+    again = pickle.loads(pickle.dumps(legacy))
     assert again._index is None and np.array_equal(again.index, before)
 
 
