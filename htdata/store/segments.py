@@ -18,10 +18,12 @@ O(units changed x SEGMENT_UNITS) plus a manifest of one entry per segment.
 
 What a reader sees is exactly what format 3 gave: `segmented_records` fills the manifest's shard
 list and the episode records (first_sample, shard names) from the segments' JSON;
-`load_segment_index` the global index (htdata/store/manifest.py's loaders dispatch to both). The global index is assembled in memory, or, from INDEX_CACHE_MIN_BYTES (and for
-a remote dataset always), once into the local cache (HTDATA_CACHE, where a remote dataset's index goes: htdata/store/remote.py),
-checked against the manifest's index_sha256 and memory-mapped from there. Writers read their
-parent's parts straight from the segments (`segment_parts`), never the global index.
+`load_segment_index` the global index (htdata/store/manifest.py's loaders dispatch to both). The
+global index is assembled in memory, or, from INDEX_CACHE_MIN_BYTES (and for a remote dataset
+always), once into the local cache (HTDATA_CACHE, where a remote dataset's index goes:
+htdata/store/remote.py), checked against the manifest's index_sha256 and memory-mapped from there.
+Writers read their parent's parts straight from the segments (`segment_parts`), never the global
+index. A segment an interrupted write left behind belongs to no version: `htdata gc` removes it.
 """
 
 from __future__ import annotations
@@ -44,7 +46,6 @@ from htdata.store.parts import COMPUTED_FIELDS, Part
 from htdata.store.storage import cache_dir
 
 SEGMENT_FORMAT = "htdata-segment"
-SEGMENTED_FORMAT = 4            # the first format_version whose versions are segments
 SEGMENT_UNITS = 64              # a segment ends after unit u when u % 64 == 63 ...
 MAX_SEGMENT_UNITS = 4 * SEGMENT_UNITS   # ... or when it holds this many (re-packed units renumbered high)
 INDEX_CACHE_MIN_BYTES = 64 << 20        # a larger global index is assembled into the cache and mapped

@@ -1,7 +1,7 @@
 """The folders of a dataset a writer writes or deletes in are the dataset's own, never symlinks out of it.
 
-A stranger's dataset may hold `shards/`, `.work/`, `reports/`, `stats/`, `layouts/`, `versions/` or
-`splits/` as a symlink to a folder elsewhere: an append would then delete unrelated `shard-*.tar` /
+A stranger's dataset may hold `shards/`, `segments/`, `.work/`, `reports/`, `stats/`, `layouts/`,
+`versions/` or `splits/` as a symlink to a folder elsewhere: an append would then delete unrelated `shard-*.tar` /
 `unit-*.json` files there and write its shards there, validate and stats their reports and caches.
 `check_writable_folders` refuses such a dataset before anything is written (one line naming the link);
 every writer calls it through `store.lock.WriterLock`, `htdata validate` before it writes its report,
@@ -15,10 +15,10 @@ import os
 from pathlib import Path
 
 from htdata.errors import DatasetError
-from htdata.format.table import LAYOUTS_DIR, REPORTS_DIR, SHARDS_DIR, SPLITS_DIR, STATS_DIR, WORK_DIR
+from htdata.format.table import LAYOUTS_DIR, REPORTS_DIR, SEGMENTS_DIR, SHARDS_DIR, SPLITS_DIR, STATS_DIR, WORK_DIR
 from htdata.store.versions import VERSIONS_DIR
 
-WRITER_FOLDERS = (SHARDS_DIR, WORK_DIR, REPORTS_DIR, STATS_DIR, LAYOUTS_DIR, VERSIONS_DIR, SPLITS_DIR)
+WRITER_FOLDERS = (SHARDS_DIR, SEGMENTS_DIR, WORK_DIR, REPORTS_DIR, STATS_DIR, LAYOUTS_DIR, VERSIONS_DIR, SPLITS_DIR)
 
 
 class SymlinkedFolder(DatasetError):

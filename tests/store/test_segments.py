@@ -181,3 +181,14 @@ def test_gc_deletes_the_segments_no_kept_version_lists_and_keeps_shared_ones(tmp
     collect(root, keep_versions=1, dry_run=False, command="gc", retention_s=0, force=True)
     assert {f"{SEGMENTS_DIR}/{n}" for n in os.listdir(root / SEGMENTS_DIR)} == v2
     assert validate_dataset(root, deep=True)["ok"]
+
+
+def test_a_symlinked_segments_folder_is_refused_before_anything_is_written(tmp_path, small_segments):
+    root = _dataset(tmp_path / "ds")
+    elsewhere = tmp_path / "elsewhere"
+    (root / SEGMENTS_DIR).rename(elsewhere)
+    (root / SEGMENTS_DIR).symlink_to(elsewhere)
+    before = sorted(os.listdir(elsewhere))
+    with pytest.raises(DatasetError, match="is a symlink"):
+        remove_episodes(root, ["ep_05"], dry_run=False, command="rm")
+    assert sorted(os.listdir(elsewhere)) == before and list_versions(root) == [1]
