@@ -8,7 +8,8 @@ pointer directly see the current version again. The one case readers refuse
 is the reverse: dataset.json names a version whose file is gone or garbled
 (deleted by hand). Repair restores that file from dataset.json, a byte copy
 of it, once the version's record files (its segments, or format 3's episode
-and index files) match the sha256 the pointer records. Anything else it cannot decide is reported, not guessed.
+and index files) match the sha256 the pointer records. Anything else it
+cannot decide is reported, not guessed.
 """
 
 from __future__ import annotations
@@ -47,8 +48,11 @@ def _parse(data: bytes) -> dict | None:
 def _files_match(root: Path, manifest: dict) -> bool:
     """The version's record files are there with the sha256 the manifest records: its segments (format 4),
     or its episode and index files (format 3)."""
-    listed = [(e.get(k), e.get(f"{k}_sha256")) for e in manifest.get("segments") or [] for k in ("records", "index")]
-    if "segments" not in manifest:
+    segments = manifest.get("segments")
+    if segments is not None and not (isinstance(segments, list) and all(isinstance(e, dict) for e in segments)):
+        return False      # a damaged pointer: nothing to match
+    listed = [(e.get(k), e.get(f"{k}_sha256")) for e in segments or [] for k in ("records", "index")]
+    if segments is None:
         listed = [(manifest.get(f"{stem}_file"), manifest.get(f"{stem}_sha256")) for stem in ("episodes", "index")]
     for rel, sha in listed:
         try:

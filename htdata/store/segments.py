@@ -279,6 +279,23 @@ def _assemble_into(root: str, manifest: dict, where: str, out) -> str:
     return h.hexdigest()
 
 
+def check_segment_rows(root: str | os.PathLike, manifest: dict, where: str = "the manifest") -> None:
+    """Read every segment's index rows and check them against their sha256 and records, whether or not an
+    assembled index is cached (`htdata validate`: a cached index says nothing of the files since).
+
+    Args:
+        root: the dataset root (path or URL).
+        manifest: the version's manifest as stored.
+        where: the manifest, for messages.
+
+    Raises:
+        DatasetError: a segment's rows differ from what the manifest records.
+        FileNotFoundError: a segment file is missing.
+    """
+    for entry in manifest["segments"]:
+        _segment_rows(os.fspath(root), entry, where)
+
+
 def load_segment_index(root: str | os.PathLike, manifest: dict, where: str = "the manifest") -> np.ndarray:
     """The global index of a segmented version (INDEX_DTYPE), checked against the manifest's index_sha256.
 

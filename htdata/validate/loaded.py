@@ -21,7 +21,7 @@ from htdata.resources import validate_json
 from htdata.store.confine import PathOutsideDataset, inside
 from htdata.store.indexfile import IndexDtypeError, parse_index
 from htdata.store.manifest import parse_episodes, parse_manifest
-from htdata.store.segments import load_segment_index, segmented, segmented_records
+from htdata.store.segments import check_segment_rows, load_segment_index, segmented, segmented_records
 from htdata.store.versions import manifest_path, version_manifest_file
 from htdata.validate.report import Check
 
@@ -61,6 +61,7 @@ def _load_segmented(root: Path, manifest: dict, manifest_bytes: bytes, check: Ch
     and held against the digests the manifest records (episodes_sha256, index_sha256)."""
     try:
         expanded, episodes = segmented_records(root, manifest)
+        check_segment_rows(root, manifest)      # every file read, even when the assembled index is cached
         index = load_segment_index(root, manifest)
     except PathOutsideDataset as exc:
         check.fail("path_outside", str(exc), file="segments")

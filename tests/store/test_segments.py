@@ -192,3 +192,19 @@ def test_a_symlinked_segments_folder_is_refused_before_anything_is_written(tmp_p
     with pytest.raises(DatasetError, match="is a symlink"):
         remove_episodes(root, ["ep_05"], dry_run=False, command="rm")
     assert sorted(os.listdir(elsewhere)) == before and list_versions(root) == [1]
+
+
+def test_validate_reads_every_segment_even_when_the_assembled_index_is_cached(tmp_path, small_segments, monkeypatch):
+    root = _dataset(tmp_path / "ds")
+    monkeypatch.setenv(storage.CACHE_ENV, str(tmp_path / "cache"))
+    monkeypatch.setattr(segments, "INDEX_CACHE_MIN_BYTES", 0)
+    with DatasetReader(root) as reader:
+        reader.index                          # the assembled index is now in the cache
+    entry = load_manifest(root)["segments"][2]
+    path = root / entry["index"]
+    data = bytearray(path.read_bytes())
+    data[-5] ^= 0xFF
+    path.write_bytes(bytes(data))
+    report = validate_dataset(root)
+    assert any(f["what"] == "segment_damaged" and entry["index"].split("/")[1] in f["message"]
+               for f in report["checks"]["structure"]["failures"])
